@@ -1,0 +1,51 @@
+// Modes whose issue has not landed yet. Each says so in one line and exits non-zero, so scripts
+// never mistake a missing mode for a successful run.
+#include "modes.h"
+
+#include <cstdio>
+
+namespace trephine::app {
+
+void addPendingMode(CLI::App& root, int& exitCode, const char* name, const char* description,
+                    const char* issue) {
+    CLI::App* sub = root.add_subcommand(name, description);
+    sub->allow_extras();
+    sub->callback([&exitCode, name, issue] {
+        std::fprintf(stderr, "trephine %s: not built yet (%s)\n", name, issue);
+        exitCode = 2;
+    });
+}
+
+void addServerMode(CLI::App& root, int& exitCode) {
+    addPendingMode(root, exitCode, "server", "Hold the skull and serve trainees and instructors",
+                   "networked session, issue 4");
+}
+void addTraineeMode(CLI::App& root, int& exitCode) {
+    addPendingMode(root, exitCode, "trainee", "Join a session as a trainee (window or headless)",
+                   "networked session, issue 4");
+}
+void addInstructorMode(CLI::App& root, int& exitCode) {
+    addPendingMode(root, exitCode, "instructor", "Join a session as an instructor",
+                   "trainee and instructor windows, issue 6");
+}
+void addStudyMode(CLI::App& root, int& exitCode) {
+    addPendingMode(root, exitCode, "study", "Run the DBI-versus-volume performance studies",
+                   "baseline and study, issue 7");
+}
+void addDevicesMode(CLI::App& root, int& exitCode) {
+    addPendingMode(root, exitCode, "devices", "List haptic and 6-DOF input devices",
+                   "haptics and input devices, issue 5");
+}
+void addRenderMode(CLI::App& root, int& exitCode) {
+    addPendingMode(root, exitCode, "render", "Render one depth-buffered image of a volume",
+                   "server renderer, issue 3");
+}
+void addVolumeMode(CLI::App& root, int& exitCode) {
+    addPendingMode(root, exitCode, "volume", "Inspect and convert volumes", "issue 2");
+}
+void addDemoMode(CLI::App& root, int& exitCode) {
+    addPendingMode(root, exitCode, "demo", "Drill a burr hole in the built-in procedural skull",
+                   "issue 2");
+}
+
+} // namespace trephine::app

@@ -1,0 +1,31 @@
+#include "libsim/volume.h"
+
+namespace trephine {
+
+std::string_view materialName(Material m) {
+    switch (m) {
+    case Material::Air: return "air";
+    case Material::Cortical: return "cortical";
+    case Material::Diploe: return "diploe";
+    case Material::Dura: return "dura";
+    case Material::Brain: return "brain";
+    default: return "unknown";
+    }
+}
+
+Volume::Volume(glm::ivec3 dims, glm::vec3 spacingMm) : m_dims(dims), m_spacing(spacingMm) {
+    assert(dims.x > 0 && dims.y > 0 && dims.z > 0 && "Volume dimensions must be positive");
+    size_t n = size_t(dims.x) * size_t(dims.y) * size_t(dims.z);
+    m_density.assign(n, 0);
+    m_material.assign(n, uint8_t(Material::Air));
+}
+
+std::vector<int64_t> Volume::materialCounts() const {
+    // Labels past the known ones are counted as air; loaders never produce them.
+    std::vector<int64_t> counts(kMaterialCount, 0);
+    for (uint8_t m : m_material)
+        counts[m < kMaterialCount ? m : 0]++;
+    return counts;
+}
+
+} // namespace trephine
