@@ -1,0 +1,78 @@
+// A thin RAII layer over ENet: library initialisation, one host (server or client), channel
+// purposes, HOST:PORT parsing, and draining every pending event per service call (ENet returns one
+// event per enet_host_service; the rest wait in enet_host_check_events).
+#pragma once
+
+#include <enet/enet.h>
+
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <string>
+
+namespace trephine::net {
+
+// One purpose per channel, so small latency-critical messages never queue behind bulk data.
+enum class Channel : uint8_t {
+    Control = 0,   // reliable: hello, welcome, view requests, pings
+    ToolState = 1, // unsequenced, newest wins: the client's tool pose
+    Haptic = 2,    // unsequenced, newest wins: force and gradient from the server
+    Image = 3,     // reliable: DBI rectangle updates
+    Volume = 4,    // reliable: voxel updates for the replicated-volume baseline
+    Count = 5
+};
+const char* channelName(Channel c);
+
+// ENet packet flags for a channel's purpose.
+uint32_t channelPacketFlags(Channel c);
+
+// Initialises ENet once per process for as long as any instance lives.
+class EnetLibrary {
+public:
+    EnetLibrary();
+    ~EnetLibrary();
+    EnetLibrary(const EnetLibrary&) = delete;
+    EnetLibrary& operator=(const EnetLibrary&) = delete;
+};
+
+// Parses "HOST:PORT" (or ":PORT" / "PORT" for the loopback host); throws trephine::Error with one
+// line naming the text when it is not an address.
+ENetAddress parseAddress(const std::string& text, uint16_t defaultPort = 7777);
+std::string formatAddress(const ENetAddress& a);
+
+class Host {
+public:
+    using EventHandler = std::function<void(const ENetEvent&)>;
+
+    // A server host bound to port (0 = any free port; see port()). Throws trephine::Error.
+    static Host listen(uint16_t port, size_t maxPeers);
+    // A client host with one outgoing peer slot.
+    static Host client();
+
+    Host(Host&& o) noexcept;
+    Host& operator=(Host&& o) noexcept;
+    Host(const Host&) = delete;
+    ~Host();
+
+    ENetHost* get() const { return m_host; }
+    uint16_t port() const { return m_host ? m_host->address.port : 0; }
+
+    // Starts connecting; the protocol version travels in the connect data.
+    ENetPeer* connect(const ENetAddress& address, uint32_t connectData);
+
+    // Waits up to timeoutMs for the first event, then drains every event already pending and
+    // flushes queued sends. Packets in receive events are destroyed after the handler returns.
+    // Returns the number of events handled.
+    int service(uint32_t timeoutMs, const EventHandler& handler);
+
+    // Queues a packet on the channel with that channel's flags; sent on the next service/flush.
+    bool send(ENetPeer* peer, Channel channel, std::span<const uint8_t> bytes);
+    void flush() { enet_host_flush(m_host); }
+
+private:
+    explicit Host(ENetHost* h) : m_host(h) {}
+    EnetLibrary m_lib;
+    ENetHost* m_host = nullptr;
+};
+
+} // namespace trephine::net

@@ -1,0 +1,162 @@
+#include "net/enet_host.h"
+
+#include "libsim/error.h"
+
+#include <atomic>
+#include <charconv>
+#include <mutex>
+
+namespace trephine::net {
+
+const char* channelName(Channel c) {
+    switch (c) {
+    case Channel::Control:
+        return "control";
+    case Channel::ToolState:
+        return "tool";
+    case Channel::Haptic:
+        return "haptic";
+    case Channel::Image:
+        return "image";
+    case Channel::Volume:
+        return "volume";
+    default:
+        return "?";
+    }
+}
+
+uint32_t channelPacketFlags(Channel c) {
+    switch (c) {
+    case Channel::ToolState:
+    case Channel::Haptic:
+        return ENET_PACKET_FLAG_UNSEQUENCED;
+    default:
+        return ENET_PACKET_FLAG_RELIABLE;
+    }
+}
+
+namespace {
+std::mutex g_libMutex;
+int g_libUsers = 0;
+} // namespace
+
+EnetLibrary::EnetLibrary() {
+    std::lock_guard lock(g_libMutex);
+    if (g_libUsers++ == 0 && enet_initialize() != 0)
+        throw Error("could not initialise ENet");
+}
+
+EnetLibrary::~EnetLibrary() {
+    std::lock_guard lock(g_libMutex);
+    if (--g_libUsers == 0)
+        enet_deinitialize();
+}
+
+ENetAddress parseAddress(const std::string& text, uint16_t defaultPort) {
+    std::string host = "127.0.0.1";
+    std::string portText;
+    size_t colon = text.rfind(':');
+    if (colon == std::string::npos) {
+        bool digits = !text.empty() && text.find_first_not_of("0123456789") == std::string::npos;
+        if (digits)
+            portText = text;
+        else
+            host = text;
+    } else {
+        if (colon > 0)
+            host = text.substr(0, colon);
+        portText = text.substr(colon + 1);
+    }
+    uint16_t port = defaultPort;
+    if (!portText.empty()) {
+        unsigned value = 0;
+        auto [end, ec] = std::from_chars(portText.data(), portText.data() + portText.size(), value);
+        if (ec != std::errc() || end != portText.data() + portText.size() || value > 65535)
+            throw Error("'" + text + "' is not HOST:PORT (the port must be a number 0-65535)");
+        port = uint16_t(value);
+    }
+    if (host == "localhost")
+        host = "127.0.0.1";
+    ENetAddress a{};
+    if (enet_address_set_host(&a, host.c_str()) != 0)
+        throw Error("'" + text + "': cannot resolve host '" + host + "'");
+    a.port = port;
+    return a;
+}
+
+std::string formatAddress(const ENetAddress& a) {
+    char ip[64] = "?";
+    enet_address_get_host_ip(&a, ip, sizeof ip);
+    return std::string(ip) + ":" + std::to_string(a.port);
+}
+
+Host Host::listen(uint16_t port, size_t maxPeers) {
+    EnetLibrary lib; // keeps ENet initialised while the host is created
+    ENetAddress a{};
+    a.host = ENET_HOST_ANY;
+    a.port = port;
+    ENetHost* h = enet_host_create(&a, maxPeers, size_t(Channel::Count), 0, 0);
+    if (!h)
+        throw Error("cannot listen on UDP port " + std::to_string(port) +
+                    " (in use? try another --port)");
+    return Host(h);
+}
+
+Host Host::client() {
+    EnetLibrary lib;
+    ENetHost* h = enet_host_create(nullptr, 1, size_t(Channel::Count), 0, 0);
+    if (!h)
+        throw Error("cannot create an ENet client host");
+    return Host(h);
+}
+
+Host::Host(Host&& o) noexcept : m_host(o.m_host) {
+    o.m_host = nullptr;
+}
+
+Host& Host::operator=(Host&& o) noexcept {
+    if (this != &o) {
+        if (m_host)
+            enet_host_destroy(m_host);
+        m_host = o.m_host;
+        o.m_host = nullptr;
+    }
+    return *this;
+}
+
+Host::~Host() {
+    if (m_host)
+        enet_host_destroy(m_host);
+}
+
+ENetPeer* Host::connect(const ENetAddress& address, uint32_t connectData) {
+    return enet_host_connect(m_host, &address, size_t(Channel::Count), connectData);
+}
+
+int Host::service(uint32_t timeoutMs, const EventHandler& handler) {
+    int handled = 0;
+    ENetEvent ev;
+    int r = enet_host_service(m_host, &ev, timeoutMs);
+    while (r > 0) {
+        handler(ev);
+        if (ev.type == ENET_EVENT_TYPE_RECEIVE)
+            enet_packet_destroy(ev.packet);
+        ++handled;
+        r = enet_host_check_events(m_host, &ev);
+    }
+    enet_host_flush(m_host);
+    return handled;
+}
+
+bool Host::send(ENetPeer* peer, Channel channel, std::span<const uint8_t> bytes) {
+    ENetPacket* p = enet_packet_create(bytes.data(), bytes.size(), channelPacketFlags(channel));
+    if (!p)
+        return false;
+    if (enet_peer_send(peer, uint8_t(channel), p) != 0) {
+        enet_packet_destroy(p);
+        return false;
+    }
+    return true;
+}
+
+} // namespace trephine::net
