@@ -1,0 +1,251 @@
+#include "net/link_emulator.h"
+
+#include "libsim/error.h"
+
+#include <algorithm>
+#include <chrono>
+#include <cstring>
+#include <deque>
+#include <map>
+#include <memory>
+#include <pthread.h>
+#include <sstream>
+#include <vector>
+
+namespace trephine::net {
+
+LinkConditions LinkConditions::parse(const std::string& text) {
+    LinkConditions c;
+    std::stringstream ss(text);
+    std::string item;
+    while (std::getline(ss, item, ',')) {
+        if (item.empty())
+            continue;
+        size_t eq = item.find('=');
+        std::string key = item.substr(0, eq);
+        double value = 0;
+        try {
+            size_t used = 0;
+            if (eq == std::string::npos)
+                throw std::invalid_argument("no value");
+            value = std::stod(item.substr(eq + 1), &used);
+            if (used != item.size() - eq - 1 || value < 0)
+                throw std::invalid_argument("bad value");
+        } catch (const std::exception&) {
+            throw Error("link conditions '" + text + "': '" + item +
+                        "' is not key=value with a non-negative number");
+        }
+        if (key == "latency")
+            c.latencyMs = value;
+        else if (key == "jitter")
+            c.jitterMs = value;
+        else if (key == "loss")
+            c.lossPercent = std::min(value, 100.0);
+        else if (key == "rate")
+            c.rateMbps = value;
+        else if (key == "seed")
+            c.seed = uint32_t(value);
+        else
+            throw Error("link conditions '" + text + "': unknown key '" + key +
+                        "' (use latency, jitter, loss, rate, seed)");
+    }
+    return c;
+}
+
+std::string LinkConditions::describe() const {
+    std::ostringstream o;
+    o << "latency " << latencyMs << " ms, jitter " << jitterMs << " ms, loss " << lossPercent
+      << " %, rate " << (rateMbps > 0 ? std::to_string(rateMbps) + " Mbit/s" : "unlimited");
+    return o.str();
+}
+
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+struct Datagram {
+    Clock::time_point due;
+    std::vector<uint8_t> bytes;
+};
+
+// One direction of the link: a FIFO of datagrams waiting for their delivery time.
+struct Lane {
+    std::deque<Datagram> queue;
+    Clock::time_point busyUntil{};
+    Clock::time_point lastDue{};
+};
+
+// Small deterministic generator (xorshift) so runs with one seed drop the same datagrams.
+struct Rng {
+    uint64_t s;
+    double uniform() {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        return double(s >> 11) * (1.0 / 9007199254740992.0);
+    }
+};
+
+struct Client {
+    ENetAddress address{};
+    ENetSocket back = ENET_SOCKET_NULL;
+    Lane up, down; // up: client -> target; down: target -> client
+};
+
+// ENetBuffer's field order differs between platforms: name the fields.
+ENetBuffer makeBuffer(uint8_t* data, size_t n) {
+    ENetBuffer b;
+    b.data = data;
+    b.dataLength = n;
+    return b;
+}
+
+uint64_t addressKey(const ENetAddress& a) {
+    return (uint64_t(a.host) << 16) | a.port;
+}
+
+ENetSocket makeSocket(uint16_t port) {
+    ENetSocket s = enet_socket_create(ENET_SOCKET_TYPE_DATAGRAM);
+    if (s == ENET_SOCKET_NULL)
+        throw Error("link emulator: cannot create a UDP socket");
+    ENetAddress a{};
+    enet_address_set_host(&a, "127.0.0.1");
+    a.port = port;
+    if (enet_socket_bind(s, &a) != 0) {
+        enet_socket_destroy(s);
+        throw Error("link emulator: cannot bind UDP port " + std::to_string(port));
+    }
+    enet_socket_set_option(s, ENET_SOCKOPT_NONBLOCK, 1);
+    enet_socket_set_option(s, ENET_SOCKOPT_RCVBUF, 4 * 1024 * 1024);
+    enet_socket_set_option(s, ENET_SOCKOPT_SNDBUF, 4 * 1024 * 1024);
+    return s;
+}
+
+} // namespace
+
+LinkEmulator::LinkEmulator(uint16_t listenPort, const ENetAddress& target,
+                           LinkConditions conditions)
+    : m_target(target), m_conditions(conditions) {
+    if (enet_initialize() != 0)
+        throw Error("could not initialise ENet");
+    m_front = makeSocket(listenPort);
+    ENetAddress bound{};
+    enet_socket_get_address(m_front, &bound);
+    m_port = bound.port;
+    m_thread = std::thread([this] { run(); });
+}
+
+LinkEmulator::~LinkEmulator() {
+    m_stop = true;
+    if (m_thread.joinable())
+        m_thread.join();
+    enet_socket_destroy(m_front);
+    enet_deinitialize();
+}
+
+void LinkEmulator::setConditions(const LinkConditions& c) {
+    std::lock_guard lock(m_mutex);
+    m_conditions = c;
+}
+
+void LinkEmulator::run() {
+    pthread_setname_np(pthread_self(), "link-emulator");
+    std::map<uint64_t, std::unique_ptr<Client>> clients;
+    Rng rng{0x9E3779B97F4A7C15ull};
+    uint32_t seededWith = 0;
+    std::vector<uint8_t> buffer(65536);
+
+    auto enqueue = [&](Lane& lane, const uint8_t* data, size_t n, const LinkConditions& c) {
+        if (c.lossPercent > 0 && rng.uniform() * 100.0 < c.lossPercent) {
+            ++m_dropped;
+            return;
+        }
+        auto now = Clock::now();
+        auto delay = std::chrono::duration<double, std::milli>(
+            c.latencyMs + (c.jitterMs > 0 ? rng.uniform() * c.jitterMs : 0.0));
+        auto start = now;
+        if (c.rateMbps > 0) {
+            start = std::max(now, lane.busyUntil);
+            lane.busyUntil =
+                start + std::chrono::duration_cast<Clock::duration>(
+                            std::chrono::duration<double>(double(n) * 8.0 / (c.rateMbps * 1e6)));
+            start = lane.busyUntil;
+        }
+        auto due =
+            std::max(start + std::chrono::duration_cast<Clock::duration>(delay), lane.lastDue);
+        lane.lastDue = due;
+        lane.queue.push_back({due, std::vector<uint8_t>(data, data + n)});
+    };
+
+    auto deliver = [&](Lane& lane, ENetSocket sock, const ENetAddress& to, Clock::time_point now) {
+        while (!lane.queue.empty() && lane.queue.front().due <= now) {
+            auto& d = lane.queue.front();
+            ENetBuffer b = makeBuffer(d.bytes.data(), d.bytes.size());
+            enet_socket_send(sock, &to, &b, 1);
+            ++m_forwarded;
+            lane.queue.pop_front();
+        }
+    };
+
+    while (!m_stop) {
+        LinkConditions c;
+        {
+            std::lock_guard lock(m_mutex);
+            c = m_conditions;
+        }
+        if (c.seed != seededWith) {
+            rng.s = 0x9E3779B97F4A7C15ull ^ (uint64_t(c.seed) * 0xBF58476D1CE4E5B9ull);
+            seededWith = c.seed;
+        }
+
+        ENetSocketSet set;
+        ENET_SOCKETSET_EMPTY(set);
+        ENET_SOCKETSET_ADD(set, m_front);
+        ENetSocket maxSocket = m_front;
+        for (auto& [key, cl] : clients) {
+            ENET_SOCKETSET_ADD(set, cl->back);
+            maxSocket = std::max(maxSocket, cl->back);
+        }
+        // Sleep at most 1 ms, less when nothing is queued (select's granularity is 1 ms).
+        bool pending = false;
+        for (auto& [key, cl] : clients)
+            pending = pending || !cl->up.queue.empty() || !cl->down.queue.empty();
+        enet_socketset_select(maxSocket, &set, nullptr, pending ? 0 : 1);
+
+        // From clients to the target.
+        for (;;) {
+            ENetAddress from{};
+            ENetBuffer b = makeBuffer(buffer.data(), buffer.size());
+            int n = enet_socket_receive(m_front, &from, &b, 1);
+            if (n <= 0)
+                break;
+            auto& cl = clients[addressKey(from)];
+            if (!cl) {
+                cl = std::make_unique<Client>();
+                cl->address = from;
+                cl->back = makeSocket(0);
+            }
+            enqueue(cl->up, buffer.data(), size_t(n), c);
+        }
+        // From the target back to each client.
+        for (auto& [key, cl] : clients) {
+            for (;;) {
+                ENetAddress from{};
+                ENetBuffer b = makeBuffer(buffer.data(), buffer.size());
+                int n = enet_socket_receive(cl->back, &from, &b, 1);
+                if (n <= 0)
+                    break;
+                enqueue(cl->down, buffer.data(), size_t(n), c);
+            }
+        }
+        auto now = Clock::now();
+        for (auto& [key, cl] : clients) {
+            deliver(cl->up, cl->back, m_target, now);
+            deliver(cl->down, m_front, cl->address, now);
+        }
+    }
+    for (auto& [key, cl] : clients)
+        enet_socket_destroy(cl->back);
+}
+
+} // namespace trephine::net
