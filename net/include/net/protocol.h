@@ -1,0 +1,277 @@
+// The Trephine wire protocol: message types, their fields and their one serialize() each (write,
+// read and size). docs/protocol.md describes the same format for people; keep the two together.
+// Reads check every length and range; a message that fails to read is dropped and counted.
+#pragma once
+
+#include "net/serialize.h"
+
+#include <glm/gtc/quaternion.hpp>
+#include <glm/mat3x3.hpp>
+#include <glm/vec3.hpp>
+
+#include <cmath>
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace trephine::net {
+
+// Travels in ENet's connect data; the server refuses other versions with kRefuseVersion.
+inline constexpr uint32_t kProtocolVersion = 1;
+
+// Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
+enum class RefuseReason : uint32_t {
+    None = 0,
+    Version = 1,    // protocol version mismatch
+    Malformed = 2,  // kept sending malformed messages
+    ServerFull = 3, //
+    Shutdown = 4,   // the server is stopping
+    BadHello = 5,   // first message was not a valid hello
+};
+std::string refuseReasonText(uint32_t disconnectData);
+
+inline constexpr uint16_t kMaxWindowSize = 4096;
+inline constexpr size_t kMaxNameLength = 64;
+inline constexpr size_t kMaxPayloadBytes = 64u * 1024u * 1024u;
+
+enum class MessageType : uint8_t {
+    Hello = 1,
+    Welcome = 2,
+    ViewRequest = 3,
+    ToolState = 4,
+    ToolRelay = 5,
+    HapticModel = 6,
+    ImageUpdate = 7,
+    VolumeUpdate = 8,
+    Ping = 9,
+    Pong = 10,
+    Participants = 11,
+    SyncMode = 12,
+};
+inline constexpr uint8_t kMessageTypeCount = 13; // one past the largest type
+
+enum class Role : uint8_t { Trainee = 0, Instructor = 1 };
+enum class Codec : uint8_t { Raw = 0, Lz4 = 1, Zstd = 2 };
+enum class Sync : uint8_t { Dbi = 0, Volume = 1 };
+
+// [SECTION] field helpers
+
+template <typename S>
+bool serializeFinite(S& s, float& v) {
+    if (!s.f32(v))
+        return false;
+    return std::isfinite(v);
+}
+
+template <typename S>
+bool serializeVec3(S& s, glm::vec3& v) {
+    return serializeFinite(s, v.x) && serializeFinite(s, v.y) && serializeFinite(s, v.z);
+}
+
+template <typename S>
+bool serializeQuat(S& s, glm::quat& q) {
+    return serializeFinite(s, q.w) && serializeFinite(s, q.x) && serializeFinite(s, q.y) &&
+           serializeFinite(s, q.z);
+}
+
+// [SECTION] messages
+
+// A camera as both ends build it with glm::lookAt and glm::perspective.
+struct ViewSpec {
+    glm::vec3 eye{0, 0, 300};
+    glm::vec3 target{0};
+    glm::vec3 up{0, 1, 0};
+    float fovYDeg = 60.0f;
+    float nearMm = 10.0f;
+    float farMm = 1000.0f;
+    uint16_t width = 500;
+    uint16_t height = 500;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return serializeVec3(s, eye) && serializeVec3(s, target) && serializeVec3(s, up) &&
+               serializeFinite(s, fovYDeg) && fovYDeg > 1.0f && fovYDeg < 179.0f &&
+               serializeFinite(s, nearMm) && serializeFinite(s, farMm) && nearMm > 0.0f &&
+               farMm > nearMm && s.ranged(width, uint16_t(1), kMaxWindowSize) &&
+               s.ranged(height, uint16_t(1), kMaxWindowSize);
+    }
+    bool operator==(const ViewSpec&) const = default;
+};
+
+struct Hello {
+    static constexpr MessageType kType = MessageType::Hello;
+    Role role = Role::Trainee;
+    std::string name;
+    Codec codec = Codec::Lz4;
+    Sync sync = Sync::Dbi;
+    ViewSpec view;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.ranged(role, Role::Trainee, Role::Instructor) && s.string(name, kMaxNameLength) &&
+               s.ranged(codec, Codec::Raw, Codec::Zstd) &&
+               s.ranged(sync, Sync::Dbi, Sync::Volume) && view.serialize(s);
+    }
+};
+
+struct Welcome {
+    static constexpr MessageType kType = MessageType::Welcome;
+    uint16_t clientId = 0;
+    uint64_t serverTimeUs = 0;
+    glm::ivec3 volumeDims{0};
+    glm::vec3 spacing{1.0f};
+    std::string volumeName;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.integer(clientId) && s.integer(serverTimeUs) && s.ranged(volumeDims.x, 1, 4096) &&
+               s.ranged(volumeDims.y, 1, 4096) && s.ranged(volumeDims.z, 1, 4096) &&
+               serializeVec3(s, spacing) && s.string(volumeName, 256);
+    }
+};
+
+struct ViewRequest {
+    static constexpr MessageType kType = MessageType::ViewRequest;
+    uint32_t requestId = 0;
+    ViewSpec view;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.integer(requestId) && view.serialize(s);
+    }
+};
+
+// The client's tool: pose, kind, size and drilling speed. Unsequenced; the newest wins.
+struct ToolState {
+    static constexpr MessageType kType = MessageType::ToolState;
+    uint32_t sequence = 0;
+    uint64_t clientTimeUs = 0;
+    uint8_t toolKind = 0; // ToolKind
+    float diameterMm = 4.0f;
+    glm::vec3 position{0};
+    glm::quat orientation{1, 0, 0, 0};
+    float speed = 0.0f; // [0, 1]
+    bool drilling = false;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.integer(sequence) && s.integer(clientTimeUs) &&
+               s.ranged(toolKind, uint8_t(0), uint8_t(1)) && serializeFinite(s, diameterMm) &&
+               diameterMm > 0.0f && diameterMm <= 20.0f && serializeVec3(s, position) &&
+               serializeQuat(s, orientation) && serializeFinite(s, speed) && speed >= 0.0f &&
+               speed <= 1.0f && s.boolean(drilling);
+    }
+};
+
+// Another participant's tool, relayed by the server so every client can draw every tool.
+struct ToolRelay {
+    static constexpr MessageType kType = MessageType::ToolRelay;
+    uint16_t clientId = 0;
+    ToolState tool;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.integer(clientId) && tool.serialize(s);
+    }
+};
+
+// Multi-rate haptics: force f(P_N) and its gradient at the device position P_N the server used.
+struct HapticModel {
+    static constexpr MessageType kType = MessageType::HapticModel;
+    uint32_t toolSequence = 0;
+    uint64_t serverReceivedUs = 0;
+    uint64_t serverSentUs = 0;
+    uint64_t clientTimeUs = 0; // echoed from the tool state, for the round trip
+    glm::vec3 position{0};     // P_N
+    glm::vec3 force{0};        // newtons
+    glm::mat3 gradient{0.0f};  // N/mm, column-major as glm
+    bool contact = false;
+
+    template <typename S>
+    bool serialize(S& s) {
+        bool ok = s.integer(toolSequence) && s.integer(serverReceivedUs) &&
+                  s.integer(serverSentUs) && s.integer(clientTimeUs) &&
+                  serializeVec3(s, position) && serializeVec3(s, force);
+        for (int c = 0; ok && c < 3; ++c)
+            ok = serializeVec3(s, gradient[c]);
+        return ok && s.boolean(contact);
+    }
+};
+
+// A rectangle of the client's DBI (x, y from the bottom-left, as GL), encoded with `codec`.
+struct ImageUpdate {
+    static constexpr MessageType kType = MessageType::ImageUpdate;
+    uint32_t sequence = 0;
+    uint32_t viewId = 0;        // the ViewRequest this image belongs to (0 = the hello's view)
+    uint64_t causeServerUs = 0; // when the tool state that caused it reached the server
+    uint64_t sentServerUs = 0;
+    bool full = false; // a whole-window refresh (join or view change)
+    uint16_t x = 0, y = 0, width = 0, height = 0;
+    Codec codec = Codec::Raw;
+    uint32_t rawBytes = 0; // size before compression
+    std::vector<uint8_t> payload;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.integer(sequence) && s.integer(viewId) && s.integer(causeServerUs) &&
+               s.integer(sentServerUs) && s.boolean(full) &&
+               s.ranged(x, uint16_t(0), uint16_t(kMaxWindowSize - 1)) &&
+               s.ranged(y, uint16_t(0), uint16_t(kMaxWindowSize - 1)) &&
+               s.ranged(width, uint16_t(1), kMaxWindowSize) &&
+               s.ranged(height, uint16_t(1), kMaxWindowSize) && x + width <= kMaxWindowSize &&
+               y + height <= kMaxWindowSize && s.ranged(codec, Codec::Raw, Codec::Zstd) &&
+               s.ranged(rawBytes, uint32_t(1), uint32_t(kMaxPayloadBytes)) &&
+               s.blob(payload, kMaxPayloadBytes);
+    }
+};
+
+struct Ping {
+    static constexpr MessageType kType = MessageType::Ping;
+    uint64_t clientTimeUs = 0;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.integer(clientTimeUs);
+    }
+};
+
+struct Pong {
+    static constexpr MessageType kType = MessageType::Pong;
+    uint64_t clientTimeUs = 0; // echoed
+    uint64_t serverTimeUs = 0;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.integer(clientTimeUs) && s.integer(serverTimeUs);
+    }
+};
+
+// [SECTION] framing: one type byte, then the message; nothing may follow it.
+
+template <typename M>
+std::vector<uint8_t> encodeMessage(M& m) {
+    std::vector<uint8_t> out;
+    out.push_back(uint8_t(M::kType));
+    WriteStream w(out);
+    if (!m.serialize(w))
+        out.clear(); // a value out of range: a programmer mistake the caller sees as empty
+    return out;
+}
+
+// The type byte of a packet, or 0 when it is empty or unknown.
+inline uint8_t peekMessageType(std::span<const uint8_t> packet) {
+    if (packet.empty() || packet[0] == 0 || packet[0] >= kMessageTypeCount)
+        return 0;
+    return packet[0];
+}
+
+template <typename M>
+bool decodeMessage(std::span<const uint8_t> packet, M& m) {
+    if (packet.empty() || packet[0] != uint8_t(M::kType))
+        return false;
+    ReadStream r(packet.subspan(1));
+    return m.serialize(r) && r.atEnd();
+}
+
+} // namespace trephine::net

@@ -1,0 +1,26 @@
+#include "net/protocol.h"
+
+namespace trephine::net {
+
+std::string refuseReasonText(uint32_t disconnectData) {
+    uint32_t version = disconnectData >> 8;
+    switch (RefuseReason(disconnectData & 0xff)) {
+    case RefuseReason::None:
+        return "the connection closed";
+    case RefuseReason::Version:
+        return "the server speaks protocol version " + std::to_string(version) +
+               " and this client version " + std::to_string(kProtocolVersion) +
+               ": use the same Trephine build on both ends";
+    case RefuseReason::Malformed:
+        return "the server dropped us for sending malformed messages";
+    case RefuseReason::ServerFull:
+        return "the server is full";
+    case RefuseReason::Shutdown:
+        return "the server is shutting down";
+    case RefuseReason::BadHello:
+        return "the server did not understand our hello";
+    }
+    return "the server closed the connection (reason " + std::to_string(disconnectData) + ")";
+}
+
+} // namespace trephine::net
