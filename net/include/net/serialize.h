@@ -64,7 +64,11 @@ public:
         return integer(b);
     }
     bool bytes(uint8_t* data, size_t n) {
-        m_out.insert(m_out.end(), data, data + n);
+        if (n == 0)
+            return true;
+        size_t at = m_out.size();
+        m_out.resize(at + n);
+        std::memcpy(m_out.data() + at, data, n);
         return true;
     }
     // u32 length prefix, then the bytes; refuses to write more than maxSize.
