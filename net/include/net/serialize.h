@@ -28,6 +28,14 @@ struct WireInteger<T, true> {
 template <typename T>
 using WireUnsigned = typename detail::WireInteger<T>::type;
 
+// GCC 12 reports false stringop-overflow/overread warnings for vector growth inlined here
+// (GCC bug 106199); the sizes are checked.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wstringop-overflow"
+#pragma GCC diagnostic ignored "-Wstringop-overread"
+#endif
+
 // Writes into a growing byte vector.
 class WriteStream {
 public:
@@ -88,6 +96,10 @@ public:
 private:
     std::vector<uint8_t>& m_out;
 };
+
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
 
 // Reads from a byte span; every read is bounds-checked.
 class ReadStream {
