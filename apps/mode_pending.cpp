@@ -40,12 +40,5 @@ void addRenderMode(CLI::App& root, int& exitCode) {
     addPendingMode(root, exitCode, "render", "Render one depth-buffered image of a volume",
                    "server renderer, issue 3");
 }
-void addVolumeMode(CLI::App& root, int& exitCode) {
-    addPendingMode(root, exitCode, "volume", "Inspect and convert volumes", "issue 2");
-}
-void addDemoMode(CLI::App& root, int& exitCode) {
-    addPendingMode(root, exitCode, "demo", "Drill a burr hole in the built-in procedural skull",
-                   "issue 2");
-}
 
 } // namespace trephine::app

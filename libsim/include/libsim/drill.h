@@ -10,15 +10,36 @@
 
 namespace trephine {
 
+// Erosion rates at full speed (speed 1), in density units per second, for cortical bone: every
+// voxel whose centre lies inside the cutter loses this much density. Diploe erodes
+// kDiploeErosionFactor times faster; dura and brain never erode. See docs/simulation.md.
+inline constexpr double kBurrErosionRate = 1700.0;      // solid cortical (255) in 0.15 s
+inline constexpr double kPerforatorErosionRate = 425.0; // solid cortical in 0.6 s
+inline constexpr int kDiploeErosionFactor = 3;
+
+// Perforator clutch rule. Before each step the perforator looks kPerforatorClutchMarginMm beyond
+// its cutting surface. It disengages (cuts nothing) when
+//   (a) dura or brain lies within that margin: the tip is through the inner table, or
+//   (b) after its tip has been in bone, the tip finds no bone ahead of it while bone is still
+//       within the margin of the cutter: it broke through into air (a bone block, a cut edge).
+// It re-engages once no bone lies within the margin of the cutter: lifted clear of the hole.
+inline constexpr float kPerforatorClutchMarginMm = 0.5f;
+
+// Density units removed from a voxel of material m per unit of cortical erosion (0: never eroded).
+int erosionFactor(Material m);
+// Cortical erosion rate of a tool at full speed, density units per second.
+double erosionRate(ToolKind kind);
+
 struct DrillResult {
     Box3i changed;             // tight box of voxels whose density or material changed
     int64_t voxelsTouched = 0; // voxels whose centre lay inside the cutter
     int64_t voxelsChanged = 0;
-    int64_t densityRemoved = 0; // sum of density decrements (density units)
-    int64_t voxelsRemoved = 0;  // voxels eroded to zero (relabelled air) in this step
-    bool duraContact = false;   // the cutter touched dura or brain: a violation, nothing removed
-    int64_t duraVoxels = 0;
-    bool clutchDisengaged = false; // perforator only: the tip has broken through the inner table
+    int64_t densityRemoved = 0;    // sum of density decrements (density units)
+    int64_t voxelsRemoved = 0;     // voxels eroded to zero (relabelled air) in this step
+    bool duraContact = false;      // the cutter touched dura or brain: a violation (reported at any
+    int64_t duraVoxels = 0;        // speed); dura and brain are never removed, bone around still is
+    bool clutchDisengaged = false; // perforator only: the clutch was disengaged for this step
+                                   // (the tip has broken through), so nothing was cut
 };
 
 // One driller per tool: it keeps the fractional erosion carried between steps and the
@@ -27,18 +48,24 @@ class Driller {
 public:
     explicit Driller(ToolShape shape) : m_shape(shape) {}
 
-    // speed in [0, 1] (fraction of full drill speed); dt in seconds.
+    // speed in [0, 1] (fraction of full drill speed; clamped, NaN is 0); dt >= 0 in seconds.
+    // Voxels whose centre lies inside the cutter at `pose` lose density; the cutter does not sweep
+    // between poses, so callers step small distances (well under a voxel per step).
     DrillResult drill(Volume& volume, const ToolPose& pose, float speed, float dt);
 
     const ToolShape& shape() const { return m_shape; }
     bool clutchDisengaged() const { return m_clutchDisengaged; }
     // The clutch re-engages when the perforator is lifted clear of bone; tests may reset it.
-    void resetClutch() { m_clutchDisengaged = false; }
+    void resetClutch() {
+        m_clutchDisengaged = false;
+        m_tipInBone = false;
+    }
 
 private:
     ToolShape m_shape;
-    double m_carry = 0.0; // fractional density units not yet removed
+    double m_carry = 0.0; // fractional cortical density units not yet removed
     bool m_clutchDisengaged = false;
+    bool m_tipInBone = false; // perforator: the tip has met bone since the clutch last engaged
 };
 
 } // namespace trephine

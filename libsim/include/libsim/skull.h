@@ -11,28 +11,48 @@ namespace trephine {
 
 inline constexpr uint32_t kDefaultSkullSeed = 1;
 
+// Skull constants (see docs/simulation.md). Lengths in mm, densities in bytes.
+inline constexpr float kSkullFieldOfViewMm = 200.0f; // cube edge; spacing = FOV / n
+inline constexpr float kSkullOuterTableMm = 1.8f;    // mean; varies +-0.2 over the vault
+inline constexpr float kSkullDiploeMm = 3.7f;        // mean; varies +-0.35
+inline constexpr float kSkullInnerTableMm = 1.3f;    // mean; varies +-0.15
+inline constexpr float kSkullDuraMm = 1.0f;          // at least one voxel at coarse n
+inline constexpr uint8_t kSkullCorticalDensity = 240;
+inline constexpr uint8_t kSkullDuraDensity = 180;  // >= kSurfaceDensity: exposed dura is visible
+inline constexpr uint8_t kSkullBrainDensity = 100; // < kSurfaceDensity: never rendered
+// Kocher's point on the patient's right (+x is the patient's left): 3 cm from the midline, about
+// 1 cm anterior to the coronal suture.
+inline constexpr float kKocherPointXMm = -30.0f;
+inline constexpr float kKocherPointYMm = 35.0f;
+// makeSphere's density ramp: 128 + 127 * (r - dist) / kSphereRampMm, clamped to 0..255.
+inline constexpr float kSphereRampMm = 2.0f;
+
 // Cranial vault (outer table, porous diploe, inner table; about 6-8 mm of bone) over a dura and
 // brain region. Axes: +z superior (vertex of the head), +y anterior (forehead), +x to the
 // patient's left. The physical size does not depend on n; the spacing is the field of view / n.
-// n from 32 to 512.
+// n from 32 to 512; other n throw Error.
 Volume makeSkull(int n, uint32_t seed = kDefaultSkullSeed);
 
 // Where a trainee drills the default burr hole on makeSkull(n, ...): a point on the outer table
-// surface (mm, object space) and the outward surface normal there.
+// surface (mm, object space) and the outward surface normal there. Found by marching down a
+// vertical ray through (kKocherPointXMm, kKocherPointYMm) in the volume itself (then through the
+// vertex, for other volumes) to the first trilinear crossing of kSurfaceDensity. Throws Error
+// when neither ray meets a surface.
 struct SurfaceSite {
     glm::vec3 position;
     glm::vec3 normal;
 };
 SurfaceSite defaultBurrSite(const Volume& skull);
 
-// Solid cortical sphere of radius sphereRadiusMm(n) centred in an n^3 volume of 1 mm spacing, with
-// density falling linearly across one voxel at the surface so that the iso-surface at
-// kSurfaceDensity is exactly the analytic sphere (for depth tests).
+// Solid cortical sphere of radius sphereRadiusMm(n) = 0.35 n centred in an n^3 volume of 1 mm
+// spacing, with density falling linearly with distance across +-kSphereRampMm of the surface so
+// that the trilinear iso-surface at kSurfaceDensity is the analytic sphere to ~0.01 mm (for depth
+// tests). n from 4 to 512.
 Volume makeSphere(int n);
 float sphereRadiusMm(int n);
 
 // Solid cortical axis-aligned box filling the middle half of an n^3 volume (1 mm spacing): voxels
-// with index in [n/4, 3n/4) on every axis.
+// with index in [n/4, 3n/4) on every axis, density 255; air elsewhere. n from 4 to 512.
 Volume makeBox(int n);
 
 } // namespace trephine

@@ -1,0 +1,107 @@
+#include "libsim/tool.h"
+
+#include "libsim/error.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <glm/geometric.hpp>
+#include <glm/gtx/quaternion.hpp>
+
+namespace trephine {
+
+namespace {
+
+std::string formatMm(float v) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%g", double(v));
+    return buf;
+}
+
+// Distance from p to the segment [a, b] in the (rho, z) half-plane.
+float segmentDistance(glm::vec2 p, glm::vec2 a, glm::vec2 b) {
+    glm::vec2 ab = b - a, ap = p - a;
+    float t = std::clamp(glm::dot(ap, ab) / glm::dot(ab, ab), 0.0f, 1.0f);
+    return glm::length(ap - t * ab);
+}
+
+} // namespace
+
+ToolShape ToolShape::burr(float diameterMm) {
+    ToolShape s;
+    s.kind = ToolKind::Burr;
+    s.diameterMm = diameterMm;
+    s.validate();
+    return s;
+}
+
+ToolShape ToolShape::perforator(float diameterMm) {
+    ToolShape s;
+    s.kind = ToolKind::Perforator;
+    s.diameterMm = diameterMm;
+    s.tipLengthMm = diameterMm * (kPerforatorTipLengthMm / kPerforatorDiameterMm);
+    s.cutLengthMm = kPerforatorCutLengthMm;
+    s.validate();
+    return s;
+}
+
+void ToolShape::validate() const {
+    // Written as !(in range) so that NaN is refused too.
+    switch (kind) {
+    case ToolKind::Burr:
+        if (!(diameterMm >= kBurrMinDiameterMm && diameterMm <= kBurrMaxDiameterMm))
+            throw Error("burr diameter " + formatMm(diameterMm) +
+                        " mm is out of range: burrs are " + formatMm(kBurrMinDiameterMm) + " to " +
+                        formatMm(kBurrMaxDiameterMm) + " mm");
+        return;
+    case ToolKind::Perforator:
+        if (!(diameterMm >= kPerforatorMinDiameterMm && diameterMm <= kPerforatorMaxDiameterMm))
+            throw Error("perforator diameter " + formatMm(diameterMm) +
+                        " mm is out of range: perforators are " +
+                        formatMm(kPerforatorMinDiameterMm) + " to " +
+                        formatMm(kPerforatorMaxDiameterMm) + " mm");
+        if (!(tipLengthMm >= 0.0f && tipLengthMm <= diameterMm) ||
+            !(cutLengthMm > 0.0f && cutLengthMm <= 50.0f))
+            throw Error("perforator tip length " + formatMm(tipLengthMm) + " mm / cutting length " +
+                        formatMm(cutLengthMm) + " mm is out of range");
+        return;
+    }
+    throw Error("unknown tool kind " + std::to_string(int(kind)) + ": use burr or perforator");
+}
+
+float ToolShape::signedDistance(glm::vec3 local) const {
+    if (kind == ToolKind::Burr)
+        return glm::length(local) - 0.5f * diameterMm;
+    // The perforator is a solid of revolution whose half cross-section in (rho, z) is the convex
+    // quadrilateral apex (0,0), shoulder (R,T), rim (R,H), axis top (0,H); its exact distance is
+    // the 2D distance to that polygon's three outer edges.
+    const float r = 0.5f * diameterMm, t = tipLengthMm, h = tipLengthMm + cutLengthMm;
+    glm::vec2 p(std::sqrt(local.x * local.x + local.y * local.y), local.z);
+    glm::vec2 apex(0.0f, 0.0f), shoulder(r, t), rim(r, h), top(0.0f, h);
+    float d = std::min({segmentDistance(p, apex, shoulder), segmentDistance(p, shoulder, rim),
+                        segmentDistance(p, rim, top)});
+    bool inside = p.y <= h && p.x <= r && p.x * t <= p.y * r && p.y >= 0.0f;
+    return inside ? -d : d;
+}
+
+float ToolShape::boundingRadius() const {
+    if (kind == ToolKind::Burr)
+        return 0.5f * diameterMm;
+    float r = 0.5f * diameterMm, h = tipLengthMm + cutLengthMm;
+    return std::sqrt(r * r + h * h);
+}
+
+std::string ToolShape::describe() const {
+    return (kind == ToolKind::Burr ? "burr " : "perforator ") + formatMm(diameterMm) + " mm";
+}
+
+ToolPose ToolPose::fromAxis(glm::vec3 position, glm::vec3 shaftAxis) {
+    ToolPose pose;
+    pose.position = position;
+    float len = glm::length(shaftAxis);
+    if (len > 0.0f)
+        pose.orientation = glm::rotation(glm::vec3(0, 0, 1), shaftAxis / len);
+    return pose;
+}
+
+} // namespace trephine

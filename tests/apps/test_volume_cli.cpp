@@ -1,0 +1,136 @@
+// `trephine volume info|convert` run as a user would: exit codes, output, and one-line errors that
+// name the file.
+#include "libsim/volume_io.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <atomic>
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct TempDir {
+    fs::path path;
+    TempDir() {
+        static std::atomic<int> counter{0};
+        auto stamp = std::chrono::steady_clock::now().time_since_epoch().count();
+        path =
+            fs::temp_directory_path() / ("trephine_cli_" + std::to_string(getpid()) + "_" +
+                                         std::to_string(counter++) + "_" + std::to_string(stamp));
+        fs::create_directories(path);
+    }
+    ~TempDir() {
+        std::error_code ec;
+        fs::remove_all(path, ec);
+    }
+    std::string operator/(const std::string& name) const { return (path / name).string(); }
+};
+
+struct Result {
+    int exitCode = -1;
+    std::string out;
+    std::string err;
+};
+
+std::string slurp(const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+}
+
+// Runs `trephine ARGS` (ARGS already shell-quoted) capturing stdout and stderr.
+Result runTrephine(const TempDir& dir, const std::string& args) {
+    const std::string out = dir / "stdout.txt", err = dir / "stderr.txt";
+    std::string cmd =
+        std::string("'") + TREPHINE_BIN + "' " + args + " >'" + out + "' 2>'" + err + "'";
+    int status = std::system(cmd.c_str());
+    Result r;
+    r.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    r.out = slurp(out);
+    r.err = slurp(err);
+    return r;
+}
+
+std::string quote(const std::string& s) {
+    return "'" + s + "'";
+}
+
+} // namespace
+
+TEST(VolumeCli, InfoOfBuiltinSphere) {
+    TempDir dir;
+    Result r = runTrephine(dir, "volume info sphere:32");
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_EQ(r.err, "");
+    EXPECT_NE(r.out.find("32 x 32 x 32 voxels"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("spacing:     1 x 1 x 1 mm"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("65536"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("cortical"), std::string::npos) << r.out;
+}
+
+TEST(VolumeCli, ConvertWritesALoadableVolume) {
+    TempDir dir;
+    const std::string out = dir / "sphere.nrrd";
+    Result r = runTrephine(dir, "volume convert sphere:32 " + quote(out));
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_EQ(r.err, "");
+    ASSERT_TRUE(fs::exists(out));
+    EXPECT_TRUE(trephine::loadVolume(out) == trephine::loadVolume("sphere:32"));
+
+    Result info = runTrephine(dir, "volume info " + quote(out) + " --spacing 0.5,0.5,0.5");
+    EXPECT_EQ(info.exitCode, 0) << info.err;
+    EXPECT_NE(info.out.find("extent:      16 x 16 x 16 mm"), std::string::npos) << info.out;
+}
+
+TEST(VolumeCli, RawFileWithDimsAndType) {
+    TempDir dir;
+    const std::string raw = dir / "ct.raw";
+    std::ofstream(raw, std::ios::binary).write("\x2c\x01\x84\x03", 4); // int16 300, 900
+    Result r = runTrephine(dir, "volume info " + quote(raw) + " --dims 2,1,1 --type int16");
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.out.find("2 x 1 x 1 voxels"), std::string::npos) << r.out;
+}
+
+TEST(VolumeCli, TruncatedFileIsOneLineNamingIt) {
+    TempDir dir;
+    const std::string bad = dir / "head.nrrd";
+    std::ofstream(bad) << "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 64 64 64\n"
+                          "encoding: raw\n\nshort";
+    for (const std::string& args :
+         {"volume info " + quote(bad),
+          "volume convert " + quote(bad) + " " + quote(dir / "out.nrrd")}) {
+        Result r = runTrephine(dir, args);
+        EXPECT_NE(r.exitCode, 0);
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+        EXPECT_EQ(r.err.back(), '\n');
+        EXPECT_NE(r.err.find(bad), std::string::npos) << r.err;
+        EXPECT_NE(r.err.find("truncated"), std::string::npos) << r.err;
+    }
+    EXPECT_FALSE(fs::exists(dir / "out.nrrd"));
+}
+
+TEST(VolumeCli, MissingFileAndBadFlags) {
+    TempDir dir;
+    const std::string missing = dir / "nope.nii.gz";
+    Result r = runTrephine(dir, "volume info " + quote(missing));
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_NE(r.err.find(missing), std::string::npos) << r.err;
+
+    Result t = runTrephine(dir, "volume info sphere:16 --type int16");
+    EXPECT_NE(t.exitCode, 0);
+    EXPECT_EQ(std::count(t.err.begin(), t.err.end(), '\n'), 1) << t.err;
+    EXPECT_NE(t.err.find("--dims"), std::string::npos) << t.err;
+
+    Result help = runTrephine(dir, "volume info --help");
+    EXPECT_EQ(help.exitCode, 0);
+    EXPECT_NE(help.out.find("raw:FILE?dims=X,Y,Z"), std::string::npos) << help.out;
+}

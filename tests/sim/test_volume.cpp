@@ -1,0 +1,94 @@
+// Box3i and Volume basics: the types every other layer leans on.
+#include "libsim/box.h"
+#include "libsim/volume.h"
+
+#include <gtest/gtest.h>
+
+using namespace trephine;
+
+TEST(Box3i, DefaultIsEmptyAndExtendGrowsToHoldVoxels) {
+    Box3i b;
+    EXPECT_TRUE(b.empty());
+    EXPECT_EQ(b.count(), 0);
+    EXPECT_EQ(b.size(), glm::ivec3(0));
+    b.extend({2, 3, 4});
+    EXPECT_FALSE(b.empty());
+    EXPECT_EQ(b.lo, glm::ivec3(2, 3, 4));
+    EXPECT_EQ(b.hi, glm::ivec3(3, 4, 5)); // half-open
+    EXPECT_EQ(b.count(), 1);
+    b.extend({0, 5, 4});
+    EXPECT_EQ(b.lo, glm::ivec3(0, 3, 4));
+    EXPECT_EQ(b.hi, glm::ivec3(3, 6, 5));
+    EXPECT_EQ(b.count(), 3 * 3 * 1);
+    EXPECT_TRUE(b.contains({0, 3, 4}));
+    EXPECT_TRUE(b.contains({2, 5, 4}));
+    EXPECT_FALSE(b.contains({3, 5, 4}));
+    EXPECT_FALSE(b.contains({2, 6, 4}));
+}
+
+TEST(Box3i, MergeIgnoresEmptyBoxesAndIntersectCanBeEmpty) {
+    Box3i a = Box3i::fromMinMax({0, 0, 0}, {4, 4, 4});
+    Box3i b = Box3i::fromMinMax({2, 2, 2}, {6, 5, 8});
+    Box3i m = a;
+    m.merge(Box3i{});
+    EXPECT_EQ(m, a);
+    Box3i e;
+    e.merge(b);
+    EXPECT_EQ(e, b);
+    m.merge(b);
+    EXPECT_EQ(m, Box3i::fromMinMax({0, 0, 0}, {6, 5, 8}));
+    EXPECT_EQ(a.intersect(b), Box3i::fromMinMax({2, 2, 2}, {4, 4, 4}));
+    Box3i far = Box3i::fromMinMax({10, 10, 10}, {12, 12, 12});
+    EXPECT_TRUE(a.intersect(far).empty());
+    // All empty boxes compare equal whatever their corners.
+    EXPECT_EQ(a.intersect(far), Box3i{});
+}
+
+TEST(Volume, StartsAsAirAndIndexesXFastest) {
+    Volume v({4, 3, 2}, {0.5f, 0.5f, 1.0f});
+    EXPECT_EQ(v.voxelCount(), 24u);
+    EXPECT_EQ(v.index(1, 0, 0), 1u);
+    EXPECT_EQ(v.index(0, 1, 0), 4u);
+    EXPECT_EQ(v.index(0, 0, 1), 12u);
+    EXPECT_EQ(v.bounds(), Box3i::fromMinMax({0, 0, 0}, {4, 3, 2}));
+    EXPECT_EQ(v.extentMm(), glm::vec3(2.0f, 1.5f, 2.0f));
+    auto counts = v.materialCounts();
+    EXPECT_EQ(counts[int(Material::Air)], 24);
+    v.set(3, 2, 1, 200, Material::Diploe);
+    EXPECT_EQ(v.density(3, 2, 1), 200);
+    EXPECT_EQ(v.material(3, 2, 1), Material::Diploe);
+    EXPECT_EQ(v.densityData()[23], 200);
+    counts = v.materialCounts();
+    EXPECT_EQ(counts[int(Material::Diploe)], 1);
+    EXPECT_EQ(counts[int(Material::Air)], 23);
+}
+
+TEST(Volume, VoxelCentresAreCentredOnTheOriginAndRoundTrip) {
+    Volume v({4, 4, 4}, glm::vec3(2.0f));
+    // Voxel 0 spans [-4, -2) mm: its centre is -3 mm.
+    EXPECT_EQ(v.voxelCenter({0, 0, 0}), glm::vec3(-3.0f));
+    EXPECT_EQ(v.voxelCenter({3, 3, 3}), glm::vec3(3.0f));
+    EXPECT_EQ(v.voxelCenter({1, 2, 3}) + v.voxelCenter({2, 1, 0}), glm::vec3(0.0f));
+    for (glm::ivec3 q : {glm::ivec3(0, 1, 2), glm::ivec3(3, 0, 1)})
+        EXPECT_EQ(v.toVoxel(v.voxelCenter(q)), glm::vec3(q));
+}
+
+TEST(Volume, EqualityComparesEveryByteAndTheGeometry) {
+    Volume a({3, 3, 3}, glm::vec3(1.0f));
+    Volume b = a;
+    EXPECT_EQ(a, b);
+    b.set(1, 1, 1, 1, Material::Air);
+    EXPECT_FALSE(a == b);
+    b = a;
+    b.setSpacing(glm::vec3(2.0f));
+    EXPECT_FALSE(a == b);
+}
+
+TEST(Volume, MaterialNamesAndBoneLabels) {
+    EXPECT_EQ(materialName(Material::Cortical), "cortical");
+    EXPECT_EQ(materialName(Material::Dura), "dura");
+    EXPECT_TRUE(isBone(Material::Cortical));
+    EXPECT_TRUE(isBone(Material::Diploe));
+    EXPECT_FALSE(isBone(Material::Dura));
+    EXPECT_FALSE(isBone(Material::Air));
+}
