@@ -36,9 +36,5 @@ void addDevicesMode(CLI::App& root, int& exitCode) {
     addPendingMode(root, exitCode, "devices", "List haptic and 6-DOF input devices",
                    "haptics and input devices, issue 5");
 }
-void addRenderMode(CLI::App& root, int& exitCode) {
-    addPendingMode(root, exitCode, "render", "Render one depth-buffered image of a volume",
-                   "server renderer, issue 3");
-}
 
 } // namespace trephine::app

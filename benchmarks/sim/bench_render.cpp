@@ -1,0 +1,182 @@
+// The server renderer's budgets, each printed beside its target (counters *_ms and target_ms):
+//   full 500x500 frame of skull:256, all cores        target 15 ms (floor 50 ms)
+//   dirty rectangle 64^2 / 128^2 after a burr stroke  target 0.3 ms / 1 ms
+//   BB_volume -> BB_screen projection                 (no target: it should be negligible)
+//   the paper's view: 128^3 at 330.2 mm, 60 deg, 500x500
+// Filter with --benchmark_filter=Render.
+#include "libsim/camera.h"
+#include "libsim/dirty_rect.h"
+#include "libsim/drill.h"
+#include "libsim/renderer.h"
+#include "libsim/skull.h"
+#include "libsim/thread_pool.h"
+
+#include <benchmark/benchmark.h>
+#include <chrono>
+#include <glm/gtx/quaternion.hpp>
+#include <memory>
+
+namespace trephine {
+namespace {
+
+using Clock = std::chrono::steady_clock;
+
+// One skull:256 with a burr stroke at the default site, shared by the benchmarks (building it
+// takes most of a second).
+struct Scene {
+    Volume volume;
+    SurfaceSite site;
+    Box3i stroke; // BB_volume of the burr stroke
+    std::unique_ptr<ThreadPool> pool;
+    std::unique_ptr<Renderer> renderer;
+    Camera camera;
+
+    explicit Scene(int n) : volume(makeSkull(n)) {
+        site = defaultBurrSite(volume);
+        pool = std::make_unique<ThreadPool>();
+        renderer = std::make_unique<Renderer>(volume, pool.get());
+        camera = cameraPreset("working", volume, {500, 500});
+        // A 4 mm burr pressed 2 mm into the bone along the normal, then moved 3 mm sideways.
+        Driller driller(ToolShape::burr(4.0f));
+        ToolPose pose;
+        pose.orientation = glm::rotation(glm::vec3(0, 0, 1), site.normal);
+        glm::vec3 side = glm::normalize(glm::cross(site.normal, glm::vec3(0, 0, 1)));
+        for (int i = 0; i <= 30; ++i) {
+            pose.position = site.position - site.normal * 2.0f * std::min(1.0f, i / 10.0f) +
+                            side * (0.1f * std::max(0, i - 10) * 1.5f);
+            for (int k = 0; k < 4; ++k)
+                stroke.merge(driller.drill(volume, pose, 1.0f, 0.02f).changed);
+        }
+        renderer->volumeChanged(stroke);
+    }
+};
+
+Scene& skull256() {
+    static Scene scene(256);
+    return scene;
+}
+
+void reportMs(benchmark::State& state, double totalMs, double targetMs, double floorMs = 0.0) {
+    double per = state.iterations() ? totalMs / double(state.iterations()) : 0.0;
+    state.counters["frame_ms"] = per;
+    state.counters["target_ms"] = targetMs;
+    if (floorMs > 0.0)
+        state.counters["floor_ms"] = floorMs;
+    state.counters["threads"] = skull256().pool->size();
+}
+
+void BM_RenderFullFrameSkull256(benchmark::State& state) {
+    Scene& s = skull256();
+    ThreadPool pool(int(state.range(0)));
+    Renderer renderer(s.volume, &pool);
+    Dbi frame(500, 500);
+    double total = 0.0;
+    for (auto _ : state) {
+        auto t0 = Clock::now();
+        renderer.render(s.camera, frame.bounds(), frame);
+        total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+        benchmark::DoNotOptimize(frame.depth());
+    }
+    reportMs(state, total, 15.0, 50.0);
+    state.counters["threads"] = pool.size();
+    state.SetItemsProcessed(state.iterations() * 500 * 500);
+}
+// 0: all cores; 1: one thread, for the scaling ratio.
+BENCHMARK(BM_RenderFullFrameSkull256)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// A square of `size` pixels centred on the burr stroke's screen position, as re-rendered after
+// drilling.
+void BM_RenderDirtyRect(benchmark::State& state) {
+    Scene& s = skull256();
+    const int size = int(state.range(0));
+    PixelRect screen = dirtyScreenRect(s.camera, s.volume, s.stroke);
+    int cx = screen.x + screen.w / 2, cy = screen.y + screen.h / 2;
+    PixelRect rect = intersect({cx - size / 2, cy - size / 2, size, size}, {0, 0, 500, 500});
+    Dbi frame(500, 500);
+    double total = 0.0;
+    for (auto _ : state) {
+        auto t0 = Clock::now();
+        s.renderer->render(s.camera, rect, frame);
+        total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+        benchmark::DoNotOptimize(frame.depth());
+    }
+    reportMs(state, total, size <= 64 ? 0.3 : 1.0);
+    state.SetItemsProcessed(state.iterations() * rect.area());
+}
+BENCHMARK(BM_RenderDirtyRect)->Arg(64)->Arg(128)->Unit(benchmark::kMicrosecond)->UseRealTime();
+
+// The stroke's own BB_screen, whatever its size (reported as w, h).
+void BM_RenderStrokeBBScreen(benchmark::State& state) {
+    Scene& s = skull256();
+    PixelRect rect = dirtyScreenRect(s.camera, s.volume, s.stroke);
+    Dbi frame(500, 500);
+    double total = 0.0;
+    for (auto _ : state) {
+        auto t0 = Clock::now();
+        s.renderer->render(s.camera, rect, frame);
+        total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+    }
+    double per = state.iterations() ? total / double(state.iterations()) : 0.0;
+    state.counters["frame_ms"] = per;
+    state.counters["w"] = rect.w;
+    state.counters["h"] = rect.h;
+    state.SetItemsProcessed(state.iterations() * rect.area());
+}
+BENCHMARK(BM_RenderStrokeBBScreen)->Unit(benchmark::kMicrosecond)->UseRealTime();
+
+// Projection only: eight corners through precomputed matrices, min/max, clip.
+void BM_RenderBBScreenProjection(benchmark::State& state) {
+    Scene& s = skull256();
+    glm::dmat4 vp = viewProjection(s.camera);
+    BoxMm box = dirtyBoxMm(s.volume, s.stroke);
+    for (auto _ : state) {
+        benchmark::DoNotOptimize(box);
+        PixelRect r = dirtyScreenRect(s.camera, vp, box);
+        benchmark::DoNotOptimize(r);
+    }
+}
+BENCHMARK(BM_RenderBBScreenProjection);
+
+// Including building the matrices from the camera (what a caller without a cache pays).
+void BM_RenderBBScreenFromCamera(benchmark::State& state) {
+    Scene& s = skull256();
+    for (auto _ : state) {
+        PixelRect r = dirtyScreenRect(s.camera, s.volume, s.stroke);
+        benchmark::DoNotOptimize(r);
+    }
+}
+BENCHMARK(BM_RenderBBScreenFromCamera);
+
+// Keeping the brick grid in step with the stroke's BB_volume.
+void BM_RenderBrickGridUpdate(benchmark::State& state) {
+    Scene& s = skull256();
+    BrickGrid grid(s.volume);
+    for (auto _ : state)
+        grid.update(s.volume, s.stroke);
+    state.counters["bricks"] = double(grid.dims().x) * grid.dims().y * grid.dims().z;
+}
+BENCHMARK(BM_RenderBrickGridUpdate)->Unit(benchmark::kMicrosecond);
+
+// The paper's experiment: a 128^3 volume at 330.2 mm, 60 degrees, 500x500, spanning 300 px.
+void BM_RenderPaperFrame128(benchmark::State& state) {
+    static Volume volume = [] {
+        Volume v = makeSkull(128);
+        v.setSpacing(glm::vec3(paperSpacingMm(128)));
+        return v;
+    }();
+    Renderer renderer(volume, skull256().pool.get());
+    Camera camera = cameraPreset("paper", volume, {500, 500});
+    Dbi frame(500, 500);
+    double total = 0.0;
+    for (auto _ : state) {
+        auto t0 = Clock::now();
+        renderer.render(camera, frame.bounds(), frame);
+        total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+    }
+    reportMs(state, total, 15.0);
+    state.SetItemsProcessed(state.iterations() * 500 * 500);
+}
+BENCHMARK(BM_RenderPaperFrame128)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+} // namespace
+} // namespace trephine

@@ -1,0 +1,151 @@
+#include "libsim_image/dbi_io.h"
+
+#include "libsim/error.h"
+
+#include <OpenImageIO/imageio.h>
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <vector>
+
+namespace trephine {
+
+namespace {
+
+// OpenImageIO's messages can run over several lines; a user error is one line.
+std::string firstLine(std::string s) {
+    size_t nl = s.find('\n');
+    if (nl != std::string::npos)
+        s.resize(nl);
+    return s.empty() ? "unknown error" : s;
+}
+
+bool hasExtension(const std::string& path, std::initializer_list<const char*> exts) {
+    std::string ext = std::filesystem::path(path).extension().string();
+    std::transform(ext.begin(), ext.end(), ext.begin(),
+                   [](unsigned char c) { return std::tolower(c); });
+    for (const char* e : exts)
+        if (ext == e)
+            return true;
+    return false;
+}
+
+} // namespace
+
+void writeDbiExr(const std::string& path, const Dbi& image) {
+    writeDbiExr(path, image, image.bounds(), image.width(), image.height());
+}
+
+void writeDbiExr(const std::string& path, const Dbi& image, const PixelRect& rectInFrame,
+                 int frameWidth, int frameHeight) {
+    if (!hasExtension(path, {".exr"}))
+        throw Error("cannot write DBI '" + path + "': a DBI file must end in .exr");
+    if (image.empty() || rectInFrame.w != image.width() || rectInFrame.h != image.height() ||
+        !PixelRect{0, 0, frameWidth, frameHeight}.contains(rectInFrame))
+        throw Error("cannot write DBI '" + path + "': the image does not fit its frame");
+
+    OIIO::ImageSpec spec(image.width(), image.height(), 5, OIIO::TypeDesc::HALF);
+    spec.channelnames = {"R", "G", "B", "A", "Z"};
+    spec.channelformats = {OIIO::TypeDesc::HALF, OIIO::TypeDesc::HALF, OIIO::TypeDesc::HALF,
+                           OIIO::TypeDesc::HALF, OIIO::TypeDesc::FLOAT};
+    spec.alpha_channel = 3;
+    spec.z_channel = 4;
+    // Data window: the rectangle, counted from the top of the frame; display window: the frame.
+    spec.x = rectInFrame.x;
+    spec.y = frameHeight - (rectInFrame.y + rectInFrame.h);
+    spec.full_x = 0;
+    spec.full_y = 0;
+    spec.full_width = frameWidth;
+    spec.full_height = frameHeight;
+    spec.attribute("compression", "zip");
+    spec.attribute("Software", "trephine render");
+
+    std::vector<float> pixels(size_t(image.width()) * image.height() * 5);
+    for (int row = 0; row < image.height(); ++row) {
+        int y = image.height() - 1 - row; // file rows run top-down
+        for (int x = 0; x < image.width(); ++x) {
+            float* out = &pixels[(size_t(row) * image.width() + x) * 5];
+            const uint8_t* c = image.color(x, y);
+            for (int i = 0; i < 4; ++i)
+                out[i] = float(c[i]) / 255.0f;
+            out[4] = image.depth(x, y);
+        }
+    }
+    auto out = OIIO::ImageOutput::create(path);
+    if (!out)
+        throw Error("cannot write DBI '" + path + "': " + firstLine(OIIO::geterror()));
+    if (!out->open(path, spec) || !out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()) ||
+        !out->close())
+        throw Error("cannot write DBI '" + path + "': " + firstLine(out->geterror()));
+}
+
+DbiFile readDbiExr(const std::string& path) {
+    if (!std::filesystem::exists(path))
+        throw Error("cannot read DBI '" + path + "': no such file");
+    auto in = OIIO::ImageInput::open(path);
+    if (!in)
+        throw Error("cannot read DBI '" + path + "': " + firstLine(OIIO::geterror()));
+    if (std::string(in->format_name()) != "openexr")
+        throw Error("cannot read DBI '" + path + "': it is a " + in->format_name() +
+                    " file, not OpenEXR (a DBI is an EXR with R, G, B and Z channels)");
+    const OIIO::ImageSpec& spec = in->spec();
+    auto channel = [&](const char* name) {
+        auto it = std::find(spec.channelnames.begin(), spec.channelnames.end(), name);
+        return it == spec.channelnames.end() ? -1 : int(it - spec.channelnames.begin());
+    };
+    int ch[5] = {channel("R"), channel("G"), channel("B"), channel("A"), channel("Z")};
+    if (ch[4] < 0)
+        throw Error("cannot read DBI '" + path +
+                    "': it has no Z channel, so it is not a depth-buffered image");
+    if (ch[0] < 0 || ch[1] < 0 || ch[2] < 0)
+        throw Error("cannot read DBI '" + path + "': it lacks an R, G or B channel");
+    if (spec.depth > 1 || spec.width <= 0 || spec.height <= 0)
+        throw Error("cannot read DBI '" + path + "': not a 2D image");
+
+    const int w = spec.width, h = spec.height, nc = spec.nchannels;
+    std::vector<float> pixels(size_t(w) * h * nc);
+    if (!in->read_image(0, 0, 0, nc, OIIO::TypeDesc::FLOAT, pixels.data()))
+        throw Error("cannot read DBI '" + path + "': " + firstLine(in->geterror()));
+
+    DbiFile file;
+    file.frameWidth = spec.full_width;
+    file.frameHeight = spec.full_height;
+    int yTop = spec.y - spec.full_y;
+    file.rectInFrame = {spec.x - spec.full_x, spec.full_height - (yTop + h), w, h};
+    file.image = Dbi(w, h);
+    auto to8 = [](float v) { return uint8_t(std::lround(std::clamp(v, 0.0f, 1.0f) * 255.0f)); };
+    for (int row = 0; row < h; ++row) {
+        int y = h - 1 - row;
+        for (int x = 0; x < w; ++x) {
+            const float* p = &pixels[(size_t(row) * w + x) * nc];
+            float z = p[ch[4]];
+            uint8_t* c = file.image.color(x, y);
+            c[0] = to8(p[ch[0]]), c[1] = to8(p[ch[1]]), c[2] = to8(p[ch[2]]);
+            c[3] = ch[3] >= 0 ? to8(p[ch[3]]) : (z < kBackgroundDepth ? 255 : 0);
+            file.image.depth()[file.image.index(x, y)] = z;
+        }
+    }
+    return file;
+}
+
+void writeColorPng(const std::string& path, const Dbi& image) {
+    if (!hasExtension(path, {".png"}))
+        throw Error("cannot write '" + path + "': a colour image must end in .png");
+    if (image.empty())
+        throw Error("cannot write '" + path + "': the image is empty");
+    std::vector<uint8_t> rgb(size_t(image.width()) * image.height() * 3);
+    for (int row = 0; row < image.height(); ++row) {
+        int y = image.height() - 1 - row;
+        for (int x = 0; x < image.width(); ++x)
+            std::copy_n(image.color(x, y), 3, &rgb[(size_t(row) * image.width() + x) * 3]);
+    }
+    OIIO::ImageSpec spec(image.width(), image.height(), 3, OIIO::TypeDesc::UINT8);
+    auto out = OIIO::ImageOutput::create(path);
+    if (!out)
+        throw Error("cannot write '" + path + "': " + firstLine(OIIO::geterror()));
+    if (!out->open(path, spec) || !out->write_image(OIIO::TypeDesc::UINT8, rgb.data()) ||
+        !out->close())
+        throw Error("cannot write '" + path + "': " + firstLine(out->geterror()));
+}
+
+} // namespace trephine

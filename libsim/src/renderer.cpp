@@ -1,0 +1,613 @@
+// The CPU ray caster behind the DBI. docs/rendering.md explains the conventions and the reasoning.
+//
+// [SECTION] Frame setup: matrices and voxel-space constants shared by every ray of one render
+// [SECTION] Sampling: trilinear density with air outside the volume, the marching test, gradient
+// [SECTION] Marching: fixed sample indices, brick skipping, first hit, refinement
+// [SECTION] Tile pass: one cone march per 8x8 pixel block, exact like any other skip
+// [SECTION] Shading and depth
+// [SECTION] Renderer: tiles over the worker pool
+#include "libsim/renderer.h"
+
+#include "libsim/thread_pool.h"
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+#include <cstring>
+#include <glm/geometric.hpp>
+#include <glm/matrix.hpp>
+
+namespace trephine {
+
+glm::vec3 materialColor(Material m) {
+    switch (m) {
+    case Material::Cortical:
+        return {232.0f, 222.0f, 196.0f}; // ivory
+    case Material::Diploe:
+        return {190.0f, 132.0f, 108.0f}; // darker, reddish marrow
+    case Material::Dura:
+        return {205.0f, 84.0f, 88.0f}; // pinkish red
+    case Material::Brain:
+        return {226.0f, 178.0f, 172.0f}; // pinkish grey
+    default:
+        return {232.0f, 222.0f, 196.0f};
+    }
+}
+
+namespace {
+
+// [SECTION] Frame setup ------------------------------------------------------------------------
+
+struct Frame {
+    const uint8_t* density;
+    const uint8_t* material;
+    glm::ivec3 n;
+    ptrdiff_t sy, sz; // strides of y and z in voxels
+    glm::vec3 spacing;
+    glm::vec3 invSpacing;
+    int width, height;
+    glm::dmat4 viewProj;
+    // The far-plane point of a pixel, homogeneous: farH + ndc.x * farDx + ndc.y * farDy. Points
+    // on the far plane share one clip w, so after the divide it is affine in the pixel.
+    glm::dvec4 farH, farDx, farDy;
+    double nearOverFar;
+    glm::dvec3 eye;
+    glm::vec3 origin; // eye in voxel coordinates
+    float dt;         // sample step along the ray, mm
+    float minSpacing;
+    double maxSampleT;       // distance from the eye to the farthest corner of the volume
+    const uint8_t* distance; // brick grid distances; null: no skipping
+    const uint64_t* cells;   // brick grid cell masks
+    glm::ivec3 nb;           // bricks per axis
+    size_t nbxy;
+};
+
+// See makeFrame: float positions are exact to ~6e-8 of their magnitude, and skipping needs them
+// within 1/765 voxel (see march).
+constexpr float kMaxSkipEyeVoxels = 2048.0f;
+
+Frame makeFrame(const Volume& volume, const Camera& camera, const RenderOptions& options,
+                const BrickGrid& bricks) {
+    Frame f;
+    f.density = volume.densityData();
+    f.material = volume.materialData();
+    f.n = volume.dims();
+    f.sy = f.n.x;
+    f.sz = ptrdiff_t(f.n.x) * f.n.y;
+    f.spacing = volume.spacing();
+    f.invSpacing = 1.0f / f.spacing;
+    f.width = camera.width;
+    f.height = camera.height;
+    f.viewProj = viewProjection(camera);
+    glm::dmat4 inv = glm::inverse(f.viewProj);
+    f.farH = inv * glm::dvec4(0.0, 0.0, 1.0, 1.0);
+    f.farDx = inv * glm::dvec4(1.0, 0.0, 0.0, 0.0);
+    f.farDy = inv * glm::dvec4(0.0, 1.0, 0.0, 0.0);
+    f.nearOverFar = double(camera.nearMm) / double(camera.farMm);
+    f.eye = glm::dvec3(camera.eye);
+    glm::dvec3 half = glm::dvec3(f.n) * 0.5 - 0.5;
+    f.origin = glm::vec3(f.eye / glm::dvec3(f.spacing) + half);
+    f.minSpacing = std::min({f.spacing.x, f.spacing.y, f.spacing.z});
+    f.dt = std::max(1e-3f, options.stepVoxels) * f.minSpacing;
+    f.maxSampleT = 0.0;
+    glm::dvec3 h = glm::dvec3(volume.extentMm()) * 0.5 + glm::dvec3(f.spacing); // + a voxel
+    for (int i = 0; i < 8; ++i)
+        f.maxSampleT = std::max(f.maxSampleT,
+                                glm::length(glm::dvec3((i & 1) ? h.x : -h.x, (i & 2) ? h.y : -h.y,
+                                                       (i & 4) ? h.z : -h.z) -
+                                            f.eye));
+    // Skipping relies on sample positions being within ~1e-3 voxel of the exact ray (float
+    // rounding grows with the distance of the eye, in voxels): beyond that, march everything.
+    glm::vec3 eyeVoxels = glm::abs(f.origin - glm::vec3(f.n) * 0.5f);
+    bool nearEnough = std::max({eyeVoxels.x, eyeVoxels.y, eyeVoxels.z}) < kMaxSkipEyeVoxels;
+    f.distance =
+        options.skipEmpty && !bricks.empty() && nearEnough ? bricks.distanceData() : nullptr;
+    f.cells = bricks.cellData();
+    f.nb = bricks.dims();
+    f.nbxy = size_t(f.nb.x) * size_t(f.nb.y);
+    return f;
+}
+
+// [SECTION] Sampling ---------------------------------------------------------------------------
+
+// floor(x) for x > -16 without libm (baseline x86-64 has no SSE4.1 round, so floorf is a call):
+// truncation of a positive number. x + 16 may round up to the next integer when x lies within an
+// ulp below one; the sample then uses the next cell with a weight of about -1e-6, which is the
+// same value to within 1e-4 and, being a function of x alone, the same in every render. Sample,
+// hit and gradient positions lie in [-2, n + 2]; brick lookups clamp whatever this gives below 0.
+inline int floorInt(float x) {
+    return int(x + 16.0f) - 16;
+}
+
+inline float voxelAt(const Frame& f, int x, int y, int z) {
+    if (x < 0 || y < 0 || z < 0 || x >= f.n.x || y >= f.n.y || z >= f.n.z)
+        return 0.0f;
+    return f.density[x + f.sy * y + f.sz * z];
+}
+
+// Trilinear density at voxel coordinate p (voxel centres at integers); voxels outside the volume
+// are air. The in-volume fast path and the border path feed the same arithmetic, so a sample
+// depends on p alone.
+inline float trilinear(float tx, float ty, float tz, float c000, float c100, float c010, float c110,
+                       float c001, float c101, float c011, float c111) {
+    float c00 = c000 + tx * (c100 - c000), c10 = c010 + tx * (c110 - c010);
+    float c01 = c001 + tx * (c101 - c001), c11 = c011 + tx * (c111 - c011);
+    float c0 = c00 + ty * (c10 - c00), c1 = c01 + ty * (c11 - c01);
+    return c0 + tz * (c1 - c0);
+}
+
+inline float sampleDensity(const Frame& f, glm::vec3 p) {
+    int ix = floorInt(p.x), iy = floorInt(p.y), iz = floorInt(p.z);
+    float tx = p.x - float(ix), ty = p.y - float(iy), tz = p.z - float(iz);
+    if (unsigned(ix) < unsigned(f.n.x - 1) && unsigned(iy) < unsigned(f.n.y - 1) &&
+        unsigned(iz) < unsigned(f.n.z - 1)) {
+        const uint8_t* b = f.density + ix + f.sy * iy + f.sz * iz;
+        return trilinear(tx, ty, tz, b[0], b[1], b[f.sy], b[f.sy + 1], b[f.sz], b[f.sz + 1],
+                         b[f.sz + f.sy], b[f.sz + f.sy + 1]);
+    }
+    if (ix < -1 || iy < -1 || iz < -1 || ix >= f.n.x || iy >= f.n.y || iz >= f.n.z)
+        return 0.0f;
+    return trilinear(tx, ty, tz, voxelAt(f, ix, iy, iz), voxelAt(f, ix + 1, iy, iz),
+                     voxelAt(f, ix, iy + 1, iz), voxelAt(f, ix + 1, iy + 1, iz),
+                     voxelAt(f, ix, iy, iz + 1), voxelAt(f, ix + 1, iy, iz + 1),
+                     voxelAt(f, ix, iy + 1, iz + 1), voxelAt(f, ix + 1, iy + 1, iz + 1));
+}
+
+// The marching test: is the sample at p at or above the iso-value? A trilinear sample is a convex
+// combination of its eight corners, so when no corner reaches 128 (bit 7 clear in all of them)
+// the answer is no without interpolating; otherwise the sample decides, exactly as
+// sampleDensity would. Returns the sample (or 0 when skipped) in `value`.
+static_assert(kSurfaceDensity == 128, "the corner test below reads bit 7");
+inline bool insideSample(const Frame& f, glm::vec3 p, float& value) {
+    int ix = floorInt(p.x), iy = floorInt(p.y), iz = floorInt(p.z);
+    if (unsigned(ix) < unsigned(f.n.x - 1) && unsigned(iy) < unsigned(f.n.y - 1) &&
+        unsigned(iz) < unsigned(f.n.z - 1)) {
+        const uint8_t* b = f.density + ix + f.sy * iy + f.sz * iz;
+        uint16_t r0, r1, r2, r3; // pairs of x-neighbours
+        std::memcpy(&r0, b, 2);
+        std::memcpy(&r1, b + f.sy, 2);
+        std::memcpy(&r2, b + f.sz, 2);
+        std::memcpy(&r3, b + f.sz + f.sy, 2);
+        if (((r0 | r1 | r2 | r3) & 0x8080u) == 0) {
+            value = 0.0f;
+            return false;
+        }
+        float tx = p.x - float(ix), ty = p.y - float(iy), tz = p.z - float(iz);
+        value = trilinear(tx, ty, tz, b[0], b[1], b[f.sy], b[f.sy + 1], b[f.sz], b[f.sz + 1],
+                          b[f.sz + f.sy], b[f.sz + f.sy + 1]);
+    } else {
+        value = sampleDensity(f, p);
+    }
+    return value >= float(kSurfaceDensity);
+}
+
+// Density gradient (per voxel) at p: central differences at the eight voxels around p,
+// trilinearly interpolated. Smooth across voxel faces, unlike differences of trilinear samples,
+// so the shading shows no terraces. Reads voxels within 2 of p (see kDirtyStencilVoxels).
+glm::vec3 gradientAt(const Frame& f, glm::vec3 p) {
+    int ix = floorInt(p.x), iy = floorInt(p.y), iz = floorInt(p.z);
+    float tx = p.x - float(ix), ty = p.y - float(iy), tz = p.z - float(iz);
+    // The 4^3 neighbourhood [i - 1, i + 2] on each axis.
+    float v[4][4][4];
+    if (ix >= 1 && iy >= 1 && iz >= 1 && ix + 2 < f.n.x && iy + 2 < f.n.y && iz + 2 < f.n.z) {
+        for (int z = 0; z < 4; ++z)
+            for (int y = 0; y < 4; ++y) {
+                const uint8_t* row =
+                    f.density + (ix - 1) + f.sy * (iy - 1 + y) + f.sz * (iz - 1 + z);
+                for (int x = 0; x < 4; ++x)
+                    v[z][y][x] = row[x];
+            }
+    } else {
+        for (int z = 0; z < 4; ++z)
+            for (int y = 0; y < 4; ++y)
+                for (int x = 0; x < 4; ++x)
+                    v[z][y][x] = voxelAt(f, ix - 1 + x, iy - 1 + y, iz - 1 + z);
+    }
+    glm::vec3 g[2][2][2];
+    for (int z = 0; z < 2; ++z)
+        for (int y = 0; y < 2; ++y)
+            for (int x = 0; x < 2; ++x)
+                g[z][y][x] = glm::vec3(v[z + 1][y + 1][x + 2] - v[z + 1][y + 1][x],
+                                       v[z + 1][y + 2][x + 1] - v[z + 1][y][x + 1],
+                                       v[z + 2][y + 1][x + 1] - v[z][y + 1][x + 1]) *
+                             0.5f;
+    auto lerp = [](glm::vec3 a, glm::vec3 b, float t) { return a + t * (b - a); };
+    glm::vec3 g00 = lerp(g[0][0][0], g[0][0][1], tx), g10 = lerp(g[0][1][0], g[0][1][1], tx);
+    glm::vec3 g01 = lerp(g[1][0][0], g[1][0][1], tx), g11 = lerp(g[1][1][0], g[1][1][1], tx);
+    return lerp(lerp(g00, g10, ty), lerp(g01, g11, ty), tz);
+}
+
+// [SECTION] Marching ---------------------------------------------------------------------------
+
+struct Ray {
+    glm::dvec3 dir;  // unit, object space
+    glm::vec3 dv;    // direction in voxel units per mm
+    glm::vec3 invDv; // 1 / dv (inf where dv is 0)
+    double tNear;    // distance along the ray to the near and far planes
+    double tFar;
+};
+
+// The ray through window position (wx, wy) (pixel x's centre is x + 0.5).
+Ray windowRay(const Frame& f, double wx, double wy) {
+    double ndcX = wx / f.width * 2.0 - 1.0, ndcY = wy / f.height * 2.0 - 1.0;
+    glm::dvec4 h = f.farH + ndcX * f.farDx + ndcY * f.farDy;
+    glm::dvec3 toFar = glm::dvec3(h) / h.w - f.eye;
+    Ray r;
+    r.tFar = glm::length(toFar);
+    r.dir = toFar / r.tFar;
+    r.tNear = r.tFar * f.nearOverFar; // eye-space depth grows linearly along the ray
+    r.dv = glm::vec3(r.dir) * f.invSpacing;
+    r.invDv = 1.0f / r.dv;
+    return r;
+}
+
+Ray pixelRay(const Frame& f, int x, int y) {
+    return windowRay(f, x + 0.5, y + 0.5);
+}
+
+inline glm::vec3 samplePos(const Frame& f, const Ray& r, float t) {
+    return glm::vec3(f.origin.x + t * r.dv.x, f.origin.y + t * r.dv.y, f.origin.z + t * r.dv.z);
+}
+
+inline int brickCoord(float p, int n) {
+    return std::clamp(floorInt(p), 0, n - 1) >> BrickGrid::kShift;
+}
+
+// Where the ray leaves the box of bricks within Chebyshev distance `radius` of brick b. A face on
+// the grid's edge is open: samples beyond it still belong to the edge brick.
+inline float boxExit(const Frame& f, const Ray& r, glm::ivec3 b, int radius) {
+    float tExit = INFINITY;
+    for (int a = 0; a < 3; ++a) {
+        if (r.dv[a] > 0.0f) {
+            int hi = b[a] + radius;
+            if (hi < f.nb[a] - 1)
+                tExit = std::min(tExit,
+                                 (float((hi + 1) << BrickGrid::kShift) - f.origin[a]) * r.invDv[a]);
+        } else if (r.dv[a] < 0.0f) {
+            int lo = b[a] - radius;
+            if (lo > 0)
+                tExit =
+                    std::min(tExit, (float(lo << BrickGrid::kShift) - f.origin[a]) * r.invDv[a]);
+        }
+    }
+    return tExit;
+}
+
+struct March {
+    bool hit = false;
+    float t = 0.0f;   // refined hit distance, mm
+    float tIn = 0.0f; // first sample inside
+};
+
+// Samples sit at t = k * dt from the eye for integer k, whatever is skipped. A brick at Chebyshev
+// distance d > 0 from surface lets the ray jump out of the (2d - 1)^3 bricks around it; those
+// samples are all below the iso-value, so the first sample inside is the same with or without
+// skipping. Inside a brick that may hold surface every sample is taken, but a sample in a clear
+// cell (BrickGrid::cellMask) needs no volume read.
+//
+// Why rounding cannot break this: in an empty brick every trilinear corner is at most 127, so the
+// field is <= 127 there; it changes by at most 255 per voxel along each axis, so a sample that
+// float rounding (under 2.5e-4 voxel with the eye within kMaxSkipEyeVoxels) put just outside the
+// brick, or a box exit rounded a little late, reads at most 127 + 765 * 2.5e-4 < 128.
+March march(const Frame& f, const Ray& r, float tSkipTo) {
+    March m;
+    // Samples live where some trilinear corner is inside the volume: voxel coordinates [-1, n].
+    float t0 = float(std::max(r.tNear, 0.0)), t1 = float(r.tFar);
+    for (int a = 0; a < 3; ++a) {
+        float o = f.origin[a];
+        if (r.dv[a] == 0.0f) {
+            if (o < -1.0f || o > float(f.n[a]))
+                return m;
+            continue;
+        }
+        float ta = (-1.0f - o) * r.invDv[a], tb = (float(f.n[a]) - o) * r.invDv[a];
+        t0 = std::max(t0, std::min(ta, tb));
+        t1 = std::min(t1, std::max(ta, tb));
+    }
+    if (!(t0 <= t1))
+        return m;
+    const float dt = f.dt;
+    const float invDt = 1.0f / dt;
+    const float iso = float(kSurfaceDensity);
+    const int kStart = int(std::ceil(t0 / dt));
+    const int kEnd = int(std::floor(t1 / dt));
+
+    // The tile pass proved that no sample before tSkipTo can be inside.
+    if (!(tSkipTo <= t1))
+        return m;
+    int k = tSkipTo > t0 ? std::max(kStart, int(tSkipTo * invDt)) : kStart;
+    float value = 0.0f;
+    bool found = false;
+    while (k <= kEnd && !found) {
+        int kRunEnd = kEnd;
+        uint64_t cells = ~uint64_t(0);
+        glm::ivec3 cellBase(0);
+        if (f.distance) {
+            glm::vec3 p = samplePos(f, r, float(k) * dt);
+            glm::ivec3 b(brickCoord(p.x, f.n.x), brickCoord(p.y, f.n.y), brickCoord(p.z, f.n.z));
+            size_t bi = size_t(b.x) + size_t(f.nb.x) * size_t(b.y) + f.nbxy * size_t(b.z);
+            int d = f.distance[bi];
+            float tExit = boxExit(f, r, b, std::max(d - 1, 0));
+            // Last sample before the box's exit (one a rounding error beyond it is still below
+            // the iso-value, see above).
+            float kLast = tExit * invDt;
+            if (d > 0) {
+                if (!(kLast < float(kEnd)))
+                    return m;
+                k = std::max(k + 1, floorInt(kLast) + 1);
+                continue;
+            }
+            if (kLast < float(kEnd))
+                kRunEnd = std::max(k, floorInt(kLast));
+            cells = f.cells[bi];
+            cellBase = b << BrickGrid::kShift;
+        }
+        for (; k <= kRunEnd; ++k) {
+            glm::vec3 p = samplePos(f, r, float(k) * dt);
+            // A clear cell of this brick: below the iso-value without touching the volume. A
+            // sample that rounding put in a neighbouring brick takes the full test.
+            int cx = floorInt(p.x) - cellBase.x, cy = floorInt(p.y) - cellBase.y,
+                cz = floorInt(p.z) - cellBase.z;
+            if (unsigned(cx | cy | cz) < unsigned(BrickGrid::kSize) &&
+                !((cells >> (cx + 4 * cy + 16 * cz)) & 1u))
+                continue;
+            if (insideSample(f, p, value)) {
+                found = true;
+                break;
+            }
+        }
+    }
+    if (!found)
+        return m;
+
+    m.hit = true;
+    m.tIn = float(k) * dt;
+    m.t = m.tIn;
+    if (k > kStart) {
+        // Refine between the last sample outside and the first inside: a secant (regula falsi)
+        // step, one sample there to narrow the bracket, and a final secant. The outside sample is
+        // recomputed so that skipping it changes nothing. (Bisection costs three more samples
+        // and as many mispredicted branches, for accuracy the depth test does not need.)
+        float ta = float(k - 1) * dt, tb = m.tIn;
+        float fa = sampleDensity(f, samplePos(f, r, ta)) - iso, fb = value - iso;
+        for (int i = 0; i < kRefineSteps; ++i) {
+            float tm = ta + (tb - ta) * (fa / (fa - fb));
+            float fm = sampleDensity(f, samplePos(f, r, tm)) - iso;
+            bool in = fm >= 0.0f;
+            ta = in ? ta : tm, fa = in ? fa : fm;
+            tb = in ? tm : tb, fb = in ? fm : fb;
+        }
+        m.t = ta + (tb - ta) * (fa / (fa - fb));
+    }
+    return m;
+}
+
+// [SECTION] Tile pass ----------------------------------------------------------------------------
+
+// Pixels per edge of the blocks that share one cone march.
+constexpr int kConeBlock = 8;
+
+// A lower bound on t before which no ray of the pixel block [x0, x1) x [y0, y1) has a sample in
+// a brick that may hold surface (+inf: none ever has). Every ray of the block lies within a cone
+// around the block's central ray; at distance t its points are within t * tan(angle) of the
+// central point. The central ray is marched through the brick distances with that radius taken
+// off every empty cube, so whatever the cone sweeps is empty. Skipping those samples is exact,
+// like any brick skip: results never depend on the block a pixel was rendered in.
+float coneSkipTo(const Frame& f, int x0, int y0, int x1, int y1) {
+    const Ray c = windowRay(f, 0.5 * (x0 + x1), 0.5 * (y0 + y1));
+    double cosMin = 1.0;
+    for (int i = 0; i < 4; ++i) {
+        Ray q = windowRay(f, (i & 1) ? x1 - 0.5 : x0 + 0.5, (i & 2) ? y1 - 0.5 : y0 + 0.5);
+        cosMin = std::min(cosMin, glm::dot(c.dir, q.dir));
+    }
+    if (cosMin < 0.5) // a block wider than 60 degrees: nothing worth proving
+        return 0.0f;
+    cosMin = std::min(cosMin, 1.0);
+    const double tanA = std::sqrt(1.0 - cosMin * cosMin) / cosMin;
+    // Cone radius in voxels at the farthest sample, plus slack for rounding.
+    const float radius = float(tanA * f.maxSampleT / f.minSpacing) * 1.01f + 0.05f;
+
+    // Where the central ray is within `radius` of the sampled region [-1, n] (near and far
+    // planes differ between the block's rays, so they play no part here).
+    float t0 = 0.0f, t1 = INFINITY;
+    for (int a = 0; a < 3; ++a) {
+        float o = f.origin[a], lo = -1.0f - radius, hi = float(f.n[a]) + radius;
+        if (c.dv[a] == 0.0f) {
+            if (o < lo || o > hi)
+                return INFINITY;
+            continue;
+        }
+        float ta = (lo - o) * c.invDv[a], tb = (hi - o) * c.invDv[a];
+        t0 = std::max(t0, std::min(ta, tb));
+        t1 = std::min(t1, std::max(ta, tb));
+    }
+    if (!(t0 <= t1))
+        return INFINITY;
+    float t = t0;
+    for (int step = 0; step < 64; ++step) {
+        glm::vec3 p = samplePos(f, c, t);
+        glm::ivec3 b(brickCoord(p.x, f.n.x), brickCoord(p.y, f.n.y), brickCoord(p.z, f.n.z));
+        int d = f.distance[size_t(b.x) + size_t(f.nb.x) * size_t(b.y) + f.nbxy * size_t(b.z)];
+        if (d == 0)
+            return t;
+        // The empty cube of bricks within d - 1 of b, shrunk by the radius (open at the grid's
+        // edges); the central point must be inside it for the cone to be.
+        float tNext = INFINITY;
+        for (int a = 0; a < 3; ++a) {
+            int loB = b[a] - (d - 1), hiB = b[a] + (d - 1);
+            float lo = loB <= 0 ? -INFINITY : float(loB << BrickGrid::kShift) + radius;
+            float hi =
+                hiB >= f.nb[a] - 1 ? INFINITY : float((hiB + 1) << BrickGrid::kShift) - radius;
+            if (!(p[a] >= lo && p[a] <= hi))
+                return t;
+            if (c.dv[a] > 0.0f && hi < INFINITY)
+                tNext = std::min(tNext, (hi - f.origin[a]) * c.invDv[a]);
+            else if (c.dv[a] < 0.0f && lo > -INFINITY)
+                tNext = std::min(tNext, (lo - f.origin[a]) * c.invDv[a]);
+        }
+        if (!(tNext < t1))
+            return INFINITY; // the cone stays in empty bricks until it leaves the volume
+        if (!(tNext > t))
+            return t;
+        t = tNext;
+    }
+    return t;
+}
+
+// [SECTION] Shading and depth ------------------------------------------------------------------
+
+Material hitMaterial(const Frame& f, glm::vec3 pHit, glm::vec3 pIn) {
+    auto label = [&](int x, int y, int z) { return Material(f.material[x + f.sy * y + f.sz * z]); };
+    glm::ivec3 v(floorInt(pHit.x + 0.5f), floorInt(pHit.y + 0.5f), floorInt(pHit.z + 0.5f));
+    v = glm::clamp(v, glm::ivec3(0), f.n - 1);
+    Material m = label(v.x, v.y, v.z);
+    if (m != Material::Air)
+        return m;
+    // The nearest voxel is air (the surface passes between voxels): take the densest labelled
+    // corner of the first sample inside, whose density reaches the iso-value.
+    glm::ivec3 c(floorInt(pIn.x), floorInt(pIn.y), floorInt(pIn.z));
+    int best = -1;
+    for (int i = 0; i < 8; ++i) {
+        glm::ivec3 q = c + glm::ivec3(i & 1, (i >> 1) & 1, (i >> 2) & 1);
+        if (q.x < 0 || q.y < 0 || q.z < 0 || q.x >= f.n.x || q.y >= f.n.y || q.z >= f.n.z)
+            continue;
+        int d = f.density[q.x + f.sy * q.y + f.sz * q.z];
+        if (d > best && label(q.x, q.y, q.z) != Material::Air)
+            best = d, m = label(q.x, q.y, q.z);
+    }
+    return m == Material::Air ? Material::Cortical : m;
+}
+
+RayHit traceRay(const Frame& f, int x, int y, float tSkipTo) {
+    RayHit h;
+    Ray r = pixelRay(f, x, y);
+    h.direction = glm::vec3(r.dir);
+    March m = march(f, r, tSkipTo);
+    if (!m.hit)
+        return h;
+    h.hit = true;
+    h.distanceMm = m.t;
+    h.position = f.eye + double(m.t) * r.dir;
+    h.depth = windowDepth(f.viewProj, h.position);
+
+    glm::vec3 p = samplePos(f, r, m.t);
+    glm::vec3 grad = gradientAt(f, p) * f.invSpacing; // density per mm
+    float len = glm::length(grad);
+    h.normal = len > 0.0f ? -grad / len : -h.direction;
+    h.material = hitMaterial(f, p, samplePos(f, r, m.tIn));
+    return h;
+}
+
+struct Shade {
+    float ambient, diffuse, specular;
+    int shininessLog2; // specular exponent 2^shininessLog2
+};
+
+Shade materialShade(Material m) {
+    switch (m) {
+    case Material::Diploe:
+        return {0.22f, 0.75f, 0.05f, 4};
+    case Material::Dura:
+        return {0.22f, 0.75f, 0.15f, 6}; // wet: a tighter highlight
+    case Material::Brain:
+        return {0.22f, 0.75f, 0.12f, 6};
+    default:
+        return {0.20f, 0.75f, 0.12f, 5};
+    }
+}
+
+// Headlight Phong: the light sits at the eye, so the half vector is the view vector.
+void shadePixel(const RayHit& h, uint8_t* rgba) {
+    float ndl = std::max(0.0f, -glm::dot(h.normal, h.direction));
+    Shade s = materialShade(h.material);
+    float spec = ndl;
+    for (int i = 0; i < s.shininessLog2; ++i)
+        spec *= spec;
+    glm::vec3 c =
+        materialColor(h.material) * (s.ambient + s.diffuse * ndl) + s.specular * spec * 255.0f;
+    for (int i = 0; i < 3; ++i)
+        rgba[i] = uint8_t(std::min(255.0f, c[i]) + 0.5f);
+    rgba[3] = 255;
+}
+
+} // namespace
+
+// [SECTION] Renderer -----------------------------------------------------------------------------
+
+Renderer::Renderer(const Volume& volume, ThreadPool* pool, RenderOptions options)
+    : m_volume(&volume), m_pool(pool), m_options(options) {
+    m_bricks.build(volume);
+}
+
+void Renderer::volumeChanged(const Box3i& changed) {
+    m_bricks.update(*m_volume, changed);
+}
+
+void Renderer::rebuild() {
+    m_bricks.build(*m_volume);
+}
+
+RayHit Renderer::castRay(const Camera& camera, int x, int y) const {
+    Frame f = makeFrame(*m_volume, camera, m_options, m_bricks);
+    return traceRay(f, x, y, 0.0f);
+}
+
+Dbi Renderer::render(const Camera& camera) const {
+    Dbi frame(camera.width, camera.height);
+    renderInto(camera, frame.bounds(), frame, 0, 0);
+    return frame;
+}
+
+void Renderer::render(const Camera& camera, const PixelRect& rect, Dbi& frame) const {
+    assert(frame.width() == camera.width && frame.height() == camera.height &&
+           "Renderer::render: the frame must be the camera's window size");
+    PixelRect r = intersect(rect, frame.bounds());
+    renderInto(camera, r, frame, r.x, r.y);
+}
+
+Dbi Renderer::renderRect(const Camera& camera, const PixelRect& rect) const {
+    assert(PixelRect(0, 0, camera.width, camera.height).contains(rect) &&
+           "Renderer::renderRect: rectangle outside the window");
+    Dbi out(rect.w, rect.h);
+    renderInto(camera, rect, out, 0, 0);
+    return out;
+}
+
+void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, int outX,
+                          int outY) const {
+    if (rect.empty() || m_volume->empty())
+        return;
+    const Frame f = makeFrame(*m_volume, camera, m_options, m_bricks);
+    const int tile = std::max(4, m_options.tileSize);
+    const int tilesX = (rect.w + tile - 1) / tile, tilesY = (rect.h + tile - 1) / tile;
+    auto renderTile = [&](int i) {
+        int tx = i % tilesX, ty = i / tilesX;
+        int x0 = rect.x + tx * tile, y0 = rect.y + ty * tile;
+        int x1 = std::min(x0 + tile, rect.x + rect.w), y1 = std::min(y0 + tile, rect.y + rect.h);
+        for (int by = y0; by < y1; by += kConeBlock)
+            for (int bx = x0; bx < x1; bx += kConeBlock) {
+                int bx1 = std::min(bx + kConeBlock, x1), by1 = std::min(by + kConeBlock, y1);
+                float tSkipTo = f.distance ? coneSkipTo(f, bx, by, bx1, by1) : 0.0f;
+                for (int y = by; y < by1; ++y)
+                    for (int x = bx; x < bx1; ++x) {
+                        int ox = x - rect.x + outX, oy = y - rect.y + outY;
+                        RayHit h = traceRay(f, x, y, tSkipTo);
+                        uint8_t* rgba = out.color(ox, oy);
+                        if (h.hit) {
+                            shadePixel(h, rgba);
+                            out.depth()[out.index(ox, oy)] = h.depth;
+                        } else {
+                            std::memcpy(rgba, kBackgroundRgba, 4);
+                            out.depth()[out.index(ox, oy)] = kBackgroundDepth;
+                        }
+                    }
+            }
+    };
+    if (m_pool)
+        m_pool->parallelFor(tilesX * tilesY, renderTile);
+    else
+        for (int i = 0; i < tilesX * tilesY; ++i)
+            renderTile(i);
+}
+
+} // namespace trephine
