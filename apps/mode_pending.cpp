@@ -16,14 +16,6 @@ void addPendingMode(CLI::App& root, int& exitCode, const char* name, const char*
     });
 }
 
-void addServerMode(CLI::App& root, int& exitCode) {
-    addPendingMode(root, exitCode, "server", "Hold the skull and serve trainees and instructors",
-                   "networked session, issue 4");
-}
-void addTraineeMode(CLI::App& root, int& exitCode) {
-    addPendingMode(root, exitCode, "trainee", "Join a session as a trainee (window or headless)",
-                   "networked session, issue 4");
-}
 void addInstructorMode(CLI::App& root, int& exitCode) {
     addPendingMode(root, exitCode, "instructor", "Join a session as an instructor",
                    "trainee and instructor windows, issue 6");

@@ -40,6 +40,15 @@ public:
 ENetAddress parseAddress(const std::string& text, uint16_t defaultPort = 7777);
 std::string formatAddress(const ENetAddress& a);
 
+// ENet drops unreliable and unsequenced packets at the sender when round-trip times vary (its
+// packet throttle), which on a busy machine loses tool states that the simulation integrates.
+// Ours are small and newest-wins: keep the throttle fully open on both ends of a session.
+inline void disableThrottle(ENetPeer* peer) {
+    enet_peer_throttle_configure(peer, ENET_PEER_PACKET_THROTTLE_INTERVAL,
+                                 ENET_PEER_PACKET_THROTTLE_ACCELERATION, 0);
+    peer->packetThrottle = ENET_PEER_PACKET_THROTTLE_SCALE;
+}
+
 class Host {
 public:
     using EventHandler = std::function<void(const ENetEvent&)>;

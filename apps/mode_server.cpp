@@ -1,0 +1,74 @@
+// `trephine server`: hold the skull and serve trainees and instructors over ENet until SIGINT or
+// SIGTERM, then apply every queued tool state and write --save-on-exit.
+#include "modes.h"
+
+#include "libsim/error.h"
+#include "libsim_image/volume_slices.h"
+#include "net/session_server.h"
+
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <thread>
+
+namespace trephine::app {
+
+namespace {
+
+std::atomic<bool> g_stopRequested{false};
+
+extern "C" void onStopSignal(int) {
+    g_stopRequested = true;
+}
+
+struct ServerOptions {
+    uint16_t port = 7777;
+    std::string volume = "skull:128";
+    std::string saveOnExit;
+    int renderThreads = 0;
+};
+
+int runServer(const ServerOptions& o) {
+    Volume volume = openVolume(o.volume);
+    net::ServerConfig config;
+    config.port = o.port;
+    config.volumeName = o.volume;
+    config.saveOnExit = o.saveOnExit;
+    config.renderThreads = o.renderThreads;
+    glm::ivec3 d = volume.dims();
+    net::SessionServer server(std::move(volume), config);
+    std::signal(SIGINT, onStopSignal);
+    std::signal(SIGTERM, onStopSignal);
+    server.start();
+    std::printf("trephine server: %s (%d x %d x %d) on port %u; Ctrl-C stops\n", o.volume.c_str(),
+                d.x, d.y, d.z, unsigned(server.port()));
+    std::fflush(stdout);
+    while (!g_stopRequested.load())
+        std::this_thread::sleep_for(std::chrono::milliseconds(50));
+    std::printf("trephine server: stopping (%llu tool states applied, %llu malformed dropped)\n",
+                (unsigned long long)server.toolStatesApplied(),
+                (unsigned long long)server.malformedTotal());
+    server.stop();
+    if (!o.saveOnExit.empty())
+        std::printf("trephine server: wrote %s\n", o.saveOnExit.c_str());
+    return 0;
+}
+
+} // namespace
+
+void addServerMode(CLI::App& root, int& exitCode) {
+    auto o = std::make_shared<ServerOptions>();
+    CLI::App* sub =
+        root.add_subcommand("server", "Hold the skull and serve trainees and instructors");
+    sub->add_option("--port", o->port, "UDP port (0: any free port)")->capture_default_str();
+    sub->add_option("--volume", o->volume, "Volume spec (see `trephine volume --help`)")
+        ->capture_default_str();
+    sub->add_option("--save-on-exit", o->saveOnExit,
+                    "Write the final volume here when the server stops (.nrrd keeps materials)");
+    sub->add_option("--render-threads", o->renderThreads, "Render workers (0: all cores)")
+        ->check(CLI::Range(0, 256));
+    sub->callback([o, &exitCode] { exitCode = runServer(*o); });
+}
+
+} // namespace trephine::app

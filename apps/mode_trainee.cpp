@@ -1,0 +1,277 @@
+// `trephine trainee`: join a session. The window arrives with issue 6; `--headless` runs a real
+// client with no window, driven by a script (the built-in `burrhole` or a CSV trajectory, see
+// docs/scripts.md), and writes statistics as a JSON report.
+#include "modes.h"
+
+#include "libsim/error.h"
+#include "libsim/skull.h"
+#include "libsim/tool.h"
+#include "libsim_image/dbi_io.h"
+#include "libsim_image/volume_slices.h"
+#include "net/codec.h"
+#include "net/session_client.h"
+#include "net/view.h"
+
+#include <glm/gtx/quaternion.hpp>
+
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+namespace trephine::app {
+
+namespace {
+
+struct TraineeOptions {
+    std::string connect;
+    bool headless = false;
+    std::string script = "burrhole";
+    std::string camera = "working";
+    std::string codec = "lz4";
+    int size = 500;
+    double durationS = 0; // 0: the script's own length
+    std::string report;
+    std::string saveDbi;
+    std::string name = "trainee";
+};
+
+struct Sample {
+    double t = 0;
+    net::ToolState tool;
+};
+
+// The built-in burr hole: a 5 mm burr starts 1 mm above the default site and feeds in along the
+// normal at 1 mm/s, tool states at 100 Hz, then lifts (drilling off).
+std::vector<Sample> burrholeScript(const Volume& volume, double durationS) {
+    SurfaceSite site = defaultBurrSite(volume);
+    std::vector<Sample> out;
+    int n = int(durationS * 100.0);
+    for (int i = 0; i <= n; ++i) {
+        Sample s;
+        s.t = i / 100.0;
+        s.tool.toolKind = uint8_t(ToolKind::Burr);
+        s.tool.diameterMm = 5.0f;
+        float depth = -1.0f + float(s.t);
+        s.tool.position = site.position - site.normal * depth;
+        s.tool.orientation = glm::rotation(glm::vec3(0, 0, 1), site.normal);
+        s.tool.speed = i < n ? 1.0f : 0.0f;
+        s.tool.drilling = i < n;
+        out.push_back(s);
+    }
+    return out;
+}
+
+// time_s,x,y,z,qw,qx,qy,qz,speed,tool with tool `burr:D` or `perforator[:D]`; '#' comments and
+// a header line are skipped.
+std::vector<Sample> csvScript(const std::string& path) {
+    std::ifstream in(path);
+    if (!in)
+        throw Error("script " + path + ": cannot open it (use `burrhole` or a CSV file)");
+    std::vector<Sample> out;
+    std::string line;
+    int lineNo = 0;
+    while (std::getline(in, line)) {
+        ++lineNo;
+        if (line.empty() || line[0] == '#' ||
+            (lineNo == 1 && !std::isdigit(uint8_t(line[0])) && line[0] != '-' && line[0] != '.'))
+            continue;
+        std::stringstream ss(line);
+        std::string cell;
+        std::vector<std::string> cells;
+        while (std::getline(ss, cell, ','))
+            cells.push_back(cell);
+        auto fail = [&](const std::string& what) {
+            return Error("script " + path + " line " + std::to_string(lineNo) + ": " + what);
+        };
+        if (cells.size() != 10)
+            throw fail("expected 10 columns time_s,x,y,z,qw,qx,qy,qz,speed,tool, found " +
+                       std::to_string(cells.size()));
+        double v[9];
+        for (int i = 0; i < 9; ++i) {
+            try {
+                size_t used = 0;
+                v[i] = std::stod(cells[size_t(i)], &used);
+            } catch (const std::exception&) {
+                throw fail("column " + std::to_string(i + 1) + " is not a number");
+            }
+        }
+        Sample s;
+        s.t = v[0];
+        s.tool.position = {float(v[1]), float(v[2]), float(v[3])};
+        s.tool.orientation =
+            glm::normalize(glm::quat(float(v[4]), float(v[5]), float(v[6]), float(v[7])));
+        if (!(v[8] >= 0.0 && v[8] <= 1.0))
+            throw fail("speed must be in [0, 1]");
+        s.tool.speed = float(v[8]);
+        s.tool.drilling = v[8] > 0.0;
+        std::string tool = cells[9];
+        while (!tool.empty() && std::isspace(uint8_t(tool.back())))
+            tool.pop_back();
+        ToolShape shape;
+        try {
+            if (tool.rfind("burr:", 0) == 0)
+                shape = ToolShape::burr(std::stof(tool.substr(5)));
+            else if (tool == "perforator")
+                shape = ToolShape::perforator();
+            else if (tool.rfind("perforator:", 0) == 0)
+                shape = ToolShape::perforator(std::stof(tool.substr(11)));
+            else
+                throw fail("tool must be burr:D or perforator[:D], not '" + tool + "'");
+        } catch (const Error&) {
+            throw;
+        } catch (const std::exception&) {
+            throw fail("tool diameter in '" + tool + "' is not a number");
+        }
+        s.tool.toolKind = uint8_t(shape.kind);
+        s.tool.diameterMm = shape.diameterMm;
+        if (!out.empty() && s.t < out.back().t)
+            throw fail("times must not decrease");
+        out.push_back(s);
+    }
+    if (out.empty())
+        throw Error("script " + path + ": no samples");
+    return out;
+}
+
+int runTrainee(const TraineeOptions& o) {
+    if (!o.headless) {
+        std::fprintf(stderr, "trephine trainee: the window arrives with issue 6; use --headless\n");
+        return 2;
+    }
+    ENetAddress address = net::parseAddress(o.connect);
+    // A CSV script is read first, so a bad file fails before anything connects.
+    std::vector<Sample> script;
+    if (o.script != "burrhole")
+        script = csvScript(o.script);
+    net::ClientConfig config;
+    config.name = o.name;
+    config.codec = net::parseCodec(o.codec);
+    // A 1x1 placeholder view: the preset needs the volume, which the welcome names.
+    config.view.width = config.view.height = 1;
+    net::SessionClient client(config);
+    client.connect(address);
+    auto pumpUntil = [&](double seconds, const std::function<bool()>& pred) {
+        uint64_t deadline = net::steadyNowUs() + uint64_t(seconds * 1e6);
+        while (net::steadyNowUs() < deadline && !client.closed()) {
+            client.poll(1);
+            if (pred())
+                return true;
+        }
+        return pred();
+    };
+    if (!pumpUntil(10.0, [&] { return client.welcomed(); })) {
+        if (client.closed())
+            throw Error("trainee: " + o.connect + " refused us: " + client.closeReason());
+        throw Error("trainee: no answer from " + o.connect + " (is `trephine server` running?)");
+    }
+    const std::string volumeName = client.welcome().volumeName;
+    Volume volume;
+    try {
+        volume = openVolume(volumeName);
+    } catch (const Error& e) {
+        throw Error("trainee: --camera presets and scripts need the server's volume '" +
+                    volumeName + "' here too: " + e.what());
+    }
+    Camera camera = cameraPreset(o.camera, volume, {o.size, o.size});
+    client.requestView(net::toViewSpec(camera));
+    if (!pumpUntil(30.0, [&] { return client.hasFullImage(); }))
+        throw Error("trainee: no image from " + o.connect + ": " + client.closeReason());
+
+    if (o.script == "burrhole")
+        script = burrholeScript(volume, o.durationS > 0 ? o.durationS : 4.0);
+    std::printf("trainee: %s as client %u, view %s (%s), codec %s, %zu tool states\n",
+                o.connect.c_str(), unsigned(client.welcome().clientId), o.camera.c_str(),
+                describe(camera).c_str(), o.codec.c_str(), script.size());
+    uint64_t start = net::steadyNowUs();
+    uint64_t nextPing = start;
+    for (const Sample& s : script) {
+        if (o.durationS > 0 && s.t > o.durationS)
+            break;
+        uint64_t due = start + uint64_t(s.t * 1e6);
+        while (net::steadyNowUs() < due && !client.closed()) {
+            client.poll(1);
+            if (net::steadyNowUs() >= nextPing) {
+                client.sendPing();
+                nextPing += 100000;
+            }
+        }
+        if (client.closed())
+            break;
+        net::ToolState t = s.tool;
+        t.clientTimeUs = due;
+        client.sendToolState(t);
+    }
+    // Let the last updates arrive: stop after 0.5 s without one.
+    uint64_t lastCount = client.updatesApplied(), quietSince = net::steadyNowUs();
+    while (!client.closed() && net::steadyNowUs() - quietSince < 500000) {
+        client.poll(5);
+        if (client.updatesApplied() != lastCount) {
+            lastCount = client.updatesApplied();
+            quietSince = net::steadyNowUs();
+        }
+    }
+    double elapsed = double(net::steadyNowUs() - start) * 1e-6;
+    bool refused = client.closed();
+    std::string reason = client.closeReason();
+    client.disconnect();
+
+    const net::NetStats& st = client.stats();
+    std::printf("trainee: %llu updates (%llu full), latency p50 %.0f us p99 %.0f us, "
+                "%.0f bytes/update (raw %.0f), rtt p50 %.0f us, %llu malformed dropped\n",
+                (unsigned long long)client.updatesApplied(),
+                (unsigned long long)client.fullUpdates(), st.updateLatencyUs.percentile(50),
+                st.updateLatencyUs.percentile(99), st.updateBytes.mean(), st.updateRawBytes.mean(),
+                st.rttUs.percentile(50), (unsigned long long)st.malformed());
+    if (!o.report.empty()) {
+        net::ReportInfo info;
+        info.server = o.connect;
+        info.codec = o.codec;
+        info.view = o.camera;
+        info.camera = describe(camera);
+        info.script = o.script;
+        info.durationS = elapsed;
+        info.updatesApplied = client.updatesApplied();
+        info.fullUpdates = client.fullUpdates();
+        info.toolStatesSent = client.toolStatesSent();
+        info.relaysReceived = client.relaysReceived();
+        info.updatesRejected = client.updatesRejected();
+        std::ofstream f(o.report);
+        if (!(f << net::reportJson(info, st)))
+            throw Error("--report " + o.report + ": cannot write it");
+    }
+    if (!o.saveDbi.empty())
+        writeDbiExr(o.saveDbi, client.dbi());
+    if (refused) {
+        std::fprintf(stderr, "trainee: the server closed the session: %s\n", reason.c_str());
+        return 1;
+    }
+    return 0;
+}
+
+} // namespace
+
+void addTraineeMode(CLI::App& root, int& exitCode) {
+    auto o = std::make_shared<TraineeOptions>();
+    CLI::App* sub =
+        root.add_subcommand("trainee", "Join a session as a trainee (window or headless)");
+    sub->add_option("--connect", o->connect, "Server address HOST:PORT")->required();
+    sub->add_flag("--headless", o->headless, "No window: run a script and report statistics");
+    sub->add_option("--script", o->script, "burrhole, or a CSV trajectory (docs/scripts.md)")
+        ->capture_default_str();
+    sub->add_option("--camera", o->camera, "View preset, as in `trephine render`")
+        ->capture_default_str();
+    sub->add_option("--codec", o->codec, "Image codec: raw, lz4 or zstd")
+        ->check(CLI::IsMember({"raw", "lz4", "zstd"}))
+        ->capture_default_str();
+    sub->add_option("--size", o->size, "Window size in pixels (square)")
+        ->check(CLI::Range(16, 4096))
+        ->capture_default_str();
+    sub->add_option("--duration", o->durationS, "Seconds of script to run (burrhole: its length)")
+        ->check(CLI::Range(0.0, 3600.0));
+    sub->add_option("--report", o->report, "Write statistics as JSON here");
+    sub->add_option("--save-dbi", o->saveDbi, "Write the final DBI as OpenEXR here");
+    sub->add_option("--name", o->name, "Name shown to others")->capture_default_str();
+    sub->callback([o, &exitCode] { exitCode = runTrainee(*o); });
+}
+
+} // namespace trephine::app

@@ -1,0 +1,87 @@
+// Network statistics as data (Tracy's way): the network thread bumps atomic counters per channel,
+// tick() folds them into a fixed-length history of per-second rates, and the report writer and
+// any UI only read the model. Latencies are microseconds from our own steady clock (ENet's round
+// trip is whole milliseconds).
+#pragma once
+
+#include "libsim/stats.h"
+#include "net/enet_host.h"
+
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <deque>
+#include <string>
+
+namespace trephine::net {
+
+// Microseconds of std::chrono::steady_clock. On Linux this is CLOCK_MONOTONIC, shared by every
+// process on the machine, so a server and a client on one host (tests, loopback benchmarks)
+// read the same clock; across machines the client corrects with the offset estimated from pings.
+uint64_t steadyNowUs();
+
+struct ChannelRates {
+    double bytesInPerS = 0, bytesOutPerS = 0, messagesInPerS = 0, messagesOutPerS = 0;
+};
+
+class NetStats {
+public:
+    static constexpr size_t kHistoryLength = 120; // ticks kept (seconds, with a 1 s tick)
+
+    // Called by the thread that sends or receives; cheap and lock-free.
+    void countIn(Channel c, size_t bytes);
+    void countOut(Channel c, size_t bytes);
+    void countMalformed() { m_malformed.fetch_add(1, std::memory_order_relaxed); }
+
+    // Folds the counters since the last tick into rates and appends them to the history.
+    void tick(uint64_t nowUs);
+
+    uint64_t totalBytesIn(Channel c) const { return m_channels[size_t(c)].bytesIn.load(); }
+    uint64_t totalBytesOut(Channel c) const { return m_channels[size_t(c)].bytesOut.load(); }
+    uint64_t totalMessagesIn(Channel c) const { return m_channels[size_t(c)].msgsIn.load(); }
+    uint64_t totalMessagesOut(Channel c) const { return m_channels[size_t(c)].msgsOut.load(); }
+    uint64_t malformed() const { return m_malformed.load(); }
+    // The history of rates per channel, oldest first.
+    const std::deque<std::array<ChannelRates, size_t(Channel::Count)>>& history() const {
+        return m_history;
+    }
+    // Rates over the whole time from the first count to the last tick.
+    ChannelRates averageRates(Channel c) const;
+
+    // Owned by one thread (the one that polls the client); not thread-safe.
+    SampleWindow rttUs{4096};            // ping round trip, our own microseconds
+    SampleWindow updateBytes{65536};     // payload bytes per image update
+    SampleWindow updateRawBytes{65536};  // bytes before compression
+    SampleWindow updateLatencyUs{65536}; // cause at server -> rectangle applied at client
+    SampleWindow applyUs{65536};         // decode + apply time at the client
+    int64_t clockOffsetUs = 0; // server clock - client clock, from the best (lowest-RTT) ping
+    double bestRttUs = -1;
+
+private:
+    struct Counters {
+        std::atomic<uint64_t> bytesIn{0}, bytesOut{0}, msgsIn{0}, msgsOut{0};
+    };
+    std::array<Counters, size_t(Channel::Count)> m_channels;
+    std::array<std::array<uint64_t, 4>, size_t(Channel::Count)> m_lastTick{};
+    std::atomic<uint64_t> m_malformed{0};
+    uint64_t m_firstTickUs = 0, m_lastTickUs = 0;
+    std::deque<std::array<ChannelRates, size_t(Channel::Count)>> m_history;
+};
+
+// Everything a headless client reports, as JSON (docs/session.md lists the fields).
+struct ReportInfo {
+    std::string server; // HOST:PORT
+    std::string codec;  // raw | lz4 | zstd
+    std::string view;   // the camera preset's name
+    std::string camera; // describe(camera)
+    std::string script;
+    double durationS = 0;
+    uint64_t updatesApplied = 0;
+    uint64_t fullUpdates = 0;
+    uint64_t toolStatesSent = 0;
+    uint64_t relaysReceived = 0;
+    uint64_t updatesRejected = 0; // malformed / out-of-window image updates
+};
+std::string reportJson(const ReportInfo& info, const NetStats& stats);
+
+} // namespace trephine::net

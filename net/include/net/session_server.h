@@ -1,0 +1,83 @@
+// The session server: one network thread owns the ENet host (hello/welcome, views, tool-state
+// relay, pings, malformed-input policy) and one simulation thread owns the volume (drilling,
+// BB_volume -> BB_screen per distinct view, rendering, encoding). They talk through two
+// mutex-guarded queues: tool and view events one way, coalesced image updates the other.
+// docs/session.md describes the threads, queues and coalescing.
+#pragma once
+
+#include "libsim/camera.h"
+#include "libsim/dbi.h"
+#include "libsim/volume.h"
+#include "net/enet_host.h"
+#include "net/net_stats.h"
+#include "net/protocol.h"
+
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace trephine::net {
+
+struct ServerConfig {
+    uint16_t port = 7777; // 0: any free port (tests); see SessionServer::port()
+    size_t maxClients = 32;
+    std::string volumeName;  // sent in the welcome
+    std::string saveOnExit;  // when set, stop() writes the final volume here (saveVolume)
+    int malformedLimit = 50; // a peer that sends more malformed packets is disconnected
+    int renderThreads = 0;   // 0: hardware concurrency
+    float maxStepS = 0.05f;  // longest drilling step taken from one tool state to the next
+};
+
+class SessionServer {
+public:
+    // Binds the port at once (throws trephine::Error when it cannot); threads start in start().
+    SessionServer(Volume volume, ServerConfig config);
+    ~SessionServer();
+    SessionServer(const SessionServer&) = delete;
+    SessionServer& operator=(const SessionServer&) = delete;
+
+    uint16_t port() const;
+    // Starts the named threads "trephine-net" and "trephine-sim".
+    void start();
+    // Stops both threads: the network thread disconnects peers (RefuseReason::Shutdown), the
+    // simulation thread applies every queued tool state, then saveOnExit is written. Idempotent.
+    void stop();
+
+    // [Inspection, thread-safe]
+    // A fresh full render of the current volume for a view (what a converged client holds).
+    Dbi renderView(const ViewSpec& view);
+    Volume volumeSnapshot();
+    // True when no tool state or view event waits and no image update is queued or unsent.
+    bool idle();
+    size_t clientCount() const { return m_clientCount.load(); }
+    uint64_t malformedTotal() const { return m_stats.malformed(); }
+    uint64_t disconnectedForMalformed() const { return m_malformedKicks.load(); }
+    uint64_t toolStatesApplied() const { return m_toolStatesApplied.load(); }
+    uint64_t rendersDone() const { return m_renders.load(); }
+    const NetStats& stats() const { return m_stats; }
+
+private:
+    struct Impl;
+    void networkLoop();
+    void simulationLoop();
+
+    std::unique_ptr<Impl> m_impl;
+    ServerConfig m_config;
+    NetStats m_stats;
+    std::atomic<bool> m_stop{false};
+    std::atomic<bool> m_started{false};
+    std::atomic<size_t> m_clientCount{0};
+    std::atomic<uint64_t> m_malformedKicks{0};
+    std::atomic<uint64_t> m_toolStatesApplied{0};
+    std::atomic<uint64_t> m_renders{0};
+    std::thread m_netThread;
+    std::thread m_simThread;
+};
+
+} // namespace trephine::net

@@ -1,0 +1,130 @@
+#include "net/net_stats.h"
+
+#include <chrono>
+#include <cstdio>
+
+namespace trephine::net {
+
+uint64_t steadyNowUs() {
+    using namespace std::chrono;
+    return uint64_t(duration_cast<microseconds>(steady_clock::now().time_since_epoch()).count());
+}
+
+void NetStats::countIn(Channel c, size_t bytes) {
+    auto& k = m_channels[size_t(c)];
+    k.bytesIn.fetch_add(bytes, std::memory_order_relaxed);
+    k.msgsIn.fetch_add(1, std::memory_order_relaxed);
+}
+
+void NetStats::countOut(Channel c, size_t bytes) {
+    auto& k = m_channels[size_t(c)];
+    k.bytesOut.fetch_add(bytes, std::memory_order_relaxed);
+    k.msgsOut.fetch_add(1, std::memory_order_relaxed);
+}
+
+void NetStats::tick(uint64_t nowUs) {
+    if (m_firstTickUs == 0) {
+        m_firstTickUs = m_lastTickUs = nowUs;
+        for (size_t c = 0; c < m_channels.size(); ++c)
+            m_lastTick[c] = {m_channels[c].bytesIn.load(), m_channels[c].bytesOut.load(),
+                             m_channels[c].msgsIn.load(), m_channels[c].msgsOut.load()};
+        return;
+    }
+    double dt = double(nowUs - m_lastTickUs) * 1e-6;
+    if (dt <= 0)
+        return;
+    std::array<ChannelRates, size_t(Channel::Count)> rates{};
+    for (size_t c = 0; c < m_channels.size(); ++c) {
+        std::array<uint64_t, 4> now = {m_channels[c].bytesIn.load(), m_channels[c].bytesOut.load(),
+                                       m_channels[c].msgsIn.load(), m_channels[c].msgsOut.load()};
+        rates[c] = {double(now[0] - m_lastTick[c][0]) / dt, double(now[1] - m_lastTick[c][1]) / dt,
+                    double(now[2] - m_lastTick[c][2]) / dt, double(now[3] - m_lastTick[c][3]) / dt};
+        m_lastTick[c] = now;
+    }
+    m_history.push_back(rates);
+    if (m_history.size() > kHistoryLength)
+        m_history.pop_front();
+    m_lastTickUs = nowUs;
+}
+
+ChannelRates NetStats::averageRates(Channel c) const {
+    double dt = double(m_lastTickUs - m_firstTickUs) * 1e-6;
+    if (dt <= 0)
+        return {};
+    const auto& k = m_channels[size_t(c)];
+    return {double(k.bytesIn.load()) / dt, double(k.bytesOut.load()) / dt,
+            double(k.msgsIn.load()) / dt, double(k.msgsOut.load()) / dt};
+}
+
+namespace {
+
+std::string jsonString(const std::string& s) {
+    std::string out = "\"";
+    for (char ch : s) {
+        if (ch == '"' || ch == '\\') {
+            out += '\\';
+            out += ch;
+        } else if (uint8_t(ch) < 0x20) {
+            char buf[8];
+            std::snprintf(buf, sizeof buf, "\\u%04x", unsigned(uint8_t(ch)));
+            out += buf;
+        } else {
+            out += ch;
+        }
+    }
+    return out + "\"";
+}
+
+std::string num(double v) {
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.6g", v);
+    return buf;
+}
+
+std::string windowJson(const SampleWindow& w) {
+    return "{\"count\": " + std::to_string(w.totalCount()) + ", \"mean\": " + num(w.mean()) +
+           ", \"min\": " + num(w.min()) + ", \"p50\": " + num(w.percentile(50)) +
+           ", \"p99\": " + num(w.percentile(99)) + ", \"max\": " + num(w.max()) + "}";
+}
+
+} // namespace
+
+std::string reportJson(const ReportInfo& info, const NetStats& stats) {
+    std::string j = "{\n";
+    j += "  \"server\": " + jsonString(info.server) + ",\n";
+    j += "  \"codec\": " + jsonString(info.codec) + ",\n";
+    j += "  \"view\": " + jsonString(info.view) + ",\n";
+    j += "  \"camera\": " + jsonString(info.camera) + ",\n";
+    j += "  \"script\": " + jsonString(info.script) + ",\n";
+    j += "  \"duration_s\": " + num(info.durationS) + ",\n";
+    j += "  \"updates_applied\": " + std::to_string(info.updatesApplied) + ",\n";
+    j += "  \"full_updates\": " + std::to_string(info.fullUpdates) + ",\n";
+    j += "  \"tool_states_sent\": " + std::to_string(info.toolStatesSent) + ",\n";
+    j += "  \"relays_received\": " + std::to_string(info.relaysReceived) + ",\n";
+    j += "  \"malformed_dropped\": " + std::to_string(stats.malformed()) + ",\n";
+    j += "  \"updates_rejected\": " + std::to_string(info.updatesRejected) + ",\n";
+    j += "  \"clock_offset_us\": " + std::to_string(stats.clockOffsetUs) + ",\n";
+    j += "  \"rtt_us\": " + windowJson(stats.rttUs) + ",\n";
+    j += "  \"update_bytes\": " + windowJson(stats.updateBytes) + ",\n";
+    j += "  \"update_raw_bytes\": " + windowJson(stats.updateRawBytes) + ",\n";
+    j += "  \"update_latency_us\": " + windowJson(stats.updateLatencyUs) + ",\n";
+    j += "  \"apply_us\": " + windowJson(stats.applyUs) + ",\n";
+    j += "  \"channels\": {";
+    for (size_t c = 0; c < size_t(Channel::Count); ++c) {
+        Channel ch = Channel(c);
+        ChannelRates r = stats.averageRates(ch);
+        j += std::string(c ? "," : "") + "\n    " + jsonString(channelName(ch)) + ": {" +
+             "\"bytes_in\": " + std::to_string(stats.totalBytesIn(ch)) +
+             ", \"bytes_out\": " + std::to_string(stats.totalBytesOut(ch)) +
+             ", \"messages_in\": " + std::to_string(stats.totalMessagesIn(ch)) +
+             ", \"messages_out\": " + std::to_string(stats.totalMessagesOut(ch)) +
+             ", \"bytes_in_per_s\": " + num(r.bytesInPerS) +
+             ", \"bytes_out_per_s\": " + num(r.bytesOutPerS) +
+             ", \"messages_in_per_s\": " + num(r.messagesInPerS) +
+             ", \"messages_out_per_s\": " + num(r.messagesOutPerS) + "}";
+    }
+    j += "\n  }\n}\n";
+    return j;
+}
+
+} // namespace trephine::net

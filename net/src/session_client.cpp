@@ -1,0 +1,219 @@
+#include "net/session_client.h"
+
+#include "libsim/error.h"
+#include "net/codec.h"
+#include "net/view.h"
+
+#include <cstdlib>
+
+namespace trephine::net {
+
+SessionClient::SessionClient(ClientConfig config)
+    : m_config(std::move(config)), m_host(Host::client()), m_view(m_config.view),
+      m_dbi(m_config.view.width, m_config.view.height) {}
+
+SessionClient::~SessionClient() {
+    if (connected())
+        disconnect(50);
+}
+
+void SessionClient::connect(const ENetAddress& address) {
+    m_peer = m_host.connect(address, m_config.protocolVersion);
+    if (!m_peer)
+        throw Error("cannot connect to " + formatAddress(address) + ": no free ENet peer");
+}
+
+void SessionClient::send(Channel ch, const std::vector<uint8_t>& bytes) {
+    if (!connected() || bytes.empty())
+        return;
+    if (m_host.send(m_peer, ch, bytes))
+        m_stats.countOut(ch, bytes.size());
+}
+
+bool SessionClient::sendRaw(Channel channel, std::span<const uint8_t> bytes) {
+    if (!connected())
+        return false;
+    return m_host.send(m_peer, channel, bytes);
+}
+
+int SessionClient::poll(uint32_t timeoutMs) {
+    int n = m_host.service(timeoutMs, [this](const ENetEvent& ev) { onEvent(ev); });
+    m_stats.tick(steadyNowUs());
+    return n;
+}
+
+void SessionClient::disconnect(uint32_t timeoutMs) {
+    if (!m_peer)
+        return;
+    if (m_connected) {
+        enet_peer_disconnect(m_peer, 0);
+        uint64_t deadline = steadyNowUs() + uint64_t(timeoutMs) * 1000;
+        while (m_connected && steadyNowUs() < deadline)
+            poll(5);
+    }
+    if (m_connected)
+        enet_peer_reset(m_peer);
+    m_connected = false;
+    m_closed = true;
+    m_peer = nullptr;
+}
+
+void SessionClient::onEvent(const ENetEvent& ev) {
+    switch (ev.type) {
+    case ENET_EVENT_TYPE_CONNECT: {
+        m_connected = true;
+        disableThrottle(m_peer);
+        Hello h;
+        h.role = m_config.role;
+        h.name = m_config.name;
+        h.codec = m_config.codec;
+        h.view = m_config.view;
+        send(Channel::Control, encodeMessage(h));
+        sendPing();
+        return;
+    }
+    case ENET_EVENT_TYPE_DISCONNECT:
+        m_connected = false;
+        m_closed = true;
+        m_closeReason = refuseReasonText(ev.data);
+        m_peer = nullptr;
+        return;
+    case ENET_EVENT_TYPE_RECEIVE: {
+        m_stats.countIn(Channel(std::min<int>(ev.channelID, int(Channel::Count) - 1)),
+                        ev.packet->dataLength);
+        if (!handleMessage({ev.packet->data, ev.packet->dataLength}, steadyNowUs()))
+            m_stats.countMalformed();
+        return;
+    }
+    default:
+        return;
+    }
+}
+
+bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs) {
+    switch (MessageType(peekMessageType(data))) {
+    case MessageType::Welcome: {
+        Welcome w;
+        if (!decodeMessage(data, w))
+            return false;
+        m_welcome = w;
+        return true;
+    }
+    case MessageType::ToolRelay: {
+        ToolRelay r;
+        if (!decodeMessage(data, r))
+            return false;
+        auto it = m_others.find(r.clientId);
+        // Unsequenced: keep the newest.
+        if (it == m_others.end() || int32_t(r.tool.sequence - it->second.sequence) > 0)
+            m_others[r.clientId] = r.tool;
+        ++m_relays;
+        return true;
+    }
+    case MessageType::ImageUpdate: {
+        ImageUpdate u;
+        if (!decodeMessage(data, u))
+            return false;
+        if (!applyImage(u, nowUs)) {
+            ++m_rejected;
+            return false;
+        }
+        return true;
+    }
+    case MessageType::Pong: {
+        Pong p;
+        if (!decodeMessage(data, p) || p.clientTimeUs > nowUs)
+            return false;
+        double rtt = double(nowUs - p.clientTimeUs);
+        m_stats.rttUs.add(rtt);
+        // The ping with the smallest round trip bounds the offset best (NTP's rule).
+        if (m_stats.bestRttUs < 0 || rtt < m_stats.bestRttUs) {
+            m_stats.bestRttUs = rtt;
+            int64_t offset = int64_t(p.serverTimeUs) - int64_t(p.clientTimeUs + uint64_t(rtt / 2));
+            // The true offset lies within +-rtt/2 of the estimate; when 0 does too, take the
+            // clocks as one (one machine, one CLOCK_MONOTONIC) rather than add the error.
+            m_stats.clockOffsetUs = double(std::abs(offset)) <= rtt / 2 ? 0 : offset;
+        }
+        return true;
+    }
+    default:
+        return false;
+    }
+}
+
+bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
+    uint64_t start = steadyNowUs();
+    // Which view does it belong to? Updates of a view we have left are stale, not malformed.
+    const ViewSpec* view = nullptr;
+    bool switching = false;
+    if (u.viewId == m_viewId) {
+        view = &m_view;
+    } else if (auto it = m_requested.find(u.viewId); it != m_requested.end()) {
+        if (!u.full)
+            return true; // partial update of a view whose full image has not come yet
+        view = &it->second;
+        switching = true;
+    } else {
+        return true;
+    }
+    if (u.x + u.width > view->width || u.y + u.height > view->height)
+        return false; // outside the window
+    if (u.full && (u.x != 0 || u.y != 0 || u.width != view->width || u.height != view->height))
+        return false;
+    Camera camera = toCamera(*view);
+    Dbi patch;
+    if (!decodeImage(u.payload, u.rawBytes, u.codec, u.width, u.height, camera, patch))
+        return false;
+    if (switching) {
+        m_view = *view;
+        m_viewId = u.viewId;
+        m_dbi = Dbi(m_view.width, m_view.height);
+        // Requests older than this one will never be shown.
+        std::erase_if(m_requested, [&](const auto& r) { return int32_t(r.first - u.viewId) <= 0; });
+    }
+    m_dbi.apply(patch, u.x, u.y);
+    m_lastSequence = u.sequence;
+    ++m_updatesApplied;
+    if (u.full) {
+        ++m_fullUpdates;
+        if (u.viewId == m_viewId)
+            m_hasFull = true;
+    }
+    m_stats.updateBytes.add(double(u.payload.size()));
+    m_stats.updateRawBytes.add(double(u.rawBytes));
+    uint64_t applied = steadyNowUs();
+    m_stats.applyUs.add(double(applied - start));
+    // Server clock -> ours with the ping offset (0 on one machine: one monotonic clock).
+    int64_t causeLocal = int64_t(u.causeServerUs) - m_stats.clockOffsetUs;
+    if (!u.full && causeLocal > 0 && int64_t(applied) >= causeLocal)
+        m_stats.updateLatencyUs.add(double(int64_t(applied) - causeLocal));
+    (void)nowUs;
+    return true;
+}
+
+uint32_t SessionClient::sendToolState(ToolState state) {
+    if (state.sequence == 0)
+        state.sequence = ++m_toolSequence;
+    if (state.clientTimeUs == 0)
+        state.clientTimeUs = steadyNowUs();
+    send(Channel::ToolState, encodeMessage(state));
+    ++m_toolSent;
+    return state.sequence;
+}
+
+uint32_t SessionClient::requestView(const ViewSpec& view) {
+    ViewRequest r;
+    r.requestId = m_nextRequestId++;
+    r.view = view;
+    m_requested[r.requestId] = view;
+    m_requestedViewId = r.requestId;
+    send(Channel::Control, encodeMessage(r));
+    return r.requestId;
+}
+
+void SessionClient::sendPing() {
+    Ping p{steadyNowUs()};
+    send(Channel::Control, encodeMessage(p));
+}
+
+} // namespace trephine::net

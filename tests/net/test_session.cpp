@@ -1,0 +1,438 @@
+// The networked session over loopback: a SessionServer (its own threads) and poll-driven
+// SessionClients in one process. Deadlines only guard against hangs; nothing asserts wall time.
+#include "net/session_client.h"
+#include "net/session_server.h"
+
+#include "libsim/drill.h"
+#include "libsim/error.h"
+#include "libsim/skull.h"
+#include "libsim/tool.h"
+#include "libsim/volume_io.h"
+#include "net/codec.h"
+#include "net/view.h"
+
+#include <gtest/gtest.h>
+
+#include <glm/gtx/quaternion.hpp>
+
+#include <chrono>
+#include <cmath>
+#include <filesystem>
+#include <functional>
+#include <random>
+#include <unistd.h>
+
+using namespace trephine;
+using namespace trephine::net;
+
+namespace {
+
+constexpr int kWindow = 160;
+
+ENetAddress loopback(uint16_t port) {
+    return parseAddress("127.0.0.1:" + std::to_string(port));
+}
+
+ServerConfig testConfig(const std::string& name) {
+    ServerConfig c;
+    c.port = 0;
+    c.volumeName = name;
+    c.renderThreads = 2;
+    return c;
+}
+
+ViewSpec presetView(const Volume& v, const char* name) {
+    return toViewSpec(cameraPreset(name, v, {kWindow, kWindow}));
+}
+
+// Pumps the clients until pred() holds; false after the guard deadline.
+bool pumpUntil(std::vector<SessionClient*> clients, const std::function<bool()>& pred,
+               double guardS = 60.0) {
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(guardS);
+    while (std::chrono::steady_clock::now() < deadline) {
+        for (SessionClient* c : clients)
+            c->poll(1);
+        if (pred())
+            return true;
+    }
+    return false;
+}
+
+// The client's DBI equals a fresh full render of the server's volume for its view.
+bool converged(SessionServer& server, SessionClient& client) {
+    if (!client.hasFullImage() || !server.idle())
+        return false;
+    return compare(client.dbi(), server.renderView(client.view())).identical();
+}
+
+bool waitConverged(SessionServer& server, std::vector<SessionClient*> clients) {
+    int polls = 0;
+    return pumpUntil(clients, [&] {
+        if (++polls % 10)
+            return false; // render the reference only now and then
+        for (SessionClient* c : clients)
+            if (!converged(server, *c))
+                return false;
+        return true;
+    });
+}
+
+// A burr stroke: the burr starts 1 mm above the site and feeds 2.5 mm in along the normal over
+// `count` states 10 ms apart (client time), drilling at full speed.
+ToolState burrState(const SurfaceSite& site, int i, int count, uint64_t baseUs) {
+    ToolState t;
+    t.sequence = uint32_t(i + 1);
+    t.clientTimeUs = baseUs + uint64_t(i) * 10000;
+    t.toolKind = uint8_t(ToolKind::Burr);
+    t.diameterMm = 5.0f;
+    float depth = -1.0f + 3.5f * float(i) / float(count);
+    t.position = site.position - site.normal * depth;
+    t.orientation = glm::rotation(glm::vec3(0, 0, 1), site.normal);
+    t.speed = 1.0f;
+    t.drilling = true;
+    return t;
+}
+
+SurfaceSite sphereTop(int n) {
+    return {{0.0f, 0.0f, sphereRadiusMm(n)}, {0.0f, 0.0f, 1.0f}};
+}
+
+void drill(SessionClient& driller, std::vector<SessionClient*> all, const SurfaceSite& site,
+           int count, uint64_t baseUs, int firstSequence = 0) {
+    for (int i = 0; i < count; ++i) {
+        ToolState t = burrState(site, i, count, baseUs);
+        t.sequence += uint32_t(firstSequence);
+        driller.sendToolState(t);
+        for (SessionClient* c : all)
+            c->poll(1);
+    }
+}
+
+bool connectAll(std::vector<SessionClient*> clients) {
+    return pumpUntil(clients, [&] {
+        for (SessionClient* c : clients)
+            if (!c->welcomed() || !c->hasFullImage())
+                return false;
+        return true;
+    });
+}
+
+// Largest eye-distance error (mm) between two DBIs of one camera, and whether colours match.
+struct DepthCheck {
+    double maxErrorMm = 0;
+    bool colorsEqual = true;
+    bool backgroundEqual = true;
+};
+DepthCheck compareDepthMm(const Dbi& a, const Dbi& b, const Camera& cam) {
+    DepthCheck r;
+    for (int y = 0; y < a.height(); ++y)
+        for (int x = 0; x < a.width(); ++x) {
+            for (int c = 0; c < 3; ++c)
+                r.colorsEqual &= a.color(x, y)[c] == b.color(x, y)[c];
+            float da = a.depth(x, y), db = b.depth(x, y);
+            if ((da == kBackgroundDepth) != (db == kBackgroundDepth)) {
+                r.backgroundEqual = false;
+                continue;
+            }
+            if (da == kBackgroundDepth)
+                continue;
+            double e = std::abs(eyeZFromWindowDepth(cam, da) - eyeZFromWindowDepth(cam, db));
+            r.maxErrorMm = std::max(r.maxErrorMm, e);
+        }
+    return r;
+}
+
+std::string tempPath(const std::string& name) {
+    return (std::filesystem::temp_directory_path() /
+            ("trephine_session_" + std::to_string(getpid()) + "_" + name))
+        .string();
+}
+
+} // namespace
+
+TEST(Session, RawClientConvergesBitForBitAfterBurrHoleOnSkull) {
+    Volume skull = makeSkull(64);
+    SurfaceSite site = defaultBurrSite(skull);
+    ViewSpec view = presetView(skull, "working");
+    SessionServer server(skull, testConfig("skull:64"));
+    server.start();
+    ClientConfig cc;
+    cc.codec = Codec::Raw;
+    cc.view = view;
+    SessionClient client(cc);
+    client.connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&client}));
+    Dbi before = client.dbi();
+    drill(client, {&client}, site, 60, 1000000);
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return server.toolStatesApplied() == 60; }));
+    ASSERT_TRUE(waitConverged(server, {&client}));
+    EXPECT_FALSE(compare(before, client.dbi()).identical()) << "the drilling shows";
+    EXPECT_GT(client.updatesApplied(), 1u);
+    EXPECT_EQ(client.stats().malformed(), 0u);
+    EXPECT_GT(client.stats().updateLatencyUs.totalCount(), 0u);
+}
+
+TEST(Session, QuantisedCodecsConvergeWithinTheDocumentedDepthError) {
+    Volume sphere = makeSphere(48);
+    ViewSpec view = presetView(sphere, "top");
+    SessionServer server(sphere, testConfig("sphere:48"));
+    server.start();
+    std::vector<std::unique_ptr<SessionClient>> clients;
+    for (Codec codec : {Codec::Lz4, Codec::Zstd}) {
+        ClientConfig cc;
+        cc.codec = codec;
+        cc.view = view;
+        clients.push_back(std::make_unique<SessionClient>(cc));
+        clients.back()->connect(loopback(server.port()));
+    }
+    std::vector<SessionClient*> all = {clients[0].get(), clients[1].get()};
+    ASSERT_TRUE(connectAll(all));
+    drill(*clients[0], all, sphereTop(48), 40, 1000000);
+    ASSERT_TRUE(pumpUntil(all, [&] { return server.toolStatesApplied() == 40; }));
+    Camera cam = toCamera(view);
+    double bound = DepthQuantizer(cam).stepMm() * 1.001 + 1e-6;
+    ASSERT_TRUE(pumpUntil(all, [&] {
+        if (!server.idle())
+            return false;
+        Dbi ref = server.renderView(view);
+        for (SessionClient* c : all) {
+            DepthCheck d = compareDepthMm(c->dbi(), ref, cam);
+            if (!d.colorsEqual || !d.backgroundEqual || d.maxErrorMm > bound)
+                return false;
+        }
+        return true;
+    }));
+}
+
+TEST(Session, TwoViewsLateJoinerAndViewChangeConverge) {
+    Volume sphere = makeSphere(48);
+    SessionServer server(sphere, testConfig("sphere:48"));
+    server.start();
+    ClientConfig a;
+    a.codec = Codec::Raw;
+    a.view = presetView(sphere, "top");
+    ClientConfig b = a;
+    b.view = presetView(sphere, "front");
+    SessionClient ca(a), cb(b);
+    ca.connect(loopback(server.port()));
+    cb.connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&ca, &cb}));
+    drill(ca, {&ca, &cb}, sphereTop(48), 40, 1000000);
+    ASSERT_TRUE(pumpUntil({&ca, &cb}, [&] { return server.toolStatesApplied() == 40; }));
+    ASSERT_TRUE(waitConverged(server, {&ca, &cb}));
+
+    // A late joiner sharing A's view gets the drilled skull in its first full image.
+    ClientConfig c = a;
+    c.name = "late";
+    c.codec = Codec::Zstd;
+    SessionClient late(c);
+    late.connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&ca, &cb, &late}));
+    Camera cam = toCamera(c.view);
+    DepthCheck d = compareDepthMm(late.dbi(), server.renderView(c.view), cam);
+    EXPECT_TRUE(d.colorsEqual && d.backgroundEqual);
+    EXPECT_LE(d.maxErrorMm, DepthQuantizer(cam).stepMm() * 1.001 + 1e-6);
+
+    // B changes its view, and drilling continues on the side.
+    ViewSpec left = presetView(sphere, "left");
+    uint32_t id = cb.requestView(left);
+    ASSERT_TRUE(pumpUntil({&ca, &cb, &late}, [&] { return cb.viewId() == id; }));
+    EXPECT_EQ(cb.view(), left);
+    SurfaceSite side{{sphereRadiusMm(48), 0.0f, 0.0f}, {1.0f, 0.0f, 0.0f}};
+    drill(ca, {&ca, &cb, &late}, side, 40, 3000000, 40);
+    ASSERT_TRUE(pumpUntil({&ca, &cb}, [&] { return server.toolStatesApplied() == 80; }));
+    ASSERT_TRUE(waitConverged(server, {&ca, &cb}));
+}
+
+TEST(Session, EveryToolPoseReachesTheOtherClients) {
+    Volume sphere = makeSphere(32);
+    SessionServer server(sphere, testConfig("sphere:32"));
+    server.start();
+    ClientConfig cfg;
+    cfg.view = presetView(sphere, "top");
+    cfg.view.width = cfg.view.height = 32;
+    SessionClient a(cfg), b(cfg), c(cfg);
+    for (SessionClient* x : {&a, &b, &c})
+        x->connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&a, &b, &c}));
+    SurfaceSite site = sphereTop(32);
+    for (int i = 0; i < 50; ++i) {
+        ToolState t = burrState(site, i, 50, 1000);
+        t.drilling = false;
+        a.sendToolState(t);
+        for (SessionClient* x : {&a, &b, &c})
+            x->poll(1);
+    }
+    ASSERT_TRUE(pumpUntil({&a, &b, &c},
+                          [&] { return b.relaysReceived() == 50 && c.relaysReceived() == 50; }));
+    uint16_t aId = a.welcome().clientId;
+    ASSERT_TRUE(b.others().count(aId));
+    EXPECT_EQ(b.others().at(aId).sequence, 50u);
+    EXPECT_EQ(c.others().at(aId).position, burrState(site, 49, 50, 1000).position);
+    EXPECT_EQ(a.relaysReceived(), 0u) << "a client is not sent its own tool";
+}
+
+TEST(Session, MalformedInputIsDroppedCountedAndAPersistentOffenderDisconnected) {
+    Volume sphere = makeSphere(48);
+    SessionServer server(sphere, testConfig("sphere:48"));
+    server.start();
+    ClientConfig cfg;
+    cfg.codec = Codec::Raw;
+    cfg.view = presetView(sphere, "top");
+    SessionClient good(cfg), bad(cfg);
+    good.connect(loopback(server.port()));
+    bad.connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&good, &bad}));
+
+    Ping ping{42};
+    std::vector<uint8_t> truncated = encodeMessage(ping);
+    truncated.pop_back();
+    std::vector<uint8_t> oversized = encodeMessage(ping);
+    oversized.push_back(0);
+    Welcome w;
+    std::vector<uint8_t> wrongType = encodeMessage(w); // only the server sends a welcome
+    std::vector<uint8_t> unknown = {200, 1, 2, 3};
+    std::vector<uint8_t> empty;
+    ToolState hugeTool;
+    hugeTool.toolKind = uint8_t(ToolKind::Burr);
+    hugeTool.diameterMm = 12.0f; // on the wire range, but no burr is that large
+    std::vector<uint8_t> badTool = encodeMessage(hugeTool);
+    ASSERT_FALSE(badTool.empty());
+    std::vector<std::vector<uint8_t>> bads = {truncated, oversized, wrongType, unknown, badTool};
+    std::mt19937 rng(7);
+    for (int i = 0; i < 5; ++i) {
+        std::vector<uint8_t> r(1 + rng() % 64);
+        for (auto& byte : r)
+            byte = uint8_t(rng());
+        r[0] = uint8_t(1 + rng() % 12); // a known type with garbage after it
+        if (r[0] == uint8_t(MessageType::Ping) && r.size() == 9)
+            r.push_back(0);
+        bads.push_back(r);
+    }
+    for (auto& m : bads)
+        bad.sendRaw(Channel::Control, m);
+    ASSERT_TRUE(pumpUntil({&good, &bad}, [&] { return server.malformedTotal() == bads.size(); }));
+    EXPECT_FALSE(bad.closed()) << "a few bad packets are only dropped";
+
+    for (int i = 0; i < 60 && bad.connected(); ++i) {
+        bad.sendRaw(Channel::Control, unknown);
+        bad.poll(1);
+    }
+    ASSERT_TRUE(pumpUntil({&good, &bad}, [&] { return bad.closed(); }));
+    EXPECT_NE(bad.closeReason().find("malformed"), std::string::npos) << bad.closeReason();
+    EXPECT_EQ(server.disconnectedForMalformed(), 1u);
+
+    drill(good, {&good}, sphereTop(48), 30, 1000000);
+    ASSERT_TRUE(pumpUntil({&good}, [&] { return server.toolStatesApplied() == 30; }));
+    ASSERT_TRUE(waitConverged(server, {&good}));
+}
+
+TEST(Session, ClientRejectsOutOfWindowRectanglesAndCorruptPayloads) {
+    // A fake server: a raw ENet host that welcomes the client and sends bad updates.
+    Host fake = Host::listen(0, 2);
+    ClientConfig cfg;
+    cfg.codec = Codec::Raw;
+    cfg.view.width = 64;
+    cfg.view.height = 48;
+    SessionClient client(cfg);
+    client.connect(loopback(fake.port()));
+    ENetPeer* peer = nullptr;
+    auto pumpBoth = [&](const std::function<bool()>& pred) {
+        auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+        while (std::chrono::steady_clock::now() < deadline) {
+            fake.service(1, [&](const ENetEvent& e) {
+                if (e.type == ENET_EVENT_TYPE_CONNECT)
+                    peer = e.peer;
+            });
+            client.poll(1);
+            if (pred())
+                return true;
+        }
+        return false;
+    };
+    ASSERT_TRUE(pumpBoth([&] { return peer && client.connected(); }));
+
+    Dbi patch(16, 16);
+    auto update = [&](uint16_t x, uint16_t y, uint16_t w, uint16_t h, bool corrupt) {
+        ImageUpdate u;
+        u.x = x;
+        u.y = y;
+        u.width = w;
+        u.height = h;
+        u.codec = Codec::Raw;
+        EncodedImage e = encodeImage(Dbi(w, h), Codec::Raw, toCamera(cfg.view));
+        u.rawBytes = e.rawBytes;
+        u.payload = std::move(e.payload);
+        if (corrupt)
+            u.payload.resize(u.payload.size() / 2);
+        return encodeMessage(u);
+    };
+    fake.send(peer, Channel::Image, update(60, 0, 16, 16, false)); // past the right edge
+    fake.send(peer, Channel::Image, update(0, 40, 16, 16, false)); // past the top
+    fake.send(peer, Channel::Image, update(0, 0, 16, 16, true));   // payload too short
+    fake.send(peer, Channel::Image, update(8, 8, 16, 16, false));  // fine
+    ASSERT_TRUE(
+        pumpBoth([&] { return client.stats().malformed() + client.updatesApplied() == 4; }));
+    EXPECT_EQ(client.stats().malformed(), 3u);
+    EXPECT_EQ(client.updatesRejected(), 3u);
+    EXPECT_EQ(client.updatesApplied(), 1u);
+}
+
+TEST(Session, ProtocolVersionMismatchIsRefusedWithAReadableReason) {
+    Volume sphere = makeSphere(16);
+    SessionServer server(sphere, testConfig("sphere:16"));
+    server.start();
+    Host raw = Host::client();
+    ENetPeer* peer = raw.connect(loopback(server.port()), kProtocolVersion + 1);
+    ASSERT_NE(peer, nullptr);
+    std::string reason;
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    while (reason.empty() && std::chrono::steady_clock::now() < deadline)
+        raw.service(5, [&](const ENetEvent& e) {
+            if (e.type == ENET_EVENT_TYPE_DISCONNECT)
+                reason = refuseReasonText(e.data);
+        });
+    EXPECT_NE(reason.find("protocol version " + std::to_string(kProtocolVersion)),
+              std::string::npos)
+        << reason;
+
+    // The session client prints the same sentence.
+    ClientConfig cfg;
+    cfg.protocolVersion = 99;
+    SessionClient client(cfg);
+    client.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return client.closed(); }));
+    EXPECT_NE(client.closeReason().find("same Trephine build"), std::string::npos);
+}
+
+TEST(Session, StopWritesSaveOnExitWithEveryAppliedDrilling) {
+    Volume sphere = makeSphere(48);
+    std::string path = tempPath("final.nrrd");
+    ServerConfig config = testConfig("sphere:48");
+    config.saveOnExit = path;
+    auto server = std::make_unique<SessionServer>(sphere, config);
+    server->start();
+    ClientConfig cfg;
+    cfg.view = presetView(sphere, "top");
+    cfg.view.width = cfg.view.height = 64;
+    SessionClient client(cfg);
+    client.connect(loopback(server->port()));
+    ASSERT_TRUE(connectAll({&client}));
+    drill(client, {&client}, sphereTop(48), 40, 1000000);
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return server->toolStatesApplied() == 40; }));
+    server->stop();
+    Volume saved = loadVolume(path);
+    EXPECT_TRUE(saved == server->volumeSnapshot());
+    EXPECT_FALSE(saved == sphere) << "the drilling is in the file";
+    // Every tool state applied, in order, with dt from the client's stamps: a local replay.
+    Volume replay = sphere;
+    Driller driller(ToolShape::burr(5.0f));
+    for (int i = 1; i < 40; ++i) {
+        ToolState t = burrState(sphereTop(48), i, 40, 1000000);
+        driller.drill(replay, ToolPose{t.position, t.orientation}, t.speed, 0.01f);
+    }
+    EXPECT_TRUE(saved == replay) << "no applied drilling is lost";
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return client.closed(); }));
+    EXPECT_NE(client.closeReason().find("shutting down"), std::string::npos);
+    std::filesystem::remove(path);
+}

@@ -1,0 +1,87 @@
+// `trephine server` as a process: SIGTERM stops it cleanly and --save-on-exit holds every
+// drilling step it applied.
+#include "net/session_client.h"
+#include "net/view.h"
+
+#include "libsim/skull.h"
+#include "libsim/volume_io.h"
+
+#include <gtest/gtest.h>
+
+#include <glm/gtx/quaternion.hpp>
+
+#include <chrono>
+#include <csignal>
+#include <cstdio>
+#include <filesystem>
+#include <string>
+#include <sys/wait.h>
+#include <unistd.h>
+
+using namespace trephine;
+using namespace trephine::net;
+
+TEST(SessionCli, SigtermWritesSaveOnExitWithTheDrilling) {
+    std::string path = (std::filesystem::temp_directory_path() /
+                        ("trephine_sigterm_" + std::to_string(getpid()) + ".nrrd"))
+                           .string();
+    int fds[2];
+    ASSERT_EQ(pipe(fds), 0);
+    pid_t pid = fork();
+    ASSERT_GE(pid, 0);
+    if (pid == 0) {
+        dup2(fds[1], 1);
+        close(fds[0]);
+        execl(TREPHINE_BIN, TREPHINE_BIN, "server", "--port", "0", "--volume", "sphere:32",
+              "--render-threads", "1", "--save-on-exit", path.c_str(), (char*)nullptr);
+        _exit(127);
+    }
+    close(fds[1]);
+    FILE* out = fdopen(fds[0], "r");
+    char line[512] = {};
+    ASSERT_NE(fgets(line, sizeof line, out), nullptr) << "the server printed nothing";
+    std::string text = line;
+    auto at = text.find("on port ");
+    ASSERT_NE(at, std::string::npos) << text;
+    int port = std::stoi(text.substr(at + 8));
+
+    Volume sphere = makeSphere(32);
+    ClientConfig cfg;
+    cfg.view = toViewSpec(cameraPreset("top", sphere, {32, 32}));
+    SessionClient client(cfg);
+    client.connect(parseAddress("127.0.0.1:" + std::to_string(port)));
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (!client.hasFullImage() && !client.closed() &&
+           std::chrono::steady_clock::now() < deadline)
+        client.poll(1);
+    ASSERT_TRUE(client.hasFullImage());
+    glm::vec3 top(0.0f, 0.0f, sphereRadiusMm(32));
+    for (int i = 0; i < 30; ++i) {
+        ToolState t;
+        t.sequence = uint32_t(i + 1);
+        t.clientTimeUs = 1000000 + uint64_t(i) * 10000;
+        t.diameterMm = 5.0f;
+        t.position = top - glm::vec3(0, 0, 0.05f * float(i));
+        t.speed = 1.0f;
+        t.drilling = true;
+        client.sendToolState(t);
+        client.poll(1);
+    }
+    // Drilling shows up as image updates; wait for the first before stopping the server.
+    while (client.updatesApplied() < 2 && std::chrono::steady_clock::now() < deadline)
+        client.poll(1);
+    ASSERT_GE(client.updatesApplied(), 2u);
+    kill(pid, SIGTERM);
+    while (!client.closed() && std::chrono::steady_clock::now() < deadline)
+        client.poll(1);
+    EXPECT_NE(client.closeReason().find("shutting down"), std::string::npos);
+    int status = 0;
+    ASSERT_EQ(waitpid(pid, &status, 0), pid);
+    fclose(out);
+    ASSERT_TRUE(WIFEXITED(status));
+    EXPECT_EQ(WEXITSTATUS(status), 0);
+    Volume saved = loadVolume(path);
+    EXPECT_EQ(saved.dims(), sphere.dims());
+    EXPECT_FALSE(saved == sphere) << "the applied drilling is in the saved volume";
+    std::filesystem::remove(path);
+}
