@@ -20,13 +20,5 @@ void addInstructorMode(CLI::App& root, int& exitCode) {
     addPendingMode(root, exitCode, "instructor", "Join a session as an instructor",
                    "trainee and instructor windows, issue 6");
 }
-void addStudyMode(CLI::App& root, int& exitCode) {
-    addPendingMode(root, exitCode, "study", "Run the DBI-versus-volume performance studies",
-                   "baseline and study, issue 7");
-}
-void addDevicesMode(CLI::App& root, int& exitCode) {
-    addPendingMode(root, exitCode, "devices", "List haptic and 6-DOF input devices",
-                   "haptics and input devices, issue 5");
-}
 
 } // namespace trephine::app

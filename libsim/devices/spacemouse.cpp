@@ -1,0 +1,187 @@
+#include "libsim_devices/spacemouse.h"
+
+#include "libsim/error.h"
+
+#include <algorithm>
+#include <cmath>
+#include <glm/gtc/quaternion.hpp>
+#include <hidapi.h>
+
+namespace trephine {
+
+namespace {
+
+int16_t readI16(const uint8_t* p) {
+    return int16_t(uint16_t(p[0]) | uint16_t(p[1]) << 8);
+}
+
+glm::ivec3 readAxes(const uint8_t* p) {
+    return {readI16(p), readI16(p + 2), readI16(p + 4)};
+}
+
+double shaped(int raw, int deadZone) {
+    // Dead zone, then linear from its edge so there is no jump when leaving it.
+    const int mag = std::abs(raw);
+    if (mag <= deadZone)
+        return 0.0;
+    const double span = std::max(1, kSpaceMouseFullScale - deadZone);
+    return std::copysign(std::min(1.0, double(mag - deadZone) / span), double(raw));
+}
+
+// Device axes to object space (see integrateSpaceMouse).
+glm::dvec3 toObject(glm::dvec3 d) {
+    return {d.x, -d.y, -d.z};
+}
+
+} // namespace
+
+bool SpaceMouseParser::feed(std::span<const uint8_t> r) {
+    if (r.empty()) {
+        m_state.ignored++;
+        return false;
+    }
+    switch (r[0]) {
+    case 1:
+        if (r.size() >= 13) { // newer models: translation and rotation in one report
+            m_state.translation = readAxes(&r[1]);
+            m_state.rotation = readAxes(&r[7]);
+        } else if (r.size() >= 7) {
+            m_state.translation = readAxes(&r[1]);
+        } else {
+            break;
+        }
+        m_state.reports++;
+        return true;
+    case 2:
+        if (r.size() < 7)
+            break;
+        m_state.rotation = readAxes(&r[1]);
+        m_state.reports++;
+        return true;
+    case 3: {
+        if (r.size() < 2)
+            break;
+        uint32_t bits = 0;
+        const size_t n = std::min<size_t>(r.size() - 1, 4);
+        for (size_t i = 0; i < n; ++i)
+            bits |= uint32_t(r[1 + i]) << (8 * i);
+        m_state.buttons = bits;
+        m_state.reports++;
+        return true;
+    }
+    default:
+        break;
+    }
+    m_state.ignored++;
+    return false;
+}
+
+ToolPose integrateSpaceMouse(const ToolPose& pose, const SpaceMouseState& s, double dt,
+                             const SpaceMouseConfig& c) {
+    ToolPose out = pose;
+    if (!(dt > 0.0))
+        return out;
+    const glm::dvec3 t(shaped(s.translation.x, c.deadZone), shaped(s.translation.y, c.deadZone),
+                       shaped(s.translation.z, c.deadZone));
+    const glm::dvec3 r(shaped(s.rotation.x, c.deadZone), shaped(s.rotation.y, c.deadZone),
+                       shaped(s.rotation.z, c.deadZone));
+    out.position += glm::vec3(toObject(t) * (c.translationGainMmPerS * dt));
+    const glm::dvec3 w = toObject(r) * (c.rotationGainRadPerS * dt); // rotation vector
+    const double angle = glm::length(w);
+    if (angle > 0.0) {
+        const glm::quat dq = glm::angleAxis(float(angle), glm::vec3(w / angle));
+        out.orientation = glm::normalize(dq * pose.orientation); // about object axes
+    }
+    return out;
+}
+
+bool isSpaceMouse(uint16_t vendorId, uint16_t productId) {
+    if (vendorId == k3DconnexionVendorId)
+        return true;
+    if (vendorId != kLogitechVendorId)
+        return false;
+    // 3Dconnexion products sold under Logitech's vendor ID (SpaceNavigator and kin).
+    static constexpr uint16_t kProducts[] = {0xc603, 0xc605, 0xc606, 0xc621, 0xc623, 0xc625,
+                                             0xc626, 0xc627, 0xc628, 0xc629, 0xc62b, 0xc640};
+    return std::find(std::begin(kProducts), std::end(kProducts), productId) != std::end(kProducts);
+}
+
+namespace {
+
+std::string narrow(const wchar_t* w) {
+    std::string out;
+    for (; w && *w; ++w)
+        out.push_back(*w < 128 ? char(*w) : '?');
+    return out;
+}
+
+} // namespace
+
+std::vector<HidDeviceInfo> enumerateHidDevices() {
+    std::vector<HidDeviceInfo> out;
+    if (hid_init() != 0)
+        return out;
+    hid_device_info* list = hid_enumerate(0, 0);
+    for (hid_device_info* d = list; d; d = d->next) {
+        HidDeviceInfo info;
+        info.path = d->path ? d->path : "";
+        info.vendorId = d->vendor_id;
+        info.productId = d->product_id;
+        info.manufacturer = narrow(d->manufacturer_string);
+        info.product = narrow(d->product_string);
+        info.usable = isSpaceMouse(d->vendor_id, d->product_id);
+        out.push_back(std::move(info));
+    }
+    hid_free_enumeration(list);
+    return out;
+}
+
+struct SpaceMouseDevice::Impl {
+    hid_device* handle = nullptr;
+};
+
+SpaceMouseDevice::SpaceMouseDevice(SpaceMouseConfig config, const std::string& path)
+    : m_impl(std::make_unique<Impl>()), m_config(config) {
+    std::string chosen = path;
+    if (chosen.empty()) {
+        for (const HidDeviceInfo& d : enumerateHidDevices())
+            if (d.usable) {
+                chosen = d.path;
+                m_name = d.product.empty() ? "SpaceMouse" : d.product;
+                break;
+            }
+        if (chosen.empty())
+            throw Error("no SpaceMouse found: attach one (and check /dev/hidraw* permissions) or "
+                        "use the mouse device");
+    }
+    if (hid_init() != 0 || !(m_impl->handle = hid_open_path(chosen.c_str())))
+        throw Error("cannot open HID device " + chosen + ": check its permissions");
+    hid_set_nonblocking(m_impl->handle, 1);
+    if (m_name.empty())
+        m_name = "SpaceMouse";
+}
+
+SpaceMouseDevice::~SpaceMouseDevice() {
+    if (m_impl && m_impl->handle)
+        hid_close(m_impl->handle);
+}
+
+DeviceState SpaceMouseDevice::read(double now) {
+    uint8_t buf[64];
+    for (int i = 0; i < 64; ++i) { // bounded: never starve the haptic tick
+        int n = hid_read(m_impl->handle, buf, sizeof buf);
+        if (n <= 0)
+            break;
+        m_parser.feed(std::span<const uint8_t>(buf, size_t(n)));
+    }
+    if (m_lastRead >= 0.0)
+        m_pose = integrateSpaceMouse(m_pose, m_parser.state(), now - m_lastRead, m_config);
+    m_lastRead = now;
+    DeviceState s;
+    s.pose = m_pose;
+    s.buttons = m_parser.state().buttons;
+    s.valid = true;
+    return s;
+}
+
+} // namespace trephine

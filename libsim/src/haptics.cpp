@@ -1,0 +1,253 @@
+#include "libsim/haptics.h"
+
+#include <algorithm>
+#include <cassert>
+#include <chrono>
+#include <cmath>
+#include <pthread.h>
+
+namespace trephine {
+
+// [SECTION] model and extrapolation
+
+AffineForce AffineForce::fromModel(const HapticModelData& m) {
+    return {glm::dvec3(m.position), glm::dvec3(m.force), glm::dmat3(m.gradient)};
+}
+
+glm::vec3 extrapolate(const HapticModelData& m, glm::vec3 p) {
+    return m.force + m.gradient * (p - m.position);
+}
+
+glm::vec3 clampForce(glm::vec3 f, float maxN) {
+    float mag = glm::length(f);
+    if (!(mag <= maxN)) // also catches NaN: a NaN force never reaches a device
+        return std::isfinite(mag) && mag > 0.0f ? f * (maxN / mag) : glm::vec3(0.0f);
+    return f;
+}
+
+// [SECTION] blender
+
+void ModelBlender::reset() {
+    *this = ModelBlender(m_config);
+}
+
+AffineForce ModelBlender::current() const {
+    // A convex mix of two affine fields is affine; anchor it at the newer one.
+    AffineForce out;
+    out.anchor = m_to.anchor;
+    out.force = (1.0 - m_alpha) * m_from.at(m_to.anchor) + m_alpha * m_to.force;
+    out.gradient = (1.0 - m_alpha) * m_from.gradient + m_alpha * m_to.gradient;
+    return out;
+}
+
+void ModelBlender::setModel(const HapticModelData& m, double now) {
+    AffineForce next = AffineForce::fromModel(m);
+    if (m_hasModel) {
+        m_from = current();
+    } else {
+        m_from = AffineForce{next.anchor, glm::dvec3(0.0), glm::dmat3(0.0)};
+    }
+    m_to = next;
+    m_alpha = 0.0;
+    if (m_config.blendTimeS > 0.0)
+        m_blendTime = m_config.blendTimeS;
+    else if (m_hasModel)
+        m_blendTime = std::clamp(now - m_lastModelTime, m_config.minBlendS, m_config.maxBlendS);
+    else
+        m_blendTime = m_config.minBlendS;
+    m_prevModelTime = m_lastModelTime;
+    m_lastModelTime = now;
+    m_hasModel = true;
+    m_fading = false;
+}
+
+void ModelBlender::resetTo(const HapticModelData& m, double now) {
+    setModel(m, now);
+    m_alpha = 1.0;
+}
+
+glm::vec3 ModelBlender::update(glm::vec3 p, double now) {
+    const double dt = m_ticked ? std::max(0.0, now - m_lastTick) : 0.0;
+    m_lastTick = now;
+    m_ticked = true;
+    if (!m_hasModel)
+        return glm::vec3(0.0f);
+    const glm::dvec3 pd(p);
+    if (!m_fading && now - m_lastModelTime > m_config.staleTimeoutS) {
+        // Fading is a blend towards the zero field.
+        m_from = current();
+        m_to = AffineForce{m_from.anchor, glm::dvec3(0.0), glm::dmat3(0.0)};
+        m_alpha = 0.0;
+        m_blendTime = m_config.fadeTimeS;
+        m_fading = true;
+    }
+    const glm::dvec3 fromF = m_from.at(pd), toF = m_to.at(pd);
+    if (m_alpha < 1.0 && dt > 0.0) {
+        double step = m_blendTime > 0.0 ? dt / m_blendTime : 1.0;
+        const double diff = glm::length(toF - fromF);
+        if (diff > 0.0)
+            step = std::min(step, m_config.maxStepN / diff);
+        m_alpha = std::min(1.0, m_alpha + step);
+    }
+    const glm::dvec3 f = (1.0 - m_alpha) * fromF + m_alpha * toF;
+    return clampForce(glm::vec3(f), m_config.maxForceN);
+}
+
+// [SECTION] recorder
+
+void HapticRecorder::add(const HapticSample& s) {
+    if (m_capacity == 0)
+        return;
+    if (m_ring.size() < m_capacity) {
+        m_ring.push_back(s);
+    } else {
+        m_ring[m_next] = s;
+        m_next = (m_next + 1) % m_capacity;
+    }
+}
+
+std::vector<HapticSample> HapticRecorder::samples() const {
+    std::vector<HapticSample> out;
+    out.reserve(m_ring.size());
+    for (size_t i = 0; i < m_ring.size(); ++i)
+        out.push_back(m_ring[(m_next + i) % m_ring.size()]);
+    return out;
+}
+
+// [SECTION] haptic loop
+
+HapticLoop::HapticLoop(Device& device, HapticLoopConfig config, SendToolState send)
+    : m_device(device), m_config(config), m_send(std::move(send)), m_blender(config.blend),
+      m_recorder(config.recorderCapacity), m_sendRateHz(config.sendRateHz) {
+    assert(config.rateHz > 0.0 && "HapticLoopConfig::rateHz must be positive");
+    setSendRate(config.sendRateHz);
+}
+
+HapticLoop::~HapticLoop() {
+    stop();
+}
+
+void HapticLoop::setSendRate(double hz) {
+    m_sendRateHz = std::clamp(hz, 20.0, 1000.0);
+}
+
+void HapticLoop::setModel(const HapticModelData& model, double now) {
+    std::lock_guard lock(m_modelMutex);
+    m_pending = std::make_pair(model, now);
+}
+
+HapticSample HapticLoop::step(double now) {
+    std::optional<std::pair<HapticModelData, double>> pending;
+    {
+        std::lock_guard lock(m_modelMutex);
+        pending.swap(m_pending);
+    }
+    bool gotModel = false, dropped = false;
+    // Sequence numbers wrap: compare by signed difference.
+    if (pending && m_anyModel && int32_t(pending->first.toolSequence - m_lastSequence) < 0) {
+        pending.reset();
+        dropped = true;
+    }
+    if (pending) {
+        m_lastSequence = pending->first.toolSequence;
+        m_anyModel = true;
+        m_blender.setModel(pending->first, pending->second);
+        m_lastModelForce = pending->first.force;
+        gotModel = true;
+    }
+
+    const DeviceState state = m_device.read(now);
+    glm::vec3 force(0.0f);
+    if (state.valid) {
+        if (m_source)
+            force = clampForce(m_source->force(state.pose, now), m_config.blend.maxForceN);
+        else
+            force = m_blender.update(state.pose.position, now);
+    }
+    m_device.setForce(force);
+
+    bool sent = false;
+    const double period = 1.0 / m_sendRateHz.load();
+    if (m_nextSend < 0.0)
+        m_nextSend = now;
+    if (state.valid && now + 1e-9 >= m_nextSend) {
+        if (m_send)
+            m_send(state, now);
+        sent = true;
+        m_nextSend += period;
+        if (m_nextSend <= now)
+            m_nextSend = now + period;
+    }
+
+    HapticSample s;
+    s.time = now;
+    s.force = force;
+    s.forceN = glm::length(force);
+    s.modelForce = m_lastModelForce;
+    s.position = state.pose.position;
+    s.stale = m_blender.stale();
+    std::lock_guard lock(m_statsMutex);
+    m_recorder.add(s);
+    if (m_firstTick < 0.0)
+        m_firstTick = now;
+    m_lastTick = now;
+    m_stats.ticks++;
+    m_stats.sent += sent;
+    m_stats.models += gotModel;
+    m_stats.modelsDropped += dropped;
+    return s;
+}
+
+void HapticLoop::start() {
+    if (m_thread.joinable())
+        return;
+    m_stop = false;
+    m_thread = std::thread([this] { run(); });
+}
+
+void HapticLoop::stop() {
+    m_stop = true;
+    if (m_thread.joinable())
+        m_thread.join();
+}
+
+void HapticLoop::run() {
+    pthread_setname_np(pthread_self(), "haptics");
+    using Clock = std::chrono::steady_clock;
+    const auto t0 = Clock::now();
+    const auto period = std::chrono::duration_cast<Clock::duration>(
+        std::chrono::duration<double>(1.0 / m_config.rateHz));
+    auto next = t0;
+    while (!m_stop.load(std::memory_order_relaxed)) {
+        std::this_thread::sleep_until(next);
+        const auto actual = Clock::now();
+        const double late = std::chrono::duration<double, std::milli>(actual - next).count();
+        {
+            std::lock_guard lock(m_statsMutex);
+            m_lateness.add(late);
+        }
+        step(std::chrono::duration<double>(actual - t0).count());
+        next += period;
+        // After a long stall (a suspended VM), resume the schedule rather than burst to catch up.
+        if (actual - next > 20 * period)
+            next = actual + period;
+    }
+    m_device.setForce(glm::vec3(0.0f));
+}
+
+HapticLoopStats HapticLoop::stats() const {
+    std::lock_guard lock(m_statsMutex);
+    HapticLoopStats s = m_stats;
+    if (s.ticks > 1 && m_lastTick > m_firstTick)
+        s.achievedRateHz = double(s.ticks - 1) / (m_lastTick - m_firstTick);
+    s.latenessP50Ms = m_lateness.percentile(50.0);
+    s.latenessP99Ms = m_lateness.percentile(99.0);
+    return s;
+}
+
+std::vector<HapticSample> HapticLoop::samples() const {
+    std::lock_guard lock(m_statsMutex);
+    return m_recorder.samples();
+}
+
+} // namespace trephine

@@ -1,0 +1,266 @@
+// Multi-rate haptics: extrapolation, blending bounds, stale fading, the haptic loop's throttled
+// sends and local mode, and the haptics study's stability contrast (multirate vs zero-order hold).
+#include "libsim/haptics.h"
+
+#include "libsim/haptics_study.h"
+#include "libsim/skull.h"
+
+#include <cmath>
+#include <glm/geometric.hpp>
+#include <gtest/gtest.h>
+#include <sstream>
+#include <thread>
+
+using namespace trephine;
+
+namespace {
+
+HapticModelData modelAt(glm::vec3 p, glm::vec3 f, float stiffness) {
+    HapticModelData m;
+    m.position = p;
+    m.force = f;
+    m.gradient = glm::mat3(-stiffness);
+    m.contact = true;
+    return m;
+}
+
+// A device that stays where the test puts it and remembers the last force.
+class TestDevice : public Device {
+public:
+    std::string name() const override { return "test"; }
+    DeviceState read(double) override {
+        DeviceState s;
+        s.pose.position = position;
+        s.valid = true;
+        return s;
+    }
+    void setForce(glm::vec3 f) override { force = f; }
+    glm::vec3 position{0.0f};
+    glm::vec3 force{0.0f};
+};
+
+} // namespace
+
+TEST(Haptics, ExtrapolationReproducesTheModelAtItsPosition) {
+    HapticModelData m = modelAt({1.5f, -2.0f, 30.25f}, {0.3f, -0.2f, 2.5f}, 3.0f);
+    m.gradient[0][1] = m.gradient[1][0] = 0.7f;
+    EXPECT_EQ(extrapolate(m, m.position), m.force);
+    glm::vec3 d(0.1f, 0.0f, -0.2f);
+    glm::vec3 expect = m.force + m.gradient * d;
+    EXPECT_LT(glm::length(extrapolate(m, m.position + d) - expect), 1e-5f);
+
+    // Through the blender once the blend is over: the same force at P_N.
+    ModelBlender blender;
+    blender.setModel(m, 0.0);
+    glm::vec3 f(0.0f);
+    for (int i = 0; i <= 200; ++i)
+        f = blender.update(m.position, i * 1e-3);
+    EXPECT_EQ(blender.blendFraction(), 1.0);
+    EXPECT_LT(glm::length(f - m.force), 1e-6f);
+}
+
+TEST(Haptics, ClampKeepsDirectionAndDropsNaN) {
+    glm::vec3 c = clampForce({30.0f, 40.0f, 0.0f}, 5.0f);
+    EXPECT_NEAR(glm::length(c), 5.0f, 1e-5f);
+    EXPECT_NEAR(c.x / c.y, 0.75f, 1e-5f);
+    EXPECT_EQ(clampForce({NAN, 0.0f, 0.0f}, 5.0f), glm::vec3(0.0f));
+    EXPECT_EQ(clampForce({1.0f, 0.0f, 0.0f}, 5.0f), glm::vec3(1.0f, 0.0f, 0.0f));
+}
+
+TEST(Haptics, BlendingNeverStepsMoreThanTheBound) {
+    BlendConfig config;
+    config.maxStepN = 0.1;
+    ModelBlender blender(config);
+    const glm::vec3 p(0.0f, 0.0f, 10.0f);
+    glm::vec3 prev = blender.update(p, 0.0);
+    double maxStep = 0.0;
+    // Models alternating between far-apart forces at 20 Hz, plus one arriving mid-blend.
+    int tick = 0;
+    for (int k = 0; k < 10; ++k) {
+        glm::vec3 f = (k % 2) ? glm::vec3(0, 0, 6.0f) : glm::vec3(2.0f, 0, -3.0f);
+        blender.setModel(modelAt(p + glm::vec3(0.3f, 0, 0), f, 4.0f), tick * 1e-3);
+        for (int i = 0; i < (k == 5 ? 7 : 50); ++i, ++tick) {
+            glm::vec3 out = blender.update(p, tick * 1e-3);
+            maxStep = std::max(maxStep, double(glm::length(out - prev)));
+            prev = out;
+        }
+    }
+    EXPECT_LE(maxStep, config.maxStepN + 1e-5);
+    EXPECT_GT(maxStep, 0.5 * config.maxStepN); // it did have to limit
+}
+
+TEST(Haptics, BlendTakesAboutOneUpdatePeriod) {
+    BlendConfig config;
+    config.maxStepN = 100.0; // not the limit here
+    ModelBlender blender(config);
+    const glm::vec3 p(0.0f);
+    blender.resetTo(modelAt(p, {0, 0, 1.0f}, 0.0f), 0.0);
+    blender.setModel(modelAt(p, {0, 0, 2.0f}, 0.0f), 0.05); // 50 ms after the last: 20 Hz
+    blender.update(p, 0.05);
+    glm::vec3 mid = blender.update(p, 0.075);
+    EXPECT_NEAR(mid.z, 1.5f, 0.02f);
+    glm::vec3 end = blender.update(p, 0.1);
+    EXPECT_NEAR(end.z, 2.0f, 1e-5f);
+}
+
+TEST(Haptics, StaleModelFadesToZero) {
+    BlendConfig config;
+    config.staleTimeoutS = 0.25;
+    config.fadeTimeS = 0.1;
+    config.maxStepN = 0.05;
+    ModelBlender blender(config);
+    const glm::vec3 p(1.0f, 2.0f, 3.0f);
+    blender.resetTo(modelAt(p, {0, 0, 3.0f}, 2.0f), 0.0);
+    glm::vec3 prev = blender.update(p, 0.0);
+    double maxStep = 0.0;
+    glm::vec3 at200(0.0f);
+    for (int i = 1; i <= 1000; ++i) {
+        glm::vec3 f = blender.update(p, i * 1e-3);
+        maxStep = std::max(maxStep, double(glm::length(f - prev)));
+        prev = f;
+        if (i == 200)
+            at200 = f;
+    }
+    EXPECT_NEAR(at200.z, 3.0f, 1e-5f); // not stale yet
+    EXPECT_TRUE(blender.stale());
+    EXPECT_EQ(prev, glm::vec3(0.0f));
+    EXPECT_LE(maxStep, config.maxStepN + 1e-6);
+    // A fresh model brings the force back, blended.
+    blender.setModel(modelAt(p, {0, 0, 3.0f}, 2.0f), 1.0);
+    EXPECT_FALSE(blender.stale());
+    EXPECT_LE(glm::length(blender.update(p, 1.001)), config.maxStepN + 1e-6);
+}
+
+TEST(Haptics, RecorderKeepsTheNewestSamples) {
+    HapticRecorder rec(4);
+    for (int i = 0; i < 10; ++i) {
+        HapticSample s;
+        s.time = i;
+        rec.add(s);
+    }
+    std::vector<HapticSample> got = rec.samples();
+    ASSERT_EQ(got.size(), 4u);
+    EXPECT_EQ(got.front().time, 6.0);
+    EXPECT_EQ(got.back().time, 9.0);
+}
+
+TEST(HapticLoop, StepsDeterministicallyAndThrottlesSends) {
+    TestDevice device;
+    device.position = {0, 0, 5.0f};
+    HapticLoopConfig config;
+    config.sendRateHz = 100.0;
+    int sends = 0;
+    HapticLoop loop(device, config, [&](const DeviceState& s, double) {
+        EXPECT_EQ(s.pose.position, glm::vec3(0, 0, 5.0f));
+        ++sends;
+    });
+    for (int i = 0; i < 1000; ++i)
+        loop.step(i * 1e-3);
+    EXPECT_EQ(sends, 100);
+    loop.setSendRate(20.0);
+    for (int i = 1000; i < 2000; ++i)
+        loop.step(i * 1e-3);
+    EXPECT_NEAR(sends, 120, 1);
+    HapticLoopStats st = loop.stats();
+    EXPECT_EQ(st.ticks, 2000u);
+    EXPECT_NEAR(st.achievedRateHz, 1000.0, 1e-6);
+
+    // A model arrives (from "another thread"): the device feels it, blended in.
+    loop.setModel(modelAt(device.position, {0, 0, 2.0f}, 1.0f), 2.0);
+    for (int i = 2000; i < 2200; ++i)
+        loop.step(i * 1e-3);
+    EXPECT_NEAR(device.force.z, 2.0f, 1e-5f);
+    EXPECT_EQ(loop.stats().models, 1u);
+    EXPECT_EQ(loop.samples().back().modelForce, glm::vec3(0, 0, 2.0f));
+}
+
+TEST(HapticLoop, DropsModelsThatArriveOutOfOrder) {
+    TestDevice device;
+    HapticLoop loop(device, {}, nullptr);
+    HapticModelData newer = modelAt(device.position, {0, 0, 1.0f}, 0.0f);
+    newer.toolSequence = 0xffffffffu; // just before the wrap
+    loop.setModel(newer, 0.0);
+    loop.step(0.0);
+    HapticModelData older = modelAt(device.position, {0, 0, 5.0f}, 0.0f);
+    older.toolSequence = 0xfffffff0u;
+    loop.setModel(older, 0.001);
+    loop.step(0.001);
+    HapticModelData wrapped = modelAt(device.position, {0, 0, 2.0f}, 0.0f);
+    wrapped.toolSequence = 3; // after the wrap: newer
+    loop.setModel(wrapped, 0.002);
+    loop.step(0.002);
+    EXPECT_EQ(loop.stats().models, 2u);
+    EXPECT_EQ(loop.stats().modelsDropped, 1u);
+    EXPECT_EQ(loop.samples().back().modelForce, glm::vec3(0, 0, 2.0f));
+}
+
+TEST(HapticLoop, LocalForceSourceRunsTheForceModelInTheLoop) {
+    Volume sphere = makeSphere(40);
+    TestDevice device;
+    device.position = {0, 0, sphereRadiusMm(40) + 0.5f}; // 2 mm burr, 0.5 mm in
+    HapticLoop loop(device, {}, nullptr);
+    LocalForceSource local(sphere, ToolShape::burr(2.0f));
+    loop.setForceSource(&local);
+    loop.step(0.0);
+    EXPECT_GT(device.force.z, 0.5f);
+}
+
+TEST(HapticLoop, ThreadRunsAndStops) {
+    // No wall-clock assertion: only that it ticks and stops cleanly.
+    TestDevice device;
+    HapticLoop loop(device, {}, nullptr);
+    loop.start();
+    // Models from this thread while the loop runs (the network thread's role).
+    for (uint32_t seq = 1; loop.stats().ticks < 20 || loop.stats().models == 0; ++seq) {
+        HapticModelData m = modelAt(device.position, {0, 0, 1.0f}, 1.0f);
+        m.toolSequence = seq;
+        loop.setModel(m, 0.0);
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    loop.stop();
+    EXPECT_GE(loop.stats().models, 1u);
+    EXPECT_FALSE(loop.running());
+    EXPECT_GE(loop.stats().ticks, 20u);
+}
+
+// The paper's claim, in simulation: at 20 Hz updates multi-rate extrapolation keeps the hand's
+// contact stable; a zero-order hold of f alone in the same setting does not.
+TEST(HapticsStudy, MultirateStableAt20HzWhereZeroOrderHoldIsNot) {
+    Volume box = makeBox(48);
+    SurfaceSite site = boxTopSite(box);
+    HapticsStudyConfig config;
+    config.durationS = 1.0;
+    for (double latency : {0.0, 25.0}) {
+        HapticsCaseResult mr =
+            runHapticsCase(box, site, config, {HapticMethod::Multirate, 20.0, latency});
+        HapticsCaseResult zoh =
+            runHapticsCase(box, site, config, {HapticMethod::ZeroOrderHold, 20.0, latency});
+        EXPECT_TRUE(mr.stable) << hapticsCsvRow(mr);
+        EXPECT_LT(mr.energyInjectedJ, config.maxEnergyInjectedJ);
+        EXPECT_LE(mr.finalOscillationMm, 1.5 * mr.earlyOscillationMm + 0.01); // not growing
+        EXPECT_LT(mr.maxPenetrationMm, config.hand.targetDepthMm);
+        EXPECT_FALSE(zoh.stable) << hapticsCsvRow(zoh);
+        EXPECT_GT(zoh.forceRmsErrorN, 10.0 * mr.forceRmsErrorN);
+        EXPECT_GT(zoh.energyInjectedJ, 10.0 * std::max(mr.energyInjectedJ, 1e-6));
+    }
+}
+
+TEST(HapticsStudy, BlendingWithoutTheGradientIsNotEnough) {
+    Volume box = makeBox(48);
+    SurfaceSite site = boxTopSite(box);
+    HapticsStudyConfig config;
+    config.durationS = 1.0;
+    config.multirateUsesGradient = false;
+    HapticsCaseResult r = runHapticsCase(box, site, config, {HapticMethod::Multirate, 20.0, 0.0});
+    EXPECT_FALSE(r.stable) << hapticsCsvRow(r);
+}
+
+TEST(HapticsStudy, CsvHeaderIsExact) {
+    EXPECT_EQ(hapticsCsvHeader().rfind("method,update_hz,latency_ms,force_rms_error_n,"
+                                       "force_peak_error_n,energy_injected_j,stable",
+                                       0),
+              0u);
+    HapticsCaseResult r;
+    r.c = {HapticMethod::ZeroOrderHold, 20.0, 50.0};
+    EXPECT_EQ(hapticsCsvRow(r).rfind("zoh,20,50,", 0), 0u);
+}
