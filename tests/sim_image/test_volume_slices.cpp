@@ -3,12 +3,12 @@
 #include "libsim/error.h"
 #include "libsim_image/volume_slices.h"
 
+#include "test_support.h"
+
 #include <gtest/gtest.h>
 
 #include <OpenImageIO/imageio.h>
 
-#include <atomic>
-#include <chrono>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -21,23 +21,7 @@ using namespace trephine;
 
 namespace {
 
-struct TempDir {
-    fs::path path;
-    TempDir() {
-        static std::atomic<int> counter{0};
-        auto stamp = std::chrono::steady_clock::now().time_since_epoch().count();
-        path =
-            fs::temp_directory_path() / ("trephine_slices_" + std::to_string(getpid()) + "_" +
-                                         std::to_string(counter++) + "_" + std::to_string(stamp));
-        fs::create_directories(path);
-    }
-    ~TempDir() {
-        std::error_code ec;
-        fs::remove_all(path, ec);
-    }
-    std::string operator/(const std::string& name) const { return (path / name).string(); }
-};
-
+using namespace trephine::testing;
 template <typename T>
 void writeImage(const std::string& path, int w, int h, int channels, OIIO::TypeDesc type,
                 const std::vector<T>& pixels) {

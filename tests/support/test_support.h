@@ -1,0 +1,63 @@
+// Helpers shared by the test suites: a self-deleting temporary folder, whole-file reads, and
+// running the built `trephine` binary (TREPHINE_BIN) as a user would.
+#pragma once
+
+#include <atomic>
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <iterator>
+#include <string>
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace trephine::testing {
+
+// A fresh folder under the system temp dir, removed with everything in it on destruction.
+struct TempDir {
+    std::filesystem::path path;
+    TempDir() {
+        static std::atomic<int> counter{0};
+        auto stamp = std::chrono::steady_clock::now().time_since_epoch().count();
+        path = std::filesystem::temp_directory_path() /
+               ("trephine_test_" + std::to_string(getpid()) + "_" + std::to_string(counter++) +
+                "_" + std::to_string(stamp));
+        std::filesystem::create_directories(path);
+    }
+    ~TempDir() {
+        std::error_code ec;
+        std::filesystem::remove_all(path, ec);
+    }
+    TempDir(const TempDir&) = delete;
+    TempDir& operator=(const TempDir&) = delete;
+    std::string operator/(const std::string& name) const { return (path / name).string(); }
+};
+
+inline std::string slurp(const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(f), {});
+}
+
+struct CommandResult {
+    int exitCode = -1;
+    std::string out;
+    std::string err;
+};
+
+#ifdef TREPHINE_BIN
+// Runs `trephine ARGS` (ARGS already shell-quoted), capturing stdout and stderr in `dir`.
+inline CommandResult runTrephine(const TempDir& dir, const std::string& args) {
+    const std::string out = dir / "stdout.txt", err = dir / "stderr.txt";
+    std::string cmd =
+        std::string("'") + TREPHINE_BIN + "' " + args + " >'" + out + "' 2>'" + err + "'";
+    int status = std::system(cmd.c_str());
+    CommandResult r;
+    r.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    r.out = slurp(out);
+    r.err = slurp(err);
+    return r;
+}
+#endif
+
+} // namespace trephine::testing
