@@ -10,6 +10,7 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <fstream>
 #include <thread>
 
 namespace trephine::app {
@@ -27,6 +28,8 @@ struct ServerOptions {
     std::string volume = "skull:128";
     std::string saveOnExit;
     int renderThreads = 0;
+    size_t maxClients = 16;
+    std::string report;
 };
 
 int runServer(const ServerOptions& o) {
@@ -36,6 +39,7 @@ int runServer(const ServerOptions& o) {
     config.volumeName = o.volume;
     config.saveOnExit = o.saveOnExit;
     config.renderThreads = o.renderThreads;
+    config.maxClients = o.maxClients;
     glm::ivec3 d = volume.dims();
     net::SessionServer server(std::move(volume), config);
     std::signal(SIGINT, onStopSignal);
@@ -52,6 +56,12 @@ int runServer(const ServerOptions& o) {
     server.stop();
     if (!o.saveOnExit.empty())
         std::printf("trephine server: wrote %s\n", o.saveOnExit.c_str());
+    if (!o.report.empty()) {
+        std::ofstream f(o.report);
+        if (!(f << server.reportJson()))
+            throw Error("--report " + o.report + ": cannot write it");
+        std::printf("trephine server: wrote %s\n", o.report.c_str());
+    }
     return 0;
 }
 
@@ -68,6 +78,12 @@ void addServerMode(CLI::App& root, int& exitCode) {
                     "Write the final volume here when the server stops (.nrrd keeps materials)");
     sub->add_option("--render-threads", o->renderThreads, "Render workers (0: all cores)")
         ->check(CLI::Range(0, 256));
+    sub->add_option("--max-clients", o->maxClients,
+                    "Participants at once; one more is refused (server full)")
+        ->check(CLI::Range(1, 1024))
+        ->capture_default_str();
+    sub->add_option("--report", o->report,
+                    "Write server statistics as JSON here when it stops (per channel and peer)");
     sub->callback([o, &exitCode] { exitCode = runServer(*o); });
 }
 

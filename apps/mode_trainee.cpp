@@ -4,8 +4,10 @@
 #include "modes.h"
 
 #include "libsim/error.h"
+#include "libsim/haptics.h"
 #include "libsim/skull.h"
 #include "libsim/tool.h"
+#include "libsim_devices/devices.h"
 #include "libsim_image/dbi_io.h"
 #include "libsim_image/volume_slices.h"
 #include "net/codec.h"
@@ -14,9 +16,14 @@
 
 #include <glm/gtx/quaternion.hpp>
 
+#include <algorithm>
+#include <chrono>
 #include <cstdio>
+#include <deque>
 #include <fstream>
+#include <mutex>
 #include <sstream>
+#include <thread>
 
 namespace trephine::app {
 
@@ -33,6 +40,7 @@ struct TraineeOptions {
     std::string report;
     std::string saveDbi;
     std::string name = "trainee";
+    double toolRateHz = 100.0; // tool states per second from the haptic loop
 };
 
 struct Sample {
@@ -179,27 +187,84 @@ int runTrainee(const TraineeOptions& o) {
 
     if (o.script == "burrhole")
         script = burrholeScript(volume, o.durationS > 0 ? o.durationS : 4.0);
-    std::printf("trainee: %s as client %u, view %s (%s), codec %s, %zu tool states\n",
+    std::printf("trainee: %s as client %u, view %s (%s), codec %s, %zu script samples\n",
                 o.connect.c_str(), unsigned(client.welcome().clientId), o.camera.c_str(),
                 describe(camera).c_str(), o.codec.c_str(), script.size());
+    // The haptic loop (its own thread, 1 kHz) reads a device that follows the script's poses,
+    // extrapolates the server's force models and sends tool states at --tool-rate through its
+    // throttle; this thread owns the client, so the loop's sends wait in a queue for it.
+    std::vector<Waypoint> waypoints;
+    for (const Sample& s : script)
+        waypoints.push_back({s.t, ToolPose{s.tool.position, s.tool.orientation}, 0});
+    ScriptedDevice device(std::move(waypoints));
+    double scriptEnd = script.back().t;
+    if (o.durationS > 0)
+        scriptEnd = std::min(scriptEnd, o.durationS);
+    // The script sample in force at time t (speed, drilling and tool hold until the next).
+    auto sampleAt = [&](double t) -> const Sample& {
+        auto it = std::upper_bound(script.begin(), script.end(), t,
+                                   [](double v, const Sample& s) { return v < s.t; });
+        return it == script.begin() ? script.front() : *std::prev(it);
+    };
+    std::mutex sendMutex;
+    std::deque<net::ToolState> toSend;
     uint64_t start = net::steadyNowUs();
-    uint64_t nextPing = start;
-    for (const Sample& s : script) {
-        if (o.durationS > 0 && s.t > o.durationS)
-            break;
-        uint64_t due = start + uint64_t(s.t * 1e6);
-        while (net::steadyNowUs() < due && !client.closed()) {
-            client.poll(1);
-            if (net::steadyNowUs() >= nextPing) {
-                client.sendPing();
-                nextPing += 100000;
-            }
+    HapticLoopConfig loopConfig;
+    loopConfig.sendRateHz = o.toolRateHz;
+    HapticLoop loop(device, loopConfig, [&](const DeviceState& state, double now) {
+        net::ToolState t = sampleAt(now).tool;
+        if (now >= scriptEnd) {
+            t.speed = 0.0f; // the script is over: no more drilling
+            t.drilling = false;
         }
-        if (client.closed())
-            break;
-        net::ToolState t = s.tool;
-        t.clientTimeUs = due;
-        client.sendToolState(t);
+        t.position = state.pose.position;
+        t.orientation = state.pose.orientation;
+        t.clientTimeUs = net::steadyNowUs(); // the device sample: the round trip starts here
+        std::lock_guard lock(sendMutex);
+        toSend.push_back(t);
+    });
+    client.setHapticCallback([&](const net::HapticModel& m, uint64_t arrivalUs) {
+        HapticModelData d;
+        d.position = m.position;
+        d.force = m.force;
+        d.gradient = m.gradient;
+        d.contact = m.contact;
+        d.toolSequence = m.toolSequence;
+        // The loop's clock counts from its start (within microseconds of `start`).
+        loop.setModel(d, double(int64_t(arrivalUs) - int64_t(start)) * 1e-6);
+    });
+    uint64_t nextPing = start;
+    uint64_t end = start;
+    std::vector<net::ToolState> batch;
+    start = net::steadyNowUs();
+    nextPing = start;
+    end = start + uint64_t(scriptEnd * 1e6);
+    loop.start();
+    while (net::steadyNowUs() < end && !client.closed()) {
+        {
+            std::lock_guard lock(sendMutex);
+            batch.assign(toSend.begin(), toSend.end());
+            toSend.clear();
+        }
+        for (const net::ToolState& t : batch)
+            client.sendToolState(t);
+        // Short waits, not poll(1): a tool state queued by the haptic thread goes out within
+        // ~0.2 ms instead of waiting for ENet's 1 ms timeout (it counts in the force round trip).
+        if (client.poll(0) == 0 && batch.empty())
+            std::this_thread::sleep_for(std::chrono::microseconds(200));
+        if (net::steadyNowUs() >= nextPing) {
+            client.sendPing();
+            nextPing += 100000;
+        }
+    }
+    loop.stop();
+    HapticLoopStats haptics = loop.stats();
+    client.setHapticCallback({}); // the loop is stopped; models still count in the stats
+    if (!client.closed()) {
+        net::ToolState last = script.back().tool; // lift: drilling off
+        last.speed = 0.0f;
+        last.drilling = false;
+        client.sendToolState(last);
     }
     // Let the last updates arrive: stop after 0.5 s without one.
     uint64_t lastCount = client.updatesApplied(), quietSince = net::steadyNowUs();
@@ -222,6 +287,13 @@ int runTrainee(const TraineeOptions& o) {
                 (unsigned long long)client.fullUpdates(), st.updateLatencyUs.percentile(50),
                 st.updateLatencyUs.percentile(99), st.updateBytes.mean(), st.updateRawBytes.mean(),
                 st.rttUs.percentile(50), (unsigned long long)st.malformed());
+    std::printf("trainee: haptic loop %.0f Hz achieved (lateness p50 %.3f ms p99 %.3f ms), "
+                "%llu tool states at %.0f Hz, %llu force models, force round trip p50 %.0f us "
+                "p99 %.0f us\n",
+                haptics.achievedRateHz, haptics.latenessP50Ms, haptics.latenessP99Ms,
+                (unsigned long long)client.toolStatesSent(), o.toolRateHz,
+                (unsigned long long)client.hapticModelsReceived(),
+                st.hapticRoundTripUs.percentile(50), st.hapticRoundTripUs.percentile(99));
     if (!o.report.empty()) {
         net::ReportInfo info;
         info.server = o.connect;
@@ -235,6 +307,16 @@ int runTrainee(const TraineeOptions& o) {
         info.toolStatesSent = client.toolStatesSent();
         info.relaysReceived = client.relaysReceived();
         info.updatesRejected = client.updatesRejected();
+        info.hapticLoop = true;
+        info.toolRateHz = o.toolRateHz;
+        info.hapticRateHz = loopConfig.rateHz;
+        info.achievedRateHz = haptics.achievedRateHz;
+        info.latenessP50Ms = haptics.latenessP50Ms;
+        info.latenessP99Ms = haptics.latenessP99Ms;
+        info.hapticTicks = haptics.ticks;
+        info.hapticModels = client.hapticModelsReceived();
+        info.modelsApplied = haptics.models;
+        info.modelsDropped = haptics.modelsDropped;
         std::ofstream f(o.report);
         if (!(f << net::reportJson(info, st)))
             throw Error("--report " + o.report + ": cannot write it");
@@ -271,6 +353,10 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
     sub->add_option("--report", o->report, "Write statistics as JSON here");
     sub->add_option("--save-dbi", o->saveDbi, "Write the final DBI as OpenEXR here");
     sub->add_option("--name", o->name, "Name shown to others")->capture_default_str();
+    sub->add_option("--tool-rate", o->toolRateHz,
+                    "Tool states per second sent by the haptic loop (20-1000)")
+        ->check(CLI::Range(20.0, 1000.0))
+        ->capture_default_str();
     sub->callback([o, &exitCode] { exitCode = runTrainee(*o); });
 }
 

@@ -2,8 +2,15 @@
 // -> rectangle applied at the client) and bytes per update for each codec against the raw size;
 // full-view refresh time (view change). Server and client in one process, one steady clock.
 // Figures print beside the targets (p50 <= 2 ms, p99 <= 5 ms at BB_volume ~40^3).
+// The box sweep cuts N^3 boxes of bone (N = 10..80) at the surface facing the paper camera of a
+// paper-spaced skull:128 through SessionServer::submitBoxCut and reports latency, BB_screen size
+// and bytes per update against raw. Haptics: the loopback force round trip (target p50 <= 0.3 ms)
+// and the 1 kHz haptic loop's achieved rate and lateness while the server streams DBI updates.
+#include "libsim/device.h"
+#include "libsim/haptics.h"
 #include "libsim/skull.h"
 #include "libsim/stats.h"
+#include "net/force_round_trip.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
 #include "net/view.h"
@@ -11,7 +18,11 @@
 #include <benchmark/benchmark.h>
 #include <glm/gtx/quaternion.hpp>
 
+#include <atomic>
+#include <deque>
 #include <memory>
+#include <mutex>
+#include <thread>
 
 using namespace trephine;
 using namespace trephine::net;
@@ -24,7 +35,8 @@ struct Session {
     std::unique_ptr<SessionClient> client;
     SurfaceSite site;
 
-    Session(Codec codec, const char* preset, int window) : skull(makeSkull(128)) {
+    Session(Codec codec, const char* preset, int window, Volume volume = makeSkull(128))
+        : skull(std::move(volume)) {
         site = defaultBurrSite(skull);
         ServerConfig config;
         config.port = 0;
@@ -106,8 +118,185 @@ void fullRefresh(benchmark::State& state, Codec codec) {
     state.counters["bytes_full"] = s.client->stats().updateBytes.max();
 }
 
+// skull:128 at the paper's spacing (its 128 voxels project to the paper's size in a 500 px view).
+const Volume& paperSkull() {
+    static const Volume v = [] {
+        Volume s = makeSkull(128);
+        s.setSpacing(glm::vec3(paperSpacingMm(128)));
+        return s;
+    }();
+    return v;
+}
+
+// An N^3 box whose top face lies at the bone surface the paper camera (on +z) looks at, centred
+// on the volume's middle column, shifted by `shift` voxels along x.
+Box3i surfaceBox(const Volume& v, int n, int shift) {
+    glm::ivec3 d = v.dims();
+    int cx = d.x / 2 + shift, cy = d.y / 2;
+    int top = d.z - 1;
+    while (top > 0 && v.density(cx, cy, top) < kSurfaceDensity)
+        --top;
+    glm::ivec3 lo(cx - n / 2, cy - n / 2, top + 1 - n);
+    return Box3i::fromMinMax(lo, lo + glm::ivec3(n));
+}
+
+void boxSweep(benchmark::State& state, Codec codec) {
+    const int n = int(state.range(0));
+    Session s(codec, "paper", 500, paperSkull());
+    SampleWindow rectPx, serverUs, deliverUs;
+    s.client->setUpdateCallback([&](const ImageUpdate& u, const PixelRect& r, bool full) {
+        if (full)
+            return;
+        rectPx.add(double(r.area()));
+        // Where the time goes: cause -> encoded and queued (simulation thread: cut, BB_screen,
+        // render, encode), then queued -> applied (network thread, ENet, decode, apply).
+        serverUs.add(double(u.sentServerUs - u.causeServerUs));
+        deliverUs.add(double(steadyNowUs() - u.sentServerUs));
+    });
+    s.client->stats().updateLatencyUs.clear();
+    s.client->stats().updateBytes.clear();
+    s.client->stats().updateRawBytes.clear();
+    int i = 0;
+    int64_t timeouts = 0;
+    for (auto _ : state) {
+        s.server->submitBoxCut(surfaceBox(s.skull, n, (i++ % 5) * 2 - 4));
+        if (!s.waitUpdates(1, 2000000))
+            ++timeouts;
+    }
+    const NetStats& st = s.client->stats();
+    state.counters["N"] = n;
+    state.counters["latency_p50_us"] = st.updateLatencyUs.percentile(50);
+    state.counters["latency_p99_us"] = st.updateLatencyUs.percentile(99);
+    state.counters["target_p50_us"] = n == 40 ? 2000 : 0;
+    state.counters["target_p99_us"] = n == 40 ? 5000 : 0;
+    state.counters["bb_screen_px"] = rectPx.percentile(50);
+    state.counters["server_p50_us"] = serverUs.percentile(50);
+    state.counters["deliver_p50_us"] = deliverUs.percentile(50);
+    state.counters["bytes_per_update"] = st.updateBytes.mean();
+    state.counters["raw_bytes_per_update"] = st.updateRawBytes.mean();
+    // Against the raw codec's 8 bytes a pixel (the reference), and against the codec's own
+    // layout before compression (5 bytes a pixel for lz4/zstd).
+    const double rawCodecBytes = 8.0 * rectPx.mean();
+    state.counters["raw_codec_bytes"] = rawCodecBytes;
+    state.counters["raw_codec_over_bytes"] =
+        st.updateBytes.mean() > 0 ? rawCodecBytes / st.updateBytes.mean() : 0;
+    state.counters["layout_over_bytes"] =
+        st.updateBytes.mean() > 0 ? st.updateRawBytes.mean() / st.updateBytes.mean() : 0;
+    state.counters["no_update"] = double(timeouts);
+}
+
+// Tool state out, HapticModel back, one in flight, at 1 kHz, a 2 mm burr pressed 1 mm into the
+// bone at the default site (the paper: 0.82 ms over its LAN).
+void forceRoundTrip(benchmark::State& state) {
+    Session s(Codec::Lz4, "paper", 64);
+    ForceRoundTripConfig fc;
+    fc.shape = ToolShape::burr(2.0f);
+    fc.pose = ToolPose::fromAxis(s.site.position + s.site.normal * 0.0f, s.site.normal);
+    fc.samples = 2000;
+    ForceRoundTripResult r;
+    for (auto _ : state)
+        r = measureForceRoundTrip(parseAddress("127.0.0.1:" + std::to_string(s.server->port())),
+                                  fc);
+    state.counters["round_trip_p50_us"] = r.p50Us;
+    state.counters["round_trip_p99_us"] = r.p99Us;
+    state.counters["target_p50_us"] = 300;
+    state.counters["paper_us"] = 820;
+    state.counters["server_p50_us"] = r.serverP50Us;
+    state.counters["contacts"] = r.contacts;
+    state.counters["lost"] = r.lost;
+}
+
+// A device held still at one pose.
+class HoldDevice : public Device {
+public:
+    explicit HoldDevice(ToolPose p) : m_pose(p) {}
+    std::string name() const override { return "hold"; }
+    DeviceState read(double) override { return {m_pose, 0, true}; }
+    void setForce(glm::vec3) override {}
+
+private:
+    ToolPose m_pose;
+};
+
+// The haptic loop on its own thread (1 kHz, tool states at 100 Hz) with the burr in contact,
+// while another thread cuts 20^3 boxes every 10 ms so the server streams DBI updates to the
+// same client (500x500 paper view, lz4).
+void hapticLoopWhileStreaming(benchmark::State& state) {
+    Session s(Codec::Lz4, "paper", 500, paperSkull());
+    HoldDevice device(ToolPose::fromAxis(s.site.position, s.site.normal));
+    std::mutex sendMutex;
+    std::deque<ToolState> toSend;
+    HapticLoop loop(device, {}, [&](const DeviceState& d, double) {
+        ToolState t;
+        t.diameterMm = 2.0f;
+        t.position = d.pose.position;
+        t.orientation = d.pose.orientation;
+        t.clientTimeUs = steadyNowUs();
+        std::lock_guard lock(sendMutex);
+        toSend.push_back(t);
+    });
+    uint64_t loopStart = 0;
+    s.client->setHapticCallback([&](const HapticModel& m, uint64_t arrivalUs) {
+        HapticModelData d{m.position, m.force, m.gradient, m.contact, m.toolSequence};
+        loop.setModel(d, double(int64_t(arrivalUs) - int64_t(loopStart)) * 1e-6);
+    });
+    HapticLoopStats st;
+    uint64_t updates = 0;
+    for (auto _ : state) {
+        uint64_t updates0 = s.client->updatesApplied();
+        std::atomic<bool> stop{false};
+        std::thread cutter([&] {
+            int i = 0;
+            while (!stop.load()) {
+                s.server->submitBoxCut(surfaceBox(s.skull, 20, (i++ % 9) * 4 - 16));
+                std::this_thread::sleep_for(std::chrono::milliseconds(10));
+            }
+        });
+        loopStart = steadyNowUs();
+        loop.start();
+        uint64_t end = steadyNowUs() + 3000000;
+        std::vector<ToolState> batch;
+        while (steadyNowUs() < end) {
+            {
+                std::lock_guard lock(sendMutex);
+                batch.assign(toSend.begin(), toSend.end());
+                toSend.clear();
+            }
+            for (const ToolState& t : batch)
+                s.client->sendToolState(t);
+            // As the headless trainee: short waits so queued tool states leave within ~0.2 ms.
+            if (s.client->poll(0) == 0 && batch.empty())
+                std::this_thread::sleep_for(std::chrono::microseconds(200));
+        }
+        loop.stop();
+        stop = true;
+        cutter.join();
+        st = loop.stats();
+        updates = s.client->updatesApplied() - updates0;
+    }
+    s.client->setHapticCallback({});
+    const NetStats& ns = s.client->stats();
+    state.counters["achieved_hz"] = st.achievedRateHz;
+    state.counters["target_hz"] = 1000;
+    state.counters["lateness_p50_ms"] = st.latenessP50Ms;
+    state.counters["lateness_p99_ms"] = st.latenessP99Ms;
+    state.counters["models"] = double(st.models);
+    state.counters["force_rtt_p50_us"] = ns.hapticRoundTripUs.percentile(50);
+    state.counters["force_rtt_p99_us"] = ns.hapticRoundTripUs.percentile(99);
+    state.counters["dbi_updates"] = double(updates);
+    state.counters["update_latency_p50_us"] = ns.updateLatencyUs.percentile(50);
+}
+
 } // namespace
 
+BENCHMARK_CAPTURE(boxSweep, raw, Codec::Raw)->DenseRange(10, 80, 10)->Iterations(30)->UseRealTime();
+BENCHMARK_CAPTURE(boxSweep, lz4, Codec::Lz4)->DenseRange(10, 80, 10)->Iterations(30)->UseRealTime();
+BENCHMARK_CAPTURE(boxSweep, zstd, Codec::Zstd)
+    ->DenseRange(10, 80, 10)
+    ->Iterations(30)
+    ->UseRealTime();
+BENCHMARK(forceRoundTrip)->Iterations(1)->UseRealTime()->Unit(benchmark::kMillisecond);
+BENCHMARK(hapticLoopWhileStreaming)->Iterations(1)->UseRealTime()->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(burrStroke, raw_burr5mm, Codec::Raw, 5.0f)->Iterations(200)->UseRealTime();
 BENCHMARK_CAPTURE(burrStroke, lz4_burr5mm, Codec::Lz4, 5.0f)->Iterations(200)->UseRealTime();
 BENCHMARK_CAPTURE(burrStroke, zstd_burr5mm, Codec::Zstd, 5.0f)->Iterations(200)->UseRealTime();

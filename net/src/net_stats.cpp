@@ -109,6 +109,21 @@ std::string reportJson(const ReportInfo& info, const NetStats& stats) {
     j += "  \"update_raw_bytes\": " + windowJson(stats.updateRawBytes) + ",\n";
     j += "  \"update_latency_us\": " + windowJson(stats.updateLatencyUs) + ",\n";
     j += "  \"apply_us\": " + windowJson(stats.applyUs) + ",\n";
+    j += "  \"haptic_round_trip_us\": " + windowJson(stats.hapticRoundTripUs) + ",\n";
+    if (info.hapticLoop) {
+        j += "  \"haptics\": {\"tool_rate_hz\": " + num(info.toolRateHz) +
+             ", \"rate_hz\": " + num(info.hapticRateHz) +
+             ", \"achieved_rate_hz\": " + num(info.achievedRateHz) +
+             ", \"lateness_p50_ms\": " + num(info.latenessP50Ms) +
+             ", \"lateness_p99_ms\": " + num(info.latenessP99Ms) +
+             ", \"ticks\": " + std::to_string(info.hapticTicks) +
+             ", \"models_received\": " + std::to_string(info.hapticModels) +
+             ", \"models_applied\": " + std::to_string(info.modelsApplied) +
+             ", \"models_dropped\": " + std::to_string(info.modelsDropped) +
+             ", \"force_round_trip_p50_us\": " + num(stats.hapticRoundTripUs.percentile(50)) +
+             ", \"force_round_trip_p99_us\": " + num(stats.hapticRoundTripUs.percentile(99)) +
+             "},\n";
+    }
     j += "  \"channels\": {";
     for (size_t c = 0; c < size_t(Channel::Count); ++c) {
         Channel ch = Channel(c);

@@ -120,6 +120,19 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         }
         return true;
     }
+    case MessageType::HapticModel: {
+        HapticModel m;
+        if (!decodeMessage(data, m))
+            return false;
+        ++m_hapticModels;
+        if (m.clientTimeUs > 0 && m.clientTimeUs <= nowUs)
+            m_stats.hapticRoundTripUs.add(double(nowUs - m.clientTimeUs));
+        if (!m_latestHaptic || int32_t(m.toolSequence - m_latestHaptic->toolSequence) > 0)
+            m_latestHaptic = m;
+        if (m_hapticCallback)
+            m_hapticCallback(m, nowUs);
+        return true;
+    }
     case MessageType::Pong: {
         Pong p;
         if (!decodeMessage(data, p) || p.clientTimeUs > nowUs)
@@ -188,6 +201,8 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
     if (!u.full && causeLocal > 0 && int64_t(applied) >= causeLocal)
         m_stats.updateLatencyUs.add(double(int64_t(applied) - causeLocal));
     (void)nowUs;
+    if (m_updateCallback)
+        m_updateCallback(u, PixelRect{u.x, u.y, u.width, u.height}, u.full);
     return true;
 }
 

@@ -3,17 +3,22 @@
 #include "libsim/dirty_rect.h"
 #include "libsim/drill.h"
 #include "libsim/error.h"
+#include "libsim/force_model.h"
 #include "libsim/renderer.h"
 #include "libsim/thread_pool.h"
 #include "libsim/volume_io.h"
 #include "net/codec.h"
 #include "net/view.h"
 
+#include <poll.h>
 #include <pthread.h>
+#include <sys/eventfd.h>
+#include <unistd.h>
 
 #include <algorithm>
 #include <cstdio>
 #include <optional>
+#include <shared_mutex>
 
 namespace trephine::net {
 
@@ -23,12 +28,13 @@ namespace {
 
 // What the network thread hands the simulation thread, in arrival order.
 struct SimEvent {
-    enum class Kind { Join, View, Tool, Leave } kind = Kind::Tool;
+    enum class Kind { Join, View, Tool, Leave, Cut } kind = Kind::Tool;
     uint16_t client = 0;
     Camera camera;
     uint32_t viewId = 0;
     Codec codec = Codec::Raw;
     ToolState tool;
+    Box3i box; // Cut
     uint64_t arrivedUs = 0;
 };
 
@@ -48,6 +54,17 @@ struct NetPeer {
     bool hello = false;
     Hello helloMsg;
     int malformed = 0;
+    bool kicked = false;
+};
+
+// Per-peer figures for the server report (kept after the peer leaves).
+struct PeerReport {
+    std::string name;
+    Role role = Role::Trainee;
+    bool hello = false;
+    uint64_t bytesIn = 0, bytesOut = 0, messagesIn = 0, messagesOut = 0;
+    uint64_t malformed = 0, hapticModels = 0, toolStates = 0, viewsRefused = 0;
+    uint64_t connectedUs = 0, disconnectedUs = 0;
     bool kicked = false;
 };
 
@@ -88,19 +105,41 @@ ToolShape shapeOf(const ToolState& t) {
 
 struct SessionServer::Impl {
     explicit Impl(Volume v, const ServerConfig& c)
-        : host(Host::listen(c.port, c.maxClients)), volume(std::move(v)), pool(c.renderThreads),
-          renderer(volume, &pool) {}
+        : host(Host::listen(c.port, c.maxClients + kSparePeers)), volume(std::move(v)),
+          pool(c.renderThreads), renderer(volume, &pool),
+          wakeFd(eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)) {}
+    ~Impl() {
+        if (wakeFd >= 0)
+            ::close(wakeFd);
+    }
+    Impl(const Impl&) = delete;
+    Impl& operator=(const Impl&) = delete;
+
+    // ENet peer slots beyond maxClients, so that one more can be told "server full".
+    static constexpr size_t kSparePeers = 4;
 
     Host host;
 
-    // Simulation thread (and inspection) under volumeMutex.
+    // Simulation thread (and inspection) under volumeMutex: the renderer's bricks, views, frames.
     std::mutex volumeMutex;
+    // The voxels themselves are also read by the network thread (haptic force models) while the
+    // simulation thread renders: the simulation thread, the only writer, holds volumeRw exclusively
+    // just around each write (one Driller::drill step, one box cut); the network thread holds it
+    // shared around ForceModel::compute. Reads on the simulation thread need no lock (it is the
+    // writer), so rendering never blocks haptics and haptics waits at most one drill step.
+    std::shared_mutex volumeRw;
     Volume volume;
     ThreadPool pool;
     Renderer renderer;
     std::map<uint16_t, SimClient> simClients;
     std::vector<ViewFrame> views;
     uint32_t sequence = 0;
+
+    // Network thread writes, report readers read, under reportMutex.
+    mutable std::mutex reportMutex;
+    std::map<uint16_t, PeerReport> peerReport;
+    SampleWindow forceComputeUs{65536};
+    SampleWindow hapticServiceUs{65536}; // tool state received -> haptic model queued
 
     // Network thread only.
     std::map<uint16_t, NetPeer> peers;
@@ -116,6 +155,27 @@ struct SessionServer::Impl {
     // Simulation -> network.
     std::mutex outMutex;
     std::map<uint16_t, PendingUpdate> outbox;
+    // Wakes the network thread's wait on the ENet socket when an update is posted, so it goes
+    // out at once instead of after the rest of a 1 ms service timeout (-1: no eventfd; the
+    // network thread then simply waits out its timeout).
+    int wakeFd = -1;
+
+    void wakeNetwork() {
+        if (wakeFd >= 0) {
+            uint64_t one = 1;
+            [[maybe_unused]] ssize_t n = ::write(wakeFd, &one, sizeof one);
+        }
+    }
+
+    // Waits up to timeoutMs for a datagram on the ENet socket or a wake-up.
+    void waitNetwork(int timeoutMs) {
+        pollfd fds[2] = {{int(host.get()->socket), POLLIN, 0}, {wakeFd, POLLIN, 0}};
+        if (::poll(fds, wakeFd >= 0 ? 2 : 1, timeoutMs) > 0 && wakeFd >= 0 &&
+            (fds[1].revents & POLLIN)) {
+            uint64_t count = 0;
+            [[maybe_unused]] ssize_t n = ::read(wakeFd, &count, sizeof count);
+        }
+    }
 
     void push(SimEvent ev) {
         {
@@ -159,8 +219,11 @@ struct SessionServer::Impl {
         u.payload = std::move(e.payload);
         u.sentServerUs = steadyNowUs();
         PendingUpdate p{c.viewId, rect, full, causeUs, encodeMessage(u)};
-        std::lock_guard lock(outMutex);
-        outbox[id] = std::move(p);
+        {
+            std::lock_guard lock(outMutex);
+            outbox[id] = std::move(p);
+        }
+        wakeNetwork();
     }
 };
 
@@ -205,6 +268,13 @@ void SessionServer::stop() {
 
 // [SECTION] inspection
 
+void SessionServer::submitBoxCut(const Box3i& box) {
+    SimEvent ev = makeEvent(SimEvent::Kind::Cut, 0);
+    ev.box = box;
+    ev.arrivedUs = steadyNowUs();
+    m_impl->push(std::move(ev));
+}
+
 Dbi SessionServer::renderView(const ViewSpec& view) {
     std::lock_guard lock(m_impl->volumeMutex);
     return m_impl->renderer.render(toCamera(view));
@@ -232,15 +302,63 @@ void SessionServer::networkLoop() {
     Impl& s = *m_impl;
     uint64_t nextTick = 0;
 
+    ForceModelCache forceModels; // network thread only
+    auto peerId = [](ENetPeer* peer) { return uint16_t(reinterpret_cast<uintptr_t>(peer->data)); };
+    auto report = [&](uint16_t id, const auto& f) {
+        std::lock_guard lock(s.reportMutex);
+        f(s.peerReport[id]);
+    };
     auto sendTo = [&](ENetPeer* peer, Channel ch, const std::vector<uint8_t>& bytes) {
-        if (!bytes.empty() && s.host.send(peer, ch, bytes))
+        if (!bytes.empty() && s.host.send(peer, ch, bytes)) {
             m_stats.countOut(ch, bytes.size());
+            if (uint16_t id = peerId(peer))
+                report(id, [&](PeerReport& r) {
+                    r.bytesOut += bytes.size();
+                    ++r.messagesOut;
+                    if (ch == Channel::Haptic)
+                        ++r.hapticModels;
+                });
+        }
+    };
+    auto viewTooLarge = [&](const ViewSpec& v) {
+        return int64_t(v.width) * int64_t(v.height) > m_config.maxViewPixels;
+    };
+    // The force at the tool's pose, answered at once (before and independent of drilling).
+    auto answerHaptic = [&](NetPeer& p, const ToolState& t, uint64_t receivedUs) {
+        HapticModel m;
+        m.toolSequence = t.sequence;
+        m.serverReceivedUs = receivedUs;
+        m.clientTimeUs = t.clientTimeUs;
+        m.position = t.position;
+        const ForceModel& model = forceModels.get(shapeOf(t));
+        uint64_t c0 = steadyNowUs();
+        ForceResult f;
+        {
+            std::shared_lock lock(s.volumeRw);
+            f = model.compute(s.volume, ToolPose{t.position, t.orientation},
+                              t.drilling ? t.speed : 0.0f);
+        }
+        uint64_t c1 = steadyNowUs();
+        m.force = f.force;
+        m.gradient = f.gradient;
+        m.contact = f.contact;
+        m.serverSentUs = steadyNowUs();
+        {
+            std::lock_guard lock(s.reportMutex);
+            s.forceComputeUs.add(double(c1 - c0));
+            s.hapticServiceUs.add(double(m.serverSentUs - receivedUs));
+        }
+        m_hapticSent.fetch_add(1); // before it can arrive: readers never see fewer than received
+        sendTo(p.peer, Channel::Haptic, encodeMessage(m));
+        s.host.flush();
     };
     auto malformed = [&](NetPeer& p) {
         m_stats.countMalformed();
+        report(peerId(p.peer), [](PeerReport& r) { ++r.malformed; });
         if (++p.malformed > m_config.malformedLimit && !p.kicked) {
             p.kicked = true;
             m_malformedKicks.fetch_add(1);
+            report(peerId(p.peer), [](PeerReport& r) { r.kicked = true; });
             enet_peer_disconnect(p.peer, uint32_t(RefuseReason::Malformed));
         }
     };
@@ -255,6 +373,17 @@ void SessionServer::networkLoop() {
                 return false;
             p.hello = true;
             p.helloMsg = h;
+            report(id, [&](PeerReport& r) {
+                r.hello = true;
+                r.name = h.name;
+                r.role = h.role;
+            });
+            if (viewTooLarge(h.view)) {
+                p.kicked = true;
+                report(id, [](PeerReport& r) { r.kicked = true; });
+                enet_peer_disconnect(p.peer, uint32_t(RefuseReason::BadHello));
+                return true;
+            }
             Welcome w;
             w.clientId = id;
             w.serverTimeUs = now;
@@ -276,6 +405,11 @@ void SessionServer::networkLoop() {
             ViewRequest r;
             if (!decodeMessage(data, r))
                 return false;
+            if (viewTooLarge(r.view)) {
+                m_viewsRefused.fetch_add(1);
+                report(id, [](PeerReport& rep) { ++rep.viewsRefused; });
+                return true; // well-formed, but more than we serve: dropped and counted
+            }
             SimEvent ev = makeEvent(SimEvent::Kind::View, id);
             ev.camera = toCamera(r.view);
             ev.viewId = r.requestId;
@@ -291,6 +425,9 @@ void SessionServer::networkLoop() {
             } catch (const Error&) {
                 return false; // a diameter the tool cannot have
             }
+            report(id, [](PeerReport& r) { ++r.toolStates; });
+            if (m_config.hapticModels)
+                answerHaptic(p, t, now);
             SimEvent ev = makeEvent(SimEvent::Kind::Tool, id);
             ev.tool = t;
             ev.arrivedUs = now;
@@ -324,18 +461,27 @@ void SessionServer::networkLoop() {
                                      uint32_t(RefuseReason::Version) | (kProtocolVersion << 8));
                 return;
             }
+            if (s.peers.size() >= m_config.maxClients) {
+                ev.peer->data = nullptr;
+                m_refusedFull.fetch_add(1);
+                enet_peer_disconnect(ev.peer, uint32_t(RefuseReason::ServerFull));
+                return;
+            }
             disableThrottle(ev.peer);
             uint16_t id = s.nextId++;
             if (s.nextId == 0)
                 s.nextId = 1;
             ev.peer->data = reinterpret_cast<void*>(uintptr_t(id));
             s.peers[id].peer = ev.peer;
+            report(id, [](PeerReport& r) { r.connectedUs = steadyNowUs(); });
             m_clientCount = s.peers.size();
             return;
         }
         case ENET_EVENT_TYPE_DISCONNECT: {
             auto id = uint16_t(reinterpret_cast<uintptr_t>(ev.peer->data));
             ev.peer->data = nullptr;
+            if (id)
+                report(id, [](PeerReport& r) { r.disconnectedUs = steadyNowUs(); });
             if (id && s.peers.erase(id)) {
                 s.push(makeEvent(SimEvent::Kind::Leave, id));
                 m_clientCount = s.peers.size();
@@ -349,6 +495,10 @@ void SessionServer::networkLoop() {
                 return;
             m_stats.countIn(Channel(std::min<int>(ev.channelID, int(Channel::Count) - 1)),
                             ev.packet->dataLength);
+            report(id, [&](PeerReport& r) {
+                r.bytesIn += ev.packet->dataLength;
+                ++r.messagesIn;
+            });
             if (!handle(id, it->second, {ev.packet->data, ev.packet->dataLength}))
                 malformed(it->second);
             return;
@@ -359,7 +509,9 @@ void SessionServer::networkLoop() {
     };
 
     while (!m_stop.load()) {
-        s.host.service(1, onEvent);
+        // Wait on the socket and the wake-up together, then handle everything pending.
+        s.waitNetwork(1);
+        s.host.service(0, onEvent);
         std::map<uint16_t, PendingUpdate> out;
         {
             std::lock_guard lock(s.outMutex);
@@ -434,6 +586,21 @@ void SessionServer::simulationLoop() {
                 s.simClients.erase(ev.client);
                 needFull.erase(ev.client);
                 break;
+            case SimEvent::Kind::Cut: {
+                Box3i box = ev.box.intersect(s.volume.bounds());
+                if (box.empty())
+                    break;
+                {
+                    std::unique_lock write(s.volumeRw);
+                    for (int z = box.lo.z; z < box.hi.z; ++z)
+                        for (int y = box.lo.y; y < box.hi.y; ++y)
+                            for (int x = box.lo.x; x < box.hi.x; ++x)
+                                s.volume.set(x, y, z, 0, Material::Air);
+                }
+                changed.merge(box);
+                causeUs = causeUs ? std::min(causeUs, ev.arrivedUs) : ev.arrivedUs;
+                break;
+            }
             case SimEvent::Kind::Tool: {
                 auto it = s.simClients.find(ev.client);
                 if (it == s.simClients.end())
@@ -458,8 +625,12 @@ void SessionServer::simulationLoop() {
                 m_toolStatesApplied.fetch_add(1);
                 if (!t.drilling || t.speed <= 0.0f || dt <= 0.0f)
                     break;
-                DrillResult r =
-                    c.driller->drill(s.volume, ToolPose{t.position, t.orientation}, t.speed, dt);
+                DrillResult r;
+                {
+                    std::unique_lock write(s.volumeRw);
+                    r = c.driller->drill(s.volume, ToolPose{t.position, t.orientation}, t.speed,
+                                         dt);
+                }
                 if (!r.changed.empty()) {
                     changed.merge(r.changed);
                     causeUs = causeUs ? std::min(causeUs, ev.arrivedUs) : ev.arrivedUs;
@@ -507,6 +678,98 @@ void SessionServer::simulationLoop() {
         std::lock_guard lock(s.inMutex);
         s.busy = false;
     }
+}
+
+} // namespace trephine::net
+
+// [SECTION] report
+
+namespace trephine::net {
+
+namespace {
+
+std::string jsonNum(double v) {
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.6g", v);
+    return buf;
+}
+
+std::string jsonText(const std::string& s) {
+    std::string out = "\"";
+    for (char ch : s) {
+        if (ch == '"' || ch == '\\') {
+            out += '\\';
+            out += ch;
+        } else if (uint8_t(ch) < 0x20) {
+            char buf[8];
+            std::snprintf(buf, sizeof buf, "\\u%04x", unsigned(uint8_t(ch)));
+            out += buf;
+        } else {
+            out += ch;
+        }
+    }
+    return out + "\"";
+}
+
+std::string jsonWindow(const SampleWindow& w) {
+    return "{\"count\": " + std::to_string(w.totalCount()) + ", \"mean\": " + jsonNum(w.mean()) +
+           ", \"p50\": " + jsonNum(w.percentile(50)) + ", \"p99\": " + jsonNum(w.percentile(99)) +
+           ", \"max\": " + jsonNum(w.max()) + "}";
+}
+
+} // namespace
+
+std::string SessionServer::reportJson() const {
+    const Impl& s = *m_impl;
+    std::string j = "{\n";
+    j += "  \"port\": " + std::to_string(port()) + ",\n";
+    j += "  \"volume\": " + jsonText(m_config.volumeName) + ",\n";
+    j += "  \"max_clients\": " + std::to_string(m_config.maxClients) + ",\n";
+    j += "  \"clients\": " + std::to_string(m_clientCount.load()) + ",\n";
+    j += "  \"tool_states_applied\": " + std::to_string(m_toolStatesApplied.load()) + ",\n";
+    j += "  \"renders\": " + std::to_string(m_renders.load()) + ",\n";
+    j += "  \"haptic_models_sent\": " + std::to_string(m_hapticSent.load()) + ",\n";
+    j += "  \"malformed_dropped\": " + std::to_string(m_stats.malformed()) + ",\n";
+    j += "  \"disconnected_for_malformed\": " + std::to_string(m_malformedKicks.load()) + ",\n";
+    j += "  \"refused_server_full\": " + std::to_string(m_refusedFull.load()) + ",\n";
+    j += "  \"views_refused\": " + std::to_string(m_viewsRefused.load()) + ",\n";
+    j += "  \"channels\": {";
+    for (size_t c = 0; c < size_t(Channel::Count); ++c) {
+        Channel ch = Channel(c);
+        ChannelRates r = m_stats.averageRates(ch);
+        j += std::string(c ? "," : "") + "\n    " + jsonText(channelName(ch)) + ": {" +
+             "\"bytes_in\": " + std::to_string(m_stats.totalBytesIn(ch)) +
+             ", \"bytes_out\": " + std::to_string(m_stats.totalBytesOut(ch)) +
+             ", \"messages_in\": " + std::to_string(m_stats.totalMessagesIn(ch)) +
+             ", \"messages_out\": " + std::to_string(m_stats.totalMessagesOut(ch)) +
+             ", \"bytes_in_per_s\": " + jsonNum(r.bytesInPerS) +
+             ", \"bytes_out_per_s\": " + jsonNum(r.bytesOutPerS) + "}";
+    }
+    j += "\n  },\n";
+    std::lock_guard lock(s.reportMutex);
+    j += "  \"force_compute_us\": " + jsonWindow(s.forceComputeUs) + ",\n";
+    j += "  \"haptic_service_us\": " + jsonWindow(s.hapticServiceUs) + ",\n";
+    j += "  \"peers\": [";
+    bool first = true;
+    for (const auto& [id, r] : s.peerReport) {
+        j += std::string(first ? "" : ",") + "\n    {\"id\": " + std::to_string(id) +
+             ", \"name\": " + jsonText(r.name) +
+             ", \"role\": " + jsonText(r.role == Role::Instructor ? "instructor" : "trainee") +
+             ", \"hello\": " + (r.hello ? "true" : "false") +
+             ", \"connected\": " + (r.disconnectedUs == 0 ? "true" : "false") +
+             ", \"bytes_in\": " + std::to_string(r.bytesIn) +
+             ", \"bytes_out\": " + std::to_string(r.bytesOut) +
+             ", \"messages_in\": " + std::to_string(r.messagesIn) +
+             ", \"messages_out\": " + std::to_string(r.messagesOut) +
+             ", \"tool_states\": " + std::to_string(r.toolStates) +
+             ", \"haptic_models\": " + std::to_string(r.hapticModels) +
+             ", \"malformed\": " + std::to_string(r.malformed) +
+             ", \"views_refused\": " + std::to_string(r.viewsRefused) +
+             ", \"kicked\": " + (r.kicked ? "true" : "false") + "}";
+        first = false;
+    }
+    j += "\n  ]\n}\n";
+    return j;
 }
 
 } // namespace trephine::net

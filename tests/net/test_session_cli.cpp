@@ -1,6 +1,7 @@
-// `trephine server` as a process: SIGTERM stops it cleanly and --save-on-exit holds every
-// drilling step it applied.
+// `trephine server` as a process: SIGTERM stops it cleanly, --save-on-exit holds every drilling
+// step it applied and --report is written; `trephine trainee --headless` runs its haptic loop.
 #include "net/session_client.h"
+#include "net/session_server.h"
 #include "net/view.h"
 
 #include "libsim/skull.h"
@@ -13,7 +14,10 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <string>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -25,6 +29,7 @@ TEST(SessionCli, SigtermWritesSaveOnExitWithTheDrilling) {
     std::string path = (std::filesystem::temp_directory_path() /
                         ("trephine_sigterm_" + std::to_string(getpid()) + ".nrrd"))
                            .string();
+    std::string report = path + ".json";
     int fds[2];
     ASSERT_EQ(pipe(fds), 0);
     pid_t pid = fork();
@@ -33,7 +38,8 @@ TEST(SessionCli, SigtermWritesSaveOnExitWithTheDrilling) {
         dup2(fds[1], 1);
         close(fds[0]);
         execl(TREPHINE_BIN, TREPHINE_BIN, "server", "--port", "0", "--volume", "sphere:32",
-              "--render-threads", "1", "--save-on-exit", path.c_str(), (char*)nullptr);
+              "--render-threads", "1", "--save-on-exit", path.c_str(), "--report", report.c_str(),
+              (char*)nullptr);
         _exit(127);
     }
     close(fds[1]);
@@ -84,4 +90,49 @@ TEST(SessionCli, SigtermWritesSaveOnExitWithTheDrilling) {
     EXPECT_EQ(saved.dims(), sphere.dims());
     EXPECT_FALSE(saved == sphere) << "the applied drilling is in the saved volume";
     std::filesystem::remove(path);
+    // --report: per-channel and per-peer statistics, written when the server stopped.
+    std::ifstream r(report);
+    std::string json((std::istreambuf_iterator<char>(r)), std::istreambuf_iterator<char>());
+    EXPECT_NE(json.find("\"peers\""), std::string::npos) << json;
+    EXPECT_NE(json.find("\"haptic_models_sent\": "), std::string::npos) << json;
+    EXPECT_NE(json.find("\"malformed_dropped\": 0"), std::string::npos) << json;
+    std::filesystem::remove(report);
+}
+
+// `trephine trainee --headless` against an in-process server: its haptic loop sends tool states at
+// --tool-rate, every one is answered with a force model, and the report holds the loop's figures
+// and the force round trip.
+TEST(SessionCli, HeadlessTraineeRunsTheHapticLoopAndReportsIt) {
+    Volume sphere = makeSphere(32);
+    ServerConfig sc;
+    sc.port = 0;
+    sc.volumeName = "sphere:32";
+    sc.renderThreads = 1;
+    SessionServer server(sphere, sc);
+    server.start();
+    std::string report = (std::filesystem::temp_directory_path() /
+                          ("trephine_trainee_" + std::to_string(getpid()) + ".json"))
+                             .string();
+    std::string cmd = std::string(TREPHINE_BIN) +
+                      " trainee --connect 127.0.0.1:" + std::to_string(server.port()) +
+                      " --headless --camera top --size 64 --duration 1 --tool-rate 50 --report " +
+                      report + " > /dev/null 2>&1";
+    ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+    server.stop();
+    std::ifstream r(report);
+    std::string json((std::istreambuf_iterator<char>(r)), std::istreambuf_iterator<char>());
+    auto number = [&](const std::string& key) {
+        auto at = json.find("\"" + key + "\": ");
+        return at == std::string::npos ? -1.0 : std::stod(json.substr(at + key.size() + 4));
+    };
+    EXPECT_EQ(number("tool_rate_hz"), 50.0) << json;
+    double sent = number("tool_states_sent");
+    EXPECT_GT(sent, 10.0) << json; // about 50 in the second, plus the final lift
+    EXPECT_GT(number("models_received"), 0.0) << json;
+    EXPECT_LE(number("models_received"), sent) << json;
+    EXPECT_GT(number("ticks"), 0.0) << json;
+    EXPECT_GT(number("force_round_trip_p50_us"), 0.0) << json;
+    EXPECT_GT(server.hapticModelsSent(), 0u);
+    EXPECT_LE(double(server.hapticModelsSent()), sent); // unsequenced: loss is allowed
+    std::filesystem::remove(report);
 }

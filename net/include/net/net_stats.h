@@ -49,11 +49,12 @@ public:
     ChannelRates averageRates(Channel c) const;
 
     // Owned by one thread (the one that polls the client); not thread-safe.
-    SampleWindow rttUs{4096};            // ping round trip, our own microseconds
-    SampleWindow updateBytes{65536};     // payload bytes per image update
-    SampleWindow updateRawBytes{65536};  // bytes before compression
-    SampleWindow updateLatencyUs{65536}; // cause at server -> rectangle applied at client
-    SampleWindow applyUs{65536};         // decode + apply time at the client
+    SampleWindow rttUs{4096};              // ping round trip, our own microseconds
+    SampleWindow updateBytes{65536};       // payload bytes per image update
+    SampleWindow updateRawBytes{65536};    // bytes before compression
+    SampleWindow updateLatencyUs{65536};   // cause at server -> rectangle applied at client
+    SampleWindow applyUs{65536};           // decode + apply time at the client
+    SampleWindow hapticRoundTripUs{65536}; // tool state sent -> its HapticModel received
     int64_t clockOffsetUs = 0; // server clock - client clock, from the best (lowest-RTT) ping
     double bestRttUs = -1;
 
@@ -81,6 +82,17 @@ struct ReportInfo {
     uint64_t toolStatesSent = 0;
     uint64_t relaysReceived = 0;
     uint64_t updatesRejected = 0; // malformed / out-of-window image updates
+    // The haptic loop (absent from the JSON when hapticLoop is false).
+    bool hapticLoop = false;
+    double toolRateHz = 0;     // tool states per second requested (--tool-rate)
+    double hapticRateHz = 0;   // the loop's nominal rate
+    double achievedRateHz = 0; // ticks per second achieved
+    double latenessP50Ms = 0;  // tick start after its schedule
+    double latenessP99Ms = 0;
+    uint64_t hapticTicks = 0;
+    uint64_t hapticModels = 0;  // HapticModel messages received
+    uint64_t modelsApplied = 0; // taken by the loop (in order)
+    uint64_t modelsDropped = 0; // reordered, dropped by the loop
 };
 std::string reportJson(const ReportInfo& info, const NetStats& stats);
 

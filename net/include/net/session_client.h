@@ -11,6 +11,7 @@
 #include "net/protocol.h"
 
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <optional>
 #include <string>
@@ -71,6 +72,21 @@ public:
     NetStats& stats() { return m_stats; }
     const NetStats& stats() const { return m_stats; }
 
+    // [Haptics and UI hooks] Callbacks run on the thread that calls poll(), inside poll().
+    // Called with each HapticModel received on Channel::Haptic (arrivalUs: steadyNowUs() when it
+    // was handled). Models are newest-wins on the wire; an older one may arrive after a newer one.
+    using HapticCallback = std::function<void(const HapticModel&, uint64_t arrivalUs)>;
+    void setHapticCallback(HapticCallback callback) { m_hapticCallback = std::move(callback); }
+    // The newest HapticModel received (by tool sequence), if any.
+    std::optional<HapticModel> latestHapticModel() const { return m_latestHaptic; }
+    uint64_t hapticModelsReceived() const { return m_hapticModels; }
+    // Called after each ImageUpdate has been applied to the DBI: `rect` is the changed rectangle
+    // in DBI pixels (row 0 at the bottom, as GL), `full` when the whole DBI was replaced (a join
+    // or a view switch: the DBI's size may have changed).
+    using UpdateCallback =
+        std::function<void(const ImageUpdate& meta, const PixelRect& rect, bool full)>;
+    void setUpdateCallback(UpdateCallback callback) { m_updateCallback = std::move(callback); }
+
     // [Test hooks] Sends raw bytes on a channel, bypassing every check.
     bool sendRaw(Channel channel, std::span<const uint8_t> bytes);
 
@@ -99,6 +115,10 @@ private:
     std::map<uint16_t, ToolState> m_others;
     uint32_t m_toolSequence = 0;
     uint32_t m_lastSequence = 0;
+    HapticCallback m_hapticCallback;
+    UpdateCallback m_updateCallback;
+    std::optional<HapticModel> m_latestHaptic;
+    uint64_t m_hapticModels = 0;
     uint64_t m_relays = 0, m_updatesApplied = 0, m_fullUpdates = 0, m_rejected = 0, m_toolSent = 0;
     NetStats m_stats;
 };

@@ -5,6 +5,7 @@
 // docs/session.md describes the threads, queues and coalescing.
 #pragma once
 
+#include "libsim/box.h"
 #include "libsim/camera.h"
 #include "libsim/dbi.h"
 #include "libsim/volume.h"
@@ -26,12 +27,18 @@ namespace trephine::net {
 
 struct ServerConfig {
     uint16_t port = 7777; // 0: any free port (tests); see SessionServer::port()
-    size_t maxClients = 32;
-    std::string volumeName;  // sent in the welcome
-    std::string saveOnExit;  // when set, stop() writes the final volume here (saveVolume)
-    int malformedLimit = 50; // a peer that sends more malformed packets is disconnected
-    int renderThreads = 0;   // 0: hardware concurrency
-    float maxStepS = 0.05f;  // longest drilling step taken from one tool state to the next
+    // Participants at once; one more is refused with RefuseReason::ServerFull (ENet keeps a few
+    // spare peer slots so the refusal can be said).
+    size_t maxClients = 16;
+    // The largest view (width x height pixels) served: a larger hello is refused (BadHello), a
+    // larger view request is dropped and counted (viewsRefused()).
+    int64_t maxViewPixels = 2048 * 2048;
+    bool hapticModels = true; // answer each tool state with a HapticModel (Channel::Haptic)
+    std::string volumeName;   // sent in the welcome
+    std::string saveOnExit;   // when set, stop() writes the final volume here (saveVolume)
+    int malformedLimit = 50;  // a peer that sends more malformed packets is disconnected
+    int renderThreads = 0;    // 0: hardware concurrency
+    float maxStepS = 0.05f;   // longest drilling step taken from one tool state to the next
 };
 
 class SessionServer {
@@ -49,6 +56,11 @@ public:
     // simulation thread applies every queued tool state, then saveOnExit is written. Idempotent.
     void stop();
 
+    // Cuts a box of voxels (volume indices) to air on the simulation thread, exactly like a tool
+    // update: density 0 and Material::Air in the box (clipped to the volume), BB_volume = the
+    // box, cause time = now (the submit time), then BB_screen updates to every client. Thread-safe.
+    void submitBoxCut(const Box3i& box);
+
     // [Inspection, thread-safe]
     // A fresh full render of the current volume for a view (what a converged client holds).
     Dbi renderView(const ViewSpec& view);
@@ -60,7 +72,13 @@ public:
     uint64_t disconnectedForMalformed() const { return m_malformedKicks.load(); }
     uint64_t toolStatesApplied() const { return m_toolStatesApplied.load(); }
     uint64_t rendersDone() const { return m_renders.load(); }
+    uint64_t hapticModelsSent() const { return m_hapticSent.load(); }
+    uint64_t refusedFull() const { return m_refusedFull.load(); }
+    uint64_t viewsRefused() const { return m_viewsRefused.load(); }
     const NetStats& stats() const { return m_stats; }
+    // Server statistics as JSON: per channel totals and rates, per peer (current and departed)
+    // bytes, messages, malformed counts, haptic models, refusals; force compute time.
+    std::string reportJson() const;
 
 private:
     struct Impl;
@@ -76,6 +94,9 @@ private:
     std::atomic<uint64_t> m_malformedKicks{0};
     std::atomic<uint64_t> m_toolStatesApplied{0};
     std::atomic<uint64_t> m_renders{0};
+    std::atomic<uint64_t> m_hapticSent{0};
+    std::atomic<uint64_t> m_refusedFull{0};
+    std::atomic<uint64_t> m_viewsRefused{0};
     std::thread m_netThread;
     std::thread m_simThread;
 };
