@@ -12,6 +12,7 @@
 
 #include <algorithm>
 #include <cassert>
+#include <climits>
 #include <cmath>
 #include <cstring>
 #include <glm/geometric.hpp>
@@ -46,6 +47,7 @@ struct Frame {
     glm::vec3 spacing;
     glm::vec3 invSpacing;
     int width, height;
+    double ndcPerPixelX, ndcPerPixelY; // 2 / width, 2 / height
     glm::dmat4 viewProj;
     // The far-plane point of a pixel, homogeneous: farH + ndc.x * farDx + ndc.y * farDy. Points
     // on the far plane share one clip w, so after the divide it is affine in the pixel.
@@ -78,6 +80,8 @@ Frame makeFrame(const Volume& volume, const Camera& camera, const RenderOptions&
     f.invSpacing = 1.0f / f.spacing;
     f.width = camera.width;
     f.height = camera.height;
+    f.ndcPerPixelX = 2.0 / camera.width;
+    f.ndcPerPixelY = 2.0 / camera.height;
     f.viewProj = viewProjection(camera);
     glm::dmat4 inv = glm::inverse(f.viewProj);
     f.farH = inv * glm::dvec4(0.0, 0.0, 1.0, 1.0);
@@ -156,7 +160,7 @@ inline float sampleDensity(const Frame& f, glm::vec3 p) {
 // The marching test: is the sample at p at or above the iso-value? A trilinear sample is a convex
 // combination of its eight corners, so when no corner reaches 128 (bit 7 clear in all of them)
 // the answer is no without interpolating; otherwise the sample decides, exactly as
-// sampleDensity would. Returns the sample (or 0 when skipped) in `value`.
+// sampleDensity would. Returns the sample in `value`, or -1 when the corner test answered.
 static_assert(kSurfaceDensity == 128, "the corner test below reads bit 7");
 inline bool insideSample(const Frame& f, glm::vec3 p, float& value) {
     int ix = floorInt(p.x), iy = floorInt(p.y), iz = floorInt(p.z);
@@ -169,7 +173,7 @@ inline bool insideSample(const Frame& f, glm::vec3 p, float& value) {
         std::memcpy(&r2, b + f.sz, 2);
         std::memcpy(&r3, b + f.sz + f.sy, 2);
         if (((r0 | r1 | r2 | r3) & 0x8080u) == 0) {
-            value = 0.0f;
+            value = -1.0f;
             return false;
         }
         float tx = p.x - float(ix), ty = p.y - float(iy), tz = p.z - float(iz);
@@ -187,33 +191,27 @@ inline bool insideSample(const Frame& f, glm::vec3 p, float& value) {
 glm::vec3 gradientAt(const Frame& f, glm::vec3 p) {
     int ix = floorInt(p.x), iy = floorInt(p.y), iz = floorInt(p.z);
     float tx = p.x - float(ix), ty = p.y - float(iy), tz = p.z - float(iz);
-    // The 4^3 neighbourhood [i - 1, i + 2] on each axis.
-    float v[4][4][4];
+    // Central differences at the eight corners of p's cell read the 32 voxels of the cell and its
+    // face neighbours (never the edges or corners of the 4^3 neighbourhood).
+    auto gradients = [](auto at, glm::vec3 g[8]) {
+        for (int i = 0; i < 8; ++i) {
+            int x = i & 1, y = (i >> 1) & 1, z = i >> 2;
+            g[i] = glm::vec3(at(x + 1, y, z) - at(x - 1, y, z), at(x, y + 1, z) - at(x, y - 1, z),
+                             at(x, y, z + 1) - at(x, y, z - 1)) *
+                   0.5f;
+        }
+    };
+    glm::vec3 g[8];
     if (ix >= 1 && iy >= 1 && iz >= 1 && ix + 2 < f.n.x && iy + 2 < f.n.y && iz + 2 < f.n.z) {
-        for (int z = 0; z < 4; ++z)
-            for (int y = 0; y < 4; ++y) {
-                const uint8_t* row =
-                    f.density + (ix - 1) + f.sy * (iy - 1 + y) + f.sz * (iz - 1 + z);
-                for (int x = 0; x < 4; ++x)
-                    v[z][y][x] = row[x];
-            }
+        const uint8_t* b = f.density + ix + f.sy * iy + f.sz * iz;
+        const ptrdiff_t sy = f.sy, sz = f.sz;
+        gradients([&](int x, int y, int z) { return float(b[x + sy * y + sz * z]); }, g);
     } else {
-        for (int z = 0; z < 4; ++z)
-            for (int y = 0; y < 4; ++y)
-                for (int x = 0; x < 4; ++x)
-                    v[z][y][x] = voxelAt(f, ix - 1 + x, iy - 1 + y, iz - 1 + z);
+        gradients([&](int x, int y, int z) { return voxelAt(f, ix + x, iy + y, iz + z); }, g);
     }
-    glm::vec3 g[2][2][2];
-    for (int z = 0; z < 2; ++z)
-        for (int y = 0; y < 2; ++y)
-            for (int x = 0; x < 2; ++x)
-                g[z][y][x] = glm::vec3(v[z + 1][y + 1][x + 2] - v[z + 1][y + 1][x],
-                                       v[z + 1][y + 2][x + 1] - v[z + 1][y][x + 1],
-                                       v[z + 2][y + 1][x + 1] - v[z][y + 1][x + 1]) *
-                             0.5f;
     auto lerp = [](glm::vec3 a, glm::vec3 b, float t) { return a + t * (b - a); };
-    glm::vec3 g00 = lerp(g[0][0][0], g[0][0][1], tx), g10 = lerp(g[0][1][0], g[0][1][1], tx);
-    glm::vec3 g01 = lerp(g[1][0][0], g[1][0][1], tx), g11 = lerp(g[1][1][0], g[1][1][1], tx);
+    glm::vec3 g00 = lerp(g[0], g[1], tx), g10 = lerp(g[2], g[3], tx);
+    glm::vec3 g01 = lerp(g[4], g[5], tx), g11 = lerp(g[6], g[7], tx);
     return lerp(lerp(g00, g10, ty), lerp(g01, g11, ty), tz);
 }
 
@@ -228,13 +226,14 @@ struct Ray {
 };
 
 // The ray through window position (wx, wy) (pixel x's centre is x + 0.5).
+// Divisions are few and done once (they are most of the cost of setting up a ray).
 Ray windowRay(const Frame& f, double wx, double wy) {
-    double ndcX = wx / f.width * 2.0 - 1.0, ndcY = wy / f.height * 2.0 - 1.0;
+    double ndcX = wx * f.ndcPerPixelX - 1.0, ndcY = wy * f.ndcPerPixelY - 1.0;
     glm::dvec4 h = f.farH + ndcX * f.farDx + ndcY * f.farDy;
-    glm::dvec3 toFar = glm::dvec3(h) / h.w - f.eye;
+    glm::dvec3 toFar = glm::dvec3(h) * (1.0 / h.w) - f.eye;
     Ray r;
-    r.tFar = glm::length(toFar);
-    r.dir = toFar / r.tFar;
+    r.tFar = std::sqrt(glm::dot(toFar, toFar));
+    r.dir = toFar * (1.0 / r.tFar);
     r.tNear = r.tFar * f.nearOverFar; // eye-space depth grows linearly along the ray
     r.dv = glm::vec3(r.dir) * f.invSpacing;
     r.invDv = 1.0f / r.dv;
@@ -318,8 +317,12 @@ March march(const Frame& f, const Ray& r, float tSkipTo) {
     int k = tSkipTo > t0 ? std::max(kStart, int(tSkipTo * invDt)) : kStart;
     float value = 0.0f;
     bool found = false;
+    // The last sample below the iso-value whose density was computed (by the same arithmetic as
+    // sampleDensity, so reusing it for the refinement changes no bit).
+    int lastK = INT_MIN;
+    float lastValue = 0.0f;
+    constexpr int S = BrickGrid::kShift;
     while (k <= kEnd && !found) {
-        int kRunEnd = kEnd;
         uint64_t cells = ~uint64_t(0);
         glm::ivec3 cellBase(0);
         if (f.distance) {
@@ -327,27 +330,36 @@ March march(const Frame& f, const Ray& r, float tSkipTo) {
             glm::ivec3 b(brickCoord(p.x, f.n.x), brickCoord(p.y, f.n.y), brickCoord(p.z, f.n.z));
             size_t bi = size_t(b.x) + size_t(f.nb.x) * size_t(b.y) + f.nbxy * size_t(b.z);
             int d = f.distance[bi];
-            float tExit = boxExit(f, r, b, std::max(d - 1, 0));
-            // Last sample before the box's exit (one a rounding error beyond it is still below
-            // the iso-value, see above).
-            float kLast = tExit * invDt;
             if (d > 0) {
+                // Last sample before the exit of the empty cube (one a rounding error beyond it
+                // is still below the iso-value, see above).
+                float kLast = boxExit(f, r, b, d - 1) * invDt;
                 if (!(kLast < float(kEnd)))
                     return m;
                 k = std::max(k + 1, floorInt(kLast) + 1);
                 continue;
             }
-            if (kLast < float(kEnd))
-                kRunEnd = std::max(k, floorInt(kLast));
             cells = f.cells[bi];
-            cellBase = b << BrickGrid::kShift;
+            cellBase = b << S;
         }
-        for (; k <= kRunEnd; ++k) {
+        for (; k <= kEnd; ++k) {
             glm::vec3 p = samplePos(f, r, float(k) * dt);
+            int fx = floorInt(p.x), fy = floorInt(p.y), fz = floorInt(p.z);
+            int cx = fx - cellBase.x, cy = fy - cellBase.y, cz = fz - cellBase.z;
+            if (unsigned(cx | cy | cz) >= unsigned(BrickGrid::kSize) && f.distance) {
+                // The sample is in another brick: go on with that brick's cells if it may hold
+                // surface, or leave it to the leap above if it is empty.
+                glm::ivec3 b(std::clamp(fx, 0, f.n.x - 1) >> S, std::clamp(fy, 0, f.n.y - 1) >> S,
+                             std::clamp(fz, 0, f.n.z - 1) >> S);
+                size_t bi = size_t(b.x) + size_t(f.nb.x) * size_t(b.y) + f.nbxy * size_t(b.z);
+                if (f.distance[bi] > 0)
+                    break;
+                cells = f.cells[bi];
+                cellBase = b << S;
+                cx = fx - cellBase.x, cy = fy - cellBase.y, cz = fz - cellBase.z;
+            }
             // A clear cell of this brick: below the iso-value without touching the volume. A
-            // sample that rounding put in a neighbouring brick takes the full test.
-            int cx = floorInt(p.x) - cellBase.x, cy = floorInt(p.y) - cellBase.y,
-                cz = floorInt(p.z) - cellBase.z;
+            // sample outside the grid's bricks takes the full test.
             if (unsigned(cx | cy | cz) < unsigned(BrickGrid::kSize) &&
                 !((cells >> (cx + 4 * cy + 16 * cz)) & 1u))
                 continue;
@@ -355,6 +367,8 @@ March march(const Frame& f, const Ray& r, float tSkipTo) {
                 found = true;
                 break;
             }
+            if (value >= 0.0f)
+                lastK = k, lastValue = value;
         }
     }
     if (!found)
@@ -366,10 +380,12 @@ March march(const Frame& f, const Ray& r, float tSkipTo) {
     if (k > kStart) {
         // Refine between the last sample outside and the first inside: a secant (regula falsi)
         // step, one sample there to narrow the bracket, and a final secant. The outside sample is
-        // recomputed so that skipping it changes nothing. (Bisection costs three more samples
-        // and as many mispredicted branches, for accuracy the depth test does not need.)
+        // recomputed unless the march just computed it, so skipping it changes nothing. (Bisection
+        // costs three more samples and as many mispredicted branches, for accuracy the depth test
+        // does not need.)
         float ta = float(k - 1) * dt, tb = m.tIn;
-        float fa = sampleDensity(f, samplePos(f, r, ta)) - iso, fb = value - iso;
+        float fa = (lastK == k - 1 ? lastValue : sampleDensity(f, samplePos(f, r, ta))) - iso;
+        float fb = value - iso;
         for (int i = 0; i < kRefineSteps; ++i) {
             float tm = ta + (tb - ta) * (fa / (fa - fb));
             float fm = sampleDensity(f, samplePos(f, r, tm)) - iso;
@@ -386,13 +402,19 @@ March march(const Frame& f, const Ray& r, float tSkipTo) {
 
 // Pixels per edge of the blocks that share one cone march.
 constexpr int kConeBlock = 8;
+// The widest box of bricks (per axis) a cone's cross-section may overlap for the cone march to go
+// on.
+constexpr int kConeMaxBricks = 4;
+// Leaps per cone march (through bricks far out, through clear cells near the surface).
+constexpr int kConeMaxSteps = 128;
 
-// A lower bound on t before which no ray of the pixel block [x0, x1) x [y0, y1) has a sample in
-// a brick that may hold surface (+inf: none ever has). Every ray of the block lies within a cone
-// around the block's central ray; at distance t its points are within t * tan(angle) of the
-// central point. The central ray is marched through the brick distances with that radius taken
-// off every empty cube, so whatever the cone sweeps is empty. Skipping those samples is exact,
-// like any brick skip: results never depend on the block a pixel was rendered in.
+// A lower bound on t before which every sample of every ray of the pixel block [x0, x1) x
+// [y0, y1) lies in an empty brick or a clear trilinear cell (+inf: all of them do). Every ray of
+// the block lies within a cone around the block's central ray; at distance t its points are within
+// t * tan(angle) of the central point. The central ray leaps through boxes proved empty (by brick
+// distances far out, by cell masks near the surface) with that radius taken off every box, so
+// whatever the cone sweeps is below the iso-value. Skipping those samples is exact, like any
+// brick skip: results never depend on the block a pixel was rendered in.
 float coneSkipTo(const Frame& f, int x0, int y0, int x1, int y1) {
     const Ray c = windowRay(f, 0.5 * (x0 + x1), 0.5 * (y0 + y1));
     double cosMin = 1.0;
@@ -424,29 +446,87 @@ float coneSkipTo(const Frame& f, int x0, int y0, int x1, int y1) {
     if (!(t0 <= t1))
         return INFINITY;
     float t = t0;
-    for (int step = 0; step < 64; ++step) {
+    const int nbx = f.nb.x;
+    constexpr int S = BrickGrid::kShift;
+    for (int step = 0; step < kConeMaxSteps; ++step) {
         glm::vec3 p = samplePos(f, c, t);
-        glm::ivec3 b(brickCoord(p.x, f.n.x), brickCoord(p.y, f.n.y), brickCoord(p.z, f.n.z));
-        int d = f.distance[size_t(b.x) + size_t(f.nb.x) * size_t(b.y) + f.nbxy * size_t(b.z)];
-        if (d == 0)
-            return t;
-        // The empty cube of bricks within d - 1 of b, shrunk by the radius (open at the grid's
-        // edges); the central point must be inside it for the cone to be.
+        // The bricks that the cone's cross-section around p can touch, reaching half a voxel
+        // further so that the march always moves on, and the smallest distance among them.
+        glm::ivec3 lo, hi;
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = brickCoord(p[a] - radius - 0.5f, f.n[a]);
+            hi[a] = brickCoord(p[a] + radius + 0.5f, f.n[a]);
+            if (hi[a] - lo[a] >= kConeMaxBricks)
+                return t; // a cone this wide gains nothing here
+        }
+        int d = BrickGrid::kMaxDistance;
+        for (int z = lo.z; z <= hi.z; ++z)
+            for (int y = lo.y; y <= hi.y; ++y) {
+                const uint8_t* row = f.distance + size_t(nbx) * size_t(y) + f.nbxy * size_t(z);
+                for (int x = lo.x; x <= hi.x; ++x)
+                    d = std::min(d, int(row[x]));
+            }
+        // An empty box around p, in voxel coordinates (infinite faces: open at the grid's edge).
+        glm::vec3 boxLo, boxHi;
+        if (d > 0) {
+            // Every brick within d - 1 of the box of bricks [lo, hi] is within d - 1 of one of
+            // them, so empty.
+            lo -= d - 1;
+            hi += d - 1;
+            for (int a = 0; a < 3; ++a) {
+                boxLo[a] = lo[a] <= 0 ? -INFINITY : float(lo[a] << S);
+                boxHi[a] = hi[a] >= f.nb[a] - 1 ? INFINITY : float((hi[a] + 1) << S);
+            }
+        } else {
+            // Near surface: the trilinear cells the cross-section can touch must all be clear
+            // (no corner at the iso-value, BrickGrid::cellMask); samples there are below it.
+            glm::ivec3 clo, chi;
+            for (int a = 0; a < 3; ++a) {
+                clo[a] = floorInt(p[a] - radius - 0.5f);
+                chi[a] = floorInt(p[a] + radius + 0.5f);
+                if (clo[a] < 0 || chi[a] >= (f.nb[a] << S) || chi[a] - clo[a] >= 8)
+                    return t;
+            }
+            for (int z = clo.z; z <= chi.z; ++z)
+                for (int y = clo.y; y <= chi.y; ++y)
+                    for (int x = clo.x; x <= chi.x; ++x) {
+                        size_t bi =
+                            size_t(x >> S) + size_t(nbx) * size_t(y >> S) + f.nbxy * size_t(z >> S);
+                        int bit =
+                            (x & (BrickGrid::kSize - 1)) +
+                            BrickGrid::kSize * ((y & (BrickGrid::kSize - 1)) +
+                                                BrickGrid::kSize * (z & (BrickGrid::kSize - 1)));
+                        if ((f.cells[bi] >> bit) & 1u)
+                            return t;
+                    }
+            boxLo = glm::vec3(clo);
+            boxHi = glm::vec3(chi + 1);
+        }
+        // The cone's radius grows with t: over the part of the central ray inside the box it is
+        // at most its radius where the ray leaves the box.
+        float tBox = INFINITY;
+        for (int a = 0; a < 3; ++a) {
+            if (c.dv[a] > 0.0f && boxHi[a] < INFINITY)
+                tBox = std::min(tBox, (boxHi[a] - f.origin[a]) * c.invDv[a]);
+            else if (c.dv[a] < 0.0f && boxLo[a] > -INFINITY)
+                tBox = std::min(tBox, (boxLo[a] - f.origin[a]) * c.invDv[a]);
+        }
+        float r = tBox < INFINITY
+                      ? std::min(radius, float(tanA * tBox / f.minSpacing) * 1.01f + 0.05f)
+                      : radius;
+        // The box shrunk by the radius; the central point must be inside it for the cone to be.
         float tNext = INFINITY;
         for (int a = 0; a < 3; ++a) {
-            int loB = b[a] - (d - 1), hiB = b[a] + (d - 1);
-            float lo = loB <= 0 ? -INFINITY : float(loB << BrickGrid::kShift) + radius;
-            float hi =
-                hiB >= f.nb[a] - 1 ? INFINITY : float((hiB + 1) << BrickGrid::kShift) - radius;
-            if (!(p[a] >= lo && p[a] <= hi))
+            float l = boxLo[a] + r, h = boxHi[a] - r;
+            if (!(p[a] >= l && p[a] <= h))
                 return t;
-            if (c.dv[a] > 0.0f && hi < INFINITY)
-                tNext = std::min(tNext, (hi - f.origin[a]) * c.invDv[a]);
-            else if (c.dv[a] < 0.0f && lo > -INFINITY)
-                tNext = std::min(tNext, (lo - f.origin[a]) * c.invDv[a]);
+            if (c.dv[a] > 0.0f && h < INFINITY)
+                tNext = std::min(tNext, (h - f.origin[a]) * c.invDv[a]);
+            else if (c.dv[a] < 0.0f && l > -INFINITY)
+                tNext = std::min(tNext, (l - f.origin[a]) * c.invDv[a]);
         }
         if (!(tNext < t1))
-            return INFINITY; // the cone stays in empty bricks until it leaves the volume
+            return INFINITY; // the cone stays in empty space until it leaves the volume
         if (!(tNext > t))
             return t;
         t = tNext;

@@ -21,29 +21,38 @@ ThreadPool::~ThreadPool() {
         t.join();
 }
 
-void ThreadPool::runItems() {
+void ThreadPool::runItems(uint32_t generation, int count, const std::function<void(int)>* fn) {
+    uint64_t v = m_claim.load(std::memory_order_acquire);
     for (;;) {
-        int i = m_next.fetch_add(1, std::memory_order_relaxed);
-        if (i >= m_count)
+        // A claim is valid only for this job and below its count. While a claimed item is
+        // unfinished the caller cannot return, so fn (this job's) stays alive while it runs.
+        if (uint32_t(v >> 32) != generation || int(uint32_t(v)) >= count)
             return;
-        (*m_fn)(i);
+        if (!m_claim.compare_exchange_weak(v, v + 1, std::memory_order_acq_rel,
+                                           std::memory_order_acquire))
+            continue;
+        (*fn)(int(uint32_t(v)));
+        if (m_remaining.fetch_sub(1, std::memory_order_acq_rel) == 1)
+            m_remaining.notify_all();
+        v = m_claim.load(std::memory_order_acquire);
     }
 }
 
 void ThreadPool::workerLoop() {
-    uint64_t seen = 0;
+    uint32_t seen = 0;
     for (;;) {
+        const std::function<void(int)>* fn;
+        int count;
         {
             std::unique_lock lock(m_mutex);
             m_wake.wait(lock, [&] { return m_stop || m_generation != seen; });
             if (m_stop)
                 return;
             seen = m_generation;
+            fn = m_fn;
+            count = m_count;
         }
-        runItems();
-        std::lock_guard lock(m_mutex);
-        if (--m_busy == 0)
-            m_done.notify_one();
+        runItems(seen, count, fn);
     }
 }
 
@@ -55,19 +64,21 @@ void ThreadPool::parallelFor(int count, const std::function<void(int)>& fn) {
             fn(i);
         return;
     }
+    uint32_t generation;
     {
         std::lock_guard lock(m_mutex);
+        generation = ++m_generation;
         m_fn = &fn;
         m_count = count;
-        m_next.store(0, std::memory_order_relaxed);
-        m_busy = int(m_workers.size());
-        ++m_generation;
+        m_remaining.store(count, std::memory_order_relaxed);
+        m_claim.store(uint64_t(generation) << 32, std::memory_order_release);
     }
     m_wake.notify_all();
-    runItems();
-    std::unique_lock lock(m_mutex);
-    m_done.wait(lock, [&] { return m_busy == 0; });
-    m_fn = nullptr;
+    runItems(generation, count, &fn);
+    // Items the workers still run: wait for them to finish (not for idle workers to wake).
+    for (int left = m_remaining.load(std::memory_order_acquire); left != 0;
+         left = m_remaining.load(std::memory_order_acquire))
+        m_remaining.wait(left, std::memory_order_acquire);
 }
 
 } // namespace trephine

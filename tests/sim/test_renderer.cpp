@@ -8,12 +8,15 @@
 #include "libsim/skull.h"
 #include "libsim/thread_pool.h"
 
+#include <atomic>
 #include <cmath>
 #include <cstring>
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtx/quaternion.hpp>
 #include <gtest/gtest.h>
 #include <random>
+#include <thread>
+#include <vector>
 
 namespace trephine {
 namespace {
@@ -148,6 +151,46 @@ TEST(Renderer, RectangleRenderIsBitForBitTheFullRender) {
     }
 }
 
+// The pool returns only when every item has run, each exactly once, also when its workers wake
+// late (more threads than cores) and for jobs smaller than the pool; back-to-back jobs never see
+// each other's items.
+TEST(ThreadPool, RunsEveryItemOnceAndWaitsForAll) {
+    for (int threads : {1, 2, 5}) {
+        SCOPED_TRACE(threads);
+        ThreadPool pool(threads);
+        EXPECT_EQ(pool.size(), threads);
+        std::mt19937 rng(3);
+        for (int job = 0; job < 300; ++job) {
+            int count = std::uniform_int_distribution<int>(0, 40)(rng);
+            std::vector<std::atomic<int>> hits(size_t(count) + 1);
+            std::atomic<int> done{0};
+            pool.parallelFor(count, [&](int i) {
+                if (i % 7 == 3)
+                    std::this_thread::yield();
+                hits[size_t(i)].fetch_add(1);
+                done.fetch_add(1);
+            });
+            ASSERT_EQ(done.load(), count);
+            for (int i = 0; i < count; ++i)
+                ASSERT_EQ(hits[size_t(i)].load(), 1) << "job " << job << " item " << i;
+            ASSERT_EQ(hits[size_t(count)].load(), 0);
+        }
+    }
+}
+
+// Tiles of any size over a pool of any size give the same image (items are claimed dynamically).
+TEST(Renderer, TileSizeAndThreadsChangeNoBit) {
+    Volume skull = makeSkull(48);
+    Camera c = cameraPreset("working", skull, {97, 61});
+    Dbi reference = Renderer(skull, nullptr, RenderOptions{.tileSize = 97}).render(c);
+    for (int threads : {2, 3}) {
+        ThreadPool pool(threads);
+        for (int tile : {4, 16, 32})
+            EXPECT_EQ(Renderer(skull, &pool, RenderOptions{.tileSize = tile}).render(c), reference)
+                << threads << " threads, tile " << tile;
+    }
+}
+
 TEST(Renderer, SkippingEmptySpaceChangesNoBit) {
     Volume skull = makeSkull(64);
     ThreadPool pool;
@@ -186,6 +229,44 @@ TEST(Renderer, SkippingChangesNoBitFromAnyCamera) {
             ASSERT_TRUE(a == b) << describe(c) << ": " << compare(a, b).describe();
         }
     }
+}
+
+// The cone march goes on through clear trilinear cells near the surface: scattered single voxels
+// just above and just below the iso-value (127, 128, 255), seen through narrow fields of view so
+// that the cones are thin, render bit for bit as without skipping.
+TEST(Renderer, ConeMarchThroughClearCellsChangesNoBit) {
+    Volume v({48, 40, 44}, glm::vec3(0.7f, 0.8f, 0.75f));
+    std::mt19937 rng(5);
+    std::uniform_int_distribution<int> x(0, 47), y(0, 39), z(0, 43), pick(0, 3);
+    const uint8_t values[4] = {127, 128, 129, 255};
+    for (int i = 0; i < 400; ++i)
+        v.set(x(rng), y(rng), z(rng), values[pick(rng)], Material::Cortical);
+    for (int i = 10; i < 38; ++i) // a thin plate, one voxel thick
+        for (int j = 8; j < 32; ++j)
+            v.set(i, j, 22, 160, Material::Diploe);
+    ThreadPool pool;
+    Renderer skipping(v, &pool);
+    Renderer marching(v, &pool, RenderOptions{.skipEmpty = false});
+    float r = 0.5f * glm::length(v.extentMm());
+    std::uniform_real_distribution<float> unit(-1.0f, 1.0f), dist(1.2f, 6.0f), fov(3, 30);
+    int hits = 0;
+    for (int i = 0; i < 16; ++i) {
+        Camera c;
+        glm::vec3 dir = glm::normalize(glm::vec3(unit(rng), unit(rng), unit(rng)) + 1e-3f);
+        c.eye = dir * r * dist(rng);
+        c.target = glm::vec3(unit(rng), unit(rng), unit(rng)) * r * 0.2f;
+        c.up = glm::normalize(glm::cross(dir, glm::vec3(unit(rng), unit(rng), unit(rng))));
+        c.fovYDeg = fov(rng);
+        c.width = 160;
+        c.height = 120;
+        fitNearFar(c, glm::vec3(0.0f), r);
+        Dbi a = skipping.render(c), b = marching.render(c);
+        ASSERT_TRUE(a == b) << describe(c) << ": " << compare(a, b).describe();
+        for (int py = 0; py < c.height; ++py)
+            for (int px = 0; px < c.width; ++px)
+                hits += a.depth(px, py) < kBackgroundDepth;
+    }
+    EXPECT_GT(hits, 1000);
 }
 
 TEST(Renderer, BrickGridStaysCorrectAfterErosion) {

@@ -19,7 +19,7 @@ struct RenderOptions {
     // multiples of the step from the eye, so skipping never moves them.
     float stepVoxels = 0.5f;
     bool skipEmpty = true; // empty-space skipping with the brick grid (bit-identical either way)
-    int tileSize = 32;     // pixels per tile edge handed to one worker
+    int tileSize = 16;     // pixels per tile edge handed to one worker (claimed dynamically)
 };
 
 // Shading uses the density gradient from central differences at the eight voxels around the hit,

@@ -1,5 +1,11 @@
 // A small fork-join worker pool for the renderer: parallelFor hands out work items to the workers
 // and the calling thread, and returns when all are done. One job at a time.
+//
+// The caller never waits for a worker that has not started: items are claimed from one atomic
+// counter tagged with the job's generation, and the caller returns as soon as every item has
+// *finished*, whoever ran it. A worker that wakes late finds the job's items all claimed (or a
+// newer generation) and goes back to sleep, so a small job on a busy machine costs the caller no
+// hand-off latency beyond the work itself.
 #pragma once
 
 #include <atomic>
@@ -30,18 +36,20 @@ public:
 
 private:
     void workerLoop();
-    void runItems();
+    // Claims and runs items of job `generation` until none is left (or a newer job started).
+    void runItems(uint32_t generation, int count, const std::function<void(int)>* fn);
 
     std::vector<std::thread> m_workers;
     std::mutex m_mutex;
     std::condition_variable m_wake;
-    std::condition_variable m_done;
-    const std::function<void(int)>* m_fn = nullptr;
-    int m_count = 0;
-    std::atomic<int> m_next{0};
-    int m_busy = 0;            // workers still inside the current job
-    uint64_t m_generation = 0; // bumped for every job
+    const std::function<void(int)>* m_fn = nullptr; // guarded by m_mutex
+    int m_count = 0;                                // guarded by m_mutex
+    uint32_t m_generation = 0;                      // guarded by m_mutex; bumped for every job
     bool m_stop = false;
+    // (generation << 32) | next unclaimed item of the current job.
+    std::atomic<uint64_t> m_claim{0};
+    // Items of the current job not yet finished; the caller waits for 0.
+    std::atomic<int> m_remaining{0};
 };
 
 } // namespace trephine
