@@ -1,7 +1,11 @@
-// `trephine demo`: the README's main job. Drills a burr hole with the cranial perforator at the
-// default site of the procedural skull and prints what happened. (The windowed demo, an embedded
-// server plus a trainee window, arrives with the GUI; this is its headless form.)
+// `trephine demo`: the README's main job. With a display: an embedded session server on the
+// procedural skull plus a trainee window connected over loopback, drilled with the mouse or a
+// script. Without one (or with --headless): drills a burr hole with the cranial perforator at the
+// default site and prints what happened.
 #include "modes.h"
+
+#include "mode_window.h"
+#include "net/session_server.h"
 
 #include "libsim/drill.h"
 #include "libsim/skull.h"
@@ -21,6 +25,8 @@ struct DemoOptions {
     float feedMmPerS = 1.0f;
     float dtMs = 1.0f;
     float maxSeconds = 30.0f;
+    bool headless = false;
+    WindowedOptions window;
 };
 
 // Voxel counts per material of voxels that were bone before and are air now.
@@ -34,7 +40,7 @@ std::vector<int64_t> removedByMaterial(const Volume& before, const Volume& after
     return removed;
 }
 
-int runDemo(const DemoOptions& o) {
+int runHeadlessDemo(const DemoOptions& o) {
     using Clock = std::chrono::steady_clock;
     std::printf("Trephine demo: a burr hole with the cranial perforator (headless)\n");
     Volume skull = openVolume(o.volume);
@@ -102,12 +108,40 @@ int runDemo(const DemoOptions& o) {
     return clutchDepth >= 0 && duraContacts == 0 ? 0 : 1;
 }
 
+int runDemo(DemoOptions& o) {
+    std::string why;
+    if (!o.headless && !windowAvailable(&why)) {
+        std::printf("demo: no window (%s); running the headless demo\n", why.c_str());
+        o.headless = true;
+    }
+    if (o.headless)
+        return runHeadlessDemo(o);
+    // The embedded server on a free loopback port, then the trainee window.
+    net::ServerConfig config;
+    config.port = 0;
+    config.volumeName = o.volume;
+    net::SessionServer server(openVolume(o.volume), config);
+    server.start();
+    o.window.connect = "127.0.0.1:" + std::to_string(server.port());
+    std::printf("demo: server on %s (%s), trainee window connected\n", o.window.connect.c_str(),
+                o.volume.c_str());
+    int rc = runWindowedClient(o.window);
+    server.stop();
+    return rc;
+}
+
 } // namespace
 
 void addDemoMode(CLI::App& root, int& exitCode) {
     auto o = std::make_shared<DemoOptions>();
     CLI::App* sub = root.add_subcommand(
-        "demo", "Drill a burr hole in the built-in procedural skull and print a summary");
+        "demo", "An embedded server on the procedural skull and a trainee window (headless "
+                "without a display: drill a burr hole and print a summary)");
+    sub->add_flag("--headless", o->headless, "No window: drill and print a summary");
+    sub->add_option("--script", o->window.script,
+                    "Windowed: `burrhole` drills a scripted hole (default: the mouse drills)")
+        ->check(CLI::IsMember({"", "burrhole"}));
+    addWindowOptions(sub, o->window);
     sub->add_option("--volume", o->volume, "Volume spec (see `trephine volume --help`)")
         ->capture_default_str();
     sub->add_option("--feed", o->feedMmPerS, "Perforator feed rate, mm/s")

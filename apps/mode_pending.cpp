@@ -16,9 +16,4 @@ void addPendingMode(CLI::App& root, int& exitCode, const char* name, const char*
     });
 }
 
-void addInstructorMode(CLI::App& root, int& exitCode) {
-    addPendingMode(root, exitCode, "instructor", "Join a session as an instructor",
-                   "trainee and instructor windows, issue 6");
-}
-
 } // namespace trephine::app

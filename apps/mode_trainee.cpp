@@ -1,6 +1,7 @@
-// `trephine trainee`: join a session. The window arrives with issue 6; `--headless` runs a real
-// client with no window, driven by a script (the built-in `burrhole` or a CSV trajectory, see
-// docs/scripts.md), and writes statistics as a JSON report.
+// `trephine trainee`: join a session. By default a trainee window (apps/mode_window.cpp);
+// `--headless` runs a real client with no window, driven by a script (the built-in `burrhole` or a
+// CSV trajectory, see docs/scripts.md), and writes statistics as a JSON report.
+#include "mode_window.h"
 #include "modes.h"
 
 #include "libsim/error.h"
@@ -142,10 +143,8 @@ std::vector<Sample> csvScript(const std::string& path) {
 }
 
 int runTrainee(const TraineeOptions& o) {
-    if (!o.headless) {
-        std::fprintf(stderr, "trephine trainee: the window arrives with issue 6; use --headless\n");
-        return 2;
-    }
+    if (!o.headless)
+        return runWindowedTrainee(o.connect, o.name, o.codec, o.size);
     ENetAddress address = net::parseAddress(o.connect);
     // A CSV script is read first, so a bad file fails before anything connects.
     std::vector<Sample> script;

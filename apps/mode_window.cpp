@@ -1,0 +1,98 @@
+// The windowed client (issue 6) and `trephine instructor`. `trephine trainee` calls
+// runWindowedClient when it runs without --headless.
+#include "mode_window.h"
+
+#include "libsim/error.h"
+#include "modes.h"
+
+#include <cstdio>
+
+#ifdef TREPHINE_HAVE_GUI
+#include "ui/trainer_app.h"
+#include "ui/window.h"
+#endif
+
+namespace trephine::app {
+
+bool windowAvailable(std::string* why) {
+#ifdef TREPHINE_HAVE_GUI
+    return ui::displayAvailable(why);
+#else
+    if (why)
+        *why = "this trephine was built without the GUI (TREPHINE_BUILD_GUI=OFF)";
+    return false;
+#endif
+}
+
+int runWindowedClient(const WindowedOptions& o) {
+#ifdef TREPHINE_HAVE_GUI
+    std::string why;
+    if (!windowAvailable(&why))
+        throw Error("cannot open a window: " + why + " (use --headless, or run under xvfb-run)");
+    ui::TrainerOptions t;
+    t.address = o.connect;
+    t.name = o.name;
+    t.instructor = o.instructor;
+    t.camera = o.camera;
+    t.codec = o.codec;
+    t.size = o.size;
+    t.script = o.script;
+    t.screenshot = o.screenshot;
+    t.frames = o.frames;
+    t.timeoutS = o.timeoutS;
+    t.orbitDeg = o.orbitDeg;
+    t.tiltDeg = o.tiltDeg;
+    return ui::runTrainerWindow(t);
+#else
+    (void)o;
+    throw Error("this trephine was built without the GUI (TREPHINE_BUILD_GUI=OFF), so it has no "
+                "window (a trainee can run --headless)");
+#endif
+}
+
+int runWindowedTrainee(const std::string& connect, const std::string& name,
+                       const std::string& codec, int size) {
+    WindowedOptions o;
+    o.connect = connect;
+    o.name = name;
+    o.codec = codec;
+    o.size = size;
+    return runWindowedClient(o);
+}
+
+void addWindowOptions(CLI::App* sub, WindowedOptions& o) {
+    sub->add_option("--screenshot", o.screenshot,
+                    "Write the window to this PNG once the view has settled, then exit");
+    sub->add_option("--frames", o.frames,
+                    "Settled frames to render before the screenshot (without one: frames to run)")
+        ->check(CLI::Range(0, 1000000));
+    sub->add_option("--view", o.camera, "site (close view of the burr site) or a camera preset")
+        ->capture_default_str();
+    sub->add_option("--orbit", o.orbitDeg, "Initial orbit of the view about the site, degrees")
+        ->check(CLI::Range(-90.0f, 90.0f));
+    sub->add_option("--tilt", o.tiltDeg, "Initial tilt of the view, degrees")
+        ->check(CLI::Range(-60.0f, 60.0f));
+    sub->add_option("--window-size", o.size, "View size in pixels (square, 1:1 with the DBI)")
+        ->check(CLI::Range(64, 2048))
+        ->capture_default_str();
+    sub->add_option("--timeout", o.timeoutS, "With --screenshot: give up after this many seconds")
+        ->check(CLI::Range(1.0, 3600.0))
+        ->capture_default_str();
+}
+
+void addInstructorMode(CLI::App& root, int& exitCode) {
+    auto o = std::make_shared<WindowedOptions>();
+    o->instructor = true;
+    o->name = "instructor";
+    CLI::App* sub = root.add_subcommand(
+        "instructor", "Join a session as an instructor: the window shows every participant's tool");
+    sub->add_option("--connect", o->connect, "Server address HOST:PORT")->required();
+    sub->add_option("--name", o->name, "Name shown to others")->capture_default_str();
+    sub->add_option("--codec", o->codec, "Image codec: raw, lz4 or zstd")
+        ->check(CLI::IsMember({"raw", "lz4", "zstd"}))
+        ->capture_default_str();
+    addWindowOptions(sub, *o);
+    sub->callback([o, &exitCode] { exitCode = runWindowedClient(*o); });
+}
+
+} // namespace trephine::app

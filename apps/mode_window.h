@@ -1,0 +1,35 @@
+// The windowed client shared by `trephine trainee`, `instructor` and `demo` (issue 6). Builds
+// without the GUI too: then windowAvailable() says why not and runWindowedClient() refuses.
+#pragma once
+
+#include <CLI/CLI.hpp>
+#include <string>
+
+namespace trephine::app {
+
+struct WindowedOptions {
+    std::string connect; // HOST:PORT
+    std::string name = "trainee";
+    bool instructor = false;
+    std::string camera = "site";
+    std::string codec = "lz4";
+    int size = 500;
+    std::string script; // "" or "burrhole"
+    std::string screenshot;
+    int frames = 0;
+    double timeoutS = 90.0;
+    float orbitDeg = 0.0f;
+    float tiltDeg = 0.0f;
+};
+
+// True when this build has the GUI and a window can open here; `why` says why not.
+bool windowAvailable(std::string* why);
+// Runs the trainee/instructor window; returns the exit code.
+int runWindowedClient(const WindowedOptions& o);
+// The hook `trephine trainee` calls without --headless: a trainee window on `connect`.
+int runWindowedTrainee(const std::string& connect, const std::string& name,
+                       const std::string& codec, int size);
+// Adds --screenshot, --frames, --script and --camera to a windowed mode's subcommand.
+void addWindowOptions(CLI::App* sub, WindowedOptions& o);
+
+} // namespace trephine::app

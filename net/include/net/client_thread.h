@@ -1,0 +1,144 @@
+// ClientThread: a SessionClient run on its own named network thread ("net-client"), for windows.
+// Other threads hand it commands through a bounded queue and read what it publishes without
+// blocking: an immutable snapshot (connection, view, others' tools, statistics) swapped whole, and
+// a queue of applied rectangles (the pixels a window re-uploads with glTexSubImage2D).
+#pragma once
+
+#include "libsim/dbi.h"
+#include "net/net_stats.h"
+#include "net/protocol.h"
+#include "net/session_client.h"
+
+#include <array>
+#include <atomic>
+#include <condition_variable>
+#include <cstdint>
+#include <deque>
+#include <functional>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <optional>
+#include <string>
+#include <thread>
+#include <variant>
+#include <vector>
+
+namespace trephine::net {
+
+enum class LinkState : uint8_t { Connecting, Connected, Retrying, Stopped };
+const char* linkStateName(LinkState s);
+
+// One image update as the window needs it: where, the pixels, and the figures for the panels.
+struct AppliedRect {
+    PixelRect rect;    // DBI pixels, row 0 at the bottom
+    Dbi pixels;        // rect.w x rect.h patch taken from the client's DBI after applying
+    bool full = false; // a whole-window refresh: pixels is the whole DBI
+    uint32_t sequence = 0;
+    uint32_t viewId = 0;
+    uint32_t bytes = 0;    // payload on the wire
+    uint32_t rawBytes = 0; // before compression
+    double latencyUs = -1; // cause at the server -> applied here (-1: unknown)
+    uint64_t appliedUs = 0;
+};
+
+// What the UI reads each frame. Immutable once published.
+struct ClientSnapshot {
+    LinkState state = LinkState::Connecting;
+    std::string closeReason; // why the last connection ended, empty if none did
+    int attempts = 0;        // connection attempts so far
+    uint64_t publishedUs = 0;
+    std::optional<Welcome> welcome;
+    ViewSpec view;
+    uint32_t viewId = 0;
+    bool hasFullImage = false;
+    bool waitingForView = false; // a requested view has not arrived in full yet
+    std::map<uint16_t, ToolState> others;
+    std::optional<HapticModel> hapticModel; // latest force model (when the client offers it)
+    uint64_t hapticModels = 0;
+    // Statistics.
+    uint64_t updatesApplied = 0, fullUpdates = 0, updatesRejected = 0, toolStatesSent = 0,
+             relaysReceived = 0, malformed = 0;
+    double rttUs = -1, rttP50Us = -1;
+    double latencyP50Us = -1, latencyP99Us = -1;
+    double meanBytes = 0, meanRawBytes = 0; // per update
+    std::string codec;
+    std::array<ChannelRates, size_t(Channel::Count)> rates{}; // latest 1 s tick
+    std::deque<std::array<ChannelRates, size_t(Channel::Count)>> rateHistory;
+};
+
+struct ClientThreadConfig {
+    ClientConfig client;
+    std::string address = "127.0.0.1:7777"; // HOST:PORT
+    double retryS = 2.0;                    // wait before reconnecting after a failure or drop
+    double connectTimeoutS = 5.0;
+    size_t maxQueuedRects = 256; // beyond this the queue is replaced by one full copy of the DBI
+    size_t maxCommands = 256;
+    // Called on the network thread for every force model as it arrives (e.g. HapticLoop::setModel,
+    // which is thread-safe); must be quick.
+    std::function<void(const HapticModel&)> onHapticModel;
+};
+
+class ClientThread {
+public:
+    explicit ClientThread(ClientThreadConfig config);
+    ~ClientThread(); // stops
+    ClientThread(const ClientThread&) = delete;
+    ClientThread& operator=(const ClientThread&) = delete;
+
+    void start();
+    // Disconnects gracefully and joins the thread. Idempotent.
+    void stop();
+
+    // Commands: never block; false when the queue is full (the command is dropped). Tool states
+    // replace a queued tool state (newest wins).
+    bool sendToolState(const ToolState& t);
+    bool requestView(const ViewSpec& v);
+    bool ping();
+
+    // The latest snapshot (never null after construction).
+    std::shared_ptr<const ClientSnapshot> snapshot() const;
+    // Moves out the rectangles applied since the last call, oldest first.
+    std::vector<AppliedRect> drainRects();
+    // Total rectangles published (tests wait on it).
+    uint64_t rectsPublished() const { return m_rectsPublished.load(); }
+
+private:
+    struct ViewCmd {
+        ViewSpec view;
+    };
+    struct PingCmd {};
+    using Command = std::variant<ToolState, ViewCmd, PingCmd>;
+
+    void run();
+    bool push(Command c);
+    void publish(const SessionClient* c, uint64_t nowUs);
+    void pushRect(AppliedRect r);
+
+    ClientThreadConfig m_config;
+    std::atomic<bool> m_stop{false};
+    std::thread m_thread;
+
+    mutable std::mutex m_cmdMutex;
+    std::deque<Command> m_commands;
+
+    mutable std::mutex m_snapMutex; // guards only the pointer swap
+    std::shared_ptr<const ClientSnapshot> m_snapshot;
+
+    std::mutex m_rectMutex;
+    std::vector<AppliedRect> m_rects;
+    std::atomic<uint64_t> m_rectsPublished{0};
+    std::atomic<bool> m_needFull{false};
+
+    // Network-thread state.
+    LinkState m_state = LinkState::Connecting;
+    std::string m_closeReason;
+    int m_attempts = 0;
+    std::optional<ViewSpec> m_wantedView;
+    std::optional<HapticModel> m_haptic;
+    uint64_t m_hapticModels = 0;
+    double m_lastRttUs = -1;
+    std::deque<std::array<ChannelRates, size_t(Channel::Count)>> m_rateHistory;
+};
+
+} // namespace trephine::net

@@ -1,0 +1,291 @@
+#include "net/client_thread.h"
+
+#include "libsim/error.h"
+#include "net/codec.h"
+
+#include <chrono>
+#include <functional>
+#include <pthread.h>
+
+namespace trephine::net {
+
+const char* linkStateName(LinkState s) {
+    switch (s) {
+    case LinkState::Connecting:
+        return "connecting";
+    case LinkState::Connected:
+        return "connected";
+    case LinkState::Retrying:
+        return "retrying";
+    case LinkState::Stopped:
+        return "stopped";
+    }
+    return "?";
+}
+
+namespace {
+
+// The mean of the samples added to a window since the last call (the newest sample when one was
+// added); -1 when none was. SampleWindow keeps no "latest", but its running sum does.
+struct NewSamples {
+    uint64_t count = 0;
+    double sum = 0;
+    double take(const SampleWindow& w) {
+        uint64_t n = w.totalCount() - count;
+        double v = n ? (w.totalSum() - sum) / double(n) : -1.0;
+        count = w.totalCount();
+        sum = w.totalSum();
+        return v;
+    }
+};
+
+} // namespace
+
+ClientThread::ClientThread(ClientThreadConfig config)
+    : m_config(std::move(config)), m_snapshot(std::make_shared<ClientSnapshot>()) {}
+
+ClientThread::~ClientThread() {
+    stop();
+}
+
+void ClientThread::start() {
+    if (m_thread.joinable())
+        return;
+    m_stop = false;
+    m_thread = std::thread([this] { run(); });
+}
+
+void ClientThread::stop() {
+    m_stop = true;
+    if (m_thread.joinable())
+        m_thread.join();
+}
+
+bool ClientThread::push(Command c) {
+    std::lock_guard lock(m_cmdMutex);
+    if (std::holds_alternative<ToolState>(c))
+        for (auto& q : m_commands)
+            if (std::holds_alternative<ToolState>(q)) {
+                q = std::move(c); // newest tool state wins
+                return true;
+            }
+    if (m_commands.size() >= m_config.maxCommands)
+        return false;
+    m_commands.push_back(std::move(c));
+    return true;
+}
+
+bool ClientThread::sendToolState(const ToolState& t) {
+    return push(t);
+}
+bool ClientThread::requestView(const ViewSpec& v) {
+    return push(ViewCmd{v});
+}
+bool ClientThread::ping() {
+    return push(PingCmd{});
+}
+
+std::shared_ptr<const ClientSnapshot> ClientThread::snapshot() const {
+    std::lock_guard lock(m_snapMutex);
+    return m_snapshot;
+}
+
+std::vector<AppliedRect> ClientThread::drainRects() {
+    std::vector<AppliedRect> out;
+    std::lock_guard lock(m_rectMutex);
+    out.swap(m_rects);
+    return out;
+}
+
+void ClientThread::pushRect(AppliedRect r) {
+    std::lock_guard lock(m_rectMutex);
+    if (r.full)
+        m_rects.clear(); // a full image supersedes every queued rectangle
+    m_rects.push_back(std::move(r));
+    if (m_rects.size() > m_config.maxQueuedRects) {
+        // The UI fell behind: drop the queue; the network thread publishes a full copy of the DBI
+        // next, which stands for everything dropped.
+        m_rects.clear();
+        m_needFull = true;
+    }
+    m_rectsPublished.fetch_add(1);
+}
+
+void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
+    auto s = std::make_shared<ClientSnapshot>();
+    s->state = m_state;
+    s->closeReason = m_closeReason;
+    s->attempts = m_attempts;
+    s->publishedUs = nowUs;
+    s->codec = codecName(m_config.client.codec);
+    s->hapticModel = m_haptic;
+    s->hapticModels = m_hapticModels;
+    if (c) {
+        if (c->welcomed())
+            s->welcome = c->welcome();
+        s->view = c->view();
+        s->viewId = c->viewId();
+        s->hasFullImage = c->hasFullImage();
+        s->waitingForView = c->welcomed() && !c->hasFullImage();
+        s->others = c->others();
+        s->updatesApplied = c->updatesApplied();
+        s->fullUpdates = c->fullUpdates();
+        s->updatesRejected = c->updatesRejected();
+        s->toolStatesSent = c->toolStatesSent();
+        s->relaysReceived = c->relaysReceived();
+        const NetStats& st = c->stats();
+        s->malformed = st.malformed();
+        s->rttUs = m_lastRttUs;
+        s->rttP50Us = st.rttUs.size() ? st.rttUs.percentile(50) : -1;
+        s->latencyP50Us = st.updateLatencyUs.size() ? st.updateLatencyUs.percentile(50) : -1;
+        s->latencyP99Us = st.updateLatencyUs.size() ? st.updateLatencyUs.percentile(99) : -1;
+        s->meanBytes = st.updateBytes.size() ? st.updateBytes.mean() : 0;
+        s->meanRawBytes = st.updateRawBytes.size() ? st.updateRawBytes.mean() : 0;
+        s->rateHistory = m_rateHistory;
+        if (!s->rateHistory.empty())
+            s->rates = s->rateHistory.back();
+    }
+    std::lock_guard lock(m_snapMutex);
+    m_snapshot = std::move(s);
+}
+
+void ClientThread::run() {
+    pthread_setname_np(pthread_self(), "net-client");
+    using namespace std::chrono;
+    while (!m_stop) {
+        ++m_attempts;
+        m_state = LinkState::Connecting;
+        publish(nullptr, steadyNowUs());
+        ClientConfig cc = m_config.client;
+        if (m_wantedView)
+            cc.view = *m_wantedView;
+        std::unique_ptr<SessionClient> client;
+        try {
+            client = std::make_unique<SessionClient>(cc);
+            client->connect(parseAddress(m_config.address));
+        } catch (const std::exception& e) {
+            m_closeReason = e.what();
+            client.reset();
+        }
+        if (client) {
+            SessionClient* cp = client.get();
+            NewSamples newLatency, newRtt;
+            // Runs inside poll(), right after the update is applied to the client's DBI.
+            cp->setUpdateCallback(
+                [this, cp, &newLatency](const ImageUpdate& meta, const PixelRect& rect, bool full) {
+                    AppliedRect r;
+                    r.full = full;
+                    r.rect = full ? cp->dbi().bounds() : rect;
+                    r.pixels = full ? cp->dbi() : cp->dbi().extract(rect);
+                    r.sequence = meta.sequence;
+                    r.viewId = meta.viewId;
+                    r.bytes = uint32_t(meta.payload.size());
+                    r.rawBytes = meta.rawBytes;
+                    r.appliedUs = steadyNowUs();
+                    r.latencyUs = newLatency.take(cp->stats().updateLatencyUs);
+                    pushRect(std::move(r));
+                });
+            cp->setHapticCallback([this](const HapticModel& m, uint64_t) {
+                m_haptic = m;
+                ++m_hapticModels;
+                if (m_config.onHapticModel)
+                    m_config.onHapticModel(m);
+            });
+            const uint64_t start = steadyNowUs();
+            uint64_t nextPing = start, nextTick = start + 1000000, nextPublish = start;
+            uint64_t lastTickUs = start;
+            std::array<std::array<uint64_t, 4>, size_t(Channel::Count)> lastTotals{};
+            m_rateHistory.clear();
+            while (!m_stop && !cp->closed()) {
+                cp->poll(1);
+                uint64_t now = steadyNowUs();
+                if (!cp->welcomed()) {
+                    if (now - start > uint64_t(m_config.connectTimeoutS * 1e6)) {
+                        m_closeReason = "no answer from " + m_config.address +
+                                        " (is `trephine server` running?)";
+                        break;
+                    }
+                } else if (m_state != LinkState::Connected) {
+                    m_state = LinkState::Connected;
+                    m_closeReason.clear();
+                    nextPublish = now;
+                }
+                std::deque<Command> cmds;
+                {
+                    std::lock_guard lock(m_cmdMutex);
+                    cmds.swap(m_commands);
+                }
+                for (auto& c : cmds) {
+                    if (auto* t = std::get_if<ToolState>(&c)) {
+                        if (cp->welcomed())
+                            cp->sendToolState(*t);
+                    } else if (auto* v = std::get_if<ViewCmd>(&c)) {
+                        m_wantedView = v->view;
+                        if (cp->welcomed())
+                            cp->requestView(v->view);
+                    } else if (cp->welcomed()) {
+                        cp->sendPing();
+                    }
+                }
+                if (m_needFull.exchange(false) && cp->hasFullImage()) {
+                    AppliedRect r;
+                    r.full = true;
+                    r.rect = cp->dbi().bounds();
+                    r.pixels = cp->dbi();
+                    r.viewId = cp->viewId();
+                    r.sequence = cp->lastUpdateSequence();
+                    r.appliedUs = now;
+                    pushRect(std::move(r));
+                }
+                if (cp->welcomed() && now >= nextPing) {
+                    cp->sendPing();
+                    nextPing = now + 250000;
+                }
+                if (now >= nextTick) {
+                    // Our own 1 s rates from the totals: the client ticks its history per poll.
+                    std::array<ChannelRates, size_t(Channel::Count)> rates{};
+                    const double dt = double(now - lastTickUs) * 1e-6;
+                    for (size_t ch = 0; ch < size_t(Channel::Count); ++ch) {
+                        const NetStats& st = cp->stats();
+                        std::array<uint64_t, 4> t = {
+                            st.totalBytesIn(Channel(ch)), st.totalBytesOut(Channel(ch)),
+                            st.totalMessagesIn(Channel(ch)), st.totalMessagesOut(Channel(ch))};
+                        rates[ch] = {double(t[0] - lastTotals[ch][0]) / dt,
+                                     double(t[1] - lastTotals[ch][1]) / dt,
+                                     double(t[2] - lastTotals[ch][2]) / dt,
+                                     double(t[3] - lastTotals[ch][3]) / dt};
+                        lastTotals[ch] = t;
+                    }
+                    m_rateHistory.push_back(rates);
+                    if (m_rateHistory.size() > 120)
+                        m_rateHistory.pop_front();
+                    lastTickUs = now;
+                    nextTick += 1000000;
+                }
+                if (now >= nextPublish) {
+                    if (double rtt = newRtt.take(cp->stats().rttUs); rtt >= 0)
+                        m_lastRttUs = rtt;
+                    publish(cp, now);
+                    nextPublish = now + 10000; // 100 Hz is plenty for a 60 Hz window
+                }
+            }
+            if (cp->closed())
+                m_closeReason =
+                    cp->closeReason().empty() ? "the connection was lost" : cp->closeReason();
+            else if (m_stop)
+                cp->disconnect();
+            client.reset();
+        }
+        if (m_stop)
+            break;
+        m_state = LinkState::Retrying;
+        publish(nullptr, steadyNowUs());
+        auto until = steady_clock::now() + duration<double>(m_config.retryS);
+        while (!m_stop && steady_clock::now() < until)
+            std::this_thread::sleep_for(milliseconds(20));
+    }
+    m_state = LinkState::Stopped;
+    publish(nullptr, steadyNowUs());
+}
+
+} // namespace trephine::net

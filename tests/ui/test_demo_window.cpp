@@ -1,0 +1,88 @@
+// `trephine demo` windowed, end to end: an embedded server, the trainee window over loopback, a
+// scripted burr hole, and the screenshot it writes. Needs a display (xvfb-run).
+#include "ui/window.h"
+
+#include <OpenImageIO/imageio.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+namespace {
+
+struct Image {
+    int w = 0, h = 0;
+    std::vector<uint8_t> rgb; // top row first
+    const uint8_t* at(int x, int y) const { return &rgb[(size_t(y) * size_t(w) + size_t(x)) * 3]; }
+};
+
+Image readPng(const std::string& path) {
+    Image img;
+    auto in = OIIO::ImageInput::open(path);
+    if (!in)
+        return img;
+    const OIIO::ImageSpec& spec = in->spec();
+    img.w = spec.width;
+    img.h = spec.height;
+    img.rgb.resize(size_t(img.w) * size_t(img.h) * 3);
+    in->read_image(0, 0, 0, 3, OIIO::TypeDesc::UINT8, img.rgb.data());
+    return img;
+}
+
+bool boneColoured(const uint8_t* p) {
+    return p[0] > 150 && p[1] > 140 && p[2] > 110 && p[0] >= p[2] && p[0] - p[2] < 90;
+}
+
+std::string shoot(const std::string& name, const std::string& extra) {
+    std::string out = (std::filesystem::temp_directory_path() / name).string();
+    std::filesystem::remove(out);
+    std::string cmd = std::string(TREPHINE_BIN) + " demo --volume skull:128 --screenshot " + out +
+                      " --frames 3 --timeout 80 " + extra + " > " + out + ".log 2>&1";
+    int rc = std::system(cmd.c_str());
+    EXPECT_EQ(rc, 0) << cmd;
+    return out;
+}
+
+} // namespace
+
+TEST(DemoWindow, ScreenshotShowsBoneTheDrilledHoleAndPanels) {
+    std::string why;
+    if (!trephine::ui::displayAvailable(&why))
+        GTEST_SKIP() << "no display for the demo window (" << why << "); run under xvfb-run";
+    Image plain = readPng(shoot("trephine_demo_plain.png", ""));
+    Image drilled = readPng(shoot("trephine_demo_drilled.png", "--script burrhole"));
+    ASSERT_EQ(plain.w, 920);
+    ASSERT_EQ(drilled.w, plain.w);
+    ASSERT_EQ(drilled.h, plain.h);
+    // The view is 500x500 at the top left, looking straight at the burr site (its centre).
+    const int cx = 250, cy = 250;
+    int ring = 0, ringBone = 0, centre = 0, centreBonePlain = 0, centreChanged = 0;
+    for (int y = 0; y < 500; ++y)
+        for (int x = 0; x < 500; ++x) {
+            double r = std::hypot(x + 0.5 - cx, y + 0.5 - cy);
+            if (r > 80 && r < 100 && x > cx) { // exposed bone, away from where the drill rests
+                ++ring;
+                ringBone += boneColoured(plain.at(x, y));
+            }
+            if (r < 12) {
+                ++centre;
+                centreBonePlain += boneColoured(plain.at(x, y));
+                const uint8_t *a = plain.at(x, y), *b = drilled.at(x, y);
+                int d =
+                    std::max({std::abs(a[0] - b[0]), std::abs(a[1] - b[1]), std::abs(a[2] - b[2])});
+                centreChanged += d > 30;
+            }
+        }
+    EXPECT_GT(ringBone, ring * 8 / 10) << "bone-coloured pixels where the skull is exposed";
+    EXPECT_GT(centreBonePlain, centre * 9 / 10) << "intact bone at the site before drilling";
+    EXPECT_GT(centreChanged, centre / 2) << "the drilled hole at the site";
+    // Panels: ImGui text (bright pixels) in the right-hand column and under the view.
+    int bright = 0;
+    for (int y = 0; y < drilled.h; ++y)
+        for (int x = 500; x < drilled.w; ++x)
+            bright += drilled.at(x, y)[0] > 200 && drilled.at(x, y)[1] > 200;
+    EXPECT_GT(bright, 1000) << "panel text in the right-hand column";
+}

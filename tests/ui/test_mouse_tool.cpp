@@ -1,0 +1,65 @@
+// The mouse device's geometry without GL: picking the bone under the cursor from DBI depth, and
+// the tool pose placed there.
+#include "ui/mouse_tool.h"
+
+#include <glm/geometric.hpp>
+#include <gtest/gtest.h>
+
+using namespace trephine;
+using namespace trephine::ui;
+
+namespace {
+// A bone plane z = 0 seen from +z: every pixel's depth is the window depth of its plane point.
+struct PlaneView {
+    Camera cam;
+    Dbi dbi;
+    PlaneView() {
+        cam.eye = {10, -20, 250};
+        cam.target = {0, 0, 0};
+        cam.nearMm = 100;
+        cam.farMm = 400;
+        cam.width = cam.height = 120;
+        dbi = Dbi(cam.width, cam.height);
+        glm::dmat4 vp = viewProjection(cam), inv = glm::inverse(vp);
+        for (int y = 0; y < 120; ++y)
+            for (int x = 0; x < 120; ++x) {
+                if (x < 10) // a strip of background on the left
+                    continue;
+                glm::dvec2 ndc(2.0 * (x + 0.5) / 120 - 1.0, 2.0 * (y + 0.5) / 120 - 1.0);
+                glm::dvec4 a = inv * glm::dvec4(ndc, -1, 1), b = inv * glm::dvec4(ndc, 1, 1);
+                glm::dvec3 p0 = glm::dvec3(a) / a.w, p1 = glm::dvec3(b) / b.w;
+                glm::dvec3 p = p0 + (p1 - p0) * (-p0.z / (p1.z - p0.z));
+                dbi.depth()[dbi.index(x, y)] = windowDepth(vp, p);
+            }
+    }
+};
+} // namespace
+
+TEST(MouseTool, PicksThePointOfBoneUnderTheCursor) {
+    PlaneView v;
+    for (auto [x, y] : {std::pair{60, 60}, {20, 100}, {119, 5}}) {
+        auto p = pickSurface(v.dbi, v.cam, x, y);
+        ASSERT_TRUE(p.has_value());
+        EXPECT_NEAR(p->z, 0.0f, 0.05f);
+        // It projects back to the same pixel.
+        WindowPoint w = projectToWindow(viewProjection(v.cam), v.cam, glm::dvec3(*p));
+        EXPECT_NEAR(w.window.x, x + 0.5, 0.01);
+        EXPECT_NEAR(w.window.y, y + 0.5, 0.01);
+    }
+    EXPECT_FALSE(pickSurface(v.dbi, v.cam, 5, 60).has_value()) << "background: no bone";
+    EXPECT_FALSE(pickSurface(v.dbi, v.cam, 200, 60).has_value()) << "outside the image";
+}
+
+TEST(MouseTool, BurrTouchesThePointAndPushesAlongTheLineOfSight) {
+    PlaneView v;
+    glm::vec3 s = *pickSurface(v.dbi, v.cam, 60, 60);
+    ToolShape burr = ToolShape::burr(4.0f);
+    ToolPose touch = toolPoseAt(s, v.cam, burr, 0.0f);
+    EXPECT_NEAR(glm::length(touch.position - s), 2.0f, 1e-4f);
+    EXPECT_GT(glm::dot(touch.axis(), glm::normalize(v.cam.eye - s)), 0.9999f);
+    EXPECT_NEAR(burr.signedDistance(touch.toLocal(s)), 0.0f, 1e-4f);
+    ToolPose pushed = toolPoseAt(s, v.cam, burr, 1.5f);
+    EXPECT_NEAR(burr.signedDistance(pushed.toLocal(s)), -1.5f, 1e-3f);
+    ToolPose perf = toolPoseAt(s, v.cam, ToolShape::perforator(), 0.0f);
+    EXPECT_NEAR(glm::length(perf.position - s), 0.0f, 1e-4f);
+}

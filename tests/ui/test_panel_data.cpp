@@ -1,0 +1,104 @@
+// The panels' data and the generated meshes, without GL.
+#include "ui/mesh.h"
+#include "ui/panel_data.h"
+
+#include "libsim/skull.h"
+#include "libsim/volume.h"
+
+#include <glm/geometric.hpp>
+#include <gtest/gtest.h>
+
+using namespace trephine;
+using namespace trephine::ui;
+
+TEST(NetworkHistory, RateCompressionAndHistogram) {
+    NetworkHistory h;
+    h.windowS = 10.0;
+    for (int i = 0; i < 20; ++i)
+        h.addUpdate({0.1 * i, 1000.0 * (i % 4), 100, 400, false});
+    EXPECT_DOUBLE_EQ(h.compressionRatio(), 4.0);
+    EXPECT_EQ(h.updateRate(1.95), 10.0); // t in (0.95, 1.95]
+    auto hist = h.latencyHistogram(4, 4000.0);
+    ASSERT_EQ(hist.size(), 4u);
+    EXPECT_EQ(hist[0], 5.0f);
+    EXPECT_EQ(hist[3], 5.0f);
+    h.expire(10.55); // keeps t >= 0.55
+    EXPECT_EQ(h.updates.size(), 14u);
+    EXPECT_GE(h.latencyPercentile(50), 0.0);
+}
+
+TEST(NetworkHistory, SeriesAreCapped) {
+    NetworkHistory h;
+    h.seriesLength = 3;
+    for (int i = 0; i < 5; ++i)
+        h.addSecond(1000.0 * i, 0, 0, i, 500.0);
+    ASSERT_EQ(h.imageKbitPerS.size(), 3u);
+    EXPECT_FLOAT_EQ(h.imageKbitPerS.back(), 32.0f); // 4000 B/s = 32 kbit/s
+    EXPECT_FLOAT_EQ(h.rttMs.back(), 0.5f);
+}
+
+TEST(ForceHistory, WindowRateAndSeries) {
+    ForceHistory f;
+    f.windowS = 1.0;
+    for (int i = 0; i <= 100; ++i)
+        f.addServer(0.01 * i, {3.0f, 4.0f, 0.0f});
+    EXPECT_NEAR(f.serverRate(), 100.0, 1.0);
+    auto mag = ForceHistory::series(f.server, 3);
+    EXPECT_FLOAT_EQ(mag.back(), 5.0f);
+    f.addExtrapolated(2.5, {0, 0, 1});
+    EXPECT_TRUE(f.server.empty()); // all older than 1.5 s
+    EXPECT_EQ(ForceHistory::series(f.extrapolated, 2).back(), 1.0f);
+}
+
+TEST(DirtyBoxHistory, FadesAndKeepsTheNewest) {
+    DirtyBoxHistory d;
+    d.fadeS = 1.0;
+    d.keep = 3;
+    for (int i = 0; i < 5; ++i)
+        d.add({double(i), {i, i, 10, 10}, uint32_t(i), 100, 1000.0, false});
+    ASSERT_EQ(d.boxes.size(), 3u);
+    EXPECT_EQ(d.boxes.front().sequence, 2u);
+    EXPECT_FLOAT_EQ(d.alpha(d.boxes.back(), 4.0), 1.0f);
+    EXPECT_FLOAT_EQ(d.alpha(d.boxes.back(), 4.5), 0.5f);
+    EXPECT_EQ(d.visible(4.5).size(), 1u);
+    EXPECT_TRUE(d.visible(6.0).empty());
+}
+
+TEST(Meshes, BurrToolHasItsSphereAtTheOrigin) {
+    MeshData m = makeToolMesh(ToolShape::burr(5.0f));
+    ASSERT_GT(m.triangleCount(), 100u);
+    float minZ = 1e9f;
+    for (const auto& v : m.vertices) {
+        minZ = std::min(minZ, v.position.z);
+        EXPECT_NEAR(glm::length(v.normal), 1.0f, 1e-3f);
+    }
+    EXPECT_NEAR(minZ, -2.5f, 1e-4f); // the burr's bottom: radius below the origin
+    for (uint32_t i : m.indices)
+        ASSERT_LT(i, m.vertices.size());
+}
+
+TEST(Meshes, PerforatorTipIsTheApex) {
+    ToolShape s = ToolShape::perforator();
+    MeshData m = makeToolMesh(s);
+    float minZ = 1e9f, maxR = 0;
+    for (const auto& v : m.vertices) {
+        minZ = std::min(minZ, v.position.z);
+        if (v.position.z < s.tipLengthMm + s.cutLengthMm)
+            maxR = std::max(maxR, glm::length(glm::vec2(v.position)));
+    }
+    EXPECT_NEAR(minZ, 0.0f, 1e-5f);
+    EXPECT_NEAR(maxR, s.diameterMm * 0.5f, 1e-3f);
+}
+
+TEST(Meshes, SurgicalFieldSitsAboveTheBoneAndLeavesTheSiteOpen) {
+    Volume skull = makeSkull(64);
+    SurfaceSite site = defaultBurrSite(skull);
+    MeshData m = makeSurgicalField(skull, site, 20.0f, 35.0f, 3.0f);
+    ASSERT_GT(m.triangleCount(), 500u);
+    float nearest = 1e9f;
+    for (const auto& v : m.vertices)
+        nearest = std::min(nearest, glm::length(v.position - site.position));
+    EXPECT_GT(nearest, 15.0f); // the craniotomy opening stays clear
+    for (uint32_t i : m.indices)
+        ASSERT_LT(i, m.vertices.size());
+}

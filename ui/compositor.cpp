@@ -1,0 +1,260 @@
+#include "ui/compositor.h"
+
+#include "libsim/error.h"
+
+#include <glm/gtc/type_ptr.hpp>
+#include <string>
+
+namespace trephine::ui {
+
+namespace {
+
+const char* kRestoreVs = R"(#version 330 core
+void main() {
+    // One triangle covering the viewport; no vertex buffer.
+    vec2 p = vec2(gl_VertexID == 1 ? 3.0 : -1.0, gl_VertexID == 2 ? 3.0 : -1.0);
+    gl_Position = vec4(p, 0.0, 1.0);
+})";
+
+const char* kRestoreFs = R"(#version 330 core
+uniform sampler2D uColor;
+uniform sampler2D uDepth;
+out vec4 fragColor;
+void main() {
+    ivec2 px = ivec2(gl_FragCoord.xy); // framebuffer == DBI size: texel (x, y) is pixel (x, y)
+    fragColor = vec4(texelFetch(uColor, px, 0).rgb, 1.0);
+    gl_FragDepth = texelFetch(uDepth, px, 0).r;
+})";
+
+const char* kMeshVs = R"(#version 330 core
+layout(location = 0) in vec3 aPos;
+layout(location = 1) in vec3 aNormal;
+layout(location = 2) in vec4 aColor;
+uniform mat4 uModel, uView, uProj;
+out vec3 vNormal;
+out vec3 vPosEye;
+out vec4 vColor;
+void main() {
+    vec4 pe = uView * uModel * vec4(aPos, 1.0);
+    vPosEye = pe.xyz;
+    vNormal = mat3(uView * uModel) * aNormal;
+    vColor = aColor;
+    gl_Position = uProj * pe;
+})";
+
+const char* kMeshFs = R"(#version 330 core
+in vec3 vNormal;
+in vec3 vPosEye;
+in vec4 vColor;
+uniform vec4 uOwner;
+out vec4 fragColor;
+void main() {
+    vec3 n = normalize(vNormal);
+    vec3 l = normalize(-vPosEye); // headlight, like the server's shading
+    float d = abs(dot(n, l));
+    vec3 base = vColor.a == 0.0 ? uOwner.rgb : vColor.rgb;
+    vec3 c = base * (0.22 + 0.78 * d) + vec3(0.35) * pow(d, 40.0);
+    fragColor = vec4(c, 1.0);
+})";
+
+GLuint compile(GLenum type, const char* src) {
+    GLuint s = glCreateShader(type);
+    glShaderSource(s, 1, &src, nullptr);
+    glCompileShader(s);
+    GLint ok = 0;
+    glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
+    if (!ok) {
+        char log[2048];
+        glGetShaderInfoLog(s, sizeof log, nullptr, log);
+        throw Error(std::string("ui: shader does not compile: ") + log);
+    }
+    return s;
+}
+
+GLuint link(const char* vs, const char* fs) {
+    GLuint p = glCreateProgram();
+    GLuint v = compile(GL_VERTEX_SHADER, vs), f = compile(GL_FRAGMENT_SHADER, fs);
+    glAttachShader(p, v);
+    glAttachShader(p, f);
+    glLinkProgram(p);
+    glDeleteShader(v);
+    glDeleteShader(f);
+    GLint ok = 0;
+    glGetProgramiv(p, GL_LINK_STATUS, &ok);
+    if (!ok) {
+        char log[2048];
+        glGetProgramInfoLog(p, sizeof log, nullptr, log);
+        throw Error(std::string("ui: program does not link: ") + log);
+    }
+    return p;
+}
+
+} // namespace
+
+Compositor::Compositor() {
+    m_restoreProgram = link(kRestoreVs, kRestoreFs);
+    glUseProgram(m_restoreProgram);
+    glUniform1i(glGetUniformLocation(m_restoreProgram, "uColor"), 0);
+    glUniform1i(glGetUniformLocation(m_restoreProgram, "uDepth"), 1);
+    m_meshProgram = link(kMeshVs, kMeshFs);
+    m_uModel = glGetUniformLocation(m_meshProgram, "uModel");
+    m_uView = glGetUniformLocation(m_meshProgram, "uView");
+    m_uProj = glGetUniformLocation(m_meshProgram, "uProj");
+    m_uOwner = glGetUniformLocation(m_meshProgram, "uOwner");
+    glGenVertexArrays(1, &m_emptyVao); // a core profile draws nothing without a bound VAO
+}
+
+Compositor::~Compositor() {
+    glDeleteTextures(1, &m_colorTex);
+    glDeleteTextures(1, &m_depthTex);
+    glDeleteFramebuffers(1, &m_fbo);
+    glDeleteTextures(1, &m_fboColor);
+    glDeleteRenderbuffers(1, &m_fboDepth);
+    glDeleteVertexArrays(1, &m_emptyVao);
+    glDeleteProgram(m_restoreProgram);
+    glDeleteProgram(m_meshProgram);
+}
+
+void Compositor::resize(int width, int height) {
+    if (width == m_width && height == m_height && m_fbo)
+        return;
+    m_width = width;
+    m_height = height;
+    auto makeTex = [&](GLuint& tex, GLint internal, GLenum format, GLenum type) {
+        if (!tex)
+            glGenTextures(1, &tex);
+        glBindTexture(GL_TEXTURE_2D, tex);
+        glTexImage2D(GL_TEXTURE_2D, 0, internal, width, height, 0, format, type, nullptr);
+        glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+        glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+        glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_S, GL_CLAMP_TO_EDGE);
+        glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_WRAP_T, GL_CLAMP_TO_EDGE);
+    };
+    makeTex(m_colorTex, GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE);
+    makeTex(m_depthTex, GL_R32F, GL_RED, GL_FLOAT);
+    makeTex(m_fboColor, GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE);
+    if (!m_fboDepth)
+        glGenRenderbuffers(1, &m_fboDepth);
+    glBindRenderbuffer(GL_RENDERBUFFER, m_fboDepth);
+    glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT32F, width, height);
+    if (!m_fbo)
+        glGenFramebuffers(1, &m_fbo);
+    glBindFramebuffer(GL_FRAMEBUFFER, m_fbo);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, m_fboColor, 0);
+    glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, m_fboDepth);
+    if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+        throw Error("ui: the composite framebuffer is incomplete");
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    uploadFull(Dbi(width, height));
+}
+
+void Compositor::uploadFull(const Dbi& dbi) {
+    if (dbi.width() != m_width || dbi.height() != m_height)
+        resize(dbi.width(), dbi.height());
+    uploadRect(dbi.bounds(), dbi);
+}
+
+void Compositor::uploadRect(const PixelRect& rect, const Dbi& patch) {
+    if (rect.empty() || !PixelRect{0, 0, m_width, m_height}.contains(rect) ||
+        patch.width() != rect.w || patch.height() != rect.h)
+        return;
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+    glBindTexture(GL_TEXTURE_2D, m_colorTex);
+    glTexSubImage2D(GL_TEXTURE_2D, 0, rect.x, rect.y, rect.w, rect.h, GL_RGBA, GL_UNSIGNED_BYTE,
+                    patch.color());
+    glBindTexture(GL_TEXTURE_2D, m_depthTex);
+    glTexSubImage2D(GL_TEXTURE_2D, 0, rect.x, rect.y, rect.w, rect.h, GL_RED, GL_FLOAT,
+                    patch.depth());
+}
+
+GpuMesh Compositor::upload(const MeshData& mesh) {
+    GpuMesh g;
+    if (mesh.indices.empty())
+        return g;
+    glGenVertexArrays(1, &g.vao);
+    glBindVertexArray(g.vao);
+    glGenBuffers(1, &g.vbo);
+    glBindBuffer(GL_ARRAY_BUFFER, g.vbo);
+    glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(mesh.vertices.size() * sizeof(MeshVertex)),
+                 mesh.vertices.data(), GL_STATIC_DRAW);
+    glGenBuffers(1, &g.ibo);
+    glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, g.ibo);
+    glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(mesh.indices.size() * sizeof(uint32_t)),
+                 mesh.indices.data(), GL_STATIC_DRAW);
+    const auto stride = GLsizei(sizeof(MeshVertex));
+    glEnableVertexAttribArray(0);
+    glVertexAttribPointer(0, 3, GL_FLOAT, GL_FALSE, stride,
+                          reinterpret_cast<void*>(offsetof(MeshVertex, position)));
+    glEnableVertexAttribArray(1);
+    glVertexAttribPointer(1, 3, GL_FLOAT, GL_FALSE, stride,
+                          reinterpret_cast<void*>(offsetof(MeshVertex, normal)));
+    glEnableVertexAttribArray(2);
+    glVertexAttribPointer(2, 4, GL_FLOAT, GL_FALSE, stride,
+                          reinterpret_cast<void*>(offsetof(MeshVertex, color)));
+    glBindVertexArray(0);
+    g.indexCount = GLsizei(mesh.indices.size());
+    return g;
+}
+
+void Compositor::destroy(GpuMesh& g) {
+    glDeleteBuffers(1, &g.vbo);
+    glDeleteBuffers(1, &g.ibo);
+    glDeleteVertexArrays(1, &g.vao);
+    g = GpuMesh{};
+}
+
+void Compositor::begin(const Camera& camera) {
+    m_view = viewMatrix(camera);
+    m_proj = projectionMatrix(camera);
+    glBindFramebuffer(GL_FRAMEBUFFER, m_fbo);
+    glViewport(0, 0, m_width, m_height);
+    glDisable(GL_BLEND);
+    glDisable(GL_SCISSOR_TEST);
+    glDisable(GL_CULL_FACE);
+    glEnable(GL_DEPTH_TEST);
+    glDepthMask(GL_TRUE);
+    glDepthFunc(GL_ALWAYS);
+    glUseProgram(m_restoreProgram);
+    glActiveTexture(GL_TEXTURE0);
+    glBindTexture(GL_TEXTURE_2D, m_colorTex);
+    glActiveTexture(GL_TEXTURE1);
+    glBindTexture(GL_TEXTURE_2D, m_depthTex);
+    glActiveTexture(GL_TEXTURE0);
+    glBindVertexArray(m_emptyVao);
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+    glDepthFunc(GL_LESS);
+    glUseProgram(m_meshProgram);
+    glUniformMatrix4fv(m_uView, 1, GL_FALSE, glm::value_ptr(m_view));
+    glUniformMatrix4fv(m_uProj, 1, GL_FALSE, glm::value_ptr(m_proj));
+}
+
+void Compositor::draw(const GpuMesh& mesh, const glm::mat4& model, glm::vec4 ownerColor) {
+    if (!mesh.valid())
+        return;
+    glUniformMatrix4fv(m_uModel, 1, GL_FALSE, glm::value_ptr(model));
+    glUniform4fv(m_uOwner, 1, glm::value_ptr(ownerColor));
+    glBindVertexArray(mesh.vao);
+    glDrawElements(GL_TRIANGLES, mesh.indexCount, GL_UNSIGNED_INT, nullptr);
+}
+
+void Compositor::blitTo(int x, int y) {
+    glBindVertexArray(0);
+    glDisable(GL_DEPTH_TEST);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, m_fbo);
+    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, 0);
+    glBlitFramebuffer(0, 0, m_width, m_height, x, y, x + m_width, y + m_height, GL_COLOR_BUFFER_BIT,
+                      GL_NEAREST);
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+}
+
+Dbi Compositor::readBack() {
+    Dbi out(m_width, m_height);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, m_fbo);
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    glReadPixels(0, 0, m_width, m_height, GL_RGBA, GL_UNSIGNED_BYTE, out.color());
+    glReadPixels(0, 0, m_width, m_height, GL_DEPTH_COMPONENT, GL_FLOAT, out.depth());
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
+    return out;
+}
+
+} // namespace trephine::ui

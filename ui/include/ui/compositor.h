@@ -1,0 +1,63 @@
+// The paper's two-pass hybrid rendering (section 3.3). Pass 1 restores the DBI into an offscreen
+// framebuffer (RGBA8 colour, 32-bit float depth) from a colour and a depth texture with a
+// fullscreen triangle that writes gl_FragDepth; pass 2 draws meshes depth-tested against it with
+// the matrices the server rendered the DBI with. The framebuffer is the DBI's size, so pixels map
+// 1:1, and is blitted into the window. Image updates re-upload only their rectangle.
+#pragma once
+
+#include "libsim/camera.h"
+#include "libsim/dbi.h"
+#include "ui/gl.h"
+#include "ui/mesh.h"
+
+#include <glm/mat4x4.hpp>
+#include <glm/vec4.hpp>
+
+namespace trephine::ui {
+
+struct GpuMesh {
+    GLuint vao = 0, vbo = 0, ibo = 0;
+    GLsizei indexCount = 0;
+    bool valid() const { return vao != 0; }
+};
+
+class Compositor {
+public:
+    Compositor(); // needs a current GL 3.3 core context
+    ~Compositor();
+    Compositor(const Compositor&) = delete;
+    Compositor& operator=(const Compositor&) = delete;
+
+    // (Re)allocates the textures and framebuffer for a DBI of this size (background filled).
+    void resize(int width, int height);
+    int width() const { return m_width; }
+    int height() const { return m_height; }
+
+    // Whole-image upload (join, view change) and the per-update sub-rectangle upload.
+    void uploadFull(const Dbi& dbi);
+    void uploadRect(const PixelRect& rect, const Dbi& patch);
+
+    GpuMesh upload(const MeshData& mesh);
+    void destroy(GpuMesh& mesh);
+
+    // Pass 1: binds the framebuffer, restores the DBI's colour and depth.
+    void begin(const Camera& camera);
+    // Pass 2: one mesh with its model matrix; vertices with alpha 0 take ownerColor.
+    void draw(const GpuMesh& mesh, const glm::mat4& model, glm::vec4 ownerColor = glm::vec4(1));
+    // Copies the composite into the bound window framebuffer with its bottom-left at (x, y).
+    void blitTo(int x, int y);
+
+    // [Tests] The composite's colour (RGBA8) and depth, row 0 at the bottom.
+    Dbi readBack();
+
+private:
+    int m_width = 0, m_height = 0;
+    GLuint m_colorTex = 0, m_depthTex = 0;
+    GLuint m_fbo = 0, m_fboColor = 0, m_fboDepth = 0;
+    GLuint m_emptyVao = 0;
+    GLuint m_restoreProgram = 0, m_meshProgram = 0;
+    GLint m_uModel = -1, m_uView = -1, m_uProj = -1, m_uOwner = -1;
+    glm::mat4 m_view{1.0f}, m_proj{1.0f};
+};
+
+} // namespace trephine::ui

@@ -1,0 +1,80 @@
+// The panels' data as plain structs (Tracy's way: statistics are model data). The window feeds
+// them each frame from ClientThread's snapshot and applied rectangles; panels only plot them, and
+// tests check them without GL. Times are seconds on the caller's clock.
+#pragma once
+
+#include "libsim/dbi.h"
+
+#include <cstdint>
+#include <deque>
+#include <glm/vec3.hpp>
+#include <vector>
+
+namespace trephine::ui {
+
+// Image updates over the last seconds: latency, bytes, compression, rate.
+struct NetworkHistory {
+    struct Update {
+        double t = 0;
+        double latencyUs = -1;
+        uint32_t bytes = 0, rawBytes = 0;
+        bool full = false;
+    };
+    double windowS = 10.0;
+    std::deque<Update> updates;
+    // Per-second series for the plots (oldest first), kept to `seriesLength` points.
+    size_t seriesLength = 60;
+    std::vector<float> imageKbitPerS, toolKbitPerS, hapticKbitPerS, updatesPerS, rttMs;
+
+    void addUpdate(const Update& u);
+    // Appends one point per series from the 1 s rates (bytes/s) and the latest round trip (us).
+    void addSecond(double imageBytesPerS, double toolBytesPerS, double hapticBytesPerS,
+                   double updatesInS, double rttUs);
+    // Drops updates older than windowS before `now`.
+    void expire(double now);
+    double updateRate(double now) const; // updates per second over the last second
+    double compressionRatio() const;     // raw / wire bytes over the window (1 when none)
+    // Counts of latencies in `buckets` equal bins over [0, maxUs); larger ones go in the last.
+    std::vector<float> latencyHistogram(int buckets, double maxUs) const;
+    double latencyPercentile(double p) const; // -1 when none
+};
+
+// Forces over the last seconds: the server's samples (f at P_N) and the extrapolated force the
+// client computes between them.
+struct ForceHistory {
+    struct Sample {
+        double t = 0;
+        glm::vec3 f{0.0f};
+    };
+    double windowS = 5.0;
+    std::deque<Sample> server, extrapolated;
+
+    void addServer(double t, glm::vec3 f);
+    void addExtrapolated(double t, glm::vec3 f);
+    void expire(double now);
+    double serverRate() const; // samples per second over the window held
+    // One component (0..2 x, y, z; 3 magnitude) of a series, oldest first.
+    static std::vector<float> series(const std::deque<Sample>& s, int component);
+};
+
+// BB_screen of each update, fading out, and the recent ones as a list.
+struct DirtyBoxHistory {
+    struct Box {
+        double t = 0;
+        PixelRect rect;
+        uint32_t sequence = 0, bytes = 0;
+        double latencyUs = -1;
+        bool full = false;
+    };
+    double fadeS = 1.5;
+    size_t keep = 64;
+    std::deque<Box> boxes; // newest last
+
+    void add(const Box& b);
+    // 1 when new, falling linearly to 0 at fadeS.
+    float alpha(const Box& b, double now) const;
+    // Boxes still visible at `now`.
+    std::vector<Box> visible(double now) const;
+};
+
+} // namespace trephine::ui

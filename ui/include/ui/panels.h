@@ -1,0 +1,53 @@
+// The window's Dear ImGui panels, one per file (panel_<name>.cpp). Each draws from model data
+// (ClientSnapshot and the histories in panel_data.h) every frame; its own UI state is the small
+// struct declared beside it here.
+#pragma once
+
+#include "net/client_thread.h"
+#include "ui/panel_data.h"
+
+#include <string>
+
+namespace trephine::ui {
+
+// [Network] round trip, per-channel rates, update rate, latency histogram, codec, compression.
+void drawNetworkPanel(const net::ClientSnapshot& snap, const NetworkHistory& history, double now);
+
+// [Dirty boxes] BB_screen overlays on the view and the list of recent updates.
+struct DirtyBoxPanelState {
+    bool overlay = true;
+};
+void drawDirtyBoxPanel(DirtyBoxPanelState& state, const DirtyBoxHistory& boxes, double now);
+// Fading rectangles over the view, whose top-left corner is at `viewOrigin` (ImGui coordinates)
+// and which is `viewHeight` pixels tall (DBI rows count from the bottom).
+void drawDirtyBoxOverlay(const DirtyBoxPanelState& state, const DirtyBoxHistory& boxes, double now,
+                         float viewOriginX, float viewOriginY, int viewHeight);
+
+// [Forces] |F| and x/y/z of the server's samples and the haptic loop's extrapolated force
+// (loopRateHz: the rate the loop achieves).
+void drawForcesPanel(const ForceHistory& forces, double loopRateHz);
+
+// [Session] role, participants, tool, burr size, speed, connection state.
+struct ToolControls {
+    int kind = 0;          // 0 burr, 1 perforator
+    float burrMm = 5.0f;   // burr diameter
+    float speed = 1.0f;    // [0, 1]
+    float pushMm = 0.0f;   // how far the tip is pushed below the surface under the cursor
+    bool drilling = false; // mouse button held (or the script drills)
+    bool canDrill = true;  // instructors point, they do not drill
+};
+void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, const std::string& role,
+                      const std::string& address, const std::string& name);
+
+// [View] orbit and zoom about the site; a change requests a new DBI.
+struct ViewControls {
+    float yawDeg = 0.0f, pitchDeg = 0.0f, distanceMm = 200.0f;
+    bool dirty = false; // changed since the last request
+};
+// True when the user changed the view this frame.
+bool drawViewPanel(ViewControls& view, bool waitingForImage, const std::string& describeCamera);
+
+// Distinct colours for participants (index 0: this client).
+glm::vec4 participantColor(int index);
+
+} // namespace trephine::ui

@@ -1,0 +1,55 @@
+// A GLFW window with an OpenGL 3.3 core context and Dear ImGui 1.86 (GLFW + OpenGL3 backends).
+// One per process; the main thread owns it and everything GL.
+#pragma once
+
+#include "libsim/dbi.h"
+
+#include <string>
+
+struct GLFWwindow;
+
+namespace trephine::ui {
+
+// Whether a window can open here: glfwInit succeeds (needs an X display). `why` says why not.
+bool displayAvailable(std::string* why = nullptr);
+
+struct WindowConfig {
+    int width = 920;
+    int height = 760;
+    std::string title = "Trephine";
+    bool visible = true;
+    bool imgui = true;
+};
+
+class Window {
+public:
+    // Throws trephine::Error with one line when GLFW, the context or ImGui cannot start.
+    explicit Window(const WindowConfig& config);
+    ~Window();
+    Window(const Window&) = delete;
+    Window& operator=(const Window&) = delete;
+
+    bool shouldClose() const;
+    void requestClose();
+    // Polls events, clears the window, starts an ImGui frame.
+    void beginFrame();
+    // Renders ImGui over the scene and swaps; when capture is given, reads the finished frame
+    // into it first (row 0 at the bottom).
+    void endFrame(Dbi* capture = nullptr);
+    // The back buffer as it is now (call between drawing and endFrame), row 0 at the bottom.
+    Dbi readFramebuffer() const;
+
+    int width() const { return m_width; }
+    int height() const { return m_height; }
+    GLFWwindow* handle() const { return m_window; }
+
+private:
+    GLFWwindow* m_window = nullptr;
+    bool m_imgui = true;
+    int m_width = 0, m_height = 0;
+};
+
+// Writes a framebuffer read by readFramebuffer as a top-down RGB PNG.
+void writeScreenshot(const std::string& path, const Dbi& framebuffer);
+
+} // namespace trephine::ui

@@ -1,0 +1,122 @@
+#include "ui/panel_data.h"
+
+#include "libsim/stats.h"
+
+#include <algorithm>
+#include <glm/geometric.hpp>
+
+namespace trephine::ui {
+
+namespace {
+void pushCapped(std::vector<float>& v, float x, size_t n) {
+    v.push_back(x);
+    if (v.size() > n)
+        v.erase(v.begin(), v.begin() + ptrdiff_t(v.size() - n));
+}
+} // namespace
+
+void NetworkHistory::addUpdate(const Update& u) {
+    updates.push_back(u);
+    expire(u.t);
+}
+
+void NetworkHistory::addSecond(double imageBytesPerS, double toolBytesPerS, double hapticBytesPerS,
+                               double updatesInS, double rttUs) {
+    pushCapped(imageKbitPerS, float(imageBytesPerS * 8e-3), seriesLength);
+    pushCapped(toolKbitPerS, float(toolBytesPerS * 8e-3), seriesLength);
+    pushCapped(hapticKbitPerS, float(hapticBytesPerS * 8e-3), seriesLength);
+    pushCapped(updatesPerS, float(updatesInS), seriesLength);
+    pushCapped(rttMs, float(std::max(0.0, rttUs) * 1e-3), seriesLength);
+}
+
+void NetworkHistory::expire(double now) {
+    while (!updates.empty() && updates.front().t < now - windowS)
+        updates.pop_front();
+}
+
+double NetworkHistory::updateRate(double now) const {
+    return double(std::count_if(updates.begin(), updates.end(),
+                                [&](const Update& u) { return u.t > now - 1.0 && u.t <= now; }));
+}
+
+double NetworkHistory::compressionRatio() const {
+    double raw = 0, wire = 0;
+    for (const Update& u : updates) {
+        raw += u.rawBytes;
+        wire += u.bytes;
+    }
+    return wire > 0 ? raw / wire : 1.0;
+}
+
+std::vector<float> NetworkHistory::latencyHistogram(int buckets, double maxUs) const {
+    std::vector<float> h(size_t(std::max(buckets, 1)), 0.0f);
+    for (const Update& u : updates) {
+        if (u.latencyUs < 0)
+            continue;
+        int b = int(u.latencyUs / maxUs * double(h.size()));
+        h[size_t(std::clamp(b, 0, int(h.size()) - 1))] += 1.0f;
+    }
+    return h;
+}
+
+double NetworkHistory::latencyPercentile(double p) const {
+    std::vector<double> v;
+    for (const Update& u : updates)
+        if (u.latencyUs >= 0)
+            v.push_back(u.latencyUs);
+    return v.empty() ? -1.0 : percentile(v, p);
+}
+
+void ForceHistory::addServer(double t, glm::vec3 f) {
+    server.push_back({t, f});
+    expire(t);
+}
+
+void ForceHistory::addExtrapolated(double t, glm::vec3 f) {
+    extrapolated.push_back({t, f});
+    expire(t);
+}
+
+void ForceHistory::expire(double now) {
+    for (auto* q : {&server, &extrapolated})
+        while (!q->empty() && q->front().t < now - windowS)
+            q->pop_front();
+}
+
+double ForceHistory::serverRate() const {
+    if (server.size() < 2)
+        return 0.0;
+    double span = server.back().t - server.front().t;
+    return span > 0 ? double(server.size() - 1) / span : 0.0;
+}
+
+std::vector<float> ForceHistory::series(const std::deque<Sample>& s, int component) {
+    std::vector<float> out;
+    out.reserve(s.size());
+    for (const Sample& x : s)
+        out.push_back(component >= 3 ? glm::length(x.f) : x.f[component]);
+    return out;
+}
+
+void DirtyBoxHistory::add(const Box& b) {
+    boxes.push_back(b);
+    while (boxes.size() > keep)
+        boxes.pop_front();
+}
+
+float DirtyBoxHistory::alpha(const Box& b, double now) const {
+    double age = now - b.t;
+    if (age < 0)
+        return 1.0f;
+    return float(std::clamp(1.0 - age / fadeS, 0.0, 1.0));
+}
+
+std::vector<DirtyBoxHistory::Box> DirtyBoxHistory::visible(double now) const {
+    std::vector<Box> out;
+    for (const Box& b : boxes)
+        if (alpha(b, now) > 0.0f)
+            out.push_back(b);
+    return out;
+}
+
+} // namespace trephine::ui

@@ -1,0 +1,65 @@
+// [Dirty boxes] panel: BB_screen of each image update as a fading overlay, and the recent list.
+#include "ui/panels.h"
+
+#include <imgui.h>
+
+namespace trephine::ui {
+
+void drawDirtyBoxPanel(DirtyBoxPanelState& state, const DirtyBoxHistory& boxes, double now) {
+    if (!ImGui::Begin("Dirty boxes")) {
+        ImGui::End();
+        return;
+    }
+    ImGui::Checkbox("show BB_screen on the view", &state.overlay);
+    ImGui::SameLine();
+    ImGui::TextDisabled("(%zu visible)", boxes.visible(now).size());
+    if (ImGui::BeginTable("recent", 5,
+                          ImGuiTableFlags_ScrollY | ImGuiTableFlags_RowBg |
+                              ImGuiTableFlags_SizingStretchProp,
+                          ImVec2(0, 0))) {
+        ImGui::TableSetupScrollFreeze(0, 1);
+        ImGui::TableSetupColumn("seq");
+        ImGui::TableSetupColumn("rect x y w h");
+        ImGui::TableSetupColumn("pixels");
+        ImGui::TableSetupColumn("bytes");
+        ImGui::TableSetupColumn("latency");
+        ImGui::TableHeadersRow();
+        for (auto it = boxes.boxes.rbegin(); it != boxes.boxes.rend(); ++it) {
+            ImGui::TableNextRow();
+            ImGui::TableNextColumn();
+            ImGui::Text("%u%s", it->sequence, it->full ? " full" : "");
+            ImGui::TableNextColumn();
+            ImGui::Text("%d %d %d %d", it->rect.x, it->rect.y, it->rect.w, it->rect.h);
+            ImGui::TableNextColumn();
+            ImGui::Text("%lld", (long long)it->rect.area());
+            ImGui::TableNextColumn();
+            ImGui::Text("%u", it->bytes);
+            ImGui::TableNextColumn();
+            if (it->latencyUs >= 0)
+                ImGui::Text("%.1f ms", it->latencyUs * 1e-3);
+            else
+                ImGui::TextDisabled("-");
+        }
+        ImGui::EndTable();
+    }
+    ImGui::End();
+}
+
+void drawDirtyBoxOverlay(const DirtyBoxPanelState& state, const DirtyBoxHistory& boxes, double now,
+                         float viewOriginX, float viewOriginY, int viewHeight) {
+    if (!state.overlay)
+        return;
+    ImDrawList* dl = ImGui::GetBackgroundDrawList();
+    for (const auto& b : boxes.visible(now)) {
+        if (b.full)
+            continue;
+        float a = boxes.alpha(b, now);
+        float x0 = viewOriginX + float(b.rect.x);
+        float y0 = viewOriginY + float(viewHeight - (b.rect.y + b.rect.h));
+        ImVec2 p0(x0, y0), p1(x0 + float(b.rect.w), y0 + float(b.rect.h));
+        dl->AddRectFilled(p0, p1, ImGui::GetColorU32(ImVec4(1.0f, 0.85f, 0.1f, 0.10f * a)));
+        dl->AddRect(p0, p1, ImGui::GetColorU32(ImVec4(1.0f, 0.85f, 0.1f, 0.9f * a)), 0.0f, 0, 1.5f);
+    }
+}
+
+} // namespace trephine::ui

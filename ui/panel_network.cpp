@@ -1,0 +1,61 @@
+// [Network] panel: what the link does now and over the last minute.
+#include "ui/panels.h"
+
+#include "net/enet_host.h"
+
+#include <cstdio>
+#include <imgui.h>
+
+namespace trephine::ui {
+
+void drawNetworkPanel(const net::ClientSnapshot& snap, const NetworkHistory& history, double now) {
+    if (!ImGui::Begin("Network")) {
+        ImGui::End();
+        return;
+    }
+    if (snap.rttUs >= 0)
+        ImGui::Text("round trip  %.0f us (p50 %.0f us)", snap.rttUs, snap.rttP50Us);
+    else
+        ImGui::TextDisabled("round trip  - (no pong yet)");
+    ImGui::Text("loss        %llu malformed, %llu updates rejected",
+                (unsigned long long)snap.malformed, (unsigned long long)snap.updatesRejected);
+    ImGui::Text("updates     %.0f /s   %llu applied (%llu full)", history.updateRate(now),
+                (unsigned long long)snap.updatesApplied, (unsigned long long)snap.fullUpdates);
+    ImGui::Text("codec       %s   compression %.1fx", snap.codec.c_str(),
+                history.compressionRatio());
+    if (ImGui::BeginTable("channels", 3, ImGuiTableFlags_BordersInnerH)) {
+        ImGui::TableSetupColumn("channel");
+        ImGui::TableSetupColumn("in kbit/s");
+        ImGui::TableSetupColumn("out kbit/s");
+        ImGui::TableHeadersRow();
+        for (size_t c = 0; c < size_t(net::Channel::Count); ++c) {
+            ImGui::TableNextRow();
+            ImGui::TableNextColumn();
+            ImGui::TextUnformatted(net::channelName(net::Channel(c)));
+            ImGui::TableNextColumn();
+            ImGui::Text("%.1f", snap.rates[c].bytesInPerS * 8e-3);
+            ImGui::TableNextColumn();
+            ImGui::Text("%.1f", snap.rates[c].bytesOutPerS * 8e-3);
+        }
+        ImGui::EndTable();
+    }
+    auto plot = [](const char* label, const std::vector<float>& v, const char* unit) {
+        char overlay[64];
+        std::snprintf(overlay, sizeof overlay, "%.1f %s", v.empty() ? 0.0f : v.back(), unit);
+        ImGui::PlotLines(label, v.data(), int(v.size()), 0, overlay, 0.0f, FLT_MAX, ImVec2(0, 38));
+    };
+    plot("image", history.imageKbitPerS, "kbit/s");
+    plot("tool", history.toolKbitPerS, "kbit/s");
+    plot("updates", history.updatesPerS, "/s");
+    plot("rtt", history.rttMs, "ms");
+    const double maxUs = 20000.0;
+    auto hist = history.latencyHistogram(20, maxUs);
+    char overlay[96];
+    std::snprintf(overlay, sizeof overlay, "latency p50 %.1f ms p99 %.1f ms (0-20 ms)",
+                  history.latencyPercentile(50) * 1e-3, history.latencyPercentile(99) * 1e-3);
+    ImGui::PlotHistogram("##latency", hist.data(), int(hist.size()), 0, overlay, 0.0f, FLT_MAX,
+                         ImVec2(-1, 60));
+    ImGui::End();
+}
+
+} // namespace trephine::ui

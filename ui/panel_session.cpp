@@ -1,0 +1,58 @@
+// [Session] panel: who is here, which tool, and the connection.
+#include "ui/panels.h"
+
+#include "libsim/tool.h"
+
+#include <imgui.h>
+
+namespace trephine::ui {
+
+glm::vec4 participantColor(int index) {
+    static const glm::vec4 k[] = {{0.20f, 0.45f, 0.85f, 1}, {0.85f, 0.35f, 0.20f, 1},
+                                  {0.30f, 0.70f, 0.30f, 1}, {0.75f, 0.30f, 0.75f, 1},
+                                  {0.90f, 0.75f, 0.20f, 1}, {0.25f, 0.75f, 0.80f, 1}};
+    constexpr size_t n = sizeof k / sizeof k[0];
+    // 0 is this client's own colour; every other index cycles through the rest.
+    return index <= 0 ? k[0] : k[1 + size_t(index - 1) % (n - 1)];
+}
+
+void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, const std::string& role,
+                      const std::string& address, const std::string& name) {
+    if (!ImGui::Begin("Session")) {
+        ImGui::End();
+        return;
+    }
+    ImVec4 stateColor = snap.state == net::LinkState::Connected ? ImVec4(0.4f, 0.9f, 0.4f, 1)
+                                                                : ImVec4(1.0f, 0.6f, 0.2f, 1);
+    ImGui::TextColored(stateColor, "%s", net::linkStateName(snap.state));
+    ImGui::SameLine();
+    ImGui::Text("%s  (attempt %d)", address.c_str(), snap.attempts);
+    if (!snap.closeReason.empty())
+        ImGui::TextWrapped("last close: %s", snap.closeReason.c_str());
+    ImGui::Text("%s '%s'", role.c_str(), name.c_str());
+    if (snap.welcome)
+        ImGui::Text("client %u on %s", unsigned(snap.welcome->clientId),
+                    snap.welcome->volumeName.c_str());
+    ImGui::Text("participants: you + %zu", snap.others.size());
+    for (const auto& [id, t] : snap.others) {
+        glm::vec4 c = participantColor(int(id));
+        ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), "  client %u: %s %.0f mm%s", unsigned(id),
+                           t.toolKind == uint8_t(ToolKind::Perforator) ? "perforator" : "burr",
+                           double(t.diameterMm), t.drilling ? " drilling" : "");
+    }
+    ImGui::Separator();
+    ImGui::RadioButton("burr [B]", &tool.kind, 0);
+    ImGui::SameLine();
+    ImGui::RadioButton("perforator [P]", &tool.kind, 1);
+    ImGui::SliderFloat("burr mm [ ]", &tool.burrMm, kBurrMinDiameterMm, kBurrMaxDiameterMm, "%.1f");
+    ImGui::SliderFloat("speed", &tool.speed, 0.0f, 1.0f, "%.2f");
+    ImGui::SliderFloat("depth mm [wheel]", &tool.pushMm, -5.0f, 10.0f, "%.1f");
+    if (tool.canDrill)
+        ImGui::TextColored(tool.drilling ? ImVec4(1, 0.4f, 0.3f, 1) : ImVec4(0.6f, 0.6f, 0.6f, 1),
+                           tool.drilling ? "DRILLING" : "hold the left button to drill");
+    else
+        ImGui::TextDisabled("instructor: pointer only");
+    ImGui::End();
+}
+
+} // namespace trephine::ui

@@ -1,0 +1,31 @@
+// [View] panel: orbit and zoom about the site. A change asks the server for a new DBI.
+#include "ui/panels.h"
+
+#include <imgui.h>
+
+namespace trephine::ui {
+
+bool drawViewPanel(ViewControls& view, bool waitingForImage, const std::string& describeCamera) {
+    bool changed = false;
+    if (ImGui::Begin("View")) {
+        changed |= ImGui::SliderFloat("orbit", &view.yawDeg, -90.0f, 90.0f, "%.0f deg");
+        changed |= ImGui::SliderFloat("tilt", &view.pitchDeg, -60.0f, 60.0f, "%.0f deg");
+        changed |= ImGui::SliderFloat("distance", &view.distanceMm, 80.0f, 500.0f, "%.0f mm");
+        if (ImGui::Button("reset")) {
+            view.yawDeg = view.pitchDeg = 0.0f;
+            changed = true;
+        }
+        ImGui::SameLine();
+        if (waitingForImage)
+            ImGui::TextColored(ImVec4(1.0f, 0.75f, 0.2f, 1), "waiting for the new DBI...");
+        else
+            ImGui::TextDisabled("DBI up to date");
+        ImGui::TextWrapped("%s", describeCamera.c_str());
+    }
+    ImGui::End();
+    if (changed)
+        view.dirty = true;
+    return changed;
+}
+
+} // namespace trephine::ui
