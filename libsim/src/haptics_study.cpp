@@ -52,9 +52,31 @@ double peakToPeak(const std::vector<double>& v, size_t from, size_t to) {
 
 HapticsCaseResult runHapticsCase(const Volume& volume, const SurfaceSite& site,
                                  const HapticsStudyConfig& cfg, const HapticsCase& c) {
+    const ForceModel model(cfg.shape, cfg.force);
+    return runHapticsCase(volume, site, cfg, c, [&](const ToolPose& pose) {
+        ForceResult r = model.compute(volume, pose);
+        HapticModelData m;
+        m.position = pose.position;
+        m.force = r.force;
+        m.gradient = r.gradient;
+        m.contact = r.contact;
+        return m;
+    });
+}
+
+HapticsCaseResult runHapticsCase(const Volume& volume, const SurfaceSite& site,
+                                 const HapticsStudyConfig& cfg, const HapticsCase& c,
+                                 const HapticModelSource& source) {
     HapticsCaseResult out;
     out.c = c;
     const ForceModel model(cfg.shape, cfg.force);
+    auto ask = [&](const ToolPose& p, uint32_t sequence) {
+        HapticModelData m = source(p);
+        if (!cfg.multirateUsesGradient)
+            m.gradient = glm::mat3(0.0f);
+        m.toolSequence = sequence;
+        return m;
+    };
     const HandModel& hand = cfg.hand;
     const glm::dvec3 n = glm::normalize(glm::dvec3(site.normal));
     // A tangent for the slide.
@@ -92,14 +114,7 @@ HapticsCaseResult runHapticsCase(const Volume& volume, const SurfaceSite& site,
     blend.maxForceN = cfg.force.maxForceN;
     ModelBlender blender(blend);
     pose.position = glm::vec3(x);
-    HapticModelData start;
-    {
-        ForceResult r = model.compute(volume, pose);
-        start.position = pose.position;
-        start.force = r.force;
-        start.gradient = cfg.multirateUsesGradient ? r.gradient : glm::mat3(0.0f);
-        start.contact = r.contact;
-    }
+    const HapticModelData start = ask(pose, 0);
     blender.resetTo(start, 0.0);
     glm::vec3 held = start.force; // zero-order hold
     std::deque<PendingModel> inFlight;
@@ -114,14 +129,7 @@ HapticsCaseResult runHapticsCase(const Volume& volume, const SurfaceSite& site,
         pose.position = glm::vec3(x);
         // The server samples P_N when the tool state is sent; its answer arrives `latency` later.
         if (t + 1e-12 >= nextSend) {
-            ForceResult r = model.compute(volume, pose);
-            HapticModelData m;
-            m.position = pose.position;
-            m.force = r.force;
-            m.gradient = cfg.multirateUsesGradient ? r.gradient : glm::mat3(0.0f);
-            m.contact = r.contact;
-            m.toolSequence = uint32_t(i);
-            inFlight.push_back({t + latency, m});
+            inFlight.push_back({t + latency, ask(pose, uint32_t(i))});
             nextSend += updatePeriod;
         }
         while (!inFlight.empty() && inFlight.front().arrival <= t + 1e-12) {

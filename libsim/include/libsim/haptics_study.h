@@ -8,6 +8,7 @@
 #include "libsim/skull.h"
 #include "libsim/volume.h"
 
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -69,6 +70,19 @@ struct HapticsCaseResult {
 // One run. `site` is a point on the bone surface and its outward normal.
 HapticsCaseResult runHapticsCase(const Volume& volume, const SurfaceSite& site,
                                  const HapticsStudyConfig& config, const HapticsCase& c);
+
+// Where a run's force models come from: the model answering the tool pose the client samples
+// (its P_N). Called once for the warm start and at each update, in simulated-time order; the
+// answer then reaches the hand `latencyMs` of simulated time later. The default computes the
+// force model on the volume in process; a test passes one that asks a real SessionServer.
+using HapticModelSource = std::function<HapticModelData(const ToolPose& pose)>;
+
+// The same run with the models from `source` (toolSequence is set by the run; the gradient is
+// dropped when !config.multirateUsesGradient). `volume` still gives the hand's start and the true
+// contact force the errors are measured against, so it must hold what the source answers from.
+HapticsCaseResult runHapticsCase(const Volume& volume, const SurfaceSite& site,
+                                 const HapticsStudyConfig& config, const HapticsCase& c,
+                                 const HapticModelSource& source);
 
 // Exact first line of haptics.csv.
 std::string hapticsCsvHeader();
