@@ -98,6 +98,33 @@ std::vector<float> ForceHistory::series(const std::deque<Sample>& s, int compone
     return out;
 }
 
+int ParticipantForces::update(double now, const std::map<uint16_t, net::HapticModel>& models) {
+    int added = 0;
+    for (const auto& [id, m] : models) {
+        auto seen = lastSequence.find(id);
+        if (seen != lastSequence.end() && int32_t(m.toolSequence - seen->second) <= 0)
+            continue;
+        lastSequence[id] = m.toolSequence;
+        ForceHistory& h = byClient[id];
+        h.windowS = windowS;
+        h.addServer(now, m.force);
+        ++added;
+    }
+    expire(now);
+    return added;
+}
+
+void ParticipantForces::expire(double now) {
+    for (auto it = byClient.begin(); it != byClient.end();) {
+        it->second.expire(now);
+        // lastSequence stays: the same old model must not bring the participant back.
+        if (it->second.server.empty())
+            it = byClient.erase(it);
+        else
+            ++it;
+    }
+}
+
 void DirtyBoxHistory::add(const Box& b) {
     boxes.push_back(b);
     while (boxes.size() > keep)

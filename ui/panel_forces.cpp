@@ -6,10 +6,46 @@
 
 namespace trephine::ui {
 
-void drawForcesPanel(const ForceHistory& forces, double loopRateHz) {
+namespace {
+
+// |F| and x/y/z of one participant's relayed samples, under its name in its tool's colour.
+void drawParticipant(uint16_t id, const ForceHistory& h) {
+    static const char* names[4] = {"x", "y", "z", "|F|"};
+    glm::vec4 c = participantColor(int(id));
+    ImGui::PushStyleColor(ImGuiCol_Text, ImVec4(c.r, c.g, c.b, 1.0f));
+    ImGui::PushStyleColor(ImGuiCol_PlotLines, ImVec4(c.r, c.g, c.b, 1.0f));
+    ImGui::Text("client %u   f %.0f /s", unsigned(id), h.serverRate());
+    for (int comp : {3, 0, 1, 2}) {
+        auto v = ForceHistory::series(h.server, comp);
+        char label[48], overlay[48];
+        std::snprintf(label, sizeof label, "%s f##client%u", names[comp], unsigned(id));
+        std::snprintf(overlay, sizeof overlay, "%.2f N", v.empty() ? 0.0f : v.back());
+        ImGui::PlotLines(label, v.data(), int(v.size()), 0, overlay, FLT_MAX, FLT_MAX,
+                         ImVec2(0.0f, comp == 3 ? 40.0f : 24.0f));
+    }
+    ImGui::PopStyleColor(2);
+}
+
+} // namespace
+
+void drawForcesPanel(const ForceHistory& forces, double loopRateHz,
+                     const ParticipantForces* participants) {
     if (!ImGui::Begin("Forces")) {
         ImGui::End();
         return;
+    }
+    // An instructor watches the participants first; its own pointer's forces follow, folded.
+    if (participants) {
+        ImGui::TextDisabled("participants (relayed by the server)");
+        for (const auto& [id, h] : participants->byClient)
+            drawParticipant(id, h);
+        if (participants->byClient.empty())
+            ImGui::TextDisabled("no participant's force model in the last %.0f s",
+                                participants->windowS);
+        if (!ImGui::CollapsingHeader("your tool")) {
+            ImGui::End();
+            return;
+        }
     }
     ImGui::Text("server f %.0f /s   F %.0f Hz", forces.serverRate(), loopRateHz);
     static const char* names[4] = {"x", "y", "z", "|F|"};

@@ -17,7 +17,15 @@ void drawNetworkPanel(const net::ClientSnapshot& snap, const NetworkHistory& his
         ImGui::Text("round trip  %.0f us (p50 %.0f us)", snap.rttUs, snap.rttP50Us);
     else
         ImGui::TextDisabled("round trip  - (no pong yet)");
-    ImGui::Text("loss        %llu malformed, %llu updates rejected",
+    if (snap.packetLoss >= 0)
+        ImGui::Text("loss        %.1f %% (ENet, ~10 s), %llu lost this interval",
+                    snap.packetLoss * 100.0, (unsigned long long)snap.packetsLost);
+    else
+        ImGui::TextDisabled("loss        - (not connected)");
+    if (ImGui::IsItemHovered())
+        ImGui::SetTooltip("ENet's coarse estimate: the smoothed share of reliable packets that\n"
+                          "needed a resend, recomputed by ENet about every 10 s.");
+    ImGui::Text("dropped     %llu malformed, %llu updates rejected",
                 (unsigned long long)snap.malformed, (unsigned long long)snap.updatesRejected);
     ImGui::Text("updates     %.0f /s   %llu applied (%llu full)", history.updateRate(now),
                 (unsigned long long)snap.updatesApplied, (unsigned long long)snap.fullUpdates);

@@ -217,6 +217,7 @@ int runTrainerWindow(const TrainerOptions& o) {
     DirtyBoxPanelState boxState;
     NetworkHistory netHistory;
     ForceHistory forceHistory;
+    ParticipantForces participantForces; // instructor: every other participant's force
     DirtyBoxHistory boxHistory;
 
     Dbi cpuDbi;               // mirror of the textures, for the cursor's depth lookups
@@ -369,6 +370,8 @@ int runTrainerWindow(const TrainerOptions& o) {
             forceHistory.addServer(now, snap->hapticModel->force);
         }
         forceHistory.expire(now);
+        if (o.instructor)
+            participantForces.update(now, snap->relayedModels);
         // The 1 kHz extrapolated force, straight from the haptic loop's recorder.
         forceHistory.extrapolated.clear();
         for (const HapticSample& h : haptics.samples())
@@ -464,7 +467,8 @@ int runTrainerWindow(const TrainerOptions& o) {
         drawNetworkPanel(*snap, netHistory, now);
         ImGui::SetNextWindowPos(ImVec2(0, float(viewSize)), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(right * 0.5f, H - float(viewSize)), ImGuiCond_FirstUseEver);
-        drawForcesPanel(forceHistory, hstats.achievedRateHz);
+        drawForcesPanel(forceHistory, hstats.achievedRateHz,
+                        o.instructor ? &participantForces : nullptr);
         ImGui::SetNextWindowPos(ImVec2(right * 0.5f, float(viewSize)), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(right * 0.5f, H - float(viewSize)), ImGuiCond_FirstUseEver);
         drawDirtyBoxPanel(boxState, boxHistory, now);

@@ -133,7 +133,11 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
         s->updatesRejected = c->updatesRejected();
         s->toolStatesSent = c->toolStatesSent();
         s->relaysReceived = c->relaysReceived();
+        s->relayedModels = c->relayedModels();
+        s->hapticRelays = c->hapticRelaysReceived();
         const NetStats& st = c->stats();
+        s->packetLoss = st.packetLoss;
+        s->packetsLost = st.packetsLost;
         s->malformed = st.malformed();
         s->rttUs = m_lastRttUs;
         s->rttP50Us = st.rttUs.size() ? st.rttUs.percentile(50) : -1;

@@ -104,6 +104,8 @@ std::string reportJson(const ReportInfo& info, const NetStats& stats) {
     j += "  \"malformed_dropped\": " + std::to_string(stats.malformed()) + ",\n";
     j += "  \"updates_rejected\": " + std::to_string(info.updatesRejected) + ",\n";
     j += "  \"clock_offset_us\": " + std::to_string(stats.clockOffsetUs) + ",\n";
+    j += "  \"packet_loss\": " + num(stats.packetLoss) + ",\n";
+    j += "  \"packets_lost\": " + std::to_string(stats.packetsLost) + ",\n";
     j += "  \"rtt_us\": " + windowJson(stats.rttUs) + ",\n";
     j += "  \"update_bytes\": " + windowJson(stats.updateBytes) + ",\n";
     j += "  \"update_raw_bytes\": " + windowJson(stats.updateRawBytes) + ",\n";

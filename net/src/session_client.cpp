@@ -38,6 +38,11 @@ bool SessionClient::sendRaw(Channel channel, std::span<const uint8_t> bytes) {
 
 int SessionClient::poll(uint32_t timeoutMs) {
     int n = m_host.service(timeoutMs, [this](const ENetEvent& ev) { onEvent(ev); });
+    if (m_peer && m_connected) {
+        // ENet's own estimate, refreshed about every ENET_PEER_PACKET_LOSS_INTERVAL (10 s).
+        m_stats.packetLoss = double(m_peer->packetLoss) / double(ENET_PEER_PACKET_LOSS_SCALE);
+        m_stats.packetsLost = m_peer->packetsLost;
+    }
     m_stats.tick(steadyNowUs());
     return n;
 }
@@ -131,6 +136,19 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
             m_latestHaptic = m;
         if (m_hapticCallback)
             m_hapticCallback(m, nowUs);
+        return true;
+    }
+    case MessageType::HapticRelay: {
+        HapticRelay r;
+        if (!decodeMessage(data, r))
+            return false;
+        ++m_hapticRelays;
+        auto it = m_relayedModels.find(r.clientId);
+        if (it == m_relayedModels.end() ||
+            int32_t(r.model.toolSequence - it->second.toolSequence) > 0)
+            m_relayedModels[r.clientId] = r.model;
+        if (m_relayCallback)
+            m_relayCallback(r.clientId, r.model, nowUs);
         return true;
     }
     case MessageType::Pong: {

@@ -63,7 +63,7 @@ struct PeerReport {
     Role role = Role::Trainee;
     bool hello = false;
     uint64_t bytesIn = 0, bytesOut = 0, messagesIn = 0, messagesOut = 0;
-    uint64_t malformed = 0, hapticModels = 0, toolStates = 0, viewsRefused = 0;
+    uint64_t malformed = 0, hapticModels = 0, hapticRelays = 0, toolStates = 0, viewsRefused = 0;
     uint64_t connectedUs = 0, disconnectedUs = 0;
     bool kicked = false;
 };
@@ -315,8 +315,10 @@ void SessionServer::networkLoop() {
                 report(id, [&](PeerReport& r) {
                     r.bytesOut += bytes.size();
                     ++r.messagesOut;
-                    if (ch == Channel::Haptic)
+                    if (bytes[0] == uint8_t(MessageType::HapticModel))
                         ++r.hapticModels;
+                    else if (bytes[0] == uint8_t(MessageType::HapticRelay))
+                        ++r.hapticRelays;
                 });
         }
     };
@@ -350,6 +352,19 @@ void SessionServer::networkLoop() {
         }
         m_hapticSent.fetch_add(1); // before it can arrive: readers never see fewer than received
         sendTo(p.peer, Channel::Haptic, encodeMessage(m));
+        // Every instructor sees every other participant's force plot.
+        const uint16_t from = peerId(p.peer);
+        HapticRelay relay{from, m};
+        std::vector<uint8_t> relayBytes;
+        for (auto& [otherId, other] : s.peers) {
+            if (otherId == from || !other.hello || other.kicked ||
+                other.helloMsg.role != Role::Instructor)
+                continue;
+            if (relayBytes.empty())
+                relayBytes = encodeMessage(relay);
+            m_hapticRelayed.fetch_add(1);
+            sendTo(other.peer, Channel::Haptic, relayBytes);
+        }
         s.host.flush();
     };
     auto malformed = [&](NetPeer& p) {
@@ -729,6 +744,7 @@ std::string SessionServer::reportJson() const {
     j += "  \"tool_states_applied\": " + std::to_string(m_toolStatesApplied.load()) + ",\n";
     j += "  \"renders\": " + std::to_string(m_renders.load()) + ",\n";
     j += "  \"haptic_models_sent\": " + std::to_string(m_hapticSent.load()) + ",\n";
+    j += "  \"haptic_relays_sent\": " + std::to_string(m_hapticRelayed.load()) + ",\n";
     j += "  \"malformed_dropped\": " + std::to_string(m_stats.malformed()) + ",\n";
     j += "  \"disconnected_for_malformed\": " + std::to_string(m_malformedKicks.load()) + ",\n";
     j += "  \"refused_server_full\": " + std::to_string(m_refusedFull.load()) + ",\n";
@@ -763,6 +779,7 @@ std::string SessionServer::reportJson() const {
              ", \"messages_out\": " + std::to_string(r.messagesOut) +
              ", \"tool_states\": " + std::to_string(r.toolStates) +
              ", \"haptic_models\": " + std::to_string(r.hapticModels) +
+             ", \"haptic_relays\": " + std::to_string(r.hapticRelays) +
              ", \"malformed\": " + std::to_string(r.malformed) +
              ", \"views_refused\": " + std::to_string(r.viewsRefused) +
              ", \"kicked\": " + (r.kicked ? "true" : "false") + "}";

@@ -11,6 +11,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <memory>
 #include <thread>
 
 using namespace trephine;
@@ -142,4 +143,64 @@ TEST(ClientThread, ViewChangeWaitsThenDeliversAFullImage) {
     EXPECT_TRUE(gotFull);
     client.stop();
     server.stop();
+}
+
+TEST(ClientThread, ReconnectsToANewServerOnTheSamePort) {
+    Volume skull = makeSkull(64);
+    ServerConfig sc;
+    sc.port = 0;
+    sc.volumeName = "skull:64";
+    sc.renderThreads = 1;
+    auto server = std::make_unique<SessionServer>(skull, sc);
+    const uint16_t port = server->port();
+    server->start();
+
+    ClientThreadConfig cc;
+    cc.address = "127.0.0.1:" + std::to_string(port);
+    cc.client.view = toViewSpec(cameraPreset("top", skull, {64, 64}));
+    cc.retryS = 0.2;
+    cc.connectTimeoutS = 1.0;
+    ClientThread client(cc);
+    client.start();
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->hasFullImage; }, 20.0));
+    const int attemptsBefore = client.snapshot()->attempts;
+    EXPECT_GE(client.snapshot()->packetLoss, 0.0) << "ENet's loss estimate, once connected";
+    client.drainRects();
+
+    // The server goes away: the thread says why and retries.
+    server->stop();
+    server.reset();
+    std::shared_ptr<const ClientSnapshot> dropped;
+    ASSERT_TRUE(waitFor(
+        [&] {
+            dropped = client.snapshot();
+            return dropped->state == LinkState::Retrying;
+        },
+        10.0));
+    EXPECT_EQ(dropped->closeReason, refuseReasonText(uint32_t(RefuseReason::Shutdown)));
+    EXPECT_FALSE(dropped->hasFullImage);
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->attempts > attemptsBefore; }, 10.0));
+    EXPECT_NE(client.snapshot()->state, LinkState::Connected);
+
+    // A new server on the same port: the thread reconnects and gets a whole image again.
+    sc.port = port;
+    server = std::make_unique<SessionServer>(skull, sc);
+    server->start();
+    ASSERT_TRUE(waitFor(
+        [&] {
+            auto s = client.snapshot();
+            return s->state == LinkState::Connected && s->hasFullImage;
+        },
+        20.0));
+    EXPECT_TRUE(client.snapshot()->closeReason.empty());
+    EXPECT_GT(client.snapshot()->attempts, attemptsBefore);
+    bool gotFull = false;
+    for (AppliedRect& r : client.drainRects())
+        if (r.full) {
+            gotFull = true;
+            EXPECT_EQ(compare(r.pixels, server->renderView(cc.client.view)).maxColorError, 0);
+        }
+    EXPECT_TRUE(gotFull) << "a full image after reconnecting";
+    client.stop();
+    server->stop();
 }

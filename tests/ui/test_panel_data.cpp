@@ -8,6 +8,8 @@
 #include <glm/geometric.hpp>
 #include <gtest/gtest.h>
 
+#include <map>
+
 using namespace trephine;
 using namespace trephine::ui;
 
@@ -101,4 +103,32 @@ TEST(Meshes, SurgicalFieldSitsAboveTheBoneAndLeavesTheSiteOpen) {
     EXPECT_GT(nearest, 15.0f); // the craniotomy opening stays clear
     for (uint32_t i : m.indices)
         ASSERT_LT(i, m.vertices.size());
+}
+
+TEST(ParticipantForces, OneHistoryPerParticipantFromNewModelsOnly) {
+    ParticipantForces p;
+    p.windowS = 1.0;
+    std::map<uint16_t, net::HapticModel> models;
+    models[2].toolSequence = 1;
+    models[2].force = {3.0f, 4.0f, 0.0f};
+    models[5].toolSequence = 9;
+    models[5].force = {0.0f, 0.0f, -1.0f};
+    EXPECT_EQ(p.update(0.0, models), 2);
+    EXPECT_EQ(p.update(0.1, models), 0) << "the same models again add nothing";
+    models[2].toolSequence = 2;
+    models[2].force = {0.0f, 6.0f, 8.0f};
+    EXPECT_EQ(p.update(0.2, models), 1);
+    ASSERT_EQ(p.byClient.size(), 2u);
+    auto mag = ForceHistory::series(p.byClient.at(2).server, 3);
+    ASSERT_EQ(mag.size(), 2u);
+    EXPECT_FLOAT_EQ(mag[0], 5.0f);
+    EXPECT_FLOAT_EQ(mag[1], 10.0f);
+    EXPECT_EQ(ForceHistory::series(p.byClient.at(5).server, 2).back(), -1.0f);
+    // Participant 5 sends nothing new: gone after the window; its old model does not return it.
+    models[2].toolSequence = 3;
+    EXPECT_EQ(p.update(1.5, models), 1);
+    EXPECT_EQ(p.byClient.count(5), 0u);
+    EXPECT_EQ(p.byClient.at(2).server.size(), 1u);
+    EXPECT_EQ(p.update(1.6, models), 0);
+    EXPECT_EQ(p.byClient.count(5), 0u);
 }

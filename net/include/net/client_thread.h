@@ -56,6 +56,13 @@ struct ClientSnapshot {
     std::map<uint16_t, ToolState> others;
     std::optional<HapticModel> hapticModel; // latest force model (when the client offers it)
     uint64_t hapticModels = 0;
+    // [Instructor] the newest relayed force model of every other participant, by client id.
+    std::map<uint16_t, HapticModel> relayedModels;
+    uint64_t hapticRelays = 0;
+    // ENet's coarse loss estimate (NetStats::packetLoss, -1: unknown) and packets lost in its
+    // current 10 s interval.
+    double packetLoss = -1;
+    uint64_t packetsLost = 0;
     // Statistics.
     uint64_t updatesApplied = 0, fullUpdates = 0, updatesRejected = 0, toolStatesSent = 0,
              relaysReceived = 0, malformed = 0;

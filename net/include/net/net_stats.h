@@ -56,6 +56,12 @@ public:
     SampleWindow applyUs{65536};           // decode + apply time at the client
     SampleWindow hapticRoundTripUs{65536}; // tool state sent -> its HapticModel received
     int64_t clockOffsetUs = 0; // server clock - client clock, from the best (lowest-RTT) ping
+    // ENet's coarse loss estimate for the peer (peer->packetLoss / ENET_PEER_PACKET_LOSS_SCALE):
+    // a smoothed fraction of our reliable packets that needed a resend, recomputed by ENet about
+    // every 10 s (-1 until connected), and peer->packetsLost, its count in ENet's current 10 s
+    // interval (reset when the estimate is refreshed).
+    double packetLoss = -1;
+    uint64_t packetsLost = 0;
     double bestRttUs = -1;
 
 private:

@@ -48,8 +48,9 @@ enum class MessageType : uint8_t {
     Pong = 10,
     Participants = 11,
     SyncMode = 12,
+    HapticRelay = 13,
 };
-inline constexpr uint8_t kMessageTypeCount = 13; // one past the largest type
+inline constexpr uint8_t kMessageTypeCount = 14; // one past the largest type
 
 enum class Role : uint8_t { Trainee = 0, Instructor = 1 };
 enum class Codec : uint8_t { Raw = 0, Lz4 = 1, Zstd = 2 };
@@ -196,6 +197,19 @@ struct HapticModel {
         for (int c = 0; ok && c < 3; ++c)
             ok = serializeVec3(s, gradient[c]);
         return ok && s.boolean(contact);
+    }
+};
+
+// Another participant's force model, relayed by the server's network thread to every instructor
+// when it answers that participant's tool state (Channel::Haptic, unsequenced; newest wins).
+struct HapticRelay {
+    static constexpr MessageType kType = MessageType::HapticRelay;
+    uint16_t clientId = 0;
+    HapticModel model;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.integer(clientId) && model.serialize(s);
     }
 };
 

@@ -80,6 +80,14 @@ public:
     // The newest HapticModel received (by tool sequence), if any.
     std::optional<HapticModel> latestHapticModel() const { return m_latestHaptic; }
     uint64_t hapticModelsReceived() const { return m_hapticModels; }
+    // [Instructor] The newest force model of every other participant, relayed by the server
+    // (HapticRelay, sent only to instructors), by client id; newest by tool sequence wins.
+    const std::map<uint16_t, HapticModel>& relayedModels() const { return m_relayedModels; }
+    uint64_t hapticRelaysReceived() const { return m_hapticRelays; }
+    // Called with each relayed model received (client id, model, arrival as steadyNowUs()).
+    using RelayCallback =
+        std::function<void(uint16_t clientId, const HapticModel&, uint64_t arrivalUs)>;
+    void setRelayCallback(RelayCallback callback) { m_relayCallback = std::move(callback); }
     // Called after each ImageUpdate has been applied to the DBI: `rect` is the changed rectangle
     // in DBI pixels (row 0 at the bottom, as GL), `full` when the whole DBI was replaced (a join
     // or a view switch: the DBI's size may have changed).
@@ -116,6 +124,9 @@ private:
     uint32_t m_toolSequence = 0;
     uint32_t m_lastSequence = 0;
     HapticCallback m_hapticCallback;
+    RelayCallback m_relayCallback;
+    std::map<uint16_t, HapticModel> m_relayedModels;
+    uint64_t m_hapticRelays = 0;
     UpdateCallback m_updateCallback;
     std::optional<HapticModel> m_latestHaptic;
     uint64_t m_hapticModels = 0;

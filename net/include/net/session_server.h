@@ -33,12 +33,14 @@ struct ServerConfig {
     // The largest view (width x height pixels) served: a larger hello is refused (BadHello), a
     // larger view request is dropped and counted (viewsRefused()).
     int64_t maxViewPixels = 2048 * 2048;
-    bool hapticModels = true; // answer each tool state with a HapticModel (Channel::Haptic)
-    std::string volumeName;   // sent in the welcome
-    std::string saveOnExit;   // when set, stop() writes the final volume here (saveVolume)
-    int malformedLimit = 50;  // a peer that sends more malformed packets is disconnected
-    int renderThreads = 0;    // 0: hardware concurrency
-    float maxStepS = 0.05f;   // longest drilling step taken from one tool state to the next
+    // Answer each tool state with a HapticModel (Channel::Haptic), relayed to every instructor as
+    // a HapticRelay.
+    bool hapticModels = true;
+    std::string volumeName;  // sent in the welcome
+    std::string saveOnExit;  // when set, stop() writes the final volume here (saveVolume)
+    int malformedLimit = 50; // a peer that sends more malformed packets is disconnected
+    int renderThreads = 0;   // 0: hardware concurrency
+    float maxStepS = 0.05f;  // longest drilling step taken from one tool state to the next
 };
 
 class SessionServer {
@@ -73,6 +75,9 @@ public:
     uint64_t toolStatesApplied() const { return m_toolStatesApplied.load(); }
     uint64_t rendersDone() const { return m_renders.load(); }
     uint64_t hapticModelsSent() const { return m_hapticSent.load(); }
+    // HapticRelay messages sent: each force model answered, once per instructor other than its
+    // tool's own client.
+    uint64_t hapticRelaysSent() const { return m_hapticRelayed.load(); }
     uint64_t refusedFull() const { return m_refusedFull.load(); }
     uint64_t viewsRefused() const { return m_viewsRefused.load(); }
     const NetStats& stats() const { return m_stats; }
@@ -95,6 +100,7 @@ private:
     std::atomic<uint64_t> m_toolStatesApplied{0};
     std::atomic<uint64_t> m_renders{0};
     std::atomic<uint64_t> m_hapticSent{0};
+    std::atomic<uint64_t> m_hapticRelayed{0};
     std::atomic<uint64_t> m_refusedFull{0};
     std::atomic<uint64_t> m_viewsRefused{0};
     std::thread m_netThread;

@@ -4,10 +4,12 @@
 #pragma once
 
 #include "libsim/dbi.h"
+#include "net/protocol.h"
 
 #include <cstdint>
 #include <deque>
 #include <glm/vec3.hpp>
+#include <map>
 #include <vector>
 
 namespace trephine::ui {
@@ -55,6 +57,19 @@ struct ForceHistory {
     double serverRate() const; // samples per second over the window held
     // One component (0..2 x, y, z; 3 magnitude) of a series, oldest first.
     static std::vector<float> series(const std::deque<Sample>& s, int component);
+};
+
+// [Instructor] one force history per other participant, from the newest relayed model of each
+// (ClientSnapshot::relayedModels). A participant with no new model for windowS is dropped.
+struct ParticipantForces {
+    double windowS = 5.0;
+    std::map<uint16_t, ForceHistory> byClient;
+    std::map<uint16_t, uint32_t> lastSequence; // tool sequence of the last model taken
+
+    // Adds a server sample at `now` for each participant whose model is new (by tool sequence);
+    // returns how many were added.
+    int update(double now, const std::map<uint16_t, net::HapticModel>& models);
+    void expire(double now);
 };
 
 // BB_screen of each update, fading out, and the recent ones as a list.

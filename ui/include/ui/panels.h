@@ -24,8 +24,10 @@ void drawDirtyBoxOverlay(const DirtyBoxPanelState& state, const DirtyBoxHistory&
                          float viewOriginX, float viewOriginY, int viewHeight);
 
 // [Forces] |F| and x/y/z of the server's samples and the haptic loop's extrapolated force
-// (loopRateHz: the rate the loop achieves).
-void drawForcesPanel(const ForceHistory& forces, double loopRateHz);
+// (loopRateHz: the rate the loop achieves). For an instructor (`participants` not null), one more
+// plot per other participant from the server's relayed models, named and coloured as its tool.
+void drawForcesPanel(const ForceHistory& forces, double loopRateHz,
+                     const ParticipantForces* participants = nullptr);
 
 // [Session] role, participants, tool, burr size, speed, connection state.
 struct ToolControls {

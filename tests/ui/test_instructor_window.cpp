@@ -1,0 +1,174 @@
+// `trephine instructor` windowed against an in-process server: a headless trainee SessionClient
+// holds its tool in view, and the instructor's screenshot shows that tool in the trainee's colour
+// where the server's camera projects it. Needs a display (xvfb-run).
+#include "ui/panels.h"
+#include "ui/window.h"
+
+#include "libsim/camera.h"
+#include "libsim/skull.h"
+#include "libsim/tool.h"
+#include "net/session_client.h"
+#include "net/session_server.h"
+
+#include <OpenImageIO/imageio.h>
+#include <glm/geometric.hpp>
+#include <glm/gtx/quaternion.hpp>
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+#include <thread>
+#include <vector>
+
+using namespace trephine;
+
+namespace {
+
+struct Image {
+    int w = 0, h = 0;
+    std::vector<uint8_t> rgb; // top row first
+    const uint8_t* at(int x, int y) const { return &rgb[(size_t(y) * size_t(w) + size_t(x)) * 3]; }
+};
+
+Image readPng(const std::string& path) {
+    Image img;
+    auto in = OIIO::ImageInput::open(path);
+    if (!in)
+        return img;
+    img.w = in->spec().width;
+    img.h = in->spec().height;
+    img.rgb.resize(size_t(img.w) * size_t(img.h) * 3);
+    in->read_image(0, 0, 0, 3, OIIO::TypeDesc::UINT8, img.rgb.data());
+    return img;
+}
+
+// A lit pixel of `colour`'s hue: the compositor scales the base colour by its headlight term.
+bool hasHue(const uint8_t* p, glm::vec4 colour) {
+    glm::vec3 px(p[0], p[1], p[2]);
+    float len = glm::length(px);
+    if (len < 40.0f)
+        return false;
+    return glm::dot(px / len, glm::normalize(glm::vec3(colour))) > 0.985f;
+}
+
+// Pixels of `colour`'s hue within `radius` of (x, y) (image rows from the top).
+int countHue(const Image& img, int x, int y, int radius, glm::vec4 colour) {
+    int n = 0;
+    for (int dy = -radius; dy <= radius; ++dy)
+        for (int dx = -radius; dx <= radius; ++dx) {
+            int px = x + dx, py = y + dy;
+            if (px >= 0 && py >= 0 && px < img.w && py < img.h)
+                n += hasHue(img.at(px, py), colour);
+        }
+    return n;
+}
+
+glm::vec3 anyPerpendicular(glm::vec3 n) {
+    return glm::normalize(
+        glm::cross(n, std::abs(n.z) < 0.9f ? glm::vec3(0, 0, 1) : glm::vec3(1, 0, 0)));
+}
+
+} // namespace
+
+TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
+    std::string why;
+    if (!ui::displayAvailable(&why))
+        GTEST_SKIP() << "no display for the instructor window (" << why << "); run under xvfb-run";
+    Volume skull = makeSkull(128);
+    const SurfaceSite site = defaultBurrSite(skull);
+    net::ServerConfig sc;
+    sc.port = 0;
+    sc.volumeName = "skull:128";
+    sc.renderThreads = 1;
+    net::SessionServer server(skull, sc);
+    server.start();
+    const std::string address = "127.0.0.1:" + std::to_string(server.port());
+
+    // The trainee's burr rests 10 mm to one side of the site, its handpiece leaning outwards.
+    const glm::vec3 n = site.normal, e1 = anyPerpendicular(n);
+    const glm::vec3 axis = glm::normalize(n - e1 * 0.5f);
+    net::ToolState tool;
+    tool.toolKind = uint8_t(ToolKind::Burr);
+    tool.diameterMm = 5.0f;
+    tool.position = site.position - e1 * 10.0f + n * 3.0f;
+    tool.orientation = glm::rotation(glm::vec3(0, 0, 1), axis);
+
+    net::ClientConfig tc;
+    tc.name = "trainee";
+    tc.view = net::ViewSpec{};
+    tc.view.width = tc.view.height = 32;
+    net::SessionClient trainee(tc);
+    trainee.connect(net::parseAddress(address));
+    std::atomic<bool> stop{false};
+    std::atomic<uint16_t> traineeId{0};
+    std::thread traineeThread([&] {
+        auto next = std::chrono::steady_clock::now();
+        while (!stop) {
+            trainee.poll(1);
+            if (trainee.welcomed()) {
+                traineeId = trainee.welcome().clientId;
+                if (std::chrono::steady_clock::now() >= next) {
+                    net::ToolState t = tool;
+                    trainee.sendToolState(t);
+                    next += std::chrono::milliseconds(20);
+                }
+            }
+        }
+        trainee.disconnect();
+    });
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    while (traineeId == 0 && std::chrono::steady_clock::now() < deadline)
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+
+    const std::string out =
+        (std::filesystem::temp_directory_path() / "trephine_instructor.png").string();
+    std::filesystem::remove(out);
+    const std::string cmd = std::string(TREPHINE_BIN) + " instructor --connect " + address +
+                            " --window-size 500 --screenshot " + out +
+                            " --frames 3 --timeout 80 > " + out + ".log 2>&1";
+    const int rc = std::system(cmd.c_str());
+    const uint64_t relays = server.hapticRelaysSent();
+    stop = true;
+    traineeThread.join();
+    server.stop();
+    ASSERT_NE(traineeId.load(), 0) << "the trainee joined";
+    ASSERT_EQ(rc, 0) << cmd;
+    EXPECT_GT(relays, 0u) << "the trainee's force models were relayed to the instructor";
+
+    Image img = readPng(out);
+    ASSERT_EQ(img.w, 920);
+    // The instructor's camera: its default close view of the burr site, 500 x 500 at the top left.
+    const Camera cam =
+        cameraLookingAt(site.position, site.normal, 170.0f, 45.0f, {500, 500}, skull);
+    const glm::dmat4 vp = viewProjection(cam);
+    auto pixelOf = [&](glm::vec3 p) {
+        WindowPoint w = projectToWindow(vp, cam, glm::dvec3(p));
+        return glm::ivec2(int(w.window.x), 500 - 1 - int(w.window.y));
+    };
+    const glm::vec4 colour = ui::participantColor(int(traineeId.load()));
+    ASSERT_NE(colour, ui::participantColor(0)) << "a colour distinct from the instructor's own";
+    // The owner-coloured handpiece body lies 38..76 mm up the axis from the burr's centre.
+    int onTool = 0, besideTool = 0;
+    for (float d : {45.0f, 55.0f, 65.0f}) {
+        glm::ivec2 at = pixelOf(tool.position + axis * d);
+        ASSERT_TRUE(at.x >= 0 && at.x < 500 && at.y >= 0 && at.y < 500) << at.x << "," << at.y;
+        onTool += countHue(img, at.x, at.y, 2, colour);
+    }
+    // Across the site from the tool (the handpiece leans away from there): bone, none of the
+    // trainee's colour.
+    for (float d : {20.0f, 25.0f}) {
+        glm::ivec2 m = pixelOf(site.position + e1 * d);
+        besideTool += countHue(img, m.x, m.y, 2, colour);
+    }
+    EXPECT_GE(onTool, 3 * 25 * 6 / 10) << "the trainee's colour at its projected handpiece";
+    EXPECT_EQ(besideTool, 0) << "no trainee colour on the bone across the site";
+    // The Forces panel (under the view, left half) plots the trainee's relayed force in its colour.
+    int inForces = 0;
+    for (int y = 500; y < img.h; ++y)
+        for (int x = 0; x < 250; ++x)
+            inForces += hasHue(img.at(x, y), colour);
+    EXPECT_GT(inForces, 50) << "the trainee's force plot in the instructor's Forces panel";
+}
