@@ -56,8 +56,6 @@ ChannelRates NetStats::averageRates(Channel c) const {
             double(k.msgsIn.load()) / dt, double(k.msgsOut.load()) / dt};
 }
 
-namespace {
-
 std::string jsonString(const std::string& s) {
     std::string out = "\"";
     for (char ch : s) {
@@ -75,19 +73,17 @@ std::string jsonString(const std::string& s) {
     return out + "\"";
 }
 
-std::string num(double v) {
+std::string jsonNumber(double v) {
     char buf[64];
     std::snprintf(buf, sizeof buf, "%.6g", v);
     return buf;
 }
 
-std::string windowJson(const SampleWindow& w) {
-    return "{\"count\": " + std::to_string(w.totalCount()) + ", \"mean\": " + num(w.mean()) +
-           ", \"min\": " + num(w.min()) + ", \"p50\": " + num(w.percentile(50)) +
-           ", \"p99\": " + num(w.percentile(99)) + ", \"max\": " + num(w.max()) + "}";
+std::string jsonWindow(const SampleWindow& w) {
+    return "{\"count\": " + std::to_string(w.totalCount()) + ", \"mean\": " + jsonNumber(w.mean()) +
+           ", \"min\": " + jsonNumber(w.min()) + ", \"p50\": " + jsonNumber(w.percentile(50)) +
+           ", \"p99\": " + jsonNumber(w.percentile(99)) + ", \"max\": " + jsonNumber(w.max()) + "}";
 }
-
-} // namespace
 
 std::string reportJson(const ReportInfo& info, const NetStats& stats) {
     std::string j = "{\n";
@@ -96,7 +92,7 @@ std::string reportJson(const ReportInfo& info, const NetStats& stats) {
     j += "  \"view\": " + jsonString(info.view) + ",\n";
     j += "  \"camera\": " + jsonString(info.camera) + ",\n";
     j += "  \"script\": " + jsonString(info.script) + ",\n";
-    j += "  \"duration_s\": " + num(info.durationS) + ",\n";
+    j += "  \"duration_s\": " + jsonNumber(info.durationS) + ",\n";
     j += "  \"updates_applied\": " + std::to_string(info.updatesApplied) + ",\n";
     j += "  \"full_updates\": " + std::to_string(info.fullUpdates) + ",\n";
     j += "  \"tool_states_sent\": " + std::to_string(info.toolStatesSent) + ",\n";
@@ -104,27 +100,28 @@ std::string reportJson(const ReportInfo& info, const NetStats& stats) {
     j += "  \"malformed_dropped\": " + std::to_string(stats.malformed()) + ",\n";
     j += "  \"updates_rejected\": " + std::to_string(info.updatesRejected) + ",\n";
     j += "  \"clock_offset_us\": " + std::to_string(stats.clockOffsetUs) + ",\n";
-    j += "  \"packet_loss\": " + num(stats.packetLoss) + ",\n";
+    j += "  \"packet_loss\": " + jsonNumber(stats.packetLoss) + ",\n";
     j += "  \"packets_lost\": " + std::to_string(stats.packetsLost) + ",\n";
-    j += "  \"rtt_us\": " + windowJson(stats.rttUs) + ",\n";
-    j += "  \"update_bytes\": " + windowJson(stats.updateBytes) + ",\n";
-    j += "  \"update_raw_bytes\": " + windowJson(stats.updateRawBytes) + ",\n";
-    j += "  \"update_latency_us\": " + windowJson(stats.updateLatencyUs) + ",\n";
-    j += "  \"apply_us\": " + windowJson(stats.applyUs) + ",\n";
-    j += "  \"haptic_round_trip_us\": " + windowJson(stats.hapticRoundTripUs) + ",\n";
+    j += "  \"rtt_us\": " + jsonWindow(stats.rttUs) + ",\n";
+    j += "  \"update_bytes\": " + jsonWindow(stats.updateBytes) + ",\n";
+    j += "  \"update_raw_bytes\": " + jsonWindow(stats.updateRawBytes) + ",\n";
+    j += "  \"update_latency_us\": " + jsonWindow(stats.updateLatencyUs) + ",\n";
+    j += "  \"apply_us\": " + jsonWindow(stats.applyUs) + ",\n";
+    j += "  \"haptic_round_trip_us\": " + jsonWindow(stats.hapticRoundTripUs) + ",\n";
     if (info.hapticLoop) {
-        j += "  \"haptics\": {\"tool_rate_hz\": " + num(info.toolRateHz) +
-             ", \"rate_hz\": " + num(info.hapticRateHz) +
-             ", \"achieved_rate_hz\": " + num(info.achievedRateHz) +
-             ", \"lateness_p50_ms\": " + num(info.latenessP50Ms) +
-             ", \"lateness_p99_ms\": " + num(info.latenessP99Ms) +
-             ", \"ticks\": " + std::to_string(info.hapticTicks) +
-             ", \"models_received\": " + std::to_string(info.hapticModels) +
-             ", \"models_applied\": " + std::to_string(info.modelsApplied) +
-             ", \"models_dropped\": " + std::to_string(info.modelsDropped) +
-             ", \"force_round_trip_p50_us\": " + num(stats.hapticRoundTripUs.percentile(50)) +
-             ", \"force_round_trip_p99_us\": " + num(stats.hapticRoundTripUs.percentile(99)) +
-             "},\n";
+        j +=
+            "  \"haptics\": {\"tool_rate_hz\": " + jsonNumber(info.toolRateHz) +
+            ", \"rate_hz\": " + jsonNumber(info.hapticRateHz) +
+            ", \"achieved_rate_hz\": " + jsonNumber(info.achievedRateHz) +
+            ", \"lateness_p50_ms\": " + jsonNumber(info.latenessP50Ms) +
+            ", \"lateness_p99_ms\": " + jsonNumber(info.latenessP99Ms) +
+            ", \"ticks\": " + std::to_string(info.hapticTicks) +
+            ", \"models_received\": " + std::to_string(info.hapticModels) +
+            ", \"models_applied\": " + std::to_string(info.modelsApplied) +
+            ", \"models_dropped\": " + std::to_string(info.modelsDropped) +
+            ", \"force_round_trip_p50_us\": " + jsonNumber(stats.hapticRoundTripUs.percentile(50)) +
+            ", \"force_round_trip_p99_us\": " + jsonNumber(stats.hapticRoundTripUs.percentile(99)) +
+            "},\n";
     }
     j += "  \"channels\": {";
     for (size_t c = 0; c < size_t(Channel::Count); ++c) {
@@ -135,10 +132,10 @@ std::string reportJson(const ReportInfo& info, const NetStats& stats) {
              ", \"bytes_out\": " + std::to_string(stats.totalBytesOut(ch)) +
              ", \"messages_in\": " + std::to_string(stats.totalMessagesIn(ch)) +
              ", \"messages_out\": " + std::to_string(stats.totalMessagesOut(ch)) +
-             ", \"bytes_in_per_s\": " + num(r.bytesInPerS) +
-             ", \"bytes_out_per_s\": " + num(r.bytesOutPerS) +
-             ", \"messages_in_per_s\": " + num(r.messagesInPerS) +
-             ", \"messages_out_per_s\": " + num(r.messagesOutPerS) + "}";
+             ", \"bytes_in_per_s\": " + jsonNumber(r.bytesInPerS) +
+             ", \"bytes_out_per_s\": " + jsonNumber(r.bytesOutPerS) +
+             ", \"messages_in_per_s\": " + jsonNumber(r.messagesInPerS) +
+             ", \"messages_out_per_s\": " + jsonNumber(r.messagesOutPerS) + "}";
     }
     j += "\n  }\n}\n";
     return j;

@@ -701,44 +701,11 @@ void SessionServer::simulationLoop() {
 
 namespace trephine::net {
 
-namespace {
-
-std::string jsonNum(double v) {
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "%.6g", v);
-    return buf;
-}
-
-std::string jsonText(const std::string& s) {
-    std::string out = "\"";
-    for (char ch : s) {
-        if (ch == '"' || ch == '\\') {
-            out += '\\';
-            out += ch;
-        } else if (uint8_t(ch) < 0x20) {
-            char buf[8];
-            std::snprintf(buf, sizeof buf, "\\u%04x", unsigned(uint8_t(ch)));
-            out += buf;
-        } else {
-            out += ch;
-        }
-    }
-    return out + "\"";
-}
-
-std::string jsonWindow(const SampleWindow& w) {
-    return "{\"count\": " + std::to_string(w.totalCount()) + ", \"mean\": " + jsonNum(w.mean()) +
-           ", \"p50\": " + jsonNum(w.percentile(50)) + ", \"p99\": " + jsonNum(w.percentile(99)) +
-           ", \"max\": " + jsonNum(w.max()) + "}";
-}
-
-} // namespace
-
 std::string SessionServer::reportJson() const {
     const Impl& s = *m_impl;
     std::string j = "{\n";
     j += "  \"port\": " + std::to_string(port()) + ",\n";
-    j += "  \"volume\": " + jsonText(m_config.volumeName) + ",\n";
+    j += "  \"volume\": " + jsonString(m_config.volumeName) + ",\n";
     j += "  \"max_clients\": " + std::to_string(m_config.maxClients) + ",\n";
     j += "  \"clients\": " + std::to_string(m_clientCount.load()) + ",\n";
     j += "  \"tool_states_applied\": " + std::to_string(m_toolStatesApplied.load()) + ",\n";
@@ -753,13 +720,13 @@ std::string SessionServer::reportJson() const {
     for (size_t c = 0; c < size_t(Channel::Count); ++c) {
         Channel ch = Channel(c);
         ChannelRates r = m_stats.averageRates(ch);
-        j += std::string(c ? "," : "") + "\n    " + jsonText(channelName(ch)) + ": {" +
+        j += std::string(c ? "," : "") + "\n    " + jsonString(channelName(ch)) + ": {" +
              "\"bytes_in\": " + std::to_string(m_stats.totalBytesIn(ch)) +
              ", \"bytes_out\": " + std::to_string(m_stats.totalBytesOut(ch)) +
              ", \"messages_in\": " + std::to_string(m_stats.totalMessagesIn(ch)) +
              ", \"messages_out\": " + std::to_string(m_stats.totalMessagesOut(ch)) +
-             ", \"bytes_in_per_s\": " + jsonNum(r.bytesInPerS) +
-             ", \"bytes_out_per_s\": " + jsonNum(r.bytesOutPerS) + "}";
+             ", \"bytes_in_per_s\": " + jsonNumber(r.bytesInPerS) +
+             ", \"bytes_out_per_s\": " + jsonNumber(r.bytesOutPerS) + "}";
     }
     j += "\n  },\n";
     std::lock_guard lock(s.reportMutex);
@@ -769,8 +736,8 @@ std::string SessionServer::reportJson() const {
     bool first = true;
     for (const auto& [id, r] : s.peerReport) {
         j += std::string(first ? "" : ",") + "\n    {\"id\": " + std::to_string(id) +
-             ", \"name\": " + jsonText(r.name) +
-             ", \"role\": " + jsonText(r.role == Role::Instructor ? "instructor" : "trainee") +
+             ", \"name\": " + jsonString(r.name) +
+             ", \"role\": " + jsonString(r.role == Role::Instructor ? "instructor" : "trainee") +
              ", \"hello\": " + (r.hello ? "true" : "false") +
              ", \"connected\": " + (r.disconnectedUs == 0 ? "true" : "false") +
              ", \"bytes_in\": " + std::to_string(r.bytesIn) +

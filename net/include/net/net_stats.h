@@ -102,4 +102,10 @@ struct ReportInfo {
 };
 std::string reportJson(const ReportInfo& info, const NetStats& stats);
 
+// JSON pieces shared by the client's and the server's reports.
+std::string jsonString(const std::string& s); // quoted and escaped
+std::string jsonNumber(double v);             // %.6g
+// {"count", "mean", "min", "p50", "p99", "max"} of a sample window.
+std::string jsonWindow(const SampleWindow& w);
+
 } // namespace trephine::net
