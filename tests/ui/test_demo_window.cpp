@@ -2,7 +2,9 @@
 // scripted burr hole, and the screenshot it writes. Needs a display (xvfb-run).
 #include "ui/window.h"
 
+#include "screenshot.h"
 #include <OpenImageIO/imageio.h>
+
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -13,24 +15,8 @@
 
 namespace {
 
-struct Image {
-    int w = 0, h = 0;
-    std::vector<uint8_t> rgb; // top row first
-    const uint8_t* at(int x, int y) const { return &rgb[(size_t(y) * size_t(w) + size_t(x)) * 3]; }
-};
-
-Image readPng(const std::string& path) {
-    Image img;
-    auto in = OIIO::ImageInput::open(path);
-    if (!in)
-        return img;
-    const OIIO::ImageSpec& spec = in->spec();
-    img.w = spec.width;
-    img.h = spec.height;
-    img.rgb.resize(size_t(img.w) * size_t(img.h) * 3);
-    in->read_image(0, 0, 0, 3, OIIO::TypeDesc::UINT8, img.rgb.data());
-    return img;
-}
+using trephine::testing::Image;
+using trephine::testing::readPng;
 
 bool boneColoured(const uint8_t* p) {
     return p[0] > 150 && p[1] > 140 && p[2] > 110 && p[0] >= p[2] && p[0] - p[2] < 90;

@@ -10,9 +10,11 @@
 #include "net/session_client.h"
 #include "net/session_server.h"
 
+#include "screenshot.h"
 #include <OpenImageIO/imageio.h>
 #include <glm/geometric.hpp>
 #include <glm/gtx/quaternion.hpp>
+
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -27,23 +29,8 @@ using namespace trephine;
 
 namespace {
 
-struct Image {
-    int w = 0, h = 0;
-    std::vector<uint8_t> rgb; // top row first
-    const uint8_t* at(int x, int y) const { return &rgb[(size_t(y) * size_t(w) + size_t(x)) * 3]; }
-};
-
-Image readPng(const std::string& path) {
-    Image img;
-    auto in = OIIO::ImageInput::open(path);
-    if (!in)
-        return img;
-    img.w = in->spec().width;
-    img.h = in->spec().height;
-    img.rgb.resize(size_t(img.w) * size_t(img.h) * 3);
-    in->read_image(0, 0, 0, 3, OIIO::TypeDesc::UINT8, img.rgb.data());
-    return img;
-}
+using trephine::testing::Image;
+using trephine::testing::readPng;
 
 // A lit pixel of `colour`'s hue: the compositor scales the base colour by its headlight term.
 bool hasHue(const uint8_t* p, glm::vec4 colour) {
