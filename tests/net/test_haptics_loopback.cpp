@@ -10,6 +10,8 @@
 #include "libsim/skull.h"
 #include "net/view.h"
 
+#include "loopback.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -22,19 +24,9 @@ using namespace trephine::net;
 
 namespace {
 
-ENetAddress loopback(uint16_t port) {
-    return parseAddress("127.0.0.1:" + std::to_string(port));
-}
-
-bool pumpUntil(SessionClient& client, const std::function<bool()>& pred, double guardS) {
-    auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(guardS);
-    while (std::chrono::steady_clock::now() < deadline) {
-        client.poll(1);
-        if (pred())
-            return true;
-    }
-    return false;
-}
+using trephine::testing::loopback;
+using trephine::testing::loopbackServerConfig;
+using trephine::testing::pumpUntil;
 
 // A HapticModelSource that asks the server: sends the sampled pose as a (non-drilling) tool state
 // and pumps the client until the model answering that sequence has arrived.
@@ -61,7 +53,7 @@ struct ServerModels {
             auto m = client.latestHapticModel();
             return m && m->toolSequence == seq;
         };
-        if (!pumpUntil(client, answer, 20.0)) {
+        if (!pumpUntil({&client}, answer, 20.0)) {
             ++lost;
             return d;
         }
@@ -88,18 +80,14 @@ TEST(HapticsLoopback, MultirateStableAt20HzOverLoopbackWhereZeroOrderHoldIsNot) 
     HapticsStudyConfig config; // 2 mm burr, 2 s, hand target 2 mm inside, 1 kHz haptics
     ASSERT_EQ(config.shape.kind, ToolKind::Burr);
 
-    ServerConfig sc;
-    sc.port = 0;
-    sc.volumeName = "box:48";
-    sc.renderThreads = 1;
-    SessionServer server(box, sc);
+    SessionServer server(box, loopbackServerConfig("box:48"));
     server.start();
     ClientConfig cc;
     cc.view = toViewSpec(cameraPreset("top", box, {16, 16}));
     SessionClient client(cc);
     client.connect(loopback(server.port()));
     ASSERT_TRUE(pumpUntil(
-        client, [&] { return client.hasFullImage(); }, 60.0));
+        {&client}, [&] { return client.hasFullImage(); }, 60.0));
 
     auto overLoopback = [&](HapticMethod method, bool gradient, int& models) {
         HapticsStudyConfig c = config;

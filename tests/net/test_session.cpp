@@ -11,6 +11,8 @@
 #include "net/codec.h"
 #include "net/view.h"
 
+#include "loopback.h"
+
 #include <gtest/gtest.h>
 
 #include <glm/gtx/quaternion.hpp>
@@ -27,11 +29,10 @@ using namespace trephine::net;
 
 namespace {
 
-constexpr int kWindow = 160;
+using trephine::testing::loopback;
+using trephine::testing::pumpUntil;
 
-ENetAddress loopback(uint16_t port) {
-    return parseAddress("127.0.0.1:" + std::to_string(port));
-}
+constexpr int kWindow = 160;
 
 ServerConfig testConfig(const std::string& name) {
     ServerConfig c;
@@ -43,19 +44,6 @@ ServerConfig testConfig(const std::string& name) {
 
 ViewSpec presetView(const Volume& v, const char* name) {
     return toViewSpec(cameraPreset(name, v, {kWindow, kWindow}));
-}
-
-// Pumps the clients until pred() holds; false after the guard deadline.
-bool pumpUntil(std::vector<SessionClient*> clients, const std::function<bool()>& pred,
-               double guardS = 60.0) {
-    auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(guardS);
-    while (std::chrono::steady_clock::now() < deadline) {
-        for (SessionClient* c : clients)
-            c->poll(1);
-        if (pred())
-            return true;
-    }
-    return false;
 }
 
 // The client's DBI equals a fresh full render of the server's volume for its view.

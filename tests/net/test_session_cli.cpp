@@ -7,6 +7,8 @@
 #include "libsim/skull.h"
 #include "libsim/volume_io.h"
 
+#include "loopback.h"
+
 #include <gtest/gtest.h>
 
 #include <glm/gtx/quaternion.hpp>
@@ -24,6 +26,8 @@
 
 using namespace trephine;
 using namespace trephine::net;
+
+using trephine::testing::loopbackServerConfig;
 
 TEST(SessionCli, SigtermWritesSaveOnExitWithTheDrilling) {
     std::string path = (std::filesystem::temp_directory_path() /
@@ -104,10 +108,7 @@ TEST(SessionCli, SigtermWritesSaveOnExitWithTheDrilling) {
 // and the force round trip.
 TEST(SessionCli, HeadlessTraineeRunsTheHapticLoopAndReportsIt) {
     Volume sphere = makeSphere(32);
-    ServerConfig sc;
-    sc.port = 0;
-    sc.volumeName = "sphere:32";
-    sc.renderThreads = 1;
+    ServerConfig sc = loopbackServerConfig("sphere:32");
     SessionServer server(sphere, sc);
     server.start();
     std::string report = (std::filesystem::temp_directory_path() /

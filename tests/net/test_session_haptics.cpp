@@ -10,6 +10,8 @@
 #include "libsim/skull.h"
 #include "net/view.h"
 
+#include "loopback.h"
+
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -22,9 +24,8 @@ using namespace trephine::net;
 
 namespace {
 
-ENetAddress loopback(uint16_t port) {
-    return parseAddress("127.0.0.1:" + std::to_string(port));
-}
+using trephine::testing::loopback;
+using trephine::testing::pumpUntil;
 
 ServerConfig testConfig() {
     ServerConfig c;
@@ -32,18 +33,6 @@ ServerConfig testConfig() {
     c.volumeName = "sphere:40";
     c.renderThreads = 1;
     return c;
-}
-
-bool pumpUntil(std::vector<SessionClient*> clients, const std::function<bool()>& pred,
-               double guardS = 60.0) {
-    auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(guardS);
-    while (std::chrono::steady_clock::now() < deadline) {
-        for (SessionClient* c : clients)
-            c->poll(1);
-        if (pred())
-            return true;
-    }
-    return false;
 }
 
 ViewSpec topView(const Volume& v, int size = 64) {

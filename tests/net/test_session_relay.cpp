@@ -8,6 +8,8 @@
 #include "libsim/tool.h"
 #include "net/view.h"
 
+#include "loopback.h"
+
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -19,17 +21,9 @@ using namespace trephine::net;
 
 namespace {
 
-bool pumpUntil(std::vector<SessionClient*> clients, const std::function<bool()>& pred,
-               double guardS = 30.0) {
-    auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(guardS);
-    while (std::chrono::steady_clock::now() < deadline) {
-        for (SessionClient* c : clients)
-            c->poll(1);
-        if (pred())
-            return true;
-    }
-    return false;
-}
+using trephine::testing::loopbackServerConfig;
+
+using trephine::testing::pumpUntil;
 
 ClientConfig clientConfig(const Volume& v, const std::string& name, Role role) {
     ClientConfig c;
@@ -53,10 +47,7 @@ ToolState burrInBone(int n, uint32_t sequence) {
 
 TEST(SessionRelay, InstructorReceivesTheTraineesForceModels) {
     Volume sphere = makeSphere(40);
-    ServerConfig sc;
-    sc.port = 0;
-    sc.volumeName = "sphere:40";
-    sc.renderThreads = 1;
+    ServerConfig sc = loopbackServerConfig("sphere:40");
     SessionServer server(sphere, sc);
     server.start();
     const ENetAddress at = parseAddress("127.0.0.1:" + std::to_string(server.port()));

@@ -7,7 +7,9 @@
 #include "net/session_server.h"
 #include "net/view.h"
 
+#include "loopback.h"
 #include <glm/gtx/quaternion.hpp>
+
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -18,6 +20,8 @@ using namespace trephine;
 using namespace trephine::net;
 
 namespace {
+
+using trephine::testing::loopbackServerConfig;
 template <class F>
 bool waitFor(F pred, double seconds) {
     auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
@@ -33,10 +37,7 @@ bool waitFor(F pred, double seconds) {
 TEST(ClientThread, PublishesSnapshotsAndDrilledRectangles) {
     Volume skull = makeSkull(64);
     SurfaceSite site = defaultBurrSite(skull);
-    ServerConfig sc;
-    sc.port = 0;
-    sc.volumeName = "skull:64";
-    sc.renderThreads = 1;
+    ServerConfig sc = loopbackServerConfig("skull:64");
     SessionServer server(skull, sc);
     server.start();
 
@@ -112,10 +113,7 @@ TEST(ClientThread, NoServerMeansRetryingWithAReason) {
 
 TEST(ClientThread, ViewChangeWaitsThenDeliversAFullImage) {
     Volume skull = makeSkull(64);
-    ServerConfig sc;
-    sc.port = 0;
-    sc.volumeName = "skull:64";
-    sc.renderThreads = 1;
+    ServerConfig sc = loopbackServerConfig("skull:64");
     SessionServer server(skull, sc);
     server.start();
     ClientThreadConfig cc;
@@ -147,10 +145,7 @@ TEST(ClientThread, ViewChangeWaitsThenDeliversAFullImage) {
 
 TEST(ClientThread, ReconnectsToANewServerOnTheSamePort) {
     Volume skull = makeSkull(64);
-    ServerConfig sc;
-    sc.port = 0;
-    sc.volumeName = "skull:64";
-    sc.renderThreads = 1;
+    ServerConfig sc = loopbackServerConfig("skull:64");
     auto server = std::make_unique<SessionServer>(skull, sc);
     const uint16_t port = server->port();
     server->start();

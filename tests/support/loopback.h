@@ -1,0 +1,44 @@
+// Loopback session helpers for net and ui tests: a server config on a port the OS picks, the
+// loopback address of a port, and pumping clients until a condition holds.
+#pragma once
+
+#include "net/enet_host.h"
+#include "net/session_client.h"
+#include "net/session_server.h"
+
+#include <chrono>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace trephine::testing {
+
+// A server on any free port (see SessionServer::port()) serving the named built-in volume.
+inline net::ServerConfig loopbackServerConfig(const std::string& volumeName,
+                                              int renderThreads = 1) {
+    net::ServerConfig c;
+    c.port = 0;
+    c.volumeName = volumeName;
+    c.renderThreads = renderThreads;
+    return c;
+}
+
+inline ENetAddress loopback(uint16_t port) {
+    return net::parseAddress("127.0.0.1:" + std::to_string(port));
+}
+
+// Polls every client (1 ms each) until pred() holds; false once the guard deadline passes. The
+// guard only stops a hung test: tests never assert on how long this takes.
+inline bool pumpUntil(const std::vector<net::SessionClient*>& clients,
+                      const std::function<bool()>& pred, double guardS = 60.0) {
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(guardS);
+    while (std::chrono::steady_clock::now() < deadline) {
+        for (net::SessionClient* c : clients)
+            c->poll(1);
+        if (pred())
+            return true;
+    }
+    return false;
+}
+
+} // namespace trephine::testing
