@@ -1,0 +1,226 @@
+#include "libsim/svg_plot.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdarg>
+#include <cstdio>
+#include <limits>
+
+namespace trephine {
+
+namespace {
+
+const char* const kPalette[] = {"#1f77b4", "#d62728", "#2ca02c", "#ff7f0e",
+                                "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"};
+
+std::string escapeXml(const std::string& s) {
+    std::string out;
+    out.reserve(s.size());
+    for (char c : s) {
+        switch (c) {
+        case '&':
+            out += "&amp;";
+            break;
+        case '<':
+            out += "&lt;";
+            break;
+        case '>':
+            out += "&gt;";
+            break;
+        case '"':
+            out += "&quot;";
+            break;
+        default:
+            out += c;
+        }
+    }
+    return out;
+}
+
+std::string tickLabel(double v) {
+    if (v == 0.0)
+        return "0";
+    const double a = std::fabs(v);
+    if (a >= 1e5 || a < 1e-3)
+        return formatString("%.0e", v);
+    return formatString("%g", v);
+}
+
+bool usable(double x, double y, bool logY) {
+    return std::isfinite(x) && std::isfinite(y) && (!logY || y > 0.0);
+}
+
+} // namespace
+
+std::string formatString(const char* fmt, ...) {
+    va_list args;
+    va_start(args, fmt);
+    va_list copy;
+    va_copy(copy, args);
+    const int n = std::vsnprintf(nullptr, 0, fmt, copy);
+    va_end(copy);
+    std::string out(size_t(std::max(n, 0)), '\0');
+    if (n > 0)
+        std::vsnprintf(out.data(), size_t(n) + 1, fmt, args);
+    va_end(args);
+    return out;
+}
+
+std::vector<double> niceTicks(double lo, double hi, int count) {
+    std::vector<double> ticks;
+    if (!std::isfinite(lo) || !std::isfinite(hi) || count < 1)
+        return ticks;
+    if (hi < lo)
+        std::swap(lo, hi);
+    if (hi - lo < 1e-12) {
+        ticks.push_back(lo);
+        return ticks;
+    }
+    const double raw = (hi - lo) / count;
+    const double mag = std::pow(10.0, std::floor(std::log10(raw)));
+    double step = mag;
+    for (double m : {1.0, 2.0, 5.0, 10.0})
+        if (raw <= m * mag) {
+            step = m * mag;
+            break;
+        }
+    const double first = std::ceil(lo / step - 1e-9) * step;
+    for (double t = first; t <= hi + step * 1e-9; t += step)
+        ticks.push_back(std::fabs(t) < step * 1e-9 ? 0.0 : t);
+    return ticks;
+}
+
+std::string svgLinePlot(const PlotSpec& spec) {
+    const double W = std::max(spec.width, 200), H = std::max(spec.height, 150);
+    const double left = 70, right = 170, top = 40, bottom = 55; // right: the legend
+    const double pw = W - left - right, ph = H - top - bottom;
+
+    double xmin = std::numeric_limits<double>::infinity(), xmax = -xmin;
+    double ymin = xmin, ymax = -xmin;
+    for (const PlotSeries& s : spec.series)
+        for (size_t i = 0; i < std::min(s.x.size(), s.y.size()); ++i) {
+            if (!usable(s.x[i], s.y[i], spec.logY))
+                continue;
+            const double y = spec.logY ? std::log10(s.y[i]) : s.y[i];
+            xmin = std::min(xmin, s.x[i]);
+            xmax = std::max(xmax, s.x[i]);
+            ymin = std::min(ymin, y);
+            ymax = std::max(ymax, y);
+        }
+    if (!std::isfinite(xmin)) { // nothing to draw: unit axes
+        xmin = 0, xmax = 1, ymin = 0, ymax = 1;
+    }
+    if (xmax - xmin < 1e-12)
+        xmin -= 0.5, xmax += 0.5;
+    if (spec.logY) {
+        ymin = std::floor(ymin);
+        ymax = std::ceil(ymax);
+        if (ymax - ymin < 1)
+            ymax = ymin + 1;
+    } else {
+        ymin = std::min(ymin, 0.0); // rates and sizes read best from zero
+        if (ymax - ymin < 1e-12)
+            ymax = ymin + 1;
+        ymax += 0.05 * (ymax - ymin);
+    }
+    auto px = [&](double x) { return left + (x - xmin) / (xmax - xmin) * pw; };
+    auto py = [&](double y) { return top + ph - (y - ymin) / (ymax - ymin) * ph; };
+
+    std::string svg =
+        formatString("<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"%.0f\" height=\"%.0f\" "
+                     "viewBox=\"0 0 %.0f %.0f\" font-family=\"sans-serif\" font-size=\"12\">\n"
+                     "<rect width=\"100%%\" height=\"100%%\" fill=\"white\"/>\n",
+                     W, H, W, H);
+    svg += formatString("<text x=\"%.1f\" y=\"22\" text-anchor=\"middle\" font-size=\"14\" "
+                        "font-weight=\"bold\">%s</text>\n",
+                        left + pw / 2, escapeXml(spec.title).c_str());
+
+    // Grid and ticks.
+    for (double t : niceTicks(xmin, xmax, 8)) {
+        const double x = px(t);
+        svg += formatString("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" "
+                            "stroke=\"#ddd\"/>\n<text x=\"%.1f\" y=\"%.1f\" "
+                            "text-anchor=\"middle\">%s</text>\n",
+                            x, top, x, top + ph, x, top + ph + 16, tickLabel(t).c_str());
+    }
+    std::vector<double> yticks;
+    if (spec.logY)
+        for (double d = ymin; d <= ymax + 1e-9; d += 1)
+            yticks.push_back(d);
+    else
+        yticks = niceTicks(ymin, ymax, 6);
+    for (double t : yticks) {
+        const double y = py(t);
+        const std::string label = tickLabel(spec.logY ? std::pow(10.0, t) : t);
+        svg += formatString("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" "
+                            "stroke=\"#ddd\"/>\n<text x=\"%.1f\" y=\"%.1f\" "
+                            "text-anchor=\"end\">%s</text>\n",
+                            left, y, left + pw, y, left - 6, y + 4, label.c_str());
+    }
+    svg += formatString("<rect x=\"%.1f\" y=\"%.1f\" width=\"%.1f\" height=\"%.1f\" "
+                        "fill=\"none\" stroke=\"#333\"/>\n",
+                        left, top, pw, ph);
+    svg += formatString("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\">%s</text>\n",
+                        left + pw / 2, H - 12, escapeXml(spec.xLabel).c_str());
+    svg += formatString("<text x=\"16\" y=\"%.1f\" text-anchor=\"middle\" "
+                        "transform=\"rotate(-90 16 %.1f)\">%s%s</text>\n",
+                        top + ph / 2, top + ph / 2, escapeXml(spec.yLabel).c_str(),
+                        spec.logY ? " (log)" : "");
+
+    // Series and legend.
+    size_t paletteIndex = 0;
+    for (size_t si = 0; si < spec.series.size(); ++si) {
+        const PlotSeries& s = spec.series[si];
+        const std::string color =
+            s.color.empty() ? kPalette[paletteIndex++ % std::size(kPalette)] : s.color;
+        std::string points;
+        std::string markers;
+        for (size_t i = 0; i < std::min(s.x.size(), s.y.size()); ++i) {
+            if (!usable(s.x[i], s.y[i], spec.logY))
+                continue;
+            const double x = px(s.x[i]), y = py(spec.logY ? std::log10(s.y[i]) : s.y[i]);
+            points += formatString("%.1f,%.1f ", x, y);
+            markers += formatString("<circle cx=\"%.1f\" cy=\"%.1f\" r=\"3\" fill=\"%s\"/>\n", x, y,
+                                    color.c_str());
+        }
+        svg += formatString("<polyline fill=\"none\" stroke=\"%s\" stroke-width=\"2\"%s "
+                            "points=\"%s\"/>\n",
+                            color.c_str(), s.dashed ? " stroke-dasharray=\"6 4\"" : "",
+                            points.c_str());
+        svg += markers;
+        const double ly = top + 10 + 20 * double(si);
+        svg += formatString("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"%s\" "
+                            "stroke-width=\"2\"%s/>\n<text x=\"%.1f\" y=\"%.1f\">%s</text>\n",
+                            left + pw + 12, ly, left + pw + 36, ly, color.c_str(),
+                            s.dashed ? " stroke-dasharray=\"6 4\"" : "", left + pw + 42, ly + 4,
+                            escapeXml(s.name).c_str());
+    }
+    svg += "</svg>\n";
+    return svg;
+}
+
+std::string markdownTable(const std::vector<std::string>& header,
+                          const std::vector<std::vector<std::string>>& rows) {
+    auto cell = [](const std::string& s) {
+        std::string out;
+        for (char c : s)
+            out += c == '|' ? std::string("\\|") : std::string(1, c);
+        return out;
+    };
+    std::string md = "|";
+    for (const std::string& h : header)
+        md += " " + cell(h) + " |";
+    md += "\n|";
+    for (size_t i = 0; i < header.size(); ++i)
+        md += i == 0 ? "---|" : "---:|";
+    md += "\n";
+    for (const auto& row : rows) {
+        md += "|";
+        for (size_t i = 0; i < header.size(); ++i)
+            md += " " + (i < row.size() ? cell(row[i]) : std::string()) + " |";
+        md += "\n";
+    }
+    return md;
+}
+
+} // namespace trephine
