@@ -1,6 +1,7 @@
 // The server renderer's budgets, each printed beside its target (counters *_ms and target_ms):
 //   full 500x500 frame of skull:256, all cores        target 15 ms (floor 50 ms)
-//   dirty rectangle 64^2 / 128^2 after a burr stroke  target 0.3 ms / 1 ms
+//   dirty rectangle 64^2 / 128^2 after a burr stroke  target 0.3 ms / 1 ms, without and with the
+//                                                     view's hit cache (the server's path)
 //   BB_volume -> BB_screen projection                 (no target: it should be negligible)
 //   the paper's view: 128^3 at 330.2 mm, 60 deg, 500x500
 // Filter with --benchmark_filter=Render.
@@ -30,12 +31,16 @@ struct Scene {
     std::unique_ptr<ThreadPool> pool;
     std::unique_ptr<Renderer> renderer;
     Camera camera;
+    // The working view's hit cache as a full render before the stroke left it: what the server
+    // holds when the stroke's dirty rectangle is re-rendered.
+    HitCache cacheBeforeStroke;
 
     explicit Scene(int n) : volume(makeSkull(n)) {
         site = defaultBurrSite(volume);
         pool = std::make_unique<ThreadPool>();
         renderer = std::make_unique<Renderer>(volume, pool.get());
         camera = cameraPreset("working", volume, {500, 500});
+        renderer->render(camera, &cacheBeforeStroke);
         // A 4 mm burr pressed 2 mm into the bone along the normal, then moved 3 mm sideways.
         Driller driller(ToolShape::burr(4.0f));
         ToolPose pose;
@@ -104,6 +109,38 @@ void BM_RenderDirtyRect(benchmark::State& state) {
     state.SetItemsProcessed(state.iterations() * rect.area());
 }
 BENCHMARK(BM_RenderDirtyRect)->Arg(64)->Arg(128)->Unit(benchmark::kMicrosecond)->UseRealTime();
+
+// The same rectangles re-rendered through the view's hit cache, each time from the cache as it was
+// before the stroke (the copy is not timed), as the server's first re-render after a stroke.
+void BM_RenderDirtyRectCached(benchmark::State& state) {
+    Scene& s = skull256();
+    const int size = int(state.range(0));
+    PixelRect screen = dirtyScreenRect(s.camera, s.volume, s.stroke);
+    int cx = screen.x + screen.w / 2, cy = screen.y + screen.h / 2;
+    PixelRect rect = intersect({cx - size / 2, cy - size / 2, size, size}, {0, 0, 500, 500});
+    Dbi frame(500, 500);
+    HitCache cache;
+    double total = 0.0;
+    for (auto _ : state) {
+        state.PauseTiming();
+        cache = s.cacheBeforeStroke;
+        state.ResumeTiming();
+        auto t0 = Clock::now();
+        s.renderer->render(s.camera, rect, frame, &cache);
+        total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+        benchmark::DoNotOptimize(frame.depth());
+    }
+    reportMs(state, total, size <= 64 ? 0.3 : 1.0);
+    // Every pixel should have resumed (a cache the renderer rejected would show 0).
+    state.counters["resumed"] =
+        state.iterations() ? double(cache.resumed()) / double(rect.area()) : 0.0;
+    state.SetItemsProcessed(state.iterations() * rect.area());
+}
+BENCHMARK(BM_RenderDirtyRectCached)
+    ->Arg(64)
+    ->Arg(128)
+    ->Unit(benchmark::kMicrosecond)
+    ->UseRealTime();
 
 // The stroke's own BB_screen, whatever its size (reported as w, h).
 void BM_RenderStrokeBBScreen(benchmark::State& state) {

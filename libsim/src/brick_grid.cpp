@@ -112,14 +112,14 @@ uint8_t BrickGrid::brickMax(const Volume& volume, glm::ivec3 b) const {
     return m;
 }
 
-void BrickGrid::update(const Volume& volume, const Box3i& changed) {
+bool BrickGrid::update(const Volume& volume, const Box3i& changed) {
     if (empty() || volume.dims() != m_volumeDims) {
         build(volume);
-        return;
+        return true;
     }
     Box3i box = changed.intersect(volume.bounds());
     if (box.empty())
-        return;
+        return false;
     // Brick b covers voxels [8b - apronLo, 8b + 8 + apronHi): it overlaps [lo, hi) when
     // 8b + 8 + apronHi > lo and 8b - apronLo < hi.
     glm::ivec3 b0, b1;
@@ -144,6 +144,7 @@ void BrickGrid::update(const Volume& volume, const Box3i& changed) {
             }
     if (gained)
         computeDistances();
+    return gained;
 }
 
 void BrickGrid::computeDistances() {

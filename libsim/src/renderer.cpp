@@ -11,6 +11,7 @@
 #include "libsim/thread_pool.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cassert>
 #include <climits>
 #include <cmath>
@@ -132,12 +133,18 @@ inline float voxelAt(const Frame& f, int x, int y, int z) {
 // Trilinear density at voxel coordinate p (voxel centres at integers); voxels outside the volume
 // are air. The in-volume fast path and the border path feed the same arithmetic, so a sample
 // depends on p alone.
+//
+// Each lerp is (1 - t) a + t b with both weights >= 0, never a + t (b - a): every float operation
+// is then monotone in every corner, so lowering corners (erosion) can never raise a sample, not
+// even by an ulp. The hit cache relies on it (HitCache). a + t (b - a) is not monotone in a: with
+// t near 1 its rounding can outweigh the (1 - t) share of a change of a.
 inline float trilinear(float tx, float ty, float tz, float c000, float c100, float c010, float c110,
                        float c001, float c101, float c011, float c111) {
-    float c00 = c000 + tx * (c100 - c000), c10 = c010 + tx * (c110 - c010);
-    float c01 = c001 + tx * (c101 - c001), c11 = c011 + tx * (c111 - c011);
-    float c0 = c00 + ty * (c10 - c00), c1 = c01 + ty * (c11 - c01);
-    return c0 + tz * (c1 - c0);
+    const float ux = 1.0f - tx, uy = 1.0f - ty, uz = 1.0f - tz;
+    float c00 = ux * c000 + tx * c100, c10 = ux * c010 + tx * c110;
+    float c01 = ux * c001 + tx * c101, c11 = ux * c011 + tx * c111;
+    float c0 = uy * c00 + ty * c10, c1 = uy * c01 + ty * c11;
+    return uz * c0 + tz * c1;
 }
 
 inline float sampleDensity(const Frame& f, glm::vec3 p) {
@@ -203,9 +210,16 @@ glm::vec3 gradientAt(const Frame& f, glm::vec3 p) {
     };
     glm::vec3 g[8];
     if (ix >= 1 && iy >= 1 && iz >= 1 && ix + 2 < f.n.x && iy + 2 < f.n.y && iz + 2 < f.n.z) {
+        // Differences of bytes in integers, converted once: float(a) - float(b) is exact for
+        // bytes, so the bits are those of the float differences.
         const uint8_t* b = f.density + ix + f.sy * iy + f.sz * iz;
         const ptrdiff_t sy = f.sy, sz = f.sz;
-        gradients([&](int x, int y, int z) { return float(b[x + sy * y + sz * z]); }, g);
+        for (int i = 0; i < 8; ++i) {
+            const uint8_t* c = b + (i & 1) + sy * ((i >> 1) & 1) + sz * (i >> 2);
+            g[i] = glm::vec3(float(int(c[1]) - int(c[-1])), float(int(c[sy]) - int(c[-sy])),
+                             float(int(c[sz]) - int(c[-sz]))) *
+                   0.5f;
+        }
     } else {
         gradients([&](int x, int y, int z) { return voxelAt(f, ix + x, iy + y, iz + z); }, g);
     }
@@ -276,6 +290,9 @@ struct March {
     bool hit = false;
     float t = 0.0f;   // refined hit distance, mm
     float tIn = 0.0f; // first sample inside
+    // Index of the first sample inside (tIn = kIn * dt), or HitCache::kNever when no sample of the
+    // ray is inside.
+    int32_t kIn = HitCache::kNever;
 };
 
 // Samples sit at t = k * dt from the eye for integer k, whatever is skipped. A brick at Chebyshev
@@ -288,7 +305,11 @@ struct March {
 // field is <= 127 there; it changes by at most 255 per voxel along each axis, so a sample that
 // float rounding (under 2.5e-4 voxel with the eye within kMaxSkipEyeVoxels) put just outside the
 // brick, or a box exit rounded a little late, reads at most 127 + 765 * 2.5e-4 < 128.
-March march(const Frame& f, const Ray& r, float tSkipTo) {
+//
+// `kResume` is a lower bound on the index of the first sample inside (a hit cache's entry; 0 when
+// unknown, kNever when no sample can be inside): marching starts there, which changes nothing but
+// the time taken.
+March march(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume) {
     March m;
     // Samples live where some trilinear corner is inside the volume: voxel coordinates [-1, n].
     float t0 = float(std::max(r.tNear, 0.0)), t1 = float(r.tFar);
@@ -311,10 +332,12 @@ March march(const Frame& f, const Ray& r, float tSkipTo) {
     const int kStart = int(std::ceil(t0 / dt));
     const int kEnd = int(std::floor(t1 / dt));
 
-    // The tile pass proved that no sample before tSkipTo can be inside.
-    if (!(tSkipTo <= t1))
+    // The tile pass proved that no sample before tSkipTo can be inside; the cache, none before
+    // kResume.
+    if (!(tSkipTo <= t1) || kResume > kEnd)
         return m;
     int k = tSkipTo > t0 ? std::max(kStart, int(tSkipTo * invDt)) : kStart;
+    k = std::max(k, int(kResume));
     float value = 0.0f;
     bool found = false;
     // The last sample below the iso-value whose density was computed (by the same arithmetic as
@@ -375,6 +398,7 @@ March march(const Frame& f, const Ray& r, float tSkipTo) {
         return m;
 
     m.hit = true;
+    m.kIn = k;
     m.tIn = float(k) * dt;
     m.t = m.tIn;
     if (k > kStart) {
@@ -558,11 +582,13 @@ Material hitMaterial(const Frame& f, glm::vec3 pHit, glm::vec3 pIn) {
     return m == Material::Air ? Material::Cortical : m;
 }
 
-RayHit traceRay(const Frame& f, int x, int y, float tSkipTo) {
+// `resume`: in, a lower bound on the first inside sample's index (see march); out, that index.
+RayHit traceRay(const Frame& f, int x, int y, float tSkipTo, int32_t& resume) {
     RayHit h;
     Ray r = pixelRay(f, x, y);
     h.direction = glm::vec3(r.dir);
-    March m = march(f, r, tSkipTo);
+    March m = march(f, r, tSkipTo, resume);
+    resume = m.kIn;
     if (!m.hit)
         return h;
     h.hit = true;
@@ -614,64 +640,126 @@ void shadePixel(const RayHit& h, uint8_t* rgba) {
 
 // [SECTION] Renderer -----------------------------------------------------------------------------
 
+namespace {
+
+// Generations are unique across renderers, so a cache can never match another renderer's volume.
+std::atomic<uint64_t> g_generations{0};
+
+uint64_t nextGeneration() {
+    return g_generations.fetch_add(1, std::memory_order_relaxed) + 1;
+}
+
+} // namespace
+
+void HitCache::clear() {
+    m_generation = 0;
+    m_resume.clear();
+    m_resumed = 0;
+}
+
+bool HitCache::validFor(const Renderer& renderer, const Camera& camera) const {
+    return m_generation == renderer.generation() && m_camera == camera &&
+           m_stepVoxels == renderer.options().stepVoxels &&
+           m_spacing == renderer.volume().spacing() &&
+           m_resume.size() == size_t(camera.width) * size_t(camera.height);
+}
+
 Renderer::Renderer(const Volume& volume, ThreadPool* pool, RenderOptions options)
-    : m_volume(&volume), m_pool(pool), m_options(options) {
+    : m_volume(&volume), m_pool(pool), m_options(options), m_generation(nextGeneration()) {
     m_bricks.build(volume);
 }
 
 void Renderer::volumeChanged(const Box3i& changed) {
-    m_bricks.update(*m_volume, changed);
+    if (m_bricks.update(*m_volume, changed))
+        m_generation = nextGeneration(); // surface appeared: not erosion, caches may be wrong
 }
 
 void Renderer::rebuild() {
     m_bricks.build(*m_volume);
+    m_generation = nextGeneration();
 }
 
 RayHit Renderer::castRay(const Camera& camera, int x, int y) const {
     Frame f = makeFrame(*m_volume, camera, m_options, m_bricks);
-    return traceRay(f, x, y, 0.0f);
+    int32_t resume = 0;
+    return traceRay(f, x, y, 0.0f, resume);
 }
 
 Dbi Renderer::render(const Camera& camera) const {
+    return render(camera, nullptr);
+}
+
+Dbi Renderer::render(const Camera& camera, HitCache* cache) const {
     Dbi frame(camera.width, camera.height);
-    renderInto(camera, frame.bounds(), frame, 0, 0);
+    render(camera, frame.bounds(), frame, cache);
     return frame;
 }
 
 void Renderer::render(const Camera& camera, const PixelRect& rect, Dbi& frame) const {
+    render(camera, rect, frame, nullptr);
+}
+
+void Renderer::render(const Camera& camera, const PixelRect& rect, Dbi& frame,
+                      HitCache* cache) const {
     assert(frame.width() == camera.width && frame.height() == camera.height &&
            "Renderer::render: the frame must be the camera's window size");
+    if (cache && !cache->validFor(*this, camera)) {
+        // Another view or a volume that may have gained density: start afresh. 0 (unknown) is a
+        // valid lower bound for every pixel.
+        cache->m_camera = camera;
+        cache->m_generation = m_generation;
+        cache->m_stepVoxels = m_options.stepVoxels;
+        cache->m_spacing = m_volume->spacing();
+        cache->m_resume.assign(size_t(camera.width) * size_t(camera.height), 0);
+        cache->m_resumed = 0;
+    }
     PixelRect r = intersect(rect, frame.bounds());
-    renderInto(camera, r, frame, r.x, r.y);
+    renderInto(camera, r, frame, r.x, r.y, cache);
 }
 
 Dbi Renderer::renderRect(const Camera& camera, const PixelRect& rect) const {
     assert(PixelRect(0, 0, camera.width, camera.height).contains(rect) &&
            "Renderer::renderRect: rectangle outside the window");
     Dbi out(rect.w, rect.h);
-    renderInto(camera, rect, out, 0, 0);
+    renderInto(camera, rect, out, 0, 0, nullptr);
     return out;
 }
 
-void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, int outX,
-                          int outY) const {
+void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, int outX, int outY,
+                          HitCache* cache) const {
     if (rect.empty() || m_volume->empty())
         return;
     const Frame f = makeFrame(*m_volume, camera, m_options, m_bricks);
     const int tile = std::max(4, m_options.tileSize);
     const int tilesX = (rect.w + tile - 1) / tile, tilesY = (rect.h + tile - 1) / tile;
+    int32_t* resume = cache ? cache->m_resume.data() : nullptr;
+    const size_t stride = size_t(camera.width);
+    std::atomic<int64_t> resumed{0};
     auto renderTile = [&](int i) {
         int tx = i % tilesX, ty = i / tilesX;
         int x0 = rect.x + tx * tile, y0 = rect.y + ty * tile;
         int x1 = std::min(x0 + tile, rect.x + rect.w), y1 = std::min(y0 + tile, rect.y + rect.h);
+        int64_t known = 0;
         for (int by = y0; by < y1; by += kConeBlock)
             for (int bx = x0; bx < x1; bx += kConeBlock) {
                 int bx1 = std::min(bx + kConeBlock, x1), by1 = std::min(by + kConeBlock, y1);
-                float tSkipTo = f.distance ? coneSkipTo(f, bx, by, bx1, by1) : 0.0f;
+                // The cone only proves a lower bound; where the cache knows every pixel's, the
+                // cone has nothing to add worth its cost.
+                bool allKnown = resume != nullptr;
+                for (int y = by; y < by1 && allKnown; ++y)
+                    for (int x = bx; x < bx1; ++x)
+                        if (resume[size_t(y) * stride + size_t(x)] == 0) {
+                            allKnown = false;
+                            break;
+                        }
+                float tSkipTo = f.distance && !allKnown ? coneSkipTo(f, bx, by, bx1, by1) : 0.0f;
                 for (int y = by; y < by1; ++y)
                     for (int x = bx; x < bx1; ++x) {
                         int ox = x - rect.x + outX, oy = y - rect.y + outY;
-                        RayHit h = traceRay(f, x, y, tSkipTo);
+                        int32_t k = 0;
+                        int32_t* slot = resume ? &resume[size_t(y) * stride + size_t(x)] : &k;
+                        known += *slot != 0;
+                        RayHit h = traceRay(f, x, y, tSkipTo, *slot);
                         uint8_t* rgba = out.color(ox, oy);
                         if (h.hit) {
                             shadePixel(h, rgba);
@@ -682,12 +770,16 @@ void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out,
                         }
                     }
             }
+        if (resume)
+            resumed.fetch_add(known, std::memory_order_relaxed);
     };
     if (m_pool)
         m_pool->parallelFor(tilesX * tilesY, renderTile);
     else
         for (int i = 0; i < tilesX * tilesY; ++i)
             renderTile(i);
+    if (cache)
+        cache->m_resumed += resumed.load(std::memory_order_relaxed);
 }
 
 } // namespace trephine

@@ -4,6 +4,7 @@
 #include "libsim/renderer.h"
 
 #include "libsim/brick_grid.h"
+#include "libsim/dirty_rect.h"
 #include "libsim/drill.h"
 #include "libsim/skull.h"
 #include "libsim/thread_pool.h"
@@ -400,6 +401,164 @@ TEST(Renderer, ClientGeometryCompositesWithTheDbiPixelForPixel) {
     EXPECT_EQ(mismatches, 0);
     EXPECT_GT(visible, 500);
     EXPECT_GT(hidden, 500);
+}
+
+// [SECTION] Hit cache: dirty re-renders that resume at the last first hit
+
+// The server's path: one cache per view filled by a full render; after each erosion only BB_screen
+// is re-rendered through the cache. The frame must equal an uncached full render bit for bit, and
+// so must a full render through the cache after all the strokes (pixels outside the rectangles
+// then resume at indices computed many strokes earlier).
+TEST(HitCache, CachedDirtyRendersAreBitForBitUncachedFullRenders) {
+    Volume skull = makeSkull(64);
+    ThreadPool pool;
+    Renderer renderer(skull, &pool);
+    struct View {
+        Camera camera;
+        HitCache cache;
+        Dbi frame;
+    };
+    std::vector<View> views;
+    for (const char* preset : {"working", "top", "left", "paper"}) {
+        View v{cameraPreset(preset, skull, {140, 110}), {}, {}};
+        v.frame = renderer.render(v.camera, &v.cache);
+        EXPECT_TRUE(v.cache.validFor(renderer, v.camera));
+        EXPECT_EQ(v.frame, renderer.render(v.camera)) << preset;
+        views.push_back(std::move(v));
+    }
+    std::mt19937 rng(21);
+    int64_t resumedBefore = 0;
+    for (int stroke = 0; stroke < 16; ++stroke) {
+        View& drilled = views[size_t(stroke) % views.size()];
+        Box3i changed = drillSomewhere(skull, renderer, drilled.camera, rng);
+        renderer.volumeChanged(changed);
+        for (View& v : views) {
+            SCOPED_TRACE(describe(v.camera));
+            ASSERT_TRUE(v.cache.validFor(renderer, v.camera)) << "erosion keeps caches valid";
+            PixelRect rect = dirtyScreenRect(v.camera, skull, changed);
+            renderer.render(v.camera, rect, v.frame, &v.cache);
+            Dbi expected = renderer.render(v.camera);
+            ASSERT_TRUE(v.frame == expected)
+                << "stroke " << stroke << ": " << compare(v.frame, expected).describe();
+        }
+    }
+    for (View& v : views) {
+        resumedBefore += v.cache.resumed();
+        ASSERT_EQ(renderer.render(v.camera, &v.cache), renderer.render(v.camera));
+    }
+    EXPECT_GT(resumedBefore, 1000) << "the dirty renders should have resumed from the cache";
+}
+
+// Erosion at the iso-value's edge: voxels of 126..130 lowered by 1 or 2 at a time, so samples
+// cross 128 by the smallest steps there are. A sample that rose by an ulp where its corners went
+// down (a + t (b - a) can) would make the cached render disagree.
+TEST(HitCache, ErosionByTheSmallestStepsStaysBitForBit) {
+    Volume v({40, 36, 32}, glm::vec3(0.8f));
+    std::mt19937 rng(8);
+    std::uniform_int_distribution<int> level(126, 130);
+    for (int z = 8; z < 24; ++z)
+        for (int y = 0; y < 36; ++y)
+            for (int x = 0; x < 40; ++x)
+                v.set(x, y, z, uint8_t(level(rng)), Material::Cortical);
+    ThreadPool pool(2);
+    Renderer renderer(v, &pool);
+    std::vector<Camera> cameras;
+    for (const char* preset : {"top", "front", "left"})
+        cameras.push_back(cameraPreset(preset, v, {96, 80}));
+    std::vector<HitCache> caches(cameras.size());
+    std::vector<Dbi> frames;
+    for (size_t i = 0; i < cameras.size(); ++i)
+        frames.push_back(renderer.render(cameras[i], &caches[i]));
+    std::uniform_int_distribution<int> x(0, 39), y(0, 35), z(8, 23), by(1, 2);
+    int changedPixels = 0;
+    for (int round = 0; round < 12; ++round) {
+        Box3i changed;
+        for (int i = 0; i < 300; ++i) {
+            glm::ivec3 p(x(rng), y(rng), z(rng));
+            uint8_t d = v.density(p.x, p.y, p.z);
+            v.set(p.x, p.y, p.z, uint8_t(std::max(0, d - by(rng))), Material::Cortical);
+            changed.merge(Box3i::fromMinMax(p, p + 1));
+        }
+        renderer.volumeChanged(changed);
+        for (size_t i = 0; i < cameras.size(); ++i) {
+            Dbi old = frames[i];
+            PixelRect rect = dirtyScreenRect(cameras[i], v, changed);
+            renderer.render(cameras[i], rect, frames[i], &caches[i]);
+            Dbi expected = renderer.render(cameras[i]);
+            ASSERT_TRUE(frames[i] == expected)
+                << "round " << round << ": " << compare(frames[i], expected).describe();
+            changedPixels += int(compare(old, expected).differingPixels);
+        }
+    }
+    EXPECT_GT(changedPixels, 1000) << "the erosion should have moved the surface";
+}
+
+// Anything that may raise a density invalidates every cache: rebuild(), and a brick that gains
+// surface through volumeChanged. A stale cache would hide the new bone (its rays would resume
+// behind it).
+TEST(HitCache, RaisedDensityInvalidatesTheCache) {
+    Volume skull = makeSkull(64);
+    Renderer renderer(skull);
+    Camera c = cameraPreset("working", skull, {100, 90});
+    HitCache cache;
+    Dbi frame = renderer.render(c, &cache);
+    // A plate of bone in front of the surface, between the eye and the skull.
+    glm::vec3 toEye = glm::normalize(c.eye - c.target);
+    glm::ivec3 centre = glm::ivec3(skull.toVoxel(c.target + toEye * 60.0f));
+    Box3i plate = Box3i::fromMinMax(centre - 6, centre + 6);
+    for (int z = plate.lo.z; z < plate.hi.z; ++z)
+        for (int y = plate.lo.y; y < plate.hi.y; ++y)
+            for (int x = plate.lo.x; x < plate.hi.x; ++x)
+                skull.set(x, y, z, 255, Material::Cortical);
+    const uint64_t generation = renderer.generation();
+    renderer.rebuild();
+    EXPECT_NE(renderer.generation(), generation);
+    EXPECT_FALSE(cache.validFor(renderer, c));
+    PixelRect all = frame.bounds();
+    renderer.render(c, all, frame, &cache);
+    Dbi expected = renderer.render(c);
+    ASSERT_TRUE(frame == expected) << compare(frame, expected).describe();
+    EXPECT_TRUE(cache.validFor(renderer, c));
+    EXPECT_EQ(cache.resumed(), 0) << "a restarted cache knows nothing";
+
+    // The same through volumeChanged: a brick that gains surface (a corner of the field, air in
+    // the skull) bumps the generation.
+    Box3i more = Box3i::fromMinMax({1, 1, 1}, {5, 5, 5});
+    ASSERT_FALSE(renderer.bricks().occupied({0, 0, 0}));
+    for (int z = more.lo.z; z < more.hi.z; ++z)
+        for (int y = more.lo.y; y < more.hi.y; ++y)
+            for (int x = more.lo.x; x < more.hi.x; ++x)
+                skull.set(x, y, z, 255, Material::Cortical);
+    renderer.volumeChanged(more);
+    EXPECT_FALSE(cache.validFor(renderer, c));
+    renderer.render(c, all, frame, &cache);
+    expected = renderer.render(c);
+    ASSERT_TRUE(frame == expected) << compare(frame, expected).describe();
+}
+
+// A cache is bound to its camera (and window size): handed another view it restarts instead of
+// resuming rays at indices of other rays.
+TEST(HitCache, ACacheForAnotherCameraIsNeverUsed) {
+    Volume skull = makeSkull(48);
+    Renderer renderer(skull);
+    Camera a = cameraPreset("top", skull, {80, 60});
+    Camera b = cameraPreset("front", skull, {80, 60});
+    Camera wide = a;
+    wide.width = 96;
+    HitCache cache;
+    renderer.render(a, &cache);
+    EXPECT_TRUE(cache.validFor(renderer, a));
+    EXPECT_FALSE(cache.validFor(renderer, b));
+    EXPECT_FALSE(cache.validFor(renderer, wide));
+    EXPECT_EQ(renderer.render(b, &cache), renderer.render(b));
+    EXPECT_TRUE(cache.validFor(renderer, b));
+    EXPECT_FALSE(cache.validFor(renderer, a));
+    EXPECT_EQ(renderer.render(wide, &cache), renderer.render(wide));
+    // Another renderer of the same volume has its own generation.
+    Renderer other(skull);
+    EXPECT_FALSE(cache.validFor(other, wide));
+    cache.clear();
+    EXPECT_FALSE(cache.validFor(renderer, wide));
 }
 
 } // namespace

@@ -36,7 +36,8 @@ public:
     // Recomputes the bricks whose apron overlaps `changed` (voxels whose density changed). When
     // bricks only empty out (drilling), distances stay valid lower bounds and are left alone
     // except for newly empty bricks; a brick that gains surface triggers a full distance pass.
-    void update(const Volume& volume, const Box3i& changed);
+    // Returns true when some brick gained surface (or the grid was rebuilt): not erosion.
+    bool update(const Volume& volume, const Box3i& changed);
 
     glm::ivec3 dims() const { return m_dims; } // bricks per axis
     bool empty() const { return m_max.empty(); }

@@ -8,7 +8,9 @@
 #include "libsim/dbi.h"
 #include "libsim/volume.h"
 
+#include <cstdint>
 #include <glm/vec3.hpp>
+#include <vector>
 
 namespace trephine {
 
@@ -42,6 +44,44 @@ struct RayHit {
     glm::vec3 direction{0.0f};      // unit ray direction, object space
 };
 
+class Renderer;
+
+// Per view: where each pixel's ray first reached the iso-value last time, as an index on the
+// ray's fixed sample grid (sample k at t = k * step from the eye). Erosion only lowers densities
+// and the trilinear sample is monotone in its corners, so no sample before that index can be
+// inside after erosion: a re-render of a dirty rectangle resumes there instead of at the eye,
+// bit for bit the same pixels. Keep one per view (camera and window size) and pass it to every
+// render of that view. A cache made for another camera, another sample step, another volume or
+// before Renderer::rebuild() is never used: the render that finds it so starts it afresh.
+// One render call at a time may use a cache; distinct caches may be used concurrently.
+class HitCache {
+public:
+    // Pixels whose ray can never reach the iso-value (no hit, and erosion cannot make one).
+    static constexpr int32_t kNever = INT32_MAX;
+
+    HitCache() = default;
+    // Forgets everything; the next render starts every ray at the eye again.
+    void clear();
+    // True when the cache holds resume indices for `camera` under `renderer`'s current volume.
+    bool validFor(const Renderer& renderer, const Camera& camera) const;
+    // The resume index of pixel (x, y) (row 0 at the bottom): 0 when unknown, kNever for a ray
+    // that cannot hit.
+    int32_t resumeIndex(int x, int y) const {
+        return m_resume[size_t(y) * size_t(m_camera.width) + size_t(x)];
+    }
+    // Pixels rendered since the cache was (re)started whose resume index was known.
+    int64_t resumed() const { return m_resumed; }
+
+private:
+    friend class Renderer;
+    Camera m_camera{};
+    uint64_t m_generation = 0; // Renderer generation the indices were computed under; 0: none
+    float m_stepVoxels = 0.0f;
+    glm::vec3 m_spacing{0.0f};
+    std::vector<int32_t> m_resume; // per pixel, row 0 at the bottom
+    int64_t m_resumed = 0;
+};
+
 class Renderer {
 public:
     // The renderer reads `volume` (which must outlive it) and builds its brick grid. After
@@ -50,10 +90,18 @@ public:
     explicit Renderer(const Volume& volume, ThreadPool* pool = nullptr, RenderOptions options = {});
 
     // Keeps the brick grid in step with erosion: only bricks near `changed` are recomputed.
+    // Promises that densities in `changed` only went down (drilling, cutting): hit caches stay
+    // valid. Should a brick gain surface all the same, caches are invalidated (a safety net, not
+    // a licence: a rise inside a brick that already held surface cannot be seen here).
     void volumeChanged(const Box3i& changed);
-    // Rebuilds the brick grid from scratch (after replacing the volume's contents wholesale).
+    // Rebuilds the brick grid from scratch (after replacing the volume's contents wholesale, or
+    // any change that may raise a density) and invalidates every HitCache.
     void rebuild();
+    // Identifies the volume state hit caches were computed under; changes on rebuild(). Unique
+    // across renderers.
+    uint64_t generation() const { return m_generation; }
 
+    const Volume& volume() const { return *m_volume; }
     const BrickGrid& bricks() const { return m_bricks; }
     const RenderOptions& options() const { return m_options; }
     void setOptions(const RenderOptions& options) { m_options = options; }
@@ -65,6 +113,13 @@ public:
     // camera-sized image, at the same place; the pixels are bit for bit those a full render
     // gives there.
     void render(const Camera& camera, const PixelRect& rect, Dbi& frame) const;
+    // The same, resuming each ray at its cached first hit and storing the new ones (see
+    // HitCache). Pixels are bit for bit those of the render without a cache. A cache that is not
+    // valid for this camera is restarted first (then this render costs what an uncached one
+    // does, and fills the cache for the pixels of `rect`). `cache` may be null.
+    void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache) const;
+    // A full frame that also fills `cache`.
+    Dbi render(const Camera& camera, HitCache* cache) const;
     // The pixels of `rect` as an image of the rectangle's size; rect must lie inside the window.
     Dbi renderRect(const Camera& camera, const PixelRect& rect) const;
 
@@ -72,13 +127,14 @@ public:
     RayHit castRay(const Camera& camera, int x, int y) const;
 
 private:
-    void renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, int outX,
-                    int outY) const;
+    void renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, int outX, int outY,
+                    HitCache* cache) const;
 
     const Volume* m_volume;
     ThreadPool* m_pool;
     RenderOptions m_options;
     BrickGrid m_bricks;
+    uint64_t m_generation;
 };
 
 } // namespace trephine
