@@ -146,4 +146,34 @@ std::vector<DirtyBoxHistory::Box> DirtyBoxHistory::visible(double now) const {
     return out;
 }
 
+const char* syncDesignName(SyncDesign d) {
+    return d == SyncDesign::Dbi ? "DBI (server renders)" : "Volume (local copy)";
+}
+
+void ComparisonHistory::record(SyncDesign design, double now, const ComparisonFigures& f) {
+    Series& s = designs[int(design)];
+    pushCapped(s.updatesPerS, float(f.updatesPerS), seriesLength);
+    pushCapped(s.bytesPerUpdate, float(f.bytesPerUpdate), seriesLength);
+    pushCapped(s.rawBytesPerUpdate, float(f.rawBytesPerUpdate), seriesLength);
+    pushCapped(s.latencyP50Ms, float(std::max(0.0, f.latencyP50Ms)), seriesLength);
+    pushCapped(s.latencyP99Ms, float(std::max(0.0, f.latencyP99Ms)), seriesLength);
+    pushCapped(s.frameMs, float(f.frameMs), seriesLength);
+    pushCapped(s.hapticHz, float(f.hapticHz), seriesLength);
+    s.last = f;
+    s.lastT = now;
+    ++s.points;
+    active = design;
+}
+
+double ComparisonHistory::ageS(SyncDesign d, double now) const {
+    return measured(d) ? std::max(0.0, now - series(d).lastT) : -1.0;
+}
+
+double ComparisonHistory::ratio(double ComparisonFigures::*figure) const {
+    if (!measured(SyncDesign::Dbi) || !measured(SyncDesign::Volume))
+        return 0.0;
+    double v = series(SyncDesign::Volume).last.*figure;
+    return v > 0 ? series(SyncDesign::Dbi).last.*figure / v : 0.0;
+}
+
 } // namespace trephine::ui

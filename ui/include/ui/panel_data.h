@@ -92,4 +92,43 @@ struct DirtyBoxHistory {
     std::vector<Box> visible(double now) const;
 };
 
+// [Comparison] the figures the study reports, measured live for both designs (DBI and replicated
+// volume), kept per design: while one design runs, the other keeps its last measured figures.
+// The window records one point a second for the design that is active; the panel only plots.
+enum class SyncDesign : uint8_t { Dbi = 0, Volume = 1 };
+inline constexpr int kSyncDesignCount = 2;
+const char* syncDesignName(SyncDesign d); // "DBI (server renders)", "Volume (local copy)"
+
+struct ComparisonFigures {
+    double updatesPerS = 0;       // image or volume updates applied per second
+    double bytesPerUpdate = 0;    // on the wire, mean over the last second
+    double rawBytesPerUpdate = 0; // before compression
+    double latencyP50Ms = -1;     // end-to-end update latency (-1: no update measured)
+    double latencyP99Ms = -1;
+    double frameMs = 0;  // the client's frame time (display)
+    double hapticHz = 0; // the haptic loop's achieved rate
+};
+
+struct ComparisonHistory {
+    struct Series {
+        std::vector<float> updatesPerS, bytesPerUpdate, rawBytesPerUpdate, latencyP50Ms,
+            latencyP99Ms, frameMs, hapticHz; // oldest first, at most seriesLength points
+        ComparisonFigures last;              // the newest figures recorded
+        double lastT = -1;                   // when they were recorded (-1: never)
+        size_t points = 0;                   // points ever recorded
+    };
+    size_t seriesLength = 120;
+    SyncDesign active = SyncDesign::Dbi; // the design of the newest record
+    Series designs[kSyncDesignCount];
+
+    // Appends one point to `design`'s series (capped), makes it the active design.
+    void record(SyncDesign design, double now, const ComparisonFigures& figures);
+    const Series& series(SyncDesign d) const { return designs[int(d)]; }
+    bool measured(SyncDesign d) const { return series(d).lastT >= 0; }
+    // Seconds since `d` was last recorded (-1: never).
+    double ageS(SyncDesign d, double now) const;
+    // DBI over volume for a figure both designs have measured (e.g. updatesPerS), 0 otherwise.
+    double ratio(double ComparisonFigures::*figure) const;
+};
+
 } // namespace trephine::ui

@@ -1,0 +1,135 @@
+#include "ui/display_study.h"
+
+#include "libsim/camera.h"
+#include "libsim/error.h"
+#include "libsim/renderer.h"
+#include "libsim/skull.h"
+#include "libsim/stats.h"
+#include "libsim/thread_pool.h"
+#include "ui/compositor.h"
+#include "ui/mesh.h"
+#include "ui/volume_view.h"
+#include "ui/window.h"
+
+#include <chrono>
+#include <glm/gtc/matrix_transform.hpp>
+#include <glm/gtx/quaternion.hpp>
+#include <memory>
+#include <numeric>
+
+namespace trephine::ui {
+
+namespace {
+
+DisplayRate summarise(std::string method, int volumeSize, const std::vector<double>& ms) {
+    DisplayRate r;
+    r.method = std::move(method);
+    r.volumeSize = volumeSize;
+    r.frames = int(ms.size());
+    r.medianMs = percentile(ms, 50);
+    r.p99Ms = percentile(ms, 99);
+    r.meanMs = std::accumulate(ms.begin(), ms.end(), 0.0) / double(ms.size());
+    r.fps = r.medianMs > 0 ? 1000.0 / r.medianMs : 0.0;
+    return r;
+}
+
+// Times `frames` calls of `frame` (after `warmup` untimed ones); each ends with glFinish.
+template <typename F>
+std::vector<double> timeFrames(int warmup, int frames, F&& frame) {
+    for (int i = 0; i < warmup; ++i) {
+        frame();
+        glFinish();
+    }
+    std::vector<double> ms;
+    ms.reserve(size_t(frames));
+    for (int i = 0; i < frames; ++i) {
+        auto t0 = std::chrono::steady_clock::now();
+        frame();
+        glFinish(); // the frame is done, not just queued
+        ms.push_back(
+            std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0)
+                .count());
+    }
+    return ms;
+}
+
+// A skull of n voxels a side at the physical size of the paper's 128^3 volume, so that every size
+// shows the same view.
+Volume paperSkull(int n) {
+    Volume v = makeSkull(n);
+    float edgeMm = paperSpacingMm(128) * 128.0f;
+    v.setSpacing(glm::vec3(edgeMm / float(n)));
+    return v;
+}
+
+} // namespace
+
+DisplayStudyResult measureDisplayRates(const DisplayStudyConfig& config) {
+    if (config.volumeSizes.empty() || config.windowPx < 16 || config.dbiFrames < 1 ||
+        config.volumeFrames < 1 || config.warmupFrames < 0)
+        throw Error("study display: need at least one volume size, a window of 16 px or more "
+                    "and at least one frame per series");
+    std::string why;
+    if (!displayAvailable(&why))
+        throw Error("study display: no display for OpenGL (" + why + "); run it under xvfb-run -a");
+    WindowConfig wc;
+    wc.width = wc.height = config.windowPx;
+    wc.visible = false;
+    wc.imgui = false;
+    wc.title = "Trephine display study";
+    Window window(wc);
+
+    DisplayStudyResult result;
+    result.glRenderer = reinterpret_cast<const char*>(glGetString(GL_RENDERER));
+    result.glVersion = reinterpret_cast<const char*>(glGetString(GL_VERSION));
+    result.windowPx = config.windowPx;
+
+    // The server's side, done once and not timed: the view and its full DBI.
+    Volume base = paperSkull(config.volumeSizes.front());
+    const Camera cam = cameraPreset(config.camera, base, {config.windowPx, config.windowPx});
+    result.cameraDescription = describe(cam);
+    ThreadPool pool;
+    Renderer renderer(base, &pool);
+    Dbi dbi = renderer.render(cam);
+    // The user's burr resting on the bone in the middle of the view, its shaft toward the eye.
+    RayHit h = renderer.castRay(cam, cam.width / 2, cam.height / 2);
+    glm::vec3 tip = h.hit ? glm::vec3(h.position) : cam.target;
+    glm::vec3 axis = h.hit ? h.normal : glm::normalize(cam.eye - cam.target);
+    glm::mat4 model = glm::translate(glm::mat4(1), tip + axis * 2.5f) *
+                      glm::mat4_cast(glm::rotation(glm::vec3(0, 0, 1), axis));
+    const glm::vec4 owner(0.2f, 0.4f, 0.9f, 1.0f);
+
+    Compositor comp;
+    comp.uploadFull(dbi);
+    GpuMesh burr = comp.upload(makeToolMesh(ToolShape::burr(5.0f)));
+
+    // (a) the DBI client: pass 1 restores the DBI, pass 2 draws the tool, blit.
+    auto dbiMs = timeFrames(config.warmupFrames, config.dbiFrames, [&] {
+        comp.begin(cam);
+        comp.draw(burr, model, owner);
+        comp.blitTo(0, 0);
+    });
+    result.dbi = summarise("dbi", config.volumeSizes.front(), dbiMs);
+
+    // (b) the replicated-volume client: the same frame with the local ray cast replacing what
+    // pass 1 restored (pass 1 still runs; on llvmpipe it costs about as much as the whole DBI
+    // frame, a small part of a ray-cast frame).
+    {
+        VolumeView view;
+        for (int n : config.volumeSizes) {
+            Volume v = n == config.volumeSizes.front() ? base : paperSkull(n);
+            view.upload(v);
+            auto ms = timeFrames(config.warmupFrames, config.volumeFrames, [&] {
+                comp.begin(cam);
+                view.draw(cam);
+                comp.draw(burr, model, owner);
+                comp.blitTo(0, 0);
+            });
+            result.volume.push_back(summarise("volume", n, ms));
+        }
+    }
+    comp.destroy(burr);
+    return result;
+}
+
+} // namespace trephine::ui

@@ -1,0 +1,118 @@
+// [Comparison] panel: the DBI design against the replicated volume, live (issue 7). One toggle
+// switches the client between them; both keep their figures and plots, the inactive one greyed.
+#include "ui/panels.h"
+
+#include <cfloat>
+#include <cstdio>
+#include <imgui.h>
+
+namespace trephine::ui {
+
+namespace {
+
+constexpr float kInactiveAlpha = 0.45f;
+
+// "12.3" or "-" when the design has never been measured (or the figure is not known: < 0).
+void cell(bool measured, bool active, const char* fmt, double a, double b = 0) {
+    char text[64];
+    if (!measured || a < 0)
+        std::snprintf(text, sizeof text, "-");
+    else
+        std::snprintf(text, sizeof text, fmt, a, b);
+    if (active)
+        ImGui::TextUnformatted(text);
+    else
+        ImGui::TextDisabled("%s", text);
+}
+
+} // namespace
+
+bool drawComparisonPanel(SyncDesign& design, const ComparisonHistory& history, double now) {
+    if (!ImGui::Begin("Comparison")) {
+        ImGui::End();
+        return false;
+    }
+    const SyncDesign other = design == SyncDesign::Dbi ? SyncDesign::Volume : SyncDesign::Dbi;
+    // One toggle; the label names the design in use first. "###" keeps its ID across labels.
+    char label[96];
+    std::snprintf(label, sizeof label, "%s  |  switch to %s###design", syncDesignName(design),
+                  syncDesignName(other));
+    bool flipped = ImGui::Button(label);
+    if (flipped)
+        design = other;
+    if (ImGui::IsItemHovered())
+        ImGui::SetTooltip("DBI: the server renders and sends screen rectangles.\n"
+                          "Volume: this client holds the volume, receives changed voxels and "
+                          "renders locally.");
+
+    using S = ComparisonHistory::Series;
+    const SyncDesign order[kSyncDesignCount] = {SyncDesign::Dbi, SyncDesign::Volume};
+    if (ImGui::BeginTable("figures", 3,
+                          ImGuiTableFlags_BordersInnerH | ImGuiTableFlags_SizingStretchProp)) {
+        ImGui::TableSetupColumn("");
+        ImGui::TableSetupColumn("DBI");
+        ImGui::TableSetupColumn("Volume");
+        ImGui::TableHeadersRow();
+        auto row = [&](const char* name, auto&& draw) {
+            ImGui::TableNextRow();
+            ImGui::TableNextColumn();
+            ImGui::TextUnformatted(name);
+            for (SyncDesign d : order) {
+                ImGui::TableNextColumn();
+                draw(history.series(d), history.measured(d), d == design);
+            }
+        };
+        ImGui::TableNextRow();
+        ImGui::TableNextColumn();
+        ImGui::TextUnformatted("measured");
+        for (SyncDesign d : order) {
+            ImGui::TableNextColumn();
+            if (d == design)
+                ImGui::TextUnformatted(history.measured(d) ? "live" : "waiting");
+            else if (history.measured(d))
+                ImGui::TextDisabled("%.0f s ago", history.ageS(d, now));
+            else
+                ImGui::TextDisabled("never");
+        }
+        row("updates /s",
+            [](const S& s, bool m, bool a) { cell(m, a, "%.1f", s.last.updatesPerS); });
+        row("bytes / update", [](const S& s, bool m, bool a) {
+            cell(m, a, "%.0f (raw %.0f)", s.last.bytesPerUpdate, s.last.rawBytesPerUpdate);
+        });
+        row("latency p50/p99 ms", [](const S& s, bool m, bool a) {
+            cell(m, a, "%.2f / %.2f", s.last.latencyP50Ms, s.last.latencyP99Ms);
+        });
+        row("frame ms", [](const S& s, bool m, bool a) { cell(m, a, "%.2f", s.last.frameMs); });
+        row("haptic Hz", [](const S& s, bool m, bool a) { cell(m, a, "%.0f", s.last.hapticHz); });
+        ImGui::EndTable();
+    }
+
+    // Live plots: one row per figure, DBI on the left, volume on the right.
+    auto plots = [&](const char* name, std::vector<float> S::*series, const char* unit) {
+        const float w = (ImGui::GetContentRegionAvail().x - ImGui::GetStyle().ItemSpacing.x) * 0.5f;
+        for (int i = 0; i < kSyncDesignCount; ++i) {
+            SyncDesign d = order[i];
+            const std::vector<float>& v = history.series(d).*series;
+            char overlay[64], id[64];
+            std::snprintf(overlay, sizeof overlay, "%s %s: %.1f %s",
+                          d == SyncDesign::Dbi ? "DBI" : "Vol", name, v.empty() ? 0.0f : v.back(),
+                          unit);
+            std::snprintf(id, sizeof id, "##%s%d", name, i);
+            if (i > 0)
+                ImGui::SameLine();
+            ImGui::PushStyleVar(ImGuiStyleVar_Alpha, d == design ? 1.0f : kInactiveAlpha);
+            ImGui::PlotLines(id, v.data(), int(v.size()), 0, overlay, 0.0f, FLT_MAX, ImVec2(w, 36));
+            ImGui::PopStyleVar();
+        }
+    };
+    plots("updates", &S::updatesPerS, "/s");
+    plots("bytes", &S::bytesPerUpdate, "B");
+    plots("p50", &S::latencyP50Ms, "ms");
+    plots("p99", &S::latencyP99Ms, "ms");
+    plots("frame", &S::frameMs, "ms");
+    plots("haptic", &S::hapticHz, "Hz");
+    ImGui::End();
+    return flipped;
+}
+
+} // namespace trephine::ui

@@ -1,0 +1,456 @@
+// The replicated-volume client's GPU ray caster. It follows libsim/src/renderer.cpp step by step
+// (docs/rendering.md, "Ray casting"), with the GPU's texture unit doing the trilinear work:
+//
+// [SECTION] Shaders: one fullscreen triangle; per pixel the CPU renderer's ray, march, refinement,
+//           gradient normal, material and headlight shading, and the hit's GL window depth
+// [SECTION] Uploads: density and material (R8), gradients (RGB16F, one voxel of apron)
+// [SECTION] Drawing: into the bound framebuffer, or into the view's own offscreen target
+#include "ui/volume_view.h"
+
+#include "libsim/error.h"
+#include "libsim/renderer.h"
+
+#include <algorithm>
+#include <chrono>
+#include <glm/gtc/type_ptr.hpp>
+#include <glm/matrix.hpp>
+#include <string>
+#include <vector>
+
+namespace trephine::ui {
+
+namespace {
+
+// [SECTION] Shaders ----------------------------------------------------------------------------
+
+const char* kVs = R"(#version 330 core
+void main() {
+    vec2 p = vec2(gl_VertexID == 1 ? 3.0 : -1.0, gl_VertexID == 2 ? 3.0 : -1.0);
+    gl_Position = vec4(p, 0.0, 1.0);
+})";
+
+// Voxel coordinates put voxel centres at integers; the density texture's texel i is voxel i, the
+// gradient texture's texel i is voxel i - 1 (one voxel of apron on every side). Both clamp to a
+// zero border, so voxels outside the volume are air, as in the CPU renderer.
+const char* kFs = R"(#version 330 core
+uniform sampler3D uDensity;  // R8, linear: the trilinear density
+uniform sampler3D uMaterial; // R8, fetched
+uniform sampler3D uGradient; // RGB16F, linear: central differences interpolated trilinearly
+uniform vec3 uDims;
+uniform ivec3 uDimsI;
+uniform vec3 uOrigin;      // eye, voxel coordinates
+uniform vec3 uInvSpacing;  // voxels per mm
+uniform vec3 uEye;         // mm
+uniform vec4 uFarH, uFarDx, uFarDy; // far-plane point of ndc (x, y): farH + x farDx + y farDy
+uniform vec2 uNdcPerPixel;
+uniform vec2 uViewportOrigin;
+uniform float uNearOverFar;
+uniform float uDt;         // sample step, mm
+uniform mat4 uViewProj;
+uniform vec3 uColor[5];    // materialColor, 0..255
+uniform vec4 uShade[5];    // ambient, diffuse, specular, log2 of the shininess
+uniform vec4 uBackground;
+out vec4 fragColor;
+
+const float kIso = 128.0;
+
+float density(vec3 p) { return texture(uDensity, (p + 0.5) / uDims).r * 255.0; }
+int voxelDensity(ivec3 v) { return int(texelFetch(uDensity, v, 0).r * 255.0 + 0.5); }
+int voxelMaterial(ivec3 v) { return int(texelFetch(uMaterial, v, 0).r * 255.0 + 0.5); }
+
+// Renderer's hitMaterial: the nearest voxel's label, or if that is air the densest labelled
+// corner of the first sample inside.
+int hitMaterial(vec3 pHit, vec3 pIn) {
+    ivec3 v = clamp(ivec3(floor(pHit + 0.5)), ivec3(0), uDimsI - 1);
+    int m = voxelMaterial(v);
+    if (m != 0)
+        return m;
+    ivec3 c = ivec3(floor(pIn));
+    int best = -1;
+    for (int i = 0; i < 8; ++i) {
+        ivec3 q = c + ivec3(i & 1, (i >> 1) & 1, i >> 2);
+        if (any(lessThan(q, ivec3(0))) || any(greaterThanEqual(q, uDimsI)))
+            continue;
+        int d = voxelDensity(q);
+        int l = voxelMaterial(q);
+        if (d > best && l != 0) {
+            best = d;
+            m = l;
+        }
+    }
+    return m == 0 ? 1 : m;
+}
+
+void main() {
+    vec2 ndc = (gl_FragCoord.xy - uViewportOrigin) * uNdcPerPixel - 1.0;
+    vec4 h = uFarH + ndc.x * uFarDx + ndc.y * uFarDy;
+    vec3 toFar = h.xyz / h.w - uEye;
+    float tFar = length(toFar);
+    vec3 dir = toFar / tFar;
+    vec3 dv = dir * uInvSpacing;
+    // Samples where some trilinear corner is inside the volume: voxel coordinates [-1, n].
+    float t0 = max(tFar * uNearOverFar, 0.0), t1 = tFar;
+    bool outside = false;
+    for (int a = 0; a < 3; ++a) {
+        if (dv[a] == 0.0) {
+            outside = outside || uOrigin[a] < -1.0 || uOrigin[a] > uDims[a];
+            continue;
+        }
+        float ta = (-1.0 - uOrigin[a]) / dv[a], tb = (uDims[a] - uOrigin[a]) / dv[a];
+        t0 = max(t0, min(ta, tb));
+        t1 = min(t1, max(ta, tb));
+    }
+    int k = int(ceil(t0 / uDt)), kStart = k, kEnd = int(floor(t1 / uDt));
+    float value = 0.0, last = 0.0;
+    bool found = false;
+    if (!outside && t0 <= t1) {
+        for (; k <= kEnd; ++k) {
+            value = density(uOrigin + (float(k) * uDt) * dv);
+            if (value >= kIso) {
+                found = true;
+                break;
+            }
+            last = value;
+        }
+    }
+    if (!found) {
+        fragColor = uBackground;
+        gl_FragDepth = 1.0;
+        return;
+    }
+    float tIn = float(k) * uDt, t = tIn;
+    if (k > kStart) { // one regula-falsi step with a sample, then the final secant
+        float ta = float(k - 1) * uDt, tb = tIn;
+        float fa = last - kIso, fb = value - kIso;
+        float tm = ta + (tb - ta) * (fa / (fa - fb));
+        float fm = density(uOrigin + tm * dv) - kIso;
+        if (fm >= 0.0) {
+            tb = tm;
+            fb = fm;
+        } else {
+            ta = tm;
+            fa = fm;
+        }
+        t = ta + (tb - ta) * (fa / (fa - fb));
+    }
+    vec4 clip = uViewProj * vec4(uEye + t * dir, 1.0);
+    gl_FragDepth = clamp(clip.z / clip.w * 0.5 + 0.5, 0.0, 1.0);
+
+    vec3 p = uOrigin + t * dv;
+    vec3 grad = texture(uGradient, (p + 1.5) / (uDims + 2.0)).xyz * uInvSpacing;
+    float len = length(grad);
+    vec3 n = len > 0.0 ? -grad / len : -dir;
+    int m = hitMaterial(p, uOrigin + tIn * dv);
+    vec4 s = uShade[m];
+    float ndl = max(0.0, -dot(n, dir));
+    float spec = ndl;
+    for (int i = 0; i < int(s.w); ++i)
+        spec *= spec;
+    vec3 c = uColor[m] * (s.x + s.y * ndl) + s.z * spec * 255.0;
+    fragColor = vec4(min(c, vec3(255.0)) / 255.0, 1.0);
+})";
+
+GLuint compile(GLenum type, const char* src) {
+    GLuint s = glCreateShader(type);
+    glShaderSource(s, 1, &src, nullptr);
+    glCompileShader(s);
+    GLint ok = 0;
+    glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
+    if (!ok) {
+        char log[2048];
+        glGetShaderInfoLog(s, sizeof log, nullptr, log);
+        glDeleteShader(s);
+        throw Error(std::string("ui: volume shader does not compile: ") + log);
+    }
+    return s;
+}
+
+GLuint link(const char* vs, const char* fs) {
+    GLuint v = compile(GL_VERTEX_SHADER, vs), f = compile(GL_FRAGMENT_SHADER, fs);
+    GLuint p = glCreateProgram();
+    glAttachShader(p, v);
+    glAttachShader(p, f);
+    glLinkProgram(p);
+    glDeleteShader(v);
+    glDeleteShader(f);
+    GLint ok = 0;
+    glGetProgramiv(p, GL_LINK_STATUS, &ok);
+    if (!ok) {
+        char log[2048];
+        glGetProgramInfoLog(p, sizeof log, nullptr, log);
+        glDeleteProgram(p);
+        throw Error(std::string("ui: volume program does not link: ") + log);
+    }
+    return p;
+}
+
+// The shading constants of libsim's renderer (materialShade in renderer.cpp), per label.
+constexpr float kShade[kMaterialCount][4] = {
+    {0.20f, 0.75f, 0.12f, 5}, // air (never shaded; the default)
+    {0.20f, 0.75f, 0.12f, 5}, // cortical
+    {0.22f, 0.75f, 0.05f, 4}, // diploe
+    {0.22f, 0.75f, 0.15f, 6}, // dura
+    {0.22f, 0.75f, 0.12f, 6}, // brain
+};
+
+void setTexParams(GLenum filter) {
+    const float border[4] = {0, 0, 0, 0};
+    glTexParameteri(GL_TEXTURE_3D, GL_TEXTURE_MIN_FILTER, GLint(filter));
+    glTexParameteri(GL_TEXTURE_3D, GL_TEXTURE_MAG_FILTER, GLint(filter));
+    for (GLenum w : {GL_TEXTURE_WRAP_S, GL_TEXTURE_WRAP_T, GL_TEXTURE_WRAP_R})
+        glTexParameteri(GL_TEXTURE_3D, w, GL_CLAMP_TO_BORDER);
+    glTexParameterfv(GL_TEXTURE_3D, GL_TEXTURE_BORDER_COLOR, border);
+}
+
+double msSince(std::chrono::steady_clock::time_point t0) {
+    return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count();
+}
+
+// Unpack state for reading a sub-box straight out of a volume-sized array (no copy).
+struct UnpackBox {
+    UnpackBox(glm::ivec3 dims, glm::ivec3 lo) {
+        glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+        glPixelStorei(GL_UNPACK_ROW_LENGTH, dims.x);
+        glPixelStorei(GL_UNPACK_IMAGE_HEIGHT, dims.y);
+        glPixelStorei(GL_UNPACK_SKIP_PIXELS, lo.x);
+        glPixelStorei(GL_UNPACK_SKIP_ROWS, lo.y);
+        glPixelStorei(GL_UNPACK_SKIP_IMAGES, lo.z);
+    }
+    ~UnpackBox() {
+        for (GLenum e : {GL_UNPACK_ROW_LENGTH, GL_UNPACK_IMAGE_HEIGHT, GL_UNPACK_SKIP_PIXELS,
+                         GL_UNPACK_SKIP_ROWS, GL_UNPACK_SKIP_IMAGES})
+            glPixelStorei(e, 0);
+    }
+};
+
+} // namespace
+
+VolumeView::VolumeView() {
+    m_program = link(kVs, kFs);
+    glUseProgram(m_program);
+    glUniform1i(glGetUniformLocation(m_program, "uDensity"), 0);
+    glUniform1i(glGetUniformLocation(m_program, "uMaterial"), 1);
+    glUniform1i(glGetUniformLocation(m_program, "uGradient"), 2);
+    glm::vec3 colors[kMaterialCount];
+    for (int m = 0; m < kMaterialCount; ++m)
+        colors[m] = materialColor(Material(m));
+    glUniform3fv(glGetUniformLocation(m_program, "uColor"), kMaterialCount,
+                 glm::value_ptr(colors[0]));
+    glUniform4fv(glGetUniformLocation(m_program, "uShade"), kMaterialCount, &kShade[0][0]);
+    glUniform4f(glGetUniformLocation(m_program, "uBackground"), kBackgroundRgba[0] / 255.0f,
+                kBackgroundRgba[1] / 255.0f, kBackgroundRgba[2] / 255.0f,
+                kBackgroundRgba[3] / 255.0f);
+    glUseProgram(0);
+    glGenVertexArrays(1, &m_emptyVao); // a core profile draws nothing without a bound VAO
+}
+
+VolumeView::~VolumeView() {
+    GLuint tex[] = {m_densityTex, m_materialTex, m_gradientTex, m_fboColor};
+    glDeleteTextures(4, tex);
+    glDeleteRenderbuffers(1, &m_fboDepth);
+    glDeleteFramebuffers(1, &m_fbo);
+    glDeleteVertexArrays(1, &m_emptyVao);
+    glDeleteProgram(m_program);
+}
+
+// [SECTION] Uploads ----------------------------------------------------------------------------
+
+void VolumeView::upload(const Volume& volume) {
+    if (volume.empty())
+        throw Error("ui: VolumeView::upload: the volume is empty");
+    m_dims = volume.dims();
+    m_spacing = volume.spacing();
+    auto make = [&](GLuint& tex, GLenum internal, glm::ivec3 size, GLenum format, GLenum type,
+                    GLenum filter, const void* data) {
+        if (!tex)
+            glGenTextures(1, &tex);
+        glBindTexture(GL_TEXTURE_3D, tex);
+        glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+        glTexImage3D(GL_TEXTURE_3D, 0, GLint(internal), size.x, size.y, size.z, 0, format, type,
+                     data);
+        setTexParams(filter);
+    };
+    make(m_densityTex, GL_R8, m_dims, GL_RED, GL_UNSIGNED_BYTE, GL_LINEAR, volume.densityData());
+    make(m_materialTex, GL_R8, m_dims, GL_RED, GL_UNSIGNED_BYTE, GL_NEAREST, volume.materialData());
+    make(m_gradientTex, GL_RGB16F, m_dims + 2, GL_RGB, GL_FLOAT, GL_LINEAR, nullptr);
+    uploadGradients(volume, {glm::ivec3(-1), m_dims + 1});
+    glBindTexture(GL_TEXTURE_3D, 0);
+}
+
+VolumeUpdateStats VolumeView::updateBox(const Volume& volume, const Box3i& box) {
+    VolumeUpdateStats stats;
+    if (empty() || volume.dims() != m_dims)
+        throw Error("ui: VolumeView::updateBox: the volume is not the one uploaded");
+    Box3i b = box.intersect(volume.bounds());
+    if (b.empty())
+        return stats;
+    auto t0 = std::chrono::steady_clock::now();
+    glm::ivec3 s = b.size();
+    {
+        UnpackBox unpack(m_dims, b.lo);
+        glBindTexture(GL_TEXTURE_3D, m_densityTex);
+        glTexSubImage3D(GL_TEXTURE_3D, 0, b.lo.x, b.lo.y, b.lo.z, s.x, s.y, s.z, GL_RED,
+                        GL_UNSIGNED_BYTE, volume.densityData());
+        glBindTexture(GL_TEXTURE_3D, m_materialTex);
+        glTexSubImage3D(GL_TEXTURE_3D, 0, b.lo.x, b.lo.y, b.lo.z, s.x, s.y, s.z, GL_RED,
+                        GL_UNSIGNED_BYTE, volume.materialData());
+    }
+    stats.voxels = b.count();
+    stats.voxelUploadMs = msSince(t0);
+    auto t1 = std::chrono::steady_clock::now();
+    // A changed voxel enters the central differences of its six face neighbours.
+    Box3i g{glm::max(b.lo - 1, glm::ivec3(-1)), glm::min(b.hi + 1, m_dims + 1)};
+    uploadGradients(volume, g);
+    stats.gradientVoxels = g.count();
+    stats.gradientMs = msSince(t1);
+    glBindTexture(GL_TEXTURE_3D, 0);
+    return stats;
+}
+
+// Gradients of the voxels in `box` (volume coordinates in [-1, n], the apron included), computed
+// as the CPU renderer's gradientAt does at a voxel: half the central differences, air outside.
+// Done in slabs of z so a full upload never holds more than a few MB.
+void VolumeView::uploadGradients(const Volume& volume, const Box3i& box) {
+    const glm::ivec3 n = m_dims;
+    const uint8_t* d = volume.densityData();
+    const ptrdiff_t sy = n.x, sz = ptrdiff_t(n.x) * n.y;
+    auto at = [&](int x, int y, int z) -> float {
+        if (unsigned(x) >= unsigned(n.x) || unsigned(y) >= unsigned(n.y) ||
+            unsigned(z) >= unsigned(n.z))
+            return 0.0f;
+        return float(d[x + sy * y + sz * z]);
+    };
+    const glm::ivec3 s = box.size();
+    const int slab = std::max(1, int((1 << 20) / std::max<int64_t>(1, int64_t(s.x) * s.y)));
+    std::vector<float> buf;
+    glBindTexture(GL_TEXTURE_3D, m_gradientTex);
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+    for (int z0 = box.lo.z; z0 < box.hi.z; z0 += slab) {
+        int z1 = std::min(box.hi.z, z0 + slab);
+        buf.resize(size_t(s.x) * size_t(s.y) * size_t(z1 - z0) * 3);
+        float* o = buf.data();
+        for (int z = z0; z < z1; ++z)
+            for (int y = box.lo.y; y < box.hi.y; ++y) {
+                bool interior = z >= 1 && y >= 1 && z + 1 < n.z && y + 1 < n.y;
+                for (int x = box.lo.x; x < box.hi.x; ++x, o += 3) {
+                    if (interior && x >= 1 && x + 1 < n.x) {
+                        const uint8_t* p = d + x + sy * y + sz * z;
+                        o[0] = 0.5f * (float(p[1]) - float(p[-1]));
+                        o[1] = 0.5f * (float(p[sy]) - float(p[-sy]));
+                        o[2] = 0.5f * (float(p[sz]) - float(p[-sz]));
+                    } else {
+                        o[0] = 0.5f * (at(x + 1, y, z) - at(x - 1, y, z));
+                        o[1] = 0.5f * (at(x, y + 1, z) - at(x, y - 1, z));
+                        o[2] = 0.5f * (at(x, y, z + 1) - at(x, y, z - 1));
+                    }
+                }
+            }
+        glTexSubImage3D(GL_TEXTURE_3D, 0, box.lo.x + 1, box.lo.y + 1, z0 + 1, s.x, s.y, z1 - z0,
+                        GL_RGB, GL_FLOAT, buf.data());
+    }
+}
+
+// [SECTION] Drawing ----------------------------------------------------------------------------
+
+void VolumeView::draw(const Camera& camera) {
+    if (empty())
+        return;
+    GLint program = 0, vao = 0, depthFunc = GL_LESS, active = GL_TEXTURE0, viewport[4] = {};
+    glGetIntegerv(GL_CURRENT_PROGRAM, &program);
+    glGetIntegerv(GL_VERTEX_ARRAY_BINDING, &vao);
+    glGetIntegerv(GL_DEPTH_FUNC, &depthFunc);
+    glGetIntegerv(GL_ACTIVE_TEXTURE, &active);
+    glGetIntegerv(GL_VIEWPORT, viewport);
+
+    // The CPU renderer's frame set-up (makeFrame): matrices in double from the float ones.
+    const glm::dmat4 vp = viewProjection(camera);
+    const glm::dmat4 inv = glm::inverse(vp);
+    const glm::vec4 farH(inv * glm::dvec4(0, 0, 1, 1)), farDx(inv * glm::dvec4(1, 0, 0, 0)),
+        farDy(inv * glm::dvec4(0, 1, 0, 0));
+    const glm::vec3 origin(glm::dvec3(camera.eye) / glm::dvec3(m_spacing) +
+                           glm::dvec3(m_dims) * 0.5 - 0.5);
+    const float minSpacing = std::min({m_spacing.x, m_spacing.y, m_spacing.z});
+    const glm::mat4 vpf(vp);
+
+    glUseProgram(m_program);
+    auto loc = [&](const char* name) { return glGetUniformLocation(m_program, name); };
+    glUniform3f(loc("uDims"), float(m_dims.x), float(m_dims.y), float(m_dims.z));
+    glUniform3i(loc("uDimsI"), m_dims.x, m_dims.y, m_dims.z);
+    glUniform3fv(loc("uOrigin"), 1, glm::value_ptr(origin));
+    glm::vec3 invSpacing = 1.0f / m_spacing;
+    glUniform3fv(loc("uInvSpacing"), 1, glm::value_ptr(invSpacing));
+    glUniform3fv(loc("uEye"), 1, glm::value_ptr(camera.eye));
+    glUniform4fv(loc("uFarH"), 1, glm::value_ptr(farH));
+    glUniform4fv(loc("uFarDx"), 1, glm::value_ptr(farDx));
+    glUniform4fv(loc("uFarDy"), 1, glm::value_ptr(farDy));
+    glUniform2f(loc("uNdcPerPixel"), 2.0f / float(camera.width), 2.0f / float(camera.height));
+    glUniform2f(loc("uViewportOrigin"), float(viewport[0]), float(viewport[1]));
+    glUniform1f(loc("uNearOverFar"), float(double(camera.nearMm) / double(camera.farMm)));
+    glUniform1f(loc("uDt"), std::max(1e-3f, m_stepVoxels) * minSpacing);
+    glUniformMatrix4fv(loc("uViewProj"), 1, GL_FALSE, glm::value_ptr(vpf));
+
+    const GLuint tex[3] = {m_densityTex, m_materialTex, m_gradientTex};
+    for (int i = 0; i < 3; ++i) {
+        glActiveTexture(GLenum(GL_TEXTURE0 + i));
+        glBindTexture(GL_TEXTURE_3D, tex[i]);
+    }
+    glDisable(GL_BLEND);
+    glEnable(GL_DEPTH_TEST);
+    glDepthMask(GL_TRUE);
+    glDepthFunc(GL_ALWAYS);
+    glBindVertexArray(m_emptyVao);
+    glDrawArrays(GL_TRIANGLES, 0, 3);
+
+    glDepthFunc(GLenum(depthFunc));
+    glBindVertexArray(GLuint(vao));
+    glActiveTexture(GLenum(active));
+    glUseProgram(GLuint(program));
+}
+
+void VolumeView::ensureTarget(int width, int height) {
+    if (m_fbo && width == m_fboWidth && height == m_fboHeight)
+        return;
+    m_fboWidth = width;
+    m_fboHeight = height;
+    if (!m_fboColor)
+        glGenTextures(1, &m_fboColor);
+    glBindTexture(GL_TEXTURE_2D, m_fboColor);
+    glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, width, height, 0, GL_RGBA, GL_UNSIGNED_BYTE, nullptr);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
+    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
+    if (!m_fboDepth)
+        glGenRenderbuffers(1, &m_fboDepth);
+    glBindRenderbuffer(GL_RENDERBUFFER, m_fboDepth);
+    glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT32F, width, height);
+    if (!m_fbo)
+        glGenFramebuffers(1, &m_fbo);
+    glBindFramebuffer(GL_FRAMEBUFFER, m_fbo);
+    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, m_fboColor, 0);
+    glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, m_fboDepth);
+    if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
+        throw Error("ui: the volume view's framebuffer is incomplete");
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+}
+
+void VolumeView::render(const Camera& camera) {
+    ensureTarget(camera.width, camera.height);
+    glBindFramebuffer(GL_FRAMEBUFFER, m_fbo);
+    glViewport(0, 0, camera.width, camera.height);
+    glDisable(GL_SCISSOR_TEST);
+    draw(camera);
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+}
+
+Dbi VolumeView::readBack() {
+    Dbi out(m_fboWidth, m_fboHeight);
+    if (!m_fbo)
+        return out;
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, m_fbo);
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    glReadPixels(0, 0, m_fboWidth, m_fboHeight, GL_RGBA, GL_UNSIGNED_BYTE, out.color());
+    glReadPixels(0, 0, m_fboWidth, m_fboHeight, GL_DEPTH_COMPONENT, GL_FLOAT, out.depth());
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
+    return out;
+}
+
+} // namespace trephine::ui
