@@ -4,7 +4,9 @@
 #include "net/codec.h"
 
 #include <chrono>
+#include <cstring>
 #include <functional>
+#include <mutex>
 #include <pthread.h>
 
 namespace trephine::net {
@@ -38,6 +40,45 @@ struct NewSamples {
         return v;
     }
 };
+
+// The box's voxels (or the whole volume) as a window uploads them.
+AppliedVolumeBox copyBox(const Volume& v, const Box3i& box, bool full) {
+    AppliedVolumeBox b;
+    b.full = full;
+    b.box = full ? v.bounds() : box;
+    b.dims = v.dims();
+    b.spacing = v.spacing();
+    if (full) {
+        b.density.assign(v.densityData(), v.densityData() + v.voxelCount());
+        b.material.assign(v.materialData(), v.materialData() + v.voxelCount());
+        return b;
+    }
+    const glm::ivec3 size = b.box.size();
+    b.density.resize(size_t(b.box.count()));
+    b.material.resize(size_t(b.box.count()));
+    size_t o = 0;
+    for (int z = b.box.lo.z; z < b.box.hi.z; ++z)
+        for (int y = b.box.lo.y; y < b.box.hi.y; ++y) {
+            size_t i = v.index(b.box.lo.x, y, z);
+            std::memcpy(b.density.data() + o, v.densityData() + i, size_t(size.x));
+            std::memcpy(b.material.data() + o, v.materialData() + i, size_t(size.x));
+            o += size_t(size.x);
+        }
+    return b;
+}
+
+ModeFigures figures(const ModeStats& m, double ratePerS) {
+    ModeFigures f;
+    f.updatesApplied = m.updates;
+    f.updateRatePerS = ratePerS;
+    f.meanBytes = m.bytes.size() ? m.bytes.mean() : 0;
+    f.meanRawBytes = m.rawBytes.size() ? m.rawBytes.mean() : 0;
+    f.latencyP50Us = m.latencyUs.size() ? m.latencyUs.percentile(50) : -1;
+    f.latencyP99Us = m.latencyUs.size() ? m.latencyUs.percentile(99) : -1;
+    f.applyP50Us = m.applyUs.size() ? m.applyUs.percentile(50) : -1;
+    f.clientRenderP50Us = m.clientRenderUs.size() ? m.clientRenderUs.percentile(50) : -1;
+    return f;
+}
 
 } // namespace
 
@@ -84,6 +125,37 @@ bool ClientThread::requestView(const ViewSpec& v) {
 bool ClientThread::ping() {
     return push(PingCmd{});
 }
+bool ClientThread::requestSync(Sync mode) {
+    return push(SyncCmd{mode});
+}
+
+std::vector<AppliedVolumeBox> ClientThread::drainVolumeBoxes() {
+    std::vector<AppliedVolumeBox> out;
+    std::lock_guard lock(m_boxMutex);
+    out.swap(m_boxes);
+    return out;
+}
+
+void ClientThread::pushBox(AppliedVolumeBox b) {
+    std::lock_guard lock(m_boxMutex);
+    if (b.full)
+        m_boxes.clear();
+    m_boxes.push_back(std::move(b));
+    if (m_boxes.size() > m_config.maxQueuedRects) {
+        m_boxes.clear();
+        m_needFullVolume = true;
+    }
+    m_boxesPublished.fetch_add(1);
+}
+
+bool ClientThread::withLocalVolume(const std::function<void(const Volume&)>& fn) const {
+    std::shared_lock lock(m_volumeRw);
+    const Volume* v = m_localClient ? m_localClient->localVolume() : nullptr;
+    if (!v)
+        return false;
+    fn(*v);
+    return true;
+}
 
 std::shared_ptr<const ClientSnapshot> ClientThread::snapshot() const {
     std::lock_guard lock(m_snapMutex);
@@ -118,6 +190,7 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
     s->attempts = m_attempts;
     s->publishedUs = nowUs;
     s->codec = codecName(m_config.client.codec);
+    s->sync = s->requestedSync = m_wantedSync.value_or(m_config.client.sync);
     s->hapticModel = m_haptic;
     s->hapticModels = m_hapticModels;
     if (c) {
@@ -145,6 +218,10 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
         s->latencyP99Us = st.updateLatencyUs.size() ? st.updateLatencyUs.percentile(99) : -1;
         s->meanBytes = st.updateBytes.size() ? st.updateBytes.mean() : 0;
         s->meanRawBytes = st.updateRawBytes.size() ? st.updateRawBytes.mean() : 0;
+        s->sync = c->sync();
+        s->requestedSync = c->requestedSync();
+        for (size_t m = 0; m < 2; ++m)
+            s->modes[m] = figures(st.modes[m], m_modeRates[m]);
         s->rateHistory = m_rateHistory;
         if (!s->rateHistory.empty())
             s->rates = s->rateHistory.back();
@@ -163,6 +240,8 @@ void ClientThread::run() {
         ClientConfig cc = m_config.client;
         if (m_wantedView)
             cc.view = *m_wantedView;
+        if (m_wantedSync)
+            cc.sync = *m_wantedSync;
         std::unique_ptr<SessionClient> client;
         try {
             client = std::make_unique<SessionClient>(cc);
@@ -173,6 +252,26 @@ void ClientThread::run() {
         }
         if (client) {
             SessionClient* cp = client.get();
+            cp->setVolumeMutex(&m_volumeRw);
+            {
+                std::unique_lock lock(m_volumeRw);
+                m_localClient = cp;
+            }
+            if (!cc.renderLocally)
+                cp->setVolumeCallback(
+                    [this, cp](const VolumeUpdate& meta, const Box3i& box, bool full) {
+                        if (!cp->localVolume())
+                            return;
+                        AppliedVolumeBox b = copyBox(*cp->localVolume(), box, full);
+                        b.sequence = meta.sequence;
+                        b.bytes = uint32_t(meta.payload.size());
+                        b.rawBytes = meta.rawBytes;
+                        b.appliedUs = steadyNowUs();
+                        const auto& records = cp->updateRecords();
+                        if (!records.empty() && records.back().sequence == meta.sequence && !full)
+                            b.latencyUs = records.back().latencyUs;
+                        pushBox(std::move(b));
+                    });
             NewSamples newLatency, newRtt;
             // Runs inside poll(), right after the update is applied to the client's DBI.
             cp->setUpdateCallback(
@@ -199,6 +298,8 @@ void ClientThread::run() {
             uint64_t nextPing = start, nextTick = start + 1000000, nextPublish = start;
             uint64_t lastTickUs = start;
             std::array<std::array<uint64_t, 4>, size_t(Channel::Count)> lastTotals{};
+            std::array<uint64_t, 2> lastModeUpdates{};
+            m_modeRates = {};
             m_rateHistory.clear();
             while (!m_stop && !cp->closed()) {
                 cp->poll(1);
@@ -227,9 +328,19 @@ void ClientThread::run() {
                         m_wantedView = v->view;
                         if (cp->welcomed())
                             cp->requestView(v->view);
+                    } else if (auto* y = std::get_if<SyncCmd>(&c)) {
+                        m_wantedSync = y->sync;
+                        if (cp->welcomed())
+                            cp->requestSync(y->sync);
                     } else if (cp->welcomed()) {
                         cp->sendPing();
                     }
+                }
+                if (m_needFullVolume.exchange(false) && cp->localVolume()) {
+                    AppliedVolumeBox b = copyBox(*cp->localVolume(), {}, true);
+                    b.sequence = cp->lastUpdateSequence();
+                    b.appliedUs = now;
+                    pushBox(std::move(b));
                 }
                 if (m_needFull.exchange(false) && cp->hasFullImage()) {
                     AppliedRect r;
@@ -260,6 +371,11 @@ void ClientThread::run() {
                                      double(t[3] - lastTotals[ch][3]) / dt};
                         lastTotals[ch] = t;
                     }
+                    for (size_t m = 0; m < 2; ++m) {
+                        uint64_t n = cp->stats().modes[m].updates;
+                        m_modeRates[m] = double(n - lastModeUpdates[m]) / dt;
+                        lastModeUpdates[m] = n;
+                    }
                     m_rateHistory.push_back(rates);
                     if (m_rateHistory.size() > 120)
                         m_rateHistory.pop_front();
@@ -278,6 +394,10 @@ void ClientThread::run() {
                     cp->closeReason().empty() ? "the connection was lost" : cp->closeReason();
             else if (m_stop)
                 cp->disconnect();
+            {
+                std::unique_lock lock(m_volumeRw);
+                m_localClient = nullptr;
+            }
             client.reset();
         }
         if (m_stop)

@@ -51,7 +51,8 @@ float DepthQuantizer::dequantize(uint16_t q) const {
     // Window depth of eye z = -dist under glm::perspective (GL clip conventions).
     double n = m_near, f = m_far, z = -dist;
     double ndc = (-(f + n) / (f - n) * z - 2.0 * f * n / (f - n)) / -z;
-    return float(std::min(ndc * 0.5 + 0.5, std::nextafter(1.0, 0.0)));
+    // The largest float below 1, so the far plane never reads back as the background.
+    return std::min(float(ndc * 0.5 + 0.5), std::nextafter(1.0f, 0.0f));
 }
 
 namespace {
@@ -171,6 +172,134 @@ bool decodeImage(std::span<const uint8_t> payload, uint32_t rawBytes, Codec code
             return false;
     }
     fromPlanar(planar, width, height, camera, out);
+    return true;
+}
+
+// [SECTION] volume
+
+std::vector<uint8_t> compressBytes(std::span<const uint8_t> raw, Codec codec) {
+    std::vector<uint8_t> out;
+    if (codec == Codec::Raw) {
+        out.assign(raw.begin(), raw.end());
+    } else if (codec == Codec::Lz4) {
+        out.resize(size_t(LZ4_compressBound(int(raw.size()))));
+        int written = LZ4_compress_default(reinterpret_cast<const char*>(raw.data()),
+                                           reinterpret_cast<char*>(out.data()), int(raw.size()),
+                                           int(out.size()));
+        out.resize(size_t(std::max(written, 0)));
+    } else {
+        out.resize(ZSTD_compressBound(raw.size()));
+        size_t written = ZSTD_compress(out.data(), out.size(), raw.data(), raw.size(), 1);
+        out.resize(ZSTD_isError(written) ? 0 : written);
+    }
+    return out;
+}
+
+bool decompressBytes(std::span<const uint8_t> payload, Codec codec, size_t rawBytes,
+                     std::vector<uint8_t>& out) {
+    if (codec == Codec::Raw) {
+        if (payload.size() != rawBytes)
+            return false;
+        out.assign(payload.begin(), payload.end());
+        return true;
+    }
+    if (rawBytes > size_t(kMaxVolumeRawBytes) || payload.empty())
+        return false;
+    out.resize(rawBytes);
+    if (codec == Codec::Lz4) {
+        int got = LZ4_decompress_safe(reinterpret_cast<const char*>(payload.data()),
+                                      reinterpret_cast<char*>(out.data()), int(payload.size()),
+                                      int(out.size()));
+        return got == int(out.size());
+    }
+    size_t got = ZSTD_decompress(out.data(), out.size(), payload.data(), payload.size());
+    return !ZSTD_isError(got) && got == out.size();
+}
+
+EncodedVolume encodeVolumeBox(const Volume& volume, const Box3i& box, Codec codec, bool materials) {
+    EncodedVolume e;
+    Box3i b = box.intersect(volume.bounds());
+    if (b.empty())
+        return e;
+    const size_t n = size_t(b.count());
+    std::vector<uint8_t> raw(materials ? 2 * n : n);
+    const glm::ivec3 size = b.size();
+    const uint8_t* den = volume.densityData();
+    const uint8_t* mat = volume.materialData();
+    uint8_t* o = raw.data();
+    for (int z = b.lo.z; z < b.hi.z; ++z)
+        for (int y = b.lo.y; y < b.hi.y; ++y) {
+            size_t i = volume.index(b.lo.x, y, z);
+            std::memcpy(o, den + i, size_t(size.x));
+            if (materials)
+                std::memcpy(o + n, mat + i, size_t(size.x));
+            o += size.x;
+        }
+    e.rawBytes = uint32_t(raw.size());
+    e.codec = codec;
+    e.payload = codec == Codec::Raw ? std::move(raw) : compressBytes(raw, codec);
+    return e;
+}
+
+EncodedVolume encodeVolumeFull(const Volume& volume, Codec codec) {
+    EncodedVolume e;
+    const size_t n = volume.voxelCount();
+    std::vector<uint8_t> raw(n * 2);
+    std::memcpy(raw.data(), volume.densityData(), n);
+    std::memcpy(raw.data() + n, volume.materialData(), n);
+    e.rawBytes = uint32_t(raw.size());
+    e.codec = codec == Codec::Raw ? Codec::Zstd : codec;
+    e.payload = compressBytes(raw, e.codec);
+    return e;
+}
+
+bool applyVolumeBox(Volume& volume, const Box3i& box, std::span<const uint8_t> densities,
+                    std::span<const uint8_t> materials) {
+    if (box.empty() || !(box.intersect(volume.bounds()) == box) ||
+        densities.size() != size_t(box.count()) ||
+        (!materials.empty() && materials.size() != densities.size()))
+        return false;
+    for (uint8_t m : materials)
+        if (m >= uint8_t(kMaterialCount))
+            return false; // a material label we do not know
+    const uint8_t* inMat = materials.empty() ? nullptr : materials.data();
+    const glm::ivec3 size = box.size();
+    uint8_t* den = volume.densityData();
+    uint8_t* mat = volume.materialData();
+    const uint8_t* in = densities.data();
+    for (int z = box.lo.z; z < box.hi.z; ++z)
+        for (int y = box.lo.y; y < box.hi.y; ++y) {
+            size_t row = volume.index(box.lo.x, y, z);
+            for (int x = 0; x < size.x; ++x) {
+                uint8_t d = *in++;
+                den[row + size_t(x)] = d;
+                if (inMat)
+                    mat[row + size_t(x)] = *inMat++;
+                else if (d == 0)
+                    mat[row + size_t(x)] = uint8_t(Material::Air);
+            }
+        }
+    return true;
+}
+
+bool decodeVolumeFull(std::span<const uint8_t> payload, uint32_t rawBytes, Codec codec,
+                      glm::ivec3 dims, glm::vec3 spacing, Volume& out) {
+    if (dims.x <= 0 || dims.y <= 0 || dims.z <= 0 || dims.x > kMaxVolumeDim ||
+        dims.y > kMaxVolumeDim || dims.z > kMaxVolumeDim)
+        return false;
+    const uint64_t n = uint64_t(dims.x) * uint64_t(dims.y) * uint64_t(dims.z);
+    if (uint64_t(rawBytes) != n * 2 || codec == Codec::Raw)
+        return false;
+    std::vector<uint8_t> raw;
+    if (!decompressBytes(payload, codec, rawBytes, raw))
+        return false;
+    for (size_t i = size_t(n); i < raw.size(); ++i)
+        if (raw[i] >= uint8_t(kMaterialCount))
+            return false; // a material label we do not know
+    Volume v(dims, spacing);
+    std::memcpy(v.densityData(), raw.data(), size_t(n));
+    std::memcpy(v.materialData(), raw.data() + n, size_t(n));
+    out = std::move(v);
     return true;
 }
 

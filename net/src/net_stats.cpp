@@ -56,6 +56,38 @@ ChannelRates NetStats::averageRates(Channel c) const {
             double(k.msgsIn.load()) / dt, double(k.msgsOut.load()) / dt};
 }
 
+void ModeStats::add(const UpdateRecord& r) {
+    ++updates;
+    fullUpdates += r.full;
+    bytes.add(double(r.bytes));
+    rawBytes.add(double(r.rawBytes));
+    auto put = [](SampleWindow& w, double v) {
+        if (v >= 0)
+            w.add(v);
+    };
+    if (!r.full)
+        put(latencyUs, r.latencyUs);
+    put(transmitUs, r.transmitUs);
+    put(applyUs, r.applyUs);
+    put(clientRenderUs, r.clientRenderUs);
+    put(erodeUs, r.erodeUs);
+    put(serverRenderUs, r.serverRenderUs);
+    put(encodeUs, r.encodeUs);
+}
+
+std::string jsonModeStats(const ModeStats& m) {
+    return "{\"updates\": " + std::to_string(m.updates) +
+           ", \"full_updates\": " + std::to_string(m.fullUpdates) +
+           ", \"bytes\": " + jsonWindow(m.bytes) + ", \"raw_bytes\": " + jsonWindow(m.rawBytes) +
+           ", \"latency_us\": " + jsonWindow(m.latencyUs) +
+           ", \"erode_us\": " + jsonWindow(m.erodeUs) +
+           ", \"server_render_us\": " + jsonWindow(m.serverRenderUs) +
+           ", \"encode_us\": " + jsonWindow(m.encodeUs) +
+           ", \"transmit_us\": " + jsonWindow(m.transmitUs) +
+           ", \"client_apply_us\": " + jsonWindow(m.applyUs) +
+           ", \"client_render_us\": " + jsonWindow(m.clientRenderUs) + "}";
+}
+
 std::string jsonString(const std::string& s) {
     std::string out = "\"";
     for (char ch : s) {
@@ -89,6 +121,7 @@ std::string reportJson(const ReportInfo& info, const NetStats& stats) {
     std::string j = "{\n";
     j += "  \"server\": " + jsonString(info.server) + ",\n";
     j += "  \"codec\": " + jsonString(info.codec) + ",\n";
+    j += "  \"sync\": " + jsonString(info.sync) + ",\n";
     j += "  \"view\": " + jsonString(info.view) + ",\n";
     j += "  \"camera\": " + jsonString(info.camera) + ",\n";
     j += "  \"script\": " + jsonString(info.script) + ",\n";
@@ -108,6 +141,8 @@ std::string reportJson(const ReportInfo& info, const NetStats& stats) {
     j += "  \"update_latency_us\": " + jsonWindow(stats.updateLatencyUs) + ",\n";
     j += "  \"apply_us\": " + jsonWindow(stats.applyUs) + ",\n";
     j += "  \"haptic_round_trip_us\": " + jsonWindow(stats.hapticRoundTripUs) + ",\n";
+    j += "  \"modes\": {\"dbi\": " + jsonModeStats(stats.modes[size_t(Sync::Dbi)]) +
+         ",\n            \"volume\": " + jsonModeStats(stats.modes[size_t(Sync::Volume)]) + "},\n";
     if (info.hapticLoop) {
         j +=
             "  \"haptics\": {\"tool_rate_hz\": " + jsonNumber(info.toolRateHz) +

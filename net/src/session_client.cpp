@@ -1,16 +1,21 @@
 #include "net/session_client.h"
 
 #include "libsim/error.h"
+#include "libsim/renderer.h"
+#include "libsim/thread_pool.h"
 #include "net/codec.h"
+#include "net/image_delta.h"
 #include "net/view.h"
 
 #include <cstdlib>
+#include <mutex>
 
 namespace trephine::net {
 
 SessionClient::SessionClient(ClientConfig config)
     : m_config(std::move(config)), m_host(Host::client()), m_view(m_config.view),
-      m_dbi(m_config.view.width, m_config.view.height) {}
+      m_dbi(m_config.view.width, m_config.view.height), m_sync(m_config.sync),
+      m_wantSync(m_config.sync) {}
 
 SessionClient::~SessionClient() {
     if (connected())
@@ -72,6 +77,8 @@ void SessionClient::onEvent(const ENetEvent& ev) {
         h.role = m_config.role;
         h.name = m_config.name;
         h.codec = m_config.codec;
+        h.sync = m_config.sync;
+        h.volumeCodec = m_config.volumeCodec;
         h.view = m_config.view;
         send(Channel::Control, encodeMessage(h));
         sendPing();
@@ -125,6 +132,16 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         }
         return true;
     }
+    case MessageType::VolumeUpdate: {
+        VolumeUpdate u;
+        if (!decodeMessage(data, u))
+            return false;
+        if (!applyVolume(u, nowUs)) {
+            ++m_rejected;
+            return false;
+        }
+        return true;
+    }
     case MessageType::HapticModel: {
         HapticModel m;
         if (!decodeMessage(data, m))
@@ -172,8 +189,151 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
     }
 }
 
+double SessionClient::transmitUs(uint64_t sentServerUs, uint64_t receivedUs) const {
+    int64_t sentLocal = int64_t(sentServerUs) - m_stats.clockOffsetUs;
+    if (sentServerUs == 0 || int64_t(receivedUs) < sentLocal)
+        return -1;
+    return double(int64_t(receivedUs) - sentLocal);
+}
+
+void SessionClient::record(UpdateRecord r) {
+    m_stats.modes[size_t(r.mode)].add(r);
+    m_records.push_back(r);
+    while (m_records.size() > m_config.recordCapacity)
+        m_records.pop_front();
+    if (m_recordCallback)
+        m_recordCallback(r);
+}
+
+void SessionClient::requestSync(Sync mode) {
+    if (mode == m_wantSync)
+        return;
+    m_wantSync = mode;
+    SyncMode m{mode, m_config.volumeCodec};
+    send(Channel::Control, encodeMessage(m));
+}
+
+void SessionClient::renderLocal() {
+    if (!m_renderer || !m_config.renderLocally)
+        return;
+    m_dbi = m_renderer->render(toCamera(m_view));
+}
+
+bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
+    uint64_t start = steadyNowUs();
+    if (!m_welcome)
+        return false; // voxels before the welcome: we cannot place them
+    const glm::ivec3 dims = m_welcome->volumeDims;
+    const Box3i box{{u.x, u.y, u.z}, {u.x + u.sizeX, u.y + u.sizeY, u.z + u.sizeZ}};
+    if (box.hi.x > dims.x || box.hi.y > dims.y || box.hi.z > dims.z)
+        return false; // outside the volume of the welcome
+    if (u.full && !(box == Box3i{glm::ivec3(0), dims}))
+        return false;
+    // Not wanted (a DBI client, or one that switched away): stale, not malformed.
+    if (m_wantSync != Sync::Volume)
+        return true;
+    const bool switching = m_sync != Sync::Volume;
+    if (switching && (!u.full || int32_t(u.sequence - m_lastImageSeq) <= 0))
+        return true; // from an earlier volume period; the switch waits for its full volume
+    if (!u.full && !m_volume)
+        return true;
+
+    if (u.full) {
+        Volume v;
+        if (!decodeVolumeFull(u.payload, u.rawBytes, u.codec, dims, m_welcome->spacing, v))
+            return false;
+        std::unique_lock<std::shared_mutex> lock;
+        if (m_volumeMutex)
+            lock = std::unique_lock(*m_volumeMutex);
+        if (m_volume) {
+            *m_volume = std::move(v); // same address: the renderer keeps pointing at it
+            if (m_renderer)
+                m_renderer->rebuild();
+        } else {
+            m_volume = std::make_unique<Volume>(std::move(v));
+        }
+        if (!m_renderer && m_config.renderLocally) {
+            if (!m_pool)
+                m_pool = std::make_unique<ThreadPool>(m_config.renderThreads);
+            m_renderer = std::make_unique<Renderer>(*m_volume, m_pool.get());
+        }
+    } else {
+        std::vector<uint8_t> voxels;
+        if (!decompressBytes(u.payload, u.codec, u.rawBytes, voxels))
+            return false;
+        const size_t n = size_t(box.count());
+        std::span<const uint8_t> densities(voxels.data(), n), materials;
+        if (u.materials)
+            materials = std::span<const uint8_t>(voxels.data() + n, n);
+        std::unique_lock<std::shared_mutex> lock;
+        if (m_volumeMutex)
+            lock = std::unique_lock(*m_volumeMutex);
+        if (!applyVolumeBox(*m_volume, box, densities, materials))
+            return false;
+        lock = {};
+        if (m_renderer)
+            m_renderer->volumeChanged(box);
+    }
+    if (switching || u.full) {
+        m_sync = Sync::Volume;
+        // A view asked for while the DBI was shown is ours at once now: we render it.
+        if (!m_requested.empty()) {
+            m_view = m_requested.rbegin()->second;
+            m_viewId = m_requested.rbegin()->first;
+            m_requested.clear();
+        }
+        m_requestedViewId = m_viewId;
+        if (!m_config.renderLocally &&
+            (m_dbi.width() != m_view.width || m_dbi.height() != m_view.height))
+            m_dbi = Dbi(m_view.width, m_view.height);
+        m_hasFull = true;
+    }
+    const uint64_t applied = steadyNowUs();
+    renderLocal();
+    const uint64_t done = steadyNowUs();
+
+    m_lastVolumeSeq = u.sequence;
+    m_lastSequence = u.sequence;
+    ++m_updatesApplied;
+    ++m_volumeUpdates;
+    if (u.full)
+        ++m_fullUpdates;
+    UpdateRecord r;
+    r.mode = Sync::Volume;
+    r.sequence = u.sequence;
+    r.full = u.full;
+    r.bytes = uint32_t(u.payload.size());
+    r.rawBytes = u.rawBytes;
+    r.box = box.size();
+    r.erodeUs = u.full ? -1 : double(u.erodeUs);
+    r.serverRenderUs = 0;
+    r.encodeUs = double(u.encodeUs);
+    r.transmitUs = transmitUs(u.sentServerUs, nowUs);
+    r.applyUs = double(applied - start);
+    r.clientRenderUs = m_renderer && m_config.renderLocally ? double(done - applied) : -1;
+    int64_t causeLocal = int64_t(u.causeServerUs) - m_stats.clockOffsetUs;
+    if (causeLocal > 0 && int64_t(done) >= causeLocal)
+        r.latencyUs = double(int64_t(done) - causeLocal);
+    r.appliedUs = done;
+    m_stats.updateBytes.add(double(r.bytes));
+    m_stats.updateRawBytes.add(double(r.rawBytes));
+    m_stats.applyUs.add(r.applyUs);
+    if (!u.full && r.latencyUs >= 0)
+        m_stats.updateLatencyUs.add(r.latencyUs);
+    record(r);
+    if (m_volumeCallback)
+        m_volumeCallback(u, box, u.full);
+    return true;
+}
+
 bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
     uint64_t start = steadyNowUs();
+    // In volume mode images are stale, unless we are switching back and this is the full image
+    // the server sent after the switch (newer than every volume update applied).
+    const bool leavingVolume = m_sync == Sync::Volume;
+    if (leavingVolume &&
+        (m_wantSync != Sync::Dbi || !u.full || int32_t(u.sequence - m_lastVolumeSeq) <= 0))
+        return true;
     // Which view does it belong to? Updates of a view we have left are stale, not malformed.
     const ViewSpec* view = nullptr;
     bool switching = false;
@@ -193,8 +353,26 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
         return false;
     Camera camera = toCamera(*view);
     Dbi patch;
-    if (!decodeImage(u.payload, u.rawBytes, u.codec, u.width, u.height, camera, patch))
+    if (u.predicted) {
+        // Coded against the pixels we hold there: only for the view we show, never a switch.
+        if (switching || m_dbi.width() != view->width || m_dbi.height() != view->height)
+            return true; // stale: a full image of the right view is on its way
+        const PixelRect rect{u.x, u.y, u.width, u.height};
+        patch = m_dbi.extract(rect);
+        PredictedStatus st = decodePredicted(u.payload, u.rawBytes, u.codec, u.baseHash,
+                                             DepthQuantizer(camera), patch);
+        if (st == PredictedStatus::Malformed)
+            return false;
+        if (st == PredictedStatus::BaseMismatch) {
+            // Our copy is not what the server coded against: never show a wrong picture; ask
+            // for the whole view again (the server answers with a full image).
+            ++m_resyncs;
+            requestView(m_view);
+            return true;
+        }
+    } else if (!decodeImage(u.payload, u.rawBytes, u.codec, u.width, u.height, camera, patch)) {
         return false;
+    }
     if (switching) {
         m_view = *view;
         m_viewId = u.viewId;
@@ -202,8 +380,17 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
         // Requests older than this one will never be shown.
         std::erase_if(m_requested, [&](const auto& r) { return int32_t(r.first - u.viewId) <= 0; });
     }
+    if (leavingVolume) {
+        m_sync = Sync::Dbi;
+        std::unique_lock<std::shared_mutex> lock;
+        if (m_volumeMutex)
+            lock = std::unique_lock(*m_volumeMutex);
+        m_renderer.reset();
+        m_volume.reset();
+    }
     m_dbi.apply(patch, u.x, u.y);
     m_lastSequence = u.sequence;
+    m_lastImageSeq = u.sequence;
     ++m_updatesApplied;
     if (u.full) {
         ++m_fullUpdates;
@@ -218,7 +405,23 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
     int64_t causeLocal = int64_t(u.causeServerUs) - m_stats.clockOffsetUs;
     if (!u.full && causeLocal > 0 && int64_t(applied) >= causeLocal)
         m_stats.updateLatencyUs.add(double(int64_t(applied) - causeLocal));
-    (void)nowUs;
+    UpdateRecord r;
+    r.mode = Sync::Dbi;
+    r.sequence = u.sequence;
+    r.full = u.full;
+    r.bytes = uint32_t(u.payload.size());
+    r.rawBytes = u.rawBytes;
+    r.box = {u.width, u.height, 1};
+    r.erodeUs = u.full ? -1 : double(u.erodeUs);
+    r.serverRenderUs = u.full ? -1 : double(u.renderUs);
+    r.encodeUs = double(u.encodeUs);
+    r.transmitUs = transmitUs(u.sentServerUs, nowUs);
+    r.applyUs = double(applied - start);
+    r.clientRenderUs = 0; // the rectangle is the picture: nothing to render
+    if (causeLocal > 0 && int64_t(applied) >= causeLocal)
+        r.latencyUs = double(int64_t(applied) - causeLocal);
+    r.appliedUs = applied;
+    record(r);
     if (m_updateCallback)
         m_updateCallback(u, PixelRect{u.x, u.y, u.width, u.height}, u.full);
     return true;
@@ -238,8 +441,18 @@ uint32_t SessionClient::requestView(const ViewSpec& view) {
     ViewRequest r;
     r.requestId = m_nextRequestId++;
     r.view = view;
-    m_requested[r.requestId] = view;
     m_requestedViewId = r.requestId;
+    if (m_sync == Sync::Volume && m_wantSync == Sync::Volume && m_volume) {
+        // We render it ourselves, now; the server only keeps it for a switch to DBI.
+        m_view = view;
+        m_viewId = r.requestId;
+        if (m_config.renderLocally)
+            renderLocal();
+        else
+            m_dbi = Dbi(view.width, view.height);
+    } else {
+        m_requested[r.requestId] = view;
+    }
     send(Channel::Control, encodeMessage(r));
     return r.requestId;
 }

@@ -8,6 +8,7 @@
 #include "libsim/thread_pool.h"
 #include "libsim/volume_io.h"
 #include "net/codec.h"
+#include "net/image_delta.h"
 #include "net/view.h"
 
 #include <poll.h>
@@ -16,6 +17,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <array>
 #include <cstdio>
 #include <optional>
 #include <shared_mutex>
@@ -28,13 +30,16 @@ namespace {
 
 // What the network thread hands the simulation thread, in arrival order.
 struct SimEvent {
-    enum class Kind { Join, View, Tool, Leave, Cut } kind = Kind::Tool;
+    enum class Kind { Join, View, Tool, Leave, Cut, Sync, Voxels } kind = Kind::Tool;
     uint16_t client = 0;
     Camera camera;
     uint32_t viewId = 0;
     Codec codec = Codec::Raw;
+    Sync sync = Sync::Dbi;          // Join, Sync
+    Codec volumeCodec = Codec::Raw; // Join, Sync
     ToolState tool;
-    Box3i box; // Cut
+    Box3i box;                              // Cut, Voxels
+    std::vector<uint8_t> density, material; // Voxels
     uint64_t arrivedUs = 0;
 };
 
@@ -45,7 +50,30 @@ struct PendingUpdate {
     PixelRect rect;
     bool full = false;
     uint64_t causeUs = 0; // the oldest cause merged in: latency is never under-reported
+    uint32_t rawBytes = 0;
+    uint32_t payloadBytes = 0;
     std::vector<uint8_t> message;
+    // The client's pixels of `rect` before this update (SimClient::shadow), put back if the update
+    // is merged into a newer one before it leaves: the client never saw it. Empty when full.
+    Dbi undo;
+};
+
+// A volume update for one client (replicated-volume baseline), coalesced like images: a newer
+// box merges into an unsent one and the voxels are taken afresh, so the newest voxels win and no
+// voxel is queued twice.
+struct PendingVolume {
+    Box3i box;
+    bool full = false;
+    bool materials = false;
+    uint64_t causeUs = 0;
+    uint32_t rawBytes = 0;
+    uint32_t payloadBytes = 0;
+    std::vector<uint8_t> message;
+};
+
+// Per-mode server figures for the report (under reportMutex).
+struct ModeReport {
+    SampleWindow erodeUs{65536}, renderUs{65536}, encodeUs{65536};
 };
 
 // A network-side participant.
@@ -53,6 +81,7 @@ struct NetPeer {
     ENetPeer* peer = nullptr;
     bool hello = false;
     Hello helloMsg;
+    Sync sync = Sync::Dbi; // the hello's, then the latest SyncMode
     int malformed = 0;
     bool kicked = false;
 };
@@ -66,13 +95,20 @@ struct PeerReport {
     uint64_t malformed = 0, hapticModels = 0, hapticRelays = 0, toolStates = 0, viewsRefused = 0;
     uint64_t connectedUs = 0, disconnectedUs = 0;
     bool kicked = false;
+    Sync sync = Sync::Dbi;
+    uint64_t syncSwitches = 0;
 };
 
 // A simulation-side participant: its view, codec and tool.
 struct SimClient {
     Camera camera;
     uint32_t viewId = 0;
+    // What the client holds once every posted image update has arrived (the image channel is
+    // reliable and ordered): the base of predicted updates. Empty outside DBI mode.
+    Dbi shadow;
     Codec codec = Codec::Raw;
+    Sync sync = Sync::Dbi;
+    Codec volumeCodec = Codec::Raw;
     std::optional<Driller> driller;
     bool hasTool = false;
     uint32_t lastSequence = 0;
@@ -83,6 +119,7 @@ struct SimClient {
 struct ViewFrame {
     Camera camera;
     Dbi frame;
+    HitCache cache; // where each pixel's ray met bone: dirty re-renders resume there
 };
 
 SimEvent makeEvent(SimEvent::Kind kind, uint16_t client) {
@@ -105,8 +142,8 @@ ToolShape shapeOf(const ToolState& t) {
 
 struct SessionServer::Impl {
     explicit Impl(Volume v, const ServerConfig& c)
-        : host(Host::listen(c.port, c.maxClients + kSparePeers)), volume(std::move(v)),
-          pool(c.renderThreads), renderer(volume, &pool),
+        : host(Host::listen(c.port, c.maxClients + kSparePeers)),
+          volume(normaliseAir(std::move(v))), pool(c.renderThreads), renderer(volume, &pool),
           wakeFd(eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)) {}
     ~Impl() {
         if (wakeFd >= 0)
@@ -114,6 +151,17 @@ struct SessionServer::Impl {
     }
     Impl(const Impl&) = delete;
     Impl& operator=(const Impl&) = delete;
+
+    // Air has no material: a voxel of density 0 is labelled Air, as erosion and box cuts leave
+    // it. With that invariant a volume client derives materials exactly from box densities.
+    static Volume normaliseAir(Volume v) {
+        uint8_t* den = v.densityData();
+        uint8_t* mat = v.materialData();
+        for (size_t i = 0; i < v.voxelCount(); ++i)
+            if (den[i] == 0)
+                mat[i] = uint8_t(Material::Air);
+        return v;
+    }
 
     // ENet peer slots beyond maxClients, so that one more can be told "server full".
     static constexpr size_t kSparePeers = 4;
@@ -140,6 +188,8 @@ struct SessionServer::Impl {
     std::map<uint16_t, PeerReport> peerReport;
     SampleWindow forceComputeUs{65536};
     SampleWindow hapticServiceUs{65536}; // tool state received -> haptic model queued
+    std::array<ModeReport, 2> modeReport;
+    std::array<ModeTotals, 2> modeTotals;
 
     // Network thread only.
     std::map<uint16_t, NetPeer> peers;
@@ -155,6 +205,7 @@ struct SessionServer::Impl {
     // Simulation -> network.
     std::mutex outMutex;
     std::map<uint16_t, PendingUpdate> outbox;
+    std::map<uint16_t, PendingVolume> volumeOutbox;
     // Wakes the network thread's wait on the ENet socket when an update is posted, so it goes
     // out at once instead of after the rest of a 1 ms service timeout (-1: no eventfd; the
     // network thread then simply waits out its timeout).
@@ -187,8 +238,8 @@ struct SessionServer::Impl {
 
     // Queues `rect` of `view` for client `id`, merged with an unsent update of the same view so
     // a region is never queued twice and the newest pixels (the frame's, now) win.
-    void post(uint16_t id, const SimClient& c, const ViewFrame& view, PixelRect rect, bool full,
-              uint64_t causeUs) {
+    void post(uint16_t id, SimClient& c, const ViewFrame& view, PixelRect rect, bool full,
+              uint64_t causeUs, uint32_t erodeUs, uint32_t renderUs) {
         std::optional<PendingUpdate> old;
         {
             std::lock_guard lock(outMutex);
@@ -200,6 +251,9 @@ struct SessionServer::Impl {
             }
         }
         if (old) {
+            // It never left: the client does not have its pixels.
+            if (!old->full && !old->undo.empty() && !c.shadow.empty())
+                c.shadow.apply(old->undo, old->rect.x, old->rect.y);
             rect = unite(rect, old->rect);
             full = full || old->full;
             causeUs = std::min(causeUs, old->causeUs);
@@ -214,16 +268,130 @@ struct SessionServer::Impl {
         u.width = uint16_t(rect.w);
         u.height = uint16_t(rect.h);
         u.codec = c.codec;
-        EncodedImage e = encodeImage(view.frame.extract(rect), c.codec, view.camera);
-        u.rawBytes = e.rawBytes;
-        u.payload = std::move(e.payload);
+        uint64_t e0 = steadyNowUs();
+        const Dbi pixels = view.frame.extract(rect);
+        Dbi undo;
+        if (!full && c.codec != Codec::Raw && c.shadow.width() == view.frame.width() &&
+            c.shadow.height() == view.frame.height()) {
+            undo = c.shadow.extract(rect);
+            PredictedImage p = encodePredicted(pixels, undo, c.codec, DepthQuantizer(view.camera));
+            u.predicted = true;
+            u.baseHash = p.baseHash;
+            u.rawBytes = p.rawBytes;
+            u.payload = std::move(p.payload);
+        } else {
+            EncodedImage e = encodeImage(pixels, c.codec, view.camera);
+            u.rawBytes = e.rawBytes;
+            u.payload = std::move(e.payload);
+        }
+        if (full)
+            c.shadow = view.frame;
+        else if (!c.shadow.empty())
+            c.shadow.apply(pixels, rect.x, rect.y);
         u.sentServerUs = steadyNowUs();
-        PendingUpdate p{c.viewId, rect, full, causeUs, encodeMessage(u)};
+        u.erodeUs = erodeUs;
+        u.renderUs = renderUs;
+        u.encodeUs = uint32_t(u.sentServerUs - e0);
+        {
+            std::lock_guard lock(reportMutex);
+            ModeReport& m = modeReport[size_t(Sync::Dbi)];
+            m.encodeUs.add(double(u.encodeUs));
+            if (!full) {
+                m.erodeUs.add(double(erodeUs));
+                m.renderUs.add(double(renderUs));
+            }
+        }
+        PendingUpdate p{c.viewId,         rect,           full,
+                        causeUs,          u.rawBytes,     uint32_t(u.payload.size()),
+                        encodeMessage(u), std::move(undo)};
         {
             std::lock_guard lock(outMutex);
             outbox[id] = std::move(p);
         }
         wakeNetwork();
+    }
+
+    // Queues the voxels of `box` (or, when `full`, the whole volume) for volume client `id`,
+    // merged with its unsent volume update: the union box, taken from the volume now.
+    void postVolume(uint16_t id, const SimClient& c, Box3i box, bool full, bool materials,
+                    uint64_t causeUs, uint32_t erodeUs) {
+        std::optional<PendingVolume> old;
+        {
+            std::lock_guard lock(outMutex);
+            auto it = volumeOutbox.find(id);
+            if (it != volumeOutbox.end()) {
+                old = std::move(it->second);
+                volumeOutbox.erase(it);
+            }
+        }
+        if (old) {
+            box.merge(old->box);
+            full = full || old->full;
+            materials = materials || old->materials;
+            causeUs = std::min(causeUs, old->causeUs);
+        }
+        if (full)
+            box = volume.bounds();
+        box = box.intersect(volume.bounds());
+        if (box.empty())
+            return;
+        VolumeUpdate u;
+        u.sequence = ++sequence;
+        u.causeServerUs = causeUs;
+        u.full = full;
+        u.materials = full || materials;
+        u.x = uint16_t(box.lo.x);
+        u.y = uint16_t(box.lo.y);
+        u.z = uint16_t(box.lo.z);
+        glm::ivec3 size = box.size();
+        u.sizeX = uint16_t(size.x);
+        u.sizeY = uint16_t(size.y);
+        u.sizeZ = uint16_t(size.z);
+        uint64_t e0 = steadyNowUs();
+        EncodedVolume e = full ? encodeVolumeFull(volume, c.volumeCodec)
+                               : encodeVolumeBox(volume, box, c.volumeCodec, materials);
+        u.codec = e.codec;
+        u.rawBytes = e.rawBytes;
+        u.payload = std::move(e.payload);
+        u.sentServerUs = steadyNowUs();
+        u.erodeUs = erodeUs;
+        u.encodeUs = uint32_t(u.sentServerUs - e0);
+        {
+            std::lock_guard lock(reportMutex);
+            ModeReport& m = modeReport[size_t(Sync::Volume)];
+            m.encodeUs.add(double(u.encodeUs));
+            if (!full)
+                m.erodeUs.add(double(erodeUs));
+        }
+        std::vector<uint8_t> message = encodeMessage(u);
+        if (message.empty()) {
+            std::fprintf(stderr,
+                         "trephine server: volume update of %dx%dx%d voxels does not fit "
+                         "a message; client %u skipped it\n",
+                         size.x, size.y, size.z, unsigned(id));
+            return;
+        }
+        PendingVolume p{box,
+                        full,
+                        materials,
+                        causeUs,
+                        u.rawBytes,
+                        uint32_t(u.payload.size()),
+                        std::move(message)};
+        {
+            std::lock_guard lock(outMutex);
+            volumeOutbox[id] = std::move(p);
+        }
+        wakeNetwork();
+    }
+
+    // A client that switched modes needs nothing queued for the other one.
+    void dropPending(uint16_t id, Sync mode) {
+        std::lock_guard lock(outMutex);
+        if (mode == Sync::Dbi)
+            outbox.erase(id);
+        else
+            volumeOutbox.erase(id);
     }
 };
 
@@ -275,6 +443,23 @@ void SessionServer::submitBoxCut(const Box3i& box) {
     m_impl->push(std::move(ev));
 }
 
+void SessionServer::submitVoxels(const Box3i& box, std::vector<uint8_t> density,
+                                 std::vector<uint8_t> material) {
+    if (box.empty() || !(box.intersect(m_impl->volume.bounds()) == box))
+        throw Error("submitVoxels: the box must be non-empty and inside the volume");
+    if (density.size() != size_t(box.count()) || material.size() != density.size())
+        throw Error("submitVoxels: give box.count() density and material bytes");
+    for (uint8_t m : material)
+        if (m >= uint8_t(kMaterialCount))
+            throw Error("submitVoxels: unknown material label " + std::to_string(m));
+    SimEvent ev = makeEvent(SimEvent::Kind::Voxels, 0);
+    ev.box = box;
+    ev.density = std::move(density);
+    ev.material = std::move(material);
+    ev.arrivedUs = steadyNowUs();
+    m_impl->push(std::move(ev));
+}
+
 Dbi SessionServer::renderView(const ViewSpec& view) {
     std::lock_guard lock(m_impl->volumeMutex);
     return m_impl->renderer.render(toCamera(view));
@@ -292,7 +477,15 @@ bool SessionServer::idle() {
             return false;
     }
     std::lock_guard lock(m_impl->outMutex);
-    return m_impl->outbox.empty();
+    return m_impl->outbox.empty() && m_impl->volumeOutbox.empty();
+}
+
+ModeTotals SessionServer::modeTotals(Sync mode) const {
+    std::lock_guard lock(m_impl->reportMutex);
+    ModeTotals t = m_impl->modeTotals[size_t(mode)];
+    for (const auto& [id, r] : m_impl->peerReport)
+        t.clients += r.hello && !r.kicked && r.disconnectedUs == 0 && r.sync == mode;
+    return t;
 }
 
 // [SECTION] network thread
@@ -388,10 +581,12 @@ void SessionServer::networkLoop() {
                 return false;
             p.hello = true;
             p.helloMsg = h;
+            p.sync = h.sync;
             report(id, [&](PeerReport& r) {
                 r.hello = true;
                 r.name = h.name;
                 r.role = h.role;
+                r.sync = h.sync;
             });
             if (viewTooLarge(h.view)) {
                 p.kicked = true;
@@ -412,6 +607,8 @@ void SessionServer::networkLoop() {
             SimEvent ev = makeEvent(SimEvent::Kind::Join, id);
             ev.camera = toCamera(h.view);
             ev.codec = h.codec;
+            ev.sync = h.sync;
+            ev.volumeCodec = h.volumeCodec;
             s.push(std::move(ev));
             return true;
         }
@@ -452,6 +649,21 @@ void SessionServer::networkLoop() {
             for (auto& [otherId, other] : s.peers)
                 if (otherId != id && other.hello && !other.kicked)
                     sendTo(other.peer, Channel::ToolState, bytes);
+            return true;
+        }
+        case MessageType::SyncMode: {
+            SyncMode m;
+            if (!decodeMessage(data, m))
+                return false;
+            p.sync = m.sync;
+            report(id, [&](PeerReport& r) {
+                r.sync = m.sync;
+                ++r.syncSwitches;
+            });
+            SimEvent ev = makeEvent(SimEvent::Kind::Sync, id);
+            ev.sync = m.sync;
+            ev.volumeCodec = m.volumeCodec;
+            s.push(std::move(ev));
             return true;
         }
         case MessageType::Ping: {
@@ -528,16 +740,35 @@ void SessionServer::networkLoop() {
         s.waitNetwork(1);
         s.host.service(0, onEvent);
         std::map<uint16_t, PendingUpdate> out;
+        std::map<uint16_t, PendingVolume> outVolume;
         {
             std::lock_guard lock(s.outMutex);
             out.swap(s.outbox);
+            outVolume.swap(s.volumeOutbox);
         }
+        auto countSent = [&](Sync mode, bool full, uint32_t bytes, uint32_t rawBytes) {
+            std::lock_guard lock(s.reportMutex);
+            ModeTotals& t = s.modeTotals[size_t(mode)];
+            ++t.updates;
+            t.fullUpdates += full;
+            t.bytes += bytes;
+            t.rawBytes += rawBytes;
+        };
         for (auto& [id, u] : out) {
             auto it = s.peers.find(id);
-            if (it != s.peers.end() && !it->second.kicked)
+            if (it != s.peers.end() && !it->second.kicked) {
                 sendTo(it->second.peer, Channel::Image, u.message);
+                countSent(Sync::Dbi, u.full, u.payloadBytes, u.rawBytes);
+            }
         }
-        if (!out.empty())
+        for (auto& [id, u] : outVolume) {
+            auto it = s.peers.find(id);
+            if (it != s.peers.end() && !it->second.kicked) {
+                sendTo(it->second.peer, Channel::Volume, u.message);
+                countSent(Sync::Volume, u.full, u.payloadBytes, u.rawBytes);
+            }
+        }
+        if (!out.empty() || !outVolume.empty())
             s.host.flush();
         uint64_t now = steadyNowUs();
         if (now >= nextTick) {
@@ -584,7 +815,10 @@ void SessionServer::simulationLoop() {
         std::lock_guard volumeLock(s.volumeMutex);
         Box3i changed;
         uint64_t causeUs = 0;
-        std::map<uint16_t, uint64_t> needFull; // client -> cause time
+        uint64_t erodeUs = 0;                    // erosion and cuts of this batch
+        bool changedMaterials = false;           // voxels written wholesale (submitVoxels)
+        std::map<uint16_t, uint64_t> needFull;   // DBI client -> cause time of a full DBI
+        std::map<uint16_t, uint64_t> needVolume; // volume client -> cause time of a full volume
         for (SimEvent& ev : batch) {
             switch (ev.kind) {
             case SimEvent::Kind::Join:
@@ -592,19 +826,48 @@ void SessionServer::simulationLoop() {
                 SimClient& c = s.simClients[ev.client];
                 c.camera = ev.camera;
                 c.viewId = ev.viewId;
-                if (ev.kind == SimEvent::Kind::Join)
+                if (ev.kind == SimEvent::Kind::Join) {
                     c.codec = ev.codec;
-                needFull[ev.client] = steadyNowUs();
+                    c.sync = ev.sync;
+                    c.volumeCodec = ev.volumeCodec;
+                    if (c.sync == Sync::Volume)
+                        needVolume[ev.client] = steadyNowUs();
+                }
+                // A volume client renders its views itself; the server only keeps the camera for
+                // a later switch to DBI.
+                if (c.sync == Sync::Dbi)
+                    needFull[ev.client] = steadyNowUs();
+                break;
+            }
+            case SimEvent::Kind::Sync: {
+                auto it = s.simClients.find(ev.client);
+                if (it == s.simClients.end())
+                    break;
+                SimClient& c = it->second;
+                c.sync = ev.sync;
+                c.volumeCodec = ev.volumeCodec;
+                if (c.sync == Sync::Volume) {
+                    needFull.erase(ev.client);
+                    needVolume[ev.client] = steadyNowUs();
+                    s.dropPending(ev.client, Sync::Dbi);
+                    c.shadow = Dbi(); // the next DBI it gets is a full one
+                } else {
+                    needVolume.erase(ev.client);
+                    needFull[ev.client] = steadyNowUs();
+                    s.dropPending(ev.client, Sync::Volume);
+                }
                 break;
             }
             case SimEvent::Kind::Leave:
                 s.simClients.erase(ev.client);
                 needFull.erase(ev.client);
+                needVolume.erase(ev.client);
                 break;
             case SimEvent::Kind::Cut: {
                 Box3i box = ev.box.intersect(s.volume.bounds());
                 if (box.empty())
                     break;
+                uint64_t e0 = steadyNowUs();
                 {
                     std::unique_lock write(s.volumeRw);
                     for (int z = box.lo.z; z < box.hi.z; ++z)
@@ -612,7 +875,25 @@ void SessionServer::simulationLoop() {
                             for (int x = box.lo.x; x < box.hi.x; ++x)
                                 s.volume.set(x, y, z, 0, Material::Air);
                 }
+                erodeUs += steadyNowUs() - e0;
                 changed.merge(box);
+                causeUs = causeUs ? std::min(causeUs, ev.arrivedUs) : ev.arrivedUs;
+                break;
+            }
+            case SimEvent::Kind::Voxels: {
+                const Box3i& box = ev.box; // checked by submitVoxels
+                uint64_t e0 = steadyNowUs();
+                {
+                    std::unique_lock write(s.volumeRw);
+                    size_t i = 0;
+                    for (int z = box.lo.z; z < box.hi.z; ++z)
+                        for (int y = box.lo.y; y < box.hi.y; ++y)
+                            for (int x = box.lo.x; x < box.hi.x; ++x, ++i)
+                                s.volume.set(x, y, z, ev.density[i], Material(ev.material[i]));
+                }
+                erodeUs += steadyNowUs() - e0;
+                changed.merge(box);
+                changedMaterials = true;
                 causeUs = causeUs ? std::min(causeUs, ev.arrivedUs) : ev.arrivedUs;
                 break;
             }
@@ -641,11 +922,13 @@ void SessionServer::simulationLoop() {
                 if (!t.drilling || t.speed <= 0.0f || dt <= 0.0f)
                     break;
                 DrillResult r;
+                uint64_t e0 = steadyNowUs();
                 {
                     std::unique_lock write(s.volumeRw);
                     r = c.driller->drill(s.volume, ToolPose{t.position, t.orientation}, t.speed,
                                          dt);
                 }
+                erodeUs += steadyNowUs() - e0;
                 if (!r.changed.empty()) {
                     changed.merge(r.changed);
                     causeUs = causeUs ? std::min(causeUs, ev.arrivedUs) : ev.arrivedUs;
@@ -654,41 +937,70 @@ void SessionServer::simulationLoop() {
             }
             }
         }
-        if (!changed.empty())
+        // Erosion only lowers densities, so the views' hit caches stay valid; voxels written
+        // wholesale may raise them, which invalidates every cache (the next render restarts it).
+        if (changedMaterials)
+            s.renderer.rebuild();
+        else if (!changed.empty())
             s.renderer.volumeChanged(changed);
 
-        // Frames of views nobody holds any more are dropped.
+        // Frames of views no DBI client holds any more are dropped.
+        auto dbiView = [](const SimClient& c, const Camera& cam) {
+            return c.sync == Sync::Dbi && c.camera == cam;
+        };
         std::erase_if(s.views, [&](const ViewFrame& v) {
             return std::none_of(s.simClients.begin(), s.simClients.end(),
-                                [&](const auto& c) { return c.second.camera == v.camera; });
+                                [&](const auto& c) { return dbiView(c.second, v.camera); });
         });
         for (const auto& [id, c] : s.simClients) {
+            if (c.sync != Sync::Dbi)
+                continue;
             auto it = std::find_if(s.views.begin(), s.views.end(),
                                    [&](const ViewFrame& v) { return v.camera == c.camera; });
             if (it == s.views.end()) {
-                s.views.push_back({c.camera, s.renderer.render(c.camera)});
+                ViewFrame& v = s.views.emplace_back();
+                v.camera = c.camera;
+                v.frame = s.renderer.render(c.camera, &v.cache);
                 m_renders.fetch_add(1);
             }
         }
         for (ViewFrame& v : s.views) {
             // The frame first takes the change, so a full refresh sent now holds it too.
             PixelRect rect;
+            uint32_t renderUs = 0;
             if (!changed.empty()) {
                 rect = dirtyScreenRect(v.camera, s.volume, changed);
                 if (!rect.empty()) {
-                    s.renderer.render(v.camera, rect, v.frame);
+                    uint64_t r0 = steadyNowUs();
+                    // The paper's way re-renders the whole view from scratch (no cache).
+                    if (m_fullRender.load())
+                        v.frame = s.renderer.render(v.camera);
+                    else
+                        s.renderer.render(v.camera, rect, v.frame, &v.cache);
+                    renderUs = uint32_t(steadyNowUs() - r0);
                     m_renders.fetch_add(1);
                 }
             }
-            for (const auto& [id, c] : s.simClients) {
-                if (!(c.camera == v.camera))
+            for (auto& [id, c] : s.simClients) {
+                if (!dbiView(c, v.camera))
                     continue;
                 auto full = needFull.find(id);
                 if (full != needFull.end())
-                    s.post(id, c, v, v.frame.bounds(), true, full->second);
+                    s.post(id, c, v, v.frame.bounds(), true, full->second, 0, 0);
                 else if (!rect.empty())
-                    s.post(id, c, v, rect, false, causeUs);
+                    s.post(id, c, v, rect, false, causeUs, uint32_t(erodeUs), renderUs);
             }
+        }
+        // Volume clients: the changed voxels themselves, or the whole volume after a join or a
+        // switch (which already holds this batch's change).
+        for (const auto& [id, c] : s.simClients) {
+            if (c.sync != Sync::Volume)
+                continue;
+            auto full = needVolume.find(id);
+            if (full != needVolume.end())
+                s.postVolume(id, c, s.volume.bounds(), true, true, full->second, 0);
+            else if (!changed.empty())
+                s.postVolume(id, c, changed, false, changedMaterials, causeUs, uint32_t(erodeUs));
         }
         std::lock_guard lock(s.inMutex);
         s.busy = false;
@@ -731,6 +1043,25 @@ std::string SessionServer::reportJson() const {
     j += "\n  },\n";
     std::lock_guard lock(s.reportMutex);
     j += "  \"force_compute_us\": " + jsonWindow(s.forceComputeUs) + ",\n";
+    j += "  \"modes\": {";
+    for (Sync mode : {Sync::Dbi, Sync::Volume}) {
+        const ModeTotals& t = s.modeTotals[size_t(mode)];
+        const ModeReport& m = s.modeReport[size_t(mode)];
+        uint64_t clients = 0;
+        for (const auto& [id, r] : s.peerReport)
+            clients += r.hello && !r.kicked && r.disconnectedUs == 0 && r.sync == mode;
+        j += std::string(mode == Sync::Dbi ? "" : ",") + "\n    " +
+             jsonString(mode == Sync::Dbi ? "dbi" : "volume") +
+             ": {\"clients\": " + std::to_string(clients) +
+             ", \"updates_sent\": " + std::to_string(t.updates) +
+             ", \"full_updates_sent\": " + std::to_string(t.fullUpdates) +
+             ", \"bytes_sent\": " + std::to_string(t.bytes) +
+             ", \"raw_bytes_sent\": " + std::to_string(t.rawBytes) +
+             ", \"erode_us\": " + jsonWindow(m.erodeUs) +
+             ", \"render_us\": " + jsonWindow(m.renderUs) +
+             ", \"encode_us\": " + jsonWindow(m.encodeUs) + "}";
+    }
+    j += "\n  },\n";
     j += "  \"haptic_service_us\": " + jsonWindow(s.hapticServiceUs) + ",\n";
     j += "  \"peers\": [";
     bool first = true;
@@ -749,6 +1080,8 @@ std::string SessionServer::reportJson() const {
              ", \"haptic_relays\": " + std::to_string(r.hapticRelays) +
              ", \"malformed\": " + std::to_string(r.malformed) +
              ", \"views_refused\": " + std::to_string(r.viewsRefused) +
+             ", \"sync\": " + jsonString(r.sync == Sync::Dbi ? "dbi" : "volume") +
+             ", \"sync_switches\": " + std::to_string(r.syncSwitches) +
              ", \"kicked\": " + (r.kicked ? "true" : "false") + "}";
         first = false;
     }

@@ -92,3 +92,91 @@ TEST(Protocol, RefuseReasonsReadAsSentences) {
     EXPECT_NE(refuseReasonText(uint32_t(RefuseReason::Shutdown)).find("shutting down"),
               std::string::npos);
 }
+
+TEST(Protocol, SyncModeAndVolumeUpdateRoundTrip) {
+    SyncMode m{Sync::Volume, Codec::Lz4};
+    auto mb = encodeMessage(m);
+    ASSERT_EQ(mb.size(), 3u);
+    SyncMode mBack;
+    ASSERT_TRUE(decodeMessage(mb, mBack));
+    EXPECT_EQ(mBack.sync, Sync::Volume);
+    EXPECT_EQ(mBack.volumeCodec, Codec::Lz4);
+    mb[1] = 2; // no third mode
+    EXPECT_FALSE(decodeMessage(mb, mBack));
+
+    VolumeUpdate u;
+    u.sequence = 9;
+    u.causeServerUs = 123;
+    u.sentServerUs = 456;
+    u.erodeUs = 7;
+    u.encodeUs = 8;
+    u.x = 1;
+    u.y = 2;
+    u.z = 3;
+    u.sizeX = 4;
+    u.sizeY = 5;
+    u.sizeZ = 6;
+    u.rawBytes = 4 * 5 * 6;
+    u.payload.assign(u.rawBytes, 200);
+    auto ub = encodeMessage(u);
+    ASSERT_FALSE(ub.empty());
+    EXPECT_EQ(peekMessageType(ub), uint8_t(MessageType::VolumeUpdate));
+    VolumeUpdate back;
+    ASSERT_TRUE(decodeMessage(ub, back));
+    EXPECT_EQ(back.sequence, 9u);
+    EXPECT_EQ(back.causeServerUs, 123u);
+    EXPECT_EQ(back.encodeUs, 8u);
+    EXPECT_EQ(back.z, 3);
+    EXPECT_EQ(back.sizeZ, 6);
+    EXPECT_EQ(back.payload, u.payload);
+    for (size_t n = 0; n < ub.size(); ++n)
+        EXPECT_FALSE(decodeMessage(std::span(ub.data(), n), back)) << n;
+    ub.push_back(0);
+    EXPECT_FALSE(decodeMessage(ub, back)) << "trailing bytes accepted";
+}
+
+TEST(Protocol, VolumeUpdateRejectsBadBoxesSizesAndEncodings) {
+    VolumeUpdate u;
+    u.sizeX = u.sizeY = u.sizeZ = 2;
+    u.rawBytes = 8;
+    u.payload.assign(8, 1);
+    ASSERT_FALSE(encodeMessage(u).empty());
+    VolumeUpdate bad = u;
+    bad.x = 4095; // runs past the largest volume
+    EXPECT_TRUE(encodeMessage(bad).empty());
+    bad = u;
+    bad.sizeY = 0;
+    EXPECT_TRUE(encodeMessage(bad).empty());
+    bad = u;
+    bad.rawBytes = 9; // a box update is exactly one byte per voxel
+    EXPECT_TRUE(encodeMessage(bad).empty());
+    bad = u;
+    bad.full = true; // a full volume is density + material and never raw
+    bad.rawBytes = 16;
+    EXPECT_TRUE(encodeMessage(bad).empty());
+    bad.materials = true;
+    EXPECT_TRUE(encodeMessage(bad).empty());
+    bad.codec = Codec::Zstd;
+    EXPECT_FALSE(encodeMessage(bad).empty());
+    bad.full = false; // a box with materials: density then material bytes
+    EXPECT_FALSE(encodeMessage(bad).empty());
+    bad.rawBytes = 8;
+    EXPECT_TRUE(encodeMessage(bad).empty());
+
+    // The same checks hold on the reading side: patch the wire bytes of a good message.
+    auto bytes = encodeMessage(u);
+    // type(1) seq(4) cause(8) sent(8) erode(4) encode(4) full(1) materials(1), then x, y, z, sx,
+    // sy, sz (u16).
+    const size_t boxAt = 1 + 4 + 8 + 8 + 4 + 4 + 1 + 1;
+    VolumeUpdate back;
+    auto patched = bytes;
+    patched[boxAt + 6] = 0; // sizeX = 0
+    patched[boxAt + 7] = 0;
+    EXPECT_FALSE(decodeMessage(patched, back));
+    patched = bytes;
+    patched[boxAt + 10] = 3; // sizeZ = 3: rawBytes no longer matches the box
+    EXPECT_FALSE(decodeMessage(patched, back));
+    patched = bytes;
+    patched[boxAt + 12] = 3; // the codec byte after the box: out of range
+    EXPECT_FALSE(decodeMessage(patched, back));
+}

@@ -1,7 +1,9 @@
 // ClientThread: a SessionClient run on its own named network thread ("net-client"), for windows.
 // Other threads hand it commands through a bounded queue and read what it publishes without
 // blocking: an immutable snapshot (connection, view, others' tools, statistics) swapped whole, and
-// a queue of applied rectangles (the pixels a window re-uploads with glTexSubImage2D).
+// a queue of applied rectangles (the pixels a window re-uploads with glTexSubImage2D), and in
+// volume sync mode with renderLocally off, a queue of applied voxel boxes (3D texture
+// sub-uploads) plus guarded read access to the local volume for a haptic thread.
 #pragma once
 
 #include "libsim/dbi.h"
@@ -19,6 +21,7 @@
 #include <memory>
 #include <mutex>
 #include <optional>
+#include <shared_mutex>
 #include <string>
 #include <thread>
 #include <variant>
@@ -40,6 +43,29 @@ struct AppliedRect {
     uint32_t rawBytes = 0; // before compression
     double latencyUs = -1; // cause at the server -> applied here (-1: unknown)
     uint64_t appliedUs = 0;
+};
+
+// One volume update as a window needs it (volume mode, renderLocally off): the box and its voxels
+// after applying, or the whole volume on a full update.
+struct AppliedVolumeBox {
+    Box3i box; // voxels; the whole volume when full
+    bool full = false;
+    glm::ivec3 dims{0};                     // of the whole volume
+    glm::vec3 spacing{1.0f};                // mm per voxel
+    std::vector<uint8_t> density, material; // box.count() bytes each, x fastest
+    uint32_t sequence = 0;
+    uint32_t bytes = 0, rawBytes = 0;
+    double latencyUs = -1; // cause at the server -> applied here (-1: unknown or full)
+    uint64_t appliedUs = 0;
+};
+
+// Per-sync-mode figures for the Comparison panel; each mode's stay while the other is active.
+struct ModeFigures {
+    uint64_t updatesApplied = 0;
+    double updateRatePerS = 0;              // over the latest 1 s tick
+    double meanBytes = 0, meanRawBytes = 0; // per update
+    double latencyP50Us = -1, latencyP99Us = -1;
+    double applyP50Us = -1, clientRenderP50Us = -1;
 };
 
 // What the UI reads each frame. Immutable once published.
@@ -70,6 +96,9 @@ struct ClientSnapshot {
     double latencyP50Us = -1, latencyP99Us = -1;
     double meanBytes = 0, meanRawBytes = 0; // per update
     std::string codec;
+    Sync sync = Sync::Dbi;            // the mode feeding the picture
+    Sync requestedSync = Sync::Dbi;   // differs from sync while a switch waits for its full update
+    std::array<ModeFigures, 2> modes; // by Sync
     std::array<ChannelRates, size_t(Channel::Count)> rates{}; // latest 1 s tick
     std::deque<std::array<ChannelRates, size_t(Channel::Count)>> rateHistory;
 };
@@ -102,6 +131,8 @@ public:
     bool sendToolState(const ToolState& t);
     bool requestView(const ViewSpec& v);
     bool ping();
+    // Switches the sync mode live (kept across reconnects).
+    bool requestSync(Sync mode);
 
     // The latest snapshot (never null after construction).
     std::shared_ptr<const ClientSnapshot> snapshot() const;
@@ -109,18 +140,30 @@ public:
     std::vector<AppliedRect> drainRects();
     // Total rectangles published (tests wait on it).
     uint64_t rectsPublished() const { return m_rectsPublished.load(); }
+    // Volume mode with client.renderLocally off: the boxes applied since the last call, oldest
+    // first (bounded like the rectangles: overflow becomes one full copy of the volume).
+    std::vector<AppliedVolumeBox> drainVolumeBoxes();
+    uint64_t volumeBoxesPublished() const { return m_boxesPublished.load(); }
+    // Runs fn on the local volume under a shared lock (the network thread takes it exclusively
+    // only while it writes voxels, never while it renders); false, without calling fn, when no
+    // volume is held. For a haptic thread: e.g. ForceModel::compute(volume, pose) inside fn.
+    bool withLocalVolume(const std::function<void(const Volume&)>& fn) const;
 
 private:
     struct ViewCmd {
         ViewSpec view;
     };
     struct PingCmd {};
-    using Command = std::variant<ToolState, ViewCmd, PingCmd>;
+    struct SyncCmd {
+        Sync sync;
+    };
+    using Command = std::variant<ToolState, ViewCmd, PingCmd, SyncCmd>;
 
     void run();
     bool push(Command c);
     void publish(const SessionClient* c, uint64_t nowUs);
     void pushRect(AppliedRect r);
+    void pushBox(AppliedVolumeBox b);
 
     ClientThreadConfig m_config;
     std::atomic<bool> m_stop{false};
@@ -137,11 +180,22 @@ private:
     std::atomic<uint64_t> m_rectsPublished{0};
     std::atomic<bool> m_needFull{false};
 
+    std::mutex m_boxMutex;
+    std::vector<AppliedVolumeBox> m_boxes;
+    std::atomic<uint64_t> m_boxesPublished{0};
+    std::atomic<bool> m_needFullVolume{false};
+
+    // Guards m_localClient and writes to its volume (SessionClient::setVolumeMutex).
+    mutable std::shared_mutex m_volumeRw;
+    const SessionClient* m_localClient = nullptr;
+
     // Network-thread state.
     LinkState m_state = LinkState::Connecting;
     std::string m_closeReason;
     int m_attempts = 0;
     std::optional<ViewSpec> m_wantedView;
+    std::optional<Sync> m_wantedSync;
+    std::array<double, 2> m_modeRates{};
     std::optional<HapticModel> m_haptic;
     uint64_t m_hapticModels = 0;
     double m_lastRttUs = -1;

@@ -3,10 +3,14 @@
 // then depth quantised to 16 bits of linear eye distance between the camera's near and far
 // planes, delta-coded along rows and split into high and low byte planes — and compress it.
 // Alpha is not sent: pixels at the background depth (1.0) have alpha 0, others 255.
+// Volume updates of the replicated-volume baseline use the same codecs on voxel bytes (see
+// [SECTION] volume below and docs/protocol.md).
 #pragma once
 
+#include "libsim/box.h"
 #include "libsim/camera.h"
 #include "libsim/dbi.h"
+#include "libsim/volume.h"
 #include "net/protocol.h"
 
 #include <cstdint>
@@ -47,5 +51,35 @@ EncodedImage encodeImage(const Dbi& image, Codec codec, const Camera& camera);
 // size, corrupt compression) — never a crash.
 bool decodeImage(std::span<const uint8_t> payload, uint32_t rawBytes, Codec codec, int width,
                  int height, const Camera& camera, Dbi& out);
+
+// [SECTION] volume
+
+// Compresses bytes with a codec (Raw: a copy); zstd at level 1.
+std::vector<uint8_t> compressBytes(std::span<const uint8_t> raw, Codec codec);
+// Decompresses into exactly rawBytes bytes; false when the payload does not give exactly that.
+bool decompressBytes(std::span<const uint8_t> payload, Codec codec, size_t rawBytes,
+                     std::vector<uint8_t>& out);
+
+struct EncodedVolume {
+    std::vector<uint8_t> payload;
+    uint32_t rawBytes = 0;
+    Codec codec = Codec::Raw; // what the payload is encoded with
+};
+// A box update: the density byte of every voxel of `box` (x fastest), 1 byte each, with `codec`;
+// with `materials`, the box's material bytes follow the densities.
+EncodedVolume encodeVolumeBox(const Volume& volume, const Box3i& box, Codec codec,
+                              bool materials = false);
+// The whole volume: every density byte, then every material byte, compressed with `codec`, or
+// with zstd when `codec` is Raw (a full volume always travels compressed).
+EncodedVolume encodeVolumeFull(const Volume& volume, Codec codec);
+// Writes a decoded box's densities into `volume` and derives materials the way the server's
+// erosion and box cuts leave them: Air where the density is 0, unchanged elsewhere. `densities`
+// must hold box.count() bytes and the box lie inside the volume (false otherwise, nothing written).
+// With `materials` (box.count() known labels) those are written instead of derived.
+bool applyVolumeBox(Volume& volume, const Box3i& box, std::span<const uint8_t> densities,
+                    std::span<const uint8_t> materials = {});
+// Decodes a full update into a volume of `dims` and `spacing`; false when malformed.
+bool decodeVolumeFull(std::span<const uint8_t> payload, uint32_t rawBytes, Codec codec,
+                      glm::ivec3 dims, glm::vec3 spacing, Volume& out);
 
 } // namespace trephine::net

@@ -6,11 +6,13 @@
 
 #include "libsim/stats.h"
 #include "net/enet_host.h"
+#include "net/protocol.h"
 
 #include <array>
 #include <atomic>
 #include <cstdint>
 #include <deque>
+#include <glm/vec3.hpp>
 #include <string>
 
 namespace trephine::net {
@@ -22,6 +24,34 @@ uint64_t steadyNowUs();
 
 struct ChannelRates {
     double bytesInPerS = 0, bytesOutPerS = 0, messagesInPerS = 0, messagesOutPerS = 0;
+};
+
+// One applied image or volume update, with its stage breakdown (microseconds; -1 where unknown),
+// so that a study can compute medians per stage: erode, render (DBI only) and encode at the
+// server (sent in the update), transmit (server sent -> client received), client apply (decode +
+// write: rectangle into the DBI, or voxels + rendering-data update), client render (volume mode:
+// the local re-render of the whole view; 0 for DBI and when the client does not render), and
+// end-to-end latency (cause at the server -> applied and rendered here).
+struct UpdateRecord {
+    Sync mode = Sync::Dbi;
+    uint32_t sequence = 0;
+    bool full = false;
+    uint32_t bytes = 0;    // payload on the wire
+    uint32_t rawBytes = 0; // before compression
+    glm::ivec3 box{0};     // volume: box size in voxels; DBI: rectangle w, h, 1
+    double erodeUs = -1, serverRenderUs = -1, encodeUs = -1, transmitUs = -1;
+    double applyUs = -1, clientRenderUs = -1, latencyUs = -1;
+    uint64_t appliedUs = 0; // steadyNowUs() when done
+};
+
+// Per-sync-mode figures of a client (NetStats::modes, indexed by Sync). Full updates count in
+// updates/fullUpdates and bytes, never in latency (their cause is a join, switch or view change).
+struct ModeStats {
+    uint64_t updates = 0, fullUpdates = 0;
+    SampleWindow bytes{65536}, rawBytes{65536};
+    SampleWindow latencyUs{65536}, transmitUs{65536}, applyUs{65536}, clientRenderUs{65536};
+    SampleWindow erodeUs{65536}, serverRenderUs{65536}, encodeUs{65536};
+    void add(const UpdateRecord& r);
 };
 
 class NetStats {
@@ -55,6 +85,8 @@ public:
     SampleWindow updateLatencyUs{65536};   // cause at server -> rectangle applied at client
     SampleWindow applyUs{65536};           // decode + apply time at the client
     SampleWindow hapticRoundTripUs{65536}; // tool state sent -> its HapticModel received
+    // The same per sync mode, with stage times (the windows above take updates of both modes).
+    std::array<ModeStats, 2> modes;
     int64_t clockOffsetUs = 0; // server clock - client clock, from the best (lowest-RTT) ping
     // ENet's coarse loss estimate for the peer (peer->packetLoss / ENET_PEER_PACKET_LOSS_SCALE):
     // a smoothed fraction of our reliable packets that needed a resend, recomputed by ENet about
@@ -99,6 +131,7 @@ struct ReportInfo {
     uint64_t hapticModels = 0;  // HapticModel messages received
     uint64_t modelsApplied = 0; // taken by the loop (in order)
     uint64_t modelsDropped = 0; // reordered, dropped by the loop
+    std::string sync = "dbi";   // the sync mode at the end: dbi | volume
 };
 std::string reportJson(const ReportInfo& info, const NetStats& stats);
 
@@ -107,5 +140,7 @@ std::string jsonString(const std::string& s); // quoted and escaped
 std::string jsonNumber(double v);             // %.6g
 // {"count", "mean", "min", "p50", "p99", "max"} of a sample window.
 std::string jsonWindow(const SampleWindow& w);
+// {"updates", "full_updates", "bytes", "raw_bytes", "latency_us", and each stage's window}.
+std::string jsonModeStats(const ModeStats& m);
 
 } // namespace trephine::net

@@ -18,7 +18,9 @@
 namespace trephine::net {
 
 // Travels in ENet's connect data; the server refuses other versions with kRefuseVersion.
-inline constexpr uint32_t kProtocolVersion = 1;
+// 2: SyncMode and VolumeUpdate (the replicated-volume baseline); stage times in ImageUpdate;
+// the volume codec in the hello.
+inline constexpr uint32_t kProtocolVersion = 2;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
 enum class RefuseReason : uint32_t {
@@ -34,6 +36,11 @@ std::string refuseReasonText(uint32_t disconnectData);
 inline constexpr uint16_t kMaxWindowSize = 4096;
 inline constexpr size_t kMaxNameLength = 64;
 inline constexpr size_t kMaxPayloadBytes = 64u * 1024u * 1024u;
+inline constexpr uint16_t kMaxVolumeDim = 4096; // as the welcome's range
+// The largest uncompressed volume layout a VolumeUpdate may announce (density + material bytes of
+// a 512^3 volume); ENet itself refuses packets over 32 MiB, so payloads stay under
+// kMaxPayloadBytes.
+inline constexpr uint32_t kMaxVolumeRawBytes = 512u * 512u * 512u * 2u;
 
 enum class MessageType : uint8_t {
     Hello = 1,
@@ -106,13 +113,17 @@ struct Hello {
     std::string name;
     Codec codec = Codec::Lz4;
     Sync sync = Sync::Dbi;
+    // How volume box updates travel: Raw is the paper's 1 byte per voxel; Lz4 / Zstd compress it
+    // (the baseline's compressed variant, reported separately).
+    Codec volumeCodec = Codec::Raw;
     ViewSpec view;
 
     template <typename S>
     bool serialize(S& s) {
         return s.ranged(role, Role::Trainee, Role::Instructor) && s.string(name, kMaxNameLength) &&
                s.ranged(codec, Codec::Raw, Codec::Zstd) &&
-               s.ranged(sync, Sync::Dbi, Sync::Volume) && view.serialize(s);
+               s.ranged(sync, Sync::Dbi, Sync::Volume) &&
+               s.ranged(volumeCodec, Codec::Raw, Codec::Zstd) && view.serialize(s);
     }
 };
 
@@ -224,19 +235,87 @@ struct ImageUpdate {
     uint16_t x = 0, y = 0, width = 0, height = 0;
     Codec codec = Codec::Raw;
     uint32_t rawBytes = 0; // size before compression
+    // Server stage times of this update, microseconds (0: none): the erosion of the batch that
+    // caused it, the rendering of its rectangle, the extraction and encoding of its pixels.
+    uint32_t erodeUs = 0, renderUs = 0, encodeUs = 0;
+    // Coded against the pixels the client holds in the rectangle (net/image_delta.h): only for
+    // lz4/zstd and never for a full image; baseHash = basePixelHash of those pixels.
+    bool predicted = false;
+    uint32_t baseHash = 0;
     std::vector<uint8_t> payload;
 
     template <typename S>
     bool serialize(S& s) {
         return s.integer(sequence) && s.integer(viewId) && s.integer(causeServerUs) &&
-               s.integer(sentServerUs) && s.boolean(full) &&
+               s.integer(sentServerUs) && s.integer(erodeUs) && s.integer(renderUs) &&
+               s.integer(encodeUs) && s.boolean(full) && s.boolean(predicted) &&
+               s.integer(baseHash) && !(predicted && full) &&
                s.ranged(x, uint16_t(0), uint16_t(kMaxWindowSize - 1)) &&
                s.ranged(y, uint16_t(0), uint16_t(kMaxWindowSize - 1)) &&
                s.ranged(width, uint16_t(1), kMaxWindowSize) &&
                s.ranged(height, uint16_t(1), kMaxWindowSize) && x + width <= kMaxWindowSize &&
                y + height <= kMaxWindowSize && s.ranged(codec, Codec::Raw, Codec::Zstd) &&
+               !(predicted && codec == Codec::Raw) &&
                s.ranged(rawBytes, uint32_t(1), uint32_t(kMaxPayloadBytes)) &&
                s.blob(payload, kMaxPayloadBytes);
+    }
+};
+
+// Client -> server (Channel::Control, reliable): switch this client's sync mode live. To Volume:
+// the server sends the whole volume, then BB_volume boxes; to Dbi: a full DBI of the client's
+// view, then BB_screen rectangles.
+struct SyncMode {
+    static constexpr MessageType kType = MessageType::SyncMode;
+    Sync sync = Sync::Dbi;
+    Codec volumeCodec = Codec::Raw; // as Hello::volumeCodec
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.ranged(sync, Sync::Dbi, Sync::Volume) &&
+               s.ranged(volumeCodec, Codec::Raw, Codec::Zstd);
+    }
+};
+
+// Voxels of the replicated-volume baseline (Channel::Volume, reliable). A box update carries the
+// density of every voxel of the box (x fastest, then y, then z), 1 byte each as in the paper;
+// the receiver sets material Air where the density is 0 and keeps its material elsewhere, which
+// is exactly what erosion and box cuts do on the server. A full update carries the whole volume
+// as every density byte then every material byte (box = the whole volume), always compressed;
+// a box with `materials` set (voxels written wholesale, SessionServer::submitVoxels) carries the
+// box's density bytes then its material bytes.
+// The box is range-checked here against the largest volume and by the client against the dims
+// of its welcome.
+struct VolumeUpdate {
+    static constexpr MessageType kType = MessageType::VolumeUpdate;
+    uint32_t sequence = 0;      // shared with image updates: one counter per server
+    uint64_t causeServerUs = 0; // when the tool state that caused it reached the server
+    uint64_t sentServerUs = 0;
+    uint32_t erodeUs = 0, encodeUs = 0; // server stage times (see ImageUpdate)
+    bool full = false;
+    bool materials = false; // the payload holds material bytes after the densities (full: always)
+    uint16_t x = 0, y = 0, z = 0;             // box origin, voxels
+    uint16_t sizeX = 0, sizeY = 0, sizeZ = 0; // box size, voxels
+    Codec codec = Codec::Raw;
+    uint32_t rawBytes = 0; // bytes before compression: box voxels (x 2 with materials)
+    std::vector<uint8_t> payload;
+
+    uint64_t voxelCount() const { return uint64_t(sizeX) * sizeY * sizeZ; }
+
+    template <typename S>
+    bool serialize(S& s) {
+        constexpr uint16_t kLast = kMaxVolumeDim - 1;
+        return s.integer(sequence) && s.integer(causeServerUs) && s.integer(sentServerUs) &&
+               s.integer(erodeUs) && s.integer(encodeUs) && s.boolean(full) &&
+               s.boolean(materials) && (!full || materials) && s.ranged(x, uint16_t(0), kLast) &&
+               s.ranged(y, uint16_t(0), kLast) && s.ranged(z, uint16_t(0), kLast) &&
+               s.ranged(sizeX, uint16_t(1), kMaxVolumeDim) &&
+               s.ranged(sizeY, uint16_t(1), kMaxVolumeDim) &&
+               s.ranged(sizeZ, uint16_t(1), kMaxVolumeDim) && x + sizeX <= kMaxVolumeDim &&
+               y + sizeY <= kMaxVolumeDim && z + sizeZ <= kMaxVolumeDim &&
+               s.ranged(codec, Codec::Raw, Codec::Zstd) &&
+               s.ranged(rawBytes, uint32_t(1), kMaxVolumeRawBytes) &&
+               uint64_t(rawBytes) == voxelCount() * (materials ? 2u : 1u) &&
+               (full ? codec != Codec::Raw : true) && s.blob(payload, kMaxPayloadBytes);
     }
 };
 

@@ -1,20 +1,32 @@
 // The session client, usable without a window: connects (protocol version in the connect data),
 // says hello, holds the DBI of its view, applies image updates, keeps the others' relayed tool
-// poses and its statistics. Poll-driven: the caller's thread runs poll(), so tests pump a server
-// and clients in one process; the headless trainee drives it from its script loop.
+// poses and its statistics. In volume sync mode (the replicated-volume baseline) it holds the
+// volume instead, applies voxel boxes and re-renders its view locally into the same DBI.
+// Poll-driven: the caller's thread runs poll(), so tests pump a server and clients in one process;
+// the headless trainee drives it from its script loop.
 #pragma once
 
+#include "libsim/box.h"
 #include "libsim/camera.h"
 #include "libsim/dbi.h"
+#include "libsim/volume.h"
 #include "net/enet_host.h"
 #include "net/net_stats.h"
 #include "net/protocol.h"
 
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <map>
+#include <memory>
 #include <optional>
+#include <shared_mutex>
 #include <string>
+
+namespace trephine {
+class Renderer;
+class ThreadPool;
+} // namespace trephine
 
 namespace trephine::net {
 
@@ -24,6 +36,16 @@ struct ClientConfig {
     Codec codec = Codec::Lz4;
     ViewSpec view;
     uint32_t protocolVersion = kProtocolVersion; // tests connect with a wrong one
+    // How the picture is kept in sync: Dbi (the server renders) or Volume (the baseline: the
+    // client holds the volume and renders it). Switch live with SessionClient::requestSync.
+    Sync sync = Sync::Dbi;
+    // Encoding of volume box updates: Raw (the paper's 1 byte per voxel) or Lz4 / Zstd.
+    Codec volumeCodec = Codec::Raw;
+    // Volume mode: re-render the whole view with the CPU Renderer into dbi() after each update.
+    // A window that ray-casts the volume on the GPU itself sets false.
+    bool renderLocally = true;
+    int renderThreads = 0;        // the local render's ThreadPool (0: hardware concurrency)
+    size_t recordCapacity = 4096; // UpdateRecords kept (the newest)
 };
 
 class SessionClient {
@@ -48,8 +70,24 @@ public:
     const std::string& closeReason() const { return m_closeReason; }
     const Welcome& welcome() const { return *m_welcome; }
 
-    // The DBI of the current view (background until the first full update arrives).
+    // The DBI of the current view (background until the first full update arrives). In volume
+    // mode it is the local render (when renderLocally), so it is the picture in both modes.
     const Dbi& dbi() const { return m_dbi; }
+
+    // [Sync mode] The mode whose updates currently feed the picture. A switch asked for with
+    // requestSync takes effect when the server's first full update of the new mode arrives (the
+    // whole volume, or a full DBI); until then the old mode's updates keep being applied.
+    Sync sync() const { return m_sync; }
+    Sync requestedSync() const { return m_wantSync; }
+    bool switchingSync() const { return m_wantSync != m_sync; }
+    // Sends SyncMode (no-op when already in, or switching to, that mode).
+    void requestSync(Sync mode);
+    // The local copy of the server's volume in volume mode (null before the first full volume
+    // and after a switch back to DBI).
+    const Volume* localVolume() const { return m_volume.get(); }
+    // Writes to the local volume hold this mutex exclusively (null: no lock), so another thread
+    // (haptics) may read localVolume() under a shared lock; reads on the polling thread need none.
+    void setVolumeMutex(std::shared_mutex* mutex) { m_volumeMutex = mutex; }
     const ViewSpec& view() const { return m_view; }
     uint32_t viewId() const { return m_viewId; }
     // True once a full image of the current view (the latest requested one) has been applied.
@@ -58,6 +96,8 @@ public:
     // Sends our tool; sequence and clientTimeUs are filled in when zero. Returns the sequence.
     uint32_t sendToolState(ToolState state);
     // Asks for a new view; the DBI switches when its full image arrives. Returns the request id.
+    // In volume mode the view switches at once (rendered locally) and the server is told, so a
+    // switch to DBI gets this view.
     uint32_t requestView(const ViewSpec& view);
     void sendPing();
 
@@ -67,6 +107,8 @@ public:
     uint64_t updatesApplied() const { return m_updatesApplied; }
     uint64_t fullUpdates() const { return m_fullUpdates; }
     uint64_t updatesRejected() const { return m_rejected; }
+    // Predicted image updates whose base differed from our pixels (each asked for a full image).
+    uint64_t resyncs() const { return m_resyncs; }
     uint64_t toolStatesSent() const { return m_toolSent; }
     uint32_t lastUpdateSequence() const { return m_lastSequence; }
     NetStats& stats() { return m_stats; }
@@ -95,6 +137,20 @@ public:
         std::function<void(const ImageUpdate& meta, const PixelRect& rect, bool full)>;
     void setUpdateCallback(UpdateCallback callback) { m_updateCallback = std::move(callback); }
 
+    // Called after each VolumeUpdate has been applied (and, with renderLocally, the view
+    // re-rendered): `box` in voxels; `full` when the whole volume was replaced.
+    using VolumeCallback =
+        std::function<void(const VolumeUpdate& meta, const Box3i& box, bool full)>;
+    void setVolumeCallback(VolumeCallback callback) { m_volumeCallback = std::move(callback); }
+    uint64_t volumeUpdatesApplied() const { return m_volumeUpdates; }
+
+    // Per-update records of both modes (the newest recordCapacity), oldest first, and a hook
+    // called with each as it is made.
+    const std::deque<UpdateRecord>& updateRecords() const { return m_records; }
+    void clearUpdateRecords() { m_records.clear(); }
+    using RecordCallback = std::function<void(const UpdateRecord&)>;
+    void setRecordCallback(RecordCallback callback) { m_recordCallback = std::move(callback); }
+
     // [Test hooks] Sends raw bytes on a channel, bypassing every check.
     bool sendRaw(Channel channel, std::span<const uint8_t> bytes);
 
@@ -102,6 +158,11 @@ private:
     void onEvent(const ENetEvent& ev);
     bool handleMessage(std::span<const uint8_t> data, uint64_t nowUs);
     bool applyImage(const ImageUpdate& u, uint64_t nowUs);
+    bool applyVolume(const VolumeUpdate& u, uint64_t nowUs);
+    // Volume mode: the whole view rendered from the local volume into m_dbi.
+    void renderLocal();
+    void record(UpdateRecord r);
+    double transmitUs(uint64_t sentServerUs, uint64_t receivedUs) const;
     void send(Channel ch, const std::vector<uint8_t>& bytes);
 
     ClientConfig m_config;
@@ -128,8 +189,21 @@ private:
     std::map<uint16_t, HapticModel> m_relayedModels;
     uint64_t m_hapticRelays = 0;
     UpdateCallback m_updateCallback;
+    VolumeCallback m_volumeCallback;
+    RecordCallback m_recordCallback;
+    std::deque<UpdateRecord> m_records;
+    Sync m_sync = Sync::Dbi, m_wantSync = Sync::Dbi;
+    // The newest update sequence applied in each mode: a switch accepts only a full update newer
+    // than everything of the mode it leaves (the two channels are not ordered with each other).
+    uint32_t m_lastImageSeq = 0, m_lastVolumeSeq = 0;
+    std::unique_ptr<Volume> m_volume;
+    std::unique_ptr<ThreadPool> m_pool;
+    std::unique_ptr<Renderer> m_renderer;
+    std::shared_mutex* m_volumeMutex = nullptr;
+    uint64_t m_volumeUpdates = 0;
     std::optional<HapticModel> m_latestHaptic;
     uint64_t m_hapticModels = 0;
+    uint64_t m_resyncs = 0;
     uint64_t m_relays = 0, m_updatesApplied = 0, m_fullUpdates = 0, m_rejected = 0, m_toolSent = 0;
     NetStats m_stats;
 };

@@ -1,7 +1,9 @@
 // The session server: one network thread owns the ENet host (hello/welcome, views, tool-state
 // relay, pings, malformed-input policy) and one simulation thread owns the volume (drilling,
-// BB_volume -> BB_screen per distinct view, rendering, encoding). They talk through two
-// mutex-guarded queues: tool and view events one way, coalesced image updates the other.
+// BB_volume -> BB_screen per distinct view, rendering, encoding). They talk through mutex-guarded
+// queues: tool and view events one way, coalesced image and volume updates the other. Each client
+// syncs by DBI (rectangles of its view) or by volume (the replicated-volume baseline: the whole
+// volume at join or switch, then the BB_volume voxels), chosen in its hello and switched live.
 // docs/session.md describes the threads, queues and coalescing.
 #pragma once
 
@@ -43,6 +45,13 @@ struct ServerConfig {
     float maxStepS = 0.05f;  // longest drilling step taken from one tool state to the next
 };
 
+// What the server sent in one sync mode, and how many connected clients use it now.
+struct ModeTotals {
+    uint64_t clients = 0;
+    uint64_t updates = 0, fullUpdates = 0; // messages sent (image or volume updates)
+    uint64_t bytes = 0, rawBytes = 0;      // payload bytes on the wire / before compression
+};
+
 class SessionServer {
 public:
     // Binds the port at once (throws trephine::Error when it cannot); threads start in start().
@@ -62,6 +71,15 @@ public:
     // update: density 0 and Material::Air in the box (clipped to the volume), BB_volume = the
     // box, cause time = now (the submit time), then BB_screen updates to every client. Thread-safe.
     void submitBoxCut(const Box3i& box);
+    // Writes voxels wholesale (studies restore a cut box with it): density and material bytes of
+    // every voxel of `box` (x fastest; box.count() each, box inside the volume, known materials:
+    // throws trephine::Error otherwise), then updates like a cut. Volume clients get the box with
+    // its material bytes (VolumeUpdate::materials), since materials cannot be derived here.
+    void submitVoxels(const Box3i& box, std::vector<uint8_t> density,
+                      std::vector<uint8_t> material);
+    // The paper's DBI way, for comparison: on every change re-render each view whole, then send
+    // BB_screen of it (the default renders only BB_screen; the pixels are the same).
+    void setFullRenderUpdates(bool on) { m_fullRender = on; }
 
     // [Inspection, thread-safe]
     // A fresh full render of the current volume for a view (what a converged client holds).
@@ -81,6 +99,9 @@ public:
     uint64_t refusedFull() const { return m_refusedFull.load(); }
     uint64_t viewsRefused() const { return m_viewsRefused.load(); }
     const NetStats& stats() const { return m_stats; }
+    // Updates sent per sync mode (Dbi: image updates; Volume: volume updates) and the clients in
+    // each mode now. Both modes share the transport and the channel statistics above.
+    ModeTotals modeTotals(Sync mode) const;
     // Server statistics as JSON: per channel totals and rates, per peer (current and departed)
     // bytes, messages, malformed counts, haptic models, refusals; force compute time.
     std::string reportJson() const;
@@ -103,6 +124,7 @@ private:
     std::atomic<uint64_t> m_hapticRelayed{0};
     std::atomic<uint64_t> m_refusedFull{0};
     std::atomic<uint64_t> m_viewsRefused{0};
+    std::atomic<bool> m_fullRender{false};
     std::thread m_netThread;
     std::thread m_simThread;
 };

@@ -1,0 +1,63 @@
+// `trephine study all`'s report.md: each study's results beside the paper's figures and the
+// issue's targets, with the paper's Table 1 and Figures 7 and 8 as tables and SVG plots. Pure
+// formatting of results measured elsewhere (update study, display study, haptics study).
+#pragma once
+
+#include "libsim/haptics_study.h"
+#include "net/update_study.h"
+
+#include <string>
+#include <vector>
+
+namespace trephine::net {
+
+// The display study (ui::measureDisplayRates), as plain figures.
+struct DisplayFigures {
+    bool measured = false;
+    std::string why; // when not measured: one line
+    std::string glRenderer;
+    struct Entry {
+        std::string name; // "dbi composite", "volume 128^3", "volume 256^3"
+        double fps = 0, frameP50Ms = 0, frameP99Ms = 0;
+        double paperFps = 0;
+    };
+    std::vector<Entry> entries;
+};
+
+struct ForceTiming {
+    std::string tool;
+    double p50Ms = 0, p99Ms = 0, paperServerMs = 0, paperClientMs = 0, targetMs = 0;
+};
+
+struct HapticsFigures {
+    bool measured = false;
+    std::vector<HapticsCaseResult> cases;
+    std::vector<ForceTiming> timings;
+    double loopRateHz = 0;
+    double roundTripP50Ms = 0, roundTripP99Ms = 0, roundTripServerMs = 0;
+};
+
+struct StudyReportInput {
+    std::string command; // how it was run
+    std::string machine; // describeMachine()
+    bool quick = false;
+    UpdateStudyConfig updateConfig;
+    std::vector<UpdateStudyRow> updates;
+    DisplayFigures display;
+    HapticsFigures haptics;
+};
+
+// CPU model, cores, memory and kernel of this machine, one line.
+std::string describeMachine();
+
+// The paper's Table 1: BB_screen edge (pixels) for BB_volume N^3, N = 10..80; 0 when not listed.
+int paperBbScreen(int n);
+
+// Writes DIR/updates.svg and DIR/bytes.svg and returns report.md's text (which links them).
+std::string writeStudyReport(const StudyReportInput& input, const std::string& dir);
+
+// One line per issue target: "PASS"/"MISS", the figure and the target (also in the report).
+std::vector<std::string> updateTargetLines(const std::vector<UpdateStudyRow>& rows);
+std::vector<std::string> displayTargetLines(const DisplayFigures& d);
+
+} // namespace trephine::net

@@ -1,0 +1,71 @@
+// The update study (issue 7, the paper's Table 1 and Figures 7 and 8): a real SessionServer and
+// real headless SessionClients over loopback ENet in one process. For each box size N an N^3 box
+// of bone at the surface facing the camera is cut, and each method's full update cycle is timed
+// from the server's erosion to the change being on the client's screen:
+//   dbi               the server renders only BB_screen and sends it (our design),
+//   dbi-fullrender    the server re-renders the whole view, then captures BB_screen (the paper's),
+//   volume            the server sends the box's voxels, 1 byte each; the client applies them,
+//                     updates its rendering data and re-renders its whole view (the baseline),
+//   volume-<codec>    the same with the voxel bytes compressed (reported separately).
+// Between measured cycles the box's original voxels are put back (not measured), so every cycle
+// removes the same bone. docs/study.md gives the method and the columns.
+#pragma once
+
+#include "libsim/box.h"
+#include "libsim/volume.h"
+#include "net/protocol.h"
+
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace trephine::net {
+
+struct UpdateStudyConfig {
+    std::vector<int> sizes{10, 20, 30, 40, 50, 60, 70, 80};
+    std::string volumeName = "skull:128";
+    std::string camera = "paper";
+    int window = 500;          // square window, pixels
+    Codec codec = Codec::Lz4;  // image updates, and the compressed volume variant
+    int cycles = 30;           // measured cycles per method and size
+    int warmup = 3;            // cycles run first and discarded
+    double cycleTimeoutS = 10; // one cycle that takes longer fails the study (an Error)
+    // Called before each (method, size) with a label and the steps done/total.
+    std::function<void(const std::string& label, int done, int total)> progress;
+};
+
+// Median stage times of one (method, size), milliseconds.
+struct StageBreakdown {
+    double erode = 0, render = 0, encode = 0, transmit = 0, clientApply = 0, clientRender = 0;
+    double sum() const { return erode + render + encode + transmit + clientApply + clientRender; }
+};
+
+struct UpdateStudyRow {
+    std::string method;
+    int box = 0;
+    int bbScreenW = 0, bbScreenH = 0;
+    double bytesPerUpdate = 0; // payload on the wire, mean
+    double rawBytesPerUpdate =
+        0;                  // DBI: 5 bytes a BB_screen pixel (RGB + 16-bit depth); volume: N^3
+    double updatesPerS = 0; // 1000 / latencyP50Ms: cycles run back to back, one at a time
+    double latencyP50Ms = 0, latencyP99Ms = 0;
+    StageBreakdown stages;
+    int cycles = 0;
+};
+
+// The study's methods, in order, for a codec ("dbi", "dbi-fullrender", "volume", "volume-lz4").
+std::vector<std::string> updateStudyMethods(Codec codec);
+
+// Runs the whole study on `volume` (which should be what config.volumeName names). Throws
+// trephine::Error with one line when a cycle times out or the server cannot start.
+std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStudyConfig& config);
+
+// An N^3 box whose top face lies at the bone surface seen along -z (the paper camera sits on +z),
+// centred on the volume's middle column and shifted by `shift` voxels along x.
+Box3i surfaceBox(const Volume& volume, int n, int shift = 0);
+
+// The exact first columns the issue names, then the stage breakdown.
+std::string updatesCsvHeader();
+std::string updatesCsvRow(const UpdateStudyRow& row);
+
+} // namespace trephine::net

@@ -1,0 +1,152 @@
+// The predicted image-update form: what a client reconstructs from its own pixels plus the
+// update is exactly what the ordinary quantised codec would have given it, and it is smaller.
+#include "libsim/camera.h"
+#include "libsim/dirty_rect.h"
+#include "libsim/renderer.h"
+#include "libsim/skull.h"
+#include "net/codec.h"
+#include "net/image_delta.h"
+
+#include <gtest/gtest.h>
+
+#include <random>
+
+using namespace trephine;
+using namespace trephine::net;
+
+namespace {
+
+// What a client holds after receiving `image` through an ordinary quantised update.
+Dbi throughCodec(const Dbi& image, const Camera& camera) {
+    EncodedImage e = encodeImage(image, Codec::Lz4, camera);
+    Dbi out;
+    EXPECT_TRUE(
+        decodeImage(e.payload, e.rawBytes, Codec::Lz4, image.width(), image.height(), camera, out));
+    return out;
+}
+
+struct Cut {
+    Camera camera;
+    PixelRect rect;
+    Dbi before, after; // the rectangle before and after cutting the box
+};
+
+// An n^3 box cut at the bone surface the paper camera looks at, as the study does.
+Cut cutAtSurface(int n) {
+    Volume v = makeSkull(64);
+    v.setSpacing(glm::vec3(paperSpacingMm(64)));
+    Cut c;
+    c.camera = cameraPreset("paper", v, {200, 200});
+    Renderer renderer(v);
+    Dbi frame = renderer.render(c.camera);
+    glm::ivec3 d = v.dims();
+    int top = d.z - 1;
+    while (top > 0 && v.density(d.x / 2, d.y / 2, top) < kSurfaceDensity)
+        --top;
+    glm::ivec3 lo(d.x / 2 - n / 2, d.y / 2 - n / 2, top + 1 - n);
+    Box3i box = Box3i::fromMinMax(lo, lo + glm::ivec3(n));
+    c.rect = dirtyScreenRect(c.camera, v, box);
+    c.before = frame.extract(c.rect);
+    for (int z = box.lo.z; z < box.hi.z; ++z)
+        for (int y = box.lo.y; y < box.hi.y; ++y)
+            for (int x = box.lo.x; x < box.hi.x; ++x)
+                v.set(x, y, z, 0, Material::Air);
+    renderer.volumeChanged(box);
+    renderer.render(c.camera, c.rect, frame);
+    c.after = frame.extract(c.rect);
+    return c;
+}
+
+} // namespace
+
+TEST(DepthQuantizer, RoundTripIsIdempotentForEveryCode) {
+    // The client recomputes the codes of its unchanged pixels from the depths it decoded; they
+    // must be the codes the server used.
+    Volume v = makeSkull(64);
+    v.setSpacing(glm::vec3(paperSpacingMm(64)));
+    for (const char* preset : {"paper", "working"}) {
+        DepthQuantizer q(cameraPreset(preset, v, {500, 500}));
+        for (uint32_t code = 0; code <= 0xffff; ++code)
+            ASSERT_EQ(q.quantize(q.dequantize(uint16_t(code))), code) << preset << " code " << code;
+    }
+}
+
+TEST(PredictedImage, ReconstructsExactlyWhatTheOrdinaryCodecGivesAndIsSmaller) {
+    for (int n : {6, 12}) {
+        Cut c = cutAtSurface(n);
+        ASSERT_GT(c.rect.w, 0);
+        const Dbi clientHas = throughCodec(c.before, c.camera);
+        const Dbi expected = throughCodec(c.after, c.camera);
+        DepthQuantizer q(c.camera);
+        for (Codec codec : {Codec::Lz4, Codec::Zstd}) {
+            PredictedImage p = encodePredicted(c.after, c.before, codec, q);
+            ASSERT_FALSE(p.payload.empty());
+            EXPECT_GT(p.changedPixels, 0);
+            EXPECT_LT(p.changedPixels, c.rect.w * c.rect.h); // the rim keeps its pixels
+            Dbi image = clientHas;
+            ASSERT_EQ(decodePredicted(p.payload, p.rawBytes, codec, p.baseHash, q, image),
+                      PredictedStatus::Ok);
+            EXPECT_TRUE(image == expected) << compare(image, expected).describe();
+            EncodedImage ordinary = encodeImage(c.after, codec, c.camera);
+            EXPECT_LT(p.payload.size(), ordinary.payload.size()) << "n=" << n;
+        }
+    }
+}
+
+TEST(PredictedImage, UnchangedRectangleCostsAlmostNothing) {
+    Cut c = cutAtSurface(8);
+    DepthQuantizer q(c.camera);
+    PredictedImage p = encodePredicted(c.after, c.after, Codec::Zstd, q);
+    EXPECT_EQ(p.changedPixels, 0);
+    EXPECT_LT(p.payload.size(), 40u);
+    Dbi image = throughCodec(c.after, c.camera);
+    const Dbi copy = image;
+    ASSERT_EQ(decodePredicted(p.payload, p.rawBytes, Codec::Zstd, p.baseHash, q, image),
+              PredictedStatus::Ok);
+    EXPECT_TRUE(image == copy);
+}
+
+TEST(PredictedImage, MalformedPayloadsAreRefusedAndLeaveTheImage) {
+    Cut c = cutAtSurface(8);
+    DepthQuantizer q(c.camera);
+    PredictedImage p = encodePredicted(c.after, c.before, Codec::Lz4, q);
+    const Dbi original = throughCodec(c.before, c.camera);
+    auto refused = [&](std::span<const uint8_t> payload, uint32_t rawBytes, Codec codec) {
+        Dbi image = original;
+        PredictedStatus st = decodePredicted(payload, rawBytes, codec, p.baseHash, q, image);
+        return st == PredictedStatus::Malformed && image == original;
+    };
+    EXPECT_TRUE(refused(p.payload, p.rawBytes + 5, Codec::Lz4)); // residual count disagrees
+    EXPECT_TRUE(refused(p.payload, p.rawBytes - 1, Codec::Lz4)); // not mask + 5 per pixel
+    EXPECT_TRUE(refused(p.payload, p.rawBytes, Codec::Raw));     // never predicted
+    EXPECT_TRUE(refused(std::span(p.payload).first(p.payload.size() / 2), p.rawBytes,
+                        Codec::Lz4)); // truncated
+    EXPECT_TRUE(refused({}, 0, Codec::Zstd));
+    // A mask whose count of set bits disagrees with the residuals.
+    std::vector<uint8_t> raw(p.rawBytes, 0xff);
+    std::vector<uint8_t> bogus = compressBytes(raw, Codec::Lz4);
+    EXPECT_TRUE(refused(bogus, p.rawBytes, Codec::Lz4));
+    std::mt19937 rng(7);
+    for (int i = 0; i < 200; ++i) {
+        std::vector<uint8_t> junk(size_t(rng() % 300));
+        for (auto& b : junk)
+            b = uint8_t(rng());
+        Dbi image = original;
+        (void)decodePredicted(junk, uint32_t(rng() % 20000), Codec(1 + rng() % 2), uint32_t(rng()),
+                              q, image);
+    }
+}
+
+TEST(PredictedImage, AClientWhoseCopyDiffersRefusesInsteadOfShowingAWrongPicture) {
+    Cut c = cutAtSurface(8);
+    DepthQuantizer q(c.camera);
+    PredictedImage p = encodePredicted(c.after, c.before, Codec::Lz4, q);
+    EXPECT_EQ(p.baseHash, basePixelHash(c.before, q));
+    Dbi image = throughCodec(c.before, c.camera);
+    EXPECT_EQ(basePixelHash(image, q), p.baseHash); // the quantised copy hashes the same
+    image.color()[4 * 5] ^= 1;                      // one colour bit off
+    const Dbi stale = image;
+    EXPECT_EQ(decodePredicted(p.payload, p.rawBytes, Codec::Lz4, p.baseHash, q, image),
+              PredictedStatus::BaseMismatch);
+    EXPECT_TRUE(image == stale);
+}

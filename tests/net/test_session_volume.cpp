@@ -1,0 +1,378 @@
+// The replicated-volume baseline over loopback: volume clients beside DBI clients on one server,
+// live switches between the two, the paper's 1-byte-per-voxel boxes, and bad volume input.
+// Deadlines only guard against hangs; nothing asserts wall time.
+#include "net/session_client.h"
+#include "net/session_server.h"
+
+#include "libsim/skull.h"
+#include "libsim/tool.h"
+#include "net/codec.h"
+#include "net/view.h"
+
+#include "loopback.h"
+
+#include <gtest/gtest.h>
+
+#include <glm/gtx/quaternion.hpp>
+
+#include <chrono>
+#include <functional>
+
+using namespace trephine;
+using namespace trephine::net;
+
+namespace {
+
+using trephine::testing::loopback;
+using trephine::testing::loopbackServerConfig;
+using trephine::testing::pumpUntil;
+
+constexpr int kWindow = 128;
+
+ViewSpec presetView(const Volume& v, const char* name) {
+    return toViewSpec(cameraPreset(name, v, {kWindow, kWindow}));
+}
+
+SurfaceSite sphereTop(int n) {
+    return {{0.0f, 0.0f, sphereRadiusMm(n)}, {0.0f, 0.0f, 1.0f}};
+}
+
+// A burr stroke feeding 2.5 mm in along the normal over `count` states 10 ms apart.
+ToolState burrState(const SurfaceSite& site, int i, int count, uint64_t baseUs) {
+    ToolState t;
+    t.sequence = uint32_t(i + 1);
+    t.clientTimeUs = baseUs + uint64_t(i) * 10000;
+    t.toolKind = uint8_t(ToolKind::Burr);
+    t.diameterMm = 5.0f;
+    float depth = -1.0f + 3.5f * float(i) / float(count);
+    t.position = site.position - site.normal * depth;
+    t.orientation = glm::rotation(glm::vec3(0, 0, 1), site.normal);
+    t.speed = 1.0f;
+    t.drilling = true;
+    return t;
+}
+
+// Sends tool states [first, first + count) of a `total`-state stroke, polling everyone.
+void drill(SessionClient& driller, const std::vector<SessionClient*>& all, const SurfaceSite& site,
+           int first, int count, int total) {
+    for (int i = first; i < first + count; ++i) {
+        driller.sendToolState(burrState(site, i, total, 1000000));
+        for (SessionClient* c : all)
+            c->poll(1);
+    }
+}
+
+ClientConfig clientConfig(const ViewSpec& view, Sync sync, Codec volumeCodec = Codec::Raw) {
+    ClientConfig cc;
+    cc.codec = Codec::Raw;
+    cc.view = view;
+    cc.sync = sync;
+    cc.volumeCodec = volumeCodec;
+    cc.renderThreads = 2;
+    return cc;
+}
+
+bool connectAll(const std::vector<SessionClient*>& clients) {
+    return pumpUntil(clients, [&] {
+        for (SessionClient* c : clients)
+            if (!c->welcomed() || !c->hasFullImage())
+                return false;
+        return true;
+    });
+}
+
+// The client shows, in the mode it asked for, exactly the server's fresh render of its view;
+// a volume client also holds exactly the server's voxels.
+bool converged(SessionServer& server, SessionClient& c) {
+    if (!c.hasFullImage() || c.switchingSync() || !server.idle())
+        return false;
+    if (c.sync() == Sync::Volume &&
+        (!c.localVolume() || !(*c.localVolume() == server.volumeSnapshot())))
+        return false;
+    return compare(c.dbi(), server.renderView(c.view())).identical();
+}
+
+bool waitConverged(SessionServer& server, const std::vector<SessionClient*>& clients) {
+    int polls = 0;
+    return pumpUntil(clients, [&] {
+        if (++polls % 10)
+            return false;
+        for (SessionClient* c : clients)
+            if (!converged(server, *c))
+                return false;
+        return true;
+    });
+}
+
+// A 10^3 box just under the top of a 48^3 sphere (radius 16.8 voxels about the centre).
+Box3i topBox(int lo = 19) {
+    return {{lo, lo, 36}, {lo + 10, lo + 10, 46}};
+}
+
+} // namespace
+
+TEST(SessionVolume, VolumeClientRendersBitForBitAfterBoxCutsAndDrilling) {
+    Volume sphere = makeSphere(48);
+    SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
+    server.start();
+    SessionClient client(clientConfig(presetView(sphere, "top"), Sync::Volume));
+    client.connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&client}));
+    EXPECT_EQ(client.sync(), Sync::Volume);
+    ASSERT_NE(client.localVolume(), nullptr);
+    EXPECT_TRUE(*client.localVolume() == sphere) << "the full volume at join";
+    Dbi before = client.dbi();
+
+    server.submitBoxCut(topBox());
+    drill(client, {&client}, sphereTop(48), 0, 40, 40);
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return server.toolStatesApplied() == 40; }));
+    ASSERT_TRUE(waitConverged(server, {&client}));
+    EXPECT_FALSE(compare(before, client.dbi()).identical()) << "the cut and the drilling show";
+    EXPECT_GE(client.volumeUpdatesApplied(), 2u) << "the full volume, then boxes (coalesced)";
+    EXPECT_EQ(client.stats().malformed(), 0u);
+    const ModeStats& vm = client.stats().modes[size_t(Sync::Volume)];
+    EXPECT_EQ(vm.fullUpdates, 1u);
+    EXPECT_GT(vm.latencyUs.totalCount(), 0u);
+    EXPECT_GT(vm.clientRenderUs.totalCount(), 0u);
+    EXPECT_EQ(client.stats().modes[size_t(Sync::Dbi)].updates, 0u)
+        << "no image for a volume client";
+    ModeTotals sent = server.modeTotals(Sync::Volume);
+    EXPECT_EQ(sent.clients, 1u);
+    EXPECT_EQ(sent.updates, client.volumeUpdatesApplied());
+    EXPECT_EQ(server.modeTotals(Sync::Dbi).updates, 0u);
+}
+
+TEST(SessionVolume, RawBoxPayloadIsOneBytePerVoxelAndTheCompressedVariantIsReportedApart) {
+    Volume sphere = makeSphere(48);
+    SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
+    server.start();
+    ViewSpec view = presetView(sphere, "top");
+    SessionClient raw(clientConfig(view, Sync::Volume, Codec::Raw));
+    SessionClient packed(clientConfig(view, Sync::Volume, Codec::Lz4));
+    raw.connect(loopback(server.port()));
+    packed.connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&raw, &packed}));
+    for (SessionClient* c : {&raw, &packed})
+        c->clearUpdateRecords();
+    const int kN = 10;
+    server.submitBoxCut(topBox());
+    ASSERT_TRUE(pumpUntil({&raw, &packed}, [&] {
+        return raw.updateRecords().size() == 1 && packed.updateRecords().size() == 1;
+    }));
+    const UpdateRecord& r = raw.updateRecords().back();
+    EXPECT_EQ(r.mode, Sync::Volume);
+    EXPECT_FALSE(r.full);
+    EXPECT_EQ(r.box, glm::ivec3(kN));
+    EXPECT_EQ(r.rawBytes, uint32_t(kN * kN * kN));
+    EXPECT_EQ(r.bytes, uint32_t(kN * kN * kN)) << "the paper's N^3 bytes";
+    EXPECT_GE(r.latencyUs, 0.0);
+    const UpdateRecord& p = packed.updateRecords().back();
+    EXPECT_EQ(p.rawBytes, uint32_t(kN * kN * kN));
+    EXPECT_LT(p.bytes, p.rawBytes) << "a box cut to air compresses";
+    ASSERT_TRUE(waitConverged(server, {&raw, &packed}));
+}
+
+TEST(SessionVolume, DbiAndVolumeClientsOnOneServerBothConverge) {
+    Volume sphere = makeSphere(48);
+    SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
+    server.start();
+    SessionClient dbi(clientConfig(presetView(sphere, "top"), Sync::Dbi));
+    SessionClient vol(clientConfig(presetView(sphere, "front"), Sync::Volume, Codec::Zstd));
+    dbi.connect(loopback(server.port()));
+    vol.connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&dbi, &vol}));
+    server.submitBoxCut(topBox(14));
+    drill(dbi, {&dbi, &vol}, sphereTop(48), 0, 30, 30);
+    ASSERT_TRUE(pumpUntil({&dbi, &vol}, [&] { return server.toolStatesApplied() == 30; }));
+    ASSERT_TRUE(waitConverged(server, {&dbi, &vol}));
+    EXPECT_EQ(dbi.sync(), Sync::Dbi);
+    EXPECT_EQ(dbi.localVolume(), nullptr);
+    EXPECT_EQ(vol.sync(), Sync::Volume);
+    EXPECT_GT(dbi.stats().modes[size_t(Sync::Dbi)].updates, 1u);
+    EXPECT_GT(vol.stats().modes[size_t(Sync::Volume)].updates, 1u);
+    EXPECT_EQ(server.modeTotals(Sync::Dbi).clients, 1u);
+    EXPECT_EQ(server.modeTotals(Sync::Volume).clients, 1u);
+    // A volume client's own view change is rendered locally and matches the server's render.
+    vol.requestView(presetView(sphere, "left"));
+    EXPECT_EQ(vol.view(), presetView(sphere, "left"));
+    ASSERT_TRUE(waitConverged(server, {&dbi, &vol}));
+}
+
+TEST(SessionVolume, SwitchingLiveWhileDrillingKeepsTheSessionConsistent) {
+    Volume sphere = makeSphere(48);
+    SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
+    server.start();
+    SessionClient client(clientConfig(presetView(sphere, "top"), Sync::Dbi));
+    SessionClient watcher(clientConfig(presetView(sphere, "front"), Sync::Dbi));
+    client.connect(loopback(server.port()));
+    watcher.connect(loopback(server.port()));
+    std::vector<SessionClient*> all = {&client, &watcher};
+    ASSERT_TRUE(connectAll(all));
+    const int kTotal = 80;
+    drill(client, all, sphereTop(48), 0, 20, kTotal);
+    // dbi -> volume while the drilling goes on: no wait between the request and the next states.
+    client.requestSync(Sync::Volume);
+    EXPECT_TRUE(client.switchingSync());
+    drill(client, all, sphereTop(48), 20, 20, kTotal);
+    ASSERT_TRUE(pumpUntil(all, [&] { return client.sync() == Sync::Volume; }));
+    drill(client, all, sphereTop(48), 40, 20, kTotal);
+    ASSERT_TRUE(waitConverged(server, all));
+    // volume -> dbi, again mid-stroke, and the view changes during the switch too.
+    client.requestSync(Sync::Dbi);
+    drill(client, all, sphereTop(48), 60, 10, kTotal);
+    client.requestView(presetView(sphere, "front"));
+    drill(client, all, sphereTop(48), 70, 10, kTotal);
+    ASSERT_TRUE(pumpUntil(all, [&] { return server.toolStatesApplied() == uint64_t(kTotal); }));
+    ASSERT_TRUE(waitConverged(server, all));
+    EXPECT_EQ(client.sync(), Sync::Dbi);
+    EXPECT_EQ(client.localVolume(), nullptr);
+    EXPECT_EQ(client.view(), presetView(sphere, "front"));
+    EXPECT_GE(client.stats().modes[size_t(Sync::Volume)].fullUpdates, 1u);
+    EXPECT_GE(client.stats().modes[size_t(Sync::Dbi)].fullUpdates, 2u);
+    EXPECT_EQ(client.stats().malformed(), 0u);
+    // And back to volume once more: the full volume holds everything drilled meanwhile.
+    client.requestSync(Sync::Volume);
+    server.submitBoxCut(topBox(24));
+    ASSERT_TRUE(waitConverged(server, all));
+    EXPECT_EQ(client.sync(), Sync::Volume);
+}
+
+TEST(SessionVolume, MalformedSyncModeIsDroppedAndCountedByTheServer) {
+    Volume sphere = makeSphere(32);
+    SessionServer server(sphere, loopbackServerConfig("sphere:32", 1));
+    server.start();
+    ViewSpec view = presetView(sphere, "top");
+    SessionClient client(clientConfig(view, Sync::Dbi));
+    client.connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&client}));
+    SyncMode m{Sync::Volume, Codec::Raw};
+    std::vector<uint8_t> ok = encodeMessage(m);
+    std::vector<uint8_t> truncated(ok.begin(), ok.end() - 1);
+    std::vector<uint8_t> trailing = ok;
+    trailing.push_back(0);
+    std::vector<uint8_t> badMode = ok;
+    badMode[1] = 7; // no such sync mode
+    std::vector<uint8_t> badCodec = ok;
+    badCodec[2] = 9;
+    VolumeUpdate vu; // only the server sends voxels
+    vu.sizeX = vu.sizeY = vu.sizeZ = 1;
+    vu.rawBytes = 1;
+    vu.payload = {0};
+    std::vector<uint8_t> fromClient = encodeMessage(vu);
+    ASSERT_FALSE(fromClient.empty());
+    std::vector<std::vector<uint8_t>> bads = {truncated, trailing, badMode, badCodec, fromClient};
+    for (auto& b : bads)
+        client.sendRaw(Channel::Control, b);
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return server.malformedTotal() == bads.size(); }));
+    EXPECT_EQ(client.sync(), Sync::Dbi);
+    EXPECT_FALSE(client.closed());
+    EXPECT_EQ(server.modeTotals(Sync::Volume).updates, 0u) << "no bad switch took effect";
+}
+
+TEST(SessionVolume, ClientDropsAndCountsMalformedVolumeUpdates) {
+    // A fake server: a raw ENet host that welcomes the client with a 16^3 volume and sends voxels.
+    Host fake = Host::listen(0, 2);
+    ClientConfig cfg = clientConfig(ViewSpec{}, Sync::Volume);
+    cfg.view.width = cfg.view.height = 32;
+    cfg.renderThreads = 1;
+    SessionClient client(cfg);
+    client.connect(loopback(fake.port()));
+    ENetPeer* peer = nullptr;
+    auto pumpBoth = [&](const std::function<bool()>& pred) {
+        auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+        while (std::chrono::steady_clock::now() < deadline) {
+            fake.service(1, [&](const ENetEvent& e) {
+                if (e.type == ENET_EVENT_TYPE_CONNECT)
+                    peer = e.peer;
+            });
+            client.poll(1);
+            if (pred())
+                return true;
+        }
+        return false;
+    };
+    ASSERT_TRUE(pumpBoth([&] { return peer && client.connected(); }));
+
+    Volume v = makeSphere(16);
+    auto full = [&](bool corrupt) {
+        VolumeUpdate u;
+        u.full = true;
+        u.materials = true;
+        u.sizeX = u.sizeY = u.sizeZ = 16;
+        EncodedVolume e = encodeVolumeFull(v, Codec::Lz4);
+        u.codec = e.codec;
+        u.rawBytes = e.rawBytes;
+        u.payload = std::move(e.payload);
+        if (corrupt)
+            u.payload.resize(u.payload.size() / 2);
+        return encodeMessage(u);
+    };
+    auto box = [&](uint16_t x, uint16_t n, size_t payloadBytes, uint32_t sequence) {
+        VolumeUpdate u;
+        u.sequence = sequence;
+        u.x = x;
+        u.sizeX = u.sizeY = u.sizeZ = n;
+        u.codec = Codec::Raw;
+        u.rawBytes = uint32_t(n) * n * n;
+        u.payload.assign(payloadBytes, 0);
+        return encodeMessage(u);
+    };
+    // Before the welcome nobody knows where voxels go.
+    fake.send(peer, Channel::Volume, box(0, 2, 8, 1));
+    ASSERT_TRUE(pumpBoth([&] { return client.stats().malformed() == 1; }));
+    Welcome w;
+    w.clientId = 1;
+    w.volumeDims = v.dims();
+    w.spacing = v.spacing();
+    w.volumeName = "sphere:16";
+    fake.send(peer, Channel::Control, encodeMessage(w));
+    ASSERT_TRUE(pumpBoth([&] { return client.welcomed(); }));
+    fake.send(peer, Channel::Volume, full(true));              // corrupt compression
+    fake.send(peer, Channel::Volume, full(false));             // fine
+    fake.send(peer, Channel::Volume, box(12, 8, 512, 2));      // past the volume's x edge
+    fake.send(peer, Channel::Volume, box(0, 4, 63, 3));        // payload one byte short
+    fake.send(peer, Channel::Volume, std::vector<uint8_t>{8}); // type byte only
+    fake.send(peer, Channel::Volume, box(4, 4, 64, 4));        // fine: cuts a 4^3 box to air
+    ASSERT_TRUE(pumpBoth([&] { return client.stats().malformed() == 5; }));
+    ASSERT_TRUE(pumpBoth([&] { return client.volumeUpdatesApplied() == 2; }));
+    EXPECT_EQ(client.updatesRejected(), 4u);
+    ASSERT_NE(client.localVolume(), nullptr);
+    Volume expected = v;
+    for (int z = 0; z < 4; ++z)
+        for (int y = 0; y < 4; ++y)
+            for (int x = 4; x < 8; ++x)
+                expected.set(x, y, z, 0, Material::Air);
+    EXPECT_TRUE(*client.localVolume() == expected);
+}
+
+TEST(VolumeCodec, BoxDensitiesDeriveMaterialsAsErosionLeavesThem) {
+    Volume v = makeSkull(32);
+    Volume target = v;
+    // Erode a box partly: some voxels to 0 (Air), some only thinner (material kept).
+    Box3i box{{8, 8, 20}, {24, 24, 32}};
+    for (int z = box.lo.z; z < box.hi.z; ++z)
+        for (int y = box.lo.y; y < box.hi.y; ++y)
+            for (int x = box.lo.x; x < box.hi.x; ++x) {
+                uint8_t d = target.density(x, y, z);
+                uint8_t nd = (x + y) % 2 ? 0 : uint8_t(d / 2);
+                target.set(x, y, z, nd, nd ? target.material(x, y, z) : Material::Air);
+            }
+    for (Codec codec : {Codec::Raw, Codec::Lz4, Codec::Zstd}) {
+        EncodedVolume e = encodeVolumeBox(target, box, codec);
+        EXPECT_EQ(e.rawBytes, uint32_t(box.count()));
+        std::vector<uint8_t> densities;
+        ASSERT_TRUE(decompressBytes(e.payload, e.codec, e.rawBytes, densities));
+        Volume local = v;
+        ASSERT_TRUE(applyVolumeBox(local, box, densities));
+        EXPECT_TRUE(local == target) << codecName(codec);
+        EXPECT_FALSE(applyVolumeBox(local, Box3i{{30, 0, 0}, {33, 2, 2}}, densities));
+    }
+    EncodedVolume f = encodeVolumeFull(target, Codec::Raw);
+    EXPECT_EQ(f.codec, Codec::Zstd) << "a full volume always travels compressed";
+    Volume back;
+    ASSERT_TRUE(
+        decodeVolumeFull(f.payload, f.rawBytes, f.codec, target.dims(), target.spacing(), back));
+    EXPECT_TRUE(back == target);
+    EXPECT_FALSE(
+        decodeVolumeFull(f.payload, f.rawBytes, f.codec, {32, 32, 31}, target.spacing(), back));
+}
