@@ -1,14 +1,24 @@
-// `trephine study SUBCOMMAND`: the reproducible studies. `haptics` runs the multi-rate haptics
-// study (issue 5); `updates`, `display` and `all` arrive with the baseline (issue 7).
+// `trephine study SUBCOMMAND`: the reproducible studies. `haptics`: multi-rate haptics against a
+// zero-order hold (issue 5). `updates`: DBI against replicated-volume update cycles (the paper's
+// Table 1, Figures 7 and 8). `display`: the DBI composite's display rate against local volume
+// rendering. `all`: every study and DIR/report.md. Each takes --quick (a run under a minute).
 #include "modes.h"
 
 #include "libsim/error.h"
 #include "libsim/haptics_study.h"
+#include "libsim/progress.h"
 #include "libsim/stats.h"
+#include "libsim/svg_plot.h"
 #include "libsim_devices/devices.h"
 #include "libsim_image/volume_slices.h"
+#include "net/codec.h"
 #include "net/force_round_trip.h"
 #include "net/session_server.h"
+#include "net/study_report.h"
+#include "net/update_study.h"
+#ifdef TREPHINE_HAVE_GUI
+#include "ui/display_study.h"
+#endif
 
 #include <chrono>
 #include <cstdio>
@@ -32,18 +42,11 @@ struct HapticsOptions {
     bool quick = false;
 };
 
-struct Timing {
-    const char* name;
-    double p50Ms, p99Ms;
-    double paperMs;
-    double targetMs;
-};
-
 // Wall time of one force + gradient at a contact pose (median of many): the figure the paper
 // gives per haptic update.
-Timing timeForceModel(const char* name, const Volume& v, const SurfaceSite& site,
-                      const ToolShape& shape, float depthMm, double paperMs, double targetMs,
-                      int reps) {
+net::ForceTiming timeForceModel(const char* name, const Volume& v, const SurfaceSite& site,
+                                const ToolShape& shape, float depthMm, double paperServerMs,
+                                double paperClientMs, double targetMs, int reps) {
     using Clock = std::chrono::steady_clock;
     ForceModel model(shape);
     // The cutter's lowest point depthMm into the bone.
@@ -58,10 +61,11 @@ Timing timeForceModel(const char* name, const Volume& v, const SurfaceSite& site
         ms.add(std::chrono::duration<double, std::milli>(Clock::now() - t0).count());
         sink = sink + r.force.x;
     }
-    return {name, ms.percentile(50), ms.percentile(99), paperMs, targetMs};
+    return {name, ms.percentile(50), ms.percentile(99), paperServerMs, paperClientMs, targetMs};
 }
 
-int runHapticsStudy(const HapticsOptions& o) {
+net::HapticsFigures runHapticsStudy(const HapticsOptions& o) {
+    net::HapticsFigures figures;
     Volume volume;
     SurfaceSite site;
     if (o.volume == "box") {
@@ -105,6 +109,7 @@ int runHapticsStudy(const HapticsOptions& o) {
             for (HapticMethod m : {HapticMethod::Multirate, HapticMethod::ZeroOrderHold}) {
                 HapticsCaseResult r = runHapticsCase(volume, site, config, {m, rate, lat});
                 csv << hapticsCsvRow(r) << "\n";
+                figures.cases.push_back(r);
                 std::printf("%-10s %7g %8g %10.4f %10.4f %12.4f %7s %8.2fmm\n", hapticMethodName(m),
                             rate, lat, r.forceRmsErrorN, r.forcePeakErrorN, r.energyInjectedJ * 1e3,
                             r.stable ? "yes" : "NO", r.maxPenetrationMm);
@@ -114,13 +119,16 @@ int runHapticsStudy(const HapticsOptions& o) {
     const int reps = o.quick ? 500 : 3000;
     std::printf("\nForce model time per update (force + gradient, one core):\n");
     std::printf("%-16s %9s %9s %10s %10s\n", "tool", "p50 ms", "p99 ms", "target ms", "paper ms");
-    for (Timing t :
-         {timeForceModel("burr 2 mm", volume, site, ToolShape::burr(2.0f), 1.0f, 0.56, 0.1, reps),
-          timeForceModel("burr 6 mm", volume, site, ToolShape::burr(6.0f), 1.0f, 0.56, 0.1, reps),
-          timeForceModel("perforator 14mm", volume, site, ToolShape::perforator(), 3.0f, 2.98, 0.5,
-                         reps)})
-        std::printf("%-16s %9.4f %9.4f %10.2f %10.2f\n", t.name, t.p50Ms, t.p99Ms, t.targetMs,
-                    t.paperMs);
+    // Paper: the drill 0.56 ms on its server, 1.75 ms on its client; the perforator 2.98 / 9.19.
+    figures.timings = {timeForceModel("burr 2 mm", volume, site, ToolShape::burr(2.0f), 1.0f, 0.56,
+                                      1.75, 0.1, reps),
+                       timeForceModel("burr 6 mm", volume, site, ToolShape::burr(6.0f), 1.0f, 0.56,
+                                      1.75, 0.1, reps),
+                       timeForceModel("perforator 14mm", volume, site, ToolShape::perforator(),
+                                      3.0f, 2.98, 9.19, 0.5, reps)};
+    for (const net::ForceTiming& t : figures.timings)
+        std::printf("%-16s %9.4f %9.4f %10.2f %10.2f\n", t.tool.c_str(), t.p50Ms, t.p99Ms,
+                    t.targetMs, t.paperServerMs);
     // The 1 kHz loop on this machine (a scripted hand resting on the model; no server yet).
     {
         ToolPose rest = ToolPose::fromAxis(site.position, site.normal);
@@ -132,6 +140,7 @@ int runHapticsStudy(const HapticsOptions& o) {
         std::this_thread::sleep_for(std::chrono::milliseconds(o.quick ? 300 : 1000));
         loop.stop();
         HapticLoopStats st = loop.stats();
+        figures.loopRateHz = st.achievedRateHz;
         std::printf("\nHaptic loop (local force model, %s): %.0f Hz achieved, lateness p50 "
                     "%.3f ms, p99 %.3f ms over %llu ticks\n",
                     config.shape.describe().c_str(), st.achievedRateHz, st.latenessP50Ms,
@@ -155,6 +164,9 @@ int runHapticsStudy(const HapticsOptions& o) {
         net::ForceRoundTripResult rt = net::measureForceRoundTrip(
             net::parseAddress("127.0.0.1:" + std::to_string(server.port())), fc);
         server.stop();
+        figures.roundTripP50Ms = rt.p50Us * 1e-3;
+        figures.roundTripP99Ms = rt.p99Us * 1e-3;
+        figures.roundTripServerMs = rt.serverP50Us * 1e-3;
         std::printf("\nForce round trip over loopback through a session server (%s in contact, "
                     "%d round trips at %.0f Hz):\n",
                     config.shape.describe().c_str(), rt.samples, fc.rateHz);
@@ -169,6 +181,200 @@ int runHapticsStudy(const HapticsOptions& o) {
     std::printf("(paper: its drill and perforator on its faster machine; its round trip over its "
                 "LAN)\nwrote %s\n",
                 csvPath.c_str());
+    figures.measured = true;
+    return figures;
+}
+
+// [SECTION] updates
+
+struct UpdatesOptions {
+    std::string out = ".";
+    std::vector<int> sizes{10, 20, 30, 40, 50, 60, 70, 80};
+    std::string volume = "skull:128";
+    std::string camera = "paper";
+    // zstd: with predicted updates it sends ~35 % fewer bytes than lz4 for ~0.1-0.4 ms more
+    // encoding per update (docs/study.md); the bytes target at 10^3 needs it.
+    std::string codec = "zstd";
+    int cycles = 30;
+    bool quick = false;
+    bool sizesGiven = false; // --sizes on the command line wins over --quick's sizes
+};
+
+std::string makeOutDir(const std::string& out) {
+    std::error_code ec;
+    std::filesystem::create_directories(out, ec);
+    if (ec || !std::filesystem::is_directory(out))
+        throw Error("cannot create --out folder " + out + ": " + ec.message());
+    return out;
+}
+
+void writeText(const std::filesystem::path& path, const std::string& text) {
+    std::ofstream f(path);
+    f << text;
+    if (!f)
+        throw Error("cannot write " + path.string() + ": check that --out is a writable folder");
+}
+
+// The volume a study runs on; with the paper camera its spacing is set so the volume spans the
+// paper's 300 pixels (section 4.1).
+Volume studyVolume(const std::string& spec, const std::string& camera) {
+    Volume volume = openVolume(spec);
+    if (camera == "paper") {
+        const glm::ivec3 d = volume.dims();
+        volume.setSpacing(glm::vec3(paperSpacingMm(std::max({d.x, d.y, d.z}))));
+    }
+    return volume;
+}
+
+std::vector<net::UpdateStudyRow> runUpdatesStudy(const UpdatesOptions& o,
+                                                 net::UpdateStudyConfig& config) {
+    config.sizes = o.sizes;
+    config.volumeName = o.volume;
+    config.camera = o.camera;
+    config.codec = net::parseCodec(o.codec);
+    config.cycles = o.cycles;
+    if (o.quick) {
+        if (!o.sizesGiven)
+            config.sizes = {10, 40, 80};
+        config.cycles = 5;
+        config.warmup = 1;
+    }
+    if (config.cycles < 1 || config.cycles > 100000)
+        throw Error("--cycles must be in [1, 100000]");
+    bool known = false;
+    for (const std::string& n : cameraPresetNames())
+        known = known || n == o.camera;
+    if (!known)
+        throw Error("--camera: unknown preset '" + o.camera + "'");
+    Volume volume = studyVolume(o.volume, o.camera);
+    makeOutDir(o.out);
+    std::printf("Update study: %s, camera %s, %dx%d, codec %s, %d cycles per method and size\n",
+                o.volume.c_str(), o.camera.c_str(), config.window, config.window, o.codec.c_str(),
+                config.cycles);
+    std::fflush(stdout);
+    ProgressBar bar(int(config.sizes.size() * net::updateStudyMethods(config.codec).size()));
+    config.progress = [&](const std::string& label, int done, int) { bar.set(done, label); };
+    std::vector<net::UpdateStudyRow> rows = net::runUpdateStudy(volume, config);
+    bar.finish();
+    config.progress = nullptr;
+
+    std::string csv = net::updatesCsvHeader() + "\n";
+    for (const net::UpdateStudyRow& r : rows)
+        csv += net::updatesCsvRow(r) + "\n";
+    const auto path = std::filesystem::path(o.out) / "updates.csv";
+    writeText(path, csv);
+
+    std::printf("%-16s %6s %9s %11s %11s %9s %9s %9s\n", "method", "box", "BB_screen", "bytes/upd",
+                "raw bytes", "upd/s", "p50 ms", "p99 ms");
+    for (const net::UpdateStudyRow& r : rows)
+        std::printf("%-16s %4d^3 %4dx%-4d %11.0f %11.0f %9.1f %9.3f %9.3f\n", r.method.c_str(),
+                    r.box, r.bbScreenW, r.bbScreenH, r.bytesPerUpdate, r.rawBytesPerUpdate,
+                    r.updatesPerS, r.latencyP50Ms, r.latencyP99Ms);
+    for (const std::string& line : net::updateTargetLines(rows))
+        std::printf("%s\n", line.c_str());
+    std::printf("wrote %s\n", path.string().c_str());
+    return rows;
+}
+
+// [SECTION] display
+
+struct DisplayOptions {
+    std::string out = ".";
+    bool quick = false;
+};
+
+net::DisplayFigures runDisplayStudy(const DisplayOptions& o) {
+    net::DisplayFigures figures;
+    makeOutDir(o.out);
+#ifdef TREPHINE_HAVE_GUI
+    try {
+        ui::DisplayStudyConfig config;
+        if (o.quick) {
+            config.dbiFrames = 40;
+            config.volumeFrames = 4;
+            config.warmupFrames = 1;
+        }
+        std::printf("Display study: DBI composite against local volume ray casting, %s view "
+                    "%dx%d\n",
+                    config.camera.c_str(), config.windowPx, config.windowPx);
+        std::fflush(stdout);
+        ui::DisplayStudyResult r = ui::measureDisplayRates(config);
+        figures.measured = true;
+        figures.glRenderer = r.glRenderer + " (" + r.glVersion + ")";
+        figures.entries.push_back({"dbi composite", r.dbi.fps, r.dbi.medianMs, r.dbi.p99Ms, 990.0});
+        for (const ui::DisplayRate& v : r.volume)
+            figures.entries.push_back({formatString("volume %d^3", v.volumeSize), v.fps, v.medianMs,
+                                       v.p99Ms,
+                                       v.volumeSize == 128   ? 57.0
+                                       : v.volumeSize == 256 ? 26.0
+                                                             : 0.0});
+    } catch (const Error& e) {
+        figures.why = e.what();
+    }
+#else
+    figures.why = "this trephine was built without the GUI (TREPHINE_BUILD_GUI=OFF)";
+#endif
+    if (!figures.measured) {
+        std::printf("display study not run: %s\n", figures.why.c_str());
+        return figures;
+    }
+    std::string csv = "renderer,fps,frame_p50_ms,frame_p99_ms,paper_fps\n";
+    std::printf("%-18s %10s %12s %12s %10s\n", "client draws", "FPS", "p50 ms", "p99 ms",
+                "paper FPS");
+    for (const auto& e : figures.entries) {
+        csv += formatString("%s,%.2f,%.4f,%.4f,%.0f\n", e.name.c_str(), e.fps, e.frameP50Ms,
+                            e.frameP99Ms, e.paperFps);
+        std::printf("%-18s %10.1f %12.3f %12.3f %10.0f\n", e.name.c_str(), e.fps, e.frameP50Ms,
+                    e.frameP99Ms, e.paperFps);
+    }
+    for (const std::string& line : net::displayTargetLines(figures))
+        std::printf("%s\n", line.c_str());
+    const auto path = std::filesystem::path(o.out) / "display.csv";
+    writeText(path, csv);
+    std::printf("(%s)\nwrote %s\n", figures.glRenderer.c_str(), path.string().c_str());
+    return figures;
+}
+
+// [SECTION] all
+
+struct AllOptions {
+    std::string out = "study";
+    std::string volume = "skull:128";
+    std::string codec = "zstd";
+    bool quick = false;
+};
+
+int runAllStudies(const AllOptions& o, const std::string& command) {
+    makeOutDir(o.out);
+    net::StudyReportInput input;
+    input.command = command;
+    input.machine = net::describeMachine();
+    input.quick = o.quick;
+
+    std::printf("== 1/3 haptics ==\n");
+    HapticsOptions h;
+    h.out = o.out;
+    h.quick = o.quick;
+    input.haptics = runHapticsStudy(h);
+
+    std::printf("\n== 2/3 updates ==\n");
+    UpdatesOptions u;
+    u.out = o.out;
+    u.volume = o.volume;
+    u.codec = o.codec;
+    u.quick = o.quick;
+    input.updates = runUpdatesStudy(u, input.updateConfig);
+
+    std::printf("\n== 3/3 display ==\n");
+    DisplayOptions d;
+    d.out = o.out;
+    d.quick = o.quick;
+    input.display = runDisplayStudy(d);
+
+    const std::string report = net::writeStudyReport(input, o.out);
+    const auto path = std::filesystem::path(o.out) / "report.md";
+    writeText(path, report);
+    std::printf("\nwrote %s (with updates.svg and bytes.svg)\n", path.string().c_str());
     return 0;
 }
 
@@ -192,7 +398,58 @@ void addStudyMode(CLI::App& root, int& exitCode) {
         ->capture_default_str();
     haptics->add_option("--burr", o->burrMm, "Burr diameter, mm (1-6)")->capture_default_str();
     haptics->add_flag("--quick", o->quick, "A reduced grid in well under a minute");
-    haptics->callback([o, &exitCode] { exitCode = runHapticsStudy(*o); });
+    haptics->callback([o, &exitCode] {
+        runHapticsStudy(*o);
+        exitCode = 0;
+    });
+
+    auto u = std::make_shared<UpdatesOptions>();
+    CLI::App* updates = study->add_subcommand(
+        "updates", "DBI vs replicated-volume update cycles per box size (Table 1, Figures 7, 8)");
+    updates->add_option("--out", u->out, "Folder for updates.csv")->capture_default_str();
+    updates->add_option("--sizes", u->sizes, "Box edges N (voxels) of the N^3 cuts")
+        ->delimiter(',')
+        ->check(CLI::Range(1, 512))
+        ->capture_default_str();
+    updates->add_option("--volume", u->volume, "Volume spec")->capture_default_str();
+    updates->add_option("--camera", u->camera, "Camera preset (paper: the paper's setup)")
+        ->capture_default_str();
+    updates->add_option("--codec", u->codec, "Image codec: raw, lz4 or zstd")
+        ->capture_default_str();
+    updates->add_option("--cycles", u->cycles, "Measured cycles per method and size")
+        ->capture_default_str();
+    updates->add_flag("--quick", u->quick, "Sizes 10, 40, 80 and 5 cycles: under a minute");
+    updates->callback([u, updates, &exitCode] {
+        u->sizesGiven = updates->count("--sizes") > 0;
+        net::UpdateStudyConfig config;
+        runUpdatesStudy(*u, config);
+        exitCode = 0;
+    });
+
+    auto d = std::make_shared<DisplayOptions>();
+    CLI::App* display = study->add_subcommand(
+        "display", "Display rate: DBI composite vs local volume rendering at 128^3 and 256^3");
+    display->add_option("--out", d->out, "Folder for display.csv")->capture_default_str();
+    display->add_flag("--quick", d->quick, "Fewer frames: a few seconds");
+    display->callback([d, &exitCode] {
+        net::DisplayFigures f = runDisplayStudy(*d);
+        exitCode = f.measured ? 0 : 1;
+    });
+
+    auto a = std::make_shared<AllOptions>();
+    CLI::App* all = study->add_subcommand(
+        "all", "Every study, then DIR/report.md with the paper's figures beside ours");
+    all->add_option("--out", a->out, "Folder for the CSVs, SVGs and report.md")
+        ->capture_default_str();
+    all->add_option("--volume", a->volume, "Volume spec for the update study")
+        ->capture_default_str();
+    all->add_option("--codec", a->codec, "Image codec: raw, lz4 or zstd")->capture_default_str();
+    all->add_flag("--quick", a->quick, "A reduced run of every study, under a minute");
+    all->callback([a, &exitCode] {
+        std::string command = "trephine study all --out " + a->out + " --volume " + a->volume +
+                              " --codec " + a->codec + (a->quick ? " --quick" : "");
+        exitCode = runAllStudies(*a, command);
+    });
 }
 
 } // namespace trephine::app

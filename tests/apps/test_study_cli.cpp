@@ -1,0 +1,154 @@
+// `trephine study updates|display|all --quick` run as a user would: the CSV's exact columns with
+// sane values, and a report that names every figure.
+#include "test_support.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <map>
+#include <sstream>
+#include <string>
+#include <vector>
+
+using namespace trephine::testing;
+
+namespace {
+
+std::vector<std::string> split(const std::string& line, char sep) {
+    std::vector<std::string> out;
+    std::stringstream ss(line);
+    for (std::string cell; std::getline(ss, cell, sep);)
+        out.push_back(cell);
+    return out;
+}
+
+struct Csv {
+    std::vector<std::string> header;
+    std::vector<std::map<std::string, std::string>> rows;
+};
+
+Csv readCsv(const std::string& path) {
+    Csv csv;
+    std::stringstream ss(slurp(path));
+    std::string line;
+    if (!std::getline(ss, line))
+        return csv;
+    csv.header = split(line, ',');
+    while (std::getline(ss, line)) {
+        std::vector<std::string> cells = split(line, ',');
+        EXPECT_EQ(cells.size(), csv.header.size()) << line;
+        std::map<std::string, std::string> row;
+        for (size_t i = 0; i < cells.size() && i < csv.header.size(); ++i)
+            row[csv.header[i]] = cells[i];
+        csv.rows.push_back(row);
+    }
+    return csv;
+}
+
+double num(const std::map<std::string, std::string>& row, const std::string& column) {
+    auto it = row.find(column);
+    EXPECT_NE(it, row.end()) << column;
+    return it == row.end() ? -1.0 : std::stod(it->second);
+}
+
+// Every row sane: positive rates and sizes, BB_screen inside the 500x500 window and growing with
+// N for every method; the volume method's raw bytes are exactly N^3.
+void checkUpdates(const Csv& csv, const std::vector<int>& sizes) {
+    const std::string expected = "method,box,bb_screen_w,bb_screen_h,bytes_per_update,"
+                                 "raw_bytes_per_update,updates_per_s,latency_p50_ms,"
+                                 "latency_p99_ms";
+    std::string first;
+    for (size_t i = 0; i < 9 && i < csv.header.size(); ++i)
+        first += (i ? "," : "") + csv.header[i];
+    EXPECT_EQ(first, expected);
+    for (const char* stage : {"erode_ms", "render_ms", "encode_ms", "transmit_ms",
+                              "client_apply_ms", "client_render_ms"})
+        EXPECT_NE(std::find(csv.header.begin(), csv.header.end(), stage), csv.header.end())
+            << stage;
+    std::map<std::string, std::vector<std::map<std::string, std::string>>> byMethod;
+    for (const auto& row : csv.rows)
+        byMethod[row.at("method")].push_back(row);
+    for (const char* m : {"dbi", "dbi-fullrender", "volume", "volume-lz4"})
+        ASSERT_EQ(byMethod[m].size(), sizes.size()) << m;
+    for (const auto& [method, rows] : byMethod) {
+        double lastW = 0;
+        for (size_t i = 0; i < rows.size(); ++i) {
+            const auto& r = rows[i];
+            EXPECT_EQ(int(num(r, "box")), sizes[i]);
+            const double w = num(r, "bb_screen_w"), h = num(r, "bb_screen_h");
+            EXPECT_GT(w, 0);
+            EXPECT_GT(h, 0);
+            EXPECT_LE(w, 500);
+            EXPECT_LE(h, 500);
+            EXPECT_GT(w, lastW) << method << " BB_screen must grow with N";
+            lastW = w;
+            EXPECT_GT(num(r, "bytes_per_update"), 0) << method;
+            EXPECT_GT(num(r, "updates_per_s"), 0) << method;
+            EXPECT_GT(num(r, "latency_p50_ms"), 0) << method;
+            EXPECT_GE(num(r, "latency_p99_ms"), num(r, "latency_p50_ms")) << method;
+            const double n = sizes[i];
+            if (method.rfind("volume", 0) == 0) {
+                EXPECT_EQ(num(r, "raw_bytes_per_update"), n * n * n);
+                EXPECT_GT(num(r, "client_render_ms"), 0) << "the volume client re-renders";
+            } else {
+                EXPECT_EQ(num(r, "raw_bytes_per_update"), 5.0 * w * h);
+                EXPECT_GT(num(r, "render_ms"), 0) << "the server renders BB_screen";
+            }
+        }
+    }
+    // The raw volume method sends exactly one byte a voxel.
+    for (size_t i = 0; i < sizes.size(); ++i) {
+        const double n = sizes[i];
+        EXPECT_NEAR(num(byMethod["volume"][i], "bytes_per_update"), n * n * n, 0.5);
+    }
+}
+
+} // namespace
+
+TEST(StudyCli, UpdatesQuickWritesEveryColumnWithSaneValues) {
+    TempDir dir;
+    CommandResult r = runTrephine(dir, "study updates --quick --sizes 8,16 --volume skull:64 "
+                                       "--out '" +
+                                           dir / "out" + "'");
+    ASSERT_EQ(r.exitCode, 0) << r.out << r.err;
+    checkUpdates(readCsv(dir / "out/updates.csv"), {8, 16});
+    EXPECT_NE(r.out.find("update rate 8^3"), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("update size 16^3"), std::string::npos) << r.out;
+}
+
+TEST(StudyCli, BadFlagsGiveOneLine) {
+    TempDir dir;
+    for (const char* args :
+         {"study updates --codec gzip --quick", "study updates --sizes 0",
+          "study updates --camera nowhere --quick", "study updates --volume nosuch.nrrd --quick"}) {
+        CommandResult r = runTrephine(dir, std::string(args) + " --out '" + dir / "o" + "'");
+        EXPECT_NE(r.exitCode, 0) << args;
+        EXPECT_FALSE(r.err.empty()) << args;
+        EXPECT_LE(std::count(r.err.begin(), r.err.end(), '\n'), 2) << args << ": " << r.err;
+    }
+}
+
+TEST(StudyCli, AllQuickWritesAReportNamingEveryFigure) {
+    TempDir dir;
+    const std::string out = dir / "study";
+    CommandResult r = runTrephine(dir, "study all --quick --out '" + out + "'");
+    ASSERT_EQ(r.exitCode, 0) << r.out << r.err;
+    checkUpdates(readCsv(out + "/updates.csv"), {10, 40, 80});
+    EXPECT_FALSE(readCsv(out + "/haptics.csv").rows.empty());
+    const std::string report = slurp(out + "/report.md");
+    for (const char* figure : {"Table 1", "Figure 7", "Figure 8", "Stage breakdown", "Display",
+                               "Haptics", "Machine", "updates.svg", "bytes.svg", "paper"})
+        EXPECT_NE(report.find(figure), std::string::npos) << figure;
+    for (const char* svg : {"/updates.svg", "/bytes.svg"}) {
+        const std::string s = slurp(out + svg);
+        EXPECT_EQ(s.rfind("<svg", 0), 0u) << svg;
+        EXPECT_NE(s.find("<polyline"), std::string::npos) << svg;
+    }
+    if (std::getenv("DISPLAY")) { // ctest runs under xvfb-run: the display study must have run
+        const Csv display = readCsv(out + "/display.csv");
+        ASSERT_EQ(display.rows.size(), 3u);
+        for (const auto& row : display.rows)
+            EXPECT_GT(num(row, "fps"), 0) << row.at("renderer");
+        EXPECT_EQ(report.find("Not measured"), std::string::npos);
+    }
+}
