@@ -2,10 +2,11 @@
 // -> rectangle applied at the client) and bytes per update for each codec against the raw size;
 // full-view refresh time (view change). Server and client in one process, one steady clock.
 // Figures print beside the targets (p50 <= 2 ms, p99 <= 5 ms at BB_volume ~40^3).
-// The box sweep cuts N^3 boxes of bone (N = 10..80) at the surface facing the paper camera of a
-// paper-spaced skull:128 through SessionServer::submitBoxCut and reports latency, BB_screen size
-// and bytes per update against raw. Haptics: the loopback force round trip (target p50 <= 0.3 ms)
-// and the 1 kHz haptic loop's achieved rate and lateness while the server streams DBI updates.
+// The box sweep runs the update study's dbi method (30 cycles, each cutting fresh bone: an N^3 box,
+// N = 10..80, at the surface facing the paper camera of a paper-spaced skull:128) and reports
+// latency, BB_screen size, stage times and bytes per update against raw. Haptics: the loopback
+// force round trip (target p50 <= 0.3 ms) and the 1 kHz haptic loop's achieved rate and lateness
+// while the server streams DBI updates.
 #include "libsim/device.h"
 #include "libsim/haptics.h"
 #include "libsim/skull.h"
@@ -13,6 +14,7 @@
 #include "net/force_round_trip.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
+#include "net/update_study.h"
 #include "net/view.h"
 
 #include <benchmark/benchmark.h>
@@ -128,61 +130,33 @@ const Volume& paperSkull() {
     return v;
 }
 
-// An N^3 box whose top face lies at the bone surface the paper camera (on +z) looks at, centred
-// on the volume's middle column, shifted by `shift` voxels along x.
-Box3i surfaceBox(const Volume& v, int n, int shift) {
-    glm::ivec3 d = v.dims();
-    int cx = d.x / 2 + shift, cy = d.y / 2;
-    int top = d.z - 1;
-    while (top > 0 && v.density(cx, cy, top) < kSurfaceDensity)
-        --top;
-    glm::ivec3 lo(cx - n / 2, cy - n / 2, top + 1 - n);
-    return Box3i::fromMinMax(lo, lo + glm::ivec3(n));
-}
-
+// The update study's dbi method (net/update_study.h): each cycle cuts fresh bone (the box's
+// voxels are put back between cycles, unmeasured), cause -> rectangle applied at the client.
 void boxSweep(benchmark::State& state, Codec codec) {
     const int n = int(state.range(0));
-    Session s(codec, "paper", 500, paperSkull());
-    SampleWindow rectPx, serverUs, deliverUs;
-    s.client->setUpdateCallback([&](const ImageUpdate& u, const PixelRect& r, bool full) {
-        if (full)
-            return;
-        rectPx.add(double(r.area()));
-        // Where the time goes: cause -> encoded and queued (simulation thread: cut, BB_screen,
-        // render, encode), then queued -> applied (network thread, ENet, decode, apply).
-        serverUs.add(double(u.sentServerUs - u.causeServerUs));
-        deliverUs.add(double(steadyNowUs() - u.sentServerUs));
-    });
-    s.client->stats().updateLatencyUs.clear();
-    s.client->stats().updateBytes.clear();
-    s.client->stats().updateRawBytes.clear();
-    int i = 0;
-    int64_t timeouts = 0;
-    for (auto _ : state) {
-        s.server->submitBoxCut(surfaceBox(s.skull, n, (i++ % 5) * 2 - 4));
-        if (!s.waitUpdates(1, 2000000))
-            ++timeouts;
-    }
-    const NetStats& st = s.client->stats();
+    UpdateStudyConfig config;
+    config.sizes = {n};
+    config.codec = codec;
+    config.methods = {"dbi"};
+    config.cycles = 30;
+    UpdateStudyRow row;
+    for (auto _ : state)
+        row = runUpdateStudy(paperSkull(), config).at(0);
     state.counters["N"] = n;
-    state.counters["latency_p50_us"] = st.updateLatencyUs.percentile(50);
-    state.counters["latency_p99_us"] = st.updateLatencyUs.percentile(99);
+    state.counters["latency_p50_us"] = row.latencyP50Ms * 1e3;
+    state.counters["latency_p99_us"] = row.latencyP99Ms * 1e3;
     state.counters["target_p50_us"] = n == 40 ? 2000 : 0;
     state.counters["target_p99_us"] = n == 40 ? 5000 : 0;
-    state.counters["bb_screen_px"] = rectPx.percentile(50);
-    state.counters["server_p50_us"] = serverUs.percentile(50);
-    state.counters["deliver_p50_us"] = deliverUs.percentile(50);
-    state.counters["bytes_per_update"] = st.updateBytes.mean();
-    state.counters["raw_bytes_per_update"] = st.updateRawBytes.mean();
-    // Against the raw codec's 8 bytes a pixel (the reference), and against the codec's own
-    // layout before compression (5 bytes a pixel for lz4/zstd).
-    const double rawCodecBytes = 8.0 * rectPx.mean();
-    state.counters["raw_codec_bytes"] = rawCodecBytes;
-    state.counters["raw_codec_over_bytes"] =
-        st.updateBytes.mean() > 0 ? rawCodecBytes / st.updateBytes.mean() : 0;
-    state.counters["layout_over_bytes"] =
-        st.updateBytes.mean() > 0 ? st.updateRawBytes.mean() / st.updateBytes.mean() : 0;
-    state.counters["no_update"] = double(timeouts);
+    state.counters["bb_screen_px"] = row.bbScreenW * row.bbScreenH;
+    state.counters["server_render_us"] = row.stages.render * 1e3;
+    state.counters["server_encode_us"] = row.stages.encode * 1e3;
+    state.counters["transmit_us"] = row.stages.transmit * 1e3;
+    state.counters["client_apply_us"] = row.stages.clientApply * 1e3;
+    state.counters["bytes_per_update"] = row.bytesPerUpdate;
+    // Against the raw codec's 8 bytes a pixel (the reference) and the 5-byte planar layout.
+    state.counters["raw_codec_bytes"] = 8.0 * row.bbScreenW * row.bbScreenH;
+    state.counters["planar_over_bytes"] =
+        row.bytesPerUpdate > 0 ? row.rawBytesPerUpdate / row.bytesPerUpdate : 0;
 }
 
 // Tool state out, HapticModel back, one in flight, at 1 kHz, a 2 mm burr pressed 1 mm into the
@@ -289,11 +263,11 @@ void hapticLoopWhileStreaming(benchmark::State& state) {
 
 } // namespace
 
-BENCHMARK_CAPTURE(boxSweep, raw, Codec::Raw)->DenseRange(10, 80, 10)->Iterations(30)->UseRealTime();
-BENCHMARK_CAPTURE(boxSweep, lz4, Codec::Lz4)->DenseRange(10, 80, 10)->Iterations(30)->UseRealTime();
+BENCHMARK_CAPTURE(boxSweep, raw, Codec::Raw)->DenseRange(10, 80, 10)->Iterations(1)->UseRealTime();
+BENCHMARK_CAPTURE(boxSweep, lz4, Codec::Lz4)->DenseRange(10, 80, 10)->Iterations(1)->UseRealTime();
 BENCHMARK_CAPTURE(boxSweep, zstd, Codec::Zstd)
     ->DenseRange(10, 80, 10)
-    ->Iterations(30)
+    ->Iterations(1)
     ->UseRealTime();
 BENCHMARK(forceRoundTrip)->Iterations(1)->UseRealTime()->Unit(benchmark::kMillisecond);
 BENCHMARK(hapticLoopWhileStreaming)->Iterations(1)->UseRealTime()->Unit(benchmark::kMillisecond);

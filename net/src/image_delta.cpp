@@ -24,7 +24,10 @@ struct Planes {
     std::vector<uint8_t> c[3];
     std::vector<uint16_t> q;
 
-    Planes(const Dbi& image, const DepthQuantizer& quantizer)
+    // `same`: the planes of `other`, an image of the same size whose depth codes are reused
+    // wherever the two images' depths are bit-identical (quantising is most of the cost).
+    Planes(const Dbi& image, const DepthQuantizer& quantizer, const Dbi* other = nullptr,
+           const Planes* same = nullptr)
         : w(image.width()), h(image.height()) {
         const size_t n = size_t(w) * size_t(h);
         for (auto& p : c)
@@ -33,7 +36,8 @@ struct Planes {
         for (size_t i = 0; i < n; ++i) {
             for (int k = 0; k < 3; ++k)
                 c[k][i] = image.color()[4 * i + size_t(k)];
-            q[i] = quantizer.quantize(image.depth()[i]);
+            const float d = image.depth()[i];
+            q[i] = same && other->depth()[i] == d ? same->q[i] : quantizer.quantize(d);
         }
     }
     template <typename T>
@@ -77,7 +81,7 @@ PredictedImage encodePredicted(const Dbi& next, const Dbi& base, Codec codec,
     PredictedImage out;
     if (next.width() != base.width() || next.height() != base.height() || codec == Codec::Raw)
         return out;
-    const Planes now(next, quantizer), was(base, quantizer);
+    const Planes now(next, quantizer), was(base, quantizer, &next, &now);
     const int w = now.w, h = now.h;
     const size_t n = size_t(w) * size_t(h);
     std::vector<uint8_t> mask(maskBytes(n), 0);

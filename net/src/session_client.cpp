@@ -363,6 +363,8 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
                                              DepthQuantizer(camera), patch);
         if (st == PredictedStatus::Malformed)
             return false;
+        if (st == PredictedStatus::Ok)
+            ++m_predicted;
         if (st == PredictedStatus::BaseMismatch) {
             // Our copy is not what the server coded against: never show a wrong picture; ask
             // for the whole view again (the server answers with a full image).

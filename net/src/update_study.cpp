@@ -85,7 +85,17 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
     server.start();
     const ENetAddress address = parseAddress("127.0.0.1:" + std::to_string(server.port()));
 
-    const std::vector<Method> methods = methodsFor(config.codec);
+    std::vector<Method> methods = methodsFor(config.codec);
+    if (!config.methods.empty()) {
+        for (const std::string& name : config.methods)
+            if (std::none_of(methods.begin(), methods.end(),
+                             [&](const Method& m) { return m.name == name; }))
+                throw Error("update study: unknown method '" + name + "'");
+        std::erase_if(methods, [&](const Method& m) {
+            return std::find(config.methods.begin(), config.methods.end(), m.name) ==
+                   config.methods.end();
+        });
+    }
     const int total = int(methods.size() * config.sizes.size());
     int step = 0;
     std::vector<UpdateStudyRow> rows;

@@ -109,6 +109,8 @@ public:
     uint64_t updatesRejected() const { return m_rejected; }
     // Predicted image updates whose base differed from our pixels (each asked for a full image).
     uint64_t resyncs() const { return m_resyncs; }
+    // Predicted image updates applied (coded against our own pixels, net/image_delta.h).
+    uint64_t predictedApplied() const { return m_predicted; }
     uint64_t toolStatesSent() const { return m_toolSent; }
     uint32_t lastUpdateSequence() const { return m_lastSequence; }
     NetStats& stats() { return m_stats; }
@@ -153,6 +155,8 @@ public:
 
     // [Test hooks] Sends raw bytes on a channel, bypassing every check.
     bool sendRaw(Channel channel, std::span<const uint8_t> bytes);
+    // Flips one colour bit of our DBI at (x, y): a copy the server no longer knows.
+    void damagePixelForTest(int x, int y) { m_dbi.color(x, y)[0] ^= 1; }
 
 private:
     void onEvent(const ENetEvent& ev);
@@ -203,7 +207,7 @@ private:
     uint64_t m_volumeUpdates = 0;
     std::optional<HapticModel> m_latestHaptic;
     uint64_t m_hapticModels = 0;
-    uint64_t m_resyncs = 0;
+    uint64_t m_resyncs = 0, m_predicted = 0;
     uint64_t m_relays = 0, m_updatesApplied = 0, m_fullUpdates = 0, m_rejected = 0, m_toolSent = 0;
     NetStats m_stats;
 };

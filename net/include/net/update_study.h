@@ -25,11 +25,12 @@ struct UpdateStudyConfig {
     std::vector<int> sizes{10, 20, 30, 40, 50, 60, 70, 80};
     std::string volumeName = "skull:128";
     std::string camera = "paper";
-    int window = 500;          // square window, pixels
-    Codec codec = Codec::Lz4;  // image updates, and the compressed volume variant
-    int cycles = 30;           // measured cycles per method and size
-    int warmup = 3;            // cycles run first and discarded
-    double cycleTimeoutS = 10; // one cycle that takes longer fails the study (an Error)
+    int window = 500;                 // square window, pixels
+    Codec codec = Codec::Lz4;         // image updates, and the compressed volume variant
+    int cycles = 30;                  // measured cycles per method and size
+    int warmup = 3;                   // cycles run first and discarded
+    double cycleTimeoutS = 10;        // one cycle that takes longer fails the study (an Error)
+    std::vector<std::string> methods; // a subset of updateStudyMethods(codec); empty: all
     // Called before each (method, size) with a label and the steps done/total.
     std::function<void(const std::string& label, int done, int total)> progress;
 };
