@@ -1,6 +1,7 @@
 // `trephine trainee`: join a session. By default a trainee window (apps/mode_window.cpp);
 // `--headless` runs a real client with no window, driven by a script (the built-in `burrhole` or a
-// CSV trajectory, see docs/scripts.md), and writes statistics as a JSON report.
+// CSV trajectory, see docs/scripts.md), and writes statistics as a JSON report. `--sync volume`
+// runs the replicated-volume baseline: the client holds the volume and renders its view itself.
 #include "mode_window.h"
 #include "modes.h"
 
@@ -36,6 +37,8 @@ struct TraineeOptions {
     std::string script = "burrhole";
     std::string camera = "working";
     std::string codec = "lz4";
+    std::string sync = "dbi";        // dbi | volume
+    std::string volumeCodec = "raw"; // volume box encoding: raw (1 byte/voxel), lz4, zstd
     int size = 500;
     double durationS = 0; // 0: the script's own length
     std::string report;
@@ -143,8 +146,8 @@ std::vector<Sample> csvScript(const std::string& path) {
 }
 
 int runTrainee(const TraineeOptions& o) {
-    if (!o.headless)
-        return runWindowedTrainee(o.connect, o.name, o.codec, o.size);
+    if (!o.headless) // the window starts in --sync's design; its Comparison toggle switches
+        return runWindowedTrainee(o.connect, o.name, o.codec, o.size, o.sync, o.volumeCodec);
     ENetAddress address = net::parseAddress(o.connect);
     // A CSV script is read first, so a bad file fails before anything connects.
     std::vector<Sample> script;
@@ -153,6 +156,8 @@ int runTrainee(const TraineeOptions& o) {
     net::ClientConfig config;
     config.name = o.name;
     config.codec = net::parseCodec(o.codec);
+    config.sync = o.sync == "volume" ? net::Sync::Volume : net::Sync::Dbi;
+    config.volumeCodec = net::parseCodec(o.volumeCodec);
     // A 1x1 placeholder view: the preset needs the volume, which the welcome names.
     config.view.width = config.view.height = 1;
     net::SessionClient client(config);
@@ -186,9 +191,9 @@ int runTrainee(const TraineeOptions& o) {
 
     if (o.script == "burrhole")
         script = burrholeScript(volume, o.durationS > 0 ? o.durationS : 4.0);
-    std::printf("trainee: %s as client %u, view %s (%s), codec %s, %zu script samples\n",
+    std::printf("trainee: %s as client %u, view %s (%s), sync %s, codec %s, %zu script samples\n",
                 o.connect.c_str(), unsigned(client.welcome().clientId), o.camera.c_str(),
-                describe(camera).c_str(), o.codec.c_str(), script.size());
+                describe(camera).c_str(), o.sync.c_str(), o.codec.c_str(), script.size());
     // The haptic loop (its own thread, 1 kHz) reads a device that follows the script's poses,
     // extrapolates the server's force models and sends tool states at --tool-rate through its
     // throttle; this thread owns the client, so the loop's sends wait in a queue for it.
@@ -286,6 +291,17 @@ int runTrainee(const TraineeOptions& o) {
                 (unsigned long long)client.fullUpdates(), st.updateLatencyUs.percentile(50),
                 st.updateLatencyUs.percentile(99), st.updateBytes.mean(), st.updateRawBytes.mean(),
                 st.rttUs.percentile(50), (unsigned long long)st.malformed());
+    for (net::Sync mode : {net::Sync::Dbi, net::Sync::Volume}) {
+        const net::ModeStats& m = st.modes[size_t(mode)];
+        if (m.updates == 0)
+            continue;
+        std::printf("trainee: %s updates %llu, stage p50 us: erode %.0f, server render %.0f, "
+                    "encode %.0f, transmit %.0f, client apply %.0f, client render %.0f\n",
+                    mode == net::Sync::Dbi ? "dbi" : "volume", (unsigned long long)m.updates,
+                    m.erodeUs.percentile(50), m.serverRenderUs.percentile(50),
+                    m.encodeUs.percentile(50), m.transmitUs.percentile(50),
+                    m.applyUs.percentile(50), m.clientRenderUs.percentile(50));
+    }
     std::printf("trainee: haptic loop %.0f Hz achieved (lateness p50 %.3f ms p99 %.3f ms), "
                 "%llu tool states at %.0f Hz, %llu force models, force round trip p50 %.0f us "
                 "p99 %.0f us\n",
@@ -297,6 +313,7 @@ int runTrainee(const TraineeOptions& o) {
         net::ReportInfo info;
         info.server = o.connect;
         info.codec = o.codec;
+        info.sync = client.sync() == net::Sync::Volume ? "volume" : "dbi";
         info.view = o.camera;
         info.camera = describe(camera);
         info.script = o.script;
@@ -342,6 +359,17 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
     sub->add_option("--camera", o->camera, "View preset, as in `trephine render`")
         ->capture_default_str();
     sub->add_option("--codec", o->codec, "Image codec: raw, lz4 or zstd")
+        ->check(CLI::IsMember({"raw", "lz4", "zstd"}))
+        ->capture_default_str();
+    sub->add_option("--sync", o->sync,
+                    "How the picture is kept: dbi (the server renders and sends image "
+                    "rectangles) or volume (the baseline: the server sends voxels, the client "
+                    "holds the volume and renders locally; a window ray casts it on the GPU and "
+                    "switches live with its Comparison toggle)")
+        ->check(CLI::IsMember({"dbi", "volume"}))
+        ->capture_default_str();
+    sub->add_option("--volume-codec", o->volumeCodec,
+                    "With --sync volume: voxel boxes raw (1 byte each, as the paper), lz4 or zstd")
         ->check(CLI::IsMember({"raw", "lz4", "zstd"}))
         ->capture_default_str();
     sub->add_option("--size", o->size, "Window size in pixels (square)")

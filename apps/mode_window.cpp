@@ -42,6 +42,9 @@ int runWindowedClient(const WindowedOptions& o) {
     t.timeoutS = o.timeoutS;
     t.orbitDeg = o.orbitDeg;
     t.tiltDeg = o.tiltDeg;
+    t.sync = o.sync;
+    t.volumeCodec = o.volumeCodec;
+    t.switchSyncAtS = o.switchSyncAtS;
     return ui::runTrainerWindow(t);
 #else
     (void)o;
@@ -51,12 +54,15 @@ int runWindowedClient(const WindowedOptions& o) {
 }
 
 int runWindowedTrainee(const std::string& connect, const std::string& name,
-                       const std::string& codec, int size) {
+                       const std::string& codec, int size, const std::string& sync,
+                       const std::string& volumeCodec) {
     WindowedOptions o;
     o.connect = connect;
     o.name = name;
     o.codec = codec;
     o.size = size;
+    o.sync = sync;
+    o.volumeCodec = volumeCodec;
     return runWindowedClient(o);
 }
 
@@ -78,6 +84,22 @@ void addWindowOptions(CLI::App* sub, WindowedOptions& o) {
     sub->add_option("--timeout", o.timeoutS, "With --screenshot: give up after this many seconds")
         ->check(CLI::Range(1.0, 3600.0))
         ->capture_default_str();
+    sub->add_option(
+           "--sync", o.sync,
+           "Design to start in: dbi (the server renders, sends image rectangles) or volume "
+           "(the window holds the volume, ray casts it and computes forces locally); the "
+           "Comparison panel's toggle switches live")
+        ->check(CLI::IsMember({"dbi", "volume"}))
+        ->capture_default_str();
+    sub->add_option("--volume-codec", o.volumeCodec,
+                    "Volume design: voxel boxes raw (1 byte each, as the paper), lz4 or zstd")
+        ->check(CLI::IsMember({"raw", "lz4", "zstd"}))
+        ->capture_default_str();
+    sub->add_option("--switch-sync-at", o.switchSyncAtS,
+                    "Flip the Comparison toggle at these seconds after the first picture "
+                    "(comma-separated; each waits for the switch before it)")
+        ->delimiter(',')
+        ->check(CLI::Range(0.0, 3600.0));
 }
 
 void addInstructorMode(CLI::App& root, int& exitCode) {

@@ -4,6 +4,7 @@
 
 #include <CLI/CLI.hpp>
 #include <string>
+#include <vector>
 
 namespace trephine::app {
 
@@ -20,6 +21,9 @@ struct WindowedOptions {
     double timeoutS = 90.0;
     float orbitDeg = 0.0f;
     float tiltDeg = 0.0f;
+    std::string sync = "dbi";          // the design to start in: dbi or volume (issue 7)
+    std::string volumeCodec = "raw";   // volume boxes: raw, lz4 or zstd
+    std::vector<double> switchSyncAtS; // scripted Comparison toggles (s after the first picture)
 };
 
 // True when this build has the GUI and a window can open here; `why` says why not.
@@ -28,8 +32,10 @@ bool windowAvailable(std::string* why);
 int runWindowedClient(const WindowedOptions& o);
 // The hook `trephine trainee` calls without --headless: a trainee window on `connect`.
 int runWindowedTrainee(const std::string& connect, const std::string& name,
-                       const std::string& codec, int size);
-// Adds --screenshot, --frames, --script and --camera to a windowed mode's subcommand.
+                       const std::string& codec, int size, const std::string& sync = "dbi",
+                       const std::string& volumeCodec = "raw");
+// Adds --screenshot, --frames, --view, --orbit, --tilt, --window-size, --timeout, --sync,
+// --volume-codec and --switch-sync-at to a windowed mode's subcommand.
 void addWindowOptions(CLI::App* sub, WindowedOptions& o);
 
 } // namespace trephine::app

@@ -203,7 +203,7 @@ void Compositor::destroy(GpuMesh& g) {
     g = GpuMesh{};
 }
 
-void Compositor::begin(const Camera& camera) {
+void Compositor::bindTarget(const Camera& camera) {
     m_view = viewMatrix(camera);
     m_proj = projectionMatrix(camera);
     glBindFramebuffer(GL_FRAMEBUFFER, m_fbo);
@@ -213,6 +213,26 @@ void Compositor::begin(const Camera& camera) {
     glDisable(GL_CULL_FACE);
     glEnable(GL_DEPTH_TEST);
     glDepthMask(GL_TRUE);
+}
+
+void Compositor::beginMeshes() {
+    glDepthFunc(GL_LESS);
+    glUseProgram(m_meshProgram);
+    glUniformMatrix4fv(m_uView, 1, GL_FALSE, glm::value_ptr(m_view));
+    glUniformMatrix4fv(m_uProj, 1, GL_FALSE, glm::value_ptr(m_proj));
+}
+
+void Compositor::beginEmpty(const Camera& camera) {
+    bindTarget(camera);
+    glClearColor(float(kBackgroundRgba[0]) / 255.0f, float(kBackgroundRgba[1]) / 255.0f,
+                 float(kBackgroundRgba[2]) / 255.0f, 1.0f);
+    glClearDepth(1.0);
+    glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
+    beginMeshes();
+}
+
+void Compositor::begin(const Camera& camera) {
+    bindTarget(camera);
     glDepthFunc(GL_ALWAYS);
     glUseProgram(m_restoreProgram);
     glActiveTexture(GL_TEXTURE0);
@@ -222,10 +242,7 @@ void Compositor::begin(const Camera& camera) {
     glActiveTexture(GL_TEXTURE0);
     glBindVertexArray(m_emptyVao);
     glDrawArrays(GL_TRIANGLES, 0, 3);
-    glDepthFunc(GL_LESS);
-    glUseProgram(m_meshProgram);
-    glUniformMatrix4fv(m_uView, 1, GL_FALSE, glm::value_ptr(m_view));
-    glUniformMatrix4fv(m_uProj, 1, GL_FALSE, glm::value_ptr(m_proj));
+    beginMeshes();
 }
 
 void Compositor::draw(const GpuMesh& mesh, const glm::mat4& model, glm::vec4 ownerColor) {

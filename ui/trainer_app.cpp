@@ -1,12 +1,17 @@
 // The trainer window. Sections:
 // [SECTION] scene: volume-derived data (site, surgical field) built off the main thread
-// [SECTION] frame loop: snapshot -> rectangles -> tool -> composite -> overlays -> panels
+// [SECTION] haptics: the window's device and the force in either design
+// [SECTION] frame loop: snapshot -> rectangles / voxel boxes -> tool -> composite -> overlays ->
+//           panels -> comparison figures
 #include "ui/trainer_app.h"
 
 #include "libsim/device.h"
+#include "libsim/dirty_rect.h"
 #include "libsim/error.h"
+#include "libsim/force_model.h"
 #include "libsim/haptics.h"
 #include "libsim/skull.h"
+#include "libsim/stats.h"
 #include "libsim/volume.h"
 #include "libsim_image/volume_slices.h"
 #include "net/client_thread.h"
@@ -15,18 +20,24 @@
 #include "ui/compositor.h"
 #include "ui/mouse_tool.h"
 #include "ui/panels.h"
+#include "ui/volume_view.h"
 #include "ui/window.h"
 
 #include <GLFW/glfw3.h>
 #include <imgui.h>
 
+#include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
+#include <deque>
 #include <future>
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtx/quaternion.hpp>
 #include <glm/gtx/rotate_vector.hpp>
 #include <map>
+#include <mutex>
+#include <optional>
 #include <thread>
 
 namespace trephine::ui {
@@ -110,6 +121,8 @@ struct ToolMeshCache {
     }
 };
 
+// [SECTION] haptics
+
 // The window's tool as the haptic loop's device: the UI thread sets the pose each frame, the
 // 1 kHz loop reads it, extrapolates the force there and sends tool states at 100 Hz.
 class WindowDevice : public Device {
@@ -142,6 +155,89 @@ private:
     Tool m_tool;
 };
 
+// The haptic loop's force in either design, chosen per tick. DBI: the server's force models,
+// extrapolated and blended as HapticLoop does without a source (the multi-rate scheme). Volume:
+// the ForceModel on the client's own copy of the volume, read under ClientThread::withLocalVolume's
+// shared lock, so the 1 kHz loop no longer depends on the server's models (it falls back to them
+// while no local volume is held). The blender keeps running in volume mode so that a switch back
+// to DBI blends from where it is. force() runs on the haptic thread only.
+class WindowForceSource : public ForceSource {
+public:
+    WindowForceSource(const WindowDevice& device, BlendConfig blend)
+        : m_device(device), m_blender(blend) {}
+    void setClient(const net::ClientThread* client) { m_client = client; } // before the loop runs
+    // Any thread: the newest server model (blended in on the next tick).
+    void setModel(const HapticModelData& m) {
+        std::lock_guard lock(m_mutex);
+        m_pending = m;
+    }
+    // Any thread: compute forces locally (the picture comes from the local volume).
+    void setLocal(bool local) { m_local = local; }
+    uint64_t localTicks() const { return m_localTicks.load(); }
+    uint64_t serverTicks() const { return m_serverTicks.load(); }
+
+    glm::vec3 force(const ToolPose& pose, double now) override {
+        std::optional<HapticModelData> pending;
+        {
+            std::lock_guard lock(m_mutex);
+            pending.swap(m_pending);
+        }
+        if (pending)
+            m_blender.setModel(*pending, now);
+        const glm::vec3 extrapolated = m_blender.update(pose.position, now);
+        if (m_local.load(std::memory_order_relaxed) && m_client) {
+            const WindowDevice::Tool t = m_device.tool();
+            glm::vec3 f(0.0f);
+            try {
+                const ToolShape shape = t.kind == ToolKind::Perforator
+                                            ? ToolShape::perforator(t.diameterMm)
+                                            : ToolShape::burr(t.diameterMm);
+                const ForceModel& model = m_models.get(shape);
+                const float speed = t.drilling ? t.speed : 0.0f;
+                if (m_client->withLocalVolume(
+                        [&](const Volume& v) { f = model.compute(v, pose, speed).force; })) {
+                    m_localTicks.fetch_add(1, std::memory_order_relaxed);
+                    return f;
+                }
+            } catch (const Error&) {
+                // A shape the factories refuse: no local model; the server's is all there is.
+            }
+        }
+        m_serverTicks.fetch_add(1, std::memory_order_relaxed);
+        return extrapolated;
+    }
+
+private:
+    const WindowDevice& m_device;
+    const net::ClientThread* m_client = nullptr;
+    ModelBlender m_blender;
+    ForceModelCache m_models;
+    std::mutex m_mutex;
+    std::optional<HapticModelData> m_pending;
+    std::atomic<bool> m_local{false};
+    std::atomic<uint64_t> m_localTicks{0}, m_serverTicks{0};
+};
+
+SyncDesign designOf(net::Sync s) {
+    return s == net::Sync::Volume ? SyncDesign::Volume : SyncDesign::Dbi;
+}
+net::Sync syncOf(SyncDesign d) {
+    return d == SyncDesign::Volume ? net::Sync::Volume : net::Sync::Dbi;
+}
+
+// The window's copy of the volume for the GPU, rebuilt from the client thread's applied boxes.
+void writeBox(Volume& v, const net::AppliedVolumeBox& b) {
+    const glm::ivec3 size = b.box.size();
+    size_t o = 0;
+    for (int z = b.box.lo.z; z < b.box.hi.z; ++z)
+        for (int y = b.box.lo.y; y < b.box.hi.y; ++y) {
+            const size_t i = v.index(b.box.lo.x, y, z);
+            std::memcpy(v.densityData() + i, b.density.data() + o, size_t(size.x));
+            std::memcpy(v.materialData() + i, b.material.data() + o, size_t(size.x));
+            o += size_t(size.x);
+        }
+}
+
 glm::mat4 toolMatrix(glm::vec3 position, glm::quat orientation) {
     return glm::translate(glm::mat4(1.0f), position) * glm::mat4_cast(orientation);
 }
@@ -152,6 +248,8 @@ glm::mat4 toolMatrix(glm::vec3 position, glm::quat orientation) {
 
 int runTrainerWindow(const TrainerOptions& o) {
     using Clock = std::chrono::steady_clock;
+    if (o.sync != "dbi" && o.sync != "volume")
+        throw Error("window: --sync must be dbi or volume, not '" + o.sync + "'");
     const int viewSize = o.size;
     WindowConfig wc;
     wc.width = viewSize + kPanelWidth;
@@ -162,6 +260,7 @@ int runTrainerWindow(const TrainerOptions& o) {
     Window window(wc);
     Compositor comp;
     comp.resize(viewSize, viewSize);
+    VolumeView volumeView; // the replicated-volume design's picture
     ToolMeshCache tools{&comp, {}};
     GpuMesh fieldMesh;
 
@@ -170,6 +269,12 @@ int runTrainerWindow(const TrainerOptions& o) {
     cc.client.name = o.name;
     cc.client.role = o.instructor ? net::Role::Instructor : net::Role::Trainee;
     cc.client.codec = net::parseCodec(o.codec);
+    cc.client.sync = o.sync == "volume" ? net::Sync::Volume : net::Sync::Dbi;
+    cc.client.volumeCodec = net::parseCodec(o.volumeCodec);
+    // The window ray casts the volume itself (VolumeView), in whichever design it starts: the
+    // client thread then hands over voxel boxes instead of re-rendering on the CPU. In DBI mode
+    // the flag changes nothing, so one setting serves both designs and every switch.
+    cc.client.renderLocally = false;
     cc.client.view.width = cc.client.view.height = 1; // the real view needs the volume's name
     // The haptic loop sends the tool states; the client thread hands it each force model.
     WindowDevice device;
@@ -177,6 +282,7 @@ int runTrainerWindow(const TrainerOptions& o) {
     HapticLoopConfig hc;
     hc.rateHz = 1000.0;
     hc.sendRateHz = 100.0;
+    WindowForceSource forces(device, hc.blend);
     HapticLoop haptics(device, hc, [&](const DeviceState& s, double) {
         WindowDevice::Tool t = device.tool();
         net::ToolState ts;
@@ -197,9 +303,13 @@ int runTrainerWindow(const TrainerOptions& o) {
         d.contact = m.contact;
         d.toolSequence = m.toolSequence;
         haptics.setModel(d, std::chrono::duration<double>(Clock::now() - loopT0).count());
+        forces.setModel(d);
     };
     net::ClientThread client(cc);
     clientPtr = &client;
+    forces.setClient(&client);
+    forces.setLocal(cc.client.sync == net::Sync::Volume);
+    haptics.setForceSource(&forces);
     client.start();
     haptics.start();
 
@@ -220,9 +330,33 @@ int runTrainerWindow(const TrainerOptions& o) {
     ParticipantForces participantForces; // instructor: every other participant's force
     DirtyBoxHistory boxHistory;
 
-    Dbi cpuDbi;               // mirror of the textures, for the cursor's depth lookups
+    Dbi cpuDbi;               // pass 1's picture on the CPU, for the cursor's depth lookups
     bool haveImage = false;   // the textures hold a full image of the current view
     uint32_t imageViewId = 0; // viewId of the image in the textures
+    // [Replicated volume] the window's copy of the volume, mirrored in volumeView's textures.
+    Volume gpuVolume;
+    bool haveVolume = false;  // volumeView holds a whole volume
+    bool volumeDirty = false; // the ray cast changed since cpuDbi was read back
+    Camera volumeCamera;      // the camera cpuDbi was read back with
+    // Which design feeds the picture: the one whose full update (whole DBI or whole volume)
+    // arrived last. Until the new design's first full update the old picture stays.
+    SyncDesign picture = designOf(cc.client.sync);
+    uint64_t pictureSinceUs = 0;
+    SyncDesign wanted = picture; // the toggle (the design asked for)
+    ComparisonHistory comparison;
+    std::array<std::vector<double>, kSyncDesignCount> frameMs; // this second's frames per design
+    std::array<uint64_t, kSyncDesignCount> framesPerDesign{};
+    SampleWindow volumeUploadMs(256), volumeBoxMs(1024); // the volume client's GPU apply stage
+    uint64_t volumeUploads = 0, volumeBoxUpdates = 0;
+    uint64_t ticksAtLastSecond = 0;
+    double lastSecondAt = 0.0, firstPictureAt = -1.0;
+    size_t nextSwitch = 0;
+    int switchesRequested = 0, switchesCompleted = 0;
+    auto requestDesign = [&](SyncDesign d) {
+        wanted = d;
+        client.requestSync(syncOf(d));
+        ++switchesRequested;
+    };
     uint64_t hapticSeen = 0;
     glm::vec3 toolPos(0.0f);
     glm::quat toolRot(1, 0, 0, 0);
@@ -277,18 +411,26 @@ int runTrainerWindow(const TrainerOptions& o) {
             client.requestView(net::toViewSpec(wantedCamera));
         }
 
-        // Applied rectangles: only their pixels are uploaded.
+        // Applied rectangles: only their pixels are uploaded. A full image newer than the last
+        // whole volume makes the DBI the picture again (a switch back has completed).
         for (net::AppliedRect& r : client.drainRects()) {
             if (r.full) {
                 if (r.pixels.width() != viewSize || r.pixels.height() != viewSize)
                     continue; // the placeholder view before ours
+                if (haveVolume && r.appliedUs < pictureSinceUs)
+                    continue; // older than the volume that replaced the DBI
                 comp.uploadFull(r.pixels);
-                cpuDbi = std::move(r.pixels);
                 haveImage = true;
                 imageViewId = r.viewId;
-            } else if (haveImage && r.viewId == imageViewId && cpuDbi.bounds().contains(r.rect)) {
+                if (picture != SyncDesign::Dbi)
+                    ++switchesCompleted;
+                picture = SyncDesign::Dbi;
+                pictureSinceUs = r.appliedUs;
+                cpuDbi = std::move(r.pixels);
+            } else if (haveImage && r.viewId == imageViewId) {
                 comp.uploadRect(r.rect, r.pixels);
-                cpuDbi.apply(r.pixels, r.rect.x, r.rect.y);
+                if (picture == SyncDesign::Dbi && cpuDbi.bounds().contains(r.rect))
+                    cpuDbi.apply(r.pixels, r.rect.x, r.rect.y);
             } else {
                 continue;
             }
@@ -296,13 +438,68 @@ int runTrainerWindow(const TrainerOptions& o) {
             netHistory.addUpdate({now, r.latencyUs, r.bytes, r.rawBytes, r.full});
             boxHistory.add({now, r.rect, r.sequence, r.bytes, r.latencyUs, r.full});
         }
+        // Applied voxel boxes (volume design): the whole volume is uploaded, a box re-uploads
+        // only its voxels and the gradients around them. Both are timed: the volume client's
+        // apply stage on the GPU side.
+        for (net::AppliedVolumeBox& b : client.drainVolumeBoxes()) {
+            const auto applyStart = Clock::now();
+            if (b.full) {
+                if (haveImage && b.appliedUs < pictureSinceUs && picture == SyncDesign::Dbi)
+                    continue; // older than the DBI that replaced the volume
+                gpuVolume = Volume(b.dims, b.spacing);
+                writeBox(gpuVolume, b);
+                volumeView.upload(gpuVolume);
+                volumeUploadMs.add(
+                    std::chrono::duration<double, std::milli>(Clock::now() - applyStart).count());
+                ++volumeUploads;
+                haveVolume = true;
+                if (picture != SyncDesign::Volume)
+                    ++switchesCompleted;
+                picture = SyncDesign::Volume;
+                pictureSinceUs = b.appliedUs;
+            } else if (haveVolume && b.dims == gpuVolume.dims() && !b.box.empty() &&
+                       glm::all(glm::greaterThanEqual(b.box.lo, glm::ivec3(0))) &&
+                       glm::all(glm::lessThanEqual(b.box.hi, b.dims)) &&
+                       b.density.size() == size_t(b.box.count()) &&
+                       b.material.size() == size_t(b.box.count())) {
+                writeBox(gpuVolume, b);
+                volumeView.updateBox(gpuVolume, b.box);
+                volumeBoxMs.add(
+                    std::chrono::duration<double, std::milli>(Clock::now() - applyStart).count());
+                ++volumeBoxUpdates;
+            } else {
+                continue;
+            }
+            volumeDirty = true;
+            lastRectAt = now;
+            PixelRect screen;
+            if (!b.full && snap->view.width > 1)
+                screen = dirtyScreenRect(net::toCamera(snap->view), gpuVolume, b.box);
+            netHistory.addUpdate({now, b.latencyUs, b.bytes, b.rawBytes, b.full});
+            if (!screen.empty())
+                boxHistory.add({now, screen, b.sequence, b.bytes, b.latencyUs, b.full});
+        }
         netHistory.expire(now);
+        forces.setLocal(picture == SyncDesign::Volume);
+        const bool havePicture = picture == SyncDesign::Volume ? haveVolume : haveImage;
+        if (havePicture && firstPictureAt < 0)
+            firstPictureAt = now;
+        const bool switching = wanted != picture;
         const bool viewMatches = snap->view.width == viewSize && snap->view.height == viewSize;
         const Camera dbiCamera = net::toCamera(snap->view);
+        if (picture == SyncDesign::Volume && !(volumeCamera == dbiCamera))
+            volumeDirty = true; // a new view: the picture for picking must be read back again
+
+        // The scripted toggle: flip at the next time, once the switch before it has completed.
+        if (nextSwitch < o.switchSyncAtS.size() && firstPictureAt >= 0 && !switching &&
+            now - firstPictureAt >= o.switchSyncAtS[nextSwitch]) {
+            ++nextSwitch;
+            requestDesign(wanted == SyncDesign::Dbi ? SyncDesign::Volume : SyncDesign::Dbi);
+        }
 
         // Tool: the script, or the mouse device on the bone under the cursor.
         ImGuiIO& io = ImGui::GetIO();
-        if (scene && haveImage && o.script == "burrhole") {
+        if (scene && havePicture && o.script == "burrhole") {
             if (scriptStart < 0)
                 scriptStart = now;
             ScriptPose p = burrholePose(scene->site, now - scriptStart);
@@ -315,7 +512,7 @@ int runTrainerWindow(const TrainerOptions& o) {
                 scriptDone = true;
                 lastRectAt = now;
             }
-        } else if (scene && haveImage && viewMatches) {
+        } else if (scene && havePicture && viewMatches) {
             if (!io.WantCaptureKeyboard) {
                 if (ImGui::IsKeyPressed(GLFW_KEY_B))
                     toolControls.kind = 0;
@@ -388,11 +585,24 @@ int runTrainerWindow(const TrainerOptions& o) {
             nextSecond += 1.0;
         }
 
-        // Composite: pass 1 the DBI, pass 2 the anatomy and the tools, blitted top-left.
+        // Composite: pass 1 the DBI (or the ray cast of the local volume), pass 2 the anatomy
+        // and the tools with the same matrices and depth test, blitted top-left.
         window.beginFrame();
         const float viewTop = 0.0f;
-        if (haveImage && viewMatches) {
-            comp.begin(dbiCamera);
+        if (havePicture && viewMatches) {
+            if (picture == SyncDesign::Volume) {
+                comp.beginEmpty(dbiCamera);
+                volumeView.draw(dbiCamera);
+                if (volumeDirty) {
+                    // The picture before the tools, for the cursor's depth lookups: read back
+                    // only when the volume or the view changed.
+                    cpuDbi = comp.readBack();
+                    volumeCamera = dbiCamera;
+                    volumeDirty = false;
+                }
+            } else {
+                comp.begin(dbiCamera);
+            }
             comp.draw(fieldMesh, glm::mat4(1.0f));
             for (const auto& [id, t] : snap->others)
                 comp.draw(tools.get(ToolKind(t.toolKind), t.diameterMm),
@@ -405,7 +615,7 @@ int runTrainerWindow(const TrainerOptions& o) {
 
         // Overlays in the view: labels, dirty boxes, connection state.
         ImDrawList* fg = ImGui::GetForegroundDrawList();
-        if (haveImage && viewMatches) {
+        if (havePicture && viewMatches) {
             glm::dmat4 vp = viewProjection(dbiCamera);
             auto label = [&](glm::vec3 p, glm::vec3 axis, glm::vec4 c, const std::string& text) {
                 WindowPoint w = projectToWindow(vp, dbiCamera, glm::dvec3(p + axis * 40.0f));
@@ -435,14 +645,17 @@ int runTrainerWindow(const TrainerOptions& o) {
                 status = "Not connected: " + snap->closeReason + "\nRetrying...";
             else if (!sceneError.empty())
                 status = "Cannot open the session's volume: " + sceneError;
-            else if (!haveImage)
+            else if (!havePicture)
                 status = "Waiting for the first image of the skull...";
             else if (snap->waitingForView)
                 status = "Waiting for the new view...";
+            else if (switching)
+                status = std::string("Switching to ") + syncDesignName(wanted) +
+                         ": waiting for its first full update...";
             if (!status.empty()) {
                 ImVec2 sz = ImGui::CalcTextSize(status.c_str(), nullptr, false, viewSize - 40.0f);
                 ImVec2 at((float(viewSize) - sz.x) * 0.5f,
-                          haveImage ? 12.0f : viewTop + (float(viewSize) - sz.y) * 0.5f);
+                          havePicture ? 12.0f : viewTop + (float(viewSize) - sz.y) * 0.5f);
                 fg->AddRectFilled(ImVec2(at.x - 10, at.y - 8),
                                   ImVec2(at.x + sz.x + 10, at.y + sz.y + 8),
                                   IM_COL32(20, 20, 24, 210), 6.0f);
@@ -460,11 +673,29 @@ int runTrainerWindow(const TrainerOptions& o) {
                          o.name);
         ImGui::SetNextWindowPos(ImVec2(right, 250), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(colW, 120), ImGuiCond_FirstUseEver);
-        drawViewPanel(viewControls, snap->waitingForView || !haveImage,
-                      haveImage ? describe(dbiCamera) : std::string("no image yet"));
+        drawViewPanel(viewControls, snap->waitingForView || !havePicture,
+                      havePicture ? describe(dbiCamera) : std::string("no image yet"));
+        const float netH = (H - 370) * 0.5f;
         ImGui::SetNextWindowPos(ImVec2(right, 370), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(colW, H - 370), ImGuiCond_FirstUseEver);
+        ImGui::SetNextWindowSize(ImVec2(colW, netH), ImGuiCond_FirstUseEver);
         drawNetworkPanel(*snap, netHistory, now);
+        ImGui::SetNextWindowPos(ImVec2(right, 370 + netH), ImGuiCond_FirstUseEver);
+        ImGui::SetNextWindowSize(ImVec2(colW, H - 370 - netH), ImGuiCond_FirstUseEver);
+        SyncDesign shown = wanted;
+        if (drawComparisonPanel(shown, comparison, now) && shown != wanted)
+            requestDesign(shown);
+        if (ImGui::Begin("Comparison")) { // appends to the panel: what only the window knows
+            ImGui::TextDisabled("frame ms: frame start to swap + glFinish (median of 1 s)");
+            ImGui::TextDisabled("volume GPU apply: full %.1f ms (%llu), box p50 %.2f ms (%llu)",
+                                volumeUploadMs.size() ? volumeUploadMs.percentile(50) : 0.0,
+                                (unsigned long long)volumeUploads,
+                                volumeBoxMs.size() ? volumeBoxMs.percentile(50) : 0.0,
+                                (unsigned long long)volumeBoxUpdates);
+            ImGui::TextDisabled("haptic ticks: %llu local volume, %llu server models",
+                                (unsigned long long)forces.localTicks(),
+                                (unsigned long long)forces.serverTicks());
+        }
+        ImGui::End();
         ImGui::SetNextWindowPos(ImVec2(0, float(viewSize)), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(right * 0.5f, H - float(viewSize)), ImGuiCond_FirstUseEver);
         drawForcesPanel(forceHistory, hstats.achievedRateHz,
@@ -475,13 +706,45 @@ int runTrainerWindow(const TrainerOptions& o) {
 
         // Screenshot / frame budget.
         ++frames;
-        const bool settled = haveImage && viewMatches && scene && scriptDone &&
-                             !snap->waitingForView && now - lastRectAt > 0.5;
+        const bool settled = havePicture && viewMatches && scene && scriptDone && !switching &&
+                             nextSwitch == o.switchSyncAtS.size() && !snap->waitingForView &&
+                             now - lastRectAt > 0.5;
         settledFrames = settled ? settledFrames + 1 : 0;
         Dbi capture;
         bool shoot = !o.screenshot.empty() && settledFrames >= std::max(o.frames, 1);
         const bool timedOut = !o.screenshot.empty() && now > o.timeoutS;
         window.endFrame(shoot || timedOut ? &capture : nullptr);
+        if (havePicture && viewMatches) {
+            // The frame's time in the design it drew: from its start to the swap, waiting for
+            // the GPU work (llvmpipe renders on glFinish); the pacing sleep is not included.
+            glFinish();
+            frameMs[int(picture)].push_back(
+                std::chrono::duration<double, std::milli>(Clock::now() - frameStart).count());
+            ++framesPerDesign[int(picture)];
+        }
+        // The Comparison panel's point for this second, for the design that fed the picture;
+        // the other keeps its last figures.
+        if (now - lastSecondAt >= 1.0) {
+            const uint64_t ticks = hstats.ticks;
+            const double hz = double(ticks - ticksAtLastSecond) / (now - lastSecondAt);
+            std::vector<double>& fm = frameMs[int(picture)];
+            if (havePicture && !fm.empty()) {
+                const net::ModeFigures& m = snap->modes[size_t(syncOf(picture))];
+                ComparisonFigures f;
+                f.updatesPerS = m.updateRatePerS;
+                f.bytesPerUpdate = m.meanBytes;
+                f.rawBytesPerUpdate = m.meanRawBytes;
+                f.latencyP50Ms = m.latencyP50Us >= 0 ? m.latencyP50Us * 1e-3 : -1.0;
+                f.latencyP99Ms = m.latencyP99Us >= 0 ? m.latencyP99Us * 1e-3 : -1.0;
+                f.frameMs = percentile(fm, 50.0);
+                f.hapticHz = hz;
+                comparison.record(picture, now, f);
+            }
+            for (auto& v : frameMs)
+                v.clear();
+            ticksAtLastSecond = ticks;
+            lastSecondAt = now;
+        }
         if (shoot || timedOut) {
             writeScreenshot(o.screenshot, capture);
             if (timedOut) {
@@ -502,6 +765,30 @@ int runTrainerWindow(const TrainerOptions& o) {
     }
     haptics.stop();
     client.stop();
+    for (SyncDesign d : {SyncDesign::Dbi, SyncDesign::Volume}) {
+        if (!comparison.measured(d))
+            continue;
+        const ComparisonFigures& f = comparison.series(d).last;
+        std::printf("window: %s: %.1f updates/s, %.0f bytes/update (raw %.0f), latency p50 %.2f "
+                    "ms p99 %.2f ms, frame %.2f ms, haptics %.0f Hz\n",
+                    syncDesignName(d), f.updatesPerS, f.bytesPerUpdate, f.rawBytesPerUpdate,
+                    f.latencyP50Ms, f.latencyP99Ms, f.frameMs, f.hapticHz);
+    }
+    if (o.report) {
+        TrainerReport& r = *o.report;
+        r.comparison = comparison;
+        r.picture = picture;
+        r.view = cpuDbi;
+        r.camera =
+            picture == SyncDesign::Volume ? volumeCamera : net::toCamera(client.snapshot()->view);
+        r.switchesRequested = switchesRequested;
+        r.switchesCompleted = switchesCompleted;
+        r.volumeUploads = volumeUploads;
+        r.volumeBoxUpdates = volumeBoxUpdates;
+        r.localForceTicks = forces.localTicks();
+        r.serverForceTicks = forces.serverTicks();
+        r.frames = framesPerDesign;
+    }
     comp.destroy(fieldMesh);
     return exitCode;
 }

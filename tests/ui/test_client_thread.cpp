@@ -1,5 +1,6 @@
 // ClientThread against an in-process session server over loopback: snapshots, applied
-// rectangles, and a failed connection that retries instead of crashing. No GL.
+// rectangles, a failed connection that retries instead of crashing, and the replicated-volume
+// design (requestSync, per-mode figures, drained voxel boxes, the local volume). No GL.
 #include "net/client_thread.h"
 
 #include "libsim/skull.h"
@@ -198,4 +199,183 @@ TEST(ClientThread, ReconnectsToANewServerOnTheSamePort) {
     EXPECT_TRUE(gotFull) << "a full image after reconnecting";
     client.stop();
     server->stop();
+}
+
+namespace {
+
+// Drills at `site` for `states` tool states 10 ms apart, feeding `depthStart` + 0.08 mm a state.
+void drillThrough(ClientThread& client, const SurfaceSite& site, int states, float depthStart) {
+    for (int i = 0; i < states; ++i) {
+        ToolState t;
+        t.toolKind = uint8_t(ToolKind::Burr);
+        t.diameterMm = 5.0f;
+        t.position = site.position - site.normal * (depthStart + 0.08f * float(i));
+        t.orientation = glm::rotation(glm::vec3(0, 0, 1), site.normal);
+        t.speed = 1.0f;
+        t.drilling = true;
+        EXPECT_TRUE(client.sendToolState(t));
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+}
+
+// A window's copy of the volume, rebuilt from drained boxes as the trainer window does.
+struct VolumeMirror {
+    Volume volume;
+    int fulls = 0, boxes = 0;
+    void apply(const AppliedVolumeBox& b) {
+        if (b.full) {
+            ASSERT_EQ(b.box.lo, glm::ivec3(0));
+            ASSERT_EQ(b.box.hi, b.dims);
+            volume = Volume(b.dims, b.spacing);
+            ++fulls;
+        } else {
+            ASSERT_FALSE(volume.empty()) << "a box before the whole volume";
+            ++boxes;
+        }
+        ASSERT_EQ(b.density.size(), size_t(b.box.count()));
+        ASSERT_EQ(b.material.size(), size_t(b.box.count()));
+        size_t o = 0;
+        for (int z = b.box.lo.z; z < b.box.hi.z; ++z)
+            for (int y = b.box.lo.y; y < b.box.hi.y; ++y)
+                for (int x = b.box.lo.x; x < b.box.hi.x; ++x, ++o) {
+                    const size_t i = volume.index(x, y, z);
+                    volume.densityData()[i] = b.density[o];
+                    volume.materialData()[i] = b.material[o];
+                }
+    }
+};
+
+int64_t differingVoxels(const Volume& a, const Volume& b) {
+    if (a.dims() != b.dims())
+        return -1;
+    int64_t n = 0;
+    for (size_t i = 0; i < a.voxelCount(); ++i)
+        n += a.densityData()[i] != b.densityData()[i] || a.materialData()[i] != b.materialData()[i];
+    return n;
+}
+
+} // namespace
+
+// A window's client thread (renderLocally off) switched DBI -> volume -> DBI while drilling: the
+// snapshot says which design feeds the picture, the drained boxes rebuild exactly the server's
+// volume, the local volume is readable for haptics only in volume mode, each mode keeps its
+// figures while the other runs, and the DBI after the switch back is the server's render.
+TEST(ClientThread, RequestSyncDrainsVolumeBoxesAndKeepsPerModeFigures) {
+    Volume skull = makeSkull(64);
+    SurfaceSite site = defaultBurrSite(skull);
+    ServerConfig sc = loopbackServerConfig("skull:64");
+    SessionServer server(skull, sc);
+    server.start();
+
+    ClientThreadConfig cc;
+    cc.address = "127.0.0.1:" + std::to_string(server.port());
+    Camera cam = cameraLookingAt(site.position, site.normal, 150.0f, 45.0f, {96, 96}, skull);
+    cc.client.view = toViewSpec(cam);
+    cc.client.renderLocally = false;
+    ClientThread client(cc);
+    client.start();
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->hasFullImage; }, 20.0));
+    EXPECT_EQ(client.snapshot()->sync, Sync::Dbi);
+    EXPECT_FALSE(client.withLocalVolume([](const Volume&) {})) << "no volume in DBI mode";
+    drillThrough(client, site, 20, -1.0f);
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->modes[0].updatesApplied > 1; }, 20.0));
+    ASSERT_TRUE(waitFor([&] { return server.idle(); }, 20.0));
+    EXPECT_TRUE(client.drainVolumeBoxes().empty()) << "no voxel boxes in DBI mode";
+
+    // To volume: the switch waits for the whole volume, then boxes follow the drilling.
+    ASSERT_TRUE(client.requestSync(Sync::Volume));
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->sync == Sync::Volume; }, 20.0));
+    EXPECT_EQ(client.snapshot()->requestedSync, Sync::Volume);
+    VolumeMirror mirror;
+    for (const AppliedVolumeBox& b : client.drainVolumeBoxes())
+        mirror.apply(b);
+    ASSERT_EQ(mirror.fulls, 1) << "the whole volume at the switch";
+    EXPECT_EQ(mirror.volume.dims(), skull.dims());
+    EXPECT_EQ(differingVoxels(mirror.volume, server.volumeSnapshot()), 0)
+        << "the whole volume includes the drilling done in DBI mode";
+    const ModeFigures dbiBefore = client.snapshot()->modes[size_t(Sync::Dbi)];
+    EXPECT_GT(dbiBefore.meanBytes, 0.0);
+
+    SurfaceSite beside = site; // a fresh spot next to the first hole
+    beside.position += glm::normalize(glm::cross(site.normal, glm::vec3(1, 0, 0))) * 8.0f;
+    drillThrough(client, beside, 25, -1.0f);
+    ASSERT_TRUE(waitFor([&] { return client.volumeBoxesPublished() > 1 && server.idle(); }, 20.0))
+        << client.volumeBoxesPublished() << " boxes, volume updates "
+        << client.snapshot()->modes[1].updatesApplied << ", sync " << int(client.snapshot()->sync)
+        << " tool states " << client.snapshot()->toolStatesSent << " server volume updates "
+        << server.modeTotals(Sync::Volume).updates;
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    for (const AppliedVolumeBox& b : client.drainVolumeBoxes())
+        mirror.apply(b);
+    EXPECT_GT(mirror.boxes, 0) << "drilling in volume mode sends boxes";
+    EXPECT_EQ(differingVoxels(mirror.volume, server.volumeSnapshot()), 0)
+        << "boxes rebuild the server's volume exactly";
+    // The haptic thread's view of the local volume: the same voxels.
+    int64_t localDiff = -2;
+    EXPECT_TRUE(client.withLocalVolume(
+        [&](const Volume& v) { localDiff = differingVoxels(v, mirror.volume); }));
+    EXPECT_EQ(localDiff, 0);
+
+    auto inVolume = client.snapshot();
+    const ModeFigures& vol = inVolume->modes[size_t(Sync::Volume)];
+    EXPECT_GE(vol.updatesApplied, uint64_t(mirror.fulls + mirror.boxes));
+    EXPECT_GT(vol.meanRawBytes, 0.0);
+    EXPECT_GT(vol.latencyP50Us, 0.0) << "box updates carry their latency";
+    EXPECT_GE(vol.latencyP99Us, vol.latencyP50Us);
+    EXPECT_EQ(inVolume->modes[size_t(Sync::Dbi)].updatesApplied, dbiBefore.updatesApplied)
+        << "the DBI's figures stay while the volume runs";
+    EXPECT_EQ(inVolume->modes[size_t(Sync::Dbi)].meanBytes, dbiBefore.meanBytes);
+
+    // Back to DBI: a full image of the drilled skull, the local volume is dropped.
+    client.drainRects();
+    ASSERT_TRUE(client.requestSync(Sync::Dbi));
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->sync == Sync::Dbi; }, 20.0));
+    bool gotFull = false;
+    for (AppliedRect& r : client.drainRects())
+        if (r.full) {
+            gotFull = true;
+            EXPECT_EQ(compare(r.pixels, server.renderView(cc.client.view)).maxColorError, 0)
+                << "no drilling lost across the switches";
+        }
+    EXPECT_TRUE(gotFull);
+    EXPECT_FALSE(client.withLocalVolume([](const Volume&) {}));
+    EXPECT_EQ(client.snapshot()->modes[size_t(Sync::Volume)].updatesApplied, vol.updatesApplied)
+        << "the volume's figures stay while the DBI runs";
+    client.stop();
+    server.stop();
+}
+
+// A client thread asked for volume mode from the start gets the whole volume at join, and a
+// box queue that overflows becomes one whole copy of the volume (nothing lost).
+TEST(ClientThread, StartsInVolumeModeAndOverflowBecomesOneFullCopy) {
+    Volume skull = makeSkull(64);
+    SurfaceSite site = defaultBurrSite(skull);
+    ServerConfig sc = loopbackServerConfig("skull:64");
+    SessionServer server(skull, sc);
+    server.start();
+    ClientThreadConfig cc;
+    cc.address = "127.0.0.1:" + std::to_string(server.port());
+    cc.client.view = toViewSpec(cameraPreset("top", skull, {64, 64}));
+    cc.client.sync = Sync::Volume;
+    cc.client.renderLocally = false;
+    cc.maxQueuedRects = 2; // a window that falls behind
+    ClientThread client(cc);
+    client.start();
+    ASSERT_TRUE(waitFor([&] { return client.volumeBoxesPublished() > 0; }, 20.0));
+    auto snap = client.snapshot();
+    EXPECT_EQ(snap->sync, Sync::Volume);
+    EXPECT_EQ(snap->requestedSync, Sync::Volume);
+    EXPECT_EQ(client.rectsPublished(), 0u) << "no images in volume mode";
+
+    // Drill without draining: more boxes than the queue holds.
+    drillThrough(client, site, 40, -1.0f);
+    ASSERT_TRUE(waitFor([&] { return client.volumeBoxesPublished() > 4 && server.idle(); }, 20.0));
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    VolumeMirror mirror;
+    for (const AppliedVolumeBox& b : client.drainVolumeBoxes())
+        mirror.apply(b);
+    EXPECT_GE(mirror.fulls, 1) << "the overflow (or the join) as one whole volume";
+    EXPECT_EQ(differingVoxels(mirror.volume, server.volumeSnapshot()), 0);
+    client.stop();
+    server.stop();
 }

@@ -42,6 +42,11 @@ public:
 
     // Pass 1: binds the framebuffer, restores the DBI's colour and depth.
     void begin(const Camera& camera);
+    // Pass 1 for a picture drawn by someone else (the replicated-volume client's ray cast): binds
+    // the framebuffer, clears colour to the background and depth to 1 (far), sets up pass 2's
+    // matrices, and restores nothing. The caller then draws its picture with gl_FragDepth in the
+    // DBI's convention (e.g. VolumeView::draw) before the meshes.
+    void beginEmpty(const Camera& camera);
     // Pass 2: one mesh with its model matrix; vertices with alpha 0 take ownerColor.
     void draw(const GpuMesh& mesh, const glm::mat4& model, glm::vec4 ownerColor = glm::vec4(1));
     // Copies the composite into the bound window framebuffer with its bottom-left at (x, y).
@@ -51,6 +56,9 @@ public:
     Dbi readBack();
 
 private:
+    void bindTarget(const Camera& camera);
+    void beginMeshes();
+
     int m_width = 0, m_height = 0;
     GLuint m_colorTex = 0, m_depthTex = 0;
     GLuint m_fbo = 0, m_fboColor = 0, m_fboDepth = 0;

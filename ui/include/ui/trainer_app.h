@@ -1,19 +1,46 @@
 // The trainee / instructor window: a ClientThread, the two-pass compositor, the mouse device (or
-// a scripted tool), and the panels. `trephine trainee`, `instructor` and `demo` all run it.
+// a scripted tool), and the panels. `trephine trainee`, `instructor` and `demo` all run it. It
+// shows the skull in either design of issue 7 and switches between them live: DBI (the server
+// renders, pass 1 restores the DBI) or the replicated volume (the window keeps a copy of the
+// volume on the GPU, VolumeView ray casts it in pass 1, haptics are computed locally).
 #pragma once
 
+#include "libsim/camera.h"
+#include "libsim/dbi.h"
+#include "ui/panel_data.h"
+
+#include <array>
+#include <cstdint>
 #include <string>
+#include <vector>
 
 namespace trephine::ui {
+
+// [Tests] What a window saw, filled when it closes (TrainerOptions::report).
+struct TrainerReport {
+    ComparisonHistory comparison;         // the Comparison panel's data
+    SyncDesign picture = SyncDesign::Dbi; // the design that fed the last picture
+    // The last picture of pass 1 (no tools): the DBI mirror, or the ray cast read back in volume
+    // mode; row 0 at the bottom. Empty when no picture arrived.
+    Dbi view;
+    Camera camera; // what `view` shows
+    int switchesRequested = 0, switchesCompleted = 0;
+    uint64_t volumeUploads = 0, volumeBoxUpdates = 0; // VolumeView::upload / updateBox calls
+    uint64_t localForceTicks = 0;  // haptic ticks whose force came from the local volume
+    uint64_t serverForceTicks = 0; // ... from the server's models (multi-rate)
+    std::array<uint64_t, kSyncDesignCount> frames{}; // frames drawn per design
+};
 
 struct TrainerOptions {
     std::string address = "127.0.0.1:7777"; // HOST:PORT
     std::string name = "trainee";
     bool instructor = false;
     std::string codec = "lz4";
-    std::string camera = "site"; // "site" (close view of the burr site) or a camera preset
-    float distanceMm = 170.0f;   // eye to site for "site"
-    float orbitDeg = 0.0f;       // initial orbit and tilt of the view (the View panel's sliders)
+    std::string sync = "dbi";        // the design to start in: "dbi" or "volume"
+    std::string volumeCodec = "raw"; // volume boxes: raw (1 byte a voxel, as the paper), lz4, zstd
+    std::string camera = "site";     // "site" (close view of the burr site) or a camera preset
+    float distanceMm = 170.0f;       // eye to site for "site"
+    float orbitDeg = 0.0f; // initial orbit and tilt of the view (the View panel's sliders)
     float tiltDeg = 0.0f;
     int size = 500;         // DBI and view size in pixels (1:1 with the window)
     std::string script;     // "" (mouse) or "burrhole": a scripted drilling
@@ -21,10 +48,15 @@ struct TrainerOptions {
     int frames = 0;         // 0: run until the window closes (or the screenshot is taken)
     double timeoutS = 90.0; // with --screenshot: give up (exit 1) after this long
     bool visible = true;
+    // A scripted Comparison toggle: seconds after the first picture at which the toggle is
+    // flipped, as if clicked. Each waits until the switch before it has completed; the view is not
+    // settled (no screenshot) before the last one has.
+    std::vector<double> switchSyncAtS;
+    TrainerReport* report = nullptr; // [Tests] filled when the window closes
 };
 
 // Runs the window until it closes. Returns the process exit code; throws trephine::Error when no
-// window can open (the caller decides on a headless fallback).
+// window can open (the caller decides on a headless fallback) or on a bad option.
 int runTrainerWindow(const TrainerOptions& options);
 
 } // namespace trephine::ui

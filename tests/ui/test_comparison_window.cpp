@@ -1,0 +1,198 @@
+// The trainee window in both designs of issue 7 against an in-process server (needs a display:
+// xvfb-run): in volume mode it ray casts its own copy of the volume and shows the skull and the
+// drilled hole as the server renders them; switched live DBI -> volume -> DBI while a script
+// drills, it ends with exactly the server's picture (nothing lost), with local haptics while the
+// volume fed the picture, and the Comparison panel holds figures of both designs. Deadlines only
+// guard against hangs; nothing asserts wall time.
+#include "ui/trainer_app.h"
+#include "ui/window.h"
+
+#include "libsim/camera.h"
+#include "libsim/renderer.h"
+#include "libsim/skull.h"
+#include "net/session_server.h"
+#include "net/view.h"
+
+#include "loopback.h"
+#include "screenshot.h"
+#include "test_support.h"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <string>
+
+using namespace trephine;
+using namespace trephine::ui;
+
+namespace {
+
+using trephine::testing::Image;
+using trephine::testing::readPng;
+using trephine::testing::TempDir;
+
+constexpr int kView = 256; // small: llvmpipe ray casts on the CPU
+
+bool boneColoured(const uint8_t* p) {
+    return p[0] > 150 && p[1] > 140 && p[2] > 110 && p[0] >= p[2] && p[0] - p[2] < 90;
+}
+
+int maxChannelDiff(const uint8_t* a, const uint8_t* b) {
+    return std::max({std::abs(a[0] - b[0]), std::abs(a[1] - b[1]), std::abs(a[2] - b[2])});
+}
+
+// The window's options for a scripted burr hole on an in-process server.
+TrainerOptions windowOptions(uint16_t port, const std::string& sync, const std::string& shot,
+                             TrainerReport* report) {
+    TrainerOptions o;
+    o.address = "127.0.0.1:" + std::to_string(port);
+    o.sync = sync;
+    o.size = kView;
+    o.script = "burrhole";
+    o.screenshot = shot;
+    o.frames = 2;
+    o.timeoutS = 100.0;
+    o.visible = false;
+    o.report = report;
+    return o;
+}
+
+// How far a volume-mode picture (GPU ray cast) is from the server's CPU render of the same view:
+// pixels whose hit/miss differs, and pixels hit in both whose colour differs by more than a few
+// levels (the ray caster's own tests bound both on llvmpipe).
+struct PictureAgreement {
+    int64_t bothHit = 0, maskMismatch = 0, colourOff = 0;
+};
+PictureAgreement agree(const Dbi& gpu, const Dbi& cpu) {
+    PictureAgreement a;
+    for (int y = 0; y < cpu.height(); ++y)
+        for (int x = 0; x < cpu.width(); ++x) {
+            const bool hg = gpu.depth(x, y) < 1.0f, hc = cpu.depth(x, y) < 1.0f;
+            if (hg != hc) {
+                ++a.maskMismatch;
+                continue;
+            }
+            if (!hg)
+                continue;
+            ++a.bothHit;
+            a.colourOff += maxChannelDiff(gpu.color(x, y), cpu.color(x, y)) > 6;
+        }
+    return a;
+}
+
+bool needDisplay(std::string* why) {
+    return trephine::ui::displayAvailable(why);
+}
+
+} // namespace
+
+TEST(ComparisonWindow, VolumeModeShowsTheSkullAndTheDrilledHole) {
+    std::string why;
+    if (!needDisplay(&why))
+        GTEST_SKIP() << "no display for the window (" << why << "); run under xvfb-run";
+    const Volume skull = makeSkull(64);
+    net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64", 2));
+    server.start();
+    TempDir dir;
+    TrainerReport report;
+    const std::string shot = dir / "volume.png";
+    ASSERT_EQ(runTrainerWindow(windowOptions(server.port(), "volume", shot, &report)), 0);
+
+    EXPECT_EQ(report.picture, SyncDesign::Volume);
+    EXPECT_GE(report.volumeUploads, 1u) << "the whole volume at join";
+    EXPECT_GT(report.volumeBoxUpdates, 0u) << "the drilled boxes";
+    EXPECT_EQ(report.frames[int(SyncDesign::Dbi)], 0u) << "no DBI frame in volume mode";
+    EXPECT_GT(report.localForceTicks, 0u) << "haptics computed on the local volume";
+    ASSERT_TRUE(report.comparison.measured(SyncDesign::Volume));
+    EXPECT_FALSE(report.comparison.measured(SyncDesign::Dbi));
+    EXPECT_GT(report.comparison.series(SyncDesign::Volume).last.frameMs, 0.0);
+    EXPECT_GT(report.comparison.series(SyncDesign::Volume).last.hapticHz, 0.0);
+
+    // The window's picture (pass 1, read back) is the server's render of its view.
+    ASSERT_EQ(report.view.width(), kView);
+    ASSERT_EQ(report.view.height(), kView);
+    const net::ViewSpec view = net::toViewSpec(report.camera);
+    const Dbi truth = server.renderView(view);
+    const PictureAgreement a = agree(report.view, truth);
+    EXPECT_GT(a.bothHit, int64_t(kView) * kView / 4);
+    EXPECT_LT(a.maskMismatch, a.bothHit / 100) << "hit/miss differs only on silhouettes";
+    EXPECT_LT(a.colourOff, a.bothHit / 100) << "colours agree within a few levels";
+
+    // The screenshot: bone-coloured where the server's render has bone (a ring away from the
+    // resting drill, outside the hole), and at the site the intact skull's bone is gone.
+    const Dbi intact = Renderer(skull).render(report.camera);
+    Image img = readPng(shot);
+    ASSERT_GE(img.w, kView);
+    ASSERT_GE(img.h, kView);
+    const double c = kView * 0.5;
+    int ring = 0, ringBone = 0, centre = 0, centreChanged = 0;
+    for (int y = 0; y < kView; ++y)
+        for (int x = 0; x < kView; ++x) {
+            const int row = kView - 1 - y; // the view is at the window's top left, rows top-down
+            const double r = std::hypot(x + 0.5 - c, row + 0.5 - c);
+            if (r > kView * 0.16 && r < kView * 0.2 && x > c && truth.depth(x, y) < 1.0f) {
+                ++ring;
+                ringBone += boneColoured(img.at(x, row));
+            }
+            if (r < kView * 0.024) {
+                ++centre;
+                centreChanged += maxChannelDiff(img.at(x, row), intact.color(x, y)) > 30;
+            }
+        }
+    EXPECT_GT(ring, 100);
+    EXPECT_GT(ringBone, ring * 8 / 10) << "bone-coloured where the server's render has bone";
+    EXPECT_GT(centreChanged, centre / 2) << "the drilled hole at the site";
+    server.stop();
+}
+
+TEST(ComparisonWindow, LiveSwitchDbiVolumeDbiLosesNoDrillingAndFillsBothFigures) {
+    std::string why;
+    if (!needDisplay(&why))
+        GTEST_SKIP() << "no display for the window (" << why << "); run under xvfb-run";
+    const Volume skull = makeSkull(64);
+    net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64", 2));
+    server.start();
+    TempDir dir;
+    TrainerReport report;
+    TrainerOptions o = windowOptions(server.port(), "dbi", dir / "switch.png", &report);
+    // The burr hole's script drills from 0 to 4 s after the first picture: both switches happen
+    // while it drills (each waits for the one before it to complete).
+    o.switchSyncAtS = {1.0, 2.6};
+    ASSERT_EQ(runTrainerWindow(o), 0);
+
+    EXPECT_EQ(report.switchesRequested, 2);
+    EXPECT_EQ(report.switchesCompleted, 2);
+    EXPECT_EQ(report.picture, SyncDesign::Dbi);
+    EXPECT_GT(report.frames[int(SyncDesign::Dbi)], 0u);
+    EXPECT_GT(report.frames[int(SyncDesign::Volume)], 0u);
+    EXPECT_GE(report.volumeUploads, 1u) << "the whole volume at the switch";
+    EXPECT_GT(report.localForceTicks, 0u) << "local haptics while the volume fed the picture";
+    EXPECT_GT(report.serverForceTicks, 0u) << "the server's models in DBI mode";
+
+    // The picture after the switches is exactly the server's render: no drilling was lost.
+    const Dbi truth = server.renderView(net::toViewSpec(report.camera));
+    ASSERT_EQ(report.view.width(), kView);
+    const DbiDiff diff = compare(report.view, truth);
+    EXPECT_EQ(diff.maxColorError, 0) << diff.describe();
+    EXPECT_LT(diff.maxDepthError, 1e-5f) << diff.describe();
+    const Dbi intact = Renderer(skull).render(report.camera);
+    EXPECT_GT(compare(intact, truth).differingPixels, 0) << "the script drilled";
+
+    // The Comparison panel's data: both designs measured, the DBI active at the end.
+    const ComparisonHistory& h = report.comparison;
+    ASSERT_TRUE(h.measured(SyncDesign::Dbi));
+    ASSERT_TRUE(h.measured(SyncDesign::Volume));
+    EXPECT_EQ(h.active, SyncDesign::Dbi);
+    for (SyncDesign d : {SyncDesign::Dbi, SyncDesign::Volume}) {
+        const ComparisonHistory::Series& s = h.series(d);
+        SCOPED_TRACE(syncDesignName(d));
+        EXPECT_GT(s.points, 0u);
+        EXPECT_EQ(s.frameMs.size(), std::min(s.points, h.seriesLength));
+        EXPECT_GT(s.last.frameMs, 0.0);
+        EXPECT_GT(s.last.hapticHz, 0.0);
+        EXPECT_GT(s.last.bytesPerUpdate, 0.0);
+        EXPECT_GE(s.last.rawBytesPerUpdate, s.last.bytesPerUpdate * 0.99);
+    }
+    server.stop();
+}
