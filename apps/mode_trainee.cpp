@@ -19,11 +19,14 @@
 #include <glm/gtx/quaternion.hpp>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cstdio>
 #include <deque>
 #include <fstream>
+#include <memory>
 #include <mutex>
+#include <shared_mutex>
 #include <sstream>
 #include <thread>
 
@@ -50,6 +53,31 @@ struct TraineeOptions {
 struct Sample {
     double t = 0;
     net::ToolState tool;
+};
+
+// Volume sync (the baseline computes haptics locally): the force model on the client's own copy
+// of the volume, read under the shared lock the client writes it under. No force until the
+// first full volume has arrived.
+class LocalVolumeForce : public ForceSource {
+public:
+    LocalVolumeForce(const net::SessionClient& client, std::shared_mutex& mutex,
+                     const ToolShape& shape)
+        : m_client(client), m_mutex(mutex), m_model(shape) {}
+    glm::vec3 force(const ToolPose& pose, double) override {
+        std::shared_lock lock(m_mutex);
+        const Volume* v = m_client.localVolume();
+        if (!v)
+            return glm::vec3(0.0f);
+        ++m_ticks;
+        return m_model.compute(*v, pose).force;
+    }
+    uint64_t ticks() const { return m_ticks.load(); }
+
+private:
+    const net::SessionClient& m_client;
+    std::shared_mutex& m_mutex;
+    ForceModel m_model;
+    std::atomic<uint64_t> m_ticks{0};
 };
 
 // The built-in burr hole: a 5 mm burr starts 1 mm above the default site and feeds in along the
@@ -161,6 +189,8 @@ int runTrainee(const TraineeOptions& o) {
     // A 1x1 placeholder view: the preset needs the volume, which the welcome names.
     config.view.width = config.view.height = 1;
     net::SessionClient client(config);
+    std::shared_mutex volumeMutex; // the haptic thread reads the local volume under it
+    client.setVolumeMutex(&volumeMutex);
     client.connect(address);
     auto pumpUntil = [&](double seconds, const std::function<bool()>& pred) {
         uint64_t deadline = net::steadyNowUs() + uint64_t(seconds * 1e6);
@@ -243,6 +273,15 @@ int runTrainee(const TraineeOptions& o) {
     start = net::steadyNowUs();
     nextPing = start;
     end = start + uint64_t(scriptEnd * 1e6);
+    std::unique_ptr<LocalVolumeForce> localForce;
+    if (config.sync == net::Sync::Volume) {
+        const net::ToolState& t = script.front().tool;
+        localForce = std::make_unique<LocalVolumeForce>(client, volumeMutex,
+                                                        ToolKind(t.toolKind) == ToolKind::Perforator
+                                                            ? ToolShape::perforator(t.diameterMm)
+                                                            : ToolShape::burr(t.diameterMm));
+        loop.setForceSource(localForce.get());
+    }
     loop.start();
     while (net::steadyNowUs() < end && !client.closed()) {
         {
@@ -309,6 +348,10 @@ int runTrainee(const TraineeOptions& o) {
                 (unsigned long long)client.toolStatesSent(), o.toolRateHz,
                 (unsigned long long)client.hapticModelsReceived(),
                 st.hapticRoundTripUs.percentile(50), st.hapticRoundTripUs.percentile(99));
+    if (localForce)
+        std::printf("trainee: forces computed locally on the replicated volume in %llu of %llu "
+                    "haptic ticks (the rest: before the volume arrived)\n",
+                    (unsigned long long)localForce->ticks(), (unsigned long long)haptics.ticks);
     if (!o.report.empty()) {
         net::ReportInfo info;
         info.server = o.connect;

@@ -137,3 +137,30 @@ TEST(SessionCli, HeadlessTraineeRunsTheHapticLoopAndReportsIt) {
     EXPECT_LE(double(server.hapticModelsSent()), sent); // unsequenced: loss is allowed
     std::filesystem::remove(report);
 }
+
+// `trephine trainee --headless --sync volume`: the replicated-volume baseline computes its forces
+// locally on its copy of the volume, and the report names the mode.
+TEST(SessionCli, HeadlessVolumeTraineeComputesForcesOnItsOwnVolume) {
+    Volume sphere = makeSphere(32);
+    SessionServer server(sphere, loopbackServerConfig("sphere:32"));
+    server.start();
+    const auto dir = std::filesystem::temp_directory_path();
+    const std::string tag = std::to_string(getpid());
+    const std::string report = (dir / ("trephine_vtrainee_" + tag + ".json")).string();
+    const std::string out = (dir / ("trephine_vtrainee_" + tag + ".txt")).string();
+    std::string cmd = std::string(TREPHINE_BIN) +
+                      " trainee --connect 127.0.0.1:" + std::to_string(server.port()) +
+                      " --headless --sync volume --camera top --size 64 --duration 1 --report " +
+                      report + " > " + out + " 2>&1";
+    ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+    server.stop();
+    std::ifstream o(out), r(report);
+    std::string text((std::istreambuf_iterator<char>(o)), std::istreambuf_iterator<char>());
+    std::string json((std::istreambuf_iterator<char>(r)), std::istreambuf_iterator<char>());
+    const auto at = text.find("forces computed locally on the replicated volume in ");
+    ASSERT_NE(at, std::string::npos) << text;
+    EXPECT_GT(std::stoll(text.substr(at + 52)), 0) << text;
+    EXPECT_NE(json.find("\"sync\": \"volume\""), std::string::npos) << json;
+    std::filesystem::remove(report);
+    std::filesystem::remove(out);
+}
