@@ -68,7 +68,7 @@ void checkUpdates(const Csv& csv, const std::vector<int>& sizes) {
     std::map<std::string, std::vector<std::map<std::string, std::string>>> byMethod;
     for (const auto& row : csv.rows)
         byMethod[row.at("method")].push_back(row);
-    for (const char* m : {"dbi", "dbi-fullrender", "volume", "volume-lz4"})
+    for (const char* m : {"dbi", "dbi-fullrender", "volume", "volume-zstd"})
         ASSERT_EQ(byMethod[m].size(), sizes.size()) << m;
     for (const auto& [method, rows] : byMethod) {
         double lastW = 0;
