@@ -4,6 +4,9 @@
 //                                                     view's hit cache (the server's path)
 //   BB_volume -> BB_screen projection                 (no target: it should be negligible)
 //   the paper's view: 128^3 at 330.2 mm, 60 deg, 500x500
+//   the update study's cut in that view: an N^3 box (10, 40, 80) cut out at the surface, its
+//   BB_screen re-rendered through the view's cache (frame_ms, ns_per_px), the full frame after
+//   the cut, and the brick grid's update for the cut (update_us)
 // Filter with --benchmark_filter=Render.
 #include "libsim/camera.h"
 #include "libsim/dirty_rect.h"
@@ -15,6 +18,7 @@
 #include <benchmark/benchmark.h>
 #include <chrono>
 #include <glm/gtx/quaternion.hpp>
+#include <map>
 #include <memory>
 
 namespace trephine {
@@ -68,6 +72,11 @@ void reportMs(benchmark::State& state, double totalMs, double targetMs, double f
     if (floorMs > 0.0)
         state.counters["floor_ms"] = floorMs;
     state.counters["threads"] = skull256().pool->size();
+}
+
+// Nanoseconds per pixel of a rectangle rendered in `ms`.
+double rectNsPerPixel(double ms, const PixelRect& rect) {
+    return rect.area() ? ms * 1e6 / double(rect.area()) : 0.0;
 }
 
 void BM_RenderFullFrameSkull256(benchmark::State& state) {
@@ -214,6 +223,136 @@ void BM_RenderPaperFrame128(benchmark::State& state) {
     state.SetItemsProcessed(state.iterations() * 500 * 500);
 }
 BENCHMARK(BM_RenderPaperFrame128)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The update study's case (net::surfaceBox, trephine study updates): the paper's view of skull:128
+// at the paper's spacing, an N^3 box centred on the middle column with its top face at the bone
+// surface facing the camera, cut to air. The hole's BB_screen is re-rendered through the view's hit
+// cache as it was before the cut (the server's path); the brick grid's update for the cut is timed
+// on its own (the server pays it in its erode stage).
+struct PaperHole {
+    Volume volume;
+    Box3i box;
+    PixelRect rect;
+    Camera camera;
+    std::unique_ptr<Renderer> renderer;
+    HitCache cacheBeforeCut;
+    BrickGrid gridBeforeCut;
+};
+
+const Volume& paperSkull128() {
+    static Volume volume = [] {
+        Volume v = makeSkull(128);
+        v.setSpacing(glm::vec3(paperSpacingMm(128)));
+        return v;
+    }();
+    return volume;
+}
+
+// net::surfaceBox, which libsim cannot call: the box's top face is one voxel above the topmost
+// bone voxel of the middle column.
+Box3i surfaceBox(const Volume& v, int n) {
+    const glm::ivec3 d = v.dims();
+    const int cx = d.x / 2, cy = d.y / 2;
+    int top = d.z - 1;
+    while (top > 0 && v.density(cx, cy, top) < kSurfaceDensity)
+        --top;
+    const glm::ivec3 lo(cx - n / 2, cy - n / 2, top + 1 - n);
+    return Box3i::fromMinMax(lo, lo + glm::ivec3(n)).intersect(v.bounds());
+}
+
+PaperHole& paperHole(int n) {
+    static std::map<int, std::unique_ptr<PaperHole>> holes;
+    std::unique_ptr<PaperHole>& h = holes[n];
+    if (!h) {
+        h = std::make_unique<PaperHole>();
+        h->volume = paperSkull128();
+        h->camera = cameraPreset("paper", h->volume, {500, 500});
+        h->renderer = std::make_unique<Renderer>(h->volume, skull256().pool.get());
+        h->renderer->render(h->camera, &h->cacheBeforeCut);
+        h->gridBeforeCut = h->renderer->bricks();
+        h->box = surfaceBox(h->volume, n);
+        for (int z = h->box.lo.z; z < h->box.hi.z; ++z)
+            for (int y = h->box.lo.y; y < h->box.hi.y; ++y)
+                for (int x = h->box.lo.x; x < h->box.hi.x; ++x)
+                    h->volume.set(x, y, z, 0, Material::Air);
+        h->renderer->volumeChanged(h->box);
+        h->rect = dirtyScreenRect(h->camera, h->volume, h->box);
+    }
+    return *h;
+}
+
+void BM_RenderPaperHoleCached(benchmark::State& state) {
+    PaperHole& h = paperHole(int(state.range(0)));
+    Dbi frame(500, 500);
+    HitCache cache;
+    double total = 0.0;
+    for (auto _ : state) {
+        state.PauseTiming();
+        cache = h.cacheBeforeCut;
+        state.ResumeTiming();
+        auto t0 = Clock::now();
+        h.renderer->render(h.camera, h.rect, frame, &cache);
+        total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+        benchmark::DoNotOptimize(frame.depth());
+    }
+    double per = state.iterations() ? total / double(state.iterations()) : 0.0;
+    state.counters["frame_ms"] = per;
+    state.counters["ns_per_px"] = rectNsPerPixel(per, h.rect);
+    state.counters["w"] = h.rect.w;
+    state.counters["h"] = h.rect.h;
+    state.counters["threads"] = skull256().pool->size();
+    state.counters["resumed"] =
+        state.iterations() ? double(cache.resumed()) / double(h.rect.area()) : 0.0;
+    state.SetItemsProcessed(state.iterations() * h.rect.area());
+}
+BENCHMARK(BM_RenderPaperHoleCached)
+    ->Arg(10)
+    ->Arg(40)
+    ->Arg(80)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
+// The full frame of the same view after the cut, for the cost per pixel of a whole frame.
+void BM_RenderPaperHoleFullFrame(benchmark::State& state) {
+    PaperHole& h = paperHole(int(state.range(0)));
+    Dbi frame(500, 500);
+    double total = 0.0;
+    for (auto _ : state) {
+        auto t0 = Clock::now();
+        h.renderer->render(h.camera, frame.bounds(), frame);
+        total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+        benchmark::DoNotOptimize(frame.depth());
+    }
+    double per = state.iterations() ? total / double(state.iterations()) : 0.0;
+    state.counters["frame_ms"] = per;
+    state.counters["ns_per_px"] = rectNsPerPixel(per, frame.bounds());
+    state.counters["threads"] = skull256().pool->size();
+    state.SetItemsProcessed(state.iterations() * 500 * 500);
+}
+BENCHMARK(BM_RenderPaperHoleFullFrame)->Arg(80)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// Keeping the brick grid in step with the cut (one thread; part of the server's erode stage).
+void BM_RenderPaperHoleGridUpdate(benchmark::State& state) {
+    PaperHole& h = paperHole(int(state.range(0)));
+    BrickGrid grid;
+    double total = 0.0;
+    for (auto _ : state) {
+        state.PauseTiming();
+        grid = h.gridBeforeCut;
+        state.ResumeTiming();
+        auto t0 = Clock::now();
+        grid.update(h.volume, h.box);
+        total += std::chrono::duration<double, std::micro>(Clock::now() - t0).count();
+        benchmark::DoNotOptimize(grid.distanceData());
+    }
+    state.counters["update_us"] = state.iterations() ? total / double(state.iterations()) : 0.0;
+}
+BENCHMARK(BM_RenderPaperHoleGridUpdate)
+    ->Arg(10)
+    ->Arg(40)
+    ->Arg(80)
+    ->Unit(benchmark::kMicrosecond)
+    ->UseRealTime();
 
 } // namespace
 } // namespace trephine

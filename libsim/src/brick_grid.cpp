@@ -3,6 +3,7 @@
 #include "libsim/volume.h"
 
 #include <algorithm>
+#include <climits>
 
 namespace trephine {
 
@@ -14,50 +15,73 @@ int floorDiv(int a, int b) {
 
 } // namespace
 
-void BrickGrid::build(const Volume& volume) {
-    glm::ivec3 n = volume.dims();
-    m_volumeDims = n;
-    m_dims = (n + (kSize - 1)) / kSize;
-    const glm::ivec3 B = m_dims;
-    const uint8_t* d = volume.densityData();
-
+void BrickGrid::regionMax(const Volume& volume, glm::ivec3 b0, glm::ivec3 b1,
+                          std::vector<uint8_t>& out) const {
     // Separable maximum: along x per voxel row, then y, then z, each over a brick plus apron.
+    const glm::ivec3 n = m_volumeDims;
+    const glm::ivec3 B = b1 - b0 + 1; // bricks of the region per axis
+    const uint8_t* d = volume.densityData();
     auto range = [](int b, int limit) {
         return std::pair{std::max(0, b * kSize - kApronLo),
                          std::min(limit, b * kSize + kSize + kApronHi)};
     };
-    std::vector<uint8_t> mx(size_t(B.x) * n.y * n.z);
-    for (int z = 0; z < n.z; ++z)
-        for (int y = 0; y < n.y; ++y) {
-            const uint8_t* row = d + volume.index(0, y, z);
-            uint8_t* out = &mx[(size_t(z) * n.y + y) * B.x];
+    // Voxels the region's bricks read, per axis.
+    glm::ivec3 v0, v1;
+    for (int a = 0; a < 3; ++a) {
+        v0[a] = range(b0[a], n[a]).first;
+        v1[a] = range(b1[a], n[a]).second;
+    }
+    const int ny = v1.y - v0.y, nz = v1.z - v0.z;
+    std::vector<uint8_t> mx(size_t(B.x) * ny * nz);
+    // Along x: the maximum of 4 voxels from two pairwise passes over the row (vectorised), then
+    // each brick's 4 voxels and its apron voxel; a brick cut short by the volume's edge directly.
+    static_assert(kApronLo == 0 && kApronHi == 1 && kSize == 4, "the x pass reads 4 + 1 voxels");
+    const int len = v1.x - v0.x;
+    std::vector<uint8_t> m2(size_t(len) + 4), m4(size_t(len) + 4);
+    for (int z = 0; z < nz; ++z)
+        for (int y = 0; y < ny; ++y) {
+            const uint8_t* row = d + volume.index(v0.x, v0.y + y, v0.z + z);
+            uint8_t* o = &mx[(size_t(z) * ny + y) * B.x];
+            for (int i = 0; i + 1 < len; ++i)
+                m2[i] = std::max(row[i], row[i + 1]);
+            for (int i = 0; i + 3 < len; ++i)
+                m4[i] = std::max(m2[i], m2[i + 2]);
             for (int bx = 0; bx < B.x; ++bx) {
-                auto [x0, x1] = range(bx, n.x);
-                out[bx] = *std::max_element(row + x0, row + x1);
+                auto [x0, x1] = range(b0.x + bx, n.x);
+                o[bx] = x1 - x0 == kSize + kApronHi
+                            ? std::max(m4[x0 - v0.x], row[x0 - v0.x + kSize])
+                            : *std::max_element(row + (x0 - v0.x), row + (x1 - v0.x));
             }
         }
-    std::vector<uint8_t> mxy(size_t(B.x) * B.y * n.z);
-    for (int z = 0; z < n.z; ++z)
+    std::vector<uint8_t> mxy(size_t(B.x) * B.y * nz);
+    for (int z = 0; z < nz; ++z)
         for (int by = 0; by < B.y; ++by) {
-            auto [y0, y1] = range(by, n.y);
-            uint8_t* out = &mxy[(size_t(z) * B.y + by) * B.x];
-            std::fill(out, out + B.x, uint8_t(0));
+            auto [y0, y1] = range(b0.y + by, n.y);
+            uint8_t* o = &mxy[(size_t(z) * B.y + by) * B.x];
+            std::fill(o, o + B.x, uint8_t(0));
             for (int y = y0; y < y1; ++y) {
-                const uint8_t* in = &mx[(size_t(z) * n.y + y) * B.x];
+                const uint8_t* in = &mx[(size_t(z) * ny + (y - v0.y)) * B.x];
                 for (int bx = 0; bx < B.x; ++bx)
-                    out[bx] = std::max(out[bx], in[bx]);
+                    o[bx] = std::max(o[bx], in[bx]);
             }
         }
-    m_max.assign(size_t(B.x) * B.y * B.z, 0);
+    out.assign(size_t(B.x) * B.y * B.z, 0);
     for (int bz = 0; bz < B.z; ++bz) {
-        auto [z0, z1] = range(bz, n.z);
-        uint8_t* out = &m_max[size_t(bz) * B.y * B.x];
+        auto [z0, z1] = range(b0.z + bz, n.z);
+        uint8_t* o = &out[size_t(bz) * B.y * B.x];
         for (int z = z0; z < z1; ++z) {
-            const uint8_t* in = &mxy[size_t(z) * B.y * B.x];
+            const uint8_t* in = &mxy[size_t(z - v0.z) * B.y * B.x];
             for (size_t i = 0; i < size_t(B.y) * B.x; ++i)
-                out[i] = std::max(out[i], in[i]);
+                o[i] = std::max(o[i], in[i]);
         }
     }
+}
+
+void BrickGrid::build(const Volume& volume) {
+    m_volumeDims = volume.dims();
+    m_dims = (m_volumeDims + (kSize - 1)) / kSize;
+    const glm::ivec3 B = m_dims;
+    regionMax(volume, glm::ivec3(0), B - 1, m_max);
     m_cells.assign(m_max.size(), 0);
     for (int bz = 0; bz < B.z; ++bz)
         for (int by = 0; by < B.y; ++by)
@@ -98,20 +122,6 @@ uint64_t BrickGrid::computeCellMask(const Volume& volume, glm::ivec3 b) const {
     return mask;
 }
 
-uint8_t BrickGrid::brickMax(const Volume& volume, glm::ivec3 b) const {
-    glm::ivec3 lo = glm::max(b * kSize - kApronLo, glm::ivec3(0));
-    glm::ivec3 hi = glm::min(b * kSize + kSize + kApronHi, m_volumeDims);
-    const uint8_t* d = volume.densityData();
-    uint8_t m = 0;
-    for (int z = lo.z; z < hi.z; ++z)
-        for (int y = lo.y; y < hi.y; ++y) {
-            const uint8_t* row = d + volume.index(0, y, z);
-            for (int x = lo.x; x < hi.x; ++x)
-                m = std::max(m, row[x]);
-        }
-    return m;
-}
-
 bool BrickGrid::update(const Volume& volume, const Box3i& changed) {
     if (empty() || volume.dims() != m_volumeDims) {
         build(volume);
@@ -127,61 +137,110 @@ bool BrickGrid::update(const Volume& volume, const Box3i& changed) {
         b0[a] = std::max(0, floorDiv(box.lo[a] - kSize - kApronHi, kSize) + 1);
         b1[a] = std::min(m_dims[a] - 1, floorDiv(box.hi[a] - 1 + kApronLo, kSize));
     }
+    if (b0.x > b1.x || b0.y > b1.y || b0.z > b1.z)
+        return false;
     bool gained = false;
+    glm::ivec3 e0(INT_MAX), e1(INT_MIN); // bricks that emptied out
+    std::vector<uint8_t> maxima;
+    regionMax(volume, b0, b1, maxima);
+    const uint8_t* next = maxima.data();
     for (int z = b0.z; z <= b1.z; ++z)
         for (int y = b0.y; y <= b1.y; ++y)
             for (int x = b0.x; x <= b1.x; ++x) {
                 size_t i = index({x, y, z});
-                uint8_t m = brickMax(volume, {x, y, z});
+                uint8_t m = *next++;
                 bool was = m_max[i] >= kSurfaceDensity;
                 bool now = m >= kSurfaceDensity;
                 m_max[i] = m;
                 m_cells[i] = now ? computeCellMask(volume, {x, y, z}) : 0;
                 if (now && !was)
                     gained = true;
-                else if (was && !now)
-                    m_distance[i] = 1; // empty itself; neighbours unknown, so no larger claim
+                else if (was && !now) {
+                    e0 = glm::min(e0, glm::ivec3(x, y, z));
+                    e1 = glm::max(e1, glm::ivec3(x, y, z));
+                }
             }
-    if (gained)
+    if (gained) {
         computeDistances();
+    } else if (e0.x <= e1.x) {
+        // Distances only grow when bricks empty. Left at small lower bounds, a hole's bricks make
+        // every ray through it step brick by brick; recompute them, and the bricks around whose
+        // nearest surface may have been in the hole, out to the distance a ray in the emptied
+        // box can use: half its widest extent, plus a margin.
+        const glm::ivec3 extent = e1 - e0 + 1;
+        const int grow =
+            std::clamp(std::max({extent.x, extent.y, extent.z}) / 2 + 2, 2, int(kMaxRegionGrowth));
+        computeDistances(glm::max(e0 - grow, glm::ivec3(0)), glm::min(e1 + grow, m_dims - 1));
+    }
     return gained;
 }
 
 void BrickGrid::computeDistances() {
-    // Two-pass chamfer transform with the 26-neighbourhood and unit weights: exact Chebyshev
-    // (chessboard) distance to the nearest occupied brick.
     ++m_distancePasses;
-    const glm::ivec3 B = m_dims;
     m_distance.assign(m_max.size(), kMaxDistance);
-    for (size_t i = 0; i < m_max.size(); ++i)
-        if (m_max[i] >= kSurfaceDensity)
-            m_distance[i] = 0;
+    computeDistances(glm::ivec3(0), m_dims - 1);
+}
+
+void BrickGrid::computeDistances(glm::ivec3 lo, glm::ivec3 hi) {
+    // Two-pass chamfer transform with the 26-neighbourhood and unit weights over the bricks
+    // [lo, hi]; bricks outside the box are read, never written. On the whole grid this is the
+    // exact Chebyshev (chessboard) distance to the nearest occupied brick. On a box it is
+    // min(distance to the nearest occupied brick in the box, min over bricks k just outside it of
+    // distance(k) + |k - b|): every king-move path from an occupied brick that moves monotonically
+    // towards b (a shortest one exists, and the two passes follow one) enters the box once, from a
+    // brick just outside it, so with the outside holding lower bounds the result is a lower bound,
+    // exact where the nearest surface is in the box or the outside is exact.
+    const glm::ivec3 B = m_dims;
+    for (int z = lo.z; z <= hi.z; ++z)
+        for (int y = lo.y; y <= hi.y; ++y)
+            for (int x = lo.x; x <= hi.x; ++x) {
+                size_t i = index({x, y, z});
+                m_distance[i] = m_max[i] >= kSurfaceDensity ? 0 : kMaxDistance;
+            }
+    // Row by row: the neighbours already visited in scan order are the three rows of the previous
+    // z slice around this row, the previous row of this slice (each at x - 1, x, x + 1), and the
+    // previous brick of this row. The rows' part is a plain minimum over whole rows (vectorised);
+    // only the last is sequential.
+    const int x0 = std::max(lo.x - 1, 0), x1 = std::min(hi.x + 1, B.x - 1); // with the ring
+    const int w = x1 - x0 + 1;
+    std::vector<uint8_t> near(size_t(w) + 2);
+    auto inc = [](uint8_t v) { return uint8_t(v + (v != kMaxDistance)); };
     auto pass = [&](int sign) {
-        int zs = sign > 0 ? 0 : B.z - 1, ze = sign > 0 ? B.z : -1;
-        int ys = sign > 0 ? 0 : B.y - 1, ye = sign > 0 ? B.y : -1;
-        int xs = sign > 0 ? 0 : B.x - 1, xe = sign > 0 ? B.x : -1;
+        int zs = sign > 0 ? lo.z : hi.z, ze = sign > 0 ? hi.z + 1 : lo.z - 1;
+        int ys = sign > 0 ? lo.y : hi.y, ye = sign > 0 ? hi.y + 1 : lo.y - 1;
         for (int z = zs; z != ze; z += sign)
-            for (int y = ys; y != ye; y += sign)
-                for (int x = xs; x != xe; x += sign) {
-                    uint8_t& d = m_distance[index({x, y, z})];
-                    if (d == 0)
-                        continue;
-                    int best = d;
-                    // Neighbours already visited in this scan order: the previous z slice, the
-                    // previous row of this slice, and the previous brick of this row.
-                    for (int dz = -1; dz <= 0; ++dz)
-                        for (int dy = -1; dy <= 1; ++dy)
-                            for (int dx = -1; dx <= 1; ++dx) {
-                                if (dz == 0 && (dy > 0 || (dy == 0 && dx >= 0)))
-                                    continue;
-                                int nx = x + sign * dx, ny = y + sign * dy, nz = z + sign * dz;
-                                if (nx < 0 || ny < 0 || nz < 0 || nx >= B.x || ny >= B.y ||
-                                    nz >= B.z)
-                                    continue;
-                                best = std::min(best, m_distance[index({nx, ny, nz})] + 1);
-                            }
-                    d = uint8_t(std::min(best, int(kMaxDistance)));
+            for (int y = ys; y != ye; y += sign) {
+                // near[1 + x - x0]: the smallest visited neighbour distance above x, from the rows;
+                // near[0] and near[w + 1] pad the grid's edges.
+                std::fill(near.begin(), near.end(), kMaxDistance);
+                uint8_t* m = near.data() + 1;
+                auto row = [&](int ry, int rz) {
+                    if (ry < 0 || ry >= B.y || rz < 0 || rz >= B.z)
+                        return;
+                    const uint8_t* r = &m_distance[index({x0, ry, rz})];
+                    for (int i = 0; i < w; ++i)
+                        m[i] = std::min(m[i], r[i]);
+                };
+                row(y - 1, z - sign);
+                row(y, z - sign);
+                row(y + 1, z - sign);
+                row(y - sign, z);
+                // Widen by one brick either way (x - 1 and x + 1), then one step further away.
+                uint8_t prev = kMaxDistance;
+                for (int i = 0; i < w; ++i) {
+                    uint8_t here = m[i];
+                    m[i] = inc(std::min({prev, here, m[i + 1]}));
+                    prev = here;
                 }
+                uint8_t* d = &m_distance[index({0, y, z})];
+                const int xs = sign > 0 ? lo.x : hi.x, xe = sign > 0 ? hi.x + 1 : lo.x - 1;
+                uint8_t last = (xs - sign >= 0 && xs - sign < B.x) ? d[xs - sign] : kMaxDistance;
+                for (int x = xs; x != xe; x += sign) {
+                    uint8_t v = std::min({d[x], m[x - x0], inc(last)});
+                    d[x] = v;
+                    last = v;
+                }
+            }
     };
     pass(+1);
     pass(-1);

@@ -488,8 +488,20 @@ constexpr int kConeMaxSteps = 128;
 // distances far out, by cell masks near the surface) with that radius taken off every box, so
 // whatever the cone sweeps is below the iso-value. Skipping those samples is exact, like any
 // brick skip: results never depend on the block a pixel was rendered in.
-float coneSkipTo(const Frame& f, int x0, int y0, int x1, int y1) {
+//
+// `tStart`: the march starts there instead of at the eye (samples before it are the caller's
+// business: a hit cache proves them below the iso-value ray by ray), and the result is at least
+// tStart unless the cone never meets surface.
+float coneSkipTo(const Frame& f, int x0, int y0, int x1, int y1, float tStart) {
     const Ray c = windowRay(f, 0.5 * (x0 + x1), 0.5 * (y0 + y1));
+    if (tStart > 0.0f) {
+        // Resuming from a cache: where the block's rays last met bone and the central point's
+        // brick may still hold surface (an ordinary stroke), the cone would stop at once.
+        glm::vec3 p = samplePos(f, c, tStart);
+        glm::ivec3 b(brickCoord(p.x, f.n.x), brickCoord(p.y, f.n.y), brickCoord(p.z, f.n.z));
+        if (f.distance[size_t(b.x) + size_t(f.nb.x) * size_t(b.y) + f.nbxy * size_t(b.z)] == 0)
+            return tStart;
+    }
     double cosMin = 1.0;
     for (int i = 0; i < 4; ++i) {
         Ray q = windowRay(f, (i & 1) ? x1 - 0.5 : x0 + 0.5, (i & 2) ? y1 - 0.5 : y0 + 0.5);
@@ -518,7 +530,9 @@ float coneSkipTo(const Frame& f, int x0, int y0, int x1, int y1) {
     }
     if (!(t0 <= t1))
         return INFINITY;
-    float t = t0;
+    float t = std::max(t0, tStart);
+    if (!(t <= t1))
+        return tStart;
     const int nbx = f.nb.x;
     constexpr int S = BrickGrid::kShift;
     for (int step = 0; step < kConeMaxSteps; ++step) {
@@ -792,16 +806,18 @@ void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out,
         for (int by = y0; by < y1; by += kConeBlock)
             for (int bx = x0; bx < x1; bx += kConeBlock) {
                 int bx1 = std::min(bx + kConeBlock, x1), by1 = std::min(by + kConeBlock, y1);
-                // The cone only proves a lower bound; where the cache knows every pixel's, the
-                // cone has nothing to add worth its cost.
-                bool allKnown = resume != nullptr;
-                for (int y = by; y < by1 && allKnown; ++y)
+                // The cone starts where the block's earliest cached first hit was (the eye where
+                // some pixel is unknown): the cache already proves every ray empty before that,
+                // and after erosion the cone leaps through the emptied space once for the block
+                // instead of every ray leaping on its own. A block whose rays can never hit needs
+                // no cone.
+                int32_t kMin = resume ? HitCache::kNever : 0;
+                for (int y = by; y < by1 && kMin > 0; ++y)
                     for (int x = bx; x < bx1; ++x)
-                        if (resume[size_t(y) * stride + size_t(x)] == 0) {
-                            allKnown = false;
-                            break;
-                        }
-                float tSkipTo = f.distance && !allKnown ? coneSkipTo(f, bx, by, bx1, by1) : 0.0f;
+                        kMin = std::min(kMin, resume[size_t(y) * stride + size_t(x)]);
+                float tSkipTo = f.distance && kMin != HitCache::kNever
+                                    ? coneSkipTo(f, bx, by, bx1, by1, float(kMin) * f.dt)
+                                    : 0.0f;
                 for (int y = by; y < by1; ++y)
                     for (int x = bx; x < bx1; ++x) {
                         int ox = x - rect.x + outX, oy = y - rect.y + outY;

@@ -313,6 +313,121 @@ TEST(Renderer, BrickGridRecomputesDistancesWhenBoneAppears) {
     EXPECT_TRUE(grid.occupied({5, 5, 5}));
 }
 
+// The update study's cut: an n^3 box centred on the middle column, its top face at the bone
+// surface seen from +z, cut to air (net::surfaceBox).
+Box3i cutSurfaceBox(Volume& v, int n, int shiftX = 0) {
+    const glm::ivec3 d = v.dims();
+    const int cx = d.x / 2 + shiftX, cy = d.y / 2;
+    int top = d.z - 1;
+    while (top > 0 && v.density(cx, cy, top) < kSurfaceDensity)
+        --top;
+    const glm::ivec3 lo(cx - n / 2, cy - n / 2, top + 1 - n);
+    Box3i box = Box3i::fromMinMax(lo, lo + glm::ivec3(n)).intersect(v.bounds());
+    for (int z = box.lo.z; z < box.hi.z; ++z)
+        for (int y = box.lo.y; y < box.hi.y; ++y)
+            for (int x = box.lo.x; x < box.hi.x; ++x)
+                v.set(x, y, z, 0, Material::Air);
+    return box;
+}
+
+// After erosion the distances around the emptied bricks are recomputed: one cut into a freshly
+// built grid leaves it equal to a grid built from scratch, distances included (so rays through
+// the hole leap as far as they can), and never a full distance pass.
+TEST(Renderer, BrickGridDistancesAroundACutAreExact) {
+    for (int n : {6, 24, 40}) {
+        SCOPED_TRACE(n);
+        Volume v = makeSkull(64);
+        BrickGrid grid(v);
+        BrickGrid before = grid;
+        Box3i box = cutSurfaceBox(v, n);
+        EXPECT_FALSE(grid.update(v, box)) << "a cut is erosion";
+        BrickGrid fresh(v);
+        ASSERT_EQ(grid.maxData(), fresh.maxData());
+        glm::ivec3 nb = fresh.dims();
+        int grown = 0;
+        for (int z = 0; z < nb.z; ++z)
+            for (int y = 0; y < nb.y; ++y)
+                for (int x = 0; x < nb.x; ++x) {
+                    ASSERT_EQ(grid.distance({x, y, z}), fresh.distance({x, y, z}))
+                        << x << "," << y << "," << z;
+                    ASSERT_EQ(grid.cellMask({x, y, z}), fresh.cellMask({x, y, z}));
+                    grown += fresh.distance({x, y, z}) > before.distance({x, y, z}) + 1;
+                }
+        if (n >= 24) {
+            EXPECT_GT(grown, 0) << "the hole's distances should have grown beyond 1";
+        }
+        EXPECT_EQ(grid.fullDistancePasses(), 1);
+    }
+}
+
+// Cuts one after another (nested and side by side): distances never claim too much.
+TEST(Renderer, BrickGridDistancesStayLowerBoundsOverManyCuts) {
+    Volume v = makeSkull(64);
+    BrickGrid grid(v);
+    for (auto [n, shift] : {std::pair{8, 0}, {20, 0}, {12, 14}, {30, -6}, {4, 20}}) {
+        Box3i box = cutSurfaceBox(v, n, shift);
+        EXPECT_FALSE(grid.update(v, box));
+        BrickGrid fresh(v);
+        ASSERT_EQ(grid.maxData(), fresh.maxData());
+        glm::ivec3 nb = fresh.dims();
+        for (int z = 0; z < nb.z; ++z)
+            for (int y = 0; y < nb.y; ++y)
+                for (int x = 0; x < nb.x; ++x) {
+                    ASSERT_LE(grid.distance({x, y, z}), fresh.distance({x, y, z}));
+                    ASSERT_EQ(grid.occupied({x, y, z}), fresh.occupied({x, y, z}));
+                }
+    }
+    EXPECT_EQ(grid.fullDistancePasses(), 1);
+}
+
+// The chamfer passes against the definition: the Chebyshev distance, in bricks, to the nearest
+// brick that may hold surface, on random sparse bone; and after emptying a block of it, update()
+// against the same definition (lower bound everywhere, exact in and around the emptied block).
+TEST(Renderer, BrickGridDistancesAreChebyshevDistances) {
+    Volume v({44, 40, 36}, glm::vec3(1.0f));
+    std::mt19937 rng(5);
+    std::uniform_int_distribution<int> x(0, 43), y(0, 39), z(0, 35);
+    for (int i = 0; i < 12; ++i)
+        v.set(x(rng), y(rng), z(rng), 200, Material::Cortical);
+    for (int zz = 20; zz < 30; ++zz) // a slab, emptied below
+        for (int yy = 4; yy < 36; ++yy)
+            for (int xx = 6; xx < 40; ++xx)
+                v.set(xx, yy, zz, 255, Material::Cortical);
+    auto expectChebyshev = [](const BrickGrid& g, bool exact) {
+        glm::ivec3 nb = g.dims();
+        std::vector<glm::ivec3> occupied;
+        for (int bz = 0; bz < nb.z; ++bz)
+            for (int by = 0; by < nb.y; ++by)
+                for (int bx = 0; bx < nb.x; ++bx)
+                    if (g.maxDensity({bx, by, bz}) >= kSurfaceDensity)
+                        occupied.push_back({bx, by, bz});
+        for (int bz = 0; bz < nb.z; ++bz)
+            for (int by = 0; by < nb.y; ++by)
+                for (int bx = 0; bx < nb.x; ++bx) {
+                    int best = BrickGrid::kMaxDistance;
+                    for (glm::ivec3 o : occupied) {
+                        glm::ivec3 d = glm::abs(o - glm::ivec3(bx, by, bz));
+                        best = std::min(best, std::max({d.x, d.y, d.z}));
+                    }
+                    if (exact) {
+                        ASSERT_EQ(g.distance({bx, by, bz}), best) << bx << "," << by << "," << bz;
+                    } else {
+                        ASSERT_LE(g.distance({bx, by, bz}), best) << bx << "," << by << "," << bz;
+                    }
+                }
+    };
+    BrickGrid grid(v);
+    expectChebyshev(grid, true);
+    Box3i hole = Box3i::fromMinMax({14, 10, 20}, {34, 30, 30});
+    for (int zz = hole.lo.z; zz < hole.hi.z; ++zz)
+        for (int yy = hole.lo.y; yy < hole.hi.y; ++yy)
+            for (int xx = hole.lo.x; xx < hole.hi.x; ++xx)
+                v.set(xx, yy, zz, 0, Material::Air);
+    EXPECT_FALSE(grid.update(v, hole));
+    expectChebyshev(grid, true); // one cut into an exact grid: exact again
+    EXPECT_EQ(grid.fullDistancePasses(), 1);
+}
+
 TEST(Renderer, MaterialsGetTheirColours) {
     // Cortical bone on the left half, exposed dura on the right, seen from above.
     Volume v({32, 32, 32}, glm::vec3(1.0f));
@@ -447,6 +562,31 @@ TEST(HitCache, CachedDirtyRendersAreBitForBitUncachedFullRenders) {
         ASSERT_EQ(renderer.render(v.camera, &v.cache), renderer.render(v.camera));
     }
     EXPECT_GT(resumedBefore, 1000) << "the dirty renders should have resumed from the cache";
+}
+
+// The update study's case at test size: the paper's view, surface boxes cut out one after
+// another, each BB_screen re-rendered through the view's cache: bit for bit an uncached full render
+// and a render without skipping.
+TEST(HitCache, CutHolesRenderBitForBitThroughTheCache) {
+    Volume skull = makeSkull(64);
+    skull.setSpacing(glm::vec3(paperSpacingMm(64)));
+    ThreadPool pool;
+    Renderer renderer(skull, &pool);
+    Camera camera = cameraPreset("paper", skull, {160, 160});
+    HitCache cache;
+    Dbi frame = renderer.render(camera, &cache);
+    for (auto [n, shift] : {std::pair{5, 0}, {20, 0}, {12, 16}, {36, 0}}) {
+        SCOPED_TRACE(n);
+        Box3i box = cutSurfaceBox(skull, n, shift);
+        renderer.volumeChanged(box);
+        ASSERT_TRUE(cache.validFor(renderer, camera));
+        PixelRect rect = dirtyScreenRect(camera, skull, box);
+        renderer.render(camera, rect, frame, &cache);
+        Dbi expected = Renderer(skull, &pool).render(camera);
+        ASSERT_TRUE(frame == expected) << compare(frame, expected).describe();
+        Renderer marching(skull, &pool, RenderOptions{.skipEmpty = false});
+        ASSERT_TRUE(frame == marching.render(camera));
+    }
 }
 
 // Erosion at the iso-value's edge: voxels of 126..130 lowered by 1 or 2 at a time, so samples

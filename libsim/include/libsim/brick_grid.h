@@ -27,6 +27,9 @@ public:
     static constexpr int kApronLo = 0;
     static constexpr int kApronHi = 1;
     static constexpr uint8_t kMaxDistance = 255;
+    // After erosion, distances are recomputed over the emptied bricks' box grown by half its
+    // widest extent plus 2, at most this many bricks.
+    static constexpr int kMaxRegionGrowth = 32;
 
     BrickGrid() = default;
     explicit BrickGrid(const Volume& volume) { build(volume); }
@@ -34,8 +37,9 @@ public:
     // Computes every brick from scratch.
     void build(const Volume& volume);
     // Recomputes the bricks whose apron overlaps `changed` (voxels whose density changed). When
-    // bricks only empty out (drilling), distances stay valid lower bounds and are left alone
-    // except for newly empty bricks; a brick that gains surface triggers a full distance pass.
+    // bricks only empty out (drilling), distances are recomputed around the emptied bricks (their
+    // box grown by half its widest extent plus 2): exact there as far as that reaches, and valid
+    // lower bounds everywhere. A brick that gains surface triggers a full distance pass.
     // Returns true when some brick gained surface (or the grid was rebuilt): not erosion.
     bool update(const Volume& volume, const Box3i& changed);
 
@@ -48,7 +52,7 @@ public:
     uint8_t maxDensity(glm::ivec3 b) const { return m_max[index(b)]; }
     bool occupied(glm::ivec3 b) const { return m_distance[index(b)] == 0; }
     // 0 for a brick that may hold surface; d > 0: every brick within Chebyshev distance d - 1
-    // is empty. A lower bound after update(), exact after build().
+    // is empty. Exact after build(); after update() a lower bound, exact near the emptied bricks.
     uint8_t distance(glm::ivec3 b) const { return m_distance[index(b)]; }
     const uint8_t* distanceData() const { return m_distance.data(); }
     // Bit (x + 4 y + 16 z) is set when the trilinear cell whose lowest corner is voxel
@@ -61,7 +65,11 @@ public:
 
 private:
     void computeDistances();
-    uint8_t brickMax(const Volume& volume, glm::ivec3 b) const;
+    // Chamfer passes over the bricks [lo, hi] (inclusive), reading the distances around the box.
+    void computeDistances(glm::ivec3 lo, glm::ivec3 hi);
+    // Largest density of each brick of [b0, b1] (inclusive) with its apron, x fastest.
+    void regionMax(const Volume& volume, glm::ivec3 b0, glm::ivec3 b1,
+                   std::vector<uint8_t>& out) const;
     uint64_t computeCellMask(const Volume& volume, glm::ivec3 b) const;
 
     glm::ivec3 m_dims{0};
