@@ -34,15 +34,9 @@ Codec parseCodec(const std::string& text) {
 }
 
 DepthQuantizer::DepthQuantizer(const Camera& camera)
-    : m_camera(camera), m_near(camera.nearMm), m_far(camera.farMm) {}
-
-uint16_t DepthQuantizer::quantize(float windowDepth) const {
-    if (windowDepth >= kBackgroundDepth)
-        return kBackground;
-    double dist = -eyeZFromWindowDepth(m_camera, windowDepth);
-    double t = (dist - m_near) / (m_far - m_near);
-    return uint16_t(std::clamp(std::lround(t * 65534.0), 0l, 65534l));
-}
+    : m_near(camera.nearMm), m_far(camera.farMm), m_twoFarNear(2.0 * m_far * m_near),
+      m_farPlusNear(m_far + m_near), m_farMinusNear(m_far - m_near),
+      m_codesPerMm(65534.0 / (m_far - m_near)) {}
 
 float DepthQuantizer::dequantize(uint16_t q) const {
     if (q == kBackground)

@@ -85,32 +85,35 @@ PredictedImage encodePredicted(const Dbi& next, const Dbi& base, Codec codec,
     const int w = now.w, h = now.h;
     const size_t n = size_t(w) * size_t(h);
     std::vector<uint8_t> mask(maskBytes(n), 0);
-    std::vector<size_t> changed;
-    for (size_t i = 0; i < n; ++i)
-        if (now.q[i] != was.q[i] || now.c[0][i] != was.c[0][i] || now.c[1][i] != was.c[1][i] ||
-            now.c[2][i] != was.c[2][i]) {
+    // One raster pass: the mask, and the residuals of changed pixels into per-plane scratch.
+    std::vector<uint8_t> scratch(5 * n);
+    uint8_t *sr = scratch.data(), *sg = sr + n, *sb = sg + n, *sHi = sb + n, *sLo = sHi + n;
+    size_t m = 0;
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            const size_t i = size_t(y) * size_t(w) + size_t(x);
+            if (now.q[i] == was.q[i] && now.c[0][i] == was.c[0][i] && now.c[1][i] == was.c[1][i] &&
+                now.c[2][i] == was.c[2][i])
+                continue;
             mask[i / 8] |= uint8_t(1u << (i % 8));
-            changed.push_back(i);
+            const uint8_t er = uint8_t(now.c[0][i] - Planes::predict(now.c[0], w, x, y));
+            const uint8_t eg = uint8_t(now.c[1][i] - Planes::predict(now.c[1], w, x, y));
+            const uint8_t eb = uint8_t(now.c[2][i] - Planes::predict(now.c[2], w, x, y));
+            const uint16_t ed = uint16_t(now.q[i] - Planes::predict(now.q, w, x, y));
+            sr[m] = er;
+            sg[m] = uint8_t(eg - er);
+            sb[m] = uint8_t(eb - er);
+            sHi[m] = uint8_t(ed >> 8);
+            sLo[m] = uint8_t(ed & 0xff);
+            ++m;
         }
-    const size_t m = changed.size();
     std::vector<uint8_t> raw(mask.size() + 5 * m);
     std::memcpy(raw.data(), mask.data(), mask.size());
-    uint8_t* r = raw.data() + mask.size();
-    uint8_t *g = r + m, *b = g + m, *dHi = b + m, *dLo = dHi + m;
-    for (size_t k = 0; k < m; ++k) {
-        const int x = int(changed[k] % size_t(w)), y = int(changed[k] / size_t(w));
-        const size_t i = changed[k];
-        const uint8_t er = uint8_t(now.c[0][i] - Planes::predict(now.c[0], w, x, y));
-        const uint8_t eg = uint8_t(now.c[1][i] - Planes::predict(now.c[1], w, x, y));
-        const uint8_t eb = uint8_t(now.c[2][i] - Planes::predict(now.c[2], w, x, y));
-        const uint16_t ed = uint16_t(now.q[i] - Planes::predict(now.q, w, x, y));
-        r[k] = er;
-        g[k] = uint8_t(eg - er);
-        b[k] = uint8_t(eb - er);
-        dHi[k] = uint8_t(ed >> 8);
-        dLo[k] = uint8_t(ed & 0xff);
+    uint8_t* dst = raw.data() + mask.size();
+    for (const uint8_t* plane : {sr, sg, sb, sHi, sLo}) {
+        std::memcpy(dst, plane, m);
+        dst += m;
     }
-    (void)h;
     out.rawBytes = uint32_t(raw.size());
     out.changedPixels = int(m);
     out.payload = compressBytes(raw, codec);

@@ -30,14 +30,23 @@ public:
     explicit DepthQuantizer(const Camera& camera);
     static constexpr uint16_t kBackground = 0xffff; // exactly kBackgroundDepth
 
-    uint16_t quantize(float windowDepth) const;
+    // Inline: the predicted image form quantises every pixel of a rectangle at both ends.
+    uint16_t quantize(float windowDepth) const {
+        if (windowDepth >= kBackgroundDepth)
+            return kBackground;
+        // Eye distance under glm::perspective (eyeZFromWindowDepth, negated), then linear codes.
+        const double ndc = double(windowDepth) * 2.0 - 1.0;
+        const double dist = m_twoFarNear / (m_farPlusNear - ndc * m_farMinusNear);
+        const double code = (dist - m_near) * m_codesPerMm;
+        return code <= 0.0 ? 0 : code >= 65534.0 ? 65534 : uint16_t(code + 0.5);
+    }
     float dequantize(uint16_t q) const;
     // Worst-case error of a round trip, in millimetres of eye distance: half a quantisation step.
     double stepMm() const { return (m_far - m_near) / 65534.0; }
 
 private:
-    Camera m_camera;
     double m_near, m_far;
+    double m_twoFarNear, m_farPlusNear, m_farMinusNear, m_codesPerMm;
 };
 
 struct EncodedImage {
