@@ -19,6 +19,7 @@
 #include <algorithm>
 #include <array>
 #include <cstdio>
+#include <cstring>
 #include <optional>
 #include <shared_mutex>
 
@@ -872,10 +873,13 @@ void SessionServer::simulationLoop() {
                 uint64_t e0 = steadyNowUs();
                 {
                     std::unique_lock write(s.volumeRw);
+                    const size_t row = size_t(box.hi.x - box.lo.x);
                     for (int z = box.lo.z; z < box.hi.z; ++z)
-                        for (int y = box.lo.y; y < box.hi.y; ++y)
-                            for (int x = box.lo.x; x < box.hi.x; ++x)
-                                s.volume.set(x, y, z, 0, Material::Air);
+                        for (int y = box.lo.y; y < box.hi.y; ++y) {
+                            const size_t i = s.volume.index(box.lo.x, y, z);
+                            std::memset(s.volume.densityData() + i, 0, row);
+                            std::memset(s.volume.materialData() + i, uint8_t(Material::Air), row);
+                        }
                 }
                 erodeUs += steadyNowUs() - e0;
                 changed.merge(box);
@@ -941,10 +945,13 @@ void SessionServer::simulationLoop() {
         }
         // Erosion only lowers densities, so the views' hit caches stay valid; voxels written
         // wholesale may raise them, which invalidates every cache (the next render restarts it).
+        const uint64_t g0 = steadyNowUs();
         if (changedMaterials)
             s.renderer.rebuild();
         else if (!changed.empty())
             s.renderer.volumeChanged(changed);
+        // The brick grid is rendering data: its update counts in each view's render stage.
+        const uint32_t gridUs = uint32_t(steadyNowUs() - g0);
 
         // Frames of views no DBI client holds any more are dropped.
         auto dbiView = [](const SimClient& c, const Camera& cam) {
@@ -969,7 +976,7 @@ void SessionServer::simulationLoop() {
         for (ViewFrame& v : s.views) {
             // The frame first takes the change, so a full refresh sent now holds it too.
             PixelRect rect;
-            uint32_t renderUs = 0;
+            uint32_t renderUs = gridUs;
             if (!changed.empty()) {
                 rect = dirtyScreenRect(v.camera, s.volume, changed);
                 if (!rect.empty()) {
@@ -979,7 +986,7 @@ void SessionServer::simulationLoop() {
                         v.frame = s.renderer.render(v.camera);
                     else
                         s.renderer.render(v.camera, rect, v.frame, &v.cache);
-                    renderUs = uint32_t(steadyNowUs() - r0);
+                    renderUs += uint32_t(steadyNowUs() - r0);
                     m_renders.fetch_add(1);
                 }
             }
