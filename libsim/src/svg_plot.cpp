@@ -41,7 +41,11 @@ std::string tickLabel(double v) {
     if (v == 0.0)
         return "0";
     const double a = std::fabs(v);
-    if (a >= 1e5 || a < 1e-3)
+    if (a >= 1e6)
+        return formatString("%gM", v / 1e6);
+    if (a >= 1e4)
+        return formatString("%gk", v / 1e3);
+    if (a < 1e-3)
         return formatString("%.0e", v);
     return formatString("%g", v);
 }

@@ -113,3 +113,13 @@ TEST(ProgressBar, DrawsInPlaceOnlyWhenEnabled) {
     std::fclose(f);
     std::free(buffer);
 }
+
+TEST(SvgPlot, LargeTicksReadAsThousandsAndMillions) {
+    PlotSpec spec;
+    spec.logY = true;
+    spec.series.push_back({"bytes", {10, 80}, {1000, 512000}, "", false});
+    const std::string svg = svgLinePlot(spec);
+    EXPECT_NE(svg.find(">1M<"), std::string::npos);
+    EXPECT_NE(svg.find(">10k<"), std::string::npos);
+    EXPECT_NE(svg.find(">1000<"), std::string::npos);
+}
