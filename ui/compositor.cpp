@@ -1,5 +1,7 @@
 #include "ui/compositor.h"
 
+#include "ui/gl_program.h"
+
 #include "libsim/error.h"
 
 #include <glm/gtc/type_ptr.hpp>
@@ -8,13 +10,6 @@
 namespace trephine::ui {
 
 namespace {
-
-const char* kRestoreVs = R"(#version 330 core
-void main() {
-    // One triangle covering the viewport; no vertex buffer.
-    vec2 p = vec2(gl_VertexID == 1 ? 3.0 : -1.0, gl_VertexID == 2 ? 3.0 : -1.0);
-    gl_Position = vec4(p, 0.0, 1.0);
-})";
 
 const char* kRestoreFs = R"(#version 330 core
 uniform sampler2D uColor;
@@ -57,46 +52,14 @@ void main() {
     fragColor = vec4(c, 1.0);
 })";
 
-GLuint compile(GLenum type, const char* src) {
-    GLuint s = glCreateShader(type);
-    glShaderSource(s, 1, &src, nullptr);
-    glCompileShader(s);
-    GLint ok = 0;
-    glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
-    if (!ok) {
-        char log[2048];
-        glGetShaderInfoLog(s, sizeof log, nullptr, log);
-        throw Error(std::string("ui: shader does not compile: ") + log);
-    }
-    return s;
-}
-
-GLuint link(const char* vs, const char* fs) {
-    GLuint p = glCreateProgram();
-    GLuint v = compile(GL_VERTEX_SHADER, vs), f = compile(GL_FRAGMENT_SHADER, fs);
-    glAttachShader(p, v);
-    glAttachShader(p, f);
-    glLinkProgram(p);
-    glDeleteShader(v);
-    glDeleteShader(f);
-    GLint ok = 0;
-    glGetProgramiv(p, GL_LINK_STATUS, &ok);
-    if (!ok) {
-        char log[2048];
-        glGetProgramInfoLog(p, sizeof log, nullptr, log);
-        throw Error(std::string("ui: program does not link: ") + log);
-    }
-    return p;
-}
-
 } // namespace
 
 Compositor::Compositor() {
-    m_restoreProgram = link(kRestoreVs, kRestoreFs);
+    m_restoreProgram = linkProgram(kFullscreenTriangleVs, kRestoreFs, "DBI restore");
     glUseProgram(m_restoreProgram);
     glUniform1i(glGetUniformLocation(m_restoreProgram, "uColor"), 0);
     glUniform1i(glGetUniformLocation(m_restoreProgram, "uDepth"), 1);
-    m_meshProgram = link(kMeshVs, kMeshFs);
+    m_meshProgram = linkProgram(kMeshVs, kMeshFs, "mesh");
     m_uModel = glGetUniformLocation(m_meshProgram, "uModel");
     m_uView = glGetUniformLocation(m_meshProgram, "uView");
     m_uProj = glGetUniformLocation(m_meshProgram, "uProj");

@@ -7,6 +7,8 @@
 // [SECTION] Drawing: into the bound framebuffer, or into the view's own offscreen target
 #include "ui/volume_view.h"
 
+#include "ui/gl_program.h"
+
 #include "libsim/error.h"
 #include "libsim/renderer.h"
 
@@ -22,12 +24,6 @@ namespace trephine::ui {
 namespace {
 
 // [SECTION] Shaders ----------------------------------------------------------------------------
-
-const char* kVs = R"(#version 330 core
-void main() {
-    vec2 p = vec2(gl_VertexID == 1 ? 3.0 : -1.0, gl_VertexID == 2 ? 3.0 : -1.0);
-    gl_Position = vec4(p, 0.0, 1.0);
-})";
 
 // Voxel coordinates put voxel centres at integers; the density texture's texel i is voxel i, the
 // gradient texture's texel i is voxel i - 1 (one voxel of apron on every side). Both clamp to a
@@ -150,40 +146,6 @@ void main() {
     fragColor = vec4(min(c, vec3(255.0)) / 255.0, 1.0);
 })";
 
-GLuint compile(GLenum type, const char* src) {
-    GLuint s = glCreateShader(type);
-    glShaderSource(s, 1, &src, nullptr);
-    glCompileShader(s);
-    GLint ok = 0;
-    glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
-    if (!ok) {
-        char log[2048];
-        glGetShaderInfoLog(s, sizeof log, nullptr, log);
-        glDeleteShader(s);
-        throw Error(std::string("ui: volume shader does not compile: ") + log);
-    }
-    return s;
-}
-
-GLuint link(const char* vs, const char* fs) {
-    GLuint v = compile(GL_VERTEX_SHADER, vs), f = compile(GL_FRAGMENT_SHADER, fs);
-    GLuint p = glCreateProgram();
-    glAttachShader(p, v);
-    glAttachShader(p, f);
-    glLinkProgram(p);
-    glDeleteShader(v);
-    glDeleteShader(f);
-    GLint ok = 0;
-    glGetProgramiv(p, GL_LINK_STATUS, &ok);
-    if (!ok) {
-        char log[2048];
-        glGetProgramInfoLog(p, sizeof log, nullptr, log);
-        glDeleteProgram(p);
-        throw Error(std::string("ui: volume program does not link: ") + log);
-    }
-    return p;
-}
-
 // The shading constants of libsim's renderer (materialShade in renderer.cpp), per label.
 constexpr float kShade[kMaterialCount][4] = {
     {0.20f, 0.75f, 0.12f, 5}, // air (never shaded; the default)
@@ -226,7 +188,7 @@ struct UnpackBox {
 } // namespace
 
 VolumeView::VolumeView() {
-    m_program = link(kVs, kFs);
+    m_program = linkProgram(kFullscreenTriangleVs, kFs, "volume");
     glUseProgram(m_program);
     glUniform1i(glGetUniformLocation(m_program, "uDensity"), 0);
     glUniform1i(glGetUniformLocation(m_program, "uMaterial"), 1);

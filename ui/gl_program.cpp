@@ -1,0 +1,60 @@
+#include "ui/gl_program.h"
+
+#include "libsim/error.h"
+
+#include <string>
+
+namespace trephine::ui {
+
+const char* const kFullscreenTriangleVs = R"(#version 330 core
+void main() {
+    vec2 p = vec2(gl_VertexID == 1 ? 3.0 : -1.0, gl_VertexID == 2 ? 3.0 : -1.0);
+    gl_Position = vec4(p, 0.0, 1.0);
+})";
+
+namespace {
+
+GLuint compile(GLenum type, const char* src, const char* what) {
+    GLuint s = glCreateShader(type);
+    glShaderSource(s, 1, &src, nullptr);
+    glCompileShader(s);
+    GLint ok = 0;
+    glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
+    if (!ok) {
+        char log[2048];
+        glGetShaderInfoLog(s, sizeof log, nullptr, log);
+        glDeleteShader(s);
+        throw Error(std::string("ui: ") + what + " shader does not compile: " + log);
+    }
+    return s;
+}
+
+} // namespace
+
+GLuint linkProgram(const char* vertexSource, const char* fragmentSource, const char* what) {
+    GLuint v = compile(GL_VERTEX_SHADER, vertexSource, what);
+    GLuint f = 0;
+    try {
+        f = compile(GL_FRAGMENT_SHADER, fragmentSource, what);
+    } catch (...) {
+        glDeleteShader(v);
+        throw;
+    }
+    GLuint p = glCreateProgram();
+    glAttachShader(p, v);
+    glAttachShader(p, f);
+    glLinkProgram(p);
+    glDeleteShader(v);
+    glDeleteShader(f);
+    GLint ok = 0;
+    glGetProgramiv(p, GL_LINK_STATUS, &ok);
+    if (!ok) {
+        char log[2048];
+        glGetProgramInfoLog(p, sizeof log, nullptr, log);
+        glDeleteProgram(p);
+        throw Error(std::string("ui: ") + what + " program does not link: " + log);
+    }
+    return p;
+}
+
+} // namespace trephine::ui
