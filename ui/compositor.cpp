@@ -2,7 +2,6 @@
 
 #include "ui/gl_program.h"
 
-#include "libsim/error.h"
 
 #include <glm/gtc/type_ptr.hpp>
 #include <string>
@@ -95,19 +94,7 @@ void Compositor::resize(int width, int height) {
     };
     makeTex(m_colorTex, GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE);
     makeTex(m_depthTex, GL_R32F, GL_RED, GL_FLOAT);
-    makeTex(m_fboColor, GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE);
-    if (!m_fboDepth)
-        glGenRenderbuffers(1, &m_fboDepth);
-    glBindRenderbuffer(GL_RENDERBUFFER, m_fboDepth);
-    glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT32F, width, height);
-    if (!m_fbo)
-        glGenFramebuffers(1, &m_fbo);
-    glBindFramebuffer(GL_FRAMEBUFFER, m_fbo);
-    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, m_fboColor, 0);
-    glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, m_fboDepth);
-    if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
-        throw Error("ui: the composite framebuffer is incomplete");
-    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    makeColorDepthTarget(m_fbo, m_fboColor, m_fboDepth, width, height, "composite");
     uploadFull(Dbi(width, height));
 }
 

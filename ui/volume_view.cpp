@@ -374,24 +374,7 @@ void VolumeView::ensureTarget(int width, int height) {
         return;
     m_fboWidth = width;
     m_fboHeight = height;
-    if (!m_fboColor)
-        glGenTextures(1, &m_fboColor);
-    glBindTexture(GL_TEXTURE_2D, m_fboColor);
-    glTexImage2D(GL_TEXTURE_2D, 0, GL_RGBA8, width, height, 0, GL_RGBA, GL_UNSIGNED_BYTE, nullptr);
-    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MIN_FILTER, GL_NEAREST);
-    glTexParameteri(GL_TEXTURE_2D, GL_TEXTURE_MAG_FILTER, GL_NEAREST);
-    if (!m_fboDepth)
-        glGenRenderbuffers(1, &m_fboDepth);
-    glBindRenderbuffer(GL_RENDERBUFFER, m_fboDepth);
-    glRenderbufferStorage(GL_RENDERBUFFER, GL_DEPTH_COMPONENT32F, width, height);
-    if (!m_fbo)
-        glGenFramebuffers(1, &m_fbo);
-    glBindFramebuffer(GL_FRAMEBUFFER, m_fbo);
-    glFramebufferTexture2D(GL_FRAMEBUFFER, GL_COLOR_ATTACHMENT0, GL_TEXTURE_2D, m_fboColor, 0);
-    glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, m_fboDepth);
-    if (glCheckFramebufferStatus(GL_FRAMEBUFFER) != GL_FRAMEBUFFER_COMPLETE)
-        throw Error("ui: the volume view's framebuffer is incomplete");
-    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    makeColorDepthTarget(m_fbo, m_fboColor, m_fboDepth, width, height, "volume view's");
 }
 
 void VolumeView::render(const Camera& camera) {

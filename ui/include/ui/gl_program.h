@@ -1,5 +1,5 @@
-// Shader programs for the window's GL passes: compile and link with a one-line error naming the
-// program, and the vertex shader every fullscreen pass shares.
+// GL helpers the window's passes share: compile and link with a one-line error naming the
+// program, the vertex shader every fullscreen pass uses, and an offscreen colour + depth target.
 #pragma once
 
 #include "ui/gl.h"
@@ -12,5 +12,11 @@ extern const char* const kFullscreenTriangleVs;
 // Compiles and links a vertex + fragment program; throws trephine::Error with the GL log and
 // `what` (e.g. "volume") on failure. Needs a current GL 3.3 core context.
 GLuint linkProgram(const char* vertexSource, const char* fragmentSource, const char* what);
+
+// (Re)allocates `color` (RGBA8, nearest) and `depth` (32-bit float renderbuffer) at width x
+// height and attaches them to `fbo`, creating any of the three that is 0. Leaves the default
+// framebuffer bound; throws trephine::Error naming `what` if the framebuffer is incomplete.
+void makeColorDepthTarget(GLuint& fbo, GLuint& color, GLuint& depth, int width, int height,
+                          const char* what);
 
 } // namespace trephine::ui
