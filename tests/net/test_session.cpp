@@ -317,28 +317,15 @@ TEST(Session, MalformedInputIsDroppedCountedAndAPersistentOffenderDisconnected) 
 
 TEST(Session, ClientRejectsOutOfWindowRectanglesAndCorruptPayloads) {
     // A fake server: a raw ENet host that welcomes the client and sends bad updates.
-    Host fake = Host::listen(0, 2);
+    trephine::testing::FakeServer fake;
     ClientConfig cfg;
     cfg.codec = Codec::Raw;
     cfg.view.width = 64;
     cfg.view.height = 48;
     SessionClient client(cfg);
     client.connect(loopback(fake.port()));
-    ENetPeer* peer = nullptr;
-    auto pumpBoth = [&](const std::function<bool()>& pred) {
-        auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
-        while (std::chrono::steady_clock::now() < deadline) {
-            fake.service(1, [&](const ENetEvent& e) {
-                if (e.type == ENET_EVENT_TYPE_CONNECT)
-                    peer = e.peer;
-            });
-            client.poll(1);
-            if (pred())
-                return true;
-        }
-        return false;
-    };
-    ASSERT_TRUE(pumpBoth([&] { return peer && client.connected(); }));
+    auto pumpBoth = [&](const std::function<bool()>& pred) { return fake.pumpWith(client, pred); };
+    ASSERT_TRUE(pumpBoth([&] { return fake.peer && client.connected(); }));
 
     Dbi patch(16, 16);
     auto update = [&](uint16_t x, uint16_t y, uint16_t w, uint16_t h, bool corrupt) {
@@ -355,10 +342,10 @@ TEST(Session, ClientRejectsOutOfWindowRectanglesAndCorruptPayloads) {
             u.payload.resize(u.payload.size() / 2);
         return encodeMessage(u);
     };
-    fake.send(peer, Channel::Image, update(60, 0, 16, 16, false)); // past the right edge
-    fake.send(peer, Channel::Image, update(0, 40, 16, 16, false)); // past the top
-    fake.send(peer, Channel::Image, update(0, 0, 16, 16, true));   // payload too short
-    fake.send(peer, Channel::Image, update(8, 8, 16, 16, false));  // fine
+    fake.send(Channel::Image, update(60, 0, 16, 16, false)); // past the right edge
+    fake.send(Channel::Image, update(0, 40, 16, 16, false)); // past the top
+    fake.send(Channel::Image, update(0, 0, 16, 16, true));   // payload too short
+    fake.send(Channel::Image, update(8, 8, 16, 16, false));  // fine
     ASSERT_TRUE(
         pumpBoth([&] { return client.stats().malformed() + client.updatesApplied() == 4; }));
     EXPECT_EQ(client.stats().malformed(), 3u);

@@ -271,27 +271,14 @@ TEST(SessionVolume, MalformedSyncModeIsDroppedAndCountedByTheServer) {
 
 TEST(SessionVolume, ClientDropsAndCountsMalformedVolumeUpdates) {
     // A fake server: a raw ENet host that welcomes the client with a 16^3 volume and sends voxels.
-    Host fake = Host::listen(0, 2);
+    trephine::testing::FakeServer fake;
     ClientConfig cfg = clientConfig(ViewSpec{}, Sync::Volume);
     cfg.view.width = cfg.view.height = 32;
     cfg.renderThreads = 1;
     SessionClient client(cfg);
     client.connect(loopback(fake.port()));
-    ENetPeer* peer = nullptr;
-    auto pumpBoth = [&](const std::function<bool()>& pred) {
-        auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
-        while (std::chrono::steady_clock::now() < deadline) {
-            fake.service(1, [&](const ENetEvent& e) {
-                if (e.type == ENET_EVENT_TYPE_CONNECT)
-                    peer = e.peer;
-            });
-            client.poll(1);
-            if (pred())
-                return true;
-        }
-        return false;
-    };
-    ASSERT_TRUE(pumpBoth([&] { return peer && client.connected(); }));
+    auto pumpBoth = [&](const std::function<bool()>& pred) { return fake.pumpWith(client, pred); };
+    ASSERT_TRUE(pumpBoth([&] { return fake.peer && client.connected(); }));
 
     Volume v = makeSphere(16);
     auto full = [&](bool corrupt) {
@@ -318,21 +305,21 @@ TEST(SessionVolume, ClientDropsAndCountsMalformedVolumeUpdates) {
         return encodeMessage(u);
     };
     // Before the welcome nobody knows where voxels go.
-    fake.send(peer, Channel::Volume, box(0, 2, 8, 1));
+    fake.send(Channel::Volume, box(0, 2, 8, 1));
     ASSERT_TRUE(pumpBoth([&] { return client.stats().malformed() == 1; }));
     Welcome w;
     w.clientId = 1;
     w.volumeDims = v.dims();
     w.spacing = v.spacing();
     w.volumeName = "sphere:16";
-    fake.send(peer, Channel::Control, encodeMessage(w));
+    fake.send(Channel::Control, encodeMessage(w));
     ASSERT_TRUE(pumpBoth([&] { return client.welcomed(); }));
-    fake.send(peer, Channel::Volume, full(true));              // corrupt compression
-    fake.send(peer, Channel::Volume, full(false));             // fine
-    fake.send(peer, Channel::Volume, box(12, 8, 512, 2));      // past the volume's x edge
-    fake.send(peer, Channel::Volume, box(0, 4, 63, 3));        // payload one byte short
-    fake.send(peer, Channel::Volume, std::vector<uint8_t>{8}); // type byte only
-    fake.send(peer, Channel::Volume, box(4, 4, 64, 4));        // fine: cuts a 4^3 box to air
+    fake.send(Channel::Volume, full(true));              // corrupt compression
+    fake.send(Channel::Volume, full(false));             // fine
+    fake.send(Channel::Volume, box(12, 8, 512, 2));      // past the volume's x edge
+    fake.send(Channel::Volume, box(0, 4, 63, 3));        // payload one byte short
+    fake.send(Channel::Volume, std::vector<uint8_t>{8}); // type byte only
+    fake.send(Channel::Volume, box(4, 4, 64, 4));        // fine: cuts a 4^3 box to air
     ASSERT_TRUE(pumpBoth([&] { return client.stats().malformed() == 5; }));
     ASSERT_TRUE(pumpBoth([&] { return client.volumeUpdatesApplied() == 2; }));
     EXPECT_EQ(client.updatesRejected(), 4u);

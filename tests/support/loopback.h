@@ -41,4 +41,30 @@ inline bool pumpUntil(const std::vector<net::SessionClient*>& clients,
     return false;
 }
 
+// A raw ENet host standing in for a server, so a test can send a client hand-made messages.
+struct FakeServer {
+    net::Host host = net::Host::listen(0, 2);
+    ENetPeer* peer = nullptr; // the client, once it has connected
+
+    uint16_t port() const { return host.port(); }
+    void send(net::Channel channel, const std::vector<uint8_t>& bytes) {
+        host.send(peer, channel, bytes);
+    }
+    // Services this host and `client` (1 ms each) until pred() holds; false after the guard.
+    bool pumpWith(net::SessionClient& client, const std::function<bool()>& pred,
+                  double guardS = 20.0) {
+        auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(guardS);
+        while (std::chrono::steady_clock::now() < deadline) {
+            host.service(1, [&](const ENetEvent& e) {
+                if (e.type == ENET_EVENT_TYPE_CONNECT)
+                    peer = e.peer;
+            });
+            client.poll(1);
+            if (pred())
+                return true;
+        }
+        return false;
+    }
+};
+
 } // namespace trephine::testing
