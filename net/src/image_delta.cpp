@@ -18,62 +18,53 @@ inline int medPredict(int a, int b, int c) {
     return a + b - c;
 }
 
-// The five planes of a rectangle the predictor works on: R, G, B and 16-bit depth.
-struct Planes {
-    int w = 0, h = 0;
-    std::vector<uint8_t> c[3];
-    std::vector<uint16_t> q;
-
-    // `same`: the planes of `other`, an image of the same size whose depth codes are reused
-    // wherever the two images' depths are bit-identical (quantising is most of the cost).
-    Planes(const Dbi& image, const DepthQuantizer& quantizer, const Dbi* other = nullptr,
-           const Planes* same = nullptr)
-        : w(image.width()), h(image.height()) {
-        const size_t n = size_t(w) * size_t(h);
-        for (auto& p : c)
-            p.resize(n);
-        q.resize(n);
-        for (size_t i = 0; i < n; ++i) {
-            for (int k = 0; k < 3; ++k)
-                c[k][i] = image.color()[4 * i + size_t(k)];
-            const float d = image.depth()[i];
-            q[i] = same && other->depth()[i] == d ? same->q[i] : quantizer.quantize(d);
-        }
-    }
-    template <typename T>
-    static int predict(const std::vector<T>& p, int w, int x, int y) {
-        const size_t i = size_t(y) * size_t(w) + size_t(x);
-        const int a = x > 0 ? int(p[i - 1]) : 0;
-        const int b = y > 0 ? int(p[i - size_t(w)]) : 0;
-        const int c = x > 0 && y > 0 ? int(p[i - size_t(w) - 1]) : 0;
-        return medPredict(a, b, c);
-    }
-};
+// The prediction of pixel x of a row from its own row (`cur`) and the row below (`below`, null
+// for the bottom row); `stride` elements a pixel (4 for RGBA colour, 1 for depth codes).
+template <typename T>
+inline int predictAt(const T* cur, const T* below, int x, int stride) {
+    const int a = x > 0 ? int(cur[(x - 1) * stride]) : 0;
+    const int b = below ? int(below[x * stride]) : 0;
+    const int c = below && x > 0 ? int(below[(x - 1) * stride]) : 0;
+    return medPredict(a, b, c);
+}
 
 size_t maskBytes(size_t pixels) {
     return (pixels + 7) / 8;
 }
 
-uint32_t hashPlanes(const Planes& p) {
-    // FNV-1a over two 32-bit words a pixel: packed R, G, B, then the depth code.
+// FNV-1a over two 32-bit words a pixel: packed R, G, B, then the depth code.
+struct PixelHash {
     uint32_t h = 2166136261u;
-    auto mix = [&](uint32_t v) {
+    void mix(uint32_t v) {
         h ^= v;
         h *= 16777619u;
-    };
-    mix(uint32_t(p.w));
-    mix(uint32_t(p.h));
-    for (size_t i = 0; i < p.q.size(); ++i) {
-        mix(uint32_t(p.c[0][i]) | uint32_t(p.c[1][i]) << 8 | uint32_t(p.c[2][i]) << 16);
-        mix(p.q[i]);
     }
-    return h;
+    void pixel(const uint8_t* rgba, uint16_t q) {
+        mix(uint32_t(rgba[0]) | uint32_t(rgba[1]) << 8 | uint32_t(rgba[2]) << 16);
+        mix(q);
+    }
+};
+
+// Depth codes of every pixel of `image`, and the hash of its colour and codes.
+uint32_t codesAndHash(const Dbi& image, const DepthQuantizer& quantizer,
+                      std::vector<uint16_t>& codes) {
+    const size_t n = size_t(image.width()) * size_t(image.height());
+    codes.resize(n);
+    PixelHash hash;
+    hash.mix(uint32_t(image.width()));
+    hash.mix(uint32_t(image.height()));
+    for (size_t i = 0; i < n; ++i) {
+        codes[i] = quantizer.quantize(image.depth()[i]);
+        hash.pixel(image.color() + 4 * i, codes[i]);
+    }
+    return hash.h;
 }
 
 } // namespace
 
 uint32_t basePixelHash(const Dbi& image, const DepthQuantizer& quantizer) {
-    return hashPlanes(Planes(image, quantizer));
+    std::vector<uint16_t> codes;
+    return codesAndHash(image, quantizer, codes);
 }
 
 PredictedImage encodePredicted(const Dbi& next, const Dbi& base, Codec codec,
@@ -81,25 +72,45 @@ PredictedImage encodePredicted(const Dbi& next, const Dbi& base, Codec codec,
     PredictedImage out;
     if (next.width() != base.width() || next.height() != base.height() || codec == Codec::Raw)
         return out;
-    const Planes now(next, quantizer), was(base, quantizer, &next, &now);
-    const int w = now.w, h = now.h;
+    const int w = next.width(), h = next.height();
     const size_t n = size_t(w) * size_t(h);
     std::vector<uint8_t> mask(maskBytes(n), 0);
-    // One raster pass: the mask, and the residuals of changed pixels into per-plane scratch.
+    // One raster pass: codes of the new picture (two rows kept), the base's codes only where its
+    // depth differs (quantising is the costly part), the hash of the base, the mask, and the
+    // residuals of changed pixels into per-plane scratch.
     std::vector<uint8_t> scratch(5 * n);
     uint8_t *sr = scratch.data(), *sg = sr + n, *sb = sg + n, *sHi = sb + n, *sLo = sHi + n;
+    std::vector<uint16_t> rows(2 * size_t(w));
+    PixelHash hash;
+    hash.mix(uint32_t(w));
+    hash.mix(uint32_t(h));
     size_t m = 0;
-    for (int y = 0; y < h; ++y)
+    for (int y = 0; y < h; ++y) {
+        uint16_t* qCur = rows.data() + size_t(y & 1) * size_t(w);
+        const uint16_t* qBelow = y > 0 ? rows.data() + size_t((y - 1) & 1) * size_t(w) : nullptr;
+        const size_t row = size_t(y) * size_t(w);
+        const uint8_t* cNow = next.color() + 4 * row;
+        const uint8_t* cBelow = y > 0 ? cNow - 4 * size_t(w) : nullptr;
+        const uint8_t* cWas = base.color() + 4 * row;
+        const float* dNow = next.depth() + row;
+        const float* dWas = base.depth() + row;
+        for (int x = 0; x < w; ++x)
+            qCur[x] = quantizer.quantize(dNow[x]);
         for (int x = 0; x < w; ++x) {
-            const size_t i = size_t(y) * size_t(w) + size_t(x);
-            if (now.q[i] == was.q[i] && now.c[0][i] == was.c[0][i] && now.c[1][i] == was.c[1][i] &&
-                now.c[2][i] == was.c[2][i])
+            const uint16_t qWas = dWas[x] == dNow[x] ? qCur[x] : quantizer.quantize(dWas[x]);
+            const uint8_t* now = cNow + 4 * x;
+            const uint8_t* was = cWas + 4 * x;
+            hash.pixel(was, qWas);
+            if (qWas == qCur[x] && now[0] == was[0] && now[1] == was[1] && now[2] == was[2])
                 continue;
+            const size_t i = row + size_t(x);
             mask[i / 8] |= uint8_t(1u << (i % 8));
-            const uint8_t er = uint8_t(now.c[0][i] - Planes::predict(now.c[0], w, x, y));
-            const uint8_t eg = uint8_t(now.c[1][i] - Planes::predict(now.c[1], w, x, y));
-            const uint8_t eb = uint8_t(now.c[2][i] - Planes::predict(now.c[2], w, x, y));
-            const uint16_t ed = uint16_t(now.q[i] - Planes::predict(now.q, w, x, y));
+            const uint8_t er = uint8_t(now[0] - predictAt(cNow, cBelow, x, 4));
+            const uint8_t eg =
+                uint8_t(now[1] - predictAt(cNow + 1, cBelow ? cBelow + 1 : nullptr, x, 4));
+            const uint8_t eb =
+                uint8_t(now[2] - predictAt(cNow + 2, cBelow ? cBelow + 2 : nullptr, x, 4));
+            const uint16_t ed = uint16_t(qCur[x] - predictAt(qCur, qBelow, x, 1));
             sr[m] = er;
             sg[m] = uint8_t(eg - er);
             sb[m] = uint8_t(eb - er);
@@ -107,6 +118,7 @@ PredictedImage encodePredicted(const Dbi& next, const Dbi& base, Codec codec,
             sLo[m] = uint8_t(ed & 0xff);
             ++m;
         }
+    }
     std::vector<uint8_t> raw(mask.size() + 5 * m);
     std::memcpy(raw.data(), mask.data(), mask.size());
     uint8_t* dst = raw.data() + mask.size();
@@ -117,7 +129,7 @@ PredictedImage encodePredicted(const Dbi& next, const Dbi& base, Codec codec,
     out.rawBytes = uint32_t(raw.size());
     out.changedPixels = int(m);
     out.payload = compressBytes(raw, codec);
-    out.baseHash = hashPlanes(was);
+    out.baseHash = hash.h;
     return out;
 }
 
@@ -144,32 +156,34 @@ PredictedStatus decodePredicted(std::span<const uint8_t> payload, uint32_t rawBy
     const uint8_t* r = raw.data() + maskBytes(n);
     const uint8_t *g = r + m, *b = g + m, *dHi = b + m, *dLo = dHi + m;
 
-    Planes p(image, quantizer);
-    if (hashPlanes(p) != baseHash)
+    std::vector<uint16_t> q;
+    if (codesAndHash(image, quantizer, q) != baseHash)
         return PredictedStatus::BaseMismatch;
+    // Nothing can fail from here: decode in place, in raster order, so every prediction reads
+    // the new picture (decoded pixels below and to the left, our own pixels elsewhere).
     size_t k = 0;
-    for (int y = 0; y < h; ++y)
+    for (int y = 0; y < h; ++y) {
+        const size_t row = size_t(y) * size_t(w);
+        uint8_t* cCur = image.color() + 4 * row;
+        const uint8_t* cBelow = y > 0 ? cCur - 4 * size_t(w) : nullptr;
+        uint16_t* qCur = q.data() + row;
+        const uint16_t* qBelow = y > 0 ? qCur - w : nullptr;
         for (int x = 0; x < w; ++x) {
-            const size_t i = size_t(y) * size_t(w) + size_t(x);
+            const size_t i = row + size_t(x);
             if (!(mask[i / 8] & (1u << (i % 8))))
                 continue;
             const uint8_t er = r[k];
-            p.c[0][i] = uint8_t(Planes::predict(p.c[0], w, x, y) + er);
-            p.c[1][i] = uint8_t(Planes::predict(p.c[1], w, x, y) + uint8_t(g[k] + er));
-            p.c[2][i] = uint8_t(Planes::predict(p.c[2], w, x, y) + uint8_t(b[k] + er));
-            p.q[i] = uint16_t(Planes::predict(p.q, w, x, y) + ((dHi[k] << 8) | dLo[k]));
+            uint8_t* c = cCur + 4 * x;
+            c[0] = uint8_t(predictAt<uint8_t>(cCur, cBelow, x, 4) + er);
+            c[1] = uint8_t(predictAt<uint8_t>(cCur + 1, cBelow ? cBelow + 1 : nullptr, x, 4) +
+                           uint8_t(g[k] + er));
+            c[2] = uint8_t(predictAt<uint8_t>(cCur + 2, cBelow ? cBelow + 2 : nullptr, x, 4) +
+                           uint8_t(b[k] + er));
+            qCur[x] = uint16_t(predictAt<uint16_t>(qCur, qBelow, x, 1) + ((dHi[k] << 8) | dLo[k]));
+            image.depth()[i] = quantizer.dequantize(qCur[x]);
+            c[3] = image.depth()[i] >= kBackgroundDepth ? 0 : 255;
             ++k;
         }
-    // Everything decoded: write the changed pixels back.
-    for (size_t i = 0; i < n; ++i) {
-        if (!(mask[i / 8] & (1u << (i % 8))))
-            continue;
-        uint8_t* c = image.color() + 4 * i;
-        c[0] = p.c[0][i];
-        c[1] = p.c[1][i];
-        c[2] = p.c[2][i];
-        image.depth()[i] = quantizer.dequantize(p.q[i]);
-        c[3] = image.depth()[i] >= kBackgroundDepth ? 0 : 255;
     }
     return PredictedStatus::Ok;
 }
