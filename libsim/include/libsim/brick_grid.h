@@ -27,8 +27,8 @@ public:
     static constexpr int kApronLo = 0;
     static constexpr int kApronHi = 1;
     static constexpr uint8_t kMaxDistance = 255;
-    // After erosion, distances are recomputed over the emptied bricks' box grown by half its
-    // widest extent plus 2, at most this many bricks.
+    // After erosion, distances are recomputed at most out to the emptied bricks' box grown by half
+    // its widest extent plus 2, at most this many bricks.
     static constexpr int kMaxRegionGrowth = 32;
 
     BrickGrid() = default;
@@ -37,9 +37,10 @@ public:
     // Computes every brick from scratch.
     void build(const Volume& volume);
     // Recomputes the bricks whose apron overlaps `changed` (voxels whose density changed). When
-    // bricks only empty out (drilling), distances are recomputed around the emptied bricks (their
-    // box grown by half its widest extent plus 2): exact there as far as that reaches, and valid
-    // lower bounds everywhere. A brick that gains surface triggers a full distance pass.
+    // bricks only empty out (drilling), only the distances that went through an emptied brick are
+    // recomputed: over the box of bricks whose distance may have grown, cut to the emptied
+    // bricks' box grown by half its widest extent plus 2: exact there as far as that reaches, and
+    // valid lower bounds everywhere. A brick that gains surface triggers a full distance pass.
     // Returns true when some brick gained surface (or the grid was rebuilt): not erosion.
     bool update(const Volume& volume, const Box3i& changed);
 
@@ -64,9 +65,15 @@ public:
     int64_t fullDistancePasses() const { return m_distancePasses; }
 
 private:
+    // A full distance pass over the grid.
     void computeDistances();
-    // Chamfer passes over the bricks [lo, hi] (inclusive), reading the distances around the box.
-    void computeDistances(glm::ivec3 lo, glm::ivec3 hi);
+    // After the bricks in [e0, e1] (some of them) emptied out: a box [lo, hi] outside of which no
+    // distance can change, or where that reaches beyond [cap0, cap1], cut to it.
+    void affectedBox(glm::ivec3 e0, glm::ivec3 e1, glm::ivec3 cap0, glm::ivec3 cap1, glm::ivec3& lo,
+                     glm::ivec3& hi) const;
+    // Recomputes the distances of the bricks [lo, hi] (inclusive) from the bricks that may hold
+    // surface there and the stored distances of the bricks just outside.
+    void sweepDistances(glm::ivec3 lo, glm::ivec3 hi);
     // Largest density of each brick of [b0, b1] (inclusive) with its apron, x fastest.
     void regionMax(const Volume& volume, glm::ivec3 b0, glm::ivec3 b1,
                    std::vector<uint8_t>& out) const;
