@@ -16,6 +16,7 @@
 #include <climits>
 #include <cmath>
 #include <cstring>
+#include <emmintrin.h>
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
 
@@ -67,8 +68,13 @@ struct Frame {
     v4sf invSpacing4; // invSpacing, lane 3 one
     float nearOverFarF;
     glm::dvec3 eye;
-    glm::vec3 origin; // eye in voxel coordinates
-    float dt;         // sample step along the ray, mm
+    glm::vec3 origin;        // eye in voxel coordinates
+    v4sf origin4;            // origin, lane 3 zero
+    v4sf regionLo, regionHi; // the sampled region [-1, n] per axis; lane 3 -inf, +inf
+    // Rows 3 and 4 of viewProj (clip z and w of an object-space point), for windowDepth's
+    // arithmetic inlined: z = (zx px + zy py + zz pz) + z0.
+    double zx, zy, zz, z0, wx, wy, wz, w0;
+    float dt; // sample step along the ray, mm
     float minSpacing;
     double maxSampleT;       // distance from the eye to the farthest corner of the volume
     const uint8_t* distance; // brick grid distances; null: no skipping
@@ -119,6 +125,13 @@ Frame makeFrame(const Volume& volume, const Camera& camera, const RenderOptions&
     f.eye = glm::dvec3(camera.eye);
     glm::dvec3 half = glm::dvec3(f.n) * 0.5 - 0.5;
     f.origin = glm::vec3(f.eye / glm::dvec3(f.spacing) + half);
+    f.origin4 = v4sf{f.origin.x, f.origin.y, f.origin.z, 0.0f};
+    f.regionLo = v4sf{-1.0f, -1.0f, -1.0f, -INFINITY};
+    f.regionHi = v4sf{float(f.n.x), float(f.n.y), float(f.n.z), INFINITY};
+    f.zx = f.viewProj[0][2], f.zy = f.viewProj[1][2], f.zz = f.viewProj[2][2];
+    f.z0 = f.viewProj[3][2];
+    f.wx = f.viewProj[0][3], f.wy = f.viewProj[1][3], f.wz = f.viewProj[2][3];
+    f.w0 = f.viewProj[3][3];
     f.minSpacing = std::min({f.spacing.x, f.spacing.y, f.spacing.z});
     f.dt = std::max(1e-3f, options.stepVoxels) * f.minSpacing;
     f.maxSampleT = 0.0;
@@ -174,21 +187,66 @@ inline float trilinear(float tx, float ty, float tz, float c000, float c100, flo
     return uz * c0 + tz * c1;
 }
 
-inline float sampleDensity(const Frame& f, glm::vec3 p) {
-    int ix = floorInt(p.x), iy = floorInt(p.y), iz = floorInt(p.z);
-    float tx = p.x - float(ix), ty = p.y - float(iy), tz = p.z - float(iz);
-    if (unsigned(ix) < unsigned(f.n.x - 1) && unsigned(iy) < unsigned(f.n.y - 1) &&
-        unsigned(iz) < unsigned(f.n.z - 1)) {
-        const uint8_t* b = f.density + ix + f.sy * iy + f.sz * iz;
-        return trilinear(tx, ty, tz, b[0], b[1], b[f.sy], b[f.sy + 1], b[f.sz], b[f.sz + 1],
-                         b[f.sz + f.sy], b[f.sz + f.sy + 1]);
-    }
+// The same arithmetic four lanes at a time: floorInt of every lane (lane 3 is padding).
+inline v4si floorInt4(v4sf p) {
+    return __builtin_convertvector(p + 16.0f, v4si) - 16;
+}
+
+template <int I>
+inline v4sf broadcast(v4sf v) {
+    return __builtin_shuffle(v, v4si{I, I, I, I});
+}
+
+// The eight corners of the trilinear cell whose lowest voxel is b, one byte each, in the low 8
+// bytes (the high 8 are zero): the x pairs of the rows (y, z) = (0, 0), (1, 0), (0, 1), (1, 1),
+// i.e. c000 c100 c010 c110 c001 c101 c011 c111. Four 2-byte loads instead of eight byte loads.
+inline __m128i loadCorners(const uint8_t* b, ptrdiff_t sy, ptrdiff_t sz) {
+    uint16_t r0, r1, r2, r3;
+    std::memcpy(&r0, b, 2);
+    std::memcpy(&r1, b + sy, 2);
+    std::memcpy(&r2, b + sz, 2);
+    std::memcpy(&r3, b + sz + sy, 2);
+    __m128i v = _mm_cvtsi32_si128(int(uint32_t(r0) | uint32_t(r1) << 16));
+    v = _mm_insert_epi16(v, r2, 2);
+    return _mm_insert_epi16(v, r3, 3);
+}
+
+// trilinear() of the corners from loadCorners at fractions t (lanes x, y, z): the same IEEE
+// operations lane by lane (the four x lerps in one vector, the two y lerps in another), so the
+// same bits, in about half the instructions of eight byte conversions and seven scalar lerps.
+inline float trilinearCorners(__m128i corners, v4sf t) {
+    const __m128i w = _mm_unpacklo_epi8(corners, _mm_setzero_si128());              // 8 x u16
+    const v4sf a = (v4sf)_mm_cvtepi32_ps(_mm_and_si128(w, _mm_set1_epi32(0xffff))); // x = 0
+    const v4sf b = (v4sf)_mm_cvtepi32_ps(_mm_srli_epi32(w, 16));                    // x = 1
+    const v4sf u = 1.0f - t;
+    const v4sf x = broadcast<0>(u) * a + broadcast<0>(t) * b; // c00 c10 c01 c11
+    const v4sf lo = __builtin_shuffle(x, v4si{0, 2, 0, 2}),
+               hi = __builtin_shuffle(x, v4si{1, 3, 1, 3});
+    const v4sf y = broadcast<1>(u) * lo + broadcast<1>(t) * hi; // c0 c1
+    return u[2] * y[0] + t[2] * y[1];
+}
+
+inline bool cellInVolume(const Frame& f, int ix, int iy, int iz) {
+    return unsigned(ix) < unsigned(f.n.x - 1) && unsigned(iy) < unsigned(f.n.y - 1) &&
+           unsigned(iz) < unsigned(f.n.z - 1);
+}
+
+// p: voxel coordinates (lane 3 padding), i: floorInt4(p).
+inline float sampleDensity(const Frame& f, v4sf p, v4si i) {
+    const int ix = i[0], iy = i[1], iz = i[2];
+    const v4sf t = p - __builtin_convertvector(i, v4sf);
+    if (cellInVolume(f, ix, iy, iz))
+        return trilinearCorners(loadCorners(f.density + ix + f.sy * iy + f.sz * iz, f.sy, f.sz), t);
     if (ix < -1 || iy < -1 || iz < -1 || ix >= f.n.x || iy >= f.n.y || iz >= f.n.z)
         return 0.0f;
-    return trilinear(tx, ty, tz, voxelAt(f, ix, iy, iz), voxelAt(f, ix + 1, iy, iz),
+    return trilinear(t[0], t[1], t[2], voxelAt(f, ix, iy, iz), voxelAt(f, ix + 1, iy, iz),
                      voxelAt(f, ix, iy + 1, iz), voxelAt(f, ix + 1, iy + 1, iz),
                      voxelAt(f, ix, iy, iz + 1), voxelAt(f, ix + 1, iy, iz + 1),
                      voxelAt(f, ix, iy + 1, iz + 1), voxelAt(f, ix + 1, iy + 1, iz + 1));
+}
+
+inline float sampleDensity(const Frame& f, v4sf p) {
+    return sampleDensity(f, p, floorInt4(p));
 }
 
 // The marching test: is the sample at p at or above the iso-value? A trilinear sample is a convex
@@ -196,69 +254,88 @@ inline float sampleDensity(const Frame& f, glm::vec3 p) {
 // the answer is no without interpolating; otherwise the sample decides, exactly as
 // sampleDensity would. Returns the sample in `value`, or -1 when the corner test answered.
 static_assert(kSurfaceDensity == 128, "the corner test below reads bit 7");
-inline bool insideSample(const Frame& f, glm::vec3 p, float& value) {
-    int ix = floorInt(p.x), iy = floorInt(p.y), iz = floorInt(p.z);
-    if (unsigned(ix) < unsigned(f.n.x - 1) && unsigned(iy) < unsigned(f.n.y - 1) &&
-        unsigned(iz) < unsigned(f.n.z - 1)) {
-        const uint8_t* b = f.density + ix + f.sy * iy + f.sz * iz;
-        uint16_t r0, r1, r2, r3; // pairs of x-neighbours
-        std::memcpy(&r0, b, 2);
-        std::memcpy(&r1, b + f.sy, 2);
-        std::memcpy(&r2, b + f.sz, 2);
-        std::memcpy(&r3, b + f.sz + f.sy, 2);
-        if (((r0 | r1 | r2 | r3) & 0x8080u) == 0) {
+inline bool insideSample(const Frame& f, v4sf p, v4si i, float& value) {
+    const int ix = i[0], iy = i[1], iz = i[2];
+    if (cellInVolume(f, ix, iy, iz)) {
+        const __m128i c = loadCorners(f.density + ix + f.sy * iy + f.sz * iz, f.sy, f.sz);
+        if (_mm_movemask_epi8(c) == 0) {
             value = -1.0f;
             return false;
         }
-        float tx = p.x - float(ix), ty = p.y - float(iy), tz = p.z - float(iz);
-        value = trilinear(tx, ty, tz, b[0], b[1], b[f.sy], b[f.sy + 1], b[f.sz], b[f.sz + 1],
-                          b[f.sz + f.sy], b[f.sz + f.sy + 1]);
+        value = trilinearCorners(c, p - __builtin_convertvector(i, v4sf));
     } else {
-        value = sampleDensity(f, p);
+        value = sampleDensity(f, p, i);
     }
     return value >= float(kSurfaceDensity);
+}
+
+inline v4sf lerp4(v4sf a, v4sf b, float t) {
+    return a + t * (b - a);
+}
+
+// gradientAt near the volume's faces, voxel by voxel with air outside (kept out of line: rare).
+__attribute__((noinline)) v4sf gradientAtBorder(const Frame& f, int ix, int iy, int iz, v4sf t) {
+    v4sf g[8];
+    for (int i = 0; i < 8; ++i) {
+        const int x = ix + (i & 1), y = iy + ((i >> 1) & 1), z = iz + (i >> 2);
+        const glm::vec3 d(voxelAt(f, x + 1, y, z) - voxelAt(f, x - 1, y, z),
+                          voxelAt(f, x, y + 1, z) - voxelAt(f, x, y - 1, z),
+                          voxelAt(f, x, y, z + 1) - voxelAt(f, x, y, z - 1));
+        const glm::vec3 gs = d * 0.5f;
+        g[i] = v4sf{gs.x, gs.y, gs.z, 0.0f};
+    }
+    const v4sf g00 = lerp4(g[0], g[1], t[0]), g10 = lerp4(g[2], g[3], t[0]);
+    const v4sf g01 = lerp4(g[4], g[5], t[0]), g11 = lerp4(g[6], g[7], t[0]);
+    return lerp4(lerp4(g00, g10, t[1]), lerp4(g01, g11, t[1]), t[2]);
 }
 
 // Density gradient (per voxel) at p: central differences at the eight voxels around p,
 // trilinearly interpolated. Smooth across voxel faces, unlike differences of trilinear samples,
 // so the shading shows no terraces. Reads voxels within 2 of p (see kDirtyStencilVoxels).
-glm::vec3 gradientAt(const Frame& f, glm::vec3 p) {
-    int ix = floorInt(p.x), iy = floorInt(p.y), iz = floorInt(p.z);
-    float tx = p.x - float(ix), ty = p.y - float(iy), tz = p.z - float(iz);
-    // Central differences at the eight corners of p's cell read the 32 voxels of the cell and its
-    // face neighbours (never the edges or corners of the 4^3 neighbourhood).
-    auto gradients = [](auto at, glm::vec3 g[8]) {
-        for (int i = 0; i < 8; ++i) {
-            int x = i & 1, y = (i >> 1) & 1, z = i >> 2;
-            g[i] = glm::vec3(at(x + 1, y, z) - at(x - 1, y, z), at(x, y + 1, z) - at(x, y - 1, z),
-                             at(x, y, z + 1) - at(x, y, z - 1)) *
-                   0.5f;
-        }
+// i: floorInt4(p). Returns (x, y, z, 0). Central differences at the eight corners of p's cell read
+// the 32 voxels of the cell and its face neighbours (never the edges or corners of the 4^3
+// neighbourhood).
+inline v4sf gradientAt(const Frame& f, v4sf p, v4si i) {
+    const int ix = i[0], iy = i[1], iz = i[2];
+    const v4sf t = p - __builtin_convertvector(i, v4sf);
+    if (!(ix >= 1 && iy >= 1 && iz >= 1 && ix + 2 < f.n.x && iy + 2 < f.n.y && iz + 2 < f.n.z))
+        return gradientAtBorder(f, ix, iy, iz, t);
+    // In SSE2, component by component: for each of x, y, z the differences at the four corners
+    // with x = 0 (A) and the four with x = 1 (B), lanes in corner order (y, z) = (0, 0), (1, 0),
+    // (0, 1), (1, 1). The 32 voxels come in as twelve 4-byte rows (x = -1..2) and byte k of a row
+    // is lane-wise (row >> 8k) & 255. Differences of bytes in integers, converted once:
+    // float(a) - float(b) is exact for bytes. Then the x lerps per component (the lanes of the
+    // per-corner vec3 formula, the same operations), a transpose to one vector (x, y, z, 0) per
+    // cell edge, and the y and z lerps as in gradientAtBorder: bit for bit its result.
+    const uint8_t* b = f.density + (ix - 1) + f.sy * iy + f.sz * iz;
+    const ptrdiff_t sy = f.sy, sz = f.sz;
+    auto row = [&](int y, int z) {
+        int32_t v;
+        std::memcpy(&v, b + sy * y + sz * z, 4);
+        return v;
     };
-    // One vector (x, y, z, 0) per corner: the lane-wise arithmetic is that of the vec3 formula,
-    // bit for bit, in a third of the instructions.
-    v4sf g[8];
-    if (ix >= 1 && iy >= 1 && iz >= 1 && ix + 2 < f.n.x && iy + 2 < f.n.y && iz + 2 < f.n.z) {
-        // Differences of bytes in integers, converted once: float(a) - float(b) is exact for
-        // bytes, so the bits are those of the float differences.
-        const uint8_t* b = f.density + ix + f.sy * iy + f.sz * iz;
-        const ptrdiff_t sy = f.sy, sz = f.sz;
-        for (int i = 0; i < 8; ++i) {
-            const uint8_t* c = b + (i & 1) + sy * ((i >> 1) & 1) + sz * (i >> 2);
-            v4si d{int(c[1]) - int(c[-1]), int(c[sy]) - int(c[-sy]), int(c[sz]) - int(c[-sz]), 0};
-            g[i] = __builtin_convertvector(d, v4sf) * 0.5f;
-        }
-    } else {
-        glm::vec3 gs[8];
-        gradients([&](int x, int y, int z) { return voxelAt(f, ix + x, iy + y, iz + z); }, gs);
-        for (int i = 0; i < 8; ++i)
-            g[i] = v4sf{gs[i].x, gs[i].y, gs[i].z, 0.0f};
-    }
-    auto lerp = [](v4sf a, v4sf b, float t) { return a + t * (b - a); };
-    v4sf g00 = lerp(g[0], g[1], tx), g10 = lerp(g[2], g[3], tx);
-    v4sf g01 = lerp(g[4], g[5], tx), g11 = lerp(g[6], g[7], tx);
-    v4sf r = lerp(lerp(g00, g10, ty), lerp(g01, g11, ty), tz);
-    return glm::vec3(r[0], r[1], r[2]);
+    auto rows = [](int32_t r0, int32_t r1, int32_t r2, int32_t r3) {
+        return _mm_set_epi32(r3, r2, r1, r0);
+    };
+    const __m128i r00 = rows(row(0, 0), row(1, 0), row(0, 1), row(1, 1));
+    const __m128i yp = rows(row(1, 0), row(2, 0), row(1, 1), row(2, 1));
+    const __m128i ym = rows(row(-1, 0), row(0, 0), row(-1, 1), row(0, 1));
+    const __m128i zp = rows(row(0, 1), row(1, 1), row(0, 2), row(1, 2));
+    const __m128i zm = rows(row(0, -1), row(1, -1), row(0, 0), row(1, 0));
+    const __m128i m8 = _mm_set1_epi32(0xff);
+    auto byte1 = [&](__m128i v) { return _mm_and_si128(_mm_srli_epi32(v, 8), m8); };
+    auto byte2 = [&](__m128i v) { return _mm_and_si128(_mm_srli_epi32(v, 16), m8); };
+    auto half = [](__m128i d) { return __builtin_convertvector((v4si)d, v4sf) * 0.5f; };
+    const v4sf ax = half(_mm_sub_epi32(byte2(r00), _mm_and_si128(r00, m8)));
+    const v4sf bx = half(_mm_sub_epi32(_mm_srli_epi32(r00, 24), byte1(r00)));
+    const v4sf ay = half(_mm_sub_epi32(byte1(yp), byte1(ym)));
+    const v4sf by = half(_mm_sub_epi32(byte2(yp), byte2(ym)));
+    const v4sf az = half(_mm_sub_epi32(byte1(zp), byte1(zm)));
+    const v4sf bz = half(_mm_sub_epi32(byte2(zp), byte2(zm)));
+    __m128 gx = (__m128)lerp4(ax, bx, t[0]), gy = (__m128)lerp4(ay, by, t[0]);
+    __m128 gz = (__m128)lerp4(az, bz, t[0]), gw = _mm_setzero_ps();
+    _MM_TRANSPOSE4_PS(gx, gy, gz, gw); // now g00, g10, g01, g11
+    return lerp4(lerp4((v4sf)gx, (v4sf)gy, t[1]), lerp4((v4sf)gz, (v4sf)gw, t[1]), t[2]);
 }
 
 // [SECTION] Marching ---------------------------------------------------------------------------
@@ -269,6 +346,9 @@ struct Ray {
     glm::vec3 invDv; // 1 / dv (inf where dv is 0)
     double tNear;    // distance along the ray to the near and far planes
     double tFar;
+    v4sf dv4;    // dv, lane 3 zero
+    v4sf dir4;   // dir in float (exact: pixelRay computes it in float), lane 3 zero
+    v4sf invDv4; // invDv, lane 3 one
 };
 
 // The ray through window position (wx, wy) (pixel x's centre is x + 0.5).
@@ -283,6 +363,9 @@ Ray windowRay(const Frame& f, double wx, double wy) {
     r.tNear = r.tFar * f.nearOverFar; // eye-space depth grows linearly along the ray
     r.dv = glm::vec3(r.dir) * f.invSpacing;
     r.invDv = 1.0f / r.dv;
+    r.dv4 = v4sf{r.dv.x, r.dv.y, r.dv.z, 0.0f};
+    r.dir4 = v4sf{float(r.dir.x), float(r.dir.y), float(r.dir.z), 0.0f};
+    r.invDv4 = v4sf{r.invDv.x, r.invDv.y, r.invDv.z, 1.0f};
     return r;
 }
 
@@ -304,11 +387,20 @@ Ray pixelRay(const Frame& f, int x, int y) {
     r.tNear = len * f.nearOverFarF;
     r.dv = glm::vec3(dv[0], dv[1], dv[2]);
     r.invDv = glm::vec3(invDv[0], invDv[1], invDv[2]);
+    r.dv4 = dv;
+    r.dv4[3] = 0.0f;
+    r.dir4 = dir;
+    r.invDv4 = invDv;
     return r;
 }
 
 inline glm::vec3 samplePos(const Frame& f, const Ray& r, float t) {
     return glm::vec3(f.origin.x + t * r.dv.x, f.origin.y + t * r.dv.y, f.origin.z + t * r.dv.z);
+}
+
+// samplePos in one vector (lane 3 zero): the same operations, the same bits.
+inline v4sf samplePos4(const Frame& f, const Ray& r, float t) {
+    return f.origin4 + t * r.dv4;
 }
 
 inline int brickCoord(float p, int n) {
@@ -362,16 +454,27 @@ March march(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume) {
     March m;
     // Samples live where some trilinear corner is inside the volume: voxel coordinates [-1, n].
     float t0 = float(std::max(r.tNear, 0.0)), t1 = float(r.tFar);
-    for (int a = 0; a < 3; ++a) {
-        float o = f.origin[a];
-        if (r.dv[a] == 0.0f) {
-            if (o < -1.0f || o > float(f.n[a]))
-                return m;
-            continue;
+    if (r.dv.x != 0.0f && r.dv.y != 0.0f && r.dv.z != 0.0f) {
+        // The three slabs at once: minps(b, a) is b < a ? b : a, std::min(a, b) exactly, and
+        // maxps(b, a) std::max(a, b); lane 3 gives (-inf, inf), which changes nothing.
+        const v4sf ta = (f.regionLo - f.origin4) * r.invDv4,
+                   tb = (f.regionHi - f.origin4) * r.invDv4;
+        const v4sf lo = (v4sf)_mm_min_ps((__m128)tb, (__m128)ta);
+        const v4sf hi = (v4sf)_mm_max_ps((__m128)tb, (__m128)ta);
+        t0 = std::max(std::max(std::max(t0, lo[0]), lo[1]), lo[2]);
+        t1 = std::min(std::min(std::min(t1, hi[0]), hi[1]), hi[2]);
+    } else {
+        for (int a = 0; a < 3; ++a) {
+            float o = f.origin[a];
+            if (r.dv[a] == 0.0f) {
+                if (o < -1.0f || o > float(f.n[a]))
+                    return m;
+                continue;
+            }
+            float ta = (-1.0f - o) * r.invDv[a], tb = (float(f.n[a]) - o) * r.invDv[a];
+            t0 = std::max(t0, std::min(ta, tb));
+            t1 = std::min(t1, std::max(ta, tb));
         }
-        float ta = (-1.0f - o) * r.invDv[a], tb = (float(f.n[a]) - o) * r.invDv[a];
-        t0 = std::max(t0, std::min(ta, tb));
-        t1 = std::min(t1, std::max(ta, tb));
     }
     if (!(t0 <= t1))
         return m;
@@ -398,8 +501,9 @@ March march(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume) {
         uint64_t cells = ~uint64_t(0);
         glm::ivec3 cellBase(0);
         if (f.distance) {
-            glm::vec3 p = samplePos(f, r, float(k) * dt);
-            glm::ivec3 b(brickCoord(p.x, f.n.x), brickCoord(p.y, f.n.y), brickCoord(p.z, f.n.z));
+            const v4si i = floorInt4(samplePos4(f, r, float(k) * dt));
+            glm::ivec3 b(std::clamp(i[0], 0, f.n.x - 1) >> S, std::clamp(i[1], 0, f.n.y - 1) >> S,
+                         std::clamp(i[2], 0, f.n.z - 1) >> S);
             size_t bi = size_t(b.x) + size_t(f.nb.x) * size_t(b.y) + f.nbxy * size_t(b.z);
             int d = f.distance[bi];
             if (d > 0) {
@@ -415,8 +519,9 @@ March march(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume) {
             cellBase = b << S;
         }
         for (; k <= kEnd; ++k) {
-            glm::vec3 p = samplePos(f, r, float(k) * dt);
-            int fx = floorInt(p.x), fy = floorInt(p.y), fz = floorInt(p.z);
+            const v4sf p = samplePos4(f, r, float(k) * dt);
+            const v4si i = floorInt4(p);
+            const int fx = i[0], fy = i[1], fz = i[2];
             int cx = fx - cellBase.x, cy = fy - cellBase.y, cz = fz - cellBase.z;
             if (unsigned(cx | cy | cz) >= unsigned(BrickGrid::kSize) && f.distance) {
                 // The sample is in another brick: go on with that brick's cells if it may hold
@@ -435,7 +540,7 @@ March march(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume) {
             if (unsigned(cx | cy | cz) < unsigned(BrickGrid::kSize) &&
                 !((cells >> (cx + 4 * cy + 16 * cz)) & 1u))
                 continue;
-            if (insideSample(f, p, value)) {
+            if (insideSample(f, p, i, value)) {
                 found = true;
                 break;
             }
@@ -457,11 +562,11 @@ March march(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume) {
         // costs three more samples and as many mispredicted branches, for accuracy the depth test
         // does not need.)
         float ta = float(k - 1) * dt, tb = m.tIn;
-        float fa = (lastK == k - 1 ? lastValue : sampleDensity(f, samplePos(f, r, ta))) - iso;
+        float fa = (lastK == k - 1 ? lastValue : sampleDensity(f, samplePos4(f, r, ta))) - iso;
         float fb = value - iso;
         for (int i = 0; i < kRefineSteps; ++i) {
             float tm = ta + (tb - ta) * (fa / (fa - fb));
-            float fm = sampleDensity(f, samplePos(f, r, tm)) - iso;
+            float fm = sampleDensity(f, samplePos4(f, r, tm)) - iso;
             bool in = fm >= 0.0f;
             ta = in ? ta : tm, fa = in ? fa : fm;
             tb = in ? tm : tb, fb = in ? fm : fb;
@@ -623,16 +728,19 @@ float coneSkipTo(const Frame& f, int x0, int y0, int x1, int y1, float tStart) {
 
 // [SECTION] Shading and depth ------------------------------------------------------------------
 
-Material hitMaterial(const Frame& f, glm::vec3 pHit, glm::vec3 pIn) {
+// pHit: the hit in voxel coordinates, pIn: the first sample inside.
+Material hitMaterial(const Frame& f, v4sf pHit, v4sf pIn) {
     auto label = [&](int x, int y, int z) { return Material(f.material[x + f.sy * y + f.sz * z]); };
-    glm::ivec3 v(floorInt(pHit.x + 0.5f), floorInt(pHit.y + 0.5f), floorInt(pHit.z + 0.5f));
+    const v4si vi = floorInt4(pHit + 0.5f);
+    glm::ivec3 v(vi[0], vi[1], vi[2]);
     v = glm::clamp(v, glm::ivec3(0), f.n - 1);
     Material m = label(v.x, v.y, v.z);
     if (m != Material::Air)
         return m;
     // The nearest voxel is air (the surface passes between voxels): take the densest labelled
     // corner of the first sample inside, whose density reaches the iso-value.
-    glm::ivec3 c(floorInt(pIn.x), floorInt(pIn.y), floorInt(pIn.z));
+    const v4si ci = floorInt4(pIn);
+    glm::ivec3 c(ci[0], ci[1], ci[2]);
     int best = -1;
     for (int i = 0; i < 8; ++i) {
         glm::ivec3 q = c + glm::ivec3(i & 1, (i >> 1) & 1, (i >> 2) & 1);
@@ -645,58 +753,73 @@ Material hitMaterial(const Frame& f, glm::vec3 pHit, glm::vec3 pIn) {
     return m == Material::Air ? Material::Cortical : m;
 }
 
+// What the render loop needs of a hit; castRay dresses it up as a RayHit.
+struct Hit {
+    float t;     // refined hit distance, mm
+    v4sf normal; // unit, pointing out of the bone (lane 3 padding)
+    Material material;
+};
+
 // `resume`: in, a lower bound on the first inside sample's index (see march); out, that index.
-RayHit traceRay(const Frame& f, int x, int y, float tSkipTo, int32_t& resume) {
-    RayHit h;
-    Ray r = pixelRay(f, x, y);
-    h.direction = glm::vec3(r.dir);
+// False when the ray meets no bone.
+bool traceRay(const Frame& f, const Ray& r, float tSkipTo, int32_t& resume, Hit& h) {
     March m = march(f, r, tSkipTo, resume);
     resume = m.kIn;
     if (!m.hit)
-        return h;
-    h.hit = true;
-    h.distanceMm = m.t;
-    h.position = f.eye + double(m.t) * r.dir;
-    h.depth = windowDepth(f.viewProj, h.position);
+        return false;
+    h.t = m.t;
+    const v4sf p = samplePos4(f, r, m.t);
+    // Density per mm; lane by lane the vec3 arithmetic (glm's length and division), bit for bit.
+    const v4sf grad = gradientAt(f, p, floorInt4(p)) * f.invSpacing4;
+    const float len = std::sqrt(grad[0] * grad[0] + grad[1] * grad[1] + grad[2] * grad[2]);
+    h.normal = len > 0.0f ? -grad / len : -r.dir4;
+    h.material = hitMaterial(f, p, samplePos4(f, r, m.tIn));
+    return true;
+}
 
-    glm::vec3 p = samplePos(f, r, m.t);
-    glm::vec3 grad = gradientAt(f, p) * f.invSpacing; // density per mm
-    float len = glm::length(grad);
-    h.normal = len > 0.0f ? -grad / len : -h.direction;
-    h.material = hitMaterial(f, p, samplePos(f, r, m.tIn));
-    return h;
+// windowDepth(viewProj, eye + t dir), the same double arithmetic inlined.
+inline float hitDepth(const Frame& f, const Ray& r, float t) {
+    const glm::dvec3 q = f.eye + double(t) * r.dir;
+    const double z = f.zx * q.x + f.zy * q.y + f.zz * q.z + f.z0;
+    const double w = f.wx * q.x + f.wy * q.y + f.wz * q.z + f.w0;
+    const double d = (z / w) * 0.5 + 0.5;
+    return float(std::clamp(d, 0.0, 1.0));
 }
 
 struct Shade {
+    v4sf color; // materialColor, lane 3 zero
     float ambient, diffuse, specular;
     int shininessLog2; // specular exponent 2^shininessLog2
 };
 
-Shade materialShade(Material m) {
-    switch (m) {
-    case Material::Diploe:
-        return {0.22f, 0.75f, 0.05f, 4};
-    case Material::Dura:
-        return {0.22f, 0.75f, 0.15f, 6}; // wet: a tighter highlight
-    case Material::Brain:
-        return {0.22f, 0.75f, 0.12f, 6};
-    default:
-        return {0.20f, 0.75f, 0.12f, 5};
-    }
-}
+// Per material (indexed by Material; air, never a hit, as cortical bone).
+const Shade kShades[kMaterialCount] = {
+    {{232.0f, 222.0f, 196.0f, 0.0f}, 0.20f, 0.75f, 0.12f, 5}, // (air)
+    {{232.0f, 222.0f, 196.0f, 0.0f}, 0.20f, 0.75f, 0.12f, 5}, // cortical
+    {{190.0f, 132.0f, 108.0f, 0.0f}, 0.22f, 0.75f, 0.05f, 4}, // diploe
+    {{205.0f, 84.0f, 88.0f, 0.0f}, 0.22f, 0.75f, 0.15f, 6},   // dura: wet, a tighter highlight
+    {{226.0f, 178.0f, 172.0f, 0.0f}, 0.22f, 0.75f, 0.12f, 6}, // brain
+};
 
 // Headlight Phong: the light sits at the eye, so the half vector is the view vector.
-void shadePixel(const RayHit& h, uint8_t* rgba) {
-    float ndl = std::max(0.0f, -glm::dot(h.normal, h.direction));
-    Shade s = materialShade(h.material);
-    float spec = ndl;
-    for (int i = 0; i < s.shininessLog2; ++i)
-        spec *= spec;
-    glm::vec3 c =
-        materialColor(h.material) * (s.ambient + s.diffuse * ndl) + s.specular * spec * 255.0f;
-    for (int i = 0; i < 3; ++i)
-        rgba[i] = uint8_t(std::min(255.0f, c[i]) + 0.5f);
-    rgba[3] = 255;
+inline void shadePixel(const Hit& h, const Ray& r, uint8_t* rgba) {
+    const v4sf n = h.normal, d = r.dir4;
+    float ndl = std::max(0.0f, -(n[0] * d[0] + n[1] * d[1] + n[2] * d[2]));
+    const Shade& s = kShades[int(h.material)];
+    // ndl^(2^k) by k squarings, all taken and one picked: no loop whose length follows the
+    // material.
+    float powers[7];
+    powers[0] = ndl;
+    for (int i = 1; i < 7; ++i)
+        powers[i] = powers[i - 1] * powers[i - 1];
+    const float spec = powers[s.shininessLog2];
+    const v4sf c = s.color * (s.ambient + s.diffuse * ndl) + s.specular * spec * 255.0f;
+    // uint8_t(min(255, c) + 0.5) per channel: min, truncation, then packing values in [0, 255].
+    const v4sf rounded = (v4sf)_mm_min_ps((__m128)c, _mm_set1_ps(255.0f)) + 0.5f;
+    const __m128i q = _mm_cvttps_epi32((__m128)rounded);
+    const __m128i b = _mm_packus_epi16(_mm_packs_epi32(q, q), _mm_setzero_si128());
+    const uint32_t px = uint32_t(_mm_cvtsi128_si32(b)) | 0xff000000u; // alpha 255
+    std::memcpy(rgba, &px, 4);
 }
 
 } // namespace
@@ -745,7 +868,19 @@ void Renderer::rebuild() {
 RayHit Renderer::castRay(const Camera& camera, int x, int y) const {
     Frame f = makeFrame(*m_volume, camera, m_options, m_bricks);
     int32_t resume = 0;
-    return traceRay(f, x, y, 0.0f, resume);
+    const Ray r = pixelRay(f, x, y);
+    RayHit out;
+    out.direction = glm::vec3(r.dir);
+    Hit h;
+    if (!traceRay(f, r, 0.0f, resume, h))
+        return out;
+    out.hit = true;
+    out.distanceMm = h.t;
+    out.position = f.eye + double(h.t) * r.dir;
+    out.depth = hitDepth(f, r, h.t);
+    out.normal = glm::vec3(h.normal[0], h.normal[1], h.normal[2]);
+    out.material = h.material;
+    return out;
 }
 
 Dbi Renderer::render(const Camera& camera) const {
@@ -824,11 +959,12 @@ void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out,
                         int32_t k = 0;
                         int32_t* slot = resume ? &resume[size_t(y) * stride + size_t(x)] : &k;
                         known += *slot != 0;
-                        RayHit h = traceRay(f, x, y, tSkipTo, *slot);
+                        const Ray r = pixelRay(f, x, y);
+                        Hit h;
                         uint8_t* rgba = out.color(ox, oy);
-                        if (h.hit) {
-                            shadePixel(h, rgba);
-                            out.depth()[out.index(ox, oy)] = h.depth;
+                        if (traceRay(f, r, tSkipTo, *slot, h)) {
+                            shadePixel(h, r, rgba);
+                            out.depth()[out.index(ox, oy)] = hitDepth(f, r, h.t);
                         } else {
                             std::memcpy(rgba, kBackgroundRgba, 4);
                             out.depth()[out.index(ox, oy)] = kBackgroundDepth;
