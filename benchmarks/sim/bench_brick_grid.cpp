@@ -25,20 +25,10 @@ struct Cut {
     int changedDistances = 0;
 };
 
-// net::surfaceBox, which libsim cannot call: an n^3 box centred on the middle column, its top face
-// one voxel above the topmost bone voxel there, cut to air.
+// The update study's cut (surfaceBox), cut to air.
 Box3i cutSurfaceBox(Volume& v, int n) {
-    const glm::ivec3 d = v.dims();
-    const int cx = d.x / 2, cy = d.y / 2;
-    int top = d.z - 1;
-    while (top > 0 && v.density(cx, cy, top) < kSurfaceDensity)
-        --top;
-    const glm::ivec3 lo(cx - n / 2, cy - n / 2, top + 1 - n);
-    Box3i box = Box3i::fromMinMax(lo, lo + glm::ivec3(n)).intersect(v.bounds());
-    for (int z = box.lo.z; z < box.hi.z; ++z)
-        for (int y = box.lo.y; y < box.hi.y; ++y)
-            for (int x = box.lo.x; x < box.hi.x; ++x)
-                v.set(x, y, z, 0, Material::Air);
+    const Box3i box = surfaceBox(v, n);
+    v.fill(box, 0, Material::Air);
     return box;
 }
 

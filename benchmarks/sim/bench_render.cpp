@@ -247,7 +247,7 @@ void BM_RenderPaperFrame128(benchmark::State& state) {
 }
 BENCHMARK(BM_RenderPaperFrame128)->Unit(benchmark::kMillisecond)->UseRealTime();
 
-// The update study's case (net::surfaceBox, trephine study updates): the paper's view of skull:128
+// The update study's case (surfaceBox, trephine study updates): the paper's view of skull:128
 // at the paper's spacing, an N^3 box centred on the middle column with its top face at the bone
 // surface facing the camera, cut to air. The hole's BB_screen is re-rendered through the view's hit
 // cache as it was before the cut (the server's path); the brick grid's update for the cut is timed
@@ -271,18 +271,6 @@ const Volume& paperSkull128() {
     return volume;
 }
 
-// net::surfaceBox, which libsim cannot call: the box's top face is one voxel above the topmost
-// bone voxel of the middle column.
-Box3i surfaceBox(const Volume& v, int n) {
-    const glm::ivec3 d = v.dims();
-    const int cx = d.x / 2, cy = d.y / 2;
-    int top = d.z - 1;
-    while (top > 0 && v.density(cx, cy, top) < kSurfaceDensity)
-        --top;
-    const glm::ivec3 lo(cx - n / 2, cy - n / 2, top + 1 - n);
-    return Box3i::fromMinMax(lo, lo + glm::ivec3(n)).intersect(v.bounds());
-}
-
 PaperHole& paperHole(int n) {
     static std::map<int, std::unique_ptr<PaperHole>> holes;
     std::unique_ptr<PaperHole>& h = holes[n];
@@ -294,10 +282,7 @@ PaperHole& paperHole(int n) {
         h->renderer->render(h->camera, &h->cacheBeforeCut);
         h->gridBeforeCut = h->renderer->bricks();
         h->box = surfaceBox(h->volume, n);
-        for (int z = h->box.lo.z; z < h->box.hi.z; ++z)
-            for (int y = h->box.lo.y; y < h->box.hi.y; ++y)
-                for (int x = h->box.lo.x; x < h->box.hi.x; ++x)
-                    h->volume.set(x, y, z, 0, Material::Air);
+        h->volume.fill(h->box, 0, Material::Air);
         h->renderer->volumeChanged(h->box);
         h->rect = dirtyScreenRect(h->camera, h->volume, h->box);
     }

@@ -372,6 +372,16 @@ Volume makeBox(int n) {
 
 // [SECTION] Burr site
 
+Box3i surfaceBox(const Volume& v, int n, int shift) {
+    const glm::ivec3 d = v.dims();
+    const int cx = std::clamp(d.x / 2 + shift, 0, d.x - 1), cy = d.y / 2;
+    int top = d.z - 1;
+    while (top > 0 && v.density(cx, cy, top) < kSurfaceDensity)
+        --top;
+    const glm::ivec3 lo(cx - n / 2, cy - n / 2, top + 1 - n);
+    return Box3i::fromMinMax(lo, lo + glm::ivec3(n)).intersect(v.bounds());
+}
+
 SurfaceSite defaultBurrSite(const Volume& skull) {
     if (skull.empty())
         throw Error("cannot find a burr-hole site: the volume is empty");

@@ -1,15 +1,23 @@
 #include "libsim/volume.h"
 
+#include <cstring>
+
 namespace trephine {
 
 std::string_view materialName(Material m) {
     switch (m) {
-    case Material::Air: return "air";
-    case Material::Cortical: return "cortical";
-    case Material::Diploe: return "diploe";
-    case Material::Dura: return "dura";
-    case Material::Brain: return "brain";
-    default: return "unknown";
+    case Material::Air:
+        return "air";
+    case Material::Cortical:
+        return "cortical";
+    case Material::Diploe:
+        return "diploe";
+    case Material::Dura:
+        return "dura";
+    case Material::Brain:
+        return "brain";
+    default:
+        return "unknown";
     }
 }
 
@@ -26,6 +34,19 @@ std::vector<int64_t> Volume::materialCounts() const {
     for (uint8_t m : m_material)
         counts[m < kMaterialCount ? m : 0]++;
     return counts;
+}
+
+void Volume::fill(const Box3i& box, uint8_t density, Material m) {
+    const Box3i b = box.intersect(bounds());
+    if (b.empty())
+        return;
+    const size_t row = size_t(b.hi.x - b.lo.x);
+    for (int z = b.lo.z; z < b.hi.z; ++z)
+        for (int y = b.lo.y; y < b.hi.y; ++y) {
+            const size_t i = index(b.lo.x, y, z);
+            std::memset(m_density.data() + i, density, row);
+            std::memset(m_material.data() + i, uint8_t(m), row);
+        }
 }
 
 } // namespace trephine

@@ -19,7 +19,6 @@
 #include <algorithm>
 #include <array>
 #include <cstdio>
-#include <cstring>
 #include <optional>
 #include <shared_mutex>
 
@@ -873,13 +872,7 @@ void SessionServer::simulationLoop() {
                 uint64_t e0 = steadyNowUs();
                 {
                     std::unique_lock write(s.volumeRw);
-                    const size_t row = size_t(box.hi.x - box.lo.x);
-                    for (int z = box.lo.z; z < box.hi.z; ++z)
-                        for (int y = box.lo.y; y < box.hi.y; ++y) {
-                            const size_t i = s.volume.index(box.lo.x, y, z);
-                            std::memset(s.volume.densityData() + i, 0, row);
-                            std::memset(s.volume.materialData() + i, uint8_t(Material::Air), row);
-                        }
+                    s.volume.fill(box, 0, Material::Air);
                 }
                 erodeUs += steadyNowUs() - e0;
                 changed.merge(box);

@@ -3,6 +3,7 @@
 #include "libsim/camera.h"
 #include "libsim/dirty_rect.h"
 #include "libsim/error.h"
+#include "libsim/skull.h"
 #include "libsim/stats.h"
 #include "libsim/svg_plot.h"
 #include "net/codec.h"
@@ -57,16 +58,6 @@ std::vector<std::string> updateStudyMethods(Codec codec) {
     for (const Method& m : methodsFor(codec))
         names.push_back(m.name);
     return names;
-}
-
-Box3i surfaceBox(const Volume& v, int n, int shift) {
-    const glm::ivec3 d = v.dims();
-    const int cx = d.x / 2 + shift, cy = d.y / 2;
-    int top = d.z - 1;
-    while (top > 0 && v.density(cx, cy, top) < kSurfaceDensity)
-        --top;
-    const glm::ivec3 lo(cx - n / 2, cy - n / 2, top + 1 - n);
-    return Box3i::fromMinMax(lo, lo + glm::ivec3(n)).intersect(v.bounds());
 }
 
 std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStudyConfig& config) {

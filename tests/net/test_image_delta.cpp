@@ -39,18 +39,10 @@ Cut cutAtSurface(int n) {
     c.camera = cameraPreset("paper", v, {200, 200});
     Renderer renderer(v);
     Dbi frame = renderer.render(c.camera);
-    glm::ivec3 d = v.dims();
-    int top = d.z - 1;
-    while (top > 0 && v.density(d.x / 2, d.y / 2, top) < kSurfaceDensity)
-        --top;
-    glm::ivec3 lo(d.x / 2 - n / 2, d.y / 2 - n / 2, top + 1 - n);
-    Box3i box = Box3i::fromMinMax(lo, lo + glm::ivec3(n));
+    Box3i box = surfaceBox(v, n);
     c.rect = dirtyScreenRect(c.camera, v, box);
     c.before = frame.extract(c.rect);
-    for (int z = box.lo.z; z < box.hi.z; ++z)
-        for (int y = box.lo.y; y < box.hi.y; ++y)
-            for (int x = box.lo.x; x < box.hi.x; ++x)
-                v.set(x, y, z, 0, Material::Air);
+    v.fill(box, 0, Material::Air);
     renderer.volumeChanged(box);
     renderer.render(c.camera, c.rect, frame);
     c.after = frame.extract(c.rect);

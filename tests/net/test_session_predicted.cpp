@@ -7,7 +7,6 @@
 #include "libsim/dirty_rect.h"
 #include "libsim/skull.h"
 #include "net/codec.h"
-#include "net/update_study.h"
 #include "net/view.h"
 
 #include "loopback.h"

@@ -325,10 +325,7 @@ TEST(SessionVolume, ClientDropsAndCountsMalformedVolumeUpdates) {
     EXPECT_EQ(client.updatesRejected(), 4u);
     ASSERT_NE(client.localVolume(), nullptr);
     Volume expected = v;
-    for (int z = 0; z < 4; ++z)
-        for (int y = 0; y < 4; ++y)
-            for (int x = 4; x < 8; ++x)
-                expected.set(x, y, z, 0, Material::Air);
+    expected.fill(Box3i::fromMinMax({4, 0, 0}, {8, 4, 4}), 0, Material::Air);
     EXPECT_TRUE(*client.localVolume() == expected);
 }
 

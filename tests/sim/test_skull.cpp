@@ -270,3 +270,24 @@ TEST(Box, FillsTheMiddleHalfWithSolidCortical) {
     EXPECT_EQ(v.materialCounts()[int(Material::Cortical)], inner.count());
     EXPECT_THROW(makeBox(0), Error);
 }
+
+TEST(Skull, SurfaceBoxTopsOutAtTheBoneTheCameraOnPlusZSees) {
+    Volume v = makeSkull(64);
+    const glm::ivec3 d = v.dims();
+    for (int n : {4, 10}) {
+        const Box3i b = surfaceBox(v, n);
+        EXPECT_EQ(b.size(), glm::ivec3(n));
+        // Centred on the middle column; the voxel just below the top face is bone, nothing
+        // above the box in that column is.
+        EXPECT_EQ(b.lo.x, d.x / 2 - n / 2);
+        EXPECT_EQ(b.lo.y, d.y / 2 - n / 2);
+        EXPECT_GE(v.density(d.x / 2, d.y / 2, b.hi.z - 1), kSurfaceDensity);
+        for (int z = b.hi.z; z < d.z; ++z)
+            EXPECT_LT(v.density(d.x / 2, d.y / 2, z), kSurfaceDensity) << z;
+    }
+    EXPECT_EQ(surfaceBox(v, 6, 5).lo.x, d.x / 2 + 5 - 3);
+    const Box3i big = surfaceBox(v, 200); // clipped to the volume
+    EXPECT_EQ(big.lo, glm::ivec3(0));
+    EXPECT_EQ(big.hi.x, d.x);
+    EXPECT_EQ(big.hi.y, d.y);
+}

@@ -92,3 +92,21 @@ TEST(Volume, MaterialNamesAndBoneLabels) {
     EXPECT_FALSE(isBone(Material::Dura));
     EXPECT_FALSE(isBone(Material::Air));
 }
+
+TEST(Volume, FillSetsExactlyTheBoxClippedToTheVolume) {
+    Volume v({6, 5, 4}, glm::vec3(1.0f));
+    v.fill(Box3i::fromMinMax({-2, 1, 1}, {3, 3, 9}), 200, Material::Cortical); // clipped
+    int set = 0;
+    for (int z = 0; z < 4; ++z)
+        for (int y = 0; y < 5; ++y)
+            for (int x = 0; x < 6; ++x) {
+                const bool inside = x < 3 && y >= 1 && y < 3 && z >= 1;
+                EXPECT_EQ(v.density(x, y, z), inside ? 200 : 0) << x << y << z;
+                EXPECT_EQ(v.material(x, y, z), inside ? Material::Cortical : Material::Air);
+                set += inside;
+            }
+    EXPECT_EQ(set, 3 * 2 * 3);
+    v.fill(Box3i::fromMinMax({10, 10, 10}, {12, 12, 12}), 99, Material::Dura); // outside: nothing
+    v.fill(Box3i{}, 99, Material::Dura);                                       // empty: nothing
+    EXPECT_EQ(v.density(0, 1, 1), 200);
+}

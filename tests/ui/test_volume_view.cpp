@@ -163,10 +163,7 @@ TEST_F(VolumeViewTest, UpdateBoxShowsTheErosionLikeTheCpuRender) {
     Dbi before = view->readBack();
     // Carve a 12^3 box out of the sphere's front, where the camera sees it.
     Box3i box{{26, 30, 44}, {38, 42, 56}};
-    for (int z = box.lo.z; z < box.hi.z; ++z)
-        for (int y = box.lo.y; y < box.hi.y; ++y)
-            for (int x = box.lo.x; x < box.hi.x; ++x)
-                sphere.set(x, y, z, 0, Material::Air);
+    sphere.fill(box, 0, Material::Air);
     VolumeUpdateStats st = view->updateBox(sphere, box);
     EXPECT_EQ(st.voxels, 12 * 12 * 12);
     EXPECT_EQ(st.gradientVoxels, 14 * 14 * 14);

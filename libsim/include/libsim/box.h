@@ -3,8 +3,8 @@
 #pragma once
 
 #include <algorithm>
-#include <glm/common.hpp>
 #include <cstdint>
+#include <glm/common.hpp>
 #include <glm/vec3.hpp>
 #include <limits>
 

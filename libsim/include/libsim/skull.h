@@ -44,6 +44,11 @@ struct SurfaceSite {
 };
 SurfaceSite defaultBurrSite(const Volume& skull);
 
+// The study's cut (the paper's experiment): an n^3 box centred on the volume's middle column
+// (shifted `shift` voxels along x) whose top face lies one voxel above the topmost bone voxel of
+// that column, i.e. at the surface the paper camera on +z looks at. Clipped to the volume.
+Box3i surfaceBox(const Volume& volume, int n, int shift = 0);
+
 // Solid cortical sphere of radius sphereRadiusMm(n) = 0.35 n centred in an n^3 volume of 1 mm
 // spacing, with density falling linearly with distance across +-kSphereRampMm of the surface so
 // that the trilinear iso-surface at kSurfaceDensity is the analytic sphere to ~0.01 mm (for depth

@@ -26,7 +26,9 @@ enum class Material : uint8_t {
 };
 inline constexpr int kMaterialCount = int(Material::Count);
 std::string_view materialName(Material m);
-inline bool isBone(Material m) { return m == Material::Cortical || m == Material::Diploe; }
+inline bool isBone(Material m) {
+    return m == Material::Cortical || m == Material::Diploe;
+}
 
 // Density at or above which a voxel is solid: the iso-value of the rendered surface and of haptic
 // contact.
@@ -65,6 +67,8 @@ public:
         m_density[i] = density;
         m_material[i] = uint8_t(m);
     }
+    // Sets every voxel of `box` (clipped to the volume) to density and material, row by row.
+    void fill(const Box3i& box, uint8_t density, Material m);
 
     uint8_t* densityData() { return m_density.data(); }
     const uint8_t* densityData() const { return m_density.data(); }

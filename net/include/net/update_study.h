@@ -61,10 +61,6 @@ std::vector<std::string> updateStudyMethods(Codec codec);
 // trephine::Error with one line when a cycle times out or the server cannot start.
 std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStudyConfig& config);
 
-// An N^3 box whose top face lies at the bone surface seen along -z (the paper camera sits on +z),
-// centred on the volume's middle column and shifted by `shift` voxels along x.
-Box3i surfaceBox(const Volume& volume, int n, int shift = 0);
-
 // The exact first columns the issue names, then the stage breakdown.
 std::string updatesCsvHeader();
 std::string updatesCsvRow(const UpdateStudyRow& row);
