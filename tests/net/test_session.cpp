@@ -29,8 +29,10 @@ using namespace trephine::net;
 
 namespace {
 
+using trephine::testing::burrState;
 using trephine::testing::loopback;
 using trephine::testing::pumpUntil;
+using trephine::testing::sphereTop;
 
 constexpr int kWindow = 160;
 
@@ -63,26 +65,6 @@ bool waitConverged(SessionServer& server, std::vector<SessionClient*> clients) {
                 return false;
         return true;
     });
-}
-
-// A burr stroke: the burr starts 1 mm above the site and feeds 2.5 mm in along the normal over
-// `count` states 10 ms apart (client time), drilling at full speed.
-ToolState burrState(const SurfaceSite& site, int i, int count, uint64_t baseUs) {
-    ToolState t;
-    t.sequence = uint32_t(i + 1);
-    t.clientTimeUs = baseUs + uint64_t(i) * 10000;
-    t.toolKind = uint8_t(ToolKind::Burr);
-    t.diameterMm = 5.0f;
-    float depth = -1.0f + 3.5f * float(i) / float(count);
-    t.position = site.position - site.normal * depth;
-    t.orientation = glm::rotation(glm::vec3(0, 0, 1), site.normal);
-    t.speed = 1.0f;
-    t.drilling = true;
-    return t;
-}
-
-SurfaceSite sphereTop(int n) {
-    return {{0.0f, 0.0f, sphereRadiusMm(n)}, {0.0f, 0.0f, 1.0f}};
 }
 
 void drill(SessionClient& driller, std::vector<SessionClient*> all, const SurfaceSite& site,

@@ -23,33 +23,16 @@ using namespace trephine::net;
 
 namespace {
 
+using trephine::testing::burrState;
 using trephine::testing::loopback;
 using trephine::testing::loopbackServerConfig;
 using trephine::testing::pumpUntil;
+using trephine::testing::sphereTop;
 
 constexpr int kWindow = 128;
 
 ViewSpec presetView(const Volume& v, const char* name) {
     return toViewSpec(cameraPreset(name, v, {kWindow, kWindow}));
-}
-
-SurfaceSite sphereTop(int n) {
-    return {{0.0f, 0.0f, sphereRadiusMm(n)}, {0.0f, 0.0f, 1.0f}};
-}
-
-// A burr stroke feeding 2.5 mm in along the normal over `count` states 10 ms apart.
-ToolState burrState(const SurfaceSite& site, int i, int count, uint64_t baseUs) {
-    ToolState t;
-    t.sequence = uint32_t(i + 1);
-    t.clientTimeUs = baseUs + uint64_t(i) * 10000;
-    t.toolKind = uint8_t(ToolKind::Burr);
-    t.diameterMm = 5.0f;
-    float depth = -1.0f + 3.5f * float(i) / float(count);
-    t.position = site.position - site.normal * depth;
-    t.orientation = glm::rotation(glm::vec3(0, 0, 1), site.normal);
-    t.speed = 1.0f;
-    t.drilling = true;
-    return t;
 }
 
 // Sends tool states [first, first + count) of a `total`-state stroke, polling everyone.

@@ -2,9 +2,13 @@
 // loopback address of a port, and pumping clients until a condition holds.
 #pragma once
 
+#include "libsim/skull.h"
+#include "libsim/tool.h"
 #include "net/enet_host.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
+
+#include <glm/gtx/quaternion.hpp>
 
 #include <chrono>
 #include <functional>
@@ -66,5 +70,26 @@ struct FakeServer {
         return false;
     }
 };
+
+// A burr stroke: the 5 mm burr starts 1 mm above the site and feeds 2.5 mm in along the normal
+// over `count` states 10 ms apart (client time), drilling at full speed. State i of the stroke.
+inline net::ToolState burrState(const SurfaceSite& site, int i, int count, uint64_t baseUs) {
+    net::ToolState t;
+    t.sequence = uint32_t(i + 1);
+    t.clientTimeUs = baseUs + uint64_t(i) * 10000;
+    t.toolKind = uint8_t(ToolKind::Burr);
+    t.diameterMm = 5.0f;
+    float depth = -1.0f + 3.5f * float(i) / float(count);
+    t.position = site.position - site.normal * depth;
+    t.orientation = glm::rotation(glm::vec3(0, 0, 1), site.normal);
+    t.speed = 1.0f;
+    t.drilling = true;
+    return t;
+}
+
+// The top of makeSphere(n), facing +z.
+inline SurfaceSite sphereTop(int n) {
+    return {{0.0f, 0.0f, sphereRadiusMm(n)}, {0.0f, 0.0f, 1.0f}};
+}
 
 } // namespace trephine::testing

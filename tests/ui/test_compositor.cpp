@@ -3,6 +3,8 @@
 #include "ui/compositor.h"
 #include "ui/window.h"
 
+#include "gl_window_test.h"
+
 #include "libsim/camera.h"
 
 #include <glm/gtc/matrix_transform.hpp>
@@ -50,24 +52,17 @@ Dbi planeDbi(const Camera& cam) {
     return d;
 }
 
-class CompositorTest : public ::testing::Test {
+class CompositorTest : public trephine::testing::GlWindowTest {
 protected:
     void SetUp() override {
-        std::string why;
-        if (!displayAvailable(&why))
-            GTEST_SKIP() << "no display for OpenGL (" << why << "); run under xvfb-run";
-        WindowConfig wc;
-        wc.width = wc.height = 256;
-        wc.visible = false;
-        wc.imgui = false;
-        window = std::make_unique<Window>(wc);
-        comp = std::make_unique<Compositor>();
+        GlWindowTest::SetUp();
+        if (window)
+            comp = std::make_unique<Compositor>();
     }
     void TearDown() override {
         comp.reset();
-        window.reset();
+        GlWindowTest::TearDown();
     }
-    std::unique_ptr<Window> window;
     std::unique_ptr<Compositor> comp;
 };
 

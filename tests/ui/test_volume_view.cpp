@@ -5,6 +5,8 @@
 #include "ui/volume_view.h"
 #include "ui/window.h"
 
+#include "gl_window_test.h"
+
 #include "libsim/camera.h"
 #include "libsim/dirty_rect.h"
 #include "libsim/renderer.h"
@@ -97,24 +99,17 @@ void expectAgreement(const Agreement& a) {
     EXPECT_LE(double(a.maskMismatch), 0.01 * double(a.cpuHit)) << a.describe();
 }
 
-class VolumeViewTest : public ::testing::Test {
+class VolumeViewTest : public trephine::testing::GlWindowTest {
 protected:
     void SetUp() override {
-        std::string why;
-        if (!displayAvailable(&why))
-            GTEST_SKIP() << "no display for OpenGL (" << why << "); run under xvfb-run";
-        WindowConfig wc;
-        wc.width = wc.height = 256;
-        wc.visible = false;
-        wc.imgui = false;
-        window = std::make_unique<Window>(wc);
-        view = std::make_unique<VolumeView>();
+        GlWindowTest::SetUp();
+        if (window)
+            view = std::make_unique<VolumeView>();
     }
     void TearDown() override {
         view.reset();
-        window.reset();
+        GlWindowTest::TearDown();
     }
-    std::unique_ptr<Window> window;
     std::unique_ptr<VolumeView> view;
 };
 
