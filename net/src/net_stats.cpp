@@ -158,7 +158,13 @@ std::string reportJson(const ReportInfo& info, const NetStats& stats) {
             ", \"force_round_trip_p99_us\": " + jsonNumber(stats.hapticRoundTripUs.percentile(99)) +
             "},\n";
     }
-    j += "  \"channels\": {";
+    j += "  \"channels\": " + jsonChannels(stats);
+    j += "\n}\n";
+    return j;
+}
+
+std::string jsonChannels(const NetStats& stats) {
+    std::string j = "{";
     for (size_t c = 0; c < size_t(Channel::Count); ++c) {
         Channel ch = Channel(c);
         ChannelRates r = stats.averageRates(ch);
@@ -172,8 +178,7 @@ std::string reportJson(const ReportInfo& info, const NetStats& stats) {
              ", \"messages_in_per_s\": " + jsonNumber(r.messagesInPerS) +
              ", \"messages_out_per_s\": " + jsonNumber(r.messagesOutPerS) + "}";
     }
-    j += "\n  }\n}\n";
-    return j;
+    return j + "\n  }";
 }
 
 } // namespace trephine::net

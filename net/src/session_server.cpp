@@ -1030,19 +1030,7 @@ std::string SessionServer::reportJson() const {
     j += "  \"disconnected_for_malformed\": " + std::to_string(m_malformedKicks.load()) + ",\n";
     j += "  \"refused_server_full\": " + std::to_string(m_refusedFull.load()) + ",\n";
     j += "  \"views_refused\": " + std::to_string(m_viewsRefused.load()) + ",\n";
-    j += "  \"channels\": {";
-    for (size_t c = 0; c < size_t(Channel::Count); ++c) {
-        Channel ch = Channel(c);
-        ChannelRates r = m_stats.averageRates(ch);
-        j += std::string(c ? "," : "") + "\n    " + jsonString(channelName(ch)) + ": {" +
-             "\"bytes_in\": " + std::to_string(m_stats.totalBytesIn(ch)) +
-             ", \"bytes_out\": " + std::to_string(m_stats.totalBytesOut(ch)) +
-             ", \"messages_in\": " + std::to_string(m_stats.totalMessagesIn(ch)) +
-             ", \"messages_out\": " + std::to_string(m_stats.totalMessagesOut(ch)) +
-             ", \"bytes_in_per_s\": " + jsonNumber(r.bytesInPerS) +
-             ", \"bytes_out_per_s\": " + jsonNumber(r.bytesOutPerS) + "}";
-    }
-    j += "\n  },\n";
+    j += "  \"channels\": " + jsonChannels(m_stats) + ",\n";
     std::lock_guard lock(s.reportMutex);
     j += "  \"force_compute_us\": " + jsonWindow(s.forceComputeUs) + ",\n";
     j += "  \"modes\": {";

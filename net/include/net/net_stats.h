@@ -142,5 +142,8 @@ std::string jsonNumber(double v);             // %.6g
 std::string jsonWindow(const SampleWindow& w);
 // {"updates", "full_updates", "bytes", "raw_bytes", "latency_us", and each stage's window}.
 std::string jsonModeStats(const ModeStats& m);
+// {"control": {bytes_in, bytes_out, messages_in, messages_out and their *_per_s}, ...}: every
+// channel's totals and averages, one channel a line indented by four spaces.
+std::string jsonChannels(const NetStats& stats);
 
 } // namespace trephine::net
