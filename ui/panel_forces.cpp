@@ -9,12 +9,12 @@ namespace trephine::ui {
 namespace {
 
 // |F| and x/y/z of one participant's relayed samples, under its name in its tool's colour.
-void drawParticipant(uint16_t id, const ForceHistory& h) {
+void drawParticipant(uint16_t id, const std::string& name, const ForceHistory& h) {
     static const char* names[4] = {"x", "y", "z", "|F|"};
     glm::vec4 c = participantColor(int(id));
     ImGui::PushStyleColor(ImGuiCol_Text, ImVec4(c.r, c.g, c.b, 1.0f));
     ImGui::PushStyleColor(ImGuiCol_PlotLines, ImVec4(c.r, c.g, c.b, 1.0f));
-    ImGui::Text("client %u   f %.0f /s", unsigned(id), h.serverRate());
+    ImGui::Text("%s   f %.0f /s", name.c_str(), h.serverRate());
     for (int comp : {3, 0, 1, 2}) {
         auto v = ForceHistory::series(h.server, comp);
         char label[48], overlay[48];
@@ -29,7 +29,9 @@ void drawParticipant(uint16_t id, const ForceHistory& h) {
 } // namespace
 
 void drawForcesPanel(const ForceHistory& forces, double loopRateHz,
-                     const ParticipantForces* participants) {
+                     const ParticipantForces* participants,
+                     const std::map<uint16_t, net::ParticipantInfo>* roster) {
+    static const std::map<uint16_t, net::ParticipantInfo> kNoRoster;
     if (!ImGui::Begin("Forces")) {
         ImGui::End();
         return;
@@ -38,7 +40,7 @@ void drawForcesPanel(const ForceHistory& forces, double loopRateHz,
     if (participants) {
         ImGui::TextDisabled("participants (relayed by the server)");
         for (const auto& [id, h] : participants->byClient)
-            drawParticipant(id, h);
+            drawParticipant(id, participantName(roster ? *roster : kNoRoster, id), h);
         if (participants->byClient.empty())
             ImGui::TextDisabled("no participant's force model in the last %.0f s",
                                 participants->windowS);

@@ -16,6 +16,13 @@ glm::vec4 participantColor(int index) {
     return index <= 0 ? k[0] : k[1 + size_t(index - 1) % (n - 1)];
 }
 
+std::string participantName(const std::map<uint16_t, net::ParticipantInfo>& roster, uint16_t id) {
+    auto it = roster.find(id);
+    if (it == roster.end() || it->second.name.empty())
+        return "client " + std::to_string(id);
+    return it->second.name;
+}
+
 void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, const std::string& role,
                       const std::string& address, const std::string& name) {
     if (!ImGui::Begin("Session")) {
@@ -33,8 +40,32 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, const
     if (snap.welcome)
         ImGui::Text("client %u on %s", unsigned(snap.welcome->clientId),
                     snap.welcome->volumeName.c_str());
-    ImGui::Text("participants: you + %zu", snap.others.size());
+    // Everyone the server lists, this client first; tools as last relayed.
+    const uint16_t self = snap.welcome ? snap.welcome->clientId : 0;
+    ImGui::Text("participants: you + %zu", snap.participants.empty()
+                                               ? snap.others.size()
+                                               : snap.participants.size() - (self != 0));
+    for (const auto& [id, p] : snap.participants) {
+        if (id == self)
+            continue;
+        glm::vec4 c = participantColor(int(id));
+        ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), "  %s  %s, %s",
+                           participantName(snap.participants, id).c_str(),
+                           p.role == net::Role::Instructor ? "instructor" : "trainee",
+                           p.sync == net::Sync::Volume ? "volume" : "dbi");
+        auto t = snap.others.find(id);
+        if (t != snap.others.end()) {
+            ImGui::SameLine();
+            ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), "  %s %.0f mm%s",
+                               t->second.toolKind == uint8_t(ToolKind::Perforator) ? "perforator"
+                                                                                   : "burr",
+                               double(t->second.diameterMm), t->second.drilling ? " drilling" : "");
+        }
+    }
+    // Tools of ids the roster does not list yet (its message may trail the first relays).
     for (const auto& [id, t] : snap.others) {
+        if (snap.participants.count(id))
+            continue;
         glm::vec4 c = participantColor(int(id));
         ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), "  client %u: %s %.0f mm%s", unsigned(id),
                            t.toolKind == uint8_t(ToolKind::Perforator) ? "perforator" : "burr",

@@ -630,7 +630,7 @@ int runTrainerWindow(const TrainerOptions& o) {
             };
             for (const auto& [id, t] : snap->others)
                 label(t.position, t.orientation * glm::vec3(0, 0, 1), participantColor(int(id)),
-                      "client " + std::to_string(id) + (t.drilling ? " (drilling)" : ""));
+                      participantName(snap->participants, id) + (t.drilling ? " (drilling)" : ""));
             if (toolValid)
                 label(toolPos, toolRot * glm::vec3(0, 0, 1), participantColor(0),
                       o.name + (toolControls.drilling ? " (drilling)" : ""));
@@ -699,7 +699,7 @@ int runTrainerWindow(const TrainerOptions& o) {
         ImGui::SetNextWindowPos(ImVec2(0, float(viewSize)), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(right * 0.5f, H - float(viewSize)), ImGuiCond_FirstUseEver);
         drawForcesPanel(forceHistory, hstats.achievedRateHz,
-                        o.instructor ? &participantForces : nullptr);
+                        o.instructor ? &participantForces : nullptr, &snap->participants);
         ImGui::SetNextWindowPos(ImVec2(right * 0.5f, float(viewSize)), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(right * 0.5f, H - float(viewSize)), ImGuiCond_FirstUseEver);
         drawDirtyBoxPanel(boxState, boxHistory, now);

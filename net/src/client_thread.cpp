@@ -201,6 +201,7 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
         s->hasFullImage = c->hasFullImage();
         s->waitingForView = c->welcomed() && !c->hasFullImage();
         s->others = c->others();
+        s->participants = c->participants();
         s->updatesApplied = c->updatesApplied();
         s->fullUpdates = c->fullUpdates();
         s->updatesRejected = c->updatesRejected();

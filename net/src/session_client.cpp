@@ -111,6 +111,20 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         m_welcome = w;
         return true;
     }
+    case MessageType::Participants: {
+        Participants roster;
+        if (!decodeMessage(data, roster))
+            return false;
+        m_participants.clear();
+        for (const ParticipantInfo& p : roster.list)
+            m_participants[p.clientId] = p;
+        // Whoever left takes their tool and force plot along.
+        std::erase_if(m_others, [&](const auto& e) { return !m_participants.count(e.first); });
+        std::erase_if(m_relayedModels,
+                      [&](const auto& e) { return !m_participants.count(e.first); });
+        ++m_rosters;
+        return true;
+    }
     case MessageType::ToolRelay: {
         ToolRelay r;
         if (!decodeMessage(data, r))

@@ -562,6 +562,17 @@ void SessionServer::networkLoop() {
         }
         s.host.flush();
     };
+    // The roster to everyone who said hello (and was not kicked), whenever it changes.
+    auto sendParticipants = [&] {
+        Participants roster;
+        for (const auto& [pid, peer] : s.peers) // a std::map: increasing ids, as the wire wants
+            if (peer.hello && !peer.kicked)
+                roster.list.push_back({pid, peer.helloMsg.role, peer.sync, peer.helloMsg.name});
+        const std::vector<uint8_t> bytes = encodeMessage(roster);
+        for (const auto& [pid, peer] : s.peers)
+            if (peer.hello && !peer.kicked)
+                sendTo(peer.peer, Channel::Control, bytes);
+    };
     auto malformed = [&](NetPeer& p) {
         m_stats.countMalformed();
         report(peerId(p.peer), [](PeerReport& r) { ++r.malformed; });
@@ -570,6 +581,8 @@ void SessionServer::networkLoop() {
             m_malformedKicks.fetch_add(1);
             report(peerId(p.peer), [](PeerReport& r) { r.kicked = true; });
             enet_peer_disconnect(p.peer, uint32_t(RefuseReason::Malformed));
+            if (p.hello)
+                sendParticipants();
         }
     };
 
@@ -606,6 +619,7 @@ void SessionServer::networkLoop() {
             }
             w.volumeName = m_config.volumeName.substr(0, 256);
             sendTo(p.peer, Channel::Control, encodeMessage(w));
+            sendParticipants();
             SimEvent ev = makeEvent(SimEvent::Kind::Join, id);
             ev.camera = toCamera(h.view);
             ev.codec = h.codec;
@@ -657,11 +671,14 @@ void SessionServer::networkLoop() {
             SyncMode m;
             if (!decodeMessage(data, m))
                 return false;
+            const bool changed = p.sync != m.sync;
             p.sync = m.sync;
             report(id, [&](PeerReport& r) {
                 r.sync = m.sync;
                 ++r.syncSwitches;
             });
+            if (changed)
+                sendParticipants();
             SimEvent ev = makeEvent(SimEvent::Kind::Sync, id);
             ev.sync = m.sync;
             ev.volumeCodec = m.volumeCodec;
@@ -711,9 +728,14 @@ void SessionServer::networkLoop() {
             ev.peer->data = nullptr;
             if (id)
                 report(id, [](PeerReport& r) { r.disconnectedUs = steadyNowUs(); });
-            if (id && s.peers.erase(id)) {
+            auto gone = id ? s.peers.find(id) : s.peers.end();
+            if (gone != s.peers.end()) {
+                const bool listed = gone->second.hello && !gone->second.kicked;
+                s.peers.erase(gone);
                 s.push(makeEvent(SimEvent::Kind::Leave, id));
                 m_clientCount = s.peers.size();
+                if (listed)
+                    sendParticipants();
             }
             return;
         }

@@ -180,3 +180,32 @@ TEST(Protocol, VolumeUpdateRejectsBadBoxesSizesAndEncodings) {
     patched[boxAt + 12] = 3; // the codec byte after the box: out of range
     EXPECT_FALSE(decodeMessage(patched, back));
 }
+
+TEST(Protocol, ParticipantsRoundTripAndRejectUnorderedIdsAndOverlongLists) {
+    Participants p;
+    p.list = {{3, Role::Trainee, Sync::Dbi, "Ada"},
+              {7, Role::Instructor, Sync::Volume, "Dr. Cho"},
+              {9, Role::Trainee, Sync::Dbi, ""}};
+    auto bytes = encodeMessage(p);
+    Participants back;
+    ASSERT_TRUE(decodeMessage(bytes, back));
+    EXPECT_EQ(back.list, p.list);
+    Participants none;
+    ASSERT_TRUE(decodeMessage(encodeMessage(none), back));
+    EXPECT_TRUE(back.list.empty());
+
+    Participants unordered = p;
+    std::swap(unordered.list[0], unordered.list[1]);
+    EXPECT_FALSE(decodeMessage(encodeMessage(unordered), back));
+    Participants badRole = p;
+    auto raw = encodeMessage(badRole);
+    raw[5] = 2; // the first entry's role (type, count u16, id u16): no third role
+    EXPECT_FALSE(decodeMessage(raw, back));
+    // A count above the limit fails before any entry is read (nothing is allocated for it).
+    std::vector<uint8_t> big = {uint8_t(MessageType::Participants),
+                                uint8_t((kMaxParticipants + 1) & 0xff),
+                                uint8_t((kMaxParticipants + 1) >> 8)};
+    EXPECT_FALSE(decodeMessage(big, back));
+    for (size_t n = 1; n < bytes.size(); ++n)
+        EXPECT_FALSE(decodeMessage(std::span(bytes.data(), n), back)) << n;
+}

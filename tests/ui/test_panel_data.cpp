@@ -1,6 +1,7 @@
 // The panels' data and the generated meshes, without GL.
 #include "ui/mesh.h"
 #include "ui/panel_data.h"
+#include "ui/panels.h"
 
 #include "libsim/skull.h"
 #include "libsim/volume.h"
@@ -131,4 +132,13 @@ TEST(ParticipantForces, OneHistoryPerParticipantFromNewModelsOnly) {
     EXPECT_EQ(p.byClient.at(2).server.size(), 1u);
     EXPECT_EQ(p.update(1.6, models), 0);
     EXPECT_EQ(p.byClient.count(5), 0u);
+}
+
+TEST(Panels, ParticipantsAreNamedFromTheRosterOrByTheirId) {
+    std::map<uint16_t, net::ParticipantInfo> roster;
+    roster[3] = {3, net::Role::Instructor, net::Sync::Dbi, "Dr. Cho"};
+    roster[4] = {4, net::Role::Trainee, net::Sync::Volume, ""};
+    EXPECT_EQ(ui::participantName(roster, 3), "Dr. Cho");
+    EXPECT_EQ(ui::participantName(roster, 4), "client 4") << "no name given";
+    EXPECT_EQ(ui::participantName(roster, 9), "client 9") << "not listed yet";
 }

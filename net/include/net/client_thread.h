@@ -80,6 +80,8 @@ struct ClientSnapshot {
     bool hasFullImage = false;
     bool waitingForView = false; // a requested view has not arrived in full yet
     std::map<uint16_t, ToolState> others;
+    // Everyone in the session (this client included) by client id: names, roles, designs.
+    std::map<uint16_t, ParticipantInfo> participants;
     std::optional<HapticModel> hapticModel; // latest force model (when the client offers it)
     uint64_t hapticModels = 0;
     // [Instructor] the newest relayed force model of every other participant, by client id.

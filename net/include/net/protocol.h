@@ -9,6 +9,7 @@
 #include <glm/mat3x3.hpp>
 #include <glm/vec3.hpp>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <span>
@@ -19,8 +20,8 @@ namespace trephine::net {
 
 // Travels in ENet's connect data; the server refuses other versions with kRefuseVersion.
 // 2: SyncMode and VolumeUpdate (the replicated-volume baseline); stage times in ImageUpdate;
-// the volume codec in the hello.
-inline constexpr uint32_t kProtocolVersion = 2;
+// the volume codec in the hello. 3: Participants (who is in the session, by name and role).
+inline constexpr uint32_t kProtocolVersion = 3;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
 enum class RefuseReason : uint32_t {
@@ -35,6 +36,8 @@ std::string refuseReasonText(uint32_t disconnectData);
 
 inline constexpr uint16_t kMaxWindowSize = 4096;
 inline constexpr size_t kMaxNameLength = 64;
+// The most entries a Participants message may hold (the server's --max-clients is far below).
+inline constexpr uint16_t kMaxParticipants = 1024;
 inline constexpr size_t kMaxPayloadBytes = 64u * 1024u * 1024u;
 inline constexpr uint16_t kMaxVolumeDim = 4096; // as the welcome's range
 // The largest uncompressed volume layout a VolumeUpdate may announce (density + material bytes of
@@ -316,6 +319,48 @@ struct VolumeUpdate {
                s.ranged(rawBytes, uint32_t(1), kMaxVolumeRawBytes) &&
                uint64_t(rawBytes) == voxelCount() * (materials ? 2u : 1u) &&
                (full ? codec != Codec::Raw : true) && s.blob(payload, kMaxPayloadBytes);
+    }
+};
+
+// One participant of the session as the server knows it from its hello.
+struct ParticipantInfo {
+    uint16_t clientId = 0;
+    Role role = Role::Trainee;
+    Sync sync = Sync::Dbi; // the design feeding its picture (the hello's, then its SyncMode)
+    std::string name;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.ranged(clientId, uint16_t(1), uint16_t(UINT16_MAX)) &&
+               s.ranged(role, Role::Trainee, Role::Instructor) &&
+               s.ranged(sync, Sync::Dbi, Sync::Volume) && s.string(name, kMaxNameLength);
+    }
+    bool operator==(const ParticipantInfo&) const = default;
+};
+
+// Server -> client (Channel::Control, reliable): everyone in the session who has said hello, the
+// receiver included, in increasing client id. Sent whole whenever it changes (a hello, a leave, a
+// sync switch), so the newest one is the roster; a client forgets the tools and force models of
+// ids it no longer lists.
+struct Participants {
+    static constexpr MessageType kType = MessageType::Participants;
+    std::vector<ParticipantInfo> list;
+
+    template <typename S>
+    bool serialize(S& s) {
+        uint16_t count = uint16_t(std::min<size_t>(list.size(), kMaxParticipants));
+        if (!s.ranged(count, uint16_t(0), kMaxParticipants))
+            return false;
+        if constexpr (S::kReading)
+            list.assign(count, ParticipantInfo{});
+        for (uint16_t i = 0; i < count; ++i) {
+            if (!list[i].serialize(s))
+                return false;
+            // Strictly increasing ids: no duplicates, and one order for every receiver.
+            if (i > 0 && list[i].clientId <= list[i - 1].clientId)
+                return false;
+        }
+        return true;
     }
 };
 

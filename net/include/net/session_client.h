@@ -103,6 +103,11 @@ public:
 
     // The latest relayed tool of every other participant, by client id.
     const std::map<uint16_t, ToolState>& others() const { return m_others; }
+    // Everyone in the session, this client included, by client id, as the server's newest
+    // Participants message listed them (empty before the first).
+    const std::map<uint16_t, ParticipantInfo>& participants() const { return m_participants; }
+    // Participants messages received.
+    uint64_t rostersReceived() const { return m_rosters; }
     uint64_t relaysReceived() const { return m_relays; }
     uint64_t updatesApplied() const { return m_updatesApplied; }
     uint64_t fullUpdates() const { return m_fullUpdates; }
@@ -186,6 +191,8 @@ private:
     bool m_hasFull = false;
 
     std::map<uint16_t, ToolState> m_others;
+    std::map<uint16_t, ParticipantInfo> m_participants;
+    uint64_t m_rosters = 0;
     uint32_t m_toolSequence = 0;
     uint32_t m_lastSequence = 0;
     HapticCallback m_hapticCallback;

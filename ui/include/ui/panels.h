@@ -6,6 +6,7 @@
 #include "net/client_thread.h"
 #include "ui/panel_data.h"
 
+#include <map>
 #include <string>
 
 namespace trephine::ui {
@@ -27,7 +28,8 @@ void drawDirtyBoxOverlay(const DirtyBoxPanelState& state, const DirtyBoxHistory&
 // (loopRateHz: the rate the loop achieves). For an instructor (`participants` not null), one more
 // plot per other participant from the server's relayed models, named and coloured as its tool.
 void drawForcesPanel(const ForceHistory& forces, double loopRateHz,
-                     const ParticipantForces* participants = nullptr);
+                     const ParticipantForces* participants = nullptr,
+                     const std::map<uint16_t, net::ParticipantInfo>* roster = nullptr);
 
 // [Session] role, participants, tool, burr size, speed, connection state.
 struct ToolControls {
@@ -58,5 +60,8 @@ bool drawComparisonPanel(SyncDesign& design, const ComparisonHistory& history, d
 
 // Distinct colours for participants (index 0: this client).
 glm::vec4 participantColor(int index);
+// How the window names participant `id`: the name from its hello as the server's roster lists it
+// ("client N" when the roster does not list it yet, or it gave no name).
+std::string participantName(const std::map<uint16_t, net::ParticipantInfo>& roster, uint16_t id);
 
 } // namespace trephine::ui
