@@ -9,6 +9,7 @@
 
 #include <cstdlib>
 #include <mutex>
+#include <utility>
 
 namespace trephine::net {
 
@@ -109,6 +110,13 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         if (!decodeMessage(data, w))
             return false;
         m_welcome = w;
+        // Voxels that overtook the welcome on their own channel: place them now, in order.
+        for (VolumeUpdate& early : std::exchange(m_earlyVolume, {}))
+            if (!applyVolume(early, nowUs)) {
+                ++m_rejected;
+                m_stats.countMalformed();
+            }
+        m_earlyVolumeBytes = 0;
         return true;
     }
     case MessageType::Participants: {
@@ -150,6 +158,17 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         VolumeUpdate u;
         if (!decodeMessage(data, u))
             return false;
+        if (!m_welcome) {
+            // The volume channel is not ordered with the control channel: under loss a join's
+            // full volume can arrive before the welcome that gives its dims. Keep a few until
+            // the welcome comes (bounded: a server that floods them before welcoming is wrong).
+            if (m_earlyVolume.size() >= kMaxEarlyVolumeUpdates ||
+                m_earlyVolumeBytes + u.payload.size() > kMaxEarlyVolumeBytes)
+                return false;
+            m_earlyVolumeBytes += u.payload.size();
+            m_earlyVolume.push_back(std::move(u));
+            return true;
+        }
         if (!applyVolume(u, nowUs)) {
             ++m_rejected;
             return false;

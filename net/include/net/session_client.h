@@ -192,6 +192,12 @@ private:
 
     std::map<uint16_t, ToolState> m_others;
     std::map<uint16_t, ParticipantInfo> m_participants;
+    // Volume updates that arrived before the welcome (another channel may overtake it), applied
+    // when it comes; at most this many, of at most this many payload bytes in all.
+    static constexpr size_t kMaxEarlyVolumeUpdates = 8;
+    static constexpr size_t kMaxEarlyVolumeBytes = 2 * kMaxPayloadBytes;
+    std::vector<VolumeUpdate> m_earlyVolume;
+    size_t m_earlyVolumeBytes = 0;
     uint64_t m_rosters = 0;
     uint32_t m_toolSequence = 0;
     uint32_t m_lastSequence = 0;
