@@ -429,11 +429,17 @@ inline float boxExit(const Frame& f, const Ray& r, glm::ivec3 b, int radius) {
 
 struct March {
     bool hit = false;
-    float t = 0.0f;   // refined hit distance, mm
+    float t = 0.0f;   // refined hit distance, mm (set by refineHit)
     float tIn = 0.0f; // first sample inside
     // Index of the first sample inside (tIn = kIn * dt), or HitCache::kNever when no sample of the
     // ray is inside.
     int32_t kIn = HitCache::kNever;
+    float value = 0.0f;  // the density at the first sample inside
+    bool refine = false; // a sample before it lies in the ray's sampled span (kIn > kStart)
+    // The last sample below the iso-value whose density the march computed (by the same arithmetic
+    // as sampleDensity, so reusing it for the refinement changes no bit), INT_MIN if none.
+    int lastK = INT_MIN;
+    float lastValue = 0.0f;
 };
 
 // Samples sit at t = k * dt from the eye for integer k, whatever is skipped. A brick at Chebyshev
@@ -450,7 +456,7 @@ struct March {
 // `kResume` is a lower bound on the index of the first sample inside (a hit cache's entry; 0 when
 // unknown, kNever when no sample can be inside): marching starts there, which changes nothing but
 // the time taken.
-March march(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume) {
+March marchToSurface(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume) {
     March m;
     // Samples live where some trilinear corner is inside the volume: voxel coordinates [-1, n].
     float t0 = float(std::max(r.tNear, 0.0)), t1 = float(r.tFar);
@@ -480,7 +486,6 @@ March march(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume) {
         return m;
     const float dt = f.dt;
     const float invDt = 1.0f / dt;
-    const float iso = float(kSurfaceDensity);
     const int kStart = int(std::ceil(t0 / dt));
     const int kEnd = int(std::floor(t1 / dt));
 
@@ -555,24 +560,40 @@ March march(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume) {
     m.kIn = k;
     m.tIn = float(k) * dt;
     m.t = m.tIn;
-    if (k > kStart) {
-        // Refine between the last sample outside and the first inside: a secant (regula falsi)
-        // step, one sample there to narrow the bracket, and a final secant. The outside sample is
-        // recomputed unless the march just computed it, so skipping it changes nothing. (Bisection
-        // costs three more samples and as many mispredicted branches, for accuracy the depth test
-        // does not need.)
-        float ta = float(k - 1) * dt, tb = m.tIn;
-        float fa = (lastK == k - 1 ? lastValue : sampleDensity(f, samplePos4(f, r, ta))) - iso;
-        float fb = value - iso;
-        for (int i = 0; i < kRefineSteps; ++i) {
-            float tm = ta + (tb - ta) * (fa / (fa - fb));
-            float fm = sampleDensity(f, samplePos4(f, r, tm)) - iso;
-            bool in = fm >= 0.0f;
-            ta = in ? ta : tm, fa = in ? fa : fm;
-            tb = in ? tm : tb, fb = in ? fm : fb;
-        }
-        m.t = ta + (tb - ta) * (fa / (fa - fb));
+    m.value = value;
+    m.refine = k > kStart;
+    m.lastK = lastK;
+    m.lastValue = lastValue;
+    return m;
+}
+
+// Refines a hit between the last sample outside and the first inside: a secant (regula falsi)
+// step, one sample there to narrow the bracket, and a final secant. The outside sample is
+// recomputed unless the march just computed it, so skipping it changes nothing. (Bisection costs
+// three more samples and as many mispredicted branches, for accuracy the depth test does not
+// need.) refineHits does the same for eight hits at once, lane by lane the same operations.
+void refineHit(const Frame& f, const Ray& r, March& m) {
+    if (!m.refine)
+        return;
+    const float iso = float(kSurfaceDensity);
+    const int k = m.kIn;
+    float ta = float(k - 1) * f.dt, tb = m.tIn;
+    float fa = (m.lastK == k - 1 ? m.lastValue : sampleDensity(f, samplePos4(f, r, ta))) - iso;
+    float fb = m.value - iso;
+    for (int i = 0; i < kRefineSteps; ++i) {
+        float tm = ta + (tb - ta) * (fa / (fa - fb));
+        float fm = sampleDensity(f, samplePos4(f, r, tm)) - iso;
+        bool in = fm >= 0.0f;
+        ta = in ? ta : tm, fa = in ? fa : fm;
+        tb = in ? tm : tb, fb = in ? fm : fb;
     }
+    m.t = ta + (tb - ta) * (fa / (fa - fb));
+}
+
+March march(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume) {
+    March m = marchToSurface(f, r, tSkipTo, kResume);
+    if (m.hit)
+        refineHit(f, r, m);
     return m;
 }
 
@@ -762,19 +783,173 @@ struct Hit {
 
 // `resume`: in, a lower bound on the first inside sample's index (see march); out, that index.
 // False when the ray meets no bone.
+// The unit normal from a gradient in density per voxel: lane by lane the vec3 arithmetic (glm's
+// length and division), bit for bit. Pointing out of the bone; the ray's reverse where flat.
+inline v4sf hitNormal(const Frame& f, const Ray& r, v4sf gradVoxel) {
+    const v4sf grad = gradVoxel * f.invSpacing4; // density per mm
+    const float len = std::sqrt(grad[0] * grad[0] + grad[1] * grad[1] + grad[2] * grad[2]);
+    return len > 0.0f ? -grad / len : -r.dir4;
+}
+
+// Normal and material of a refined hit.
+inline void finishHit(const Frame& f, const Ray& r, const March& m, Hit& h) {
+    h.t = m.t;
+    const v4sf p = samplePos4(f, r, m.t);
+    h.normal = hitNormal(f, r, gradientAt(f, p, floorInt4(p)));
+    h.material = hitMaterial(f, p, samplePos4(f, r, m.tIn));
+}
+
 bool traceRay(const Frame& f, const Ray& r, float tSkipTo, int32_t& resume, Hit& h) {
     March m = march(f, r, tSkipTo, resume);
     resume = m.kIn;
     if (!m.hit)
         return false;
-    h.t = m.t;
-    const v4sf p = samplePos4(f, r, m.t);
-    // Density per mm; lane by lane the vec3 arithmetic (glm's length and division), bit for bit.
-    const v4sf grad = gradientAt(f, p, floorInt4(p)) * f.invSpacing4;
-    const float len = std::sqrt(grad[0] * grad[0] + grad[1] * grad[1] + grad[2] * grad[2]);
-    h.normal = len > 0.0f ? -grad / len : -r.dir4;
-    h.material = hitMaterial(f, p, samplePos4(f, r, m.tIn));
+    finishHit(f, r, m, h);
     return true;
+}
+
+// [SECTION] Hits eight at a time ------------------------------------------------------------------
+//
+// After the march, what is left of a hit (the refinement's two samples, the 32-voxel gradient) is
+// the same arithmetic for every ray, so the render loop marches a block's rays one by one and then
+// refines and differentiates their hits eight at a time, one ray per lane of GCC's 8-wide vectors
+// (two SSE2 registers on baseline x86-64). Lane by lane these are the scalar functions' IEEE
+// operations in the scalar order (no FMA on baseline x86-64), so the pixels are bit for bit
+// those of refineHit + finishHit, which castRay and RenderOptions::batchHits = false still use.
+// Hits whose samples or shading stencil reach the volume's faces (the border paths) take the
+// scalar functions.
+
+// Internal functions only, so the ABI of 32-byte vector arguments without AVX does not matter.
+#pragma GCC diagnostic ignored "-Wpsabi"
+typedef float v8sf __attribute__((vector_size(32)));
+typedef int32_t v8si __attribute__((vector_size(32)));
+typedef uint32_t v8su __attribute__((vector_size(32)));
+
+struct PendingHit {
+    Ray r;
+    March m;
+    int ox, oy; // output pixel
+};
+
+// Eight samples whose cells lie inside the volume: trilinearCorners lane by lane.
+inline v8sf sample8(const Frame& f, v8sf px, v8sf py, v8sf pz) {
+    const v8si ix = __builtin_convertvector(px + 16.0f, v8si) - 16;
+    const v8si iy = __builtin_convertvector(py + 16.0f, v8si) - 16;
+    const v8si iz = __builtin_convertvector(pz + 16.0f, v8si) - 16;
+    const v8sf tx = px - __builtin_convertvector(ix, v8sf);
+    const v8sf ty = py - __builtin_convertvector(iy, v8sf);
+    const v8sf tz = pz - __builtin_convertvector(iz, v8sf);
+    v8su r0, r1, r2, r3; // rows (y, z) = (0, 0), (1, 0), (0, 1), (1, 1): x = 0 low, x = 1 high
+    for (int l = 0; l < 8; ++l) {
+        const uint8_t* b = f.density + ix[l] + f.sy * iy[l] + f.sz * iz[l];
+        uint16_t a0, a1, a2, a3;
+        std::memcpy(&a0, b, 2);
+        std::memcpy(&a1, b + f.sy, 2);
+        std::memcpy(&a2, b + f.sz, 2);
+        std::memcpy(&a3, b + f.sz + f.sy, 2);
+        r0[l] = a0, r1[l] = a1, r2[l] = a2, r3[l] = a3;
+    }
+    auto lo = [](v8su r) { return __builtin_convertvector(v8si(r & 255u), v8sf); };
+    auto hi = [](v8su r) { return __builtin_convertvector(v8si(r >> 8), v8sf); };
+    const v8sf ux = 1.0f - tx, uy = 1.0f - ty, uz = 1.0f - tz;
+    const v8sf c00 = ux * lo(r0) + tx * hi(r0), c10 = ux * lo(r1) + tx * hi(r1);
+    const v8sf c01 = ux * lo(r2) + tx * hi(r2), c11 = ux * lo(r3) + tx * hi(r3);
+    const v8sf c0 = uy * c00 + ty * c10, c1 = uy * c01 + ty * c11;
+    return uz * c0 + tz * c1;
+}
+
+// gradientAt of eight positions whose stencil lies inside the volume, lane by lane; writes the
+// gradient (per voxel) of lane l to g[l].
+inline void gradient8(const Frame& f, v8sf px, v8sf py, v8sf pz, v4sf g[8]) {
+    const v8si ix = __builtin_convertvector(px + 16.0f, v8si) - 16;
+    const v8si iy = __builtin_convertvector(py + 16.0f, v8si) - 16;
+    const v8si iz = __builtin_convertvector(pz + 16.0f, v8si) - 16;
+    const v8sf tx = px - __builtin_convertvector(ix, v8sf);
+    const v8sf ty = py - __builtin_convertvector(iy, v8sf);
+    const v8sf tz = pz - __builtin_convertvector(iz, v8sf);
+    // Rows of x = ix - 1 .. ix + 2 (byte k is x = ix - 1 + k) at (y, z) offsets: R[y + 1][z + 1].
+    v8su R[4][4];
+    static constexpr int kRows[12][2] = {{0, 0},  {1, 0},  {0, 1}, {1, 1}, {2, 0},  {2, 1},
+                                         {-1, 0}, {-1, 1}, {0, 2}, {1, 2}, {0, -1}, {1, -1}};
+    for (int l = 0; l < 8; ++l) {
+        const uint8_t* b = f.density + (ix[l] - 1) + f.sy * iy[l] + f.sz * iz[l];
+        for (const auto& yz : kRows) {
+            uint32_t v;
+            std::memcpy(&v, b + f.sy * yz[0] + f.sz * yz[1], 4);
+            R[yz[0] + 1][yz[1] + 1][l] = v;
+        }
+    }
+    auto byteOf = [](v8su r, int k) { return v8si((r >> (8 * k)) & 255u); };
+    auto half = [](v8si d) { return __builtin_convertvector(d, v8sf) * 0.5f; };
+    auto lerp8 = [](v8sf a, v8sf b, v8sf t) { return a + t * (b - a); };
+    // Per corner (y, z) of the cell: the x lerp of the differences at x = 0 and x = 1.
+    v8sf gx[4], gy[4], gz[4];
+    for (int c = 0; c < 4; ++c) {
+        const int y = (c & 1) + 1, z = (c >> 1) + 1;
+        const v8su r = R[y][z];
+        const v8sf ax = half(byteOf(r, 2) - byteOf(r, 0)), bx = half(byteOf(r, 3) - byteOf(r, 1));
+        const v8sf ay = half(byteOf(R[y + 1][z], 1) - byteOf(R[y - 1][z], 1));
+        const v8sf by = half(byteOf(R[y + 1][z], 2) - byteOf(R[y - 1][z], 2));
+        const v8sf az = half(byteOf(R[y][z + 1], 1) - byteOf(R[y][z - 1], 1));
+        const v8sf bz = half(byteOf(R[y][z + 1], 2) - byteOf(R[y][z - 1], 2));
+        gx[c] = lerp8(ax, bx, tx), gy[c] = lerp8(ay, by, tx), gz[c] = lerp8(az, bz, tx);
+    }
+    // Then the y and z lerps of the corners' vectors, component by component.
+    auto yz = [&](const v8sf* v) {
+        const v8sf e0 = lerp8(v[0], v[1], ty), e1 = lerp8(v[2], v[3], ty);
+        return lerp8(e0, e1, tz);
+    };
+    const v8sf rx = yz(gx), ry = yz(gy), rz = yz(gz);
+    for (int l = 0; l < 8; ++l)
+        g[l] = v4sf{rx[l], ry[l], rz[l], 0.0f};
+}
+
+// Whether every sample and the shading stencil of hit `h` stay off the volume's faces, so that
+// the fast paths (sample8, gradient8) hold: the cells of the samples at kIn - 1 and kIn and every
+// position between them (the refinement's) have their lowest voxel in [1, n - 3] on each axis.
+inline bool hitInside(const Frame& f, const PendingHit& h) {
+    auto inside = [&](float t) {
+        const v4si i = floorInt4(samplePos4(f, h.r, t));
+        return i[0] >= 1 && i[1] >= 1 && i[2] >= 1 && i[0] + 2 < f.n.x && i[1] + 2 < f.n.y &&
+               i[2] + 2 < f.n.z;
+    };
+    return inside(h.m.tIn) && (!h.m.refine || inside(float(h.m.kIn - 1) * f.dt));
+}
+
+// refineHit then the gradient of finishHit for up to eight hits (all hitInside), lane by lane;
+// writes each hit's refined t into its March and its gradient (per voxel) to g.
+void refineAndDifferentiate8(const Frame& f, PendingHit* const* hits, int count, v4sf g[8]) {
+    v8sf ox, oy, oz, dx, dy, dz, tIn, value, ta;
+    v8si refine;
+    for (int l = 0; l < 8; ++l) {
+        const PendingHit& h = *hits[l < count ? l : 0]; // lanes past count repeat the first
+        ox[l] = f.origin.x, oy[l] = f.origin.y, oz[l] = f.origin.z;
+        dx[l] = h.r.dv.x, dy[l] = h.r.dv.y, dz[l] = h.r.dv.z;
+        tIn[l] = h.m.tIn;
+        value[l] = h.m.value;
+        // A hit at the first sample of the ray's span is not refined: its lanes bracket [tIn, tIn]
+        // with fa < 0, so every sample below stays at tIn (inside the volume, never NaN) and is
+        // dropped at the end.
+        ta[l] = h.m.refine ? float(h.m.kIn - 1) * f.dt : h.m.tIn;
+        refine[l] = h.m.refine ? -1 : 0;
+    }
+    const float iso = float(kSurfaceDensity);
+    v8sf tb = tIn;
+    v8sf fa = sample8(f, ox + ta * dx, oy + ta * dy, oz + ta * dz) - iso;
+    const v8sf minusOne = v8sf{} - 1.0f;
+    fa = refine ? fa : minusOne;
+    v8sf fb = value - iso;
+    for (int i = 0; i < kRefineSteps; ++i) {
+        const v8sf tm = ta + (tb - ta) * (fa / (fa - fb));
+        const v8sf fm = sample8(f, ox + tm * dx, oy + tm * dy, oz + tm * dz) - iso;
+        const v8si in = fm >= 0.0f;
+        ta = in ? ta : tm, fa = in ? fa : fm;
+        tb = in ? tm : tb, fb = in ? fm : fb;
+    }
+    const v8sf t = refine ? ta + (tb - ta) * (fa / (fa - fb)) : tIn;
+    for (int l = 0; l < count; ++l)
+        hits[l]->m.t = t[l];
+    gradient8(f, ox + t * dx, oy + t * dy, oz + t * dz, g);
 }
 
 // windowDepth(viewProj, eye + t dir), the same double arithmetic inlined.
@@ -953,23 +1128,62 @@ void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out,
                 float tSkipTo = f.distance && kMin != HitCache::kNever
                                     ? coneSkipTo(f, bx, by, bx1, by1, float(kMin) * f.dt)
                                     : 0.0f;
+                // March the block's rays one by one; refine and shade their hits eight at a time.
+                PendingHit pending[kConeBlock * kConeBlock];
+                int npending = 0;
                 for (int y = by; y < by1; ++y)
                     for (int x = bx; x < bx1; ++x) {
                         int ox = x - rect.x + outX, oy = y - rect.y + outY;
                         int32_t k = 0;
                         int32_t* slot = resume ? &resume[size_t(y) * stride + size_t(x)] : &k;
                         known += *slot != 0;
-                        const Ray r = pixelRay(f, x, y);
-                        Hit h;
-                        uint8_t* rgba = out.color(ox, oy);
-                        if (traceRay(f, r, tSkipTo, *slot, h)) {
-                            shadePixel(h, r, rgba);
-                            out.depth()[out.index(ox, oy)] = hitDepth(f, r, h.t);
+                        PendingHit& h = pending[npending];
+                        h.r = pixelRay(f, x, y);
+                        h.m = marchToSurface(f, h.r, tSkipTo, *slot);
+                        *slot = h.m.kIn;
+                        if (h.m.hit) {
+                            h.ox = ox, h.oy = oy;
+                            ++npending;
                         } else {
-                            std::memcpy(rgba, kBackgroundRgba, 4);
+                            std::memcpy(out.color(ox, oy), kBackgroundRgba, 4);
                             out.depth()[out.index(ox, oy)] = kBackgroundDepth;
                         }
                     }
+                auto write = [&](const PendingHit& p, const Hit& hit) {
+                    shadePixel(hit, p.r, out.color(p.ox, p.oy));
+                    out.depth()[out.index(p.ox, p.oy)] = hitDepth(f, p.r, hit.t);
+                };
+                PendingHit* batch[8];
+                int nbatch = 0;
+                auto flush = [&] {
+                    v4sf g[8];
+                    refineAndDifferentiate8(f, batch, nbatch, g);
+                    for (int l = 0; l < nbatch; ++l) {
+                        const PendingHit& p = *batch[l];
+                        Hit hit;
+                        hit.t = p.m.t;
+                        hit.normal = hitNormal(f, p.r, g[l]);
+                        hit.material =
+                            hitMaterial(f, samplePos4(f, p.r, p.m.t), samplePos4(f, p.r, p.m.tIn));
+                        write(p, hit);
+                    }
+                    nbatch = 0;
+                };
+                for (int i = 0; i < npending; ++i) {
+                    PendingHit& p = pending[i];
+                    if (m_options.batchHits && hitInside(f, p)) {
+                        batch[nbatch++] = &p;
+                        if (nbatch == 8)
+                            flush();
+                        continue;
+                    }
+                    refineHit(f, p.r, p.m);
+                    Hit hit;
+                    finishHit(f, p.r, p.m, hit);
+                    write(p, hit);
+                }
+                if (nbatch > 0)
+                    flush();
             }
         if (resume)
             resumed.fetch_add(known, std::memory_order_relaxed);

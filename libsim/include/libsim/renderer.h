@@ -22,6 +22,8 @@ struct RenderOptions {
     float stepVoxels = 0.5f;
     bool skipEmpty = true; // empty-space skipping with the brick grid (bit-identical either way)
     int tileSize = 16;     // pixels per tile edge handed to one worker (claimed dynamically)
+    // Refine and differentiate hits eight at a time in vectors (bit-identical either way).
+    bool batchHits = true;
 };
 
 // Shading uses the density gradient from central differences at the eight voxels around the hit,
