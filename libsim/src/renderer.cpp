@@ -456,8 +456,27 @@ struct March {
 // `kResume` is a lower bound on the index of the first sample inside (a hit cache's entry; 0 when
 // unknown, kNever when no sample can be inside): marching starts there, which changes nothing but
 // the time taken.
-March marchToSurface(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume) {
+// `resumeInside`: the hit cache saw sample kResume inside last time, and after the first sample of
+// the ray's span (HitCache::m_inside). Then, unless the cone proved more, the march starts there,
+// and if that sample is still inside (erosion left it) it is the first inside sample: the span
+// (slabs, divisions) is not needed. insideSample decides exactly as the march's brick and cell
+// tests would.
+March marchToSurface(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume,
+                     bool resumeInside = false) {
     March m;
+    if (resumeInside && tSkipTo * (1.0f / f.dt) < float(kResume)) {
+        const v4sf p = samplePos4(f, r, float(kResume) * f.dt);
+        float value;
+        if (insideSample(f, p, floorInt4(p), value)) {
+            m.hit = true;
+            m.kIn = kResume;
+            m.tIn = float(kResume) * f.dt;
+            m.t = m.tIn;
+            m.value = value;
+            m.refine = true;
+            return m;
+        }
+    }
     // Samples live where some trilinear corner is inside the volume: voxel coordinates [-1, n].
     float t0 = float(std::max(r.tNear, 0.0)), t1 = float(r.tFar);
     if (r.dv.x != 0.0f && r.dv.y != 0.0f && r.dv.z != 0.0f) {
@@ -1015,6 +1034,7 @@ uint64_t nextGeneration() {
 void HitCache::clear() {
     m_generation = 0;
     m_resume.clear();
+    m_inside.clear();
     m_resumed = 0;
 }
 
@@ -1084,6 +1104,7 @@ void Renderer::render(const Camera& camera, const PixelRect& rect, Dbi& frame,
         cache->m_stepVoxels = m_options.stepVoxels;
         cache->m_spacing = m_volume->spacing();
         cache->m_resume.assign(size_t(camera.width) * size_t(camera.height), 0);
+        cache->m_inside.assign(size_t(camera.width) * size_t(camera.height), 0);
         cache->m_resumed = 0;
     }
     PixelRect r = intersect(rect, frame.bounds());
@@ -1106,6 +1127,7 @@ void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out,
     const int tile = std::max(4, m_options.tileSize);
     const int tilesX = (rect.w + tile - 1) / tile, tilesY = (rect.h + tile - 1) / tile;
     int32_t* resume = cache ? cache->m_resume.data() : nullptr;
+    uint8_t* inside = cache ? cache->m_inside.data() : nullptr;
     const size_t stride = size_t(camera.width);
     std::atomic<int64_t> resumed{0};
     auto renderTile = [&](int i) {
@@ -1135,12 +1157,16 @@ void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out,
                     for (int x = bx; x < bx1; ++x) {
                         int ox = x - rect.x + outX, oy = y - rect.y + outY;
                         int32_t k = 0;
-                        int32_t* slot = resume ? &resume[size_t(y) * stride + size_t(x)] : &k;
+                        uint8_t notInside = 0;
+                        const size_t at = size_t(y) * stride + size_t(x);
+                        int32_t* slot = resume ? &resume[at] : &k;
+                        uint8_t* wasInside = resume ? &inside[at] : &notInside;
                         known += *slot != 0;
                         PendingHit& h = pending[npending];
                         h.r = pixelRay(f, x, y);
-                        h.m = marchToSurface(f, h.r, tSkipTo, *slot);
+                        h.m = marchToSurface(f, h.r, tSkipTo, *slot, *wasInside != 0);
                         *slot = h.m.kIn;
+                        *wasInside = h.m.hit && h.m.refine;
                         if (h.m.hit) {
                             h.ox = ox, h.oy = oy;
                             ++npending;

@@ -81,6 +81,9 @@ private:
     float m_stepVoxels = 0.0f;
     glm::vec3 m_spacing{0.0f};
     std::vector<int32_t> m_resume; // per pixel, row 0 at the bottom
+    // Per pixel: 1 when m_resume is a hit after the first sample of the ray's span (so a re-render
+    // that finds it still inside needs neither the span nor a brick look-up).
+    std::vector<uint8_t> m_inside;
     int64_t m_resumed = 0;
 };
 
