@@ -11,6 +11,7 @@
 #include <cmath>
 #include <glm/common.hpp>
 #include <glm/geometric.hpp>
+#include <glm/gtc/quaternion.hpp>
 #include <glm/mat3x3.hpp>
 
 namespace trephine {
@@ -377,6 +378,24 @@ DrillResult Driller::drill(Volume& volume, const ToolPose& pose, float speed, fl
                   decrement, res);
     }
     return res;
+}
+
+std::vector<ToolPose> sweepPoses(const ToolPose& from, const ToolPose& to, float maxStepMm,
+                                 float maxSweepMm) {
+    const float distance = glm::length(to.position - from.position);
+    if (!std::isfinite(distance) || !(maxStepMm > 0.0f) || distance <= maxStepMm ||
+        distance > maxSweepMm)
+        return {to};
+    const int steps = std::min(kMaxSweepSteps, int(std::ceil(distance / maxStepMm)));
+    std::vector<ToolPose> poses;
+    poses.reserve(size_t(steps));
+    for (int i = 1; i < steps; ++i) {
+        const float a = float(i) / float(steps);
+        poses.push_back({glm::mix(from.position, to.position, a),
+                         glm::slerp(from.orientation, to.orientation, a)});
+    }
+    poses.push_back(to); // exactly the sampled pose
+    return poses;
 }
 
 } // namespace trephine

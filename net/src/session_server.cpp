@@ -110,6 +110,8 @@ struct SimClient {
     Sync sync = Sync::Dbi;
     Codec volumeCodec = Codec::Raw;
     std::optional<Driller> driller;
+    ToolPose lastPose;         // of the newest applied tool state
+    bool lastDrilling = false; // it drilled (with the driller there is now)
     bool hasTool = false;
     uint32_t lastSequence = 0;
     uint64_t lastClientUs = 0;
@@ -929,8 +931,10 @@ void SessionServer::simulationLoop() {
                     break;
                 ToolShape shape = shapeOf(t);
                 if (!c.driller || c.driller->shape().kind != shape.kind ||
-                    c.driller->shape().diameterMm != shape.diameterMm)
+                    c.driller->shape().diameterMm != shape.diameterMm) {
                     c.driller.emplace(shape);
+                    c.lastDrilling = false; // another tool: nothing to sweep from
+                }
                 // The step is the time between the client's own timestamps (time passed in).
                 float dt = 0.0f;
                 if (c.hasTool && t.clientTimeUs > c.lastClientUs)
@@ -940,20 +944,39 @@ void SessionServer::simulationLoop() {
                 c.lastSequence = t.sequence;
                 c.lastClientUs = t.clientTimeUs;
                 m_toolStatesApplied.fetch_add(1);
+                const ToolPose pose{t.position, t.orientation};
+                const ToolPose from = c.lastPose;
+                const bool sweep = c.lastDrilling;
+                c.lastPose = pose;
+                c.lastDrilling = t.drilling && t.speed > 0.0f;
                 if (!t.drilling || t.speed <= 0.0f || dt <= 0.0f)
                     break;
-                DrillResult r;
+                // The cutter moved from the last drilling pose to this one during dt: it sweeps
+                // the path (a quarter voxel a sub-step, dt shared out), so a fast stroke cuts a
+                // groove rather than dents at the sampled poses. The lock is taken per sub-step so
+                // that a haptic answer never waits for more than one.
+                const glm::vec3 spacing = s.volume.spacing(); // fixed at construction
+                const float quarterVoxel = 0.25f * std::min({spacing.x, spacing.y, spacing.z});
+                const std::vector<ToolPose> path =
+                    sweep ? sweepPoses(from, pose, quarterVoxel, m_config.maxSweepMm)
+                          : std::vector<ToolPose>{pose};
+                const float stepDt = dt / float(path.size());
                 uint64_t e0 = steadyNowUs();
-                {
-                    std::unique_lock write(s.volumeRw);
-                    r = c.driller->drill(s.volume, ToolPose{t.position, t.orientation}, t.speed,
-                                         dt);
+                bool any = false;
+                for (const ToolPose& p : path) {
+                    DrillResult r;
+                    {
+                        std::unique_lock write(s.volumeRw);
+                        r = c.driller->drill(s.volume, p, t.speed, stepDt);
+                    }
+                    if (!r.changed.empty()) {
+                        changed.merge(r.changed);
+                        any = true;
+                    }
                 }
                 erodeUs += steadyNowUs() - e0;
-                if (!r.changed.empty()) {
-                    changed.merge(r.changed);
+                if (any)
                     causeUs = causeUs ? std::min(causeUs, ev.arrivedUs) : ev.arrivedUs;
-                }
                 break;
             }
             }

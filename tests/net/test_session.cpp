@@ -393,3 +393,49 @@ TEST(Session, StopWritesSaveOnExitWithEveryAppliedDrilling) {
     EXPECT_NE(client.closeReason().find("shutting down"), std::string::npos);
     std::filesystem::remove(path);
 }
+
+// Two drilling tool states 6 mm apart: the server sweeps the burr along the path between them, so
+// the bone half-way is cut although neither sampled pose reaches it; after a pause in drilling the
+// next state is drilled where it is.
+TEST(Session, TheServerSweepsTheCutterBetweenDrillingToolStates) {
+    Volume sphere = makeSphere(48);
+    SessionServer server(sphere, testConfig("sphere:48"));
+    server.start();
+    ClientConfig cfg;
+    cfg.view = presetView(sphere, "top");
+    cfg.view.width = cfg.view.height = 32;
+    SessionClient client(cfg);
+    client.connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&client}));
+    const float top = sphereRadiusMm(48);
+    auto state = [&](uint32_t seq, float x, float y, bool drilling) {
+        ToolState t;
+        t.sequence = seq;
+        t.clientTimeUs = 1000000 + uint64_t(seq) * 20000;
+        t.toolKind = uint8_t(ToolKind::Burr);
+        t.diameterMm = 4.0f;
+        t.position = {x, y, top - 1.0f};
+        t.speed = 1.0f;
+        t.drilling = drilling;
+        return t;
+    };
+    auto cutAt = [&](const Volume& now, float x, float y) {
+        glm::ivec3 v = glm::ivec3(glm::round(sphere.toVoxel({x, y, top - 1.0f})));
+        return now.density(v.x, v.y, v.z) < sphere.density(v.x, v.y, v.z);
+    };
+    // A swept stroke along x at y = -5, then the drill lifted off, moved, and restarted at y = +5.
+    // One at a time: tool states are unsequenced, and a late one would be dropped (newest wins).
+    const ToolState states[] = {state(1, -3.0f, -5.0f, true), state(2, 3.0f, -5.0f, true),
+                                state(3, -3.0f, 5.0f, false), state(4, 3.0f, 5.0f, true)};
+    for (uint64_t i = 0; i < 4; ++i) {
+        client.sendToolState(states[i]);
+        ASSERT_TRUE(pumpUntil({&client}, [&] { return server.toolStatesApplied() == i + 1; }));
+    }
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return server.idle(); }));
+    const Volume now = server.volumeSnapshot();
+    EXPECT_TRUE(cutAt(now, 0.0f, -5.0f)) << "swept: the groove is continuous";
+    EXPECT_TRUE(cutAt(now, 3.0f, 5.0f)) << "drilled where it restarted";
+    EXPECT_FALSE(cutAt(now, 0.0f, 5.0f)) << "no sweep across a pause in drilling";
+    EXPECT_FALSE(cutAt(now, -3.0f, 5.0f)) << "nor where the drill was off";
+    server.stop();
+}

@@ -6,9 +6,11 @@
 #include "libsim/skull.h"
 #include "libsim/tool.h"
 
+#include <algorithm>
 #include <cmath>
 #include <glm/geometric.hpp>
 #include <glm/gtc/quaternion.hpp>
+#include <glm/gtx/quaternion.hpp>
 #include <gtest/gtest.h>
 #include <limits>
 
@@ -413,4 +415,57 @@ TEST(Drill, PosesFromFarAwayOrNotFiniteTouchNothing) {
         EXPECT_TRUE(r.changed.empty());
     }
     EXPECT_TRUE(v == original);
+}
+
+// [SECTION] Sweeping between sampled poses
+
+TEST(Drill, SweepPosesCutAMoveIntoEqualStepsEndingAtTheTarget) {
+    ToolPose a = ToolPose::fromAxis({0, 0, 0}, {0, 0, 1});
+    ToolPose b = ToolPose::fromAxis({2.0f, 0, 0}, {1, 0, 1});
+    std::vector<ToolPose> path = sweepPoses(a, b, 0.25f, 10.0f);
+    ASSERT_EQ(path.size(), 8u);
+    EXPECT_EQ(path.back().position, b.position);
+    EXPECT_EQ(path.back().orientation, b.orientation);
+    for (size_t i = 0; i < path.size(); ++i)
+        EXPECT_NEAR(path[i].position.x, 0.25f * float(i + 1), 1e-5f);
+    // Orientations turn steadily from a's to b's.
+    EXPECT_LT(glm::angle(glm::inverse(a.orientation) * path[3].orientation),
+              glm::angle(glm::inverse(a.orientation) * b.orientation));
+    // Within a step, or a jump beyond maxSweepMm, or not finite: the target alone.
+    EXPECT_EQ(sweepPoses(a, ToolPose::fromAxis({0.2f, 0, 0}, {0, 0, 1}), 0.25f, 10.0f).size(), 1u);
+    EXPECT_EQ(sweepPoses(a, ToolPose::fromAxis({12.0f, 0, 0}, {0, 0, 1}), 0.25f, 10.0f).size(), 1u);
+    ToolPose bad = b;
+    bad.position.x = std::numeric_limits<float>::quiet_NaN();
+    EXPECT_EQ(sweepPoses(a, bad, 0.25f, 10.0f).size(), 1u);
+    EXPECT_EQ(sweepPoses(a, ToolPose::fromAxis({9.0f, 0, 0}, {0, 0, 1}), 0.01f, 10.0f).size(),
+              size_t(kMaxSweepSteps));
+}
+
+// A burr moved 6 mm across bone between two sampled poses: drilled at the poses alone it leaves
+// bone standing between the two dents; swept, it cuts a continuous groove.
+TEST(Drill, ASweptStrokeCutsAGrooveWhereSampledPosesLeaveIslands) {
+    const Volume original = makeBox(64);
+    const glm::vec3 spacing = original.spacing();
+    const float quarter = 0.25f * std::min({spacing.x, spacing.y, spacing.z});
+    ToolPose from = ToolPose::fromAxis({-3.0f, 0, 0}, {0, 0, 1});
+    ToolPose to = ToolPose::fromAxis({3.0f, 0, 0}, {0, 0, 1});
+    Volume sampled = original, swept = original;
+    Driller d1(ToolShape::burr(2.0f)), d2(ToolShape::burr(2.0f));
+    d1.drill(sampled, from, 1.0f, 0.5f);
+    d1.drill(sampled, to, 1.0f, 0.5f);
+    d2.drill(swept, from, 1.0f, 0.5f);
+    const std::vector<ToolPose> path = sweepPoses(from, to, quarter, 10.0f);
+    ASSERT_GT(path.size(), 8u);
+    for (const ToolPose& p : path)
+        d2.drill(swept, p, 1.0f, 0.5f / float(path.size()));
+    // Along the stroke's line, every voxel centre within the burr's radius of the path is cut.
+    int cutSwept = 0, cutSampled = 0, along = 0;
+    for (float x = -3.0f; x <= 3.0f; x += 0.25f) {
+        const glm::ivec3 v = glm::ivec3(glm::round(original.toVoxel({x, 0.0f, 0.0f})));
+        ++along;
+        cutSwept += swept.density(v.x, v.y, v.z) < original.density(v.x, v.y, v.z);
+        cutSampled += sampled.density(v.x, v.y, v.z) < original.density(v.x, v.y, v.z);
+    }
+    EXPECT_EQ(cutSwept, along) << "a continuous groove";
+    EXPECT_LT(cutSampled, along) << "the sampled poses alone leave bone between the dents";
 }

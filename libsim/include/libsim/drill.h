@@ -7,6 +7,7 @@
 #include "libsim/volume.h"
 
 #include <cstdint>
+#include <vector>
 
 namespace trephine {
 
@@ -41,6 +42,16 @@ struct DrillResult {
     bool clutchDisengaged = false; // perforator only: the clutch was disengaged for this step
                                    // (the tip has broken through), so nothing was cut
 };
+
+// A tool's motion between two sampled poses, cut into sub-steps so that the cutter sweeps the
+// path instead of jumping from pose to pose: equal sub-steps of at most maxStepMm (positions
+// lerped, orientations slerped), each ending at the returned pose; the last is `to`. One step (just
+// `to`) when the move is within maxStepMm, and also when it is longer than maxSweepMm (a jump, e.g.
+// a device re-centred: cutting a trench along it would be wrong) or not finite. At most
+// kMaxSweepSteps steps (longer moves take longer sub-steps).
+inline constexpr int kMaxSweepSteps = 64;
+std::vector<ToolPose> sweepPoses(const ToolPose& from, const ToolPose& to, float maxStepMm,
+                                 float maxSweepMm);
 
 // One driller per tool: it keeps the fractional erosion carried between steps and the
 // perforator's clutch state, so a stream of small dt steps erodes like one long step.

@@ -43,6 +43,9 @@ struct ServerConfig {
     int malformedLimit = 50; // a peer that sends more malformed packets is disconnected
     int renderThreads = 0;   // 0: hardware concurrency
     float maxStepS = 0.05f;  // longest drilling step taken from one tool state to the next
+    // Between two drilling tool states the cutter sweeps the path in sub-steps of at most a
+    // quarter voxel (sweepPoses); a move longer than this is a jump, drilled at its end only.
+    float maxSweepMm = 10.0f;
 };
 
 // What the server sent in one sync mode, and how many connected clients use it now.
