@@ -851,13 +851,25 @@ struct PendingHit {
 };
 
 // Eight samples whose cells lie inside the volume: trilinearCorners lane by lane.
+// floorInt4 and the fractions of eight positions, lane by lane.
+struct Cells8 {
+    v8si ix, iy, iz;
+    v8sf tx, ty, tz;
+};
+
+inline Cells8 cells8(v8sf px, v8sf py, v8sf pz) {
+    Cells8 c;
+    c.ix = __builtin_convertvector(px + 16.0f, v8si) - 16;
+    c.iy = __builtin_convertvector(py + 16.0f, v8si) - 16;
+    c.iz = __builtin_convertvector(pz + 16.0f, v8si) - 16;
+    c.tx = px - __builtin_convertvector(c.ix, v8sf);
+    c.ty = py - __builtin_convertvector(c.iy, v8sf);
+    c.tz = pz - __builtin_convertvector(c.iz, v8sf);
+    return c;
+}
+
 inline v8sf sample8(const Frame& f, v8sf px, v8sf py, v8sf pz) {
-    const v8si ix = __builtin_convertvector(px + 16.0f, v8si) - 16;
-    const v8si iy = __builtin_convertvector(py + 16.0f, v8si) - 16;
-    const v8si iz = __builtin_convertvector(pz + 16.0f, v8si) - 16;
-    const v8sf tx = px - __builtin_convertvector(ix, v8sf);
-    const v8sf ty = py - __builtin_convertvector(iy, v8sf);
-    const v8sf tz = pz - __builtin_convertvector(iz, v8sf);
+    const auto [ix, iy, iz, tx, ty, tz] = cells8(px, py, pz);
     v8su r0, r1, r2, r3; // rows (y, z) = (0, 0), (1, 0), (0, 1), (1, 1): x = 0 low, x = 1 high
     for (int l = 0; l < 8; ++l) {
         const uint8_t* b = f.density + ix[l] + f.sy * iy[l] + f.sz * iz[l];
@@ -880,12 +892,7 @@ inline v8sf sample8(const Frame& f, v8sf px, v8sf py, v8sf pz) {
 // gradientAt of eight positions whose stencil lies inside the volume, lane by lane; writes the
 // gradient (per voxel) of lane l to g[l].
 inline void gradient8(const Frame& f, v8sf px, v8sf py, v8sf pz, v4sf g[8]) {
-    const v8si ix = __builtin_convertvector(px + 16.0f, v8si) - 16;
-    const v8si iy = __builtin_convertvector(py + 16.0f, v8si) - 16;
-    const v8si iz = __builtin_convertvector(pz + 16.0f, v8si) - 16;
-    const v8sf tx = px - __builtin_convertvector(ix, v8sf);
-    const v8sf ty = py - __builtin_convertvector(iy, v8sf);
-    const v8sf tz = pz - __builtin_convertvector(iz, v8sf);
+    const auto [ix, iy, iz, tx, ty, tz] = cells8(px, py, pz);
     // Rows of x = ix - 1 .. ix + 2 (byte k is x = ix - 1 + k) at (y, z) offsets: R[y + 1][z + 1].
     v8su R[4][4];
     static constexpr int kRows[12][2] = {{0, 0},  {1, 0},  {0, 1}, {1, 1}, {2, 0},  {2, 1},

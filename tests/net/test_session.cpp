@@ -48,6 +48,14 @@ ViewSpec presetView(const Volume& v, const char* name) {
     return toViewSpec(cameraPreset(name, v, {kWindow, kWindow}));
 }
 
+// A client looking at `v` from the top in a small square window.
+ClientConfig topViewClient(const Volume& v, uint16_t window) {
+    ClientConfig cfg;
+    cfg.view = presetView(v, "top");
+    cfg.view.width = cfg.view.height = window;
+    return cfg;
+}
+
 // The client's DBI equals a fresh full render of the server's volume for its view.
 bool converged(SessionServer& server, SessionClient& client) {
     if (!client.hasFullImage() || !server.idle())
@@ -218,9 +226,7 @@ TEST(Session, EveryToolPoseReachesTheOtherClients) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, testConfig("sphere:32"));
     server.start();
-    ClientConfig cfg;
-    cfg.view = presetView(sphere, "top");
-    cfg.view.width = cfg.view.height = 32;
+    ClientConfig cfg = topViewClient(sphere, 32);
     SessionClient a(cfg), b(cfg), c(cfg);
     for (SessionClient* x : {&a, &b, &c})
         x->connect(loopback(server.port()));
@@ -369,9 +375,7 @@ TEST(Session, StopWritesSaveOnExitWithEveryAppliedDrilling) {
     config.saveOnExit = path;
     auto server = std::make_unique<SessionServer>(sphere, config);
     server->start();
-    ClientConfig cfg;
-    cfg.view = presetView(sphere, "top");
-    cfg.view.width = cfg.view.height = 64;
+    ClientConfig cfg = topViewClient(sphere, 64);
     SessionClient client(cfg);
     client.connect(loopback(server->port()));
     ASSERT_TRUE(connectAll({&client}));
@@ -401,9 +405,7 @@ TEST(Session, TheServerSweepsTheCutterBetweenDrillingToolStates) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, testConfig("sphere:48"));
     server.start();
-    ClientConfig cfg;
-    cfg.view = presetView(sphere, "top");
-    cfg.view.width = cfg.view.height = 32;
+    ClientConfig cfg = topViewClient(sphere, 32);
     SessionClient client(cfg);
     client.connect(loopback(server.port()));
     ASSERT_TRUE(connectAll({&client}));

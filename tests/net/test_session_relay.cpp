@@ -26,11 +26,7 @@ using trephine::testing::loopbackServerConfig;
 using trephine::testing::pumpUntil;
 
 ClientConfig clientConfig(const Volume& v, const std::string& name, Role role) {
-    ClientConfig c;
-    c.name = name;
-    c.role = role;
-    c.view = toViewSpec(cameraPreset("top", v, {48, 48}));
-    return c;
+    return trephine::testing::namedClientConfig(v, name, role, 48);
 }
 
 // A burr pushed 1 mm into the top of the sphere: in contact, a non-zero force.

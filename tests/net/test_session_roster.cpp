@@ -24,11 +24,7 @@ using trephine::testing::pumpUntil;
 using trephine::testing::sphereTop;
 
 ClientConfig named(const Volume& v, const std::string& name, Role role) {
-    ClientConfig c;
-    c.name = name;
-    c.role = role;
-    c.view = toViewSpec(cameraPreset("top", v, {32, 32}));
-    return c;
+    return trephine::testing::namedClientConfig(v, name, role, 32);
 }
 
 // The roster as "id:name:role:sync" entries, for readable failures.
@@ -84,9 +80,8 @@ TEST(SessionRoster, EveryoneLearnsNamesRolesAndLeavers) {
     }));
     ben.disconnect(100);
     std::vector<SessionClient*> stay = {&ada, &cho};
-    ASSERT_TRUE(pumpUntil(stay, [&] {
-        return ada.participants().size() == 2 && cho.participants().size() == 2;
-    }));
+    ASSERT_TRUE(pumpUntil(
+        stay, [&] { return ada.participants().size() == 2 && cho.participants().size() == 2; }));
     EXPECT_FALSE(ada.participants().count(b));
     EXPECT_FALSE(ada.others().count(b)) << "a leaver's tool is not drawn any more";
     EXPECT_FALSE(cho.others().count(b));

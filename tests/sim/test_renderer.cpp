@@ -35,6 +35,29 @@ TestRay pixelRay(const Camera& c, double px, double py) {
     return {glm::dvec3(c.eye), glm::normalize(pb - pa)};
 }
 
+// A random camera around (or inside) a volume of bounding radius r: eye at r x [dist) along a
+// random direction, looking near the centre (within targetScale r), random roll and field of view.
+struct RandomCameras {
+    std::uniform_real_distribution<float> unit{-1.0f, 1.0f}, dist, fov;
+    float targetScale;
+
+    RandomCameras(float distLo, float distHi, float fovLo, float fovHi, float targetScale = 0.3f)
+        : dist(distLo, distHi), fov(fovLo, fovHi), targetScale(targetScale) {}
+
+    Camera operator()(std::mt19937& rng, float r, int width, int height) {
+        Camera c;
+        glm::vec3 dir = glm::normalize(glm::vec3(unit(rng), unit(rng), unit(rng)) + 1e-3f);
+        c.eye = dir * r * dist(rng);
+        c.target = glm::vec3(unit(rng), unit(rng), unit(rng)) * r * targetScale;
+        c.up = glm::normalize(glm::cross(dir, glm::vec3(unit(rng), unit(rng), unit(rng))));
+        c.fovYDeg = fov(rng);
+        c.width = width;
+        c.height = height;
+        fitNearFar(c, glm::vec3(0.0f), r);
+        return c;
+    }
+};
+
 bool isBackground(const Dbi& d, int x, int y) {
     return d.depth(x, y) == kBackgroundDepth && std::memcmp(d.color(x, y), kBackgroundRgba, 4) == 0;
 }
@@ -224,17 +247,9 @@ TEST(Renderer, BatchedHitsChangeNoBit) {
             ASSERT_TRUE(a == b) << preset << ": " << compare(a, b).describe();
         }
         float r = 0.5f * glm::length(v.extentMm());
-        std::uniform_real_distribution<float> unit(-1.0f, 1.0f), dist(0.2f, 3.0f), fov(5, 90);
+        RandomCameras cameras(0.2f, 3.0f, 5.0f, 90.0f);
         for (int i = 0; i < 16; ++i) {
-            Camera c;
-            glm::vec3 dir = glm::normalize(glm::vec3(unit(rng), unit(rng), unit(rng)) + 1e-3f);
-            c.eye = dir * r * dist(rng);
-            c.target = glm::vec3(unit(rng), unit(rng), unit(rng)) * r * 0.3f;
-            c.up = glm::normalize(glm::cross(dir, glm::vec3(unit(rng), unit(rng), unit(rng))));
-            c.fovYDeg = fov(rng);
-            c.width = 70;
-            c.height = 50;
-            fitNearFar(c, glm::vec3(0.0f), r);
+            const Camera c = cameras(rng, r, 70, 50);
             Dbi a = batched.render(c), b = scalar.render(c);
             ASSERT_TRUE(a == b) << describe(c) << ": " << compare(a, b).describe();
         }
@@ -268,17 +283,9 @@ TEST(Renderer, SkippingChangesNoBitFromAnyCamera) {
         Renderer skipping(v, &pool);
         Renderer marching(v, &pool, RenderOptions{.skipEmpty = false});
         float r = 0.5f * glm::length(v.extentMm());
-        std::uniform_real_distribution<float> unit(-1.0f, 1.0f), dist(0.2f, 4.0f), fov(5, 100);
+        RandomCameras cameras(0.2f, 4.0f, 5.0f, 100.0f);
         for (int i = 0; i < 24; ++i) {
-            Camera c;
-            glm::vec3 dir = glm::normalize(glm::vec3(unit(rng), unit(rng), unit(rng)) + 1e-3f);
-            c.eye = dir * r * dist(rng);
-            c.target = glm::vec3(unit(rng), unit(rng), unit(rng)) * r * 0.3f;
-            c.up = glm::normalize(glm::cross(dir, glm::vec3(unit(rng), unit(rng), unit(rng))));
-            c.fovYDeg = fov(rng);
-            c.width = 90;
-            c.height = 70;
-            fitNearFar(c, glm::vec3(0.0f), r);
+            const Camera c = cameras(rng, r, 90, 70);
             Dbi a = skipping.render(c), b = marching.render(c);
             ASSERT_TRUE(a == b) << describe(c) << ": " << compare(a, b).describe();
         }
@@ -302,18 +309,10 @@ TEST(Renderer, ConeMarchThroughClearCellsChangesNoBit) {
     Renderer skipping(v, &pool);
     Renderer marching(v, &pool, RenderOptions{.skipEmpty = false});
     float r = 0.5f * glm::length(v.extentMm());
-    std::uniform_real_distribution<float> unit(-1.0f, 1.0f), dist(1.2f, 6.0f), fov(3, 30);
+    RandomCameras cameras(1.2f, 6.0f, 3.0f, 30.0f, 0.2f);
     int hits = 0;
     for (int i = 0; i < 16; ++i) {
-        Camera c;
-        glm::vec3 dir = glm::normalize(glm::vec3(unit(rng), unit(rng), unit(rng)) + 1e-3f);
-        c.eye = dir * r * dist(rng);
-        c.target = glm::vec3(unit(rng), unit(rng), unit(rng)) * r * 0.2f;
-        c.up = glm::normalize(glm::cross(dir, glm::vec3(unit(rng), unit(rng), unit(rng))));
-        c.fovYDeg = fov(rng);
-        c.width = 160;
-        c.height = 120;
-        fitNearFar(c, glm::vec3(0.0f), r);
+        const Camera c = cameras(rng, r, 160, 120);
         Dbi a = skipping.render(c), b = marching.render(c);
         ASSERT_TRUE(a == b) << describe(c) << ": " << compare(a, b).describe();
         for (int py = 0; py < c.height; ++py)

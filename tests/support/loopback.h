@@ -7,6 +7,7 @@
 #include "net/enet_host.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
+#include "net/view.h"
 
 #include <glm/gtx/quaternion.hpp>
 
@@ -24,6 +25,16 @@ inline net::ServerConfig loopbackServerConfig(const std::string& volumeName,
     c.port = 0;
     c.volumeName = volumeName;
     c.renderThreads = renderThreads;
+    return c;
+}
+
+// A client of `role` called `name` looking at `v` from the top in a window x window view.
+inline net::ClientConfig namedClientConfig(const Volume& v, const std::string& name, net::Role role,
+                                           int window) {
+    net::ClientConfig c;
+    c.name = name;
+    c.role = role;
+    c.view = net::toViewSpec(cameraPreset("top", v, {window, window}));
     return c;
 }
 
