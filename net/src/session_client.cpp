@@ -137,11 +137,13 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         ToolRelay r;
         if (!decodeMessage(data, r))
             return false;
+        ++m_relays;
+        if (!listed(r.clientId))
+            return true; // someone who left: counted, not drawn
         auto it = m_others.find(r.clientId);
         // Unsequenced: keep the newest.
         if (it == m_others.end() || int32_t(r.tool.sequence - it->second.sequence) > 0)
             m_others[r.clientId] = r.tool;
-        ++m_relays;
         return true;
     }
     case MessageType::ImageUpdate: {
@@ -193,6 +195,8 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         if (!decodeMessage(data, r))
             return false;
         ++m_hapticRelays;
+        if (!listed(r.clientId))
+            return true; // someone who left: counted, not plotted
         auto it = m_relayedModels.find(r.clientId);
         if (it == m_relayedModels.end() ||
             int32_t(r.model.toolSequence - it->second.toolSequence) > 0)

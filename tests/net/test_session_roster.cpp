@@ -119,3 +119,41 @@ TEST(SessionRoster, MalformedRostersAreDroppedAndCounted) {
     EXPECT_EQ(client.participants().at(2).name, "Cho");
     EXPECT_EQ(client.participants().at(2).sync, Sync::Volume);
 }
+
+// A relay can trail the roster that dropped its sender (they travel on different channels): once
+// a roster has come, relays of ids it does not list are counted but neither drawn nor plotted.
+TEST(SessionRoster, RelaysOfParticipantsNotListedAreNotKept) {
+    trephine::testing::FakeServer fake;
+    ClientConfig cfg;
+    cfg.view.width = cfg.view.height = 16;
+    SessionClient client(cfg);
+    client.connect(loopback(fake.port()));
+    ASSERT_TRUE(fake.pumpWith(client, [&] { return fake.peer && client.connected(); }));
+    auto relay = [&](uint16_t id) {
+        ToolRelay r;
+        r.clientId = id;
+        r.tool.sequence = 1;
+        fake.send(Channel::ToolState, encodeMessage(r));
+        HapticRelay h;
+        h.clientId = id;
+        h.model.toolSequence = 1;
+        fake.send(Channel::Haptic, encodeMessage(h));
+    };
+    relay(7); // before any roster: kept
+    ASSERT_TRUE(fake.pumpWith(client, [&] { return client.others().count(7) == 1; }));
+    Participants roster;
+    roster.list = {{1, Role::Instructor, Sync::Dbi, "me"}, {2, Role::Trainee, Sync::Dbi, "Ada"}};
+    fake.send(Channel::Control, encodeMessage(roster));
+    ASSERT_TRUE(fake.pumpWith(client, [&] { return client.rostersReceived() == 1; }));
+    EXPECT_EQ(client.others().count(7), 0u) << "the roster drops whom it does not list";
+    relay(7); // trailing: counted, not kept
+    relay(2);
+    ASSERT_TRUE(fake.pumpWith(client, [&] {
+        return client.relaysReceived() == 3 && client.hapticRelaysReceived() == 3;
+    }));
+    EXPECT_EQ(client.others().count(7), 0u);
+    EXPECT_EQ(client.relayedModels().count(7), 0u);
+    EXPECT_EQ(client.others().count(2), 1u);
+    EXPECT_EQ(client.relayedModels().count(2), 1u);
+    EXPECT_EQ(client.stats().malformed(), 0u);
+}

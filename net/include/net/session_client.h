@@ -199,6 +199,9 @@ private:
     std::vector<VolumeUpdate> m_earlyVolume;
     size_t m_earlyVolumeBytes = 0;
     uint64_t m_rosters = 0;
+    // Whether relays of `id` are kept: everyone until the first roster, then whom it lists (a relay
+    // on the tool or haptic channel can trail the reliable roster that dropped its sender).
+    bool listed(uint16_t id) const { return m_rosters == 0 || m_participants.count(id) > 0; }
     uint32_t m_toolSequence = 0;
     uint32_t m_lastSequence = 0;
     HapticCallback m_hapticCallback;
