@@ -91,13 +91,24 @@ TEST(SessionRoster, EveryoneLearnsNamesRolesAndLeavers) {
     server.stop();
 }
 
-TEST(SessionRoster, MalformedRostersAreDroppedAndCounted) {
+// A client connected to a fake server (a raw ENet host standing in), which sends it hand-made
+// messages.
+class FakeServerRoster : public ::testing::Test {
+protected:
+    void SetUp() override {
+        client.connect(loopback(fake.port()));
+        ASSERT_TRUE(fake.pumpWith(client, [&] { return fake.peer && client.connected(); }));
+    }
+    static ClientConfig tinyView() {
+        ClientConfig cfg;
+        cfg.view.width = cfg.view.height = 16;
+        return cfg;
+    }
     trephine::testing::FakeServer fake;
-    ClientConfig cfg;
-    cfg.view.width = cfg.view.height = 16;
-    SessionClient client(cfg);
-    client.connect(loopback(fake.port()));
-    ASSERT_TRUE(fake.pumpWith(client, [&] { return fake.peer && client.connected(); }));
+    SessionClient client{tinyView()};
+};
+
+TEST_F(FakeServerRoster, MalformedRostersAreDroppedAndCounted) {
 
     Participants good;
     good.list = {{1, Role::Trainee, Sync::Dbi, "Ada"}, {2, Role::Instructor, Sync::Volume, "Cho"}};
@@ -122,13 +133,7 @@ TEST(SessionRoster, MalformedRostersAreDroppedAndCounted) {
 
 // A relay can trail the roster that dropped its sender (they travel on different channels): once
 // a roster has come, relays of ids it does not list are counted but neither drawn nor plotted.
-TEST(SessionRoster, RelaysOfParticipantsNotListedAreNotKept) {
-    trephine::testing::FakeServer fake;
-    ClientConfig cfg;
-    cfg.view.width = cfg.view.height = 16;
-    SessionClient client(cfg);
-    client.connect(loopback(fake.port()));
-    ASSERT_TRUE(fake.pumpWith(client, [&] { return fake.peer && client.connected(); }));
+TEST_F(FakeServerRoster, RelaysOfParticipantsNotListedAreNotKept) {
     auto relay = [&](uint16_t id) {
         ToolRelay r;
         r.clientId = id;
