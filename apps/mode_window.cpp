@@ -45,6 +45,7 @@ int runWindowedClient(const WindowedOptions& o) {
     t.sync = o.sync;
     t.volumeCodec = o.volumeCodec;
     t.switchSyncAtS = o.switchSyncAtS;
+    t.marks = o.marks;
     return ui::runTrainerWindow(t);
 #else
     (void)o;
@@ -113,6 +114,9 @@ void addInstructorMode(CLI::App& root, int& exitCode) {
     sub->add_option("--codec", o->codec, "Image codec: raw, lz4 or zstd")
         ->check(CLI::IsMember({"raw", "lz4", "zstd"}))
         ->capture_default_str();
+    sub->add_option("--mark", o->marks,
+                    "Place a mark for everyone at X,Y,Z (mm, the volume's frame) with an optional "
+                    ":LABEL once joined; repeatable (the M key marks the bone under the pointer)");
     addWindowOptions(sub, *o);
     sub->callback([o, &exitCode] { exitCode = runWindowedClient(*o); });
 }

@@ -24,6 +24,7 @@ struct WindowedOptions {
     std::string sync = "dbi";          // the design to start in: dbi or volume (issue 7)
     std::string volumeCodec = "raw";   // volume boxes: raw, lz4 or zstd
     std::vector<double> switchSyncAtS; // scripted Comparison toggles (s after the first picture)
+    std::vector<std::string> marks;    // instructor: "X,Y,Z[:LABEL]" marks placed on joining
 };
 
 // True when this build has the GUI and a window can open here; `why` says why not.

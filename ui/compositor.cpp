@@ -2,7 +2,6 @@
 
 #include "ui/gl_program.h"
 
-
 #include <glm/gtc/type_ptr.hpp>
 #include <string>
 

@@ -23,8 +23,13 @@ std::string participantName(const std::map<uint16_t, net::ParticipantInfo>& rost
     return it->second.name;
 }
 
-void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, const std::string& role,
-                      const std::string& address, const std::string& name) {
+glm::vec4 markColor() {
+    return {1.0f, 0.84f, 0.0f, 1.0f};
+}
+
+void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkControls& marks,
+                      const std::string& role, const std::string& address,
+                      const std::string& name) {
     if (!ImGui::Begin("Session")) {
         ImGui::End();
         return;
@@ -70,6 +75,32 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, const
         ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), "  client %u: %s %.0f mm%s", unsigned(id),
                            t.toolKind == uint8_t(ToolKind::Perforator) ? "perforator" : "burr",
                            double(t.diameterMm), t.drilling ? " drilling" : "");
+    }
+    // Marks: everyone sees the list; an instructor places, removes and clears them.
+    const glm::vec4 mc = markColor();
+    const ImVec4 markCol(mc.r, mc.g, mc.b, 1.0f);
+    ImGui::Text("marks: %zu", snap.annotations.size());
+    if (marks.canMark) {
+        ImGui::SameLine();
+        if (ImGui::SmallButton("mark the pointer [M]"))
+            marks.addAtPointer = true;
+        ImGui::SameLine();
+        if (ImGui::SmallButton("clear marks"))
+            marks.clearAll = true;
+        ImGui::InputTextWithHint("##label", "label of the next mark", marks.label,
+                                 sizeof marks.label);
+    }
+    for (const net::AnnotationInfo& a : snap.annotations) {
+        ImGui::TextColored(markCol, "  %u %s", unsigned(a.id), a.label.c_str());
+        ImGui::SameLine();
+        ImGui::TextDisabled("by %s", participantName(snap.participants, a.author).c_str());
+        if (marks.canMark) {
+            ImGui::SameLine();
+            ImGui::PushID(int(a.id));
+            if (ImGui::SmallButton("remove"))
+                marks.removeId = a.id;
+            ImGui::PopID();
+        }
     }
     ImGui::Separator();
     ImGui::RadioButton("burr [B]", &tool.kind, 0);

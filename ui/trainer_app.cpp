@@ -28,6 +28,7 @@
 
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <deque>
@@ -242,6 +243,32 @@ glm::mat4 toolMatrix(glm::vec3 position, glm::quat orientation) {
     return glm::translate(glm::mat4(1.0f), position) * glm::mat4_cast(orientation);
 }
 
+// "X,Y,Z[:LABEL]" (mm) as an Annotate add; a malformed one is a one-line error naming it.
+net::Annotate parseMark(const std::string& text) {
+    const std::string where = "--mark '" + text + "'";
+    const size_t colon = text.find(':');
+    const std::string coords = text.substr(0, colon);
+    net::Annotate a;
+    a.op = net::Annotate::Op::Add;
+    a.label = colon == std::string::npos ? std::string() : text.substr(colon + 1);
+    if (a.label.size() > net::kMaxNameLength)
+        throw Error(where + ": the label is longer than " + std::to_string(net::kMaxNameLength) +
+                    " bytes");
+    float v[3];
+    const char* p = coords.c_str();
+    for (int i = 0; i < 3; ++i) {
+        char* end = nullptr;
+        v[i] = std::strtof(p, &end);
+        const char want = i < 2 ? ',' : '\0';
+        if (end == p || *end != want || !std::isfinite(v[i]) ||
+            std::abs(v[i]) > net::kMaxAnnotationDistanceMm)
+            throw Error(where + ": expected X,Y,Z[:LABEL] with X, Y, Z in mm");
+        p = end + (i < 2 ? 1 : 0);
+    }
+    a.position = {v[0], v[1], v[2]};
+    return a;
+}
+
 } // namespace
 
 // [SECTION] frame loop
@@ -250,6 +277,15 @@ int runTrainerWindow(const TrainerOptions& o) {
     using Clock = std::chrono::steady_clock;
     if (o.sync != "dbi" && o.sync != "volume")
         throw Error("window: --sync must be dbi or volume, not '" + o.sync + "'");
+    if (!o.marks.empty() && !o.instructor)
+        throw Error("window: --mark: only an instructor places marks");
+    std::vector<net::Annotate> scriptedMarks;
+    for (const std::string& m : o.marks)
+        scriptedMarks.push_back(parseMark(m));
+    bool marksSent = scriptedMarks.empty();
+    MarkControls markControls;
+    markControls.canMark = o.instructor;
+    std::optional<glm::vec3> pointerPick; // the bone under the pointer, last seen over the view
     const int viewSize = o.size;
     WindowConfig wc;
     wc.width = viewSize + kPanelWidth;
@@ -526,6 +562,8 @@ int runTrainerWindow(const TrainerOptions& o) {
                     toolControls.pushMm += 0.25f;
                 if (ImGui::IsKeyPressed(GLFW_KEY_UP))
                     toolControls.pushMm -= 0.25f;
+                if (markControls.canMark && ImGui::IsKeyPressed(GLFW_KEY_M))
+                    markControls.addAtPointer = true;
             }
             const bool overView = io.MousePos.x >= 0 && io.MousePos.y >= 0 &&
                                   io.MousePos.x < float(viewSize) &&
@@ -535,6 +573,7 @@ int runTrainerWindow(const TrainerOptions& o) {
                     std::clamp(toolControls.pushMm + io.MouseWheel * 0.25f, -5.0f, 10.0f);
                 int px = int(io.MousePos.x), py = viewSize - 1 - int(io.MousePos.y);
                 if (auto hit = pickSurface(cpuDbi, dbiCamera, px, py)) {
+                    pointerPick = *hit;
                     ToolShape shape =
                         toolControls.kind == 1
                             ? ToolShape::perforator()
@@ -634,6 +673,26 @@ int runTrainerWindow(const TrainerOptions& o) {
             if (toolValid)
                 label(toolPos, toolRot * glm::vec3(0, 0, 1), participantColor(0),
                       o.name + (toolControls.drilling ? " (drilling)" : ""));
+            // The instructors' marks: a ring on the bone and its label beside it.
+            const glm::vec4 mc = markColor();
+            const ImU32 markCol = ImGui::GetColorU32(ImVec4(mc.r, mc.g, mc.b, 1.0f));
+            for (const net::AnnotationInfo& a : snap->annotations) {
+                WindowPoint w = projectToWindow(vp, dbiCamera, glm::dvec3(a.position));
+                if (w.w <= 0)
+                    continue;
+                const ImVec2 c(float(w.window.x), viewTop + float(viewSize - w.window.y));
+                fg->AddCircle(c, 8.0f, IM_COL32(0, 0, 0, 160), 0, 4.5f);
+                fg->AddCircle(c, 8.0f, markCol, 0, 2.5f);
+                fg->AddCircleFilled(c, 2.5f, markCol);
+                if (!a.label.empty()) {
+                    const ImVec2 at(c.x + 12.0f, c.y - ImGui::GetFontSize() * 0.5f);
+                    fg->AddRectFilled(ImVec2(at.x - 3, at.y - 2),
+                                      ImVec2(at.x + ImGui::CalcTextSize(a.label.c_str()).x + 3,
+                                             at.y + ImGui::GetFontSize() + 2),
+                                      IM_COL32(0, 0, 0, 140), 3.0f);
+                    fg->AddText(at, markCol, a.label.c_str());
+                }
+            }
             drawDirtyBoxOverlay(boxState, boxHistory, now, 0.0f, viewTop, viewSize);
         }
         {
@@ -669,8 +728,36 @@ int runTrainerWindow(const TrainerOptions& o) {
         const float H = float(window.height());
         ImGui::SetNextWindowPos(ImVec2(right, 0), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(colW, 250), ImGuiCond_FirstUseEver);
-        drawSessionPanel(*snap, toolControls, o.instructor ? "instructor" : "trainee", o.address,
-                         o.name);
+        drawSessionPanel(*snap, toolControls, markControls, o.instructor ? "instructor" : "trainee",
+                         o.address, o.name);
+        // Marks asked for (the panel, the M key, --mark once joined); the server lists them back.
+        if (!marksSent && snap->welcome && snap->state == net::LinkState::Connected) {
+            for (const net::Annotate& a : scriptedMarks)
+                client.annotate(a);
+            marksSent = true;
+        }
+        if (markControls.addAtPointer && pointerPick) {
+            net::Annotate a;
+            a.op = net::Annotate::Op::Add;
+            a.position = *pointerPick;
+            a.label = markControls.label[0]
+                          ? std::string(markControls.label)
+                          : "mark " + std::to_string(snap->annotations.size() + 1);
+            client.annotate(a);
+        }
+        if (markControls.clearAll) {
+            net::Annotate a;
+            a.op = net::Annotate::Op::Clear;
+            client.annotate(a);
+        }
+        if (markControls.removeId) {
+            net::Annotate a;
+            a.op = net::Annotate::Op::Remove;
+            a.id = markControls.removeId;
+            client.annotate(a);
+        }
+        markControls.addAtPointer = markControls.clearAll = false;
+        markControls.removeId = 0;
         ImGui::SetNextWindowPos(ImVec2(right, 250), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(colW, 120), ImGuiCond_FirstUseEver);
         drawViewPanel(viewControls, snap->waitingForView || !havePicture,
@@ -708,7 +795,8 @@ int runTrainerWindow(const TrainerOptions& o) {
         ++frames;
         const bool settled = havePicture && viewMatches && scene && scriptDone && !switching &&
                              nextSwitch == o.switchSyncAtS.size() && !snap->waitingForView &&
-                             now - lastRectAt > 0.5;
+                             now - lastRectAt > 0.5 && marksSent &&
+                             snap->annotations.size() >= scriptedMarks.size();
         settledFrames = settled ? settledFrames + 1 : 0;
         Dbi capture;
         bool shoot = !o.screenshot.empty() && settledFrames >= std::max(o.frames, 1);

@@ -128,6 +128,9 @@ bool ClientThread::ping() {
 bool ClientThread::requestSync(Sync mode) {
     return push(SyncCmd{mode});
 }
+bool ClientThread::annotate(const Annotate& a) {
+    return push(a);
+}
 
 std::vector<AppliedVolumeBox> ClientThread::drainVolumeBoxes() {
     std::vector<AppliedVolumeBox> out;
@@ -202,6 +205,7 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
         s->waitingForView = c->welcomed() && !c->hasFullImage();
         s->others = c->others();
         s->participants = c->participants();
+        s->annotations = c->annotations();
         s->updatesApplied = c->updatesApplied();
         s->fullUpdates = c->fullUpdates();
         s->updatesRejected = c->updatesRejected();
@@ -333,6 +337,9 @@ void ClientThread::run() {
                         m_wantedSync = y->sync;
                         if (cp->welcomed())
                             cp->requestSync(y->sync);
+                    } else if (auto* a = std::get_if<Annotate>(&c)) {
+                        if (cp->welcomed())
+                            cp->annotate(*a);
                     } else if (cp->welcomed()) {
                         cp->sendPing();
                     }

@@ -133,6 +133,14 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         ++m_rosters;
         return true;
     }
+    case MessageType::Annotations: {
+        Annotations marks;
+        if (!decodeMessage(data, marks))
+            return false;
+        m_annotations = std::move(marks.list);
+        ++m_annotationLists;
+        return true;
+    }
     case MessageType::ToolRelay: {
         ToolRelay r;
         if (!decodeMessage(data, r))
@@ -499,6 +507,12 @@ uint32_t SessionClient::requestView(const ViewSpec& view) {
 void SessionClient::sendPing() {
     Ping p{steadyNowUs()};
     send(Channel::Control, encodeMessage(p));
+}
+
+void SessionClient::annotate(Annotate a) {
+    if (a.label.size() > kMaxNameLength)
+        a.label.resize(kMaxNameLength);
+    send(Channel::Control, encodeMessage(a));
 }
 
 } // namespace trephine::net

@@ -195,6 +195,9 @@ struct SessionServer::Impl {
 
     // Network thread only.
     std::map<uint16_t, NetPeer> peers;
+    // The instructors' marks, by id (network thread only).
+    std::map<uint32_t, AnnotationInfo> annotations;
+    uint32_t nextAnnotationId = 1;
     uint16_t nextId = 1;
 
     // Network -> simulation.
@@ -575,6 +578,20 @@ void SessionServer::networkLoop() {
             if (peer.hello && !peer.kicked)
                 sendTo(peer.peer, Channel::Control, bytes);
     };
+    // Every mark, to one peer or (null) to everyone who said hello.
+    auto sendAnnotations = [&](ENetPeer* to) {
+        Annotations marks;
+        for (const auto& [id, a] : s.annotations)
+            marks.list.push_back(a);
+        const std::vector<uint8_t> bytes = encodeMessage(marks);
+        if (to) {
+            sendTo(to, Channel::Control, bytes);
+            return;
+        }
+        for (const auto& [pid, peer] : s.peers)
+            if (peer.hello && !peer.kicked)
+                sendTo(peer.peer, Channel::Control, bytes);
+    };
     auto malformed = [&](NetPeer& p) {
         m_stats.countMalformed();
         report(peerId(p.peer), [](PeerReport& r) { ++r.malformed; });
@@ -622,6 +639,8 @@ void SessionServer::networkLoop() {
             w.volumeName = m_config.volumeName.substr(0, 256);
             sendTo(p.peer, Channel::Control, encodeMessage(w));
             sendParticipants();
+            if (!s.annotations.empty())
+                sendAnnotations(p.peer);
             SimEvent ev = makeEvent(SimEvent::Kind::Join, id);
             ev.camera = toCamera(h.view);
             ev.codec = h.codec;
@@ -685,6 +704,37 @@ void SessionServer::networkLoop() {
             ev.sync = m.sync;
             ev.volumeCodec = m.volumeCodec;
             s.push(std::move(ev));
+            return true;
+        }
+        case MessageType::Annotate: {
+            Annotate a;
+            if (!decodeMessage(data, a))
+                return false;
+            // Well-formed but not allowed: counted, not applied (and not malformed).
+            auto refuse = [&] {
+                m_annotationsRefused.fetch_add(1);
+                return true;
+            };
+            if (p.helloMsg.role != Role::Instructor)
+                return refuse();
+            switch (a.op) {
+            case Annotate::Op::Add:
+                if (s.annotations.size() >= kMaxAnnotations || s.nextAnnotationId == 0)
+                    return refuse();
+                s.annotations[s.nextAnnotationId] = {s.nextAnnotationId, id, a.position, a.label};
+                ++s.nextAnnotationId;
+                break;
+            case Annotate::Op::Remove:
+                if (!s.annotations.erase(a.id))
+                    return true; // already gone (another instructor removed it): nothing to do
+                break;
+            case Annotate::Op::Clear:
+                if (s.annotations.empty())
+                    return true;
+                s.annotations.clear();
+                break;
+            }
+            sendAnnotations(nullptr);
             return true;
         }
         case MessageType::Ping: {
@@ -1075,6 +1125,7 @@ std::string SessionServer::reportJson() const {
     j += "  \"disconnected_for_malformed\": " + std::to_string(m_malformedKicks.load()) + ",\n";
     j += "  \"refused_server_full\": " + std::to_string(m_refusedFull.load()) + ",\n";
     j += "  \"views_refused\": " + std::to_string(m_viewsRefused.load()) + ",\n";
+    j += "  \"annotations_refused\": " + std::to_string(m_annotationsRefused.load()) + ",\n";
     j += "  \"channels\": " + jsonChannels(m_stats) + ",\n";
     std::lock_guard lock(s.reportMutex);
     j += "  \"force_compute_us\": " + jsonWindow(s.forceComputeUs) + ",\n";

@@ -11,14 +11,17 @@
 #include "net/session_server.h"
 
 #include "screenshot.h"
+#include "test_support.h"
 #include <OpenImageIO/imageio.h>
 #include <glm/geometric.hpp>
 #include <glm/gtx/quaternion.hpp>
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <string>
@@ -91,12 +94,14 @@ TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
     trainee.connect(net::parseAddress(address));
     std::atomic<bool> stop{false};
     std::atomic<uint16_t> traineeId{0};
+    std::atomic<size_t> traineeMarks{0}; // marks the trainee holds (the instructor places one)
     std::thread traineeThread([&] {
         auto next = std::chrono::steady_clock::now();
         while (!stop) {
             trainee.poll(1);
             if (trainee.welcomed()) {
                 traineeId = trainee.welcome().clientId;
+                traineeMarks = trainee.annotations().size();
                 if (std::chrono::steady_clock::now() >= next) {
                     net::ToolState t = tool;
                     trainee.sendToolState(t);
@@ -113,11 +118,19 @@ TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
     const std::string out =
         (std::filesystem::temp_directory_path() / "trephine_instructor.png").string();
     std::filesystem::remove(out);
-    const std::string cmd = std::string(TREPHINE_BIN) + " instructor --connect " + address +
+    // A mark across the site from the tool, placed by the instructor for everyone.
+    const glm::vec3 e2 = glm::normalize(glm::cross(n, e1));
+    const glm::vec3 markAt = site.position + e2 * 25.0f;
+    char mark[160];
+    std::snprintf(mark, sizeof mark, " --mark '%.3f,%.3f,%.3f:entry point'", double(markAt.x),
+                  double(markAt.y), double(markAt.z));
+    const std::string cmd = std::string(TREPHINE_BIN) + " instructor --connect " + address + mark +
                             " --window-size 500 --screenshot " + out +
                             " --frames 3 --timeout 80 > " + out + ".log 2>&1";
     const int rc = std::system(cmd.c_str());
     const uint64_t relays = server.hapticRelaysSent();
+    for (int i = 0; i < 200 && traineeMarks == 0; ++i) // the list reaches the trainee too
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
     stop = true;
     traineeThread.join();
     server.stop();
@@ -158,4 +171,30 @@ TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
         for (int x = 0; x < 250; ++x)
             inForces += hasHue(img.at(x, y), colour);
     EXPECT_GT(inForces, 50) << "the trainee's force plot in the instructor's Forces panel";
+    // The mark: a ring in the mark colour where the instructor's camera projects it, and the
+    // trainee got it too.
+    EXPECT_EQ(traineeMarks.load(), 1u) << "the mark reached the trainee";
+    const glm::ivec2 m = pixelOf(markAt);
+    ASSERT_TRUE(m.x >= 10 && m.x < 490 && m.y >= 10 && m.y < 490) << m.x << "," << m.y;
+    EXPECT_GE(countHue(img, m.x, m.y, 10, ui::markColor()), 40) << "the mark's ring";
+    EXPECT_EQ(countHue(img, pixelOf(tool.position + axis * 55.0f).x,
+                       pixelOf(tool.position + axis * 55.0f).y, 2, ui::markColor()),
+              0)
+        << "no mark colour on the tool";
+}
+
+// A malformed --mark is one line naming it and a non-zero exit, before any window opens.
+TEST(InstructorWindow, MalformedMarkIsOneLineNamingIt) {
+    std::string why;
+    if (!ui::displayAvailable(&why))
+        GTEST_SKIP() << "no display for the instructor window (" << why << "); run under xvfb-run";
+    trephine::testing::TempDir dir;
+    for (const char* bad : {"1,2", "1,2,x", "1,2,3,4", "nan,0,0:label"}) {
+        SCOPED_TRACE(bad);
+        trephine::testing::CommandResult r = trephine::testing::runTrephine(
+            dir, std::string("instructor --connect 127.0.0.1:9 --mark '") + bad + "'");
+        EXPECT_NE(r.exitCode, 0);
+        EXPECT_NE(r.err.find(std::string("--mark '") + bad + "'"), std::string::npos) << r.err;
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    }
 }

@@ -82,6 +82,8 @@ struct ClientSnapshot {
     std::map<uint16_t, ToolState> others;
     // Everyone in the session (this client included) by client id: names, roles, designs.
     std::map<uint16_t, ParticipantInfo> participants;
+    // The instructors' marks on the skull, by increasing id.
+    std::vector<AnnotationInfo> annotations;
     std::optional<HapticModel> hapticModel; // latest force model (when the client offers it)
     uint64_t hapticModels = 0;
     // [Instructor] the newest relayed force model of every other participant, by client id.
@@ -135,6 +137,8 @@ public:
     bool ping();
     // Switches the sync mode live (kept across reconnects).
     bool requestSync(Sync mode);
+    // [Instructor] Adds, removes or clears marks (SessionClient::annotate).
+    bool annotate(const Annotate& a);
 
     // The latest snapshot (never null after construction).
     std::shared_ptr<const ClientSnapshot> snapshot() const;
@@ -159,7 +163,7 @@ private:
     struct SyncCmd {
         Sync sync;
     };
-    using Command = std::variant<ToolState, ViewCmd, PingCmd, SyncCmd>;
+    using Command = std::variant<ToolState, ViewCmd, PingCmd, SyncCmd, Annotate>;
 
     void run();
     bool push(Command c);

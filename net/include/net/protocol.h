@@ -20,7 +20,8 @@ namespace trephine::net {
 
 // Travels in ENet's connect data; the server refuses other versions with kRefuseVersion.
 // 2: SyncMode and VolumeUpdate (the replicated-volume baseline); stage times in ImageUpdate;
-// the volume codec in the hello. 3: Participants (who is in the session, by name and role).
+// the volume codec in the hello. 3: Participants (who is in the session, by name and role);
+// Annotate and Annotations (an instructor's marks on the skull).
 inline constexpr uint32_t kProtocolVersion = 3;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
@@ -38,6 +39,10 @@ inline constexpr uint16_t kMaxWindowSize = 4096;
 inline constexpr size_t kMaxNameLength = 64;
 // The most entries a Participants message may hold (the server's --max-clients is far below).
 inline constexpr uint16_t kMaxParticipants = 1024;
+// The most marks a session holds (Annotations); an Annotate add beyond it is refused.
+inline constexpr uint16_t kMaxAnnotations = 256;
+// Marks lie within this distance of the volume's centre (mm): the largest volume is 4096 voxels.
+inline constexpr float kMaxAnnotationDistanceMm = 1.0e5f;
 inline constexpr size_t kMaxPayloadBytes = 64u * 1024u * 1024u;
 inline constexpr uint16_t kMaxVolumeDim = 4096; // as the welcome's range
 // The largest uncompressed volume layout a VolumeUpdate may announce (density + material bytes of
@@ -59,8 +64,10 @@ enum class MessageType : uint8_t {
     Participants = 11,
     SyncMode = 12,
     HapticRelay = 13,
+    Annotate = 14,
+    Annotations = 15,
 };
-inline constexpr uint8_t kMessageTypeCount = 14; // one past the largest type
+inline constexpr uint8_t kMessageTypeCount = 16; // one past the largest type
 
 enum class Role : uint8_t { Trainee = 0, Instructor = 1 };
 enum class Codec : uint8_t { Raw = 0, Lz4 = 1, Zstd = 2 };
@@ -84,6 +91,24 @@ template <typename S>
 bool serializeQuat(S& s, glm::quat& q) {
     return serializeFinite(s, q.w) && serializeFinite(s, q.x) && serializeFinite(s, q.y) &&
            serializeFinite(s, q.z);
+}
+
+// A u16 count (at most maxCount) and that many entries, in strictly increasing id(entry): no
+// duplicates, and one order for every receiver.
+template <typename S, typename T, typename Id>
+bool serializeIdList(S& s, std::vector<T>& list, uint16_t maxCount, Id id) {
+    uint16_t count = uint16_t(std::min<size_t>(list.size(), maxCount));
+    if (!s.ranged(count, uint16_t(0), maxCount))
+        return false;
+    if constexpr (S::kReading)
+        list.assign(count, T{});
+    for (uint16_t i = 0; i < count; ++i) {
+        if (!list[i].serialize(s))
+            return false;
+        if (i > 0 && id(list[i]) <= id(list[i - 1]))
+            return false;
+    }
+    return true;
 }
 
 // [SECTION] messages
@@ -348,19 +373,56 @@ struct Participants {
 
     template <typename S>
     bool serialize(S& s) {
-        uint16_t count = uint16_t(std::min<size_t>(list.size(), kMaxParticipants));
-        if (!s.ranged(count, uint16_t(0), kMaxParticipants))
-            return false;
-        if constexpr (S::kReading)
-            list.assign(count, ParticipantInfo{});
-        for (uint16_t i = 0; i < count; ++i) {
-            if (!list[i].serialize(s))
-                return false;
-            // Strictly increasing ids: no duplicates, and one order for every receiver.
-            if (i > 0 && list[i].clientId <= list[i - 1].clientId)
-                return false;
-        }
-        return true;
+        return serializeIdList(s, list, kMaxParticipants,
+                               [](const ParticipantInfo& p) { return p.clientId; });
+    }
+};
+
+// Client -> server (Channel::Control, reliable): an instructor marks the skull for everyone (a
+// point on the bone and a short label), removes one mark, or clears them all. The server refuses
+// (counts, does not apply) edits from trainees and adds beyond kMaxAnnotations.
+struct Annotate {
+    static constexpr MessageType kType = MessageType::Annotate;
+    enum class Op : uint8_t { Add = 0, Remove = 1, Clear = 2 };
+    Op op = Op::Add;
+    uint32_t id = 0;          // Remove: the mark's id (from Annotations)
+    glm::vec3 position{0.0f}; // Add: object space, mm
+    std::string label;        // Add
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.ranged(op, Op::Add, Op::Clear) && s.integer(id) && serializeVec3(s, position) &&
+               std::abs(position.x) <= kMaxAnnotationDistanceMm &&
+               std::abs(position.y) <= kMaxAnnotationDistanceMm &&
+               std::abs(position.z) <= kMaxAnnotationDistanceMm && s.string(label, kMaxNameLength);
+    }
+};
+
+// One mark as the server keeps it.
+struct AnnotationInfo {
+    uint32_t id = 0;     // >= 1, unique in the session
+    uint16_t author = 0; // client id of the instructor who placed it
+    glm::vec3 position{0.0f};
+    std::string label;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.ranged(id, uint32_t(1), uint32_t(UINT32_MAX)) && s.integer(author) &&
+               serializeVec3(s, position) && s.string(label, kMaxNameLength);
+    }
+    bool operator==(const AnnotationInfo&) const = default;
+};
+
+// Server -> client (Channel::Control, reliable): every mark of the session in increasing id, sent
+// whole to everyone whenever it changes and to each client after its welcome.
+struct Annotations {
+    static constexpr MessageType kType = MessageType::Annotations;
+    std::vector<AnnotationInfo> list;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return serializeIdList(s, list, kMaxAnnotations,
+                               [](const AnnotationInfo& a) { return a.id; });
     }
 };
 

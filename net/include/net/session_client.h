@@ -100,6 +100,10 @@ public:
     // switch to DBI gets this view.
     uint32_t requestView(const ViewSpec& view);
     void sendPing();
+    // [Instructor] Adds a mark, removes one or clears them all (Annotate); the server applies it
+    // and sends everyone the new list. A trainee's are refused by the server. Labels are cut to
+    // kMaxNameLength bytes.
+    void annotate(Annotate a);
 
     // The latest relayed tool of every other participant, by client id.
     const std::map<uint16_t, ToolState>& others() const { return m_others; }
@@ -108,6 +112,9 @@ public:
     const std::map<uint16_t, ParticipantInfo>& participants() const { return m_participants; }
     // Participants messages received.
     uint64_t rostersReceived() const { return m_rosters; }
+    // The session's marks, as the server's newest Annotations message listed them (by id).
+    const std::vector<AnnotationInfo>& annotations() const { return m_annotations; }
+    uint64_t annotationListsReceived() const { return m_annotationLists; }
     uint64_t relaysReceived() const { return m_relays; }
     uint64_t updatesApplied() const { return m_updatesApplied; }
     uint64_t fullUpdates() const { return m_fullUpdates; }
@@ -199,6 +206,8 @@ private:
     std::vector<VolumeUpdate> m_earlyVolume;
     size_t m_earlyVolumeBytes = 0;
     uint64_t m_rosters = 0;
+    std::vector<AnnotationInfo> m_annotations;
+    uint64_t m_annotationLists = 0;
     // Whether relays of `id` are kept: everyone until the first roster, then whom it lists (a relay
     // on the tool or haptic channel can trail the reliable roster that dropped its sender).
     bool listed(uint16_t id) const { return m_rosters == 0 || m_participants.count(id) > 0; }

@@ -101,6 +101,8 @@ public:
     uint64_t hapticRelaysSent() const { return m_hapticRelayed.load(); }
     uint64_t refusedFull() const { return m_refusedFull.load(); }
     uint64_t viewsRefused() const { return m_viewsRefused.load(); }
+    // Annotate messages not applied: from trainees, or adds beyond kMaxAnnotations.
+    uint64_t annotationsRefused() const { return m_annotationsRefused.load(); }
     const NetStats& stats() const { return m_stats; }
     // Updates sent per sync mode (Dbi: image updates; Volume: volume updates) and the clients in
     // each mode now. Both modes share the transport and the channel statistics above.
@@ -127,6 +129,7 @@ private:
     std::atomic<uint64_t> m_hapticRelayed{0};
     std::atomic<uint64_t> m_refusedFull{0};
     std::atomic<uint64_t> m_viewsRefused{0};
+    std::atomic<uint64_t> m_annotationsRefused{0};
     std::atomic<bool> m_fullRender{false};
     std::thread m_netThread;
     std::thread m_simThread;

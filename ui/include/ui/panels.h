@@ -40,8 +40,20 @@ struct ToolControls {
     bool drilling = false; // mouse button held (or the script drills)
     bool canDrill = true;  // instructors point, they do not drill
 };
-void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, const std::string& role,
-                      const std::string& address, const std::string& name);
+// The marks on the skull (the server's Annotations): listed for everyone; an instructor also
+// labels the next one, marks the bone under the pointer, removes one or clears them. The panel
+// only records what was asked this frame; the window sends it.
+struct MarkControls {
+    char label[net::kMaxNameLength + 1] = "";
+    bool canMark = false;      // instructors
+    bool addAtPointer = false; // asked this frame ("mark the pointer" or the M key)
+    bool clearAll = false;
+    uint32_t removeId = 0; // 0: none
+};
+void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkControls& marks,
+                      const std::string& role, const std::string& address, const std::string& name);
+// The colour marks are drawn in (both in the view and in the list).
+glm::vec4 markColor();
 
 // [View] orbit and zoom about the site; a change requests a new DBI.
 struct ViewControls {

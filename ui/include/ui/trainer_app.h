@@ -52,6 +52,9 @@ struct TrainerOptions {
     // flipped, as if clicked. Each waits until the switch before it has completed; the view is not
     // settled (no screenshot) before the last one has.
     std::vector<double> switchSyncAtS;
+    // [Instructor] Marks placed once joined, each "X,Y,Z" (mm, the volume's frame) with an optional
+    // ":LABEL"; the view is not settled (no screenshot) before the server has listed them all.
+    std::vector<std::string> marks;
     TrainerReport* report = nullptr; // [Tests] filled when the window closes
 };
 
