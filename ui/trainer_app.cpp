@@ -673,13 +673,23 @@ int runTrainerWindow(const TrainerOptions& o) {
             if (toolValid)
                 label(toolPos, toolRot * glm::vec3(0, 0, 1), participantColor(0),
                       o.name + (toolControls.drilling ? " (drilling)" : ""));
-            // The instructors' marks: a ring on the bone and its label beside it.
+            // The instructors' marks: a ring on the bone and its label beside it; faint where the
+            // bone in this view lies more than 2 mm in front of the mark (it is behind it).
             const glm::vec4 mc = markColor();
-            const ImU32 markCol = ImGui::GetColorU32(ImVec4(mc.r, mc.g, mc.b, 1.0f));
             for (const net::AnnotationInfo& a : snap->annotations) {
                 WindowPoint w = projectToWindow(vp, dbiCamera, glm::dvec3(a.position));
                 if (w.w <= 0)
                     continue;
+                const int px = int(w.window.x), py = int(w.window.y);
+                bool hidden = false;
+                if (cpuDbi.bounds().contains(PixelRect{px, py, 1, 1}) &&
+                    cpuDbi.width() == dbiCamera.width && cpuDbi.height() == dbiCamera.height) {
+                    const double bone = eyeZFromWindowDepth(dbiCamera, cpuDbi.depth(px, py));
+                    const double mark = eyeZFromWindowDepth(dbiCamera, w.window.z);
+                    hidden = bone - mark > 2.0; // eye z is negative in front of the eye
+                }
+                const ImU32 markCol =
+                    ImGui::GetColorU32(ImVec4(mc.r, mc.g, mc.b, hidden ? 0.35f : 1.0f));
                 const ImVec2 c(float(w.window.x), viewTop + float(viewSize - w.window.y));
                 fg->AddCircle(c, 8.0f, IM_COL32(0, 0, 0, 160), 0, 4.5f);
                 fg->AddCircle(c, 8.0f, markCol, 0, 2.5f);

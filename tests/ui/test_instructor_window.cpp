@@ -121,9 +121,12 @@ TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
     // A mark across the site from the tool, placed by the instructor for everyone.
     const glm::vec3 e2 = glm::normalize(glm::cross(n, e1));
     const glm::vec3 markAt = site.position + e2 * 25.0f;
-    char mark[160];
-    std::snprintf(mark, sizeof mark, " --mark '%.3f,%.3f,%.3f:entry point'", double(markAt.x),
-                  double(markAt.y), double(markAt.z));
+    // And one 40 mm inside the skull on the other side: bone hides it from this view.
+    const glm::vec3 hiddenAt = site.position - n * 40.0f - e2 * 25.0f;
+    char mark[320];
+    std::snprintf(mark, sizeof mark, " --mark '%.3f,%.3f,%.3f:entry point' --mark '%.3f,%.3f,%.3f'",
+                  double(markAt.x), double(markAt.y), double(markAt.z), double(hiddenAt.x),
+                  double(hiddenAt.y), double(hiddenAt.z));
     const std::string cmd = std::string(TREPHINE_BIN) + " instructor --connect " + address + mark +
                             " --window-size 500 --screenshot " + out +
                             " --frames 3 --timeout 80 > " + out + ".log 2>&1";
@@ -173,10 +176,14 @@ TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
     EXPECT_GT(inForces, 50) << "the trainee's force plot in the instructor's Forces panel";
     // The mark: a ring in the mark colour where the instructor's camera projects it, and the
     // trainee got it too.
-    EXPECT_EQ(traineeMarks.load(), 1u) << "the mark reached the trainee";
+    EXPECT_EQ(traineeMarks.load(), 2u) << "the marks reached the trainee";
     const glm::ivec2 m = pixelOf(markAt);
     ASSERT_TRUE(m.x >= 10 && m.x < 490 && m.y >= 10 && m.y < 490) << m.x << "," << m.y;
     EXPECT_GE(countHue(img, m.x, m.y, 10, ui::markColor()), 40) << "the mark's ring";
+    const glm::ivec2 h = pixelOf(hiddenAt);
+    ASSERT_TRUE(h.x >= 10 && h.x < 490 && h.y >= 10 && h.y < 490) << h.x << "," << h.y;
+    EXPECT_LT(countHue(img, h.x, h.y, 10, ui::markColor()), 5)
+        << "a mark behind the bone is drawn faint, not in full colour";
     EXPECT_EQ(countHue(img, pixelOf(tool.position + axis * 55.0f).x,
                        pixelOf(tool.position + axis * 55.0f).y, 2, ui::markColor()),
               0)
