@@ -567,30 +567,26 @@ void SessionServer::networkLoop() {
         }
         s.host.flush();
     };
-    // The roster to everyone who said hello (and was not kicked), whenever it changes.
+    // A control message to everyone who said hello (and was not kicked).
+    auto sendToParticipants = [&](const std::vector<uint8_t>& bytes) {
+        for (const auto& [pid, peer] : s.peers)
+            if (peer.hello && !peer.kicked)
+                sendTo(peer.peer, Channel::Control, bytes);
+    };
+    // The roster, to everyone whenever it changes.
     auto sendParticipants = [&] {
         Participants roster;
         for (const auto& [pid, peer] : s.peers) // a std::map: increasing ids, as the wire wants
             if (peer.hello && !peer.kicked)
                 roster.list.push_back({pid, peer.helloMsg.role, peer.sync, peer.helloMsg.name});
-        const std::vector<uint8_t> bytes = encodeMessage(roster);
-        for (const auto& [pid, peer] : s.peers)
-            if (peer.hello && !peer.kicked)
-                sendTo(peer.peer, Channel::Control, bytes);
+        sendToParticipants(encodeMessage(roster));
     };
-    // Every mark, to one peer or (null) to everyone who said hello.
-    auto sendAnnotations = [&](ENetPeer* to) {
+    // Every mark, in increasing id (a std::map).
+    auto annotationList = [&] {
         Annotations marks;
-        for (const auto& [id, a] : s.annotations)
+        for (const auto& [markId, a] : s.annotations)
             marks.list.push_back(a);
-        const std::vector<uint8_t> bytes = encodeMessage(marks);
-        if (to) {
-            sendTo(to, Channel::Control, bytes);
-            return;
-        }
-        for (const auto& [pid, peer] : s.peers)
-            if (peer.hello && !peer.kicked)
-                sendTo(peer.peer, Channel::Control, bytes);
+        return encodeMessage(marks);
     };
     auto malformed = [&](NetPeer& p) {
         m_stats.countMalformed();
@@ -640,7 +636,7 @@ void SessionServer::networkLoop() {
             sendTo(p.peer, Channel::Control, encodeMessage(w));
             sendParticipants();
             if (!s.annotations.empty())
-                sendAnnotations(p.peer);
+                sendTo(p.peer, Channel::Control, annotationList());
             SimEvent ev = makeEvent(SimEvent::Kind::Join, id);
             ev.camera = toCamera(h.view);
             ev.codec = h.codec;
@@ -734,7 +730,7 @@ void SessionServer::networkLoop() {
                 s.annotations.clear();
                 break;
             }
-            sendAnnotations(nullptr);
+            sendToParticipants(annotationList());
             return true;
         }
         case MessageType::Ping: {
