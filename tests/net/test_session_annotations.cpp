@@ -72,7 +72,8 @@ TEST(Annotations, InstructorsMarksReachEveryoneAndTraineesAreRefused) {
 
     cho.annotate(add({0, 0, 10}, "entry"));
     cho.annotate(add({5, 0, 9}, "avoid: sinus"));
-    ASSERT_TRUE(pumpUntil(all, [&] { return ada.annotations().size() == 2; }));
+    ASSERT_TRUE(pumpUntil(
+        all, [&] { return ada.annotations().size() == 2 && cho.annotations().size() == 2; }));
     EXPECT_EQ(ada.annotations()[0].label, "entry");
     EXPECT_EQ(ada.annotations()[1].position, glm::vec3(5, 0, 9));
     EXPECT_EQ(ada.annotations()[1].author, cho.welcome().clientId);
