@@ -196,6 +196,7 @@ struct UpdatesOptions {
     // encoding per update (docs/study.md); the bytes target at 10^3 needs it.
     std::string codec = "zstd";
     int cycles = 30;
+    std::vector<std::string> methods; // empty: every method
     bool quick = false;
     bool sizesGiven = false; // --sizes on the command line wins over --quick's sizes
 };
@@ -233,6 +234,7 @@ std::vector<net::UpdateStudyRow> runUpdatesStudy(const UpdatesOptions& o,
     config.camera = o.camera;
     config.codec = net::parseCodec(o.codec);
     config.cycles = o.cycles;
+    config.methods = o.methods;
     if (o.quick) {
         if (!o.sizesGiven)
             config.sizes = {10, 40, 80};
@@ -241,6 +243,15 @@ std::vector<net::UpdateStudyRow> runUpdatesStudy(const UpdatesOptions& o,
     }
     if (config.cycles < 1 || config.cycles > 100000)
         throw Error("--cycles must be in [1, 100000]");
+    const std::vector<std::string> methods = net::updateStudyMethods(config.codec);
+    for (const std::string& m : o.methods)
+        if (std::find(methods.begin(), methods.end(), m) == methods.end()) {
+            std::string names;
+            for (const std::string& known : methods)
+                names += (names.empty() ? "" : ", ") + known;
+            throw Error("--methods: unknown method '" + m + "' (with --codec " + o.codec + ": " +
+                        names + ")");
+        }
     bool known = false;
     for (const std::string& n : cameraPresetNames())
         known = known || n == o.camera;
@@ -252,7 +263,9 @@ std::vector<net::UpdateStudyRow> runUpdatesStudy(const UpdatesOptions& o,
                 o.volume.c_str(), o.camera.c_str(), config.window, config.window, o.codec.c_str(),
                 config.cycles);
     std::fflush(stdout);
-    ProgressBar bar(int(config.sizes.size() * net::updateStudyMethods(config.codec).size()));
+    const size_t methodCount = config.methods.empty() ? net::updateStudyMethods(config.codec).size()
+                                                      : config.methods.size();
+    ProgressBar bar(int(config.sizes.size() * methodCount));
     config.progress = [&](const std::string& label, int done, int) { bar.set(done, label); };
     std::vector<net::UpdateStudyRow> rows = net::runUpdateStudy(volume, config);
     bar.finish();
@@ -418,6 +431,10 @@ void addStudyMode(CLI::App& root, int& exitCode) {
         ->capture_default_str();
     updates->add_option("--cycles", u->cycles, "Measured cycles per method and size")
         ->capture_default_str();
+    updates
+        ->add_option("--methods", u->methods,
+                     "Only these methods (dbi, dbi-fullrender, volume, volume-CODEC)")
+        ->delimiter(',');
     updates->add_flag("--quick", u->quick, "Sizes 10, 40, 80 and 5 cycles: under a minute");
     updates->callback([u, updates, &exitCode] {
         u->sizesGiven = updates->count("--sizes") > 0;

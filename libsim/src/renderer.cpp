@@ -637,9 +637,13 @@ constexpr int kConeMaxSteps = 128;
 // `tStart`: the march starts there instead of at the eye (samples before it are the caller's
 // business: a hit cache proves them below the iso-value ray by ray), and the result is at least
 // tStart unless the cone never meets surface.
-float coneSkipTo(const Frame& f, int x0, int y0, int x1, int y1, float tStart) {
+//
+// `fromCone`: tStart is where a wider cone around this block stopped, near surface by design, so
+// the cheap test below (made for cache resumes) would stop this narrower one at once.
+float coneSkipTo(const Frame& f, int x0, int y0, int x1, int y1, float tStart,
+                 bool fromCone = false) {
     const Ray c = windowRay(f, 0.5 * (x0 + x1), 0.5 * (y0 + y1));
-    if (tStart > 0.0f) {
+    if (tStart > 0.0f && !fromCone) {
         // Resuming from a cache: where the block's rays last met bone and the central point's
         // brick may still hold surface (an ordinary stroke), the cone would stop at once.
         glm::vec3 p = samplePos(f, c, tStart);
@@ -1154,9 +1158,22 @@ void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out,
                 for (int y = by; y < by1 && kMin > 0; ++y)
                     for (int x = bx; x < bx1; ++x)
                         kMin = std::min(kMin, resume[size_t(y) * stride + size_t(x)]);
-                float tSkipTo = f.distance && kMin != HitCache::kNever
-                                    ? coneSkipTo(f, bx, by, bx1, by1, float(kMin) * f.dt)
-                                    : 0.0f;
+                const float tStart = float(kMin) * f.dt;
+                const float tSkipTo = f.distance && kMin != HitCache::kNever
+                                          ? coneSkipTo(f, bx, by, bx1, by1, tStart)
+                                          : 0.0f;
+                // A cone that went some way and then stopped near surface (a hole's wall, the
+                // rim of a cut) may have stopped for the sake of a few of the block's rays: the
+                // quarters' narrower cones go on from there, each for its own 4 x 4 rays. (Cones
+                // that stop at once stay whole: quartering them measured slower, and so did a
+                // second level of quarters.)
+                const int midX = (bx + bx1) / 2, midY = (by + by1) / 2;
+                float quarterSkip[4] = {tSkipTo, tSkipTo, tSkipTo, tSkipTo};
+                if (tSkipTo > tStart && tSkipTo < INFINITY && midX > bx && midY > by)
+                    for (int q = 0; q < 4; ++q)
+                        quarterSkip[q] =
+                            coneSkipTo(f, q & 1 ? midX : bx, q & 2 ? midY : by, q & 1 ? bx1 : midX,
+                                       q & 2 ? by1 : midY, tSkipTo, true);
                 // March the block's rays one by one; refine and shade their hits eight at a time.
                 PendingHit pending[kConeBlock * kConeBlock];
                 int npending = 0;
@@ -1171,7 +1188,8 @@ void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out,
                         known += *slot != 0;
                         PendingHit& h = pending[npending];
                         h.r = pixelRay(f, x, y);
-                        h.m = marchToSurface(f, h.r, tSkipTo, *slot, *wasInside != 0);
+                        const float skip = quarterSkip[(x >= midX) + 2 * (y >= midY)];
+                        h.m = marchToSurface(f, h.r, skip, *slot, *wasInside != 0);
                         *slot = h.m.kIn;
                         *wasInside = h.m.hit && h.m.refine;
                         if (h.m.hit) {

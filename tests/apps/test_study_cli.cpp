@@ -116,11 +116,26 @@ TEST(StudyCli, UpdatesQuickWritesEveryColumnWithSaneValues) {
     EXPECT_NE(r.out.find("update size 16^3"), std::string::npos) << r.out;
 }
 
+// --methods runs only the methods named; the rate target needs both dbi and volume, so none prints.
+TEST(StudyCli, UpdatesMethodsRunsOnlyThoseNamed) {
+    TempDir dir;
+    CommandResult r = runTrephine(dir, "study updates --quick --sizes 8 --volume skull:64 "
+                                       "--methods dbi --out '" +
+                                           dir / "out" + "'");
+    ASSERT_EQ(r.exitCode, 0) << r.out << r.err;
+    const Csv csv = readCsv(dir / "out/updates.csv");
+    ASSERT_EQ(csv.rows.size(), 1u);
+    EXPECT_EQ(csv.rows[0].at("method"), "dbi");
+    EXPECT_EQ(r.out.find("update rate"), std::string::npos) << r.out;
+}
+
 TEST(StudyCli, BadFlagsGiveOneLine) {
     TempDir dir;
     for (const char* args :
          {"study updates --codec gzip --quick", "study updates --sizes 0",
-          "study updates --camera nowhere --quick", "study updates --volume nosuch.nrrd --quick"}) {
+          "study updates --camera nowhere --quick", "study updates --volume nosuch.nrrd --quick",
+          "study updates --quick --methods dbi,teleport",
+          "study updates --quick --codec lz4 --methods volume-zstd"}) {
         CommandResult r = runTrephine(dir, std::string(args) + " --out '" + dir / "o" + "'");
         EXPECT_NE(r.exitCode, 0) << args;
         EXPECT_FALSE(r.err.empty()) << args;
