@@ -464,6 +464,8 @@ struct March {
 March marchToSurface(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume,
                      bool resumeInside = false) {
     March m;
+    if (tSkipTo == INFINITY) // a cone proved the whole ray empty
+        return m;
     if (resumeInside && tSkipTo * (1.0f / f.dt) < float(kResume)) {
         const v4sf p = samplePos4(f, r, float(kResume) * f.dt);
         float value;
@@ -618,6 +620,17 @@ March march(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume) {
 
 // [SECTION] Tile pass ----------------------------------------------------------------------------
 
+// The bits c * step for the cells c of [lo, hi] clipped to a brick's [0, kSize): summed over
+// three axes' spans (steps 1, 4, 16) by multiplying, the cells of a box in a brick's cell mask.
+inline uint64_t cellSpan(int lo, int hi, int step) {
+    lo = std::max(lo, 0);
+    hi = std::min(hi, BrickGrid::kSize - 1);
+    uint64_t bits = 0;
+    for (int c = lo; c <= hi; ++c)
+        bits |= uint64_t(1) << (c * step);
+    return bits;
+}
+
 // Pixels per edge of the blocks that share one cone march.
 constexpr int kConeBlock = 8;
 // The widest box of bricks (per axis) a cone's cross-section may overlap for the cone march to go
@@ -723,18 +736,20 @@ float coneSkipTo(const Frame& f, int x0, int y0, int x1, int y1, float tStart,
                 if (clo[a] < 0 || chi[a] >= (f.nb[a] << S) || chi[a] - clo[a] >= 8)
                     return t;
             }
-            for (int z = clo.z; z <= chi.z; ++z)
-                for (int y = clo.y; y <= chi.y; ++y)
-                    for (int x = clo.x; x <= chi.x; ++x) {
-                        size_t bi =
-                            size_t(x >> S) + size_t(nbx) * size_t(y >> S) + f.nbxy * size_t(z >> S);
-                        int bit =
-                            (x & (BrickGrid::kSize - 1)) +
-                            BrickGrid::kSize * ((y & (BrickGrid::kSize - 1)) +
-                                                BrickGrid::kSize * (z & (BrickGrid::kSize - 1)));
-                        if ((f.cells[bi] >> bit) & 1u)
+            // Brick by brick: the cells of the box that lie in the brick as one 64-bit mask
+            // (bit cx + 4 cy + 16 cz), against the brick's cell mask.
+            for (int bz = clo.z >> S; bz <= chi.z >> S; ++bz) {
+                const uint64_t zs = cellSpan(clo.z - (bz << S), chi.z - (bz << S), 16);
+                for (int by = clo.y >> S; by <= chi.y >> S; ++by) {
+                    const uint64_t ys = cellSpan(clo.y - (by << S), chi.y - (by << S), 4);
+                    const size_t row = size_t(nbx) * size_t(by) + f.nbxy * size_t(bz);
+                    for (int bx = clo.x >> S; bx <= chi.x >> S; ++bx) {
+                        const uint64_t xs = cellSpan(clo.x - (bx << S), chi.x - (bx << S), 1);
+                        if (f.cells[row + size_t(bx)] & (xs * ys * zs))
                             return t;
                     }
+                }
+            }
             boxLo = glm::vec3(clo);
             boxHi = glm::vec3(chi + 1);
         }
@@ -1174,6 +1189,23 @@ void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out,
                         quarterSkip[q] =
                             coneSkipTo(f, q & 1 ? midX : bx, q & 2 ? midY : by, q & 1 ? bx1 : midX,
                                        q & 2 ? by1 : midY, tSkipTo, true);
+                if (quarterSkip[0] == INFINITY && quarterSkip[1] == INFINITY &&
+                    quarterSkip[2] == INFINITY && quarterSkip[3] == INFINITY) {
+                    // The cones proved every ray of the block empty: background, never to hit.
+                    for (int y = by; y < by1; ++y)
+                        for (int x = bx; x < bx1; ++x) {
+                            const int ox = x - rect.x + outX, oy = y - rect.y + outY;
+                            std::memcpy(out.color(ox, oy), kBackgroundRgba, 4);
+                            out.depth()[out.index(ox, oy)] = kBackgroundDepth;
+                            if (resume) {
+                                const size_t at = size_t(y) * stride + size_t(x);
+                                known += resume[at] != 0;
+                                resume[at] = HitCache::kNever;
+                                inside[at] = 0;
+                            }
+                        }
+                    continue;
+                }
                 // March the block's rays one by one; refine and shade their hits eight at a time.
                 PendingHit pending[kConeBlock * kConeBlock];
                 int npending = 0;
