@@ -49,6 +49,39 @@ float DepthQuantizer::dequantize(uint16_t q) const {
     return std::min(float(ndc * 0.5 + 0.5), std::nextafter(1.0f, 0.0f));
 }
 
+// GCC vectors (two SSE2 registers on baseline x86-64): every operation is the scalar one lane by
+// lane, in the scalar order, and x86-64 has no FMA to contract them, so the bits are the same.
+typedef double v4df __attribute__((vector_size(32)));
+typedef float v4sf __attribute__((vector_size(16)));
+typedef int32_t v4si __attribute__((vector_size(16)));
+
+void DepthQuantizer::quantizeRow(const float* windowDepth, uint16_t* codes, size_t n) const {
+    // Scalar: out of order, the divisions of neighbouring values overlap already; GCC's 4-lane
+    // version (selects and conversions on SSE2) measured 1.7x slower.
+    for (size_t i = 0; i < n; ++i)
+        codes[i] = quantize(windowDepth[i]);
+}
+
+void DepthQuantizer::dequantizeRow(const uint16_t* codes, float* windowDepth, size_t n) const {
+    const double n0 = m_near, f0 = m_far;
+    const float below1 = std::nextafter(1.0f, 0.0f);
+    size_t i = 0;
+    for (; i + 4 <= n; i += 4) {
+        const v4si q{codes[i], codes[i + 1], codes[i + 2], codes[i + 3]};
+        const v4df dist = n0 + __builtin_convertvector(q, v4df) / 65534.0 * (f0 - n0);
+        const v4df z = -dist;
+        const v4df ndc = (-(f0 + n0) / (f0 - n0) * z - 2.0 * f0 * n0 / (f0 - n0)) / -z;
+        v4sf d = __builtin_convertvector(ndc * 0.5 + 0.5, v4sf);
+        d = d < below1 ? d : v4sf{below1, below1, below1, below1};
+        d = q == int32_t(kBackground)
+                ? v4sf{kBackgroundDepth, kBackgroundDepth, kBackgroundDepth, kBackgroundDepth}
+                : d;
+        std::memcpy(windowDepth + i, &d, sizeof d);
+    }
+    for (; i < n; ++i)
+        windowDepth[i] = dequantize(codes[i]);
+}
+
 namespace {
 
 size_t planarBytes(size_t pixels) {

@@ -32,32 +32,49 @@ size_t maskBytes(size_t pixels) {
     return (pixels + 7) / 8;
 }
 
-// FNV-1a over two 32-bit words a pixel: packed R, G, B, then the depth code.
-struct PixelHash {
-    uint32_t h = 2166136261u;
-    void mix(uint32_t v) {
-        h ^= v;
-        h *= 16777619u;
+// The pixels' hash: four FNV-1a lanes of 64 bits, column x in lane x % 4, carried from row to row
+// in raster order; a pixel is one word, R | G << 8 | B << 16 | depth code << 24. Four lanes keep
+// four multiplications in flight where one chain waited on each (two a pixel before protocol 4).
+// The lanes, after the width and height, go through one more FNV-1a pass, folded to 32 bits.
+class PixelHash {
+public:
+    static constexpr uint64_t kBasis = 14695981039346656037ull, kPrime = 1099511628211ull;
+
+    void row(const uint8_t* rgba, const uint16_t* codes, int w) {
+        int x = 0;
+        for (; x + 4 <= w; x += 4)
+            for (int l = 0; l < 4; ++l)
+                m_lane[l] = (m_lane[l] ^ word(rgba + 4 * (x + l), codes[x + l])) * kPrime;
+        for (; x < w; ++x)
+            m_lane[x & 3] = (m_lane[x & 3] ^ word(rgba + 4 * x, codes[x])) * kPrime;
     }
-    void pixel(const uint8_t* rgba, uint16_t q) {
-        mix(uint32_t(rgba[0]) | uint32_t(rgba[1]) << 8 | uint32_t(rgba[2]) << 16);
-        mix(q);
+    uint32_t finish(int w, int h) const {
+        uint64_t f = kBasis;
+        for (uint64_t v : {uint64_t(w), uint64_t(h), m_lane[0], m_lane[1], m_lane[2], m_lane[3]})
+            f = (f ^ v) * kPrime;
+        return uint32_t(f ^ (f >> 32));
     }
+
+private:
+    static uint64_t word(const uint8_t* rgba, uint16_t q) {
+        return uint64_t(rgba[0]) | uint64_t(rgba[1]) << 8 | uint64_t(rgba[2]) << 16 |
+               uint64_t(q) << 24;
+    }
+    uint64_t m_lane[4] = {kBasis, kBasis ^ 1, kBasis ^ 2, kBasis ^ 3};
 };
 
 // Depth codes of every pixel of `image`, and the hash of its colour and codes.
 uint32_t codesAndHash(const Dbi& image, const DepthQuantizer& quantizer,
                       std::vector<uint16_t>& codes) {
-    const size_t n = size_t(image.width()) * size_t(image.height());
-    codes.resize(n);
+    const int w = image.width(), h = image.height();
+    codes.resize(size_t(w) * size_t(h));
+    quantizer.quantizeRow(image.depth(), codes.data(), codes.size());
     PixelHash hash;
-    hash.mix(uint32_t(image.width()));
-    hash.mix(uint32_t(image.height()));
-    for (size_t i = 0; i < n; ++i) {
-        codes[i] = quantizer.quantize(image.depth()[i]);
-        hash.pixel(image.color() + 4 * i, codes[i]);
+    for (int y = 0; y < h; ++y) {
+        const size_t row = size_t(y) * size_t(w);
+        hash.row(image.color() + 4 * row, codes.data() + row, w);
     }
-    return hash.h;
+    return hash.finish(w, h);
 }
 
 } // namespace
@@ -75,15 +92,13 @@ PredictedImage encodePredicted(const Dbi& next, const Dbi& base, Codec codec,
     const int w = next.width(), h = next.height();
     const size_t n = size_t(w) * size_t(h);
     std::vector<uint8_t> mask(maskBytes(n), 0);
-    // One raster pass: codes of the new picture (two rows kept), the base's codes only where its
-    // depth differs (quantising is the costly part), the hash of the base, the mask, and the
-    // residuals of changed pixels into per-plane scratch.
+    // One raster pass: the hash of the base, the mask, and the residuals of changed pixels into
+    // per-plane scratch.
     std::vector<uint8_t> scratch(5 * n);
     uint8_t *sr = scratch.data(), *sg = sr + n, *sb = sg + n, *sHi = sb + n, *sLo = sHi + n;
-    std::vector<uint16_t> rows(2 * size_t(w));
+    // Codes of the new picture (two rows kept) and of the base, a row at a time.
+    std::vector<uint16_t> rows(2 * size_t(w)), was(w);
     PixelHash hash;
-    hash.mix(uint32_t(w));
-    hash.mix(uint32_t(h));
     size_t m = 0;
     for (int y = 0; y < h; ++y) {
         uint16_t* qCur = rows.data() + size_t(y & 1) * size_t(w);
@@ -92,16 +107,13 @@ PredictedImage encodePredicted(const Dbi& next, const Dbi& base, Codec codec,
         const uint8_t* cNow = next.color() + 4 * row;
         const uint8_t* cBelow = y > 0 ? cNow - 4 * size_t(w) : nullptr;
         const uint8_t* cWas = base.color() + 4 * row;
-        const float* dNow = next.depth() + row;
-        const float* dWas = base.depth() + row;
-        for (int x = 0; x < w; ++x)
-            qCur[x] = quantizer.quantize(dNow[x]);
+        quantizer.quantizeRow(next.depth() + row, qCur, size_t(w));
+        quantizer.quantizeRow(base.depth() + row, was.data(), size_t(w));
+        hash.row(cWas, was.data(), w);
         for (int x = 0; x < w; ++x) {
-            const uint16_t qWas = dWas[x] == dNow[x] ? qCur[x] : quantizer.quantize(dWas[x]);
             const uint8_t* now = cNow + 4 * x;
-            const uint8_t* was = cWas + 4 * x;
-            hash.pixel(was, qWas);
-            if (qWas == qCur[x] && now[0] == was[0] && now[1] == was[1] && now[2] == was[2])
+            const uint8_t* old = cWas + 4 * x;
+            if (was[x] == qCur[x] && now[0] == old[0] && now[1] == old[1] && now[2] == old[2])
                 continue;
             const size_t i = row + size_t(x);
             mask[i / 8] |= uint8_t(1u << (i % 8));
@@ -129,7 +141,7 @@ PredictedImage encodePredicted(const Dbi& next, const Dbi& base, Codec codec,
     out.rawBytes = uint32_t(raw.size());
     out.changedPixels = int(m);
     out.payload = compressBytes(raw, codec);
-    out.baseHash = hash.h;
+    out.baseHash = hash.finish(w, h);
     return out;
 }
 
@@ -162,6 +174,7 @@ PredictedStatus decodePredicted(std::span<const uint8_t> payload, uint32_t rawBy
     // Nothing can fail from here: decode in place, in raster order, so every prediction reads
     // the new picture (decoded pixels below and to the left, our own pixels elsewhere).
     size_t k = 0;
+    std::vector<float> depths(static_cast<size_t>(w));
     for (int y = 0; y < h; ++y) {
         const size_t row = size_t(y) * size_t(w);
         uint8_t* cCur = image.color() + 4 * row;
@@ -180,9 +193,16 @@ PredictedStatus decodePredicted(std::span<const uint8_t> payload, uint32_t rawBy
             c[2] = uint8_t(predictAt<uint8_t>(cCur + 2, cBelow ? cBelow + 2 : nullptr, x, 4) +
                            uint8_t(b[k] + er));
             qCur[x] = uint16_t(predictAt<uint16_t>(qCur, qBelow, x, 1) + ((dHi[k] << 8) | dLo[k]));
-            image.depth()[i] = quantizer.dequantize(qCur[x]);
-            c[3] = image.depth()[i] >= kBackgroundDepth ? 0 : 255;
+            c[3] = qCur[x] == DepthQuantizer::kBackground ? 0 : 255;
             ++k;
+        }
+        // The row's depths from its codes, four at a time, kept where the mask says.
+        quantizer.dequantizeRow(qCur, depths.data(), size_t(w));
+        float* depth = image.depth() + row;
+        for (int x = 0; x < w; ++x) {
+            const size_t i = row + size_t(x);
+            if (mask[i / 8] & (1u << (i % 8)))
+                depth[x] = depths[size_t(x)];
         }
     }
     return PredictedStatus::Ok;

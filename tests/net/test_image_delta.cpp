@@ -9,6 +9,9 @@
 
 #include <gtest/gtest.h>
 
+#include <bit>
+#include <cmath>
+
 #include <random>
 
 using namespace trephine;
@@ -60,6 +63,34 @@ TEST(DepthQuantizer, RoundTripIsIdempotentForEveryCode) {
         DepthQuantizer q(cameraPreset(preset, v, {500, 500}));
         for (uint32_t code = 0; code <= 0xffff; ++code)
             ASSERT_EQ(q.quantize(q.dequantize(uint16_t(code))), code) << preset << " code " << code;
+    }
+}
+
+TEST(DepthQuantizer, RowFunctionsAreTheOneValueFunctionsBitForBit) {
+    Volume v = makeSkull(64);
+    v.setSpacing(glm::vec3(paperSpacingMm(64)));
+    for (const char* preset : {"paper", "working"}) {
+        DepthQuantizer q(cameraPreset(preset, v, {500, 500}));
+        // Every code, an odd count so the scalar tail runs too.
+        std::vector<uint16_t> codes(0x10000 + 3);
+        for (size_t i = 0; i < codes.size(); ++i)
+            codes[i] = uint16_t(i * 40503u);
+        std::vector<float> depths(codes.size());
+        q.dequantizeRow(codes.data(), depths.data(), codes.size());
+        for (size_t i = 0; i < codes.size(); ++i)
+            ASSERT_EQ(std::bit_cast<uint32_t>(depths[i]),
+                      std::bit_cast<uint32_t>(q.dequantize(codes[i])))
+                << preset << " code " << codes[i];
+        // Depths across [0, 1], the background, values just below it and beyond both ends.
+        std::vector<float> in{0.0f, -0.5f, 1.0f, 2.0f, std::nextafter(1.0f, 0.0f), 0.5f, 0.999f};
+        for (int i = 0; i <= 200000; ++i)
+            in.push_back(float(i) / 200000.0f);
+        for (float d = 0.9f; d < 1.0f; d = std::nextafter(d, 1.0f) + 1e-7f)
+            in.push_back(d);
+        std::vector<uint16_t> out(in.size());
+        q.quantizeRow(in.data(), out.data(), in.size());
+        for (size_t i = 0; i < in.size(); ++i)
+            ASSERT_EQ(out[i], q.quantize(in[i])) << preset << " depth " << in[i];
     }
 }
 

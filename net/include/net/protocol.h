@@ -21,8 +21,9 @@ namespace trephine::net {
 // Travels in ENet's connect data; the server refuses other versions with kRefuseVersion.
 // 2: SyncMode and VolumeUpdate (the replicated-volume baseline); stage times in ImageUpdate;
 // the volume codec in the hello. 3: Participants (who is in the session, by name and role);
-// Annotate and Annotations (an instructor's marks on the skull).
-inline constexpr uint32_t kProtocolVersion = 3;
+// Annotate and Annotations (an instructor's marks on the skull). 4: the predicted image form's
+// base hash is four 64-bit FNV-1a lanes, a word a pixel (image_delta.cpp).
+inline constexpr uint32_t kProtocolVersion = 4;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
 enum class RefuseReason : uint32_t {
