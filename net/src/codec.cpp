@@ -84,6 +84,35 @@ void DepthQuantizer::dequantizeRow(const uint16_t* codes, float* windowDepth, si
 
 namespace {
 
+// One zstd context per thread, kept: creating one per call cost ~9 us a compression and ~8 us a
+// decompression, a tenth of a small stroke's update (measured on 5 kB). ZSTD_compress and
+// ZSTD_decompress are exactly these calls on a fresh context.
+struct ZstdContexts {
+    ZSTD_CCtx* c = ZSTD_createCCtx();
+    ZSTD_DCtx* d = ZSTD_createDCtx();
+    ~ZstdContexts() {
+        ZSTD_freeCCtx(c);
+        ZSTD_freeDCtx(d);
+    }
+};
+
+ZstdContexts& zstdContexts() {
+    thread_local ZstdContexts contexts;
+    return contexts;
+}
+
+size_t zstdCompress(void* dst, size_t capacity, const void* src, size_t size) {
+    ZstdContexts& z = zstdContexts();
+    return z.c ? ZSTD_compressCCtx(z.c, dst, capacity, src, size, 1)
+               : ZSTD_compress(dst, capacity, src, size, 1);
+}
+
+size_t zstdDecompress(void* dst, size_t capacity, const void* src, size_t size) {
+    ZstdContexts& z = zstdContexts();
+    return z.d ? ZSTD_decompressDCtx(z.d, dst, capacity, src, size)
+               : ZSTD_decompress(dst, capacity, src, size);
+}
+
 size_t planarBytes(size_t pixels) {
     return pixels * 5;
 }
@@ -165,7 +194,7 @@ EncodedImage encodeImage(const Dbi& image, Codec codec, const Camera& camera) {
     } else {
         e.payload.resize(ZSTD_compressBound(planar.size()));
         size_t written =
-            ZSTD_compress(e.payload.data(), e.payload.size(), planar.data(), planar.size(), 1);
+            zstdCompress(e.payload.data(), e.payload.size(), planar.data(), planar.size());
         e.payload.resize(ZSTD_isError(written) ? 0 : written);
     }
     return e;
@@ -194,7 +223,7 @@ bool decodeImage(std::span<const uint8_t> payload, uint32_t rawBytes, Codec code
         if (got != int(planar.size()))
             return false;
     } else {
-        size_t got = ZSTD_decompress(planar.data(), planar.size(), payload.data(), payload.size());
+        size_t got = zstdDecompress(planar.data(), planar.size(), payload.data(), payload.size());
         if (ZSTD_isError(got) || got != planar.size())
             return false;
     }
@@ -216,7 +245,7 @@ std::vector<uint8_t> compressBytes(std::span<const uint8_t> raw, Codec codec) {
         out.resize(size_t(std::max(written, 0)));
     } else {
         out.resize(ZSTD_compressBound(raw.size()));
-        size_t written = ZSTD_compress(out.data(), out.size(), raw.data(), raw.size(), 1);
+        size_t written = zstdCompress(out.data(), out.size(), raw.data(), raw.size());
         out.resize(ZSTD_isError(written) ? 0 : written);
     }
     return out;
@@ -239,7 +268,7 @@ bool decompressBytes(std::span<const uint8_t> payload, Codec codec, size_t rawBy
                                       int(out.size()));
         return got == int(out.size());
     }
-    size_t got = ZSTD_decompress(out.data(), out.size(), payload.data(), payload.size());
+    size_t got = zstdDecompress(out.data(), out.size(), payload.data(), payload.size());
     return !ZSTD_isError(got) && got == out.size();
 }
 
