@@ -45,8 +45,13 @@ namespace trephine::ui {
 
 namespace {
 
-constexpr int kPanelWidth = 420;
-constexpr int kBottomHeight = 250;
+// The default layout, 1280 x 900 with the 500-pixel view: the view over Forces; Session, View and
+// Network in the middle column; Comparison over Dirty boxes on the right. Each panel gets the
+// height its content takes, so none scrolls in a default window (panels stay movable).
+constexpr int kPanelWidth = 380;   // the middle column
+constexpr int kSideWidth = 400;    // the right-hand column
+constexpr int kBottomHeight = 400; // Forces, under the view
+constexpr int kMinHeight = 760;
 
 // [SECTION] scene
 
@@ -288,12 +293,16 @@ int runTrainerWindow(const TrainerOptions& o) {
     std::optional<glm::vec3> pointerPick; // the bone under the pointer, last seen over the view
     const int viewSize = o.size;
     WindowConfig wc;
-    wc.width = viewSize + kPanelWidth;
-    wc.height = std::max(viewSize + kBottomHeight, 760);
+    wc.width = viewSize + kPanelWidth + kSideWidth;
+    wc.height = std::max(viewSize + kBottomHeight, kMinHeight);
     wc.title =
         std::string("Trephine - ") + (o.instructor ? "instructor" : "trainee") + " - " + o.address;
     wc.visible = o.visible;
     Window window(wc);
+    // A scripted screenshot is the same whatever the pointer of the display happens to hover (no
+    // tooltip or highlighted panel from it).
+    if (!o.screenshot.empty() && !o.script.empty())
+        ImGui::GetIO().ConfigFlags |= ImGuiConfigFlags_NoMouse;
     Compositor comp;
     comp.resize(viewSize, viewSize);
     VolumeView volumeView; // the replicated-volume design's picture
@@ -733,11 +742,14 @@ int runTrainerWindow(const TrainerOptions& o) {
             }
         }
 
-        // Panels: right column and the strip under the view.
+        // Panels: Forces under the view, and two columns right of it (kPanelWidth, above).
         const float right = float(viewSize), colW = float(kPanelWidth);
+        const float side = right + colW, sideW = float(kSideWidth);
         const float H = float(window.height());
+        const float sessionH = std::floor(H * 0.31f), viewPanelH = 165.0f;
+        const float networkY = sessionH + viewPanelH, comparisonH = std::floor(H * 0.535f);
         ImGui::SetNextWindowPos(ImVec2(right, 0), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(colW, 250), ImGuiCond_FirstUseEver);
+        ImGui::SetNextWindowSize(ImVec2(colW, sessionH), ImGuiCond_FirstUseEver);
         drawSessionPanel(*snap, toolControls, markControls, o.instructor ? "instructor" : "trainee",
                          o.address, o.name);
         // Marks asked for (the panel, the M key, --mark once joined); the server lists them back.
@@ -768,16 +780,15 @@ int runTrainerWindow(const TrainerOptions& o) {
         }
         markControls.addAtPointer = markControls.clearAll = false;
         markControls.removeId = 0;
-        ImGui::SetNextWindowPos(ImVec2(right, 250), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(colW, 120), ImGuiCond_FirstUseEver);
+        ImGui::SetNextWindowPos(ImVec2(right, sessionH), ImGuiCond_FirstUseEver);
+        ImGui::SetNextWindowSize(ImVec2(colW, viewPanelH), ImGuiCond_FirstUseEver);
         drawViewPanel(viewControls, snap->waitingForView || !havePicture,
                       havePicture ? describe(dbiCamera) : std::string("no image yet"));
-        const float netH = (H - 370) * 0.5f;
-        ImGui::SetNextWindowPos(ImVec2(right, 370), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(colW, netH), ImGuiCond_FirstUseEver);
+        ImGui::SetNextWindowPos(ImVec2(right, networkY), ImGuiCond_FirstUseEver);
+        ImGui::SetNextWindowSize(ImVec2(colW, H - networkY), ImGuiCond_FirstUseEver);
         drawNetworkPanel(*snap, netHistory, now);
-        ImGui::SetNextWindowPos(ImVec2(right, 370 + netH), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(colW, H - 370 - netH), ImGuiCond_FirstUseEver);
+        ImGui::SetNextWindowPos(ImVec2(side, 0), ImGuiCond_FirstUseEver);
+        ImGui::SetNextWindowSize(ImVec2(sideW, comparisonH), ImGuiCond_FirstUseEver);
         SyncDesign shown = wanted;
         if (drawComparisonPanel(shown, comparison, now) && shown != wanted)
             requestDesign(shown);
@@ -794,11 +805,11 @@ int runTrainerWindow(const TrainerOptions& o) {
         }
         ImGui::End();
         ImGui::SetNextWindowPos(ImVec2(0, float(viewSize)), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(right * 0.5f, H - float(viewSize)), ImGuiCond_FirstUseEver);
+        ImGui::SetNextWindowSize(ImVec2(right, H - float(viewSize)), ImGuiCond_FirstUseEver);
         drawForcesPanel(forceHistory, hstats.achievedRateHz,
                         o.instructor ? &participantForces : nullptr, &snap->participants);
-        ImGui::SetNextWindowPos(ImVec2(right * 0.5f, float(viewSize)), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(right * 0.5f, H - float(viewSize)), ImGuiCond_FirstUseEver);
+        ImGui::SetNextWindowPos(ImVec2(side, comparisonH), ImGuiCond_FirstUseEver);
+        ImGui::SetNextWindowSize(ImVec2(sideW, H - comparisonH), ImGuiCond_FirstUseEver);
         drawDirtyBoxPanel(boxState, boxHistory, now);
 
         // Screenshot / frame budget.

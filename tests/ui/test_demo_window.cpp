@@ -40,7 +40,8 @@ TEST(DemoWindow, ScreenshotShowsBoneTheDrilledHoleAndPanels) {
         GTEST_SKIP() << "no display for the demo window (" << why << "); run under xvfb-run";
     Image plain = readPng(shoot("trephine_demo_plain.png", ""));
     Image drilled = readPng(shoot("trephine_demo_drilled.png", "--script burrhole"));
-    ASSERT_EQ(plain.w, 920);
+    ASSERT_EQ(plain.w, 1280);
+    ASSERT_EQ(plain.h, 900);
     ASSERT_EQ(drilled.w, plain.w);
     ASSERT_EQ(drilled.h, plain.h);
     // The view is 500x500 at the top left, looking straight at the burr site (its centre).

@@ -142,7 +142,7 @@ TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
     EXPECT_GT(relays, 0u) << "the trainee's force models were relayed to the instructor";
 
     Image img = readPng(out);
-    ASSERT_EQ(img.w, 920);
+    ASSERT_EQ(img.w, 1280);
     // The instructor's camera: its default close view of the burr site, 500 x 500 at the top left.
     const Camera cam =
         cameraLookingAt(site.position, site.normal, 170.0f, 45.0f, {500, 500}, skull);
