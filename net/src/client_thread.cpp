@@ -131,6 +131,9 @@ bool ClientThread::requestSync(Sync mode) {
 bool ClientThread::annotate(const Annotate& a) {
     return push(a);
 }
+bool ClientThread::takeOver(uint16_t trainee) {
+    return push(TakeOver{trainee});
+}
 
 std::vector<AppliedVolumeBox> ClientThread::drainVolumeBoxes() {
     std::vector<AppliedVolumeBox> out;
@@ -340,6 +343,9 @@ void ClientThread::run() {
                     } else if (auto* a = std::get_if<Annotate>(&c)) {
                         if (cp->welcomed())
                             cp->annotate(*a);
+                    } else if (auto* k = std::get_if<TakeOver>(&c)) {
+                        if (cp->welcomed())
+                            cp->takeOver(k->trainee);
                     } else if (cp->welcomed()) {
                         cp->sendPing();
                     }

@@ -515,4 +515,9 @@ void SessionClient::annotate(Annotate a) {
     send(Channel::Control, encodeMessage(a));
 }
 
+void SessionClient::takeOver(uint16_t trainee) {
+    TakeOver m{trainee};
+    send(Channel::Control, encodeMessage(m));
+}
+
 } // namespace trephine::net

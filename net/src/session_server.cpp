@@ -198,7 +198,24 @@ struct SessionServer::Impl {
     // The instructors' marks, by id (network thread only).
     std::map<uint32_t, AnnotationInfo> annotations;
     uint32_t nextAnnotationId = 1;
+    // Trainees taken over: trainee id -> the instructor holding it (network thread only).
+    std::map<uint16_t, uint16_t> takenOver;
     uint16_t nextId = 1;
+
+    // Whether client `id` (of `role`) may cut now: a trainee nobody holds, or an instructor
+    // holding a trainee.
+    bool mayCut(uint16_t id, Role role) const {
+        if (role == Role::Trainee)
+            return !takenOver.count(id);
+        return std::any_of(takenOver.begin(), takenOver.end(),
+                           [&](const auto& held) { return held.second == id; });
+    }
+    // Hands back whatever `id` holds or is held by; true when that changed anything.
+    bool releaseTakeOvers(uint16_t id) {
+        return std::erase_if(takenOver, [&](const auto& held) {
+                   return held.first == id || held.second == id;
+               }) > 0;
+    }
 
     // Network -> simulation.
     std::mutex inMutex;
@@ -576,9 +593,13 @@ void SessionServer::networkLoop() {
     // The roster, to everyone whenever it changes.
     auto sendParticipants = [&] {
         Participants roster;
-        for (const auto& [pid, peer] : s.peers) // a std::map: increasing ids, as the wire wants
-            if (peer.hello && !peer.kicked)
-                roster.list.push_back({pid, peer.helloMsg.role, peer.sync, peer.helloMsg.name});
+        for (const auto& [pid, peer] : s.peers) { // a std::map: increasing ids, as the wire wants
+            if (!peer.hello || peer.kicked)
+                continue;
+            auto held = s.takenOver.find(pid);
+            roster.list.push_back({pid, peer.helloMsg.role, peer.sync, peer.helloMsg.name,
+                                   held == s.takenOver.end() ? uint16_t(0) : held->second});
+        }
         sendToParticipants(encodeMessage(roster));
     };
     // Every mark, in increasing id (a std::map).
@@ -596,6 +617,7 @@ void SessionServer::networkLoop() {
             m_malformedKicks.fetch_add(1);
             report(peerId(p.peer), [](PeerReport& r) { r.kicked = true; });
             enet_peer_disconnect(p.peer, uint32_t(RefuseReason::Malformed));
+            s.releaseTakeOvers(peerId(p.peer));
             if (p.hello)
                 sendParticipants();
         }
@@ -671,6 +693,12 @@ void SessionServer::networkLoop() {
                 return false; // a diameter the tool cannot have
             }
             report(id, [](PeerReport& r) { ++r.toolStates; });
+            // A paused drill (taken over, or an instructor holding nobody) still touches the
+            // bone, as a burr that does not spin: forces, relays, no cutting.
+            if (t.drilling && !s.mayCut(id, p.helloMsg.role)) {
+                t.drilling = false;
+                m_drillingPaused.fetch_add(1);
+            }
             if (m_config.hapticModels)
                 answerHaptic(p, t, now);
             SimEvent ev = makeEvent(SimEvent::Kind::Tool, id);
@@ -733,6 +761,36 @@ void SessionServer::networkLoop() {
             sendToParticipants(annotationList());
             return true;
         }
+        case MessageType::TakeOver: {
+            TakeOver m;
+            if (!decodeMessage(data, m))
+                return false;
+            auto refuse = [&] {
+                m_takeOversRefused.fetch_add(1);
+                return true;
+            };
+            if (p.helloMsg.role != Role::Instructor)
+                return refuse();
+            if (m.trainee == 0) {
+                if (s.releaseTakeOvers(id))
+                    sendParticipants();
+                return true;
+            }
+            auto target = s.peers.find(m.trainee);
+            if (target == s.peers.end() || !target->second.hello || target->second.kicked ||
+                target->second.helloMsg.role != Role::Trainee)
+                return refuse();
+            auto held = s.takenOver.find(m.trainee);
+            if (held != s.takenOver.end()) {
+                if (held->second != id)
+                    return refuse(); // another instructor's: handed back first
+                return true;         // already ours
+            }
+            s.releaseTakeOvers(id); // one trainee at a time
+            s.takenOver[m.trainee] = id;
+            sendParticipants();
+            return true;
+        }
         case MessageType::Ping: {
             Ping ping;
             if (!decodeMessage(data, ping))
@@ -780,6 +838,7 @@ void SessionServer::networkLoop() {
             if (gone != s.peers.end()) {
                 const bool listed = gone->second.hello && !gone->second.kicked;
                 s.peers.erase(gone);
+                s.releaseTakeOvers(id);
                 s.push(makeEvent(SimEvent::Kind::Leave, id));
                 m_clientCount = s.peers.size();
                 if (listed)
@@ -1122,6 +1181,8 @@ std::string SessionServer::reportJson() const {
     j += "  \"refused_server_full\": " + std::to_string(m_refusedFull.load()) + ",\n";
     j += "  \"views_refused\": " + std::to_string(m_viewsRefused.load()) + ",\n";
     j += "  \"annotations_refused\": " + std::to_string(m_annotationsRefused.load()) + ",\n";
+    j += "  \"take_overs_refused\": " + std::to_string(m_takeOversRefused.load()) + ",\n";
+    j += "  \"drilling_paused\": " + std::to_string(m_drillingPaused.load()) + ",\n";
     j += "  \"channels\": " + jsonChannels(m_stats) + ",\n";
     std::lock_guard lock(s.reportMutex);
     j += "  \"force_compute_us\": " + jsonWindow(s.forceComputeUs) + ",\n";

@@ -139,6 +139,8 @@ public:
     bool requestSync(Sync mode);
     // [Instructor] Adds, removes or clears marks (SessionClient::annotate).
     bool annotate(const Annotate& a);
+    // [Instructor] Takes over a trainee or hands back (0) (SessionClient::takeOver).
+    bool takeOver(uint16_t trainee);
 
     // The latest snapshot (never null after construction).
     std::shared_ptr<const ClientSnapshot> snapshot() const;
@@ -163,7 +165,7 @@ private:
     struct SyncCmd {
         Sync sync;
     };
-    using Command = std::variant<ToolState, ViewCmd, PingCmd, SyncCmd, Annotate>;
+    using Command = std::variant<ToolState, ViewCmd, PingCmd, SyncCmd, Annotate, TakeOver>;
 
     void run();
     bool push(Command c);

@@ -22,7 +22,8 @@ namespace trephine::net {
 // 2: SyncMode and VolumeUpdate (the replicated-volume baseline); stage times in ImageUpdate;
 // the volume codec in the hello. 3: Participants (who is in the session, by name and role);
 // Annotate and Annotations (an instructor's marks on the skull). 4: the predicted image form's
-// base hash is four 64-bit FNV-1a lanes, a word a pixel (image_delta.cpp).
+// base hash is four 64-bit FNV-1a lanes, a word a pixel (image_delta.cpp); TakeOver, and who
+// holds a trainee in Participants.
 inline constexpr uint32_t kProtocolVersion = 4;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
@@ -67,8 +68,9 @@ enum class MessageType : uint8_t {
     HapticRelay = 13,
     Annotate = 14,
     Annotations = 15,
+    TakeOver = 16,
 };
-inline constexpr uint8_t kMessageTypeCount = 16; // one past the largest type
+inline constexpr uint8_t kMessageTypeCount = 17; // one past the largest type
 
 enum class Role : uint8_t { Trainee = 0, Instructor = 1 };
 enum class Codec : uint8_t { Raw = 0, Lz4 = 1, Zstd = 2 };
@@ -354,12 +356,16 @@ struct ParticipantInfo {
     Role role = Role::Trainee;
     Sync sync = Sync::Dbi; // the design feeding its picture (the hello's, then its SyncMode)
     std::string name;
+    // A trainee an instructor has taken over: that instructor's client id (0: nobody). Its
+    // drilling is paused and the instructor's drill cuts instead (TakeOver).
+    uint16_t takenOverBy = 0;
 
     template <typename S>
     bool serialize(S& s) {
         return s.ranged(clientId, uint16_t(1), uint16_t(UINT16_MAX)) &&
                s.ranged(role, Role::Trainee, Role::Instructor) &&
-               s.ranged(sync, Sync::Dbi, Sync::Volume) && s.string(name, kMaxNameLength);
+               s.ranged(sync, Sync::Dbi, Sync::Volume) && s.string(name, kMaxNameLength) &&
+               s.integer(takenOverBy);
     }
     bool operator==(const ParticipantInfo&) const = default;
 };
@@ -424,6 +430,23 @@ struct Annotations {
     bool serialize(S& s) {
         return serializeIdList(s, list, kMaxAnnotations,
                                [](const AnnotationInfo& a) { return a.id; });
+    }
+};
+
+// Client -> server (Channel::Control, reliable): an instructor takes over a trainee (trainee's
+// client id) or hands back whoever it holds (0). While taken over, the trainee's tool still
+// touches the bone (forces, relays) but cuts nothing, and the instructor's drill cuts: the only
+// time an instructor's drill does. An instructor holds one trainee at a time (taking another
+// hands the first back); a trainee held by another instructor must be handed back first. The
+// server refuses (counts, does not apply) take-overs from trainees and of anyone else, and hands
+// back when either leaves; Participants says who holds whom.
+struct TakeOver {
+    static constexpr MessageType kType = MessageType::TakeOver;
+    uint16_t trainee = 0; // 0: hand back
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.integer(trainee);
     }
 };
 

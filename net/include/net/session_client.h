@@ -104,6 +104,9 @@ public:
     // and sends everyone the new list. A trainee's are refused by the server. Labels are cut to
     // kMaxNameLength bytes.
     void annotate(Annotate a);
+    // [Instructor] Takes over a trainee (its client id) or hands back (0): see TakeOver. The
+    // roster (participants()) says when it took effect; a trainee's are refused by the server.
+    void takeOver(uint16_t trainee);
 
     // The latest relayed tool of every other participant, by client id.
     const std::map<uint16_t, ToolState>& others() const { return m_others; }

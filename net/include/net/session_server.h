@@ -103,6 +103,12 @@ public:
     uint64_t viewsRefused() const { return m_viewsRefused.load(); }
     // Annotate messages not applied: from trainees, or adds beyond kMaxAnnotations.
     uint64_t annotationsRefused() const { return m_annotationsRefused.load(); }
+    // TakeOver messages not applied: from trainees, of a client that is not a listed trainee, or
+    // of a trainee another instructor holds.
+    uint64_t takeOversRefused() const { return m_takeOversRefused.load(); }
+    // Drilling tool states whose cutting the server paused: a trainee taken over, or an
+    // instructor holding nobody (their tools still touch the bone).
+    uint64_t drillingPaused() const { return m_drillingPaused.load(); }
     const NetStats& stats() const { return m_stats; }
     // Updates sent per sync mode (Dbi: image updates; Volume: volume updates) and the clients in
     // each mode now. Both modes share the transport and the channel statistics above.
@@ -130,6 +136,8 @@ private:
     std::atomic<uint64_t> m_refusedFull{0};
     std::atomic<uint64_t> m_viewsRefused{0};
     std::atomic<uint64_t> m_annotationsRefused{0};
+    std::atomic<uint64_t> m_takeOversRefused{0};
+    std::atomic<uint64_t> m_drillingPaused{0};
     std::atomic<bool> m_fullRender{false};
     std::thread m_netThread;
     std::thread m_simThread;
