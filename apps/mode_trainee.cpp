@@ -48,6 +48,9 @@ struct TraineeOptions {
     std::string saveDbi;
     std::string name = "trainee";
     double toolRateHz = 100.0; // tool states per second from the haptic loop
+    std::string screenshot;    // window: as `trephine instructor --screenshot`
+    int frames = 3;
+    double timeoutS = 90.0;
 };
 
 struct Sample {
@@ -174,8 +177,22 @@ std::vector<Sample> csvScript(const std::string& path) {
 }
 
 int runTrainee(const TraineeOptions& o) {
-    if (!o.headless) // the window starts in --sync's design; its Comparison toggle switches
-        return runWindowedTrainee(o.connect, o.name, o.codec, o.size, o.sync, o.volumeCodec);
+    if (!o.headless) { // the window starts in --sync's design; its Comparison toggle switches
+        WindowedOptions w;
+        w.connect = o.connect;
+        w.name = o.name;
+        w.codec = o.codec;
+        w.size = o.size;
+        w.sync = o.sync;
+        w.volumeCodec = o.volumeCodec;
+        w.screenshot = o.screenshot;
+        w.frames = o.frames;
+        w.timeoutS = o.timeoutS;
+        return runWindowedClient(w);
+    }
+    if (!o.screenshot.empty())
+        throw Error("--screenshot: the window's; a --headless trainee has none (--save-dbi writes "
+                    "its picture)");
     ENetAddress address = net::parseAddress(o.connect);
     // A CSV script is read first, so a bad file fails before anything connects.
     std::vector<Sample> script;
@@ -423,6 +440,14 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
     sub->add_option("--report", o->report, "Write statistics as JSON here");
     sub->add_option("--save-dbi", o->saveDbi, "Write the final DBI as OpenEXR here");
     sub->add_option("--name", o->name, "Name shown to others")->capture_default_str();
+    sub->add_option("--screenshot", o->screenshot,
+                    "Window: write it to this PNG once the view has settled, then exit");
+    sub->add_option("--frames", o->frames, "Window: settled frames before the screenshot")
+        ->check(CLI::Range(0, 1000000))
+        ->capture_default_str();
+    sub->add_option("--timeout", o->timeoutS, "Window, with --screenshot: give up after this long")
+        ->check(CLI::Range(1.0, 3600.0))
+        ->capture_default_str();
     sub->add_option("--tool-rate", o->toolRateHz,
                     "Tool states per second sent by the haptic loop (20-1000)")
         ->check(CLI::Range(20.0, 1000.0))

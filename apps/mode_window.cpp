@@ -46,25 +46,13 @@ int runWindowedClient(const WindowedOptions& o) {
     t.volumeCodec = o.volumeCodec;
     t.switchSyncAtS = o.switchSyncAtS;
     t.marks = o.marks;
+    t.takeOver = o.takeOver;
     return ui::runTrainerWindow(t);
 #else
     (void)o;
     throw Error("this trephine was built without the GUI (TREPHINE_BUILD_GUI=OFF), so it has no "
                 "window (a trainee can run --headless)");
 #endif
-}
-
-int runWindowedTrainee(const std::string& connect, const std::string& name,
-                       const std::string& codec, int size, const std::string& sync,
-                       const std::string& volumeCodec) {
-    WindowedOptions o;
-    o.connect = connect;
-    o.name = name;
-    o.codec = codec;
-    o.size = size;
-    o.sync = sync;
-    o.volumeCodec = volumeCodec;
-    return runWindowedClient(o);
 }
 
 void addWindowOptions(CLI::App* sub, WindowedOptions& o) {
@@ -117,6 +105,9 @@ void addInstructorMode(CLI::App& root, int& exitCode) {
     sub->add_option("--mark", o->marks,
                     "Place a mark for everyone at X,Y,Z (mm, the volume's frame) with an optional "
                     ":LABEL once joined; repeatable (the M key marks the bone under the pointer)");
+    sub->add_option("--take-over", o->takeOver,
+                    "Take over this trainee (its --name, or its client id) once it is in the "
+                    "session: its drill pauses and yours cuts (the Session panel hands back)");
     addWindowOptions(sub, *o);
     sub->callback([o, &exitCode] { exitCode = runWindowedClient(*o); });
 }

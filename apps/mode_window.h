@@ -25,16 +25,14 @@ struct WindowedOptions {
     std::string volumeCodec = "raw";   // volume boxes: raw, lz4 or zstd
     std::vector<double> switchSyncAtS; // scripted Comparison toggles (s after the first picture)
     std::vector<std::string> marks;    // instructor: "X,Y,Z[:LABEL]" marks placed on joining
+    std::string takeOver; // [Instructor] the trainee (name or client id) to take over once joined
 };
 
 // True when this build has the GUI and a window can open here; `why` says why not.
 bool windowAvailable(std::string* why);
 // Runs the trainee/instructor window; returns the exit code.
 int runWindowedClient(const WindowedOptions& o);
-// The hook `trephine trainee` calls without --headless: a trainee window on `connect`.
-int runWindowedTrainee(const std::string& connect, const std::string& name,
-                       const std::string& codec, int size, const std::string& sync = "dbi",
-                       const std::string& volumeCodec = "raw");
+
 // Adds --screenshot, --frames, --view, --orbit, --tilt, --window-size, --timeout, --sync,
 // --volume-codec and --switch-sync-at to a windowed mode's subcommand.
 void addWindowOptions(CLI::App* sub, WindowedOptions& o);

@@ -23,13 +23,27 @@ std::string participantName(const std::map<uint16_t, net::ParticipantInfo>& rost
     return it->second.name;
 }
 
+uint16_t takenOverBy(const std::map<uint16_t, net::ParticipantInfo>& roster, uint16_t id) {
+    auto it = roster.find(id);
+    return it == roster.end() ? 0 : it->second.takenOverBy;
+}
+
+uint16_t heldBy(const std::map<uint16_t, net::ParticipantInfo>& roster, uint16_t instructor) {
+    if (instructor == 0)
+        return 0;
+    for (const auto& [id, p] : roster)
+        if (p.takenOverBy == instructor)
+            return id;
+    return 0;
+}
+
 glm::vec4 markColor() {
     return {1.0f, 0.84f, 0.0f, 1.0f};
 }
 
 void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkControls& marks,
-                      const std::string& role, const std::string& address,
-                      const std::string& name) {
+                      TakeOverControls& takeOver, const std::string& role,
+                      const std::string& address, const std::string& name) {
     if (!ImGui::Begin("Session")) {
         ImGui::End();
         return;
@@ -66,6 +80,24 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
                                                                                    : "burr",
                                double(t->second.diameterMm), t->second.drilling ? " drilling" : "");
         }
+        if (p.role != net::Role::Trainee)
+            continue;
+        // Taken over: by whom; an instructor takes over or hands back here.
+        ImGui::PushID(int(id));
+        if (p.takenOverBy == self && self != 0) {
+            ImGui::SameLine();
+            if (ImGui::SmallButton("hand back"))
+                takeOver.asked = uint16_t(0);
+        } else if (p.takenOverBy != 0) {
+            ImGui::SameLine();
+            ImGui::TextDisabled("held by %s",
+                                participantName(snap.participants, p.takenOverBy).c_str());
+        } else if (takeOver.canTakeOver) {
+            ImGui::SameLine();
+            if (ImGui::SmallButton("take over"))
+                takeOver.asked = id;
+        }
+        ImGui::PopID();
     }
     // Tools of ids the roster does not list yet (its message may trail the first relays).
     for (const auto& [id, t] : snap.others) {
@@ -109,11 +141,20 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
     ImGui::SliderFloat("burr mm [ ]", &tool.burrMm, kBurrMinDiameterMm, kBurrMaxDiameterMm, "%.1f");
     ImGui::SliderFloat("speed", &tool.speed, 0.0f, 1.0f, "%.2f");
     ImGui::SliderFloat("depth mm [wheel]", &tool.pushMm, -5.0f, 10.0f, "%.1f");
-    if (tool.canDrill)
+    const uint16_t holder = takenOverBy(snap.participants, self);
+    const uint16_t held = takeOver.canTakeOver ? heldBy(snap.participants, self) : 0;
+    if (held)
+        ImGui::TextColored(ImVec4(1, 0.7f, 0.3f, 1),
+                           "you hold %s: your drill cuts, theirs is paused",
+                           participantName(snap.participants, held).c_str());
+    if (holder)
+        ImGui::TextColored(ImVec4(1, 0.7f, 0.3f, 1), "%s has taken over: your drill is paused",
+                           participantName(snap.participants, holder).c_str());
+    else if (tool.canDrill)
         ImGui::TextColored(tool.drilling ? ImVec4(1, 0.4f, 0.3f, 1) : ImVec4(0.6f, 0.6f, 0.6f, 1),
                            tool.drilling ? "DRILLING" : "hold the left button to drill");
     else
-        ImGui::TextDisabled("instructor: pointer only");
+        ImGui::TextDisabled("instructor: pointer only (take over a trainee to drill)");
     ImGui::End();
 }
 

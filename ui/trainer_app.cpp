@@ -52,6 +52,8 @@ constexpr int kPanelWidth = 380;   // the middle column
 constexpr int kSideWidth = 400;    // the right-hand column
 constexpr int kBottomHeight = 400; // Forces, under the view
 constexpr int kMinHeight = 760;
+// The band that says a trainee is taken over (opaque: tests find its pixels).
+constexpr ImU32 kTakeOverBand = IM_COL32(112, 40, 150, 255);
 
 // [SECTION] scene
 
@@ -290,6 +292,11 @@ int runTrainerWindow(const TrainerOptions& o) {
     bool marksSent = scriptedMarks.empty();
     MarkControls markControls;
     markControls.canMark = o.instructor;
+    if (!o.takeOver.empty() && !o.instructor)
+        throw Error("window: --take-over: only an instructor takes over a trainee");
+    TakeOverControls takeOverControls;
+    takeOverControls.canTakeOver = o.instructor;
+    bool takeOverSent = o.takeOver.empty();
     std::optional<glm::vec3> pointerPick; // the bone under the pointer, last seen over the view
     const int viewSize = o.size;
     WindowConfig wc;
@@ -428,6 +435,12 @@ int runTrainerWindow(const TrainerOptions& o) {
         const auto frameStart = Clock::now();
         const double now = seconds();
         auto snap = client.snapshot();
+        // Taking over (the server's roster): a held trainee's drill is paused, and an instructor
+        // drills only while it holds a trainee.
+        const uint16_t selfId = snap->welcome ? snap->welcome->clientId : 0;
+        const uint16_t heldByOther = o.instructor ? 0 : takenOverBy(snap->participants, selfId);
+        const uint16_t holding = o.instructor ? heldBy(snap->participants, selfId) : 0;
+        toolControls.canDrill = o.instructor ? holding != 0 : heldByOther == 0;
 
         // Volume-derived scene once the welcome names the volume.
         if (snap->welcome && !scene && !sceneFuture.valid() && sceneError.empty())
@@ -740,6 +753,22 @@ int runTrainerWindow(const TrainerOptions& o) {
                 fg->AddText(nullptr, 0.0f, at, IM_COL32(255, 200, 90, 255), status.c_str(), nullptr,
                             viewSize - 40.0f);
             }
+            // Taken over, or holding a trainee: said at the foot of the view, on a solid band.
+            std::string held;
+            if (heldByOther)
+                held = participantName(snap->participants, heldByOther) +
+                       " has taken over: your drill is paused";
+            else if (holding)
+                held = "You hold " + participantName(snap->participants, holding) +
+                       ": your drill cuts, theirs is paused";
+            if (!held.empty()) {
+                const ImVec2 sz = ImGui::CalcTextSize(held.c_str());
+                const ImVec2 at((float(viewSize) - sz.x) * 0.5f,
+                                viewTop + float(viewSize) - sz.y - 18.0f);
+                fg->AddRectFilled(ImVec2(at.x - 12, at.y - 8),
+                                  ImVec2(at.x + sz.x + 12, at.y + sz.y + 8), kTakeOverBand, 6.0f);
+                fg->AddText(at, IM_COL32(255, 255, 255, 255), held.c_str());
+            }
         }
 
         // Panels: Forces under the view, and two columns right of it (kPanelWidth, above).
@@ -750,8 +779,8 @@ int runTrainerWindow(const TrainerOptions& o) {
         const float networkY = sessionH + viewPanelH, comparisonH = std::floor(H * 0.535f);
         ImGui::SetNextWindowPos(ImVec2(right, 0), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(colW, sessionH), ImGuiCond_FirstUseEver);
-        drawSessionPanel(*snap, toolControls, markControls, o.instructor ? "instructor" : "trainee",
-                         o.address, o.name);
+        drawSessionPanel(*snap, toolControls, markControls, takeOverControls,
+                         o.instructor ? "instructor" : "trainee", o.address, o.name);
         // Marks asked for (the panel, the M key, --mark once joined); the server lists them back.
         if (!marksSent && snap->welcome && snap->state == net::LinkState::Connected) {
             for (const net::Annotate& a : scriptedMarks)
@@ -780,6 +809,18 @@ int runTrainerWindow(const TrainerOptions& o) {
         }
         markControls.addAtPointer = markControls.clearAll = false;
         markControls.removeId = 0;
+        // Take over (the panel's buttons, --take-over once the trainee is listed) or hand back.
+        if (!takeOverSent && snap->welcome && snap->state == net::LinkState::Connected)
+            for (const auto& [id, p] : snap->participants)
+                if (p.role == net::Role::Trainee &&
+                    (p.name == o.takeOver || std::to_string(id) == o.takeOver)) {
+                    client.takeOver(id);
+                    takeOverSent = true;
+                    break;
+                }
+        if (takeOverControls.asked)
+            client.takeOver(*takeOverControls.asked);
+        takeOverControls.asked.reset();
         ImGui::SetNextWindowPos(ImVec2(right, sessionH), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(colW, viewPanelH), ImGuiCond_FirstUseEver);
         drawViewPanel(viewControls, snap->waitingForView || !havePicture,
@@ -817,6 +858,7 @@ int runTrainerWindow(const TrainerOptions& o) {
         const bool settled = havePicture && viewMatches && scene && scriptDone && !switching &&
                              nextSwitch == o.switchSyncAtS.size() && !snap->waitingForView &&
                              now - lastRectAt > 0.5 && marksSent &&
+                             (o.takeOver.empty() || holding != 0) &&
                              snap->annotations.size() >= scriptedMarks.size();
         settledFrames = settled ? settledFrames + 1 : 0;
         Dbi capture;

@@ -7,6 +7,7 @@
 #include "ui/panel_data.h"
 
 #include <map>
+#include <optional>
 #include <string>
 
 namespace trephine::ui {
@@ -50,8 +51,18 @@ struct MarkControls {
     bool clearAll = false;
     uint32_t removeId = 0; // 0: none
 };
+// Taking over a trainee's drilling (TakeOver): an instructor's buttons in the participants list.
+// The panel only records what was asked this frame; the window sends it.
+struct TakeOverControls {
+    bool canTakeOver = false;      // instructors
+    std::optional<uint16_t> asked; // a trainee's client id, or 0 to hand back
+};
+// Who holds trainee `id` in `roster` (0: nobody, or not listed), and whom `instructor` holds.
+uint16_t takenOverBy(const std::map<uint16_t, net::ParticipantInfo>& roster, uint16_t id);
+uint16_t heldBy(const std::map<uint16_t, net::ParticipantInfo>& roster, uint16_t instructor);
 void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkControls& marks,
-                      const std::string& role, const std::string& address, const std::string& name);
+                      TakeOverControls& takeOver, const std::string& role,
+                      const std::string& address, const std::string& name);
 // The colour marks are drawn in (both in the view and in the list).
 glm::vec4 markColor();
 

@@ -55,6 +55,9 @@ struct TrainerOptions {
     // [Instructor] Marks placed once joined, each "X,Y,Z" (mm, the volume's frame) with an optional
     // ":LABEL"; the view is not settled (no screenshot) before the server has listed them all.
     std::vector<std::string> marks;
+    // [Instructor] A trainee to take over once it is listed: its name, or its client id. The view
+    // is not settled (no screenshot) before the server lists the take-over.
+    std::string takeOver;
     TrainerReport* report = nullptr; // [Tests] filled when the window closes
 };
 
