@@ -107,6 +107,53 @@ void BrickGrid::build(const Volume& volume) {
             }
     m_distance.assign(m_max.size(), kMaxDistance);
     computeDistances();
+    for (std::vector<uint8_t>& r : m_runs)
+        r.assign(m_max.size(), 0);
+    computeRuns(glm::ivec3(0), B - 1);
+}
+
+void BrickGrid::computeRuns(glm::ivec3 lo, glm::ivec3 hi) {
+    const glm::ivec3 B = m_dims;
+    auto empty = [&](size_t at) { return m_max[at] < kSurfaceDensity; };
+    auto next = [](uint8_t run) { return uint8_t(run + (run != kMaxDistance)); };
+    // Along x: row by row.
+    for (int z = lo.z; z <= hi.z; ++z)
+        for (int y = lo.y; y <= hi.y; ++y) {
+            const size_t row = index({0, y, z});
+            uint8_t* plus = &m_runs[1][row];
+            uint8_t* minus = &m_runs[0][row];
+            uint8_t run = 0;
+            for (int x = B.x - 1; x >= 0; --x)
+                plus[x] = run = empty(row + size_t(x)) ? next(run) : 0;
+            run = 0;
+            for (int x = 0; x < B.x; ++x)
+                minus[x] = run = empty(row + size_t(x)) ? next(run) : 0;
+        }
+    // Along y and z: whole stretches of x at a time, from the neighbouring row or slice.
+    auto sweep = [&](int axis, size_t step, int outerLo, int outerHi, auto at) {
+        const int n = B[axis];
+        uint8_t* plus = m_runs[size_t(2 * axis + 1)].data();
+        uint8_t* minus = m_runs[size_t(2 * axis)].data();
+        for (int o = outerLo; o <= outerHi; ++o) {
+            for (int k = n - 1; k >= 0; --k) {
+                const size_t first = at(o, k);
+                for (int x = lo.x; x <= hi.x; ++x) {
+                    const size_t i = first + size_t(x);
+                    plus[i] = empty(i) ? (k + 1 < n ? next(plus[i + step]) : 1) : 0;
+                }
+            }
+            for (int k = 0; k < n; ++k) {
+                const size_t first = at(o, k);
+                for (int x = lo.x; x <= hi.x; ++x) {
+                    const size_t i = first + size_t(x);
+                    minus[i] = empty(i) ? (k > 0 ? next(minus[i - step]) : 1) : 0;
+                }
+            }
+        }
+    };
+    const size_t rowStep = size_t(B.x), sliceStep = size_t(B.x) * size_t(B.y);
+    sweep(1, rowStep, lo.z, hi.z, [&](int z, int y) { return index({0, y, z}); });
+    sweep(2, sliceStep, lo.y, hi.y, [&](int y, int z) { return index({0, y, z}); });
 }
 
 uint64_t BrickGrid::computeCellMask(const Volume& volume, glm::ivec3 b) const {
@@ -181,7 +228,9 @@ bool BrickGrid::update(const Volume& volume, const Box3i& changed) {
         }
     if (gained) {
         computeDistances();
+        computeRuns(glm::ivec3(0), m_dims - 1);
     } else if (e0.x <= e1.x) {
+        computeRuns(e0, e1);
         // Recompute out to the distance a ray in the emptied box can use (half its widest extent
         // plus a margin, at most kMaxRegionGrowth), and there only as far as a distance can have
         // changed at all.

@@ -79,6 +79,7 @@ struct Frame {
     double maxSampleT;       // distance from the eye to the farthest corner of the volume
     const uint8_t* distance; // brick grid distances; null: no skipping
     const uint64_t* cells;   // brick grid cell masks
+    const uint8_t* runs[6];  // brick grid runs of empty bricks, [2 axis + positive]
     glm::ivec3 nb;           // bricks per axis
     size_t nbxy;
 };
@@ -148,6 +149,8 @@ Frame makeFrame(const Volume& volume, const Camera& camera, const RenderOptions&
     f.distance =
         options.skipEmpty && !bricks.empty() && nearEnough ? bricks.distanceData() : nullptr;
     f.cells = bricks.cellData();
+    for (int i = 0; i < 6; ++i)
+        f.runs[i] = bricks.empty() ? nullptr : bricks.runData(i / 2, i % 2 != 0);
     f.nb = bricks.dims();
     f.nbxy = size_t(f.nb.x) * size_t(f.nb.y);
     return f;
@@ -346,10 +349,16 @@ struct Ray {
     glm::vec3 invDv; // 1 / dv (inf where dv is 0)
     double tNear;    // distance along the ray to the near and far planes
     double tFar;
-    v4sf dv4;    // dv, lane 3 zero
-    v4sf dir4;   // dir in float (exact: pixelRay computes it in float), lane 3 zero
-    v4sf invDv4; // invDv, lane 3 one
+    v4sf dv4;     // dv, lane 3 zero
+    v4sf dir4;    // dir in float (exact: pixelRay computes it in float), lane 3 zero
+    v4sf invDv4;  // invDv, lane 3 one
+    int mainAxis; // the axis of the largest |dv|: voxels crossed fastest
 };
+
+inline int mainAxisOf(glm::vec3 dv) {
+    const glm::vec3 a = glm::abs(dv);
+    return a.x >= a.y ? (a.x >= a.z ? 0 : 2) : (a.y >= a.z ? 1 : 2);
+}
 
 // The ray through window position (wx, wy) (pixel x's centre is x + 0.5).
 // Divisions are few and done once (they are most of the cost of setting up a ray).
@@ -366,6 +375,7 @@ Ray windowRay(const Frame& f, double wx, double wy) {
     r.dv4 = v4sf{r.dv.x, r.dv.y, r.dv.z, 0.0f};
     r.dir4 = v4sf{float(r.dir.x), float(r.dir.y), float(r.dir.z), 0.0f};
     r.invDv4 = v4sf{r.invDv.x, r.invDv.y, r.invDv.z, 1.0f};
+    r.mainAxis = mainAxisOf(r.dv);
     return r;
 }
 
@@ -391,6 +401,7 @@ Ray pixelRay(const Frame& f, int x, int y) {
     r.dv4[3] = 0.0f;
     r.dir4 = dir;
     r.invDv4 = invDv;
+    r.mainAxis = mainAxisOf(r.dv);
     return r;
 }
 
@@ -409,20 +420,39 @@ inline int brickCoord(float p, int n) {
 
 // Where the ray leaves the box of bricks within Chebyshev distance `radius` of brick b. A face on
 // the grid's edge is open: samples beyond it still belong to the edge brick.
-inline float boxExit(const Frame& f, const Ray& r, glm::ivec3 b, int radius) {
+inline float boxExit(const Frame& f, const Ray& r, glm::ivec3 lo, glm::ivec3 hi) {
     float tExit = INFINITY;
     for (int a = 0; a < 3; ++a) {
         if (r.dv[a] > 0.0f) {
-            int hi = b[a] + radius;
-            if (hi < f.nb[a] - 1)
-                tExit = std::min(tExit,
-                                 (float((hi + 1) << BrickGrid::kShift) - f.origin[a]) * r.invDv[a]);
+            if (hi[a] < f.nb[a] - 1)
+                tExit = std::min(tExit, (float((hi[a] + 1) << BrickGrid::kShift) - f.origin[a]) *
+                                            r.invDv[a]);
         } else if (r.dv[a] < 0.0f) {
-            int lo = b[a] - radius;
-            if (lo > 0)
+            if (lo[a] > 0)
                 tExit =
-                    std::min(tExit, (float(lo << BrickGrid::kShift) - f.origin[a]) * r.invDv[a]);
+                    std::min(tExit, (float(lo[a] << BrickGrid::kShift) - f.origin[a]) * r.invDv[a]);
         }
+    }
+    return tExit;
+}
+
+inline float boxExit(const Frame& f, const Ray& r, glm::ivec3 b, int radius) {
+    return boxExit(f, r, b - radius, b + radius);
+}
+
+// Where the ray leaves the empty bricks around brick b (distance d > 0): the cube of bricks
+// within d - 1, or, when it reaches further, the column of empty bricks from b along the ray's
+// main axis (BrickGrid::run): beside a wall that runs along the ray the cube is one brick, the
+// column many.
+inline float emptyExit(const Frame& f, const Ray& r, glm::ivec3 b, size_t bi, int d) {
+    float tExit = boxExit(f, r, b, d - 1);
+    const int a = r.mainAxis;
+    const bool positive = r.dv[a] > 0.0f;
+    const int run = f.runs[2 * a + positive][bi];
+    if (run > d) {
+        glm::ivec3 lo = b, hi = b;
+        (positive ? hi : lo)[a] += positive ? run - 1 : 1 - run;
+        tExit = std::max(tExit, boxExit(f, r, lo, hi));
     }
     return tExit;
 }
@@ -535,7 +565,7 @@ March marchToSurface(const Frame& f, const Ray& r, float tSkipTo, int32_t kResum
             if (d > 0) {
                 // Last sample before the exit of the empty cube (one a rounding error beyond it
                 // is still below the iso-value, see above).
-                float kLast = boxExit(f, r, b, d - 1) * invDt;
+                float kLast = emptyExit(f, r, b, bi, d) * invDt;
                 if (!(kLast < float(kEnd)))
                     return m;
                 k = std::max(k + 1, floorInt(kLast) + 1);

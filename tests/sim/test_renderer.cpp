@@ -229,6 +229,39 @@ TEST(Renderer, SkippingEmptySpaceChangesNoBit) {
     }
 }
 
+// Rays nearly along a volume axis leap down columns of empty bricks (BrickGrid::run): the update
+// study's view of holes cut to increasing depth, whose rays run beside the cut's walls, renders
+// bit for bit as without skipping, uncached and through the hit cache.
+TEST(Renderer, ColumnLeapsBesideCutWallsChangeNoBit) {
+    Volume skull = makeSkull(64);
+    skull.setSpacing(glm::vec3(paperSpacingMm(64)));
+    ThreadPool pool;
+    Renderer skipping(skull, &pool);
+    Renderer marching(skull, &pool, RenderOptions{.skipEmpty = false});
+    for (const char* preset : {"paper", "top"}) {
+        SCOPED_TRACE(preset);
+        const Camera c = cameraPreset(preset, skull, {160, 160});
+        HitCache cache;
+        Dbi cached = skipping.render(c, &cache);
+        for (int n : {6, 14, 24, 40}) {
+            SCOPED_TRACE(n);
+            const Box3i box = surfaceBox(skull, n);
+            skull.fill(box, 0, Material::Air);
+            skipping.volumeChanged(box);
+            marching.volumeChanged(box);
+            Dbi truth = marching.render(c);
+            Dbi a = skipping.render(c);
+            ASSERT_TRUE(a == truth) << compare(a, truth).describe();
+            skipping.render(c, dirtyScreenRect(c, skull, box), cached, &cache);
+            ASSERT_TRUE(cached == truth) << compare(cached, truth).describe();
+        }
+        skull = makeSkull(64);
+        skull.setSpacing(glm::vec3(paperSpacingMm(64)));
+        skipping.rebuild();
+        marching.rebuild();
+    }
+}
+
 // Hits refined and differentiated eight at a time (vector lanes) give the pixels of the scalar
 // path bit for bit: every preset and random cameras (inside the volume too, so that hits near its
 // faces take the scalar border path beside batched ones), an anisotropic volume, and a drilled
@@ -420,6 +453,41 @@ TEST(Renderer, BrickGridDistancesStayLowerBoundsOverManyCuts) {
                 }
     }
     EXPECT_EQ(grid.fullDistancePasses(), 1);
+}
+
+// Runs of empty bricks against their definition (count the empty bricks from b on, along each
+// axis and direction) after build, after every cut (update recomputes the lines through the
+// bricks that emptied) and after bone appears (a full rebuild).
+TEST(Renderer, BrickGridRunsAreRunsOfEmptyBricks) {
+    Volume v = makeSkull(64);
+    BrickGrid grid(v);
+    auto expectRuns = [](const BrickGrid& g) {
+        const glm::ivec3 nb = g.dims();
+        for (int z = 0; z < nb.z; ++z)
+            for (int y = 0; y < nb.y; ++y)
+                for (int x = 0; x < nb.x; ++x)
+                    for (int a = 0; a < 3; ++a)
+                        for (int dir : {-1, 1}) {
+                            int run = 0;
+                            for (glm::ivec3 b(x, y, z); b[a] >= 0 && b[a] < nb[a]; b[a] += dir) {
+                                if (g.maxDensity(b) >= kSurfaceDensity)
+                                    break;
+                                ++run;
+                            }
+                            ASSERT_EQ(int(g.run({x, y, z}, a, dir > 0)), std::min(run, 255))
+                                << x << "," << y << "," << z << " axis " << a << " dir " << dir;
+                        }
+    };
+    expectRuns(grid);
+    for (auto [n, shift] : {std::pair{8, 0}, {20, 0}, {12, 14}, {30, -6}}) {
+        Box3i box = cutSurfaceBox(v, n, shift);
+        EXPECT_FALSE(grid.update(v, box));
+        expectRuns(grid);
+    }
+    const Box3i filled = Box3i::fromMinMax({20, 20, 20}, {30, 28, 26});
+    v.fill(filled, 255, Material::Cortical);
+    EXPECT_TRUE(grid.update(v, filled)) << "bone appeared";
+    expectRuns(grid);
 }
 
 // The chamfer passes against the definition: the Chebyshev distance, in bricks, to the nearest

@@ -6,6 +6,7 @@
 
 #include "libsim/box.h"
 
+#include <array>
 #include <cstdint>
 #include <glm/vec3.hpp>
 #include <vector>
@@ -62,6 +63,18 @@ public:
     uint64_t cellMask(glm::ivec3 b) const { return m_cells[index(b)]; }
     const uint64_t* cellData() const { return m_cells.data(); }
     const std::vector<uint8_t>& maxData() const { return m_max; }
+    // Runs of empty bricks along an axis: how many bricks from b on, b included, going along
+    // `axis` (0 x, 1 y, 2 z) towards + (`positive`) or -, are empty in a row (0 when b may hold
+    // surface; saturating at kMaxDistance). A ray moving mostly along that axis can leap to the
+    // end of its column of empty bricks, where the distance cube ends sooner (beside a wall along
+    // the ray). Exact after build() and update() (erosion only ever lengthens runs, and update()
+    // recomputes the lines through the bricks that emptied).
+    uint8_t run(glm::ivec3 b, int axis, bool positive) const {
+        return m_runs[size_t(2 * axis + positive)][index(b)];
+    }
+    const uint8_t* runData(int axis, bool positive) const {
+        return m_runs[size_t(2 * axis + positive)].data();
+    }
     int64_t fullDistancePasses() const { return m_distancePasses; }
 
 private:
@@ -78,12 +91,15 @@ private:
     void regionMax(const Volume& volume, glm::ivec3 b0, glm::ivec3 b1,
                    std::vector<uint8_t>& out) const;
     uint64_t computeCellMask(const Volume& volume, glm::ivec3 b) const;
+    // The runs of every line along each axis through the bricks [lo, hi] (inclusive), whole.
+    void computeRuns(glm::ivec3 lo, glm::ivec3 hi);
 
     glm::ivec3 m_dims{0};
     glm::ivec3 m_volumeDims{0};
     std::vector<uint8_t> m_max;
     std::vector<uint8_t> m_distance;
     std::vector<uint64_t> m_cells;
+    std::array<std::vector<uint8_t>, 6> m_runs; // [2 axis + positive]
     int64_t m_distancePasses = 0;
 };
 
