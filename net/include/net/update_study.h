@@ -27,7 +27,7 @@ struct UpdateStudyConfig {
     std::string camera = "paper";
     int window = 500;                 // square window, pixels
     Codec codec = Codec::Lz4;         // image updates, and the compressed volume variant
-    int cycles = 30;                  // measured cycles per method and size
+    int cycles = 100;                 // measured cycles per method and size
     int warmup = 3;                   // cycles run first and discarded
     double cycleTimeoutS = 10;        // one cycle that takes longer fails the study (an Error)
     std::vector<std::string> methods; // a subset of updateStudyMethods(codec); empty: all
