@@ -195,8 +195,8 @@ struct UpdatesOptions {
     // zstd: with predicted updates it sends ~35 % fewer bytes than lz4 for ~0.1-0.4 ms more
     // encoding per update (docs/study.md); the bytes target at 10^3 needs it.
     std::string codec = "zstd";
-    int cycles =
-        100; // medians steady against a shared machine's bursts (30 wobbled by 30 % and more)
+    // A burst of other work on a shared machine weighs less in each median than with 30.
+    int cycles = 100;
     std::vector<std::string> methods; // empty: every method
     bool quick = false;
     bool sizesGiven = false; // --sizes on the command line wins over --quick's sizes
