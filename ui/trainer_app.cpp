@@ -899,10 +899,16 @@ int runTrainerWindow(const TrainerOptions& o) {
         if (shoot || timedOut) {
             writeScreenshot(o.screenshot, capture);
             if (timedOut) {
+                // What the view was still waiting for, where the script asked for something.
+                std::string waiting = net::linkStateName(snap->state);
+                if (!o.takeOver.empty() && holding == 0)
+                    waiting += "; --take-over: no trainee '" + o.takeOver + "' taken over";
+                if (!marksSent || snap->annotations.size() < scriptedMarks.size())
+                    waiting += "; --mark: the marks not listed yet";
                 std::fprintf(stderr,
                              "trephine: screenshot %s taken after %.0f s without a settled view "
                              "(%s)\n",
-                             o.screenshot.c_str(), now, net::linkStateName(snap->state));
+                             o.screenshot.c_str(), now, waiting.c_str());
                 exitCode = 1;
             } else {
                 std::printf("screenshot %s (%dx%d) after %d frames\n", o.screenshot.c_str(),
