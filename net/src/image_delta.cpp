@@ -107,8 +107,12 @@ PredictedImage encodePredicted(const Dbi& next, const Dbi& base, Codec codec,
         const uint8_t* cNow = next.color() + 4 * row;
         const uint8_t* cBelow = y > 0 ? cNow - 4 * size_t(w) : nullptr;
         const uint8_t* cWas = base.color() + 4 * row;
-        quantizer.quantizeRow(next.depth() + row, qCur, size_t(w));
-        quantizer.quantizeRow(base.depth() + row, was.data(), size_t(w));
+        const float* dNow = next.depth() + row;
+        const float* dWas = base.depth() + row;
+        quantizer.quantizeRow(dNow, qCur, size_t(w));
+        // The base's codes: quantising again only where its depth differs.
+        for (int x = 0; x < w; ++x)
+            was[x] = dWas[x] == dNow[x] ? qCur[x] : quantizer.quantize(dWas[x]);
         hash.row(cWas, was.data(), w);
         for (int x = 0; x < w; ++x) {
             const uint8_t* now = cNow + 4 * x;
