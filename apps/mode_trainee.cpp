@@ -49,7 +49,7 @@ struct TraineeOptions {
     std::string name = "trainee";
     double toolRateHz = 100.0; // tool states per second from the haptic loop
     std::string screenshot;    // window: as `trephine instructor --screenshot`
-    int frames = 3;
+    int frames = 0;            // window: as `trephine instructor --frames` (0: run until closed)
     double timeoutS = 90.0;
 };
 
@@ -442,7 +442,9 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
     sub->add_option("--name", o->name, "Name shown to others")->capture_default_str();
     sub->add_option("--screenshot", o->screenshot,
                     "Window: write it to this PNG once the view has settled, then exit");
-    sub->add_option("--frames", o->frames, "Window: settled frames before the screenshot")
+    sub->add_option("--frames", o->frames,
+                    "Window: settled frames before the screenshot (without one: frames to run, 0 "
+                    "until closed)")
         ->check(CLI::Range(0, 1000000))
         ->capture_default_str();
     sub->add_option("--timeout", o->timeoutS, "Window, with --screenshot: give up after this long")

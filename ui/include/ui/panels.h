@@ -39,7 +39,7 @@ struct ToolControls {
     float speed = 1.0f;    // [0, 1]
     float pushMm = 0.0f;   // how far the tip is pushed below the surface under the cursor
     bool drilling = false; // mouse button held (or the script drills)
-    bool canDrill = true;  // instructors point, they do not drill
+    bool canDrill = true;  // a trainee nobody holds, or an instructor holding one (TakeOver)
 };
 // The marks on the skull (the server's Annotations): listed for everyone; an instructor also
 // labels the next one, marks the bone under the pointer, removes one or clears them. The panel
