@@ -9,13 +9,12 @@ namespace trephine::net {
 namespace {
 
 // Median edge detector over the left (a), lower (b) and lower-left (c) neighbours; outside the
-// rectangle a neighbour counts as 0.
-inline int medPredict(int a, int b, int c) {
-    if (c >= std::max(a, b))
-        return std::min(a, b);
-    if (c <= std::min(a, b))
-        return std::max(a, b);
-    return a + b - c;
+// rectangle a neighbour counts as 0. The median of a, b and a + b - c, written as a clamp so that
+// it compiles without branches (and vectorises in residualRow): c >= max(a, b) gives min(a, b),
+// c <= min(a, b) gives max(a, b), else a + b - c.
+template <typename I>
+inline I medPredict(I a, I b, I c) {
+    return std::clamp(I(a + b - c), std::min(a, b), std::max(a, b));
 }
 
 // The prediction of pixel x of a row from its own row (`cur`) and the row below (`below`, null
@@ -28,8 +27,33 @@ inline int predictAt(const T* cur, const T* below, int x, int stride) {
     return medPredict(a, b, c);
 }
 
+// out[i] = cur[i] - prediction for the n elements of a row, S elements a pixel (the whole row at
+// once: the encoder knows every pixel of the new picture). `below` is the row below, or zeros for
+// the bottom row. I is wide enough for a + b - c (int16_t for bytes, int32_t for codes).
+template <typename T, typename I, int S>
+void residualRow(const T* __restrict cur, const T* __restrict below, T* __restrict out, size_t n) {
+    for (size_t i = 0; i < std::min(n, size_t(S)); ++i)
+        out[i] = T(cur[i] - below[i]); // a = c = 0: the prediction is b
+    for (size_t i = S; i < n; ++i)
+        out[i] = T(cur[i] - medPredict(I(cur[i - S]), I(below[i]), I(below[i - S])));
+}
+
 size_t maskBytes(size_t pixels) {
     return (pixels + 7) / 8;
+}
+
+// Set bits in n bytes, eight bytes a count (baseline x86-64 has no popcnt instruction: each
+// std::popcount is a call).
+size_t countBits(const uint8_t* bytes, size_t n) {
+    size_t count = 0, k = 0;
+    for (; k + 8 <= n; k += 8) {
+        uint64_t word;
+        std::memcpy(&word, bytes + k, 8);
+        count += size_t(std::popcount(word));
+    }
+    for (; k < n; ++k)
+        count += size_t(std::popcount(bytes[k]));
+    return count;
 }
 
 // The pixels' hash: four FNV-1a lanes of 64 bits, column x in lane x % 4, carried from row to row
@@ -92,20 +116,26 @@ PredictedImage encodePredicted(const Dbi& next, const Dbi& base, Codec codec,
     const int w = next.width(), h = next.height();
     const size_t n = size_t(w) * size_t(h);
     std::vector<uint8_t> mask(maskBytes(n), 0);
-    // One raster pass: the hash of the base, the mask, and the residuals of changed pixels into
+    // Bit j: the j-th changed pixel is predicted exactly (its five residuals are 0), as the
+    // background seen through a hole mostly is: it stores no residuals.
+    std::vector<uint8_t> exact(maskBytes(n), 0);
+    // One raster pass: the hash of the base, the masks, and the residuals of changed pixels into
     // per-plane scratch.
     std::vector<uint8_t> scratch(5 * n);
     uint8_t *sr = scratch.data(), *sg = sr + n, *sb = sg + n, *sHi = sb + n, *sLo = sHi + n;
-    // Codes of the new picture (two rows kept) and of the base, a row at a time.
-    std::vector<uint16_t> rows(2 * size_t(w)), was(w);
+    // Codes of the new picture (two rows kept) and of the base, a row at a time; residuals of
+    // a row (colour RGBA, codes), and zeros standing for the row below the bottom one.
+    std::vector<uint16_t> rows(2 * size_t(w)), was(w), resD(w), zeroCodes(w, 0);
+    std::vector<uint8_t> resC(4 * size_t(w)), zeroColor(4 * size_t(w), 0);
     PixelHash hash;
-    size_t m = 0;
+    size_t m = 0, stored = 0;
     for (int y = 0; y < h; ++y) {
         uint16_t* qCur = rows.data() + size_t(y & 1) * size_t(w);
-        const uint16_t* qBelow = y > 0 ? rows.data() + size_t((y - 1) & 1) * size_t(w) : nullptr;
+        const uint16_t* qBelow =
+            y > 0 ? rows.data() + size_t((y - 1) & 1) * size_t(w) : zeroCodes.data();
         const size_t row = size_t(y) * size_t(w);
         const uint8_t* cNow = next.color() + 4 * row;
-        const uint8_t* cBelow = y > 0 ? cNow - 4 * size_t(w) : nullptr;
+        const uint8_t* cBelow = y > 0 ? cNow - 4 * size_t(w) : zeroColor.data();
         const uint8_t* cWas = base.color() + 4 * row;
         const float* dNow = next.depth() + row;
         const float* dWas = base.depth() + row;
@@ -114,6 +144,8 @@ PredictedImage encodePredicted(const Dbi& next, const Dbi& base, Codec codec,
         for (int x = 0; x < w; ++x)
             was[x] = dWas[x] == dNow[x] ? qCur[x] : quantizer.quantize(dWas[x]);
         hash.row(cWas, was.data(), w);
+        residualRow<uint8_t, int16_t, 4>(cNow, cBelow, resC.data(), 4 * size_t(w));
+        residualRow<uint16_t, int32_t, 1>(qCur, qBelow, resD.data(), size_t(w));
         for (int x = 0; x < w; ++x) {
             const uint8_t* now = cNow + 4 * x;
             const uint8_t* old = cWas + 4 * x;
@@ -121,26 +153,29 @@ PredictedImage encodePredicted(const Dbi& next, const Dbi& base, Codec codec,
                 continue;
             const size_t i = row + size_t(x);
             mask[i / 8] |= uint8_t(1u << (i % 8));
-            const uint8_t er = uint8_t(now[0] - predictAt(cNow, cBelow, x, 4));
-            const uint8_t eg =
-                uint8_t(now[1] - predictAt(cNow + 1, cBelow ? cBelow + 1 : nullptr, x, 4));
-            const uint8_t eb =
-                uint8_t(now[2] - predictAt(cNow + 2, cBelow ? cBelow + 2 : nullptr, x, 4));
-            const uint16_t ed = uint16_t(qCur[x] - predictAt(qCur, qBelow, x, 1));
-            sr[m] = er;
-            sg[m] = uint8_t(eg - er);
-            sb[m] = uint8_t(eb - er);
-            sHi[m] = uint8_t(ed >> 8);
-            sLo[m] = uint8_t(ed & 0xff);
+            const uint8_t er = resC[4 * size_t(x)], eg = resC[4 * size_t(x) + 1],
+                          eb = resC[4 * size_t(x) + 2];
+            const uint16_t ed = resD[size_t(x)];
+            if ((er | eg | eb | ed) == 0) {
+                exact[m / 8] |= uint8_t(1u << (m % 8));
+            } else {
+                sr[stored] = er;
+                sg[stored] = uint8_t(eg - er);
+                sb[stored] = uint8_t(eb - er);
+                sHi[stored] = uint8_t(ed >> 8);
+                sLo[stored] = uint8_t(ed & 0xff);
+                ++stored;
+            }
             ++m;
         }
     }
-    std::vector<uint8_t> raw(mask.size() + 5 * m);
+    std::vector<uint8_t> raw(mask.size() + maskBytes(m) + 5 * stored);
     std::memcpy(raw.data(), mask.data(), mask.size());
-    uint8_t* dst = raw.data() + mask.size();
+    std::memcpy(raw.data() + mask.size(), exact.data(), maskBytes(m));
+    uint8_t* dst = raw.data() + mask.size() + maskBytes(m);
     for (const uint8_t* plane : {sr, sg, sb, sHi, sLo}) {
-        std::memcpy(dst, plane, m);
-        dst += m;
+        std::memcpy(dst, plane, stored);
+        dst += stored;
     }
     out.rawBytes = uint32_t(raw.size());
     out.changedPixels = int(m);
@@ -154,30 +189,34 @@ PredictedStatus decodePredicted(std::span<const uint8_t> payload, uint32_t rawBy
     constexpr PredictedStatus kMalformed = PredictedStatus::Malformed;
     const int w = image.width(), h = image.height();
     const size_t n = size_t(w) * size_t(h);
-    if (codec == Codec::Raw || n == 0 || rawBytes < maskBytes(n) ||
-        (rawBytes - maskBytes(n)) % 5 != 0)
+    if (codec == Codec::Raw || n == 0 || rawBytes < maskBytes(n))
         return kMalformed;
     std::vector<uint8_t> raw;
     if (!decompressBytes(payload, codec, rawBytes, raw))
         return kMalformed;
     const uint8_t* mask = raw.data();
-    size_t m = 0;
-    for (size_t k = 0; k < maskBytes(n); ++k)
-        m += size_t(std::popcount(mask[k]));
-    // Bits past the last pixel must be clear, and the residuals must be exactly 5 per pixel.
+    const size_t m = countBits(mask, maskBytes(n));
+    // Bits past the last pixel must be clear, in both masks, and the residuals must be exactly
+    // 5 per changed pixel not predicted exactly.
     if (n % 8 && (mask[maskBytes(n) - 1] >> (n % 8)) != 0)
         return kMalformed;
-    if (raw.size() != maskBytes(n) + 5 * m)
+    if (raw.size() < maskBytes(n) + maskBytes(m))
         return kMalformed;
-    const uint8_t* r = raw.data() + maskBytes(n);
-    const uint8_t *g = r + m, *b = g + m, *dHi = b + m, *dLo = dHi + m;
+    const uint8_t* exact = raw.data() + maskBytes(n);
+    if (m % 8 && (exact[maskBytes(m) - 1] >> (m % 8)) != 0)
+        return kMalformed;
+    const size_t stored = m - countBits(exact, maskBytes(m));
+    if (raw.size() != maskBytes(n) + maskBytes(m) + 5 * stored)
+        return kMalformed;
+    const uint8_t* r = exact + maskBytes(m);
+    const uint8_t *g = r + stored, *b = g + stored, *dHi = b + stored, *dLo = dHi + stored;
 
     std::vector<uint16_t> q;
     if (codesAndHash(image, quantizer, q) != baseHash)
         return PredictedStatus::BaseMismatch;
     // Nothing can fail from here: decode in place, in raster order, so every prediction reads
     // the new picture (decoded pixels below and to the left, our own pixels elsewhere).
-    size_t k = 0;
+    size_t j = 0, k = 0; // changed pixels so far; stored residuals so far
     std::vector<float> depths(static_cast<size_t>(w));
     for (int y = 0; y < h; ++y) {
         const size_t row = size_t(y) * size_t(w);
@@ -189,16 +228,19 @@ PredictedStatus decodePredicted(std::span<const uint8_t> payload, uint32_t rawBy
             const size_t i = row + size_t(x);
             if (!(mask[i / 8] & (1u << (i % 8))))
                 continue;
-            const uint8_t er = r[k];
+            const bool predicted = exact[j / 8] & (1u << (j % 8));
+            ++j;
+            const uint8_t er = predicted ? 0 : r[k];
+            const uint8_t eg = predicted ? 0 : uint8_t(g[k] + er);
+            const uint8_t eb = predicted ? 0 : uint8_t(b[k] + er);
+            const uint16_t ed = predicted ? 0 : uint16_t((dHi[k] << 8) | dLo[k]);
+            k += predicted ? 0 : 1;
             uint8_t* c = cCur + 4 * x;
             c[0] = uint8_t(predictAt<uint8_t>(cCur, cBelow, x, 4) + er);
-            c[1] = uint8_t(predictAt<uint8_t>(cCur + 1, cBelow ? cBelow + 1 : nullptr, x, 4) +
-                           uint8_t(g[k] + er));
-            c[2] = uint8_t(predictAt<uint8_t>(cCur + 2, cBelow ? cBelow + 2 : nullptr, x, 4) +
-                           uint8_t(b[k] + er));
-            qCur[x] = uint16_t(predictAt<uint16_t>(qCur, qBelow, x, 1) + ((dHi[k] << 8) | dLo[k]));
+            c[1] = uint8_t(predictAt<uint8_t>(cCur + 1, cBelow ? cBelow + 1 : nullptr, x, 4) + eg);
+            c[2] = uint8_t(predictAt<uint8_t>(cCur + 2, cBelow ? cBelow + 2 : nullptr, x, 4) + eb);
+            qCur[x] = uint16_t(predictAt<uint16_t>(qCur, qBelow, x, 1) + ed);
             c[3] = qCur[x] == DepthQuantizer::kBackground ? 0 : 255;
-            ++k;
         }
         // The row's depths from its codes, four at a time, kept where the mask says.
         quantizer.dequantizeRow(qCur, depths.data(), size_t(w));

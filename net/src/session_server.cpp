@@ -293,8 +293,9 @@ struct SessionServer::Impl {
         uint64_t e0 = steadyNowUs();
         const Dbi pixels = view.frame.extract(rect);
         Dbi undo;
-        // Predicted updates trade ~60 ns a pixel of coding at each end for ~35 % fewer bytes:
-        // worth it with zstd (the codec chosen for bytes), not with lz4 (chosen for latency).
+        // Predicted updates trade ~4 ns a pixel more coding at each end than the planar form
+        // for about half its bytes (benchmark_net 'predicted|planar'): worth it with zstd (the
+        // codec chosen for bytes), not with lz4 (chosen for latency).
         if (!full && c.codec == Codec::Zstd && c.shadow.width() == view.frame.width() &&
             c.shadow.height() == view.frame.height()) {
             undo = c.shadow.extract(rect);

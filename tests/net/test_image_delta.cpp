@@ -173,3 +173,41 @@ TEST(PredictedImage, AClientWhoseCopyDiffersRefusesInsteadOfShowingAWrongPicture
               PredictedStatus::BaseMismatch);
     EXPECT_TRUE(image == stale);
 }
+
+TEST(PredictedImage, PixelsPredictedExactlyStoreNoResiduals) {
+    // Bone seen through a hole that now shows background everywhere: every pixel changed, and
+    // every one but the first (nothing to predict it from) is predicted exactly, so the update
+    // carries the two masks and one pixel's residuals (protocol 5).
+    Cut c = cutAtSurface(8);
+    const int w = 13, h = 7, n = w * h; // n % 8 != 0: the masks end in padding bits
+    const PixelRect rect{0, 0, w, h};
+    const Dbi clientHas = throughCodec(c.before, c.camera).extract(rect);
+    const Dbi background(w, h);
+    DepthQuantizer q(c.camera);
+    PredictedImage p = encodePredicted(background, clientHas, Codec::Zstd, q);
+    ASSERT_EQ(p.changedPixels, n);
+    const uint32_t maskBytes = (n + 7) / 8;
+    EXPECT_EQ(p.rawBytes, 2 * maskBytes + 5);
+    Dbi image = clientHas;
+    ASSERT_EQ(decodePredicted(p.payload, p.rawBytes, Codec::Zstd, p.baseHash, q, image),
+              PredictedStatus::Ok);
+    EXPECT_TRUE(image == throughCodec(background, c.camera));
+
+    // The same update with a padding bit of the exact mask set, or one exact bit cleared (then
+    // the residuals are one pixel short), is refused and leaves the picture.
+    std::vector<uint8_t> raw;
+    ASSERT_TRUE(decompressBytes(p.payload, Codec::Zstd, p.rawBytes, raw));
+    auto refused = [&](std::vector<uint8_t> bytes) {
+        std::vector<uint8_t> payload = compressBytes(bytes, Codec::Zstd);
+        Dbi copy = clientHas;
+        return decodePredicted(payload, uint32_t(bytes.size()), Codec::Zstd, p.baseHash, q, copy) ==
+                   PredictedStatus::Malformed &&
+               copy == clientHas;
+    };
+    std::vector<uint8_t> padded = raw;
+    padded[2 * maskBytes - 1] |= 0x80;
+    EXPECT_TRUE(refused(padded));
+    std::vector<uint8_t> short1 = raw;
+    short1[maskBytes] &= uint8_t(~0x02u);
+    EXPECT_TRUE(refused(short1));
+}

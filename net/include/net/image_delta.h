@@ -3,7 +3,9 @@
 // keep their pixels), and what changes is a smooth surface, so the update sends
 //   mask      1 bit a pixel (LSB first, raster order from the bottom row): colour or quantised
 //             depth differs from the client's copy,
-//   residuals for the changed pixels only, raster order: R, then G-R and B-R (the shading
+//   exact     1 bit per changed pixel (raster order): its five residuals below are all 0, as
+//             for background seen through a hole; such a pixel stores none (protocol 5),
+//   residuals for the other changed pixels only, raster order: R, then G-R and B-R (the shading
 //             scales one material colour, so the channels move together), then the high and low
 //             bytes of 16-bit linear depth; each residual is the value minus the median edge
 //             detector (LOCO-I / JPEG-LS) prediction from the left, lower and lower-left

@@ -24,7 +24,7 @@ namespace trephine::net {
 // Annotate and Annotations (an instructor's marks on the skull). 4: the predicted image form's
 // base hash is four 64-bit FNV-1a lanes, a word a pixel (image_delta.cpp); TakeOver, and who
 // holds a trainee in Participants.
-inline constexpr uint32_t kProtocolVersion = 4;
+inline constexpr uint32_t kProtocolVersion = 5;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
 enum class RefuseReason : uint32_t {
