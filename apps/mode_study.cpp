@@ -197,6 +197,9 @@ struct UpdatesOptions {
     std::string codec = "zstd";
     // A burst of other work on a shared machine weighs less in each median than with 30.
     int cycles = 100;
+    // The sweep runs 4 times, each with a quarter of the cycles: a cell's medians draw on four
+    // stretches of the run (docs/study.md).
+    int rounds = 4;
     std::vector<std::string> methods; // empty: every method
     bool quick = false;
     bool sizesGiven = false; // --sizes on the command line wins over --quick's sizes
@@ -235,15 +238,20 @@ std::vector<net::UpdateStudyRow> runUpdatesStudy(const UpdatesOptions& o,
     config.camera = o.camera;
     config.codec = net::parseCodec(o.codec);
     config.cycles = o.cycles;
+    config.rounds = o.rounds;
     config.methods = o.methods;
     if (o.quick) {
         if (!o.sizesGiven)
             config.sizes = {10, 40, 80};
         config.cycles = 5;
         config.warmup = 1;
+        config.rounds = 1;
     }
     if (config.cycles < 1 || config.cycles > 100000)
         throw Error("--cycles must be in [1, 100000]");
+    if (config.rounds < 1 || config.rounds > config.cycles)
+        throw Error("--rounds must be in [1, --cycles] (got " + std::to_string(config.rounds) +
+                    " with " + std::to_string(config.cycles) + " cycles)");
     const std::vector<std::string> methods = net::updateStudyMethods(config.codec);
     for (const std::string& m : o.methods)
         if (std::find(methods.begin(), methods.end(), m) == methods.end()) {
@@ -260,13 +268,14 @@ std::vector<net::UpdateStudyRow> runUpdatesStudy(const UpdatesOptions& o,
         throw Error("--camera: unknown preset '" + o.camera + "'");
     Volume volume = studyVolume(o.volume, o.camera);
     makeOutDir(o.out);
-    std::printf("Update study: %s, camera %s, %dx%d, codec %s, %d cycles per method and size\n",
+    std::printf("Update study: %s, camera %s, %dx%d, codec %s, %d cycles per method and size in "
+                "%d round%s\n",
                 o.volume.c_str(), o.camera.c_str(), config.window, config.window, o.codec.c_str(),
-                config.cycles);
+                config.cycles, config.rounds, config.rounds == 1 ? "" : "s");
     std::fflush(stdout);
     const size_t methodCount = config.methods.empty() ? net::updateStudyMethods(config.codec).size()
                                                       : config.methods.size();
-    ProgressBar bar(int(config.sizes.size() * methodCount));
+    ProgressBar bar(int(config.sizes.size() * methodCount) * config.rounds);
     config.progress = [&](const std::string& label, int done, int) { bar.set(done, label); };
     std::vector<net::UpdateStudyRow> rows = net::runUpdateStudy(volume, config);
     bar.finish();
@@ -433,10 +442,16 @@ void addStudyMode(CLI::App& root, int& exitCode) {
     updates->add_option("--cycles", u->cycles, "Measured cycles per method and size")
         ->capture_default_str();
     updates
+        ->add_option("--rounds", u->rounds,
+                     "Run the sweep this many times, each with its share of the cycles, and pool "
+                     "them")
+        ->capture_default_str();
+    updates
         ->add_option("--methods", u->methods,
                      "Only these methods (dbi, dbi-fullrender, volume, volume-CODEC)")
         ->delimiter(',');
-    updates->add_flag("--quick", u->quick, "Sizes 10, 40, 80 and 5 cycles: under a minute");
+    updates->add_flag("--quick", u->quick,
+                      "Sizes 10, 40, 80 and 5 cycles in one round: under a minute");
     updates->callback([u, updates, &exitCode] {
         u->sizesGiven = updates->count("--sizes") > 0;
         net::UpdateStudyConfig config;

@@ -87,99 +87,146 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
                    config.methods.end();
         });
     }
-    const int total = int(methods.size() * config.sizes.size());
-    int step = 0;
-    std::vector<UpdateStudyRow> rows;
-    for (const Method& method : methods) {
-        server.setFullRenderUpdates(method.fullRender);
-        ClientConfig cc;
-        cc.name = "study-" + method.name;
-        cc.codec = config.codec;
-        cc.sync = method.sync;
-        cc.volumeCodec = method.volumeCodec;
-        cc.view = toViewSpec(camera);
-        cc.recordCapacity = size_t(config.cycles + config.warmup) * 4 + 16;
-        SessionClient client(cc);
-        std::optional<UpdateRecord> last;
-        client.setRecordCallback([&](const UpdateRecord& r) {
-            if (!r.full && r.mode == method.sync)
-                last = r;
-        });
-        client.connect(address);
-        const bool ready = pumpUntil(client, 60.0, [&] {
-            return method.sync == Sync::Dbi
-                       ? client.hasFullImage()
-                       : client.sync() == Sync::Volume && client.localVolume() != nullptr &&
-                             client.hasFullImage();
-        });
-        if (!ready)
-            throw Error("update study: the " + method.name + " client never received its " +
-                        (method.sync == Sync::Dbi ? "first image" : "volume") +
-                        (client.closeReason().empty() ? "" : " (" + client.closeReason() + ")"));
+    if (config.rounds < 1 || config.rounds > config.cycles)
+        throw Error("update study: rounds must be in [1, cycles] (" +
+                    std::to_string(config.rounds) + " rounds, " + std::to_string(config.cycles) +
+                    " cycles)");
 
+    // Per size: the box, its BB_screen and its voxels as they are now, put back after every
+    // measured cut (so every round starts from the same bone).
+    struct Size {
+        int n = 0;
+        Box3i box;
+        PixelRect screen;
+        std::vector<uint8_t> density, material;
+    };
+    std::vector<Size> sizes;
+    {
+        const Volume now = server.volumeSnapshot();
         for (int n : config.sizes) {
-            if (config.progress)
-                config.progress(method.name + " " + std::to_string(n) + "^3", step, total);
-            ++step;
-            const Box3i box = surfaceBox(volume, n);
-            const PixelRect screen = dirtyScreenRect(camera, volume, box);
-            // The box's voxels as they are now, put back after every measured cut.
-            std::vector<uint8_t> density, material;
-            {
-                const Volume now = server.volumeSnapshot();
-                density.reserve(size_t(box.count()));
-                material.reserve(size_t(box.count()));
-                for (int z = box.lo.z; z < box.hi.z; ++z)
-                    for (int y = box.lo.y; y < box.hi.y; ++y)
-                        for (int x = box.lo.x; x < box.hi.x; ++x) {
-                            density.push_back(now.density(x, y, z));
-                            material.push_back(uint8_t(now.material(x, y, z)));
-                        }
+            Size z;
+            z.n = n;
+            z.box = surfaceBox(volume, n);
+            z.screen = dirtyScreenRect(camera, volume, z.box);
+            z.density.reserve(size_t(z.box.count()));
+            z.material.reserve(size_t(z.box.count()));
+            for (int zz = z.box.lo.z; zz < z.box.hi.z; ++zz)
+                for (int y = z.box.lo.y; y < z.box.hi.y; ++y)
+                    for (int x = z.box.lo.x; x < z.box.hi.x; ++x) {
+                        z.density.push_back(now.density(x, y, zz));
+                        z.material.push_back(uint8_t(now.material(x, y, zz)));
+                    }
+            sizes.push_back(std::move(z));
+        }
+    }
+    // The samples of each (method, size), pooled over the rounds.
+    struct Samples {
+        explicit Samples(size_t capacity)
+            : latency(capacity), bytes(capacity), erode(capacity), render(capacity),
+              encode(capacity), transmit(capacity), apply(capacity), clientRender(capacity) {}
+        SampleWindow latency, bytes, erode, render, encode, transmit, apply, clientRender;
+    };
+    std::vector<std::vector<Samples>> samples(methods.size());
+    for (auto& perMethod : samples)
+        perMethod.assign(sizes.size(), Samples(size_t(config.cycles)));
+
+    const int total = int(methods.size() * sizes.size()) * config.rounds;
+    int step = 0;
+    for (int round = 0; round < config.rounds; ++round) {
+        // This round's share of the cycles; the first rounds take the remainder.
+        const int cycles = config.cycles / config.rounds + (round < config.cycles % config.rounds);
+        for (size_t mi = 0; mi < methods.size(); ++mi) {
+            const Method& method = methods[mi];
+            server.setFullRenderUpdates(method.fullRender);
+            ClientConfig cc;
+            cc.name = "study-" + method.name;
+            cc.codec = config.codec;
+            cc.sync = method.sync;
+            cc.volumeCodec = method.volumeCodec;
+            cc.view = toViewSpec(camera);
+            cc.recordCapacity = size_t(cycles + config.warmup) * 4 + 16;
+            SessionClient client(cc);
+            std::optional<UpdateRecord> last;
+            client.setRecordCallback([&](const UpdateRecord& r) {
+                if (!r.full && r.mode == method.sync)
+                    last = r;
+            });
+            client.connect(address);
+            const bool ready = pumpUntil(client, 60.0, [&] {
+                return method.sync == Sync::Dbi
+                           ? client.hasFullImage()
+                           : client.sync() == Sync::Volume && client.localVolume() != nullptr &&
+                                 client.hasFullImage();
+            });
+            if (!ready)
+                throw Error(
+                    "update study: the " + method.name + " client never received its " +
+                    (method.sync == Sync::Dbi ? "first image" : "volume") +
+                    (client.closeReason().empty() ? "" : " (" + client.closeReason() + ")"));
+
+            for (size_t si = 0; si < sizes.size(); ++si) {
+                const Size& z = sizes[si];
+                if (config.progress) {
+                    std::string label = method.name + " " + std::to_string(z.n) + "^3";
+                    if (config.rounds > 1)
+                        label += " (round " + std::to_string(round + 1) + "/" +
+                                 std::to_string(config.rounds) + ")";
+                    config.progress(label, step, total);
+                }
+                ++step;
+                Samples& out = samples[mi][si];
+                auto waitOne = [&](const char* what) {
+                    last.reset();
+                    if (!pumpUntil(client, config.cycleTimeoutS, [&] { return last.has_value(); }))
+                        throw Error("update study: " + method.name + " " + std::to_string(z.n) +
+                                    "^3: no " + what + " update within " +
+                                    std::to_string(int(config.cycleTimeoutS)) + " s");
+                    return *last;
+                };
+                for (int c = 0; c < config.warmup + cycles; ++c) {
+                    server.submitBoxCut(z.box);
+                    const UpdateRecord r = waitOne("cut");
+                    server.submitVoxels(z.box, z.density, z.material);
+                    waitOne("restore");
+                    if (c < config.warmup)
+                        continue;
+                    out.latency.add(ms(r.latencyUs));
+                    out.bytes.add(double(r.bytes));
+                    out.erode.add(ms(r.erodeUs));
+                    out.render.add(ms(r.serverRenderUs));
+                    out.encode.add(ms(r.encodeUs));
+                    out.transmit.add(ms(r.transmitUs));
+                    out.apply.add(ms(r.applyUs));
+                    out.clientRender.add(ms(r.clientRenderUs));
+                }
             }
-            SampleWindow latency, bytes, erode, render, encode, transmit, apply, clientRender;
-            auto waitOne = [&](const char* what) {
-                last.reset();
-                if (!pumpUntil(client, config.cycleTimeoutS, [&] { return last.has_value(); }))
-                    throw Error("update study: " + method.name + " " + std::to_string(n) +
-                                "^3: no " + what + " update within " +
-                                std::to_string(int(config.cycleTimeoutS)) + " s");
-                return *last;
-            };
-            for (int c = 0; c < config.warmup + config.cycles; ++c) {
-                server.submitBoxCut(box);
-                const UpdateRecord r = waitOne("cut");
-                server.submitVoxels(box, density, material);
-                waitOne("restore");
-                if (c < config.warmup)
-                    continue;
-                latency.add(ms(r.latencyUs));
-                bytes.add(double(r.bytes));
-                erode.add(ms(r.erodeUs));
-                render.add(ms(r.serverRenderUs));
-                encode.add(ms(r.encodeUs));
-                transmit.add(ms(r.transmitUs));
-                apply.add(ms(r.applyUs));
-                clientRender.add(ms(r.clientRenderUs));
-            }
+            client.disconnect(100);
+        }
+    }
+
+    std::vector<UpdateStudyRow> rows;
+    for (size_t mi = 0; mi < methods.size(); ++mi)
+        for (size_t si = 0; si < sizes.size(); ++si) {
+            const Method& method = methods[mi];
+            const Size& z = sizes[si];
+            const Samples& s = samples[mi][si];
             UpdateStudyRow row;
             row.method = method.name;
-            row.box = n;
-            row.bbScreenW = screen.w;
-            row.bbScreenH = screen.h;
-            row.bytesPerUpdate = bytes.mean();
+            row.box = z.n;
+            row.bbScreenW = z.screen.w;
+            row.bbScreenH = z.screen.h;
+            row.bytesPerUpdate = s.bytes.mean();
             row.rawBytesPerUpdate =
-                method.sync == Sync::Dbi ? 5.0 * screen.w * screen.h : double(box.count());
-            row.latencyP50Ms = latency.percentile(50);
-            row.latencyP99Ms = latency.percentile(99);
+                method.sync == Sync::Dbi ? 5.0 * z.screen.w * z.screen.h : double(z.box.count());
+            row.latencyP50Ms = s.latency.percentile(50);
+            row.latencyP99Ms = s.latency.percentile(99);
             row.updatesPerS = row.latencyP50Ms > 0 ? 1000.0 / row.latencyP50Ms : 0.0;
-            row.stages = {erode.percentile(50),  render.percentile(50),
-                          encode.percentile(50), transmit.percentile(50),
-                          apply.percentile(50),  clientRender.percentile(50)};
-            row.cycles = config.cycles;
+            row.stages = {s.erode.percentile(50),  s.render.percentile(50),
+                          s.encode.percentile(50), s.transmit.percentile(50),
+                          s.apply.percentile(50),  s.clientRender.percentile(50)};
+            row.cycles = int(s.latency.size());
             rows.push_back(row);
         }
-        client.disconnect(100);
-    }
     server.stop();
     if (config.progress)
         config.progress("done", total, total);

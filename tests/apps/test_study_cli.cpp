@@ -129,13 +129,31 @@ TEST(StudyCli, UpdatesMethodsRunsOnlyThoseNamed) {
     EXPECT_EQ(r.out.find("update rate"), std::string::npos) << r.out;
 }
 
+// --rounds splits the cycles over several sweeps and pools them: every cell still reports all of
+// its cycles, and the run says how it was measured.
+TEST(StudyCli, UpdatesRoundsPoolEveryCycle) {
+    TempDir dir;
+    CommandResult r = runTrephine(dir, "study updates --sizes 8,12 --volume skull:64 --cycles 7 "
+                                       "--rounds 3 --methods dbi,volume --out '" +
+                                           dir / "out" + "'");
+    ASSERT_EQ(r.exitCode, 0) << r.out << r.err;
+    EXPECT_NE(r.out.find("7 cycles per method and size in 3 rounds"), std::string::npos) << r.out;
+    const Csv csv = readCsv(dir / "out/updates.csv");
+    ASSERT_EQ(csv.rows.size(), 4u);
+    for (const auto& row : csv.rows) {
+        EXPECT_EQ(num(row, "cycles"), 7) << row.at("method") << " " << row.at("box");
+        EXPECT_GT(num(row, "latency_p50_ms"), 0);
+    }
+}
+
 TEST(StudyCli, BadFlagsGiveOneLine) {
     TempDir dir;
     for (const char* args :
          {"study updates --codec gzip --quick", "study updates --sizes 0",
           "study updates --camera nowhere --quick", "study updates --volume nosuch.nrrd --quick",
           "study updates --quick --methods dbi,teleport",
-          "study updates --quick --codec lz4 --methods volume-zstd"}) {
+          "study updates --quick --codec lz4 --methods volume-zstd",
+          "study updates --sizes 8 --cycles 3 --rounds 4", "study updates --sizes 8 --rounds 0"}) {
         CommandResult r = runTrephine(dir, std::string(args) + " --out '" + dir / "o" + "'");
         EXPECT_NE(r.exitCode, 0) << args;
         EXPECT_FALSE(r.err.empty()) << args;

@@ -8,7 +8,8 @@
 //                     updates its rendering data and re-renders its whole view (the baseline),
 //   volume-<codec>    the same with the voxel bytes compressed (reported separately).
 // Between measured cycles the box's original voxels are put back (not measured), so every cycle
-// removes the same bone. docs/study.md gives the method and the columns.
+// removes the same bone. The sweep runs in rounds (UpdateStudyConfig::rounds) whose samples are
+// pooled. docs/study.md gives the method and the columns.
 #pragma once
 
 #include "libsim/box.h"
@@ -25,10 +26,15 @@ struct UpdateStudyConfig {
     std::vector<int> sizes{10, 20, 30, 40, 50, 60, 70, 80};
     std::string volumeName = "skull:128";
     std::string camera = "paper";
-    int window = 500;                 // square window, pixels
-    Codec codec = Codec::Lz4;         // image updates, and the compressed volume variant
-    int cycles = 100;                 // measured cycles per method and size
-    int warmup = 3;                   // cycles run first and discarded
+    int window = 500;         // square window, pixels
+    Codec codec = Codec::Lz4; // image updates, and the compressed volume variant
+    int cycles = 100;         // measured cycles per method and size
+    int warmup = 3;           // cycles run first and discarded, per round
+    // The sweep (every method, every size) runs this many times, each with its share of the
+    // cycles and a fresh client per method; each (method, size) pools its samples over the
+    // rounds, so its medians draw on several stretches of the run and a burst of other work on
+    // the machine lands in one round of every cell it touches instead of in one whole cell.
+    int rounds = 4;
     double cycleTimeoutS = 10;        // one cycle that takes longer fails the study (an Error)
     std::vector<std::string> methods; // a subset of updateStudyMethods(codec); empty: all
     // Called before each (method, size) with a label and the steps done/total.
