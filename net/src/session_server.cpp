@@ -1087,6 +1087,18 @@ void SessionServer::simulationLoop() {
             }
             }
         }
+        // Volume clients: the changed voxels themselves, or the whole volume after a join or a
+        // switch (which already holds this batch's change). Posted first: they need none of the
+        // rendering below, so in a mixed session they never wait for the DBI clients' renders.
+        for (const auto& [id, c] : s.simClients) {
+            if (c.sync != Sync::Volume)
+                continue;
+            auto full = needVolume.find(id);
+            if (full != needVolume.end())
+                s.postVolume(id, c, s.volume.bounds(), true, true, full->second, 0);
+            else if (!changed.empty())
+                s.postVolume(id, c, changed, false, changedMaterials, causeUs, uint32_t(erodeUs));
+        }
         // Erosion only lowers densities, so the views' hit caches stay valid; voxels written
         // wholesale may raise them, which invalidates every cache (the next render restarts it).
         const uint64_t g0 = steadyNowUs();
@@ -1143,17 +1155,6 @@ void SessionServer::simulationLoop() {
                 else if (!rect.empty())
                     s.post(id, c, v, rect, false, causeUs, uint32_t(erodeUs), renderUs);
             }
-        }
-        // Volume clients: the changed voxels themselves, or the whole volume after a join or a
-        // switch (which already holds this batch's change).
-        for (const auto& [id, c] : s.simClients) {
-            if (c.sync != Sync::Volume)
-                continue;
-            auto full = needVolume.find(id);
-            if (full != needVolume.end())
-                s.postVolume(id, c, s.volume.bounds(), true, true, full->second, 0);
-            else if (!changed.empty())
-                s.postVolume(id, c, changed, false, changedMaterials, causeUs, uint32_t(erodeUs));
         }
         std::lock_guard lock(s.inMutex);
         s.busy = false;
