@@ -200,6 +200,7 @@ struct UpdatesOptions {
     // The sweep runs 4 times, each with a quarter of the cycles: a cell's medians draw on four
     // stretches of the run (docs/study.md).
     int rounds = 4;
+    std::string link;                 // empty: plain loopback
     std::vector<std::string> methods; // empty: every method
     bool quick = false;
     bool sizesGiven = false; // --sizes on the command line wins over --quick's sizes
@@ -239,6 +240,8 @@ std::vector<net::UpdateStudyRow> runUpdatesStudy(const UpdatesOptions& o,
     config.codec = net::parseCodec(o.codec);
     config.cycles = o.cycles;
     config.rounds = o.rounds;
+    if (!o.link.empty())
+        config.link = net::LinkConditions::parse(o.link);
     config.methods = o.methods;
     if (o.quick) {
         if (!o.sizesGiven)
@@ -269,9 +272,10 @@ std::vector<net::UpdateStudyRow> runUpdatesStudy(const UpdatesOptions& o,
     Volume volume = studyVolume(o.volume, o.camera);
     makeOutDir(o.out);
     std::printf("Update study: %s, camera %s, %dx%d, codec %s, %d cycles per method and size in "
-                "%d round%s\n",
+                "%d round%s, %s\n",
                 o.volume.c_str(), o.camera.c_str(), config.window, config.window, o.codec.c_str(),
-                config.cycles, config.rounds, config.rounds == 1 ? "" : "s");
+                config.cycles, config.rounds, config.rounds == 1 ? "" : "s",
+                config.link ? ("emulated link: " + config.link->describe()).c_str() : "loopback");
     std::fflush(stdout);
     const size_t methodCount = config.methods.empty() ? net::updateStudyMethods(config.codec).size()
                                                       : config.methods.size();
@@ -364,6 +368,7 @@ struct AllOptions {
     std::string out = "study";
     std::string volume = "skull:128";
     std::string codec = "zstd";
+    std::string link; // empty: plain loopback
     bool quick = false;
 };
 
@@ -385,6 +390,7 @@ int runAllStudies(const AllOptions& o, const std::string& command) {
     u.out = o.out;
     u.volume = o.volume;
     u.codec = o.codec;
+    u.link = o.link;
     u.quick = o.quick;
     input.updates = runUpdatesStudy(u, input.updateConfig);
 
@@ -447,6 +453,11 @@ void addStudyMode(CLI::App& root, int& exitCode) {
                      "them")
         ->capture_default_str();
     updates
+        ->add_option("--link", u->link,
+                     "Emulate a link between clients and server, e.g. rate=100,latency=0.1 (the "
+                     "paper's 100 Mbit/s LAN); default: plain loopback")
+        ->capture_default_str();
+    updates
         ->add_option("--methods", u->methods,
                      "Only these methods (dbi, dbi-fullrender, volume, volume-CODEC)")
         ->delimiter(',');
@@ -477,10 +488,13 @@ void addStudyMode(CLI::App& root, int& exitCode) {
     all->add_option("--volume", a->volume, "Volume spec for the update study")
         ->capture_default_str();
     all->add_option("--codec", a->codec, "Image codec: raw, lz4 or zstd")->capture_default_str();
+    all->add_option("--link", a->link,
+                    "Emulate a link for the update study, e.g. rate=100 (the paper's LAN)");
     all->add_flag("--quick", a->quick, "A reduced run of every study, under a minute");
     all->callback([a, &exitCode] {
-        std::string command = "trephine study all --out " + a->out + " --volume " + a->volume +
-                              " --codec " + a->codec + (a->quick ? " --quick" : "");
+        std::string command =
+            "trephine study all --out " + a->out + " --volume " + a->volume + " --codec " +
+            a->codec + (a->link.empty() ? "" : " --link " + a->link) + (a->quick ? " --quick" : "");
         exitCode = runAllStudies(*a, command);
     });
 }

@@ -55,7 +55,11 @@ LinkConditions LinkConditions::parse(const std::string& text) {
 std::string LinkConditions::describe() const {
     std::ostringstream o;
     o << "latency " << latencyMs << " ms, jitter " << jitterMs << " ms, loss " << lossPercent
-      << " %, rate " << (rateMbps > 0 ? std::to_string(rateMbps) + " Mbit/s" : "unlimited");
+      << " %, rate ";
+    if (rateMbps > 0)
+        o << rateMbps << " Mbit/s";
+    else
+        o << "unlimited";
     return o.str();
 }
 

@@ -176,7 +176,11 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
        << in.updateConfig.cycles << " measured cycles per method and size in "
        << in.updateConfig.rounds << " round" << (in.updateConfig.rounds == 1 ? "" : "s")
        << " of the whole sweep (after " << in.updateConfig.warmup
-       << " warm-up a round), real ENet over loopback, server and clients in one process\n";
+       << " warm-up a round), real ENet over "
+       << (in.updateConfig.link ? "an emulated link (" + in.updateConfig.link->describe() +
+                                      ", net/link_emulator.h) on loopback"
+                                : std::string("loopback"))
+       << ", server and clients in one process\n";
     md << "- The paper: server (system 1) updating a client (system 2) over a 100 Mbit/s LAN, "
           "128^3 volume, camera 13\" away, 60 degrees, 500x500 window.\n\n";
 

@@ -7,6 +7,7 @@
 #include "libsim/stats.h"
 #include "libsim/svg_plot.h"
 #include "net/codec.h"
+#include "net/link_emulator.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
 #include "net/view.h"
@@ -74,7 +75,13 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
     sc.hapticModels = false;
     SessionServer server(volume, sc);
     server.start();
-    const ENetAddress address = parseAddress("127.0.0.1:" + std::to_string(server.port()));
+    const ENetAddress serverAddress = parseAddress("127.0.0.1:" + std::to_string(server.port()));
+    // With a link to emulate, every client talks to the server through the relay.
+    std::unique_ptr<LinkEmulator> link;
+    if (config.link)
+        link = std::make_unique<LinkEmulator>(0, serverAddress, *config.link);
+    const ENetAddress address =
+        link ? parseAddress("127.0.0.1:" + std::to_string(link->port())) : serverAddress;
 
     std::vector<Method> methods = methodsFor(config.codec);
     if (!config.methods.empty()) {

@@ -146,6 +146,24 @@ TEST(StudyCli, UpdatesRoundsPoolEveryCycle) {
     }
 }
 
+// --link puts the link emulator between the clients and the server: at 20 Mbit/s a 16^3 volume
+// update (4096 bytes) cannot arrive in under 1.6 ms, which loopback delivers in microseconds.
+TEST(StudyCli, UpdatesLinkEmulatesTheNetwork) {
+    TempDir dir;
+    CommandResult r = runTrephine(dir, "study updates --quick --sizes 16 --volume skull:64 "
+                                       "--methods dbi,volume --link rate=20 --out '" +
+                                           dir / "out" + "'");
+    ASSERT_EQ(r.exitCode, 0) << r.out << r.err;
+    EXPECT_NE(r.out.find("emulated link: latency 0 ms, jitter 0 ms, loss 0 %, rate 20 Mbit/s"),
+              std::string::npos)
+        << r.out;
+    const Csv csv = readCsv(dir / "out/updates.csv");
+    ASSERT_EQ(csv.rows.size(), 2u);
+    for (const auto& row : csv.rows)
+        if (row.at("method") == "volume")
+            EXPECT_GE(num(row, "transmit_ms"), 4096 * 8 / 20e6 * 1e3) << "rate not applied";
+}
+
 TEST(StudyCli, BadFlagsGiveOneLine) {
     TempDir dir;
     for (const char* args :
@@ -153,7 +171,8 @@ TEST(StudyCli, BadFlagsGiveOneLine) {
           "study updates --camera nowhere --quick", "study updates --volume nosuch.nrrd --quick",
           "study updates --quick --methods dbi,teleport",
           "study updates --quick --codec lz4 --methods volume-zstd",
-          "study updates --sizes 8 --cycles 3 --rounds 4", "study updates --sizes 8 --rounds 0"}) {
+          "study updates --sizes 8 --cycles 3 --rounds 4", "study updates --sizes 8 --rounds 0",
+          "study updates --quick --sizes 8 --link warp=9"}) {
         CommandResult r = runTrephine(dir, std::string(args) + " --out '" + dir / "o" + "'");
         EXPECT_NE(r.exitCode, 0) << args;
         EXPECT_FALSE(r.err.empty()) << args;

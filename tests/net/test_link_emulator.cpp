@@ -17,6 +17,8 @@ TEST(LinkEmulator, ParsesConditions) {
     EXPECT_DOUBLE_EQ(c.jitterMs, 5);
     EXPECT_DOUBLE_EQ(c.lossPercent, 1.5);
     EXPECT_DOUBLE_EQ(c.rateMbps, 100);
+    EXPECT_EQ(c.describe(), "latency 25 ms, jitter 5 ms, loss 1.5 %, rate 100 Mbit/s");
+    EXPECT_EQ(LinkConditions{}.describe(), "latency 0 ms, jitter 0 ms, loss 0 %, rate unlimited");
     EXPECT_THROW(LinkConditions::parse("latency=fast"), Error);
     EXPECT_THROW(LinkConditions::parse("lag=3"), Error);
     EXPECT_THROW(LinkConditions::parse("loss=-1"), Error);

@@ -1,6 +1,7 @@
 // An in-process UDP relay that emulates a network link between ENet peers on this machine:
 // latency, jitter, random loss and a rate limit, in each direction. `tc netem` is not available
-// on these kernels, so tests, the study and `--emulate` put this between client and server.
+// on these kernels, so tests and the update study (`trephine study updates --link`) put this
+// between client and server.
 // Clients send to the relay's port; it forwards to the target through one socket per client, so
 // any number of clients can share one relay.
 #pragma once
@@ -25,7 +26,7 @@ struct LinkConditions {
     // Parses "latency=25,jitter=5,loss=1,rate=100" (any subset, any order); throws
     // trephine::Error naming the text when malformed.
     static LinkConditions parse(const std::string& text);
-    std::string describe() const;
+    std::string describe() const; // "latency 0 ms, jitter 0 ms, loss 0 %, rate 100 Mbit/s"
 };
 
 class LinkEmulator {

@@ -14,9 +14,11 @@
 
 #include "libsim/box.h"
 #include "libsim/volume.h"
+#include "net/link_emulator.h"
 #include "net/protocol.h"
 
 #include <functional>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -35,6 +37,9 @@ struct UpdateStudyConfig {
     // rounds, so its medians draw on several stretches of the run and a burst of other work on
     // the machine lands in one round of every cell it touches instead of in one whole cell.
     int rounds = 4;
+    // A link to put between the clients and the server (net/link_emulator.h), e.g. the paper's
+    // 100 Mbit/s LAN; none: plain loopback.
+    std::optional<LinkConditions> link;
     double cycleTimeoutS = 10;        // one cycle that takes longer fails the study (an Error)
     std::vector<std::string> methods; // a subset of updateStudyMethods(codec); empty: all
     // Called before each (method, size) with a label and the steps done/total.
