@@ -67,6 +67,10 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
     for (int n : config.sizes)
         if (n < 1 || n > std::min({volume.dims().x, volume.dims().y, volume.dims().z}))
             throw Error("update study: box size " + std::to_string(n) + " does not fit the volume");
+    if (config.rounds < 1 || config.rounds > config.cycles)
+        throw Error("update study: rounds must be in [1, cycles] (" +
+                    std::to_string(config.rounds) + " rounds, " + std::to_string(config.cycles) +
+                    " cycles)");
     const Camera camera = cameraPreset(config.camera, volume, {config.window, config.window});
 
     ServerConfig sc;
@@ -94,10 +98,6 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
                    config.methods.end();
         });
     }
-    if (config.rounds < 1 || config.rounds > config.cycles)
-        throw Error("update study: rounds must be in [1, cycles] (" +
-                    std::to_string(config.rounds) + " rounds, " + std::to_string(config.cycles) +
-                    " cycles)");
 
     // Per size: the box, its BB_screen and its voxels as they are now, put back after every
     // measured cut (so every round starts from the same bone).
