@@ -8,8 +8,10 @@
 #include <deque>
 #include <map>
 #include <memory>
+#include <poll.h>
 #include <pthread.h>
 #include <sstream>
+#include <sys/prctl.h>
 #include <vector>
 
 namespace trephine::net {
@@ -154,6 +156,8 @@ void LinkEmulator::setConditions(const LinkConditions& c) {
 
 void LinkEmulator::run() {
     pthread_setname_np(pthread_self(), "link-emulator");
+    // Wake when a datagram is due, not up to the default 50 us of timer slack later.
+    prctl(PR_SET_TIMERSLACK, 1UL, 0UL, 0UL, 0UL);
     std::map<uint64_t, std::unique_ptr<Client>> clients;
     Rng rng{0x9E3779B97F4A7C15ull};
     uint32_t seededWith = 0;
@@ -202,19 +206,21 @@ void LinkEmulator::run() {
             seededWith = c.seed;
         }
 
-        ENetSocketSet set;
-        ENET_SOCKETSET_EMPTY(set);
-        ENET_SOCKETSET_ADD(set, m_front);
-        ENetSocket maxSocket = m_front;
+        // Wait until a datagram arrives or the next queued one is due, at most 1 ms (to see
+        // m_stop). ppoll takes nanoseconds: select's whole milliseconds made a relay with
+        // datagrams queued spin a core until they were due, taking it from the peers it serves.
+        std::vector<pollfd> fds{{m_front, POLLIN, 0}};
+        Clock::time_point wake = Clock::now() + std::chrono::milliseconds(1);
         for (auto& [key, cl] : clients) {
-            ENET_SOCKETSET_ADD(set, cl->back);
-            maxSocket = std::max(maxSocket, cl->back);
+            fds.push_back({cl->back, POLLIN, 0});
+            for (const Lane* lane : {&cl->up, &cl->down})
+                if (!lane->queue.empty())
+                    wake = std::min(wake, lane->queue.front().due);
         }
-        // Sleep at most 1 ms, less when nothing is queued (select's granularity is 1 ms).
-        bool pending = false;
-        for (auto& [key, cl] : clients)
-            pending = pending || !cl->up.queue.empty() || !cl->down.queue.empty();
-        enet_socketset_select(maxSocket, &set, nullptr, pending ? 0 : 1);
+        const auto wait = std::max(Clock::duration::zero(), wake - Clock::now());
+        const auto ns = std::chrono::duration_cast<std::chrono::nanoseconds>(wait).count();
+        const timespec timeout{time_t(ns / 1000000000), long(ns % 1000000000)};
+        ppoll(fds.data(), nfds_t(fds.size()), &timeout, nullptr);
 
         // From clients to the target.
         for (;;) {
