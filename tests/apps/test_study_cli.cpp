@@ -103,44 +103,51 @@ void checkUpdates(const Csv& csv, const std::vector<int>& sizes) {
     }
 }
 
+// `trephine study updates ARGS --volume skull:64 --out DIR/out`, which must succeed: what it
+// printed, and the CSV it wrote.
+struct UpdatesRun {
+    CommandResult result;
+    Csv csv;
+};
+
+UpdatesRun runUpdates(TempDir& dir, const std::string& args) {
+    UpdatesRun run;
+    run.result = runTrephine(dir, "study updates " + args + " --volume skull:64 --out '" +
+                                      dir / "out" + "'");
+    EXPECT_EQ(run.result.exitCode, 0) << run.result.out << run.result.err;
+    run.csv = readCsv(dir / "out/updates.csv");
+    return run;
+}
+
 } // namespace
 
 TEST(StudyCli, UpdatesQuickWritesEveryColumnWithSaneValues) {
     TempDir dir;
-    CommandResult r = runTrephine(dir, "study updates --quick --sizes 8,16 --volume skull:64 "
-                                       "--out '" +
-                                           dir / "out" + "'");
-    ASSERT_EQ(r.exitCode, 0) << r.out << r.err;
-    checkUpdates(readCsv(dir / "out/updates.csv"), {8, 16});
-    EXPECT_NE(r.out.find("update rate 8^3"), std::string::npos) << r.out;
-    EXPECT_NE(r.out.find("update size 16^3"), std::string::npos) << r.out;
+    const UpdatesRun run = runUpdates(dir, "--quick --sizes 8,16");
+    checkUpdates(run.csv, {8, 16});
+    EXPECT_NE(run.result.out.find("update rate 8^3"), std::string::npos) << run.result.out;
+    EXPECT_NE(run.result.out.find("update size 16^3"), std::string::npos) << run.result.out;
 }
 
 // --methods runs only the methods named; the rate target needs both dbi and volume, so none prints.
 TEST(StudyCli, UpdatesMethodsRunsOnlyThoseNamed) {
     TempDir dir;
-    CommandResult r = runTrephine(dir, "study updates --quick --sizes 8 --volume skull:64 "
-                                       "--methods dbi --out '" +
-                                           dir / "out" + "'");
-    ASSERT_EQ(r.exitCode, 0) << r.out << r.err;
-    const Csv csv = readCsv(dir / "out/updates.csv");
-    ASSERT_EQ(csv.rows.size(), 1u);
-    EXPECT_EQ(csv.rows[0].at("method"), "dbi");
-    EXPECT_EQ(r.out.find("update rate"), std::string::npos) << r.out;
+    const UpdatesRun run = runUpdates(dir, "--quick --sizes 8 --methods dbi");
+    ASSERT_EQ(run.csv.rows.size(), 1u);
+    EXPECT_EQ(run.csv.rows[0].at("method"), "dbi");
+    EXPECT_EQ(run.result.out.find("update rate"), std::string::npos) << run.result.out;
 }
 
 // --rounds splits the cycles over several sweeps and pools them: every cell still reports all of
 // its cycles, and the run says how it was measured.
 TEST(StudyCli, UpdatesRoundsPoolEveryCycle) {
     TempDir dir;
-    CommandResult r = runTrephine(dir, "study updates --sizes 8,12 --volume skull:64 --cycles 7 "
-                                       "--rounds 3 --methods dbi,volume --out '" +
-                                           dir / "out" + "'");
-    ASSERT_EQ(r.exitCode, 0) << r.out << r.err;
-    EXPECT_NE(r.out.find("7 cycles per method and size in 3 rounds"), std::string::npos) << r.out;
-    const Csv csv = readCsv(dir / "out/updates.csv");
-    ASSERT_EQ(csv.rows.size(), 4u);
-    for (const auto& row : csv.rows) {
+    const UpdatesRun run =
+        runUpdates(dir, "--sizes 8,12 --cycles 7 --rounds 3 --methods dbi,volume");
+    EXPECT_NE(run.result.out.find("7 cycles per method and size in 3 rounds"), std::string::npos)
+        << run.result.out;
+    ASSERT_EQ(run.csv.rows.size(), 4u);
+    for (const auto& row : run.csv.rows) {
         EXPECT_EQ(num(row, "cycles"), 7) << row.at("method") << " " << row.at("box");
         EXPECT_GT(num(row, "latency_p50_ms"), 0);
     }
@@ -150,16 +157,14 @@ TEST(StudyCli, UpdatesRoundsPoolEveryCycle) {
 // update (4096 bytes) cannot arrive in under 1.6 ms, which loopback delivers in microseconds.
 TEST(StudyCli, UpdatesLinkEmulatesTheNetwork) {
     TempDir dir;
-    CommandResult r = runTrephine(dir, "study updates --quick --sizes 16 --volume skull:64 "
-                                       "--methods dbi,volume --link rate=20 --out '" +
-                                           dir / "out" + "'");
-    ASSERT_EQ(r.exitCode, 0) << r.out << r.err;
-    EXPECT_NE(r.out.find("emulated link: latency 0 ms, jitter 0 ms, loss 0 %, rate 20 Mbit/s"),
-              std::string::npos)
-        << r.out;
-    const Csv csv = readCsv(dir / "out/updates.csv");
-    ASSERT_EQ(csv.rows.size(), 2u);
-    for (const auto& row : csv.rows)
+    const UpdatesRun run =
+        runUpdates(dir, "--quick --sizes 16 --methods dbi,volume --link rate=20");
+    EXPECT_NE(
+        run.result.out.find("emulated link: latency 0 ms, jitter 0 ms, loss 0 %, rate 20 Mbit/s"),
+        std::string::npos)
+        << run.result.out;
+    ASSERT_EQ(run.csv.rows.size(), 2u);
+    for (const auto& row : run.csv.rows)
         if (row.at("method") == "volume")
             EXPECT_GE(num(row, "transmit_ms"), 4096 * 8 / 20e6 * 1e3) << "rate not applied";
 }
