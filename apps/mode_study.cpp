@@ -203,7 +203,8 @@ struct UpdatesOptions {
     std::string link;                 // empty: plain loopback
     std::vector<std::string> methods; // empty: every method
     bool quick = false;
-    bool sizesGiven = false; // --sizes on the command line wins over --quick's sizes
+    bool sizesGiven = false;  // --sizes on the command line wins over --quick's sizes
+    bool roundsGiven = false; // without --rounds, fewer cycles than rounds means fewer rounds
 };
 
 std::string makeOutDir(const std::string& out) {
@@ -239,7 +240,7 @@ std::vector<net::UpdateStudyRow> runUpdatesStudy(const UpdatesOptions& o,
     config.camera = o.camera;
     config.codec = net::parseCodec(o.codec);
     config.cycles = o.cycles;
-    config.rounds = o.rounds;
+    config.rounds = o.roundsGiven ? o.rounds : std::min(o.rounds, std::max(o.cycles, 1));
     if (!o.link.empty())
         config.link = net::LinkConditions::parse(o.link);
     config.methods = o.methods;
@@ -373,6 +374,10 @@ struct AllOptions {
 };
 
 int runAllStudies(const AllOptions& o, const std::string& command) {
+    // Options of the later studies are checked before the first one runs.
+    net::parseCodec(o.codec);
+    if (!o.link.empty())
+        net::LinkConditions::parse(o.link);
     makeOutDir(o.out);
     net::StudyReportInput input;
     input.command = command;
@@ -465,6 +470,7 @@ void addStudyMode(CLI::App& root, int& exitCode) {
                       "Sizes 10, 40, 80 and 5 cycles in one round: under a minute");
     updates->callback([u, updates, &exitCode] {
         u->sizesGiven = updates->count("--sizes") > 0;
+        u->roundsGiven = updates->count("--rounds") > 0;
         net::UpdateStudyConfig config;
         runUpdatesStudy(*u, config);
         exitCode = 0;

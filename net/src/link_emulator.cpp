@@ -31,11 +31,13 @@ LinkConditions LinkConditions::parse(const std::string& text) {
             if (eq == std::string::npos)
                 throw std::invalid_argument("no value");
             value = std::stod(item.substr(eq + 1), &used);
-            if (used != item.size() - eq - 1 || value < 0)
+            // Finite and at most 1e6: an hour of delay or a terabit link is no link to emulate,
+            // and larger values overflow the clock's durations (NaN passed `value < 0`).
+            if (used != item.size() - eq - 1 || !(value >= 0 && value <= 1e6))
                 throw std::invalid_argument("bad value");
         } catch (const std::exception&) {
             throw Error("link conditions '" + text + "': '" + item +
-                        "' is not key=value with a non-negative number");
+                        "' is not key=value with a number from 0 to 1000000");
         }
         if (key == "latency")
             c.latencyMs = value;

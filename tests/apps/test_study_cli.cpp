@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
+#include <filesystem>
 #include <map>
 #include <sstream>
 #include <string>
@@ -153,6 +154,27 @@ TEST(StudyCli, UpdatesRoundsPoolEveryCycle) {
     }
 }
 
+// Without --rounds, fewer cycles than the default four rounds run one cycle a round.
+TEST(StudyCli, UpdatesFewCyclesRunFewerRounds) {
+    TempDir dir;
+    const UpdatesRun run = runUpdates(dir, "--sizes 8 --cycles 2 --methods dbi");
+    EXPECT_NE(run.result.out.find("2 cycles per method and size in 2 rounds"), std::string::npos)
+        << run.result.out;
+    ASSERT_EQ(run.csv.rows.size(), 1u);
+    EXPECT_EQ(num(run.csv.rows[0], "cycles"), 2);
+}
+
+// `study all` checks the options of its later studies before the first one runs: a bad --link
+// fails at once, not after the haptics study.
+TEST(StudyCli, AllChecksItsOptionsBeforeRunning) {
+    TempDir dir;
+    CommandResult r =
+        runTrephine(dir, "study all --quick --link rate=nan --out '" + dir / "all" + "'");
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_NE(r.err.find("rate=nan"), std::string::npos) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(dir / "all/haptics.csv"));
+}
+
 // --link puts the link emulator between the clients and the server: at 20 Mbit/s a 16^3 volume
 // update (4096 bytes) cannot arrive in under 1.6 ms, which loopback delivers in microseconds.
 TEST(StudyCli, UpdatesLinkEmulatesTheNetwork) {
@@ -177,7 +199,8 @@ TEST(StudyCli, BadFlagsGiveOneLine) {
           "study updates --quick --methods dbi,teleport",
           "study updates --quick --codec lz4 --methods volume-zstd",
           "study updates --sizes 8 --cycles 3 --rounds 4", "study updates --sizes 8 --rounds 0",
-          "study updates --quick --sizes 8 --link warp=9"}) {
+          "study updates --quick --sizes 8 --link warp=9", "study all --quick --link rate=nan",
+          "study all --quick --codec gzip"}) {
         CommandResult r = runTrephine(dir, std::string(args) + " --out '" + dir / "o" + "'");
         EXPECT_NE(r.exitCode, 0) << args;
         EXPECT_FALSE(r.err.empty()) << args;

@@ -22,6 +22,9 @@ TEST(LinkEmulator, ParsesConditions) {
     EXPECT_THROW(LinkConditions::parse("latency=fast"), Error);
     EXPECT_THROW(LinkConditions::parse("lag=3"), Error);
     EXPECT_THROW(LinkConditions::parse("loss=-1"), Error);
+    // Not finite, or large enough to overflow the relay's clock arithmetic.
+    for (const char* bad : {"latency=nan", "jitter=inf", "rate=1e300", "seed=1e20"})
+        EXPECT_THROW(LinkConditions::parse(bad), Error) << bad;
 }
 
 // ENet through the relay: the connection works, and its round trip grows by the added latency.
