@@ -1,0 +1,76 @@
+// The study report's targets: PASS and MISS lines from the figures, and the note that explains a
+// missed rate on loopback (and points at the paper's LAN), which an emulated link leaves out.
+#include "net/study_report.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <string>
+
+using namespace trephine;
+using namespace trephine::net;
+
+namespace {
+
+UpdateStudyRow row(const std::string& method, int n, double rate, double bytes, double raw) {
+    UpdateStudyRow r;
+    r.method = method;
+    r.box = n;
+    r.bbScreenW = r.bbScreenH = 2 * n + 10;
+    r.updatesPerS = rate;
+    r.latencyP50Ms = 1000.0 / rate;
+    r.latencyP99Ms = r.latencyP50Ms * 1.5;
+    r.bytesPerUpdate = bytes;
+    r.rawBytesPerUpdate = raw;
+    r.cycles = 10;
+    return r;
+}
+
+// DBI 6x the volume's rate at 10^3, 3x at 80^3; bytes within both size targets.
+StudyReportInput input() {
+    StudyReportInput in;
+    in.command = "trephine study all";
+    in.machine = "test machine";
+    in.updates = {row("dbi", 10, 600, 800, 4500), row("dbi", 80, 300, 14000, 147920),
+                  row("volume", 10, 100, 1000, 1000), row("volume", 80, 100, 512000, 512000)};
+    return in;
+}
+
+std::string report(const StudyReportInput& in) {
+    const std::string dir =
+        (std::filesystem::temp_directory_path() / "trephine_test_study_report").string();
+    std::filesystem::create_directories(dir);
+    return writeStudyReport(in, dir);
+}
+
+} // namespace
+
+TEST(StudyReport, TargetLinesPassAndMissByTheFigures) {
+    const std::vector<std::string> lines = updateTargetLines(input().updates);
+    ASSERT_EQ(lines.size(), 4u);
+    EXPECT_EQ(lines[0].rfind("PASS update rate 10^3", 0), 0u) << lines[0];
+    EXPECT_NE(lines[0].find("= 6.0x"), std::string::npos) << lines[0];
+    EXPECT_EQ(lines[1].rfind("MISS update rate 80^3", 0), 0u) << lines[1];
+    EXPECT_EQ(lines[2].rfind("PASS update size 10^3", 0), 0u) << lines[2];
+    EXPECT_EQ(lines[3].rfind("PASS update size 80^3", 0), 0u) << lines[3];
+}
+
+TEST(StudyReport, AMissedRateOnLoopbackIsExplainedAndTheLinkIsNamed) {
+    StudyReportInput in = input();
+    const std::string loopback = report(in);
+    EXPECT_NE(loopback.find("over loopback"), std::string::npos);
+    EXPECT_NE(loopback.find("`--link rate=100` runs the paper's 100 Mbit/s LAN"),
+              std::string::npos);
+
+    in.updateConfig.link = LinkConditions::parse("rate=100");
+    const std::string lan = report(in);
+    EXPECT_NE(lan.find("an emulated link (latency 0 ms, jitter 0 ms, loss 0 %, rate 100 Mbit/s"),
+              std::string::npos);
+    EXPECT_EQ(lan.find("`--link rate=100` runs"), std::string::npos);
+
+    // Every rate met: nothing to explain.
+    in = input();
+    in.updates[1].updatesPerS = 600;
+    in.updates[1].latencyP50Ms = 1000.0 / 600;
+    EXPECT_EQ(report(in).find("`--link rate=100` runs"), std::string::npos);
+}
