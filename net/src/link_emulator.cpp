@@ -164,6 +164,7 @@ void LinkEmulator::run() {
     Rng rng{0x9E3779B97F4A7C15ull};
     uint32_t seededWith = 0;
     std::vector<uint8_t> buffer(65536);
+    std::vector<pollfd> fds; // the sockets to wait on, refilled each pass (kept: no allocation)
 
     auto enqueue = [&](Lane& lane, const uint8_t* data, size_t n, const LinkConditions& c) {
         if (c.lossPercent > 0 && rng.uniform() * 100.0 < c.lossPercent) {
@@ -211,7 +212,7 @@ void LinkEmulator::run() {
         // Wait until a datagram arrives or the next queued one is due, at most 1 ms (to see
         // m_stop). ppoll takes nanoseconds: select's whole milliseconds made a relay with
         // datagrams queued spin a core until they were due, taking it from the peers it serves.
-        std::vector<pollfd> fds{{m_front, POLLIN, 0}};
+        fds.assign(1, pollfd{m_front, POLLIN, 0});
         Clock::time_point wake = Clock::now() + std::chrono::milliseconds(1);
         for (auto& [key, cl] : clients) {
             fds.push_back({cl->back, POLLIN, 0});
