@@ -266,6 +266,7 @@ void SessionClient::renderLocal() {
 
 bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
     uint64_t start = steadyNowUs();
+    double gridUs = -1; // the renderer's brick-grid update, part of the apply
     if (!m_welcome)
         return false; // voxels before the welcome: we cannot place them
     const glm::ivec3 dims = m_welcome->volumeDims;
@@ -316,8 +317,11 @@ bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
         if (!applyVolumeBox(*m_volume, box, densities, materials))
             return false;
         lock = {};
-        if (m_renderer)
+        if (m_renderer) {
+            const uint64_t g0 = steadyNowUs();
             m_renderer->volumeChanged(box);
+            gridUs = double(steadyNowUs() - g0);
+        }
     }
     if (switching || u.full) {
         m_sync = Sync::Volume;
@@ -356,6 +360,7 @@ bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
     r.transmitUs = transmitUs(u.sentServerUs, nowUs);
     r.applyUs = double(applied - start);
     r.clientRenderUs = m_renderer && m_config.renderLocally ? double(done - applied) : -1;
+    r.gridUs = gridUs;
     int64_t causeLocal = int64_t(u.causeServerUs) - m_stats.clockOffsetUs;
     if (causeLocal > 0 && int64_t(done) >= causeLocal)
         r.latencyUs = double(int64_t(done) - causeLocal);
@@ -461,6 +466,7 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
     r.box = {u.width, u.height, 1};
     r.erodeUs = u.full ? -1 : double(u.erodeUs);
     r.serverRenderUs = u.full ? -1 : double(u.renderUs);
+    r.gridUs = u.full ? -1 : double(u.gridUs);
     r.encodeUs = double(u.encodeUs);
     r.transmitUs = transmitUs(u.sentServerUs, nowUs);
     r.applyUs = double(applied - start);

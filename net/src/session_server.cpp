@@ -261,7 +261,7 @@ struct SessionServer::Impl {
     // Queues `rect` of `view` for client `id`, merged with an unsent update of the same view so
     // a region is never queued twice and the newest pixels (the frame's, now) win.
     void post(uint16_t id, SimClient& c, const ViewFrame& view, PixelRect rect, bool full,
-              uint64_t causeUs, uint32_t erodeUs, uint32_t renderUs) {
+              uint64_t causeUs, uint32_t erodeUs, uint32_t renderUs, uint32_t gridUs) {
         std::optional<PendingUpdate> old;
         {
             std::lock_guard lock(outMutex);
@@ -316,6 +316,7 @@ struct SessionServer::Impl {
         u.sentServerUs = steadyNowUs();
         u.erodeUs = erodeUs;
         u.renderUs = renderUs;
+        u.gridUs = std::min(gridUs, renderUs);
         u.encodeUs = uint32_t(u.sentServerUs - e0);
         {
             std::lock_guard lock(reportMutex);
@@ -1151,9 +1152,9 @@ void SessionServer::simulationLoop() {
                     continue;
                 auto full = needFull.find(id);
                 if (full != needFull.end())
-                    s.post(id, c, v, v.frame.bounds(), true, full->second, 0, 0);
+                    s.post(id, c, v, v.frame.bounds(), true, full->second, 0, 0, 0);
                 else if (!rect.empty())
-                    s.post(id, c, v, rect, false, causeUs, uint32_t(erodeUs), renderUs);
+                    s.post(id, c, v, rect, false, causeUs, uint32_t(erodeUs), renderUs, gridUs);
             }
         }
         std::lock_guard lock(s.inMutex);

@@ -107,6 +107,16 @@ int paperBbScreen(int n) {
     return it == table.end() ? 0 : it->second;
 }
 
+double rateRatioWithoutRayCasting(const std::vector<UpdateStudyRow>& rows, int n) {
+    const UpdateStudyRow* d = find(rows, "dbi", n);
+    const UpdateStudyRow* v = find(rows, "volume", n);
+    if (!d || !v || d->stages.render <= 0)
+        return 0.0;
+    const double rest =
+        d->latencyP50Ms - (d->stages.render - std::min(d->stages.grid, d->stages.render));
+    return rest > 0 ? v->latencyP50Ms / rest : 0.0;
+}
+
 std::vector<std::string> updateTargetLines(const std::vector<UpdateStudyRow>& rows) {
     std::vector<std::string> lines;
     const std::vector<int> boxes = boxesOf(rows);
@@ -191,11 +201,29 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
         md << "- " << l << "\n";
         rateMissed = rateMissed || l.rfind("MISS update rate", 0) == 0;
     }
-    if (rateMissed && !in.updateConfig.link)
+    if (rateMissed && !in.updateConfig.link) {
         md << "- On loopback the volume method's bytes cost almost nothing, so its cycle is mostly "
               "its client's re-render of the view, with the same renderer and cores as the DBI "
               "server's. `--link rate=100` runs the paper's 100 Mbit/s LAN instead "
               "(docs/study.md).\n";
+        // How far a faster renderer could go: the ratio with the DBI ray casting taken out.
+        std::string ceilings;
+        for (int n : boxes) {
+            const UpdateStudyRow* d = find(rows, "dbi", n);
+            const UpdateStudyRow* v = find(rows, "volume", n);
+            const double ceiling = rateRatioWithoutRayCasting(rows, n);
+            if (!d || !v || v->updatesPerS <= 0 || d->updatesPerS / v->updatesPerS >= 5.0 ||
+                ceiling <= 0)
+                continue;
+            ceilings += formatString("%s%.1fx at %d^3", ceilings.empty() ? "" : ", ", ceiling, n);
+        }
+        if (!ceilings.empty())
+            md << "- Were the DBI server's ray casting free (its render stage less the brick-grid "
+                  "update), its other stages' medians would still cap dbi / volume at about "
+               << ceilings
+               << ": where that is under 5x, no renderer reaches the target on this machine "
+                  "and network.\n";
+    }
     for (const std::string& l : displayTargetLines(in.display))
         md << "- " << l << "\n";
     if (!in.display.measured)
@@ -337,7 +365,9 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
         md << "Median stage times as a share of their sum (and the sum in ms). Erode, render and "
               "encode run on the server; transmit is server sent -> client received; client "
               "apply is decode + write for DBI, voxels + rendering data for volume; client render "
-              "is the volume client's re-render of its view.\n\n";
+              "is the volume client's re-render of its view. The last column is the brick-grid "
+              "update (the renderer's empty-space data), in ms: part of render for DBI, of client "
+              "apply for volume.\n\n";
         for (const std::string& m : methods) {
             std::vector<std::vector<std::string>> ts;
             for (int n : boxes) {
@@ -347,14 +377,14 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
                 auto pct = [&](double v) { return fmt(100.0 * v / sum, "%.1f%%"); };
                 ts.push_back({formatString("%d^3", n), pct(s.erode), pct(s.render), pct(s.encode),
                               pct(s.transmit), pct(s.clientApply), pct(s.clientRender),
-                              fmt(s.sum(), "%.3f")});
+                              fmt(s.sum(), "%.3f"), fmt(s.grid, "%.3f")});
             }
             md << "**" << m << "**";
             if (*paperStages(m))
                 md << " (paper at 80^3: " << paperStages(m) << ")";
             md << "\n\n";
             md << markdownTable({"BB_volume", "erode", "render", "encode", "transmit",
-                                 "client apply", "client render", "sum (ms)"},
+                                 "client apply", "client render", "sum (ms)", "of which grid (ms)"},
                                 ts)
                << "\n";
         }

@@ -130,8 +130,9 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
     struct Samples {
         explicit Samples(size_t capacity)
             : latency(capacity), bytes(capacity), erode(capacity), render(capacity),
-              encode(capacity), transmit(capacity), apply(capacity), clientRender(capacity) {}
-        SampleWindow latency, bytes, erode, render, encode, transmit, apply, clientRender;
+              encode(capacity), transmit(capacity), apply(capacity), clientRender(capacity),
+              grid(capacity) {}
+        SampleWindow latency, bytes, erode, render, encode, transmit, apply, clientRender, grid;
     };
     std::vector<std::vector<Samples>> samples(methods.size());
     for (auto& perMethod : samples)
@@ -205,6 +206,8 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
                     out.transmit.add(ms(r.transmitUs));
                     out.apply.add(ms(r.applyUs));
                     out.clientRender.add(ms(r.clientRenderUs));
+                    if (r.gridUs >= 0)
+                        out.grid.add(ms(r.gridUs));
                 }
             }
             client.disconnect(100);
@@ -231,6 +234,7 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
             row.stages = {s.erode.percentile(50),  s.render.percentile(50),
                           s.encode.percentile(50), s.transmit.percentile(50),
                           s.apply.percentile(50),  s.clientRender.percentile(50)};
+            row.stages.grid = s.grid.size() ? s.grid.percentile(50) : 0.0;
             row.cycles = int(s.latency.size());
             rows.push_back(row);
         }
@@ -243,15 +247,16 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
 std::string updatesCsvHeader() {
     return "method,box,bb_screen_w,bb_screen_h,bytes_per_update,raw_bytes_per_update,"
            "updates_per_s,latency_p50_ms,latency_p99_ms,erode_ms,render_ms,encode_ms,"
-           "transmit_ms,client_apply_ms,client_render_ms,cycles";
+           "transmit_ms,client_apply_ms,client_render_ms,cycles,grid_ms";
 }
 
 std::string updatesCsvRow(const UpdateStudyRow& r) {
-    return formatString("%s,%d,%d,%d,%.1f,%.0f,%.2f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%d",
-                        r.method.c_str(), r.box, r.bbScreenW, r.bbScreenH, r.bytesPerUpdate,
-                        r.rawBytesPerUpdate, r.updatesPerS, r.latencyP50Ms, r.latencyP99Ms,
-                        r.stages.erode, r.stages.render, r.stages.encode, r.stages.transmit,
-                        r.stages.clientApply, r.stages.clientRender, r.cycles);
+    return formatString(
+        "%s,%d,%d,%d,%.1f,%.0f,%.2f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%d,%.4f",
+        r.method.c_str(), r.box, r.bbScreenW, r.bbScreenH, r.bytesPerUpdate, r.rawBytesPerUpdate,
+        r.updatesPerS, r.latencyP50Ms, r.latencyP99Ms, r.stages.erode, r.stages.render,
+        r.stages.encode, r.stages.transmit, r.stages.clientApply, r.stages.clientRender, r.cycles,
+        r.stages.grid);
 }
 
 } // namespace trephine::net

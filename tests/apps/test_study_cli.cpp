@@ -63,7 +63,7 @@ void checkUpdates(const Csv& csv, const std::vector<int>& sizes) {
         first += (i ? "," : "") + csv.header[i];
     EXPECT_EQ(first, expected);
     for (const char* stage : {"erode_ms", "render_ms", "encode_ms", "transmit_ms",
-                              "client_apply_ms", "client_render_ms"})
+                              "client_apply_ms", "client_render_ms", "grid_ms"})
         EXPECT_NE(std::find(csv.header.begin(), csv.header.end(), stage), csv.header.end())
             << stage;
     std::map<std::string, std::vector<std::map<std::string, std::string>>> byMethod;
@@ -91,9 +91,15 @@ void checkUpdates(const Csv& csv, const std::vector<int>& sizes) {
             if (method.rfind("volume", 0) == 0) {
                 EXPECT_EQ(num(r, "raw_bytes_per_update"), n * n * n);
                 EXPECT_GT(num(r, "client_render_ms"), 0) << "the volume client re-renders";
+                // Its brick-grid update is timed, as a part of its apply.
+                EXPECT_GT(num(r, "grid_ms"), 0) << method;
+                EXPECT_LE(num(r, "grid_ms"), num(r, "client_apply_ms")) << method;
             } else {
                 EXPECT_EQ(num(r, "raw_bytes_per_update"), 5.0 * w * h);
                 EXPECT_GT(num(r, "render_ms"), 0) << "the server renders BB_screen";
+                // The server's brick-grid update travels in the update, a part of its render.
+                EXPECT_GT(num(r, "grid_ms"), 0) << method;
+                EXPECT_LE(num(r, "grid_ms"), num(r, "render_ms")) << method;
             }
         }
     }
@@ -186,9 +192,11 @@ TEST(StudyCli, UpdatesLinkEmulatesTheNetwork) {
         std::string::npos)
         << run.result.out;
     ASSERT_EQ(run.csv.rows.size(), 2u);
-    for (const auto& row : run.csv.rows)
-        if (row.at("method") == "volume")
+    for (const auto& row : run.csv.rows) {
+        if (row.at("method") == "volume") {
             EXPECT_GE(num(row, "transmit_ms"), 4096 * 8 / 20e6 * 1e3) << "rate not applied";
+        }
+    }
 }
 
 TEST(StudyCli, BadFlagsGiveOneLine) {

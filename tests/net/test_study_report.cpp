@@ -1,5 +1,6 @@
 // The study report's targets: PASS and MISS lines from the figures, and the note that explains a
-// missed rate on loopback (and points at the paper's LAN), which an emulated link leaves out.
+// missed rate on loopback (and points at the paper's LAN, and says how far a free ray caster
+// would go), which an emulated link leaves out.
 #include "net/study_report.h"
 
 #include <gtest/gtest.h>
@@ -73,4 +74,37 @@ TEST(StudyReport, AMissedRateOnLoopbackIsExplainedAndTheLinkIsNamed) {
     in.updates[1].updatesPerS = 600;
     in.updates[1].latencyP50Ms = 1000.0 / 600;
     EXPECT_EQ(report(in).find("`--link rate=100` runs"), std::string::npos);
+}
+
+// The ceiling a renderer cannot pass: the volume cycle over the DBI cycle less its ray casting
+// (render minus grid update), from the medians.
+TEST(StudyReport, TheRatioWithoutRayCastingKeepsEveryOtherStage) {
+    StudyReportInput in = input();
+    // 80^3: DBI 3.333 ms a cycle, of which 2.5 ms render, 0.3 ms of it the grid update;
+    // volume 10 ms. Without the ray casting (2.2 ms) the cycle is 1.133 ms: 8.8x.
+    in.updates[1].stages.render = 2.5;
+    in.updates[1].stages.grid = 0.3;
+    EXPECT_NEAR(rateRatioWithoutRayCasting(in.updates, 80), 10.0 / (1000.0 / 300 - 2.2), 1e-9);
+    std::string md = report(in);
+    EXPECT_NE(md.find("would still cap dbi / volume at about 8.8x at 80^3:"), std::string::npos)
+        << md.substr(0, 2000);
+    EXPECT_EQ(md.find("at 10^3:"), std::string::npos) << "10^3 met its target";
+
+    // A grid update as long as the whole render leaves nothing to take out: the cycle itself.
+    in.updates[1].stages.grid = 2.5;
+    EXPECT_NEAR(rateRatioWithoutRayCasting(in.updates, 80), 3.0, 1e-9);
+    EXPECT_NE(report(in).find("at about 3.0x at 80^3: where that is under 5x, no renderer"),
+              std::string::npos);
+
+    // No render time measured (or no such size): no figure, no line.
+    in.updates[1].stages = {};
+    EXPECT_EQ(rateRatioWithoutRayCasting(in.updates, 80), 0.0);
+    EXPECT_EQ(rateRatioWithoutRayCasting(in.updates, 50), 0.0);
+    EXPECT_EQ(report(in).find("would still cap"), std::string::npos);
+
+    // An emulated link: the loopback note, ceiling included, is left out.
+    in = input();
+    in.updates[1].stages.render = 2.5;
+    in.updateConfig.link = LinkConditions::parse("rate=100");
+    EXPECT_EQ(report(in).find("would still cap"), std::string::npos);
 }

@@ -41,6 +41,9 @@ struct UpdateRecord {
     glm::ivec3 box{0};     // volume: box size in voxels; DBI: rectangle w, h, 1
     double erodeUs = -1, serverRenderUs = -1, encodeUs = -1, transmitUs = -1;
     double applyUs = -1, clientRenderUs = -1, latencyUs = -1;
+    // The brick-grid update inside the stage that holds it: the server's render (DBI) or the
+    // client's apply (volume); -1 when none was timed.
+    double gridUs = -1;
     uint64_t appliedUs = 0; // steadyNowUs() when done
 };
 

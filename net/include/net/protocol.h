@@ -24,7 +24,7 @@ namespace trephine::net {
 // Annotate and Annotations (an instructor's marks on the skull). 4: the predicted image form's
 // base hash is four 64-bit FNV-1a lanes, a word a pixel (image_delta.cpp); TakeOver, and who
 // holds a trainee in Participants.
-inline constexpr uint32_t kProtocolVersion = 5;
+inline constexpr uint32_t kProtocolVersion = 6;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
 enum class RefuseReason : uint32_t {
@@ -268,7 +268,8 @@ struct ImageUpdate {
     uint32_t rawBytes = 0; // size before compression
     // Server stage times of this update, microseconds (0: none): the erosion of the batch that
     // caused it, the rendering of its rectangle, the extraction and encoding of its pixels.
-    uint32_t erodeUs = 0, renderUs = 0, encodeUs = 0;
+    // gridUs: the part of renderUs spent bringing the renderer's brick grid up to date.
+    uint32_t erodeUs = 0, renderUs = 0, encodeUs = 0, gridUs = 0;
     // Coded against the pixels the client holds in the rectangle (net/image_delta.h): only for
     // lz4/zstd and never for a full image; baseHash = basePixelHash of those pixels.
     bool predicted = false;
@@ -279,8 +280,8 @@ struct ImageUpdate {
     bool serialize(S& s) {
         return s.integer(sequence) && s.integer(viewId) && s.integer(causeServerUs) &&
                s.integer(sentServerUs) && s.integer(erodeUs) && s.integer(renderUs) &&
-               s.integer(encodeUs) && s.boolean(full) && s.boolean(predicted) &&
-               s.integer(baseHash) && !(predicted && full) &&
+               s.integer(encodeUs) && s.integer(gridUs) && gridUs <= renderUs && s.boolean(full) &&
+               s.boolean(predicted) && s.integer(baseHash) && !(predicted && full) &&
                s.ranged(x, uint16_t(0), uint16_t(kMaxWindowSize - 1)) &&
                s.ranged(y, uint16_t(0), uint16_t(kMaxWindowSize - 1)) &&
                s.ranged(width, uint16_t(1), kMaxWindowSize) &&

@@ -60,4 +60,11 @@ std::string writeStudyReport(const StudyReportInput& input, const std::string& d
 std::vector<std::string> updateTargetLines(const std::vector<UpdateStudyRow>& rows);
 std::vector<std::string> displayTargetLines(const DisplayFigures& d);
 
+// The DBI / volume rate ratio at box n were the DBI server's ray casting free: the volume cycle
+// over the DBI cycle less its render stage's ray casting (render minus the brick-grid update),
+// from the medians. Every other DBI stage (erosion, grid update, encoding, transmission,
+// decoding) stays, so no renderer could lift the ratio above this on the machine and network
+// measured. 0 when the rows lack the figures.
+double rateRatioWithoutRayCasting(const std::vector<UpdateStudyRow>& rows, int n);
+
 } // namespace trephine::net

@@ -49,6 +49,9 @@ struct UpdateStudyConfig {
 // Median stage times of one (method, size), milliseconds.
 struct StageBreakdown {
     double erode = 0, render = 0, encode = 0, transmit = 0, clientApply = 0, clientRender = 0;
+    // The brick-grid update: a part of `render` (DBI, at the server) or of `clientApply`
+    // (volume, at the client), not a stage of its own, so not in sum().
+    double grid = 0;
     double sum() const { return erode + render + encode + transmit + clientApply + clientRender; }
 };
 
@@ -72,7 +75,8 @@ std::vector<std::string> updateStudyMethods(Codec codec);
 // trephine::Error with one line when a cycle times out or the server cannot start.
 std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStudyConfig& config);
 
-// The exact first columns the issue names, then the stage breakdown.
+// The exact first columns the issue names, then the stage breakdown, the cycle count and the
+// grid update's share (grid_ms).
 std::string updatesCsvHeader();
 std::string updatesCsvRow(const UpdateStudyRow& row);
 
