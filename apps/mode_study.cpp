@@ -300,6 +300,8 @@ std::vector<net::UpdateStudyRow> runUpdatesStudy(const UpdatesOptions& o,
                     r.updatesPerS, r.latencyP50Ms, r.latencyP99Ms);
     for (const std::string& line : net::updateTargetLines(rows))
         std::printf("%s\n", line.c_str());
+    for (const std::string& line : net::rateMissNotes(rows, config.link.has_value()))
+        std::printf("%s\n", line.c_str());
     std::printf("wrote %s\n", path.string().c_str());
     return rows;
 }

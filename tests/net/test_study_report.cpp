@@ -108,3 +108,20 @@ TEST(StudyReport, TheRatioWithoutRayCastingKeepsEveryOtherStage) {
     in.updateConfig.link = LinkConditions::parse("rate=100");
     EXPECT_EQ(report(in).find("would still cap"), std::string::npos);
 }
+
+// What `study updates` prints under its targets: the same notes as the report, only for a missed
+// rate on plain loopback.
+TEST(StudyReport, RateMissNotesOnlyForAMissOnLoopback) {
+    StudyReportInput in = input();
+    in.updates[1].stages.render = 2.5;
+    in.updates[1].stages.grid = 0.3;
+    const std::vector<std::string> notes = rateMissNotes(in.updates, false);
+    ASSERT_EQ(notes.size(), 2u);
+    EXPECT_EQ(notes[0].rfind("On loopback", 0), 0u) << notes[0];
+    EXPECT_NE(notes[1].find("8.8x at 80^3"), std::string::npos) << notes[1];
+    EXPECT_TRUE(rateMissNotes(in.updates, true).empty());
+
+    in.updates[1].updatesPerS = 600;
+    in.updates[1].latencyP50Ms = 1000.0 / 600;
+    EXPECT_TRUE(rateMissNotes(in.updates, false).empty());
+}

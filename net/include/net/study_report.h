@@ -66,5 +66,9 @@ std::vector<std::string> displayTargetLines(const DisplayFigures& d);
 // decoding) stays, so no renderer could lift the ratio above this on the machine and network
 // measured. 0 when the rows lack the figures.
 double rateRatioWithoutRayCasting(const std::vector<UpdateStudyRow>& rows, int n);
+// When some DBI/volume rate target missed on plain loopback (no emulated link): why, where the
+// paper's network is, and the ratio each missed size would reach with free ray casting. Empty
+// otherwise. In report.md under the targets, and printed by `study updates`.
+std::vector<std::string> rateMissNotes(const std::vector<UpdateStudyRow>& rows, bool emulatedLink);
 
 } // namespace trephine::net
