@@ -52,6 +52,16 @@ TEST(Protocol, RejectsOutOfRangeRectanglesAndTrailingBytes) {
     ok.push_back(0);
     EXPECT_FALSE(decodeMessage(ok, back)) << "trailing bytes accepted";
 
+    // The grid update is a part of the render (version 6): never longer than it.
+    u.renderUs = 300;
+    u.gridUs = 120;
+    ok = encodeMessage(u);
+    ASSERT_TRUE(decodeMessage(ok, back));
+    EXPECT_EQ(back.gridUs, 120u);
+    EXPECT_EQ(back.renderUs, 300u);
+    u.gridUs = 301;
+    EXPECT_TRUE(encodeMessage(u).empty()) << "grid time over the render time encoded";
+
     ToolState t;
     t.speed = 0.5f;
     auto tb = encodeMessage(t);
