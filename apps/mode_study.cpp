@@ -200,7 +200,8 @@ struct UpdatesOptions {
     // The sweep runs 4 times, each with a quarter of the cycles: a cell's medians draw on four
     // stretches of the run (docs/study.md).
     int rounds = 4;
-    std::string link;                 // empty: plain loopback
+    std::string link; // empty: plain loopback
+    std::string csvName = "updates.csv";
     std::vector<std::string> methods; // empty: every method
     bool quick = false;
     bool sizesGiven = false;  // --sizes on the command line wins over --quick's sizes
@@ -289,7 +290,7 @@ std::vector<net::UpdateStudyRow> runUpdatesStudy(const UpdatesOptions& o,
     std::string csv = net::updatesCsvHeader() + "\n";
     for (const net::UpdateStudyRow& r : rows)
         csv += net::updatesCsvRow(r) + "\n";
-    const auto path = std::filesystem::path(o.out) / "updates.csv";
+    const auto path = std::filesystem::path(o.out) / o.csvName;
     writeText(path, csv);
 
     std::printf("%-16s %6s %9s %11s %11s %9s %9s %9s\n", "method", "box", "BB_screen", "bytes/upd",
@@ -367,18 +368,23 @@ net::DisplayFigures runDisplayStudy(const DisplayOptions& o) {
 
 // [SECTION] all
 
+// The link `study all` runs the update study over a second time: the paper's 100 Mbit/s LAN.
+constexpr const char* kPaperLink = "rate=100";
+
 struct AllOptions {
     std::string out = "study";
     std::string volume = "skull:128";
     std::string codec = "zstd";
-    std::string link; // empty: plain loopback
+    // The update study runs over loopback, then again over this emulated link; "off": only once.
+    std::string link = kPaperLink;
     bool quick = false;
 };
 
 int runAllStudies(const AllOptions& o, const std::string& command) {
     // Options of the later studies are checked before the first one runs.
     net::parseCodec(o.codec);
-    if (!o.link.empty())
+    const bool linkRun = o.link != "off";
+    if (linkRun)
         net::LinkConditions::parse(o.link);
     makeOutDir(o.out);
     net::StudyReportInput input;
@@ -386,22 +392,29 @@ int runAllStudies(const AllOptions& o, const std::string& command) {
     input.machine = net::describeMachine();
     input.quick = o.quick;
 
-    std::printf("== 1/3 haptics ==\n");
+    const int studies = linkRun ? 4 : 3;
+    std::printf("== 1/%d haptics ==\n", studies);
     HapticsOptions h;
     h.out = o.out;
     h.quick = o.quick;
     input.haptics = runHapticsStudy(h);
 
-    std::printf("\n== 2/3 updates ==\n");
+    std::printf("\n== 2/%d updates over loopback ==\n", studies);
     UpdatesOptions u;
     u.out = o.out;
     u.volume = o.volume;
     u.codec = o.codec;
-    u.link = o.link;
     u.quick = o.quick;
     input.updates = runUpdatesStudy(u, input.updateConfig);
 
-    std::printf("\n== 3/3 display ==\n");
+    if (linkRun) {
+        std::printf("\n== 3/%d updates over an emulated link ==\n", studies);
+        u.link = o.link;
+        u.csvName = "updates-link.csv";
+        input.linkUpdates = runUpdatesStudy(u, input.linkUpdateConfig);
+    }
+
+    std::printf("\n== %d/%d display ==\n", studies, studies);
     DisplayOptions d;
     d.out = o.out;
     d.quick = o.quick;
@@ -410,7 +423,8 @@ int runAllStudies(const AllOptions& o, const std::string& command) {
     const std::string report = net::writeStudyReport(input, o.out);
     const auto path = std::filesystem::path(o.out) / "report.md";
     writeText(path, report);
-    std::printf("\nwrote %s (with updates.svg and bytes.svg)\n", path.string().c_str());
+    std::printf("\nwrote %s (with updates.svg%s and bytes.svg)\n", path.string().c_str(),
+                linkRun ? ", updates-link.svg" : "");
     return 0;
 }
 
@@ -497,12 +511,14 @@ void addStudyMode(CLI::App& root, int& exitCode) {
         ->capture_default_str();
     all->add_option("--codec", a->codec, "Image codec: raw, lz4 or zstd")->capture_default_str();
     all->add_option("--link", a->link,
-                    "Emulate a link for the update study, e.g. rate=100 (the paper's LAN)");
+                    "Run the update study over loopback, then again over this emulated link "
+                    "(default: the paper's 100 Mbit/s LAN); off: loopback only")
+        ->capture_default_str();
     all->add_flag("--quick", a->quick, "A reduced run of every study, under a minute");
     all->callback([a, &exitCode] {
-        std::string command =
-            "trephine study all --out " + a->out + " --volume " + a->volume + " --codec " +
-            a->codec + (a->link.empty() ? "" : " --link " + a->link) + (a->quick ? " --quick" : "");
+        std::string command = "trephine study all --out " + a->out + " --volume " + a->volume +
+                              " --codec " + a->codec + " --link " + a->link +
+                              (a->quick ? " --quick" : "");
         exitCode = runAllStudies(*a, command);
     });
 }

@@ -160,10 +160,9 @@ std::vector<std::string> rateMissNotes(const std::vector<UpdateStudyRow>& rows, 
     return notes;
 }
 
-std::vector<std::string> updateTargetLines(const std::vector<UpdateStudyRow>& rows) {
+std::vector<std::string> rateTargetLines(const std::vector<UpdateStudyRow>& rows) {
     std::vector<std::string> lines;
-    const std::vector<int> boxes = boxesOf(rows);
-    for (int n : boxes) {
+    for (int n : boxesOf(rows)) {
         const double ratio = rateRatio(rows, n);
         if (ratio < 0)
             continue;
@@ -173,6 +172,12 @@ std::vector<std::string> updateTargetLines(const std::vector<UpdateStudyRow>& ro
                                      find(rows, "dbi", n)->updatesPerS,
                                      find(rows, "volume", n)->updatesPerS, ratio, kRateTarget));
     }
+    return lines;
+}
+
+std::vector<std::string> sizeTargetLines(const std::vector<UpdateStudyRow>& rows) {
+    std::vector<std::string> lines;
+    const std::vector<int> boxes = boxesOf(rows);
     for (int n : boxes) {
         const UpdateStudyRow* d = find(rows, "dbi", n);
         const UpdateStudyRow* v = find(rows, "volume", n);
@@ -187,6 +192,13 @@ std::vector<std::string> updateTargetLines(const std::vector<UpdateStudyRow>& ro
                                      d->bytesPerUpdate / v->rawBytesPerUpdate,
                                      last ? "0.1 at 80^3" : "1"));
     }
+    return lines;
+}
+
+std::vector<std::string> updateTargetLines(const std::vector<UpdateStudyRow>& rows) {
+    std::vector<std::string> lines = rateTargetLines(rows);
+    for (std::string& l : sizeTargetLines(rows))
+        lines.push_back(std::move(l));
     return lines;
 }
 
@@ -209,11 +221,108 @@ std::vector<std::string> displayTargetLines(const DisplayFigures& d) {
     return lines;
 }
 
+namespace {
+
+// Figure 7 of one run of the update study: a table of the rates per method and size with
+// dbi / volume and dbi-fullrender / volume, the plot (DIR/svgName), `note`, then the latencies.
+void writeFigure7(std::ostringstream& md, const std::vector<UpdateStudyRow>& rows,
+                  const std::string& dir, const std::string& svgName, const std::string& title,
+                  const std::string& note) {
+    const std::vector<int> boxes = boxesOf(rows);
+    const std::vector<std::string> methods = methodsOf(rows);
+    std::vector<std::string> h7{"BB_volume"};
+    for (const std::string& m : methods)
+        h7.push_back(m + " (/s)");
+    h7.push_back("dbi / volume");
+    h7.push_back("dbi-fullrender / volume");
+    std::vector<std::vector<std::string>> t7;
+    PlotSpec rate;
+    rate.title = title;
+    rate.xLabel = "BB_volume edge N (voxels)";
+    rate.yLabel = "updates per second";
+    rate.logY = true;
+    for (const std::string& m : methods) {
+        PlotSeries s{m, {}, {}, "", false};
+        for (int n : boxes)
+            if (const UpdateStudyRow* r = find(rows, m, n)) {
+                s.x.push_back(n);
+                s.y.push_back(r->updatesPerS);
+            }
+        rate.series.push_back(s);
+    }
+    for (int n : boxes) {
+        std::vector<std::string> row{formatString("%d^3", n)};
+        for (const std::string& m : methods) {
+            const UpdateStudyRow* r = find(rows, m, n);
+            row.push_back(r ? fmt(r->updatesPerS, "%.1f") : "-");
+        }
+        const UpdateStudyRow* d = find(rows, "dbi", n);
+        const UpdateStudyRow* f = find(rows, "dbi-fullrender", n);
+        const UpdateStudyRow* v = find(rows, "volume", n);
+        row.push_back(d && v ? fmt(d->updatesPerS / v->updatesPerS, "%.1fx") : "-");
+        row.push_back(f && v ? fmt(f->updatesPerS / v->updatesPerS, "%.1fx") : "-");
+        t7.push_back(row);
+    }
+    md << markdownTable(h7, t7);
+    writeFile((std::filesystem::path(dir) / svgName).string(), svgLinePlot(rate));
+    md << "\n![" << title << "](" << svgName << ")\n\n" << note << "\n\n";
+    std::vector<std::vector<std::string>> tl;
+    for (int n : boxes) {
+        std::vector<std::string> row{formatString("%d^3", n)};
+        for (const std::string& m : methods) {
+            const UpdateStudyRow* r = find(rows, m, n);
+            row.push_back(r ? formatString("%.2f / %.2f", r->latencyP50Ms, r->latencyP99Ms) : "-");
+        }
+        tl.push_back(row);
+    }
+    std::vector<std::string> hl{"latency p50 / p99 (ms)"};
+    hl.insert(hl.end(), methods.begin(), methods.end());
+    md << markdownTable(hl, tl) << "\n";
+}
+
+// One table per method of one run: median stage times as shares of their sum, the sum and the
+// brick-grid update.
+void writeStageBreakdown(std::ostringstream& md, const std::vector<UpdateStudyRow>& rows) {
+    for (const std::string& m : methodsOf(rows)) {
+        std::vector<std::vector<std::string>> ts;
+        for (int n : boxesOf(rows)) {
+            const UpdateStudyRow* r = find(rows, m, n);
+            if (!r)
+                continue;
+            const StageBreakdown& s = r->stages;
+            const double sum = std::max(s.sum(), 1e-9);
+            auto pct = [&](double v) { return fmt(100.0 * v / sum, "%.1f%%"); };
+            ts.push_back({formatString("%d^3", n), pct(s.erode), pct(s.render), pct(s.encode),
+                          pct(s.transmit), pct(s.clientApply), pct(s.clientRender),
+                          fmt(s.sum(), "%.3f"), fmt(s.grid, "%.3f")});
+        }
+        md << "**" << m << "**";
+        if (*paperStages(m))
+            md << " (paper at 80^3: " << paperStages(m) << ")";
+        md << "\n\n";
+        md << markdownTable({"BB_volume", "erode", "render", "encode", "transmit", "client apply",
+                             "client render", "sum (ms)", "of which grid (ms)"},
+                            ts)
+           << "\n";
+    }
+}
+
+// "an emulated link (...)" or "loopback": the network a run's clients reached the server over.
+std::string networkOf(const UpdateStudyConfig& config) {
+    return config.link ? "an emulated link (" + config.link->describe() +
+                             ", net/link_emulator.h) on loopback"
+                       : std::string("loopback");
+}
+
+} // namespace
+
 std::string writeStudyReport(const StudyReportInput& in, const std::string& dir) {
     std::filesystem::create_directories(dir);
     const std::vector<UpdateStudyRow>& rows = in.updates;
     const std::vector<int> boxes = boxesOf(rows);
     const std::vector<std::string> methods = methodsOf(rows);
+    const std::string network = networkOf(in.updateConfig);
+    const bool linkRun = !in.linkUpdates.empty();
     std::ostringstream md;
 
     md << "# Trephine study report\n\n";
@@ -228,20 +337,27 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
        << in.updateConfig.cycles << " measured cycles per method and size in "
        << in.updateConfig.rounds << " round" << (in.updateConfig.rounds == 1 ? "" : "s")
        << " of the whole sweep (after " << in.updateConfig.warmup
-       << " warm-up a round), real ENet over "
-       << (in.updateConfig.link ? "an emulated link (" + in.updateConfig.link->describe() +
-                                      ", net/link_emulator.h) on loopback"
-                                : std::string("loopback"))
+       << " warm-up a round), real ENet over " << network
+       << (linkRun ? ", then the same again over " + networkOf(in.linkUpdateConfig) : std::string())
        << ", server and clients in one process\n";
     md << "- The paper: server (system 1) updating a client (system 2) over a 100 Mbit/s LAN, "
           "128^3 volume, camera 13\" away, 60 degrees, 500x500 window.\n\n";
 
-    // Targets first: what a reader wants to know.
+    // Targets first: what a reader wants to know. The sizes are payloads, the same on any
+    // network; the rates are per network.
     md << "## Targets\n\n";
+    if (linkRun)
+        md << "Over " << network << ":\n\n";
     for (const std::string& l : updateTargetLines(rows))
         md << "- " << l << "\n";
     for (const std::string& l : rateMissNotes(rows, in.updateConfig.link.has_value()))
         md << "- " << l << "\n";
+    if (linkRun) {
+        md << "\nOver " << networkOf(in.linkUpdateConfig) << ":\n\n";
+        for (const std::string& l : rateTargetLines(in.linkUpdates))
+            md << "- " << l << "\n";
+        md << "\nThe display rate (one client, no network):\n\n";
+    }
     for (const std::string& l : displayTargetLines(in.display))
         md << "- " << l << "\n";
     if (!in.display.measured)
@@ -264,60 +380,22 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
               "(docs/architecture.md), so every pixel the cut can change is inside it.\n\n";
 
         // Figure 7.
-        md << "## Figure 7: update rates\n\n";
-        std::vector<std::string> h7{"BB_volume"};
-        for (const std::string& m : methods)
-            h7.push_back(m + " (/s)");
-        h7.push_back("dbi / volume");
-        h7.push_back("dbi-fullrender / volume");
-        std::vector<std::vector<std::string>> t7;
-        PlotSpec rate;
-        rate.title = "Update rate (Figure 7)";
-        rate.xLabel = "BB_volume edge N (voxels)";
-        rate.yLabel = "updates per second";
-        rate.logY = true;
-        for (const std::string& m : methods) {
-            PlotSeries s{m, {}, {}, "", false};
-            for (int n : boxes)
-                if (const UpdateStudyRow* r = find(rows, m, n)) {
-                    s.x.push_back(n);
-                    s.y.push_back(r->updatesPerS);
-                }
-            rate.series.push_back(s);
+        md << "## Figure 7: update rates" << (linkRun ? " over loopback" : "") << "\n\n";
+        writeFigure7(
+            md, rows, dir, "updates.svg", "Update rate (Figure 7)",
+            "Paper: the DBI method updated the client 1.5-2.0x faster than the volume method at "
+            "every size, over its 100 Mbit/s LAN; both re-rendered the whole 128^3 view. Target: "
+            "dbi >= 5x volume.\nAn update rate is 1000 / the median full cycle in ms (server "
+            "erosion -> change on the client's screen; cycles run back to back, one at a time).");
+        if (linkRun) {
+            md << "## Figure 7 over the emulated link\n\n";
+            writeFigure7(md, in.linkUpdates, dir, "updates-link.svg",
+                         "Update rate over the emulated link (Figure 7)",
+                         "The same study and cuts, every client's traffic through " +
+                             networkOf(in.linkUpdateConfig) +
+                             " (updates-link.csv). `rate=100` is the paper's 100 Mbit/s LAN: "
+                             "there a volume update's N^3 bytes cost what they cost the paper.");
         }
-        for (int n : boxes) {
-            std::vector<std::string> row{formatString("%d^3", n)};
-            for (const std::string& m : methods) {
-                const UpdateStudyRow* r = find(rows, m, n);
-                row.push_back(r ? fmt(r->updatesPerS, "%.1f") : "-");
-            }
-            const UpdateStudyRow* d = find(rows, "dbi", n);
-            const UpdateStudyRow* f = find(rows, "dbi-fullrender", n);
-            const UpdateStudyRow* v = find(rows, "volume", n);
-            row.push_back(d && v ? fmt(d->updatesPerS / v->updatesPerS, "%.1fx") : "-");
-            row.push_back(f && v ? fmt(f->updatesPerS / v->updatesPerS, "%.1fx") : "-");
-            t7.push_back(row);
-        }
-        md << markdownTable(h7, t7);
-        writeFile((std::filesystem::path(dir) / "updates.svg").string(), svgLinePlot(rate));
-        md << "\n![Update rates](updates.svg)\n\n";
-        md << "Paper: the DBI method updated the client 1.5-2.0x faster than the volume method at "
-              "every size; both re-rendered the whole 128^3 view. Target: dbi >= 5x volume.\n"
-              "An update rate is 1000 / the median full cycle in ms (server erosion -> change "
-              "on the client's screen; cycles run back to back, one at a time).\n\n";
-        std::vector<std::vector<std::string>> tl;
-        for (int n : boxes) {
-            std::vector<std::string> row{formatString("%d^3", n)};
-            for (const std::string& m : methods) {
-                const UpdateStudyRow* r = find(rows, m, n);
-                row.push_back(r ? formatString("%.2f / %.2f", r->latencyP50Ms, r->latencyP99Ms)
-                                : "-");
-            }
-            tl.push_back(row);
-        }
-        std::vector<std::string> hl{"latency p50 / p99 (ms)"};
-        hl.insert(hl.end(), methods.begin(), methods.end());
-        md << markdownTable(hl, tl) << "\n";
 
         // Figure 8.
         md << "## Figure 8: update sizes\n\n";
@@ -386,25 +464,12 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
               "is the volume client's re-render of its view. The last column is the brick-grid "
               "update (the renderer's empty-space data), in ms: part of render for DBI, of client "
               "apply for volume.\n\n";
-        for (const std::string& m : methods) {
-            std::vector<std::vector<std::string>> ts;
-            for (int n : boxes) {
-                const UpdateStudyRow* r = find(rows, m, n);
-                const StageBreakdown& s = r->stages;
-                const double sum = std::max(s.sum(), 1e-9);
-                auto pct = [&](double v) { return fmt(100.0 * v / sum, "%.1f%%"); };
-                ts.push_back({formatString("%d^3", n), pct(s.erode), pct(s.render), pct(s.encode),
-                              pct(s.transmit), pct(s.clientApply), pct(s.clientRender),
-                              fmt(s.sum(), "%.3f"), fmt(s.grid, "%.3f")});
-            }
-            md << "**" << m << "**";
-            if (*paperStages(m))
-                md << " (paper at 80^3: " << paperStages(m) << ")";
-            md << "\n\n";
-            md << markdownTable({"BB_volume", "erode", "render", "encode", "transmit",
-                                 "client apply", "client render", "sum (ms)", "of which grid (ms)"},
-                                ts)
-               << "\n";
+        if (linkRun)
+            md << "Over " << network << ":\n\n";
+        writeStageBreakdown(md, rows);
+        if (linkRun) {
+            md << "Over the emulated link (the paper's shares were measured on its LAN):\n\n";
+            writeStageBreakdown(md, in.linkUpdates);
         }
     }
 

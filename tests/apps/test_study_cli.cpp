@@ -216,18 +216,41 @@ TEST(StudyCli, BadFlagsGiveOneLine) {
     }
 }
 
+// --link off: the update study runs once, over loopback, and the report has no link sections.
+TEST(StudyCli, AllLinkOffRunsTheUpdateStudyOnce) {
+    TempDir dir;
+    const std::string out = dir / "study";
+    CommandResult r = runTrephine(dir, "study all --quick --link off --out '" + out + "'");
+    ASSERT_EQ(r.exitCode, 0) << r.out << r.err;
+    EXPECT_NE(r.out.find("== 3/3 display =="), std::string::npos) << r.out;
+    checkUpdates(readCsv(out + "/updates.csv"), {10, 40, 80});
+    EXPECT_FALSE(std::filesystem::exists(out + "/updates-link.csv"));
+    EXPECT_FALSE(std::filesystem::exists(out + "/updates-link.svg"));
+    EXPECT_EQ(slurp(out + "/report.md").find("emulated link"), std::string::npos);
+}
+
 TEST(StudyCli, AllQuickWritesAReportNamingEveryFigure) {
     TempDir dir;
     const std::string out = dir / "study";
     CommandResult r = runTrephine(dir, "study all --quick --out '" + out + "'");
     ASSERT_EQ(r.exitCode, 0) << r.out << r.err;
     checkUpdates(readCsv(out + "/updates.csv"), {10, 40, 80});
+    // The update study again over the paper's LAN, emulated: its own CSV, plot and sections.
+    const Csv link = readCsv(out + "/updates-link.csv");
+    checkUpdates(link, {10, 40, 80});
+    for (const auto& row : link.rows) {
+        if (row.at("method") == "volume" && num(row, "box") == 80) { // 512 kB at 100 Mbit/s
+            EXPECT_GE(num(row, "transmit_ms"), 512000 * 8 / 100e6 * 1e3) << "link not applied";
+        }
+    }
     EXPECT_FALSE(readCsv(out + "/haptics.csv").rows.empty());
     const std::string report = slurp(out + "/report.md");
-    for (const char* figure : {"Table 1", "Figure 7", "Figure 8", "Stage breakdown", "Display",
-                               "Haptics", "Machine", "updates.svg", "bytes.svg", "paper"})
+    for (const char* figure :
+         {"Table 1", "Figure 7: update rates over loopback", "Figure 7 over the emulated link",
+          "rate 100 Mbit/s", "Figure 8", "Stage breakdown", "Display", "Haptics", "Machine",
+          "updates.svg", "updates-link.svg", "bytes.svg", "paper"})
         EXPECT_NE(report.find(figure), std::string::npos) << figure;
-    for (const char* svg : {"/updates.svg", "/bytes.svg"}) {
+    for (const char* svg : {"/updates.svg", "/updates-link.svg", "/bytes.svg"}) {
         const std::string s = slurp(out + svg);
         EXPECT_EQ(s.rfind("<svg", 0), 0u) << svg;
         EXPECT_NE(s.find("<polyline"), std::string::npos) << svg;

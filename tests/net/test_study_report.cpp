@@ -6,6 +6,8 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <string>
 
 using namespace trephine;
@@ -124,4 +126,53 @@ TEST(StudyReport, RateMissNotesOnlyForAMissOnLoopback) {
     in.updates[1].updatesPerS = 600;
     in.updates[1].latencyP50Ms = 1000.0 / 600;
     EXPECT_TRUE(rateMissNotes(in.updates, false).empty());
+}
+
+// `study all` runs the update study a second time over an emulated link: the report gives that
+// run its own rate targets, Figure 7 (table and updates-link.svg) and stage breakdown, after the
+// loopback run's, and leaves the sizes (the same payloads on any network) to the first run.
+TEST(StudyReport, ASecondRunOverTheLinkGetsItsOwnRatesFigureAndStages) {
+    StudyReportInput in = input();
+    in.updates[1].stages.render = 2.5; // loopback, 80^3: 3x, a miss with a ceiling note
+    in.updates[1].stages.grid = 0.3;
+    in.linkUpdateConfig.link = LinkConditions::parse("rate=100");
+    // Over the link the volume's 512 kB take ~41 ms: 80^3 passes there.
+    in.linkUpdates = {row("dbi", 10, 500, 800, 4500), row("dbi", 80, 250, 14000, 147920),
+                      row("volume", 10, 90, 1000, 1000), row("volume", 80, 20, 512000, 512000)};
+    const std::string dir =
+        (std::filesystem::temp_directory_path() / "trephine_test_study_report_link").string();
+    std::filesystem::remove_all(dir);
+    const std::string md = writeStudyReport(in, dir);
+
+    const size_t linkTargets =
+        md.find("Over an emulated link (latency 0 ms, jitter 0 ms, loss 0 %, rate 100 Mbit/s");
+    ASSERT_NE(linkTargets, std::string::npos) << md.substr(0, 3000);
+    EXPECT_LT(md.find("Over loopback:"), linkTargets);
+    EXPECT_LT(md.find("MISS update rate 80^3: dbi 300.0/s vs volume 100.0/s = 3.0x"), linkTargets);
+    EXPECT_GT(md.find("PASS update rate 80^3: dbi 250.0/s vs volume 20.0/s = 12.5x"), linkTargets);
+    EXPECT_GT(md.find("PASS update rate 10^3: dbi 500.0/s vs volume 90.0/s = 5.6x"), linkTargets);
+    // The sizes once, from the first run; the loopback ceiling note stays with the loopback run.
+    EXPECT_EQ(md.find("update size 80^3", md.find("update size 80^3") + 1), std::string::npos);
+    EXPECT_LT(md.find("would still cap"), linkTargets);
+
+    const size_t fig7 = md.find("## Figure 7: update rates over loopback");
+    const size_t fig7Link = md.find("## Figure 7 over the emulated link");
+    ASSERT_NE(fig7, std::string::npos);
+    ASSERT_NE(fig7Link, std::string::npos);
+    EXPECT_LT(fig7, fig7Link);
+    EXPECT_NE(md.find("| 80^3 | 250.0 | 20.0 | 12.5x |", fig7Link), std::string::npos)
+        << md.substr(fig7Link, 1500);
+    EXPECT_NE(md.find("(updates-link.svg)"), std::string::npos);
+    for (const char* svg : {"/updates.svg", "/updates-link.svg"}) {
+        std::ifstream f(dir + svg);
+        const std::string s((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+        EXPECT_EQ(s.rfind("<svg", 0), 0u) << svg;
+    }
+    EXPECT_NE(md.find("Over the emulated link (the paper's shares"), std::string::npos);
+
+    // Without a second run none of it appears.
+    in.linkUpdates.clear();
+    const std::string once = report(in);
+    EXPECT_EQ(once.find("emulated link"), std::string::npos);
+    EXPECT_NE(once.find("## Figure 7: update rates\n"), std::string::npos);
 }

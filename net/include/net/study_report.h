@@ -43,6 +43,11 @@ struct StudyReportInput {
     bool quick = false;
     UpdateStudyConfig updateConfig;
     std::vector<UpdateStudyRow> updates;
+    // The update study run again over an emulated link (`study all`: the paper's 100 Mbit/s LAN
+    // unless --link says otherwise), written to updates-link.csv and updates-link.svg; empty
+    // when it was not run. Its Figure 7, stage breakdown and rate targets follow the first run's.
+    UpdateStudyConfig linkUpdateConfig;
+    std::vector<UpdateStudyRow> linkUpdates;
     DisplayFigures display;
     HapticsFigures haptics;
 };
@@ -56,8 +61,11 @@ int paperBbScreen(int n);
 // Writes DIR/updates.svg and DIR/bytes.svg and returns report.md's text (which links them).
 std::string writeStudyReport(const StudyReportInput& input, const std::string& dir);
 
-// One line per issue target: "PASS"/"MISS", the figure and the target (also in the report).
+// One line per issue target: "PASS"/"MISS", the figure and the target (also in the report):
+// the update-rate lines (DBI / volume rate, per box size) then the update-size lines.
 std::vector<std::string> updateTargetLines(const std::vector<UpdateStudyRow>& rows);
+std::vector<std::string> rateTargetLines(const std::vector<UpdateStudyRow>& rows);
+std::vector<std::string> sizeTargetLines(const std::vector<UpdateStudyRow>& rows);
 std::vector<std::string> displayTargetLines(const DisplayFigures& d);
 
 // The DBI / volume rate ratio at box n were the DBI server's ray casting free: the volume cycle
