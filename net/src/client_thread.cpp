@@ -322,6 +322,12 @@ void ClientThread::run() {
                     m_state = LinkState::Connected;
                     m_closeReason.clear();
                     nextPublish = now;
+                    // A switch or a view asked for after this connection's hello was built (while
+                    // retrying, or before the welcome: requests wait for it) goes out now.
+                    if (m_wantedSync && *m_wantedSync != cc.sync)
+                        cp->requestSync(*m_wantedSync);
+                    if (m_wantedView && !(*m_wantedView == cc.view))
+                        cp->requestView(*m_wantedView);
                 }
                 std::deque<Command> cmds;
                 {

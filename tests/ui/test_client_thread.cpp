@@ -201,6 +201,58 @@ TEST(ClientThread, ReconnectsToANewServerOnTheSamePort) {
     server->stop();
 }
 
+// A switch and a view asked for while the link is down are not lost: the thread makes them on
+// the next connection (its hello, or right after the welcome when the request came later).
+TEST(ClientThread, ASwitchAndAViewAskedWhileDisconnectedAreMadeOnReconnect) {
+    Volume skull = makeSkull(64);
+    ServerConfig sc = loopbackServerConfig("skull:64");
+    auto server = std::make_unique<SessionServer>(skull, sc);
+    const uint16_t port = server->port();
+    server->start();
+
+    ClientThreadConfig cc;
+    cc.address = "127.0.0.1:" + std::to_string(port);
+    cc.client.view = toViewSpec(cameraPreset("top", skull, {64, 64}));
+    cc.client.renderLocally = false;
+    cc.retryS = 0.2;
+    cc.connectTimeoutS = 1.0;
+    ClientThread client(cc);
+    client.start();
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->hasFullImage; }, 20.0));
+
+    server->stop();
+    server.reset();
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->state == LinkState::Retrying; }, 10.0));
+    const ViewSpec side = toViewSpec(cameraPreset("working", skull, {64, 64}));
+    ASSERT_FALSE(side == cc.client.view);
+    ASSERT_TRUE(client.requestSync(Sync::Volume));
+    ASSERT_TRUE(client.requestView(side));
+
+    sc.port = port;
+    server = std::make_unique<SessionServer>(skull, sc);
+    server->start();
+    std::shared_ptr<const ClientSnapshot> s;
+    ASSERT_TRUE(waitFor(
+        [&] {
+            s = client.snapshot();
+            return s->state == LinkState::Connected && s->sync == Sync::Volume && s->view == side;
+        },
+        20.0))
+        << "sync " << int(s->sync) << ", requested " << int(s->requestedSync)
+        << ", view matches: " << (s->view == side);
+    bool fullVolume = false;
+    ASSERT_TRUE(waitFor(
+        [&] {
+            for (const AppliedVolumeBox& b : client.drainVolumeBoxes())
+                fullVolume = fullVolume || b.full;
+            return fullVolume;
+        },
+        20.0))
+        << "the whole volume, once the switch is made";
+    client.stop();
+    server->stop();
+}
+
 namespace {
 
 // Drills at `site` for `states` tool states 10 ms apart, feeding `depthStart` + 0.08 mm a state.
