@@ -27,19 +27,25 @@ void cell(bool measured, bool active, const char* fmt, double a, double b = 0) {
 
 } // namespace
 
-bool drawComparisonPanel(SyncDesign& design, const ComparisonHistory& history, double now) {
+bool drawComparisonPanel(SyncDesign& wanted, SyncDesign live, const ComparisonHistory& history,
+                         double now) {
     if (!ImGui::Begin("Comparison")) {
         ImGui::End();
         return false;
     }
-    const SyncDesign other = design == SyncDesign::Dbi ? SyncDesign::Volume : SyncDesign::Dbi;
-    // One toggle; the label names the design in use first. "###" keeps its ID across labels.
-    char label[96];
-    std::snprintf(label, sizeof label, "%s  |  switch to %s###design", syncDesignName(design),
-                  syncDesignName(other));
+    const SyncDesign other = wanted == SyncDesign::Dbi ? SyncDesign::Volume : SyncDesign::Dbi;
+    // One toggle; the label names the design in use first, or the switch under way. "###" keeps
+    // its ID across labels.
+    char label[128];
+    if (wanted == live)
+        std::snprintf(label, sizeof label, "%s  |  switch to %s###design", syncDesignName(live),
+                      syncDesignName(other));
+    else
+        std::snprintf(label, sizeof label, "Switching to %s...  |  back to %s###design",
+                      syncDesignName(wanted), syncDesignName(live));
     bool flipped = ImGui::Button(label);
     if (flipped)
-        design = other;
+        wanted = other;
     if (ImGui::IsItemHovered())
         ImGui::SetTooltip("DBI: the server renders and sends screen rectangles.\n"
                           "Volume: this client holds the volume, receives changed voxels and "
@@ -59,7 +65,7 @@ bool drawComparisonPanel(SyncDesign& design, const ComparisonHistory& history, d
             ImGui::TextUnformatted(name);
             for (SyncDesign d : order) {
                 ImGui::TableNextColumn();
-                draw(history.series(d), history.measured(d), d == design);
+                draw(history.series(d), history.measured(d), d == live);
             }
         };
         ImGui::TableNextRow();
@@ -67,8 +73,10 @@ bool drawComparisonPanel(SyncDesign& design, const ComparisonHistory& history, d
         ImGui::TextUnformatted("measured");
         for (SyncDesign d : order) {
             ImGui::TableNextColumn();
-            if (d == design)
+            if (d == live)
                 ImGui::TextUnformatted(history.measured(d) ? "live" : "waiting");
+            else if (d == wanted)
+                ImGui::TextDisabled("switching...");
             else if (history.measured(d))
                 ImGui::TextDisabled("%.0f s ago", history.ageS(d, now));
             else
@@ -100,7 +108,7 @@ bool drawComparisonPanel(SyncDesign& design, const ComparisonHistory& history, d
             std::snprintf(id, sizeof id, "##%s%d", name, i);
             if (i > 0)
                 ImGui::SameLine();
-            ImGui::PushStyleVar(ImGuiStyleVar_Alpha, d == design ? 1.0f : kInactiveAlpha);
+            ImGui::PushStyleVar(ImGuiStyleVar_Alpha, d == live ? 1.0f : kInactiveAlpha);
             ImGui::PlotLines(id, v.data(), int(v.size()), 0, overlay, 0.0f, FLT_MAX, ImVec2(w, 36));
             ImGui::PopStyleVar();
         }

@@ -153,13 +153,23 @@ const char* syncDesignName(SyncDesign d) {
 void ComparisonHistory::record(SyncDesign design, double now, const ComparisonFigures& f) {
     Series& s = designs[int(design)];
     pushCapped(s.updatesPerS, float(f.updatesPerS), seriesLength);
-    pushCapped(s.bytesPerUpdate, float(f.bytesPerUpdate), seriesLength);
-    pushCapped(s.rawBytesPerUpdate, float(f.rawBytesPerUpdate), seriesLength);
+    pushCapped(s.bytesPerUpdate, float(std::max(0.0, f.bytesPerUpdate)), seriesLength);
+    pushCapped(s.rawBytesPerUpdate, float(std::max(0.0, f.rawBytesPerUpdate)), seriesLength);
     pushCapped(s.latencyP50Ms, float(std::max(0.0, f.latencyP50Ms)), seriesLength);
     pushCapped(s.latencyP99Ms, float(std::max(0.0, f.latencyP99Ms)), seriesLength);
     pushCapped(s.frameMs, float(f.frameMs), seriesLength);
     pushCapped(s.hapticHz, float(f.hapticHz), seriesLength);
+    // A second without updates keeps the last measured bytes and latencies for the table.
+    const ComparisonFigures before = s.last;
     s.last = f;
+    if (f.bytesPerUpdate < 0 && s.points > 0) {
+        s.last.bytesPerUpdate = before.bytesPerUpdate;
+        s.last.rawBytesPerUpdate = before.rawBytesPerUpdate;
+    }
+    if (f.latencyP50Ms < 0 && s.points > 0) {
+        s.last.latencyP50Ms = before.latencyP50Ms;
+        s.last.latencyP99Ms = before.latencyP99Ms;
+    }
     s.lastT = now;
     ++s.points;
     active = design;

@@ -397,6 +397,23 @@ int runTrainerWindow(const TrainerOptions& o) {
     SyncDesign wanted = picture; // the toggle (the design asked for)
     ComparisonHistory comparison;
     std::array<std::vector<double>, kSyncDesignCount> frameMs; // this second's frames per design
+    // This second's updates on screen per design (full ones excluded: a join or a switch): bytes,
+    // raw bytes and latency from the cause at the server to the end of the frame that first drew
+    // them, so both designs' latencies include their own drawing (the volume's GPU upload and
+    // ray cast, the DBI's texture upload and restore).
+    struct DrawnUpdate {
+        SyncDesign design;
+        double latencyUs; // cause -> applied by the client thread; -1: unknown
+        uint64_t appliedUs;
+        uint32_t bytes, rawBytes;
+    };
+    std::vector<DrawnUpdate> drawnThisFrame;
+    struct LiveSecond {
+        std::vector<double> latencyMs;
+        double bytes = 0, rawBytes = 0;
+        int updates = 0;
+    };
+    std::array<LiveSecond, kSyncDesignCount> liveSecond;
     std::array<uint64_t, kSyncDesignCount> framesPerDesign{};
     SampleWindow volumeUploadMs(256), volumeBoxMs(1024); // the volume client's GPU apply stage
     uint64_t volumeUploads = 0, volumeBoxUpdates = 0;
@@ -489,6 +506,8 @@ int runTrainerWindow(const TrainerOptions& o) {
                 comp.uploadRect(r.rect, r.pixels);
                 if (picture == SyncDesign::Dbi && cpuDbi.bounds().contains(r.rect))
                     cpuDbi.apply(r.pixels, r.rect.x, r.rect.y);
+                drawnThisFrame.push_back(
+                    {SyncDesign::Dbi, r.latencyUs, r.appliedUs, r.bytes, r.rawBytes});
             } else {
                 continue;
             }
@@ -525,6 +544,8 @@ int runTrainerWindow(const TrainerOptions& o) {
                 volumeBoxMs.add(
                     std::chrono::duration<double, std::milli>(Clock::now() - applyStart).count());
                 ++volumeBoxUpdates;
+                drawnThisFrame.push_back(
+                    {SyncDesign::Volume, b.latencyUs, b.appliedUs, b.bytes, b.rawBytes});
             } else {
                 continue;
             }
@@ -538,7 +559,9 @@ int runTrainerWindow(const TrainerOptions& o) {
                 boxHistory.add({now, screen, b.sequence, b.bytes, b.latencyUs, b.full});
         }
         netHistory.expire(now);
-        forces.setLocal(picture == SyncDesign::Volume);
+        // Forces on the local copy only while it is the picture and no switch away is under way:
+        // the server stops sending voxels at the request, so the copy would go stale.
+        forces.setLocal(picture == SyncDesign::Volume && wanted == SyncDesign::Volume);
         const bool havePicture = picture == SyncDesign::Volume ? haveVolume : haveImage;
         if (havePicture && firstPictureAt < 0)
             firstPictureAt = now;
@@ -831,7 +854,7 @@ int runTrainerWindow(const TrainerOptions& o) {
         ImGui::SetNextWindowPos(ImVec2(side, 0), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(sideW, comparisonH), ImGuiCond_FirstUseEver);
         SyncDesign shown = wanted;
-        if (drawComparisonPanel(shown, comparison, now) && shown != wanted)
+        if (drawComparisonPanel(shown, picture, comparison, now) && shown != wanted)
             requestDesign(shown);
         if (ImGui::Begin("Comparison")) { // appends to the panel: what only the window knows
             ImGui::TextDisabled("frame ms: frame start to swap + glFinish (median of 1 s)");
@@ -872,7 +895,19 @@ int runTrainerWindow(const TrainerOptions& o) {
             frameMs[int(picture)].push_back(
                 std::chrono::duration<double, std::milli>(Clock::now() - frameStart).count());
             ++framesPerDesign[int(picture)];
+            const uint64_t drawnUs = net::steadyNowUs();
+            for (const DrawnUpdate& u : drawnThisFrame) {
+                if (u.design != picture)
+                    continue; // in the textures, not on screen (the other design's picture)
+                LiveSecond& l = liveSecond[int(u.design)];
+                ++l.updates;
+                l.bytes += u.bytes;
+                l.rawBytes += u.rawBytes;
+                if (u.latencyUs >= 0 && drawnUs >= u.appliedUs)
+                    l.latencyMs.push_back((u.latencyUs + double(drawnUs - u.appliedUs)) * 1e-3);
+            }
         }
+        drawnThisFrame.clear();
         // The Comparison panel's point for this second, for the design that fed the picture;
         // the other keeps its last figures.
         if (now - lastSecondAt >= 1.0) {
@@ -881,18 +916,20 @@ int runTrainerWindow(const TrainerOptions& o) {
             std::vector<double>& fm = frameMs[int(picture)];
             if (havePicture && !fm.empty()) {
                 const net::ModeFigures& m = snap->modes[size_t(syncOf(picture))];
+                const LiveSecond& l = liveSecond[int(picture)];
                 ComparisonFigures f;
                 f.updatesPerS = m.updateRatePerS;
-                f.bytesPerUpdate = m.meanBytes;
-                f.rawBytesPerUpdate = m.meanRawBytes;
-                f.latencyP50Ms = m.latencyP50Us >= 0 ? m.latencyP50Us * 1e-3 : -1.0;
-                f.latencyP99Ms = m.latencyP99Us >= 0 ? m.latencyP99Us * 1e-3 : -1.0;
+                f.bytesPerUpdate = l.updates ? l.bytes / l.updates : -1.0;
+                f.rawBytesPerUpdate = l.updates ? l.rawBytes / l.updates : -1.0;
+                f.latencyP50Ms = l.latencyMs.empty() ? -1.0 : percentile(l.latencyMs, 50.0);
+                f.latencyP99Ms = l.latencyMs.empty() ? -1.0 : percentile(l.latencyMs, 99.0);
                 f.frameMs = percentile(fm, 50.0);
                 f.hapticHz = hz;
                 comparison.record(picture, now, f);
             }
             for (auto& v : frameMs)
                 v.clear();
+            liveSecond = {};
             ticksAtLastSecond = ticks;
             lastSecondAt = now;
         }

@@ -193,6 +193,12 @@ TEST(ComparisonWindow, LiveSwitchDbiVolumeDbiLosesNoDrillingAndFillsBothFigures)
         EXPECT_GT(s.last.hapticHz, 0.0);
         EXPECT_GT(s.last.bytesPerUpdate, 0.0);
         EXPECT_GE(s.last.rawBytesPerUpdate, s.last.bytesPerUpdate * 0.99);
+        // Latency runs to the end of the frame that drew the update, so it holds most of a
+        // frame (updates are taken at the frame's start).
+        EXPECT_GT(s.last.latencyP50Ms, 0.5 * s.last.frameMs);
     }
+    // Incremental updates only: the whole volume sent at the switch (64^3 bytes raw) is not an
+    // update of the drilling.
+    EXPECT_LT(h.series(SyncDesign::Volume).last.rawBytesPerUpdate, 64.0 * 64 * 64 / 8);
     server.stop();
 }

@@ -51,12 +51,22 @@ TEST(ComparisonHistory, KeepsEachDesignsFiguresWhileTheOtherRuns) {
     EXPECT_DOUBLE_EQ(h.ageS(SyncDesign::Dbi, 9.5), 3.5);
     EXPECT_DOUBLE_EQ(h.ageS(SyncDesign::Volume, 9.5), 1.5);
     EXPECT_DOUBLE_EQ(h.ratio(&ComparisonFigures::updatesPerS), 60.0 / 2.5);
-    // An unknown latency (-1) plots as 0 but stays unknown in the figures.
+    // A second without updates (-1 bytes and latencies) plots as 0; the table keeps the last
+    // second that had updates. A design whose first second had none stays unknown.
     ComparisonFigures none = figures(1);
-    none.latencyP50Ms = none.latencyP99Ms = -1;
+    none.latencyP50Ms = none.latencyP99Ms = none.bytesPerUpdate = none.rawBytesPerUpdate = -1;
     h.record(SyncDesign::Dbi, 10.0, none);
-    EXPECT_FLOAT_EQ(h.series(SyncDesign::Dbi).latencyP50Ms.back(), 0.0f);
-    EXPECT_EQ(h.series(SyncDesign::Dbi).last.latencyP50Ms, -1.0);
+    const auto& d = h.series(SyncDesign::Dbi);
+    EXPECT_FLOAT_EQ(d.latencyP50Ms.back(), 0.0f);
+    EXPECT_FLOAT_EQ(d.bytesPerUpdate.back(), 0.0f);
+    EXPECT_EQ(d.last.latencyP50Ms, figures(6).latencyP50Ms);
+    EXPECT_EQ(d.last.bytesPerUpdate, figures(6).bytesPerUpdate);
+    EXPECT_EQ(d.last.rawBytesPerUpdate, figures(6).rawBytesPerUpdate);
+    EXPECT_EQ(d.last.frameMs, figures(1).frameMs) << "the other figures are the second's";
+    ComparisonHistory fresh;
+    fresh.record(SyncDesign::Volume, 1.0, none);
+    EXPECT_EQ(fresh.series(SyncDesign::Volume).last.latencyP50Ms, -1.0);
+    EXPECT_EQ(fresh.series(SyncDesign::Volume).last.bytesPerUpdate, -1.0);
     EXPECT_STREQ(syncDesignName(SyncDesign::Volume), "Volume (local copy)");
 }
 
@@ -74,7 +84,7 @@ TEST(ComparisonPanel, DrawsBothDesignsAndTheToggleFlips) {
         h.record(SyncDesign::Volume, i, figures(1.0 + 0.1 * (i % 5)));
     for (int i = 31; i <= 60; ++i)
         h.record(SyncDesign::Dbi, i, figures(3.0 + 0.2 * (i % 7)));
-    SyncDesign design = SyncDesign::Dbi;
+    SyncDesign design = SyncDesign::Dbi, live = SyncDesign::Dbi;
 
     auto frame = [&](bool manualInput, ImVec2 mouse, bool down, Dbi* capture) {
         if (manualInput) {
@@ -89,7 +99,7 @@ TEST(ComparisonPanel, DrawsBothDesignsAndTheToggleFlips) {
         }
         ImGui::SetNextWindowPos(ImVec2(0, 0));
         ImGui::SetNextWindowSize(ImVec2(float(wc.width), float(wc.height)));
-        bool flipped = drawComparisonPanel(design, h, 61.0);
+        bool flipped = drawComparisonPanel(design, live, h, 61.0);
         window->endFrame(capture);
         return flipped;
     };
@@ -119,4 +129,23 @@ TEST(ComparisonPanel, DrawsBothDesignsAndTheToggleFlips) {
     EXPECT_EQ(design, SyncDesign::Volume);
     EXPECT_FALSE(frame(true, {400, 500}, false, nullptr));
     EXPECT_EQ(design, SyncDesign::Volume);
+
+    // While the switch waits for its first full update the picture is still the DBI's: its
+    // column stays bright and the volume's greyed; once the volume feeds the picture, they swap.
+    // Bright pixels in the upper half's right third (the Volume column) tell which.
+    auto volumeColumnBright = [&] {
+        Dbi s;
+        frame(false, {}, false, &s);
+        int n = 0;
+        for (int y = s.height() / 2; y < s.height(); ++y)
+            for (int x = 2 * s.width() / 3; x < s.width(); ++x) {
+                const uint8_t* p = s.color(x, y);
+                n += p[0] + p[1] + p[2] > 450;
+            }
+        return n;
+    };
+    const int switching = volumeColumnBright();
+    live = SyncDesign::Volume;
+    const int switched = volumeColumnBright();
+    EXPECT_GT(switched, 2 * switching + 50) << switching << " -> " << switched;
 }

@@ -99,11 +99,14 @@ enum class SyncDesign : uint8_t { Dbi = 0, Volume = 1 };
 inline constexpr int kSyncDesignCount = 2;
 const char* syncDesignName(SyncDesign d); // "DBI (server renders)", "Volume (local copy)"
 
+// Bytes and latencies are of the second's incremental updates (full ones, sent at a join, a
+// switch or a view change, left out); -1: none that second (plotted as 0; the table keeps the
+// last second that had some, "-" until one has).
 struct ComparisonFigures {
-    double updatesPerS = 0;       // image or volume updates applied per second
-    double bytesPerUpdate = 0;    // on the wire, mean over the last second
-    double rawBytesPerUpdate = 0; // before compression
-    double latencyP50Ms = -1;     // end-to-end update latency (-1: no update measured)
+    double updatesPerS = 0;        // image or volume updates applied per second
+    double bytesPerUpdate = -1;    // on the wire, mean over the last second
+    double rawBytesPerUpdate = -1; // before compression
+    double latencyP50Ms = -1;      // cause at the server -> on the client's screen
     double latencyP99Ms = -1;
     double frameMs = 0;  // the client's frame time (display)
     double hapticHz = 0; // the haptic loop's achieved rate
@@ -113,7 +116,7 @@ struct ComparisonHistory {
     struct Series {
         std::vector<float> updatesPerS, bytesPerUpdate, rawBytesPerUpdate, latencyP50Ms,
             latencyP99Ms, frameMs, hapticHz; // oldest first, at most seriesLength points
-        ComparisonFigures last;              // the newest figures recorded
+        ComparisonFigures last;              // the newest figures recorded (see above)
         double lastT = -1;                   // when they were recorded (-1: never)
         size_t points = 0;                   // points ever recorded
     };

@@ -76,10 +76,13 @@ bool drawViewPanel(ViewControls& view, bool waitingForImage, const std::string& 
 
 // [Comparison] one toggle between the two designs and, for both, live plots and the current
 // update rate, bytes per update (and raw), update latency p50/p99, client frame time and haptic
-// rate; the inactive design shows its last measured figures greyed. `design` is the design in
-// use; the toggle flips it. Returns true when the user flipped it this frame (the caller then
-// switches the client, e.g. ClientThread's sync mode).
-bool drawComparisonPanel(SyncDesign& design, const ComparisonHistory& history, double now);
+// rate. `live` is the design feeding the picture: its figures are drawn bright, the other's
+// greyed with their age. `wanted` is the design asked for, which the toggle flips; while it
+// differs from `live` (a switch waiting for its first full update) the toggle and the table say
+// so. Returns true when the user flipped it this frame (the caller then switches the client,
+// e.g. ClientThread's sync mode).
+bool drawComparisonPanel(SyncDesign& wanted, SyncDesign live, const ComparisonHistory& history,
+                         double now);
 
 // Distinct colours for participants (index 0: this client).
 glm::vec4 participantColor(int index);
