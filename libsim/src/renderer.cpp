@@ -1182,15 +1182,39 @@ void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out,
     const Frame f = makeFrame(*m_volume, camera, m_options, m_bricks);
     const int tile = std::max(4, m_options.tileSize);
     const int tilesX = (rect.w + tile - 1) / tile, tilesY = (rect.h + tile - 1) / tile;
-    int32_t* resume = cache ? cache->m_resume.data() : nullptr;
-    uint8_t* inside = cache ? cache->m_inside.data() : nullptr;
-    const size_t stride = size_t(camera.width);
+    int32_t* cacheResume = cache ? cache->m_resume.data() : nullptr;
+    uint8_t* cacheInside = cache ? cache->m_inside.data() : nullptr;
+    const size_t cacheStride = size_t(camera.width);
     std::atomic<int64_t> resumed{0};
     auto renderTile = [&](int i) {
         int tx = i % tilesX, ty = i / tilesX;
         int x0 = rect.x + tx * tile, y0 = rect.y + ty * tile;
         int x1 = std::min(x0 + tile, rect.x + rect.w), y1 = std::min(y0 + tile, rect.y + rect.h);
         int64_t known = 0;
+        // The tile's part of the hit cache, in this thread's own copy, read once and written
+        // back once: tiles side by side (other threads) share cache lines of the per-pixel
+        // arrays (four tiles a line of the 1-byte flags), and updating them pixel by pixel in
+        // place measured two threads slower than one (a 500 x 500 frame: 6.6 ms on two, 5.7 on
+        // one; 4.6 ms uncached on two).
+        const int tw = x1 - x0, th = y1 - y0;
+        thread_local std::vector<int32_t> tileResume;
+        thread_local std::vector<uint8_t> tileInside;
+        int32_t* resume = nullptr;
+        uint8_t* inside = nullptr;
+        if (cacheResume) {
+            tileResume.resize(size_t(tw) * size_t(th));
+            tileInside.resize(size_t(tw) * size_t(th));
+            for (int y = 0; y < th; ++y) {
+                const size_t from = size_t(y0 + y) * cacheStride + size_t(x0);
+                std::memcpy(&tileResume[size_t(y) * size_t(tw)], cacheResume + from,
+                            size_t(tw) * sizeof(int32_t));
+                std::memcpy(&tileInside[size_t(y) * size_t(tw)], cacheInside + from, size_t(tw));
+            }
+            resume = tileResume.data();
+            inside = tileInside.data();
+        }
+        const size_t stride = size_t(tw); // of the tile's copy, whose (0, 0) is (x0, y0)
+        auto local = [&](int x, int y) { return size_t(y - y0) * stride + size_t(x - x0); };
         for (int by = y0; by < y1; by += kConeBlock)
             for (int bx = x0; bx < x1; bx += kConeBlock) {
                 int bx1 = std::min(bx + kConeBlock, x1), by1 = std::min(by + kConeBlock, y1);
@@ -1202,7 +1226,7 @@ void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out,
                 int32_t kMin = resume ? HitCache::kNever : 0;
                 for (int y = by; y < by1 && kMin > 0; ++y)
                     for (int x = bx; x < bx1; ++x)
-                        kMin = std::min(kMin, resume[size_t(y) * stride + size_t(x)]);
+                        kMin = std::min(kMin, resume[local(x, y)]);
                 const float tStart = float(kMin) * f.dt;
                 const float tSkipTo = f.distance && kMin != HitCache::kNever
                                           ? coneSkipTo(f, bx, by, bx1, by1, tStart)
@@ -1228,7 +1252,7 @@ void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out,
                             std::memcpy(out.color(ox, oy), kBackgroundRgba, 4);
                             out.depth()[out.index(ox, oy)] = kBackgroundDepth;
                             if (resume) {
-                                const size_t at = size_t(y) * stride + size_t(x);
+                                const size_t at = local(x, y);
                                 known += resume[at] != 0;
                                 resume[at] = HitCache::kNever;
                                 inside[at] = 0;
@@ -1244,7 +1268,7 @@ void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out,
                         int ox = x - rect.x + outX, oy = y - rect.y + outY;
                         int32_t k = 0;
                         uint8_t notInside = 0;
-                        const size_t at = size_t(y) * stride + size_t(x);
+                        const size_t at = resume ? local(x, y) : 0;
                         int32_t* slot = resume ? &resume[at] : &k;
                         uint8_t* wasInside = resume ? &inside[at] : &notInside;
                         known += *slot != 0;
@@ -1298,8 +1322,15 @@ void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out,
                 if (nbatch > 0)
                     flush();
             }
-        if (resume)
+        if (resume) {
+            for (int y = 0; y < th; ++y) {
+                const size_t to = size_t(y0 + y) * cacheStride + size_t(x0);
+                std::memcpy(cacheResume + to, &tileResume[size_t(y) * size_t(tw)],
+                            size_t(tw) * sizeof(int32_t));
+                std::memcpy(cacheInside + to, &tileInside[size_t(y) * size_t(tw)], size_t(tw));
+            }
             resumed.fetch_add(known, std::memory_order_relaxed);
+        }
     };
     if (m_pool)
         m_pool->parallelFor(tilesX * tilesY, renderTile);
