@@ -261,7 +261,9 @@ void SessionClient::requestSync(Sync mode) {
 void SessionClient::renderLocal() {
     if (!m_renderer || !m_config.renderLocally)
         return;
-    m_dbi = m_renderer->render(toCamera(m_view));
+    // With the same hit cache the DBI server keeps per view: after erosion each ray resumes at
+    // its previous first hit (a view change or a rise in density restarts it).
+    m_dbi = m_renderer->render(toCamera(m_view), &m_hitCache);
 }
 
 bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {

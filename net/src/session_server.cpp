@@ -172,6 +172,21 @@ struct SessionServer::Impl {
 
     // Simulation thread (and inspection) under volumeMutex: the renderer's bricks, views, frames.
     std::mutex volumeMutex;
+    // Changes the renderer's brick grid has not taken yet: it is rendering data for DBI views,
+    // kept in step only while some client is in DBI mode (a volume-only session pays nothing for
+    // it, nor do its clients' measured cycles, which share the machine in the study), and brought
+    // up to date before the next render. Under volumeMutex.
+    Box3i gridPending;
+    bool gridRebuildPending = false;
+    // Applies the pending changes to the brick grid (under volumeMutex).
+    void syncGrid() {
+        if (gridRebuildPending)
+            renderer.rebuild(); // voxels written wholesale may have raised densities
+        else if (!gridPending.empty())
+            renderer.volumeChanged(gridPending); // erosion only: the hit caches stay valid
+        gridRebuildPending = false;
+        gridPending = {};
+    }
     // The voxels themselves are also read by the network thread (haptic force models) while the
     // simulation thread renders: the simulation thread, the only writer, holds volumeRw exclusively
     // just around each write (one Driller::drill step, one box cut); the network thread holds it
@@ -488,6 +503,7 @@ void SessionServer::submitVoxels(const Box3i& box, std::vector<uint8_t> density,
 
 Dbi SessionServer::renderView(const ViewSpec& view) {
     std::lock_guard lock(m_impl->volumeMutex);
+    m_impl->syncGrid();
     return m_impl->renderer.render(toCamera(view));
 }
 
@@ -1102,13 +1118,19 @@ void SessionServer::simulationLoop() {
         }
         // Erosion only lowers densities, so the views' hit caches stay valid; voxels written
         // wholesale may raise them, which invalidates every cache (the next render restarts it).
-        const uint64_t g0 = steadyNowUs();
+        // With no DBI client the grid waits (syncGrid): nothing here renders.
         if (changedMaterials)
-            s.renderer.rebuild();
-        else if (!changed.empty())
-            s.renderer.volumeChanged(changed);
-        // The brick grid is rendering data: its update counts in each view's render stage.
-        const uint32_t gridUs = uint32_t(steadyNowUs() - g0);
+            s.gridRebuildPending = true;
+        else
+            s.gridPending.merge(changed);
+        uint32_t gridUs = 0;
+        if (std::any_of(s.simClients.begin(), s.simClients.end(),
+                        [](const auto& c) { return c.second.sync == Sync::Dbi; })) {
+            const uint64_t g0 = steadyNowUs();
+            s.syncGrid();
+            // The brick grid is rendering data: its update counts in each view's render stage.
+            gridUs = uint32_t(steadyNowUs() - g0);
+        }
 
         // Frames of views no DBI client holds any more are dropped.
         auto dbiView = [](const SimClient& c, const Camera& cam) {

@@ -181,6 +181,38 @@ TEST(SessionVolume, DbiAndVolumeClientsOnOneServerBothConverge) {
     ASSERT_TRUE(waitConverged(server, {&dbi, &vol}));
 }
 
+// With only volume clients the server leaves its brick grid (DBI rendering data) behind and
+// brings it up to date before its next render: a DBI client joining after cuts and a restore
+// (a rise in density) gets the right picture, and so does the cut after it.
+TEST(SessionVolume, AServerWithoutDbiClientsCatchesItsRenderingDataUpOnAJoin) {
+    Volume sphere = makeSphere(48);
+    SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
+    server.start();
+    SessionClient vol(clientConfig(presetView(sphere, "front"), Sync::Volume));
+    vol.connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&vol}));
+    server.submitBoxCut(topBox(14));
+    // A plate of bone in the air above the sphere: densities rise where no brick held surface.
+    const Box3i plate{{12, 12, 46}, {30, 30, 47}};
+    server.submitVoxels(plate, std::vector<uint8_t>(size_t(plate.count()), 255),
+                        std::vector<uint8_t>(size_t(plate.count()), uint8_t(Material::Cortical)));
+    server.submitBoxCut(topBox(8));
+    ASSERT_TRUE(pumpUntil({&vol}, [&] { return server.idle(); }));
+
+    SessionClient dbi(clientConfig(presetView(sphere, "top"), Sync::Dbi));
+    dbi.connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&vol, &dbi}));
+    ASSERT_TRUE(waitConverged(server, {&vol, &dbi}));
+    // The volume as it is now, rendered by a renderer that never saw the changes.
+    const Dbi fresh = Renderer(server.volumeSnapshot()).render(toCamera(presetView(sphere, "top")));
+    EXPECT_EQ(compare(dbi.dbi(), fresh).maxColorError, 0);
+    server.submitBoxCut(topBox(20));
+    ASSERT_TRUE(waitConverged(server, {&vol, &dbi}));
+    const Dbi after = Renderer(server.volumeSnapshot()).render(toCamera(presetView(sphere, "top")));
+    EXPECT_EQ(compare(dbi.dbi(), after).maxColorError, 0);
+    EXPECT_GT(compare(fresh, after).differingPixels, 0) << "the last cut shows";
+}
+
 TEST(SessionVolume, SwitchingLiveWhileDrillingKeepsTheSessionConsistent) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));

@@ -9,6 +9,7 @@
 #include "libsim/box.h"
 #include "libsim/camera.h"
 #include "libsim/dbi.h"
+#include "libsim/renderer.h"
 #include "libsim/volume.h"
 #include "net/enet_host.h"
 #include "net/net_stats.h"
@@ -24,7 +25,6 @@
 #include <string>
 
 namespace trephine {
-class Renderer;
 class ThreadPool;
 } // namespace trephine
 
@@ -231,6 +231,7 @@ private:
     std::unique_ptr<Volume> m_volume;
     std::unique_ptr<ThreadPool> m_pool;
     std::unique_ptr<Renderer> m_renderer;
+    HitCache m_hitCache; // the local view's first hits (volume mode, renderLocally)
     std::shared_mutex* m_volumeMutex = nullptr;
     uint64_t m_volumeUpdates = 0;
     std::optional<HapticModel> m_latestHaptic;
