@@ -111,6 +111,9 @@ TEST(SessionVolume, VolumeClientRendersBitForBitAfterBoxCutsAndDrilling) {
     ASSERT_TRUE(pumpUntil({&client}, [&] { return server.toolStatesApplied() == 40; }));
     ASSERT_TRUE(waitConverged(server, {&client}));
     EXPECT_FALSE(compare(before, client.dbi()).identical()) << "the cut and the drilling show";
+    // The re-renders after erosion resumed each ray at its cached first hit, as the DBI
+    // server's do, and the picture is still bit for bit the server's.
+    EXPECT_GT(client.localHitCache().resumed(), 0);
     EXPECT_GE(client.volumeUpdatesApplied(), 2u) << "the full volume, then boxes (coalesced)";
     EXPECT_EQ(client.stats().malformed(), 0u);
     const ModeStats& vm = client.stats().modes[size_t(Sync::Volume)];

@@ -85,6 +85,8 @@ public:
     // The local copy of the server's volume in volume mode (null before the first full volume
     // and after a switch back to DBI).
     const Volume* localVolume() const { return m_volume.get(); }
+    // [Volume mode, renderLocally] the local view's hit cache (its resumed() count).
+    const HitCache& localHitCache() const { return m_hitCache; }
     // Writes to the local volume hold this mutex exclusively (null: no lock), so another thread
     // (haptics) may read localVolume() under a shared lock; reads on the polling thread need none.
     void setVolumeMutex(std::shared_mutex* mutex) { m_volumeMutex = mutex; }
