@@ -177,9 +177,11 @@ void LinkEmulator::run() {
         auto start = now;
         if (c.rateMbps > 0) {
             start = std::max(now, lane.busyUntil);
+            // On the wire a datagram is its payload plus its framing (kWireOverheadBytes).
+            const double wireBytes = double(n + LinkConditions::kWireOverheadBytes);
             lane.busyUntil =
                 start + std::chrono::duration_cast<Clock::duration>(
-                            std::chrono::duration<double>(double(n) * 8.0 / (c.rateMbps * 1e6)));
+                            std::chrono::duration<double>(wireBytes * 8.0 / (c.rateMbps * 1e6)));
             start = lane.busyUntil;
         }
         auto due =

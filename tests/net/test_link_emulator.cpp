@@ -74,3 +74,49 @@ TEST(LinkEmulator, TotalLossDropsEverything) {
     EXPECT_GT(relay.dropped(), 0u);
     EXPECT_EQ(relay.forwarded(), 0u);
 }
+
+// The rate counts each datagram as it occupies an Ethernet link: 100 datagrams of 4 bytes at
+// 1 Mbit/s take 56 ms with their 66 bytes of framing each, 3.2 ms as bare payload.
+TEST(LinkEmulator, RateCountsEachDatagramsFraming) {
+    ENetSocket target = enet_socket_create(ENET_SOCKET_TYPE_DATAGRAM);
+    ASSERT_NE(target, ENET_SOCKET_NULL);
+    ENetAddress any = parseAddress("127.0.0.1:0");
+    ASSERT_EQ(enet_socket_bind(target, &any), 0);
+    ENetAddress targetAddress{};
+    ASSERT_EQ(enet_socket_get_address(target, &targetAddress), 0);
+    targetAddress.host = any.host;
+    LinkEmulator relay(0, targetAddress, LinkConditions::parse("rate=1"));
+    ENetSocket sender = enet_socket_create(ENET_SOCKET_TYPE_DATAGRAM);
+    ASSERT_NE(sender, ENET_SOCKET_NULL);
+    const ENetAddress relayAddress = parseAddress("127.0.0.1:" + std::to_string(relay.port()));
+
+    constexpr int kDatagrams = 100;
+    uint8_t payload[4] = {1, 2, 3, 4};
+    const auto start = Clock::now();
+    for (int i = 0; i < kDatagrams; ++i) {
+        ENetBuffer b{payload, sizeof payload};
+        ASSERT_EQ(enet_socket_send(sender, &relayAddress, &b, 1), int(sizeof payload));
+    }
+    int received = 0;
+    Clock::time_point last{};
+    while (received < kDatagrams && Clock::now() - start < std::chrono::seconds(5)) {
+        enet_uint32 wait = ENET_SOCKET_WAIT_RECEIVE;
+        if (enet_socket_wait(target, &wait, 50) != 0 || !(wait & ENET_SOCKET_WAIT_RECEIVE))
+            continue;
+        uint8_t buffer[64];
+        ENetBuffer b{buffer, sizeof buffer};
+        ENetAddress from{};
+        if (enet_socket_receive(target, &from, &b, 1) == int(sizeof payload)) {
+            ++received;
+            last = Clock::now();
+        }
+    }
+    ASSERT_EQ(received, kDatagrams);
+    const double ms = std::chrono::duration<double, std::milli>(last - start).count();
+    const double wireMs =
+        kDatagrams * (4.0 + LinkConditions::kWireOverheadBytes) * 8.0 / 1e6 * 1e3; // 56 ms
+    EXPECT_GE(ms, 0.95 * wireMs);
+    EXPECT_LT(ms, 10.0 * wireMs) << "the relay should not hold datagrams far longer";
+    enet_socket_destroy(sender);
+    enet_socket_destroy(target);
+}

@@ -20,7 +20,11 @@ struct LinkConditions {
     double latencyMs = 0.0; // one-way delay added in each direction
     double jitterMs = 0.0;  // uniform extra delay in [0, jitter]; order is kept
     double lossPercent = 0.0;
-    double rateMbps = 0.0; // 0 = unlimited; otherwise each direction serialises at this rate
+    // 0 = unlimited; otherwise each direction serialises at this rate, each datagram counted as
+    // it occupies an Ethernet link: its UDP payload plus kWireOverheadBytes.
+    double rateMbps = 0.0;
+    // UDP 8 + IPv4 20 + Ethernet header and FCS 18 + preamble 8 + inter-frame gap 12 bytes.
+    static constexpr size_t kWireOverheadBytes = 66;
     uint32_t seed = 1;
 
     // Parses "latency=25,jitter=5,loss=1,rate=100" (any subset, any order); throws
