@@ -148,7 +148,7 @@ std::vector<std::string> rateMissNotes(const std::vector<UpdateStudyRow>& rows, 
     notes.push_back("On loopback the volume method's bytes cost almost nothing, so its cycle is "
                     "mostly its client's re-render of the view, with the same renderer and cores "
                     "as the DBI server's. `--link rate=100` runs the paper's 100 Mbit/s LAN "
-                    "instead (`study all` runs it after loopback; docs/study.md).");
+                    "instead, as `study all` does by default after loopback (docs/study.md).");
     if (!ceilings.empty())
         notes.push_back("Were the DBI server's ray casting free (its render stage less the "
                         "brick-grid update), its other stages' medians would still cap dbi / "

@@ -36,8 +36,16 @@ std::vector<Method> methodsFor(Codec codec) {
     return m;
 }
 
-double ms(double us) {
-    return us < 0 ? 0.0 : us * 1e-3;
+// A stage or latency in us into a window in ms; -1 (not measured: a stage the method has not,
+// a latency without the server's clock) adds no sample, so it cannot drag a median to 0.
+void put(SampleWindow& w, double us) {
+    if (us >= 0)
+        w.add(us * 1e-3);
+}
+
+// The median of a window, 0 when nothing was measured.
+double median(const SampleWindow& w) {
+    return w.size() ? w.percentile(50) : 0.0;
 }
 
 // Polls the client until `done` says so; false after the timeout.
@@ -198,16 +206,15 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
                     waitOne("restore");
                     if (c < config.warmup)
                         continue;
-                    out.latency.add(ms(r.latencyUs));
+                    put(out.latency, r.latencyUs);
                     out.bytes.add(double(r.bytes));
-                    out.erode.add(ms(r.erodeUs));
-                    out.render.add(ms(r.serverRenderUs));
-                    out.encode.add(ms(r.encodeUs));
-                    out.transmit.add(ms(r.transmitUs));
-                    out.apply.add(ms(r.applyUs));
-                    out.clientRender.add(ms(r.clientRenderUs));
-                    if (r.gridUs >= 0)
-                        out.grid.add(ms(r.gridUs));
+                    put(out.erode, r.erodeUs);
+                    put(out.render, r.serverRenderUs);
+                    put(out.encode, r.encodeUs);
+                    put(out.transmit, r.transmitUs);
+                    put(out.apply, r.applyUs);
+                    put(out.clientRender, r.clientRenderUs);
+                    put(out.grid, r.gridUs);
                 }
             }
             client.disconnect(100);
@@ -228,13 +235,12 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
             row.bytesPerUpdate = s.bytes.mean();
             row.rawBytesPerUpdate =
                 method.sync == Sync::Dbi ? 5.0 * z.screen.w * z.screen.h : double(z.box.count());
-            row.latencyP50Ms = s.latency.percentile(50);
-            row.latencyP99Ms = s.latency.percentile(99);
+            row.latencyP50Ms = median(s.latency);
+            row.latencyP99Ms = s.latency.size() ? s.latency.percentile(99) : 0.0;
             row.updatesPerS = row.latencyP50Ms > 0 ? 1000.0 / row.latencyP50Ms : 0.0;
-            row.stages = {s.erode.percentile(50),  s.render.percentile(50),
-                          s.encode.percentile(50), s.transmit.percentile(50),
-                          s.apply.percentile(50),  s.clientRender.percentile(50)};
-            row.stages.grid = s.grid.size() ? s.grid.percentile(50) : 0.0;
+            row.stages = {median(s.erode),    median(s.render), median(s.encode),
+                          median(s.transmit), median(s.apply),  median(s.clientRender)};
+            row.stages.grid = median(s.grid);
             row.cycles = int(s.latency.size());
             rows.push_back(row);
         }
