@@ -328,14 +328,24 @@ BENCHMARK(BM_RenderPaperHoleCached)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
-// The full frame of the same view after the cut, for the cost per pixel of a whole frame.
+// The full frame of the same view after the cut, for the cost per pixel of a whole frame: from
+// the eye (Arg 2 = 0), or resuming every ray at its first hit before the cut (1): the
+// replicated-volume client's re-render of its view (SessionClient keeps a HitCache as the DBI
+// server does).
 void BM_RenderPaperHoleFullFrame(benchmark::State& state) {
     PaperHole& h = paperHole(int(state.range(0)));
+    const bool cached = state.range(1) != 0;
     Dbi frame(500, 500);
+    HitCache cache;
     double total = 0.0;
     for (auto _ : state) {
+        if (cached) {
+            state.PauseTiming();
+            cache = h.cacheBeforeCut;
+            state.ResumeTiming();
+        }
         auto t0 = Clock::now();
-        h.renderer->render(h.camera, frame.bounds(), frame);
+        h.renderer->render(h.camera, frame.bounds(), frame, cached ? &cache : nullptr);
         total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
         benchmark::DoNotOptimize(frame.depth());
     }
@@ -346,36 +356,8 @@ void BM_RenderPaperHoleFullFrame(benchmark::State& state) {
     state.SetItemsProcessed(state.iterations() * 500 * 500);
 }
 BENCHMARK(BM_RenderPaperHoleFullFrame)
-    ->Arg(10)
-    ->Arg(80)
-    ->Unit(benchmark::kMillisecond)
-    ->UseRealTime();
-
-// The same full frame resuming every ray at its first hit before the cut: the replicated-volume
-// client's re-render of its view (SessionClient keeps a HitCache as the DBI server does).
-void BM_RenderPaperHoleFullFrameCached(benchmark::State& state) {
-    PaperHole& h = paperHole(int(state.range(0)));
-    Dbi frame(500, 500);
-    HitCache cache;
-    double total = 0.0;
-    for (auto _ : state) {
-        state.PauseTiming();
-        cache = h.cacheBeforeCut;
-        state.ResumeTiming();
-        auto t0 = Clock::now();
-        h.renderer->render(h.camera, frame.bounds(), frame, &cache);
-        total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-        benchmark::DoNotOptimize(frame.depth());
-    }
-    double per = state.iterations() ? total / double(state.iterations()) : 0.0;
-    state.counters["frame_ms"] = per;
-    state.counters["ns_per_px"] = rectNsPerPixel(per, frame.bounds());
-    state.counters["threads"] = skull256().pool->size();
-    state.SetItemsProcessed(state.iterations() * 500 * 500);
-}
-BENCHMARK(BM_RenderPaperHoleFullFrameCached)
-    ->Arg(10)
-    ->Arg(80)
+    ->ArgsProduct({{10, 80}, {0, 1}})
+    ->ArgNames({"box", "cached"})
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
