@@ -144,6 +144,18 @@ TEST(ClientThread, ViewChangeWaitsThenDeliversAFullImage) {
     server.stop();
 }
 
+namespace {
+// A client thread of the top view of skull:64 on `port` that retries every 0.2 s.
+ClientThreadConfig reconnectingClient(const Volume& skull, uint16_t port) {
+    ClientThreadConfig cc;
+    cc.address = "127.0.0.1:" + std::to_string(port);
+    cc.client.view = toViewSpec(cameraPreset("top", skull, {64, 64}));
+    cc.retryS = 0.2;
+    cc.connectTimeoutS = 1.0;
+    return cc;
+}
+} // namespace
+
 TEST(ClientThread, ReconnectsToANewServerOnTheSamePort) {
     Volume skull = makeSkull(64);
     ServerConfig sc = loopbackServerConfig("skull:64");
@@ -151,11 +163,7 @@ TEST(ClientThread, ReconnectsToANewServerOnTheSamePort) {
     const uint16_t port = server->port();
     server->start();
 
-    ClientThreadConfig cc;
-    cc.address = "127.0.0.1:" + std::to_string(port);
-    cc.client.view = toViewSpec(cameraPreset("top", skull, {64, 64}));
-    cc.retryS = 0.2;
-    cc.connectTimeoutS = 1.0;
+    ClientThreadConfig cc = reconnectingClient(skull, port);
     ClientThread client(cc);
     client.start();
     ASSERT_TRUE(waitFor([&] { return client.snapshot()->hasFullImage; }, 20.0));
@@ -210,12 +218,8 @@ TEST(ClientThread, ASwitchAndAViewAskedWhileDisconnectedAreMadeOnReconnect) {
     const uint16_t port = server->port();
     server->start();
 
-    ClientThreadConfig cc;
-    cc.address = "127.0.0.1:" + std::to_string(port);
-    cc.client.view = toViewSpec(cameraPreset("top", skull, {64, 64}));
+    ClientThreadConfig cc = reconnectingClient(skull, port);
     cc.client.renderLocally = false;
-    cc.retryS = 0.2;
-    cc.connectTimeoutS = 1.0;
     ClientThread client(cc);
     client.start();
     ASSERT_TRUE(waitFor([&] { return client.snapshot()->hasFullImage; }, 20.0));
