@@ -185,8 +185,9 @@ TEST(SessionVolume, DbiAndVolumeClientsOnOneServerBothConverge) {
 }
 
 // With only volume clients the server leaves its brick grid (DBI rendering data) behind and
-// brings it up to date before its next render: a DBI client joining after cuts and a restore
-// (a rise in density) gets the right picture, and so does the cut after it.
+// brings it up to date before its next render: a DBI client joining after a cut, a plate of
+// bone set in the air (a rise in density) and another cut gets the right picture, and so does
+// the cut after it.
 TEST(SessionVolume, AServerWithoutDbiClientsCatchesItsRenderingDataUpOnAJoin) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
