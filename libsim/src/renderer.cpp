@@ -630,6 +630,8 @@ void refineHit(const Frame& f, const Ray& r, March& m) {
     const int k = m.kIn;
     float ta = float(k - 1) * f.dt, tb = m.tIn;
     float fa = (m.lastK == k - 1 ? m.lastValue : sampleDensity(f, samplePos4(f, r, ta))) - iso;
+    if (!(fa < 0.0f))
+        return; // no bracket: a hit cache used against its contract (refineAndDifferentiate8)
     float fb = m.value - iso;
     for (int i = 0; i < kRefineSteps; ++i) {
         float tm = ta + (tb - ta) * (fa / (fa - fb));
@@ -1011,6 +1013,13 @@ void refineAndDifferentiate8(const Frame& f, PendingHit* const* hits, int count,
     const float iso = float(kSurfaceDensity);
     v8sf tb = tIn;
     v8sf fa = sample8(f, ox + ta * dx, oy + ta * dy, oz + ta * dz) - iso;
+    // fa < 0 <= fb brackets the iso-value; the march and a valid hit cache guarantee it (the
+    // sample before the first inside one was below, and erosion only lowers it). A cache kept
+    // across a rise in density (no Renderer::rebuild) can break it, and the secant would then
+    // extrapolate out of the volume: such a hit is left unrefined at its first inside sample,
+    // a wrong pixel instead of a crash. Valid hits are unchanged bit for bit.
+    refine = refine & (fa < 0.0f);
+    ta = refine ? ta : tIn;
     const v8sf minusOne = v8sf{} - 1.0f;
     fa = refine ? fa : minusOne;
     v8sf fb = value - iso;

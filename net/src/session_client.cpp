@@ -321,7 +321,14 @@ bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
         lock = {};
         if (m_renderer) {
             const uint64_t g0 = steadyNowUs();
-            m_renderer->volumeChanged(box);
+            // Boxes with their materials are voxels the server wrote wholesale (submitVoxels),
+            // which may raise densities: the hit cache's indices may then be too deep, so the
+            // renderer starts afresh, as the server's does. Drilling (densities only fall) keeps
+            // the cache.
+            if (u.materials)
+                m_renderer->rebuild();
+            else
+                m_renderer->volumeChanged(box);
             gridUs = double(steadyNowUs() - g0);
         }
     }

@@ -184,6 +184,35 @@ TEST(SessionVolume, DbiAndVolumeClientsOnOneServerBothConverge) {
     ASSERT_TRUE(waitConverged(server, {&dbi, &vol}));
 }
 
+// Voxels put back after a cut raise densities inside bricks that still hold surface, where the
+// renderer's safety net cannot see it: the volume client's hit cache must not survive that, or
+// its rays resume too deep (a crash or a wrong picture). A narrow box keeps every brick occupied.
+TEST(SessionVolume, VoxelsPutBackRestartTheVolumeClientsHitCache) {
+    Volume sphere = makeSphere(48);
+    SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
+    server.start();
+    SessionClient vol(clientConfig(presetView(sphere, "top"), Sync::Volume));
+    vol.connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&vol}));
+    const Box3i box{{22, 22, 36}, {26, 26, 46}};
+    std::vector<uint8_t> density, material;
+    for (int z = box.lo.z; z < box.hi.z; ++z)
+        for (int y = box.lo.y; y < box.hi.y; ++y)
+            for (int x = box.lo.x; x < box.hi.x; ++x) {
+                density.push_back(sphere.density(x, y, z));
+                material.push_back(uint8_t(sphere.material(x, y, z)));
+            }
+    const Dbi intact = vol.dbi();
+    for (int round = 0; round < 3; ++round) {
+        server.submitBoxCut(box);
+        ASSERT_TRUE(waitConverged(server, {&vol}));
+        EXPECT_FALSE(compare(intact, vol.dbi()).identical()) << "the cut shows";
+        server.submitVoxels(box, density, material);
+        ASSERT_TRUE(waitConverged(server, {&vol}));
+        EXPECT_EQ(compare(intact, vol.dbi()).maxColorError, 0) << "the bone is back";
+    }
+}
+
 // With only volume clients the server leaves its brick grid (DBI rendering data) behind and
 // brings it up to date before its next render: a DBI client joining after a cut, a plate of
 // bone set in the air (a rise in density) and another cut gets the right picture, and so does

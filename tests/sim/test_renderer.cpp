@@ -834,6 +834,34 @@ TEST(HitCache, RaisedDensityInvalidatesTheCache) {
     ASSERT_TRUE(frame == expected) << compare(frame, expected).describe();
 }
 
+// A cache kept across a rise in density the renderer cannot see (bone put back in a narrow cut,
+// every brick still occupied, volumeChanged instead of rebuild) breaks the cache's contract: its
+// pixels may be wrong, but the render must not crash or leave depths outside [0, 1]. Unguarded,
+// the refinement's secant extrapolated out of the volume (a segfault in a volume client).
+TEST(HitCache, ACacheKeptAcrossARiseStillRendersSafely) {
+    Volume sphere = makeSphere(48);
+    ThreadPool pool(2);
+    Renderer renderer(sphere, &pool);
+    const Camera c = cameraPreset("top", sphere, {128, 128});
+    HitCache cache;
+    Dbi frame = renderer.render(c, &cache);
+    const Volume original = sphere;
+    const Box3i box{{22, 22, 36}, {26, 26, 46}};
+    for (int round = 0; round < 3; ++round) {
+        sphere.fill(box, 0, Material::Air);
+        renderer.volumeChanged(box);
+        renderer.render(c, frame.bounds(), frame, &cache);
+        for (int z = box.lo.z; z < box.hi.z; ++z)
+            for (int y = box.lo.y; y < box.hi.y; ++y)
+                for (int x = box.lo.x; x < box.hi.x; ++x)
+                    sphere.set(x, y, z, original.density(x, y, z), original.material(x, y, z));
+        renderer.volumeChanged(box); // against the contract: rebuild() is due
+        renderer.render(c, frame.bounds(), frame, &cache);
+        for (int i = 0; i < frame.width() * frame.height(); ++i)
+            ASSERT_TRUE(frame.depth()[i] >= 0.0f && frame.depth()[i] <= 1.0f) << i;
+    }
+}
+
 // A cache is bound to its camera (and window size): handed another view it restarts instead of
 // resuming rays at indices of other rays.
 TEST(HitCache, ACacheForAnotherCameraIsNeverUsed) {
