@@ -4,6 +4,7 @@
 // drills, it ends with exactly the server's picture (nothing lost), with local haptics while the
 // volume fed the picture, and the Comparison panel holds figures of both designs. Deadlines only
 // guard against hangs; nothing asserts wall time.
+#include "gl_window_test.h"
 #include "ui/trainer_app.h"
 #include "ui/window.h"
 
@@ -81,16 +82,10 @@ PictureAgreement agree(const Dbi& gpu, const Dbi& cpu) {
     return a;
 }
 
-bool needDisplay(std::string* why) {
-    return trephine::ui::displayAvailable(why);
-}
-
 } // namespace
 
 TEST(ComparisonWindow, VolumeModeShowsTheSkullAndTheDrilledHole) {
-    std::string why;
-    if (!needDisplay(&why))
-        GTEST_SKIP() << "no display for the window (" << why << "); run under xvfb-run";
+    TREPHINE_NEED_DISPLAY("the window");
     const Volume skull = makeSkull(64);
     net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64", 2));
     server.start();
@@ -147,9 +142,7 @@ TEST(ComparisonWindow, VolumeModeShowsTheSkullAndTheDrilledHole) {
 }
 
 TEST(ComparisonWindow, LiveSwitchDbiVolumeDbiLosesNoDrillingAndFillsBothFigures) {
-    std::string why;
-    if (!needDisplay(&why))
-        GTEST_SKIP() << "no display for the window (" << why << "); run under xvfb-run";
+    TREPHINE_NEED_DISPLAY("the window");
     const Volume skull = makeSkull(64);
     net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64", 2));
     server.start();

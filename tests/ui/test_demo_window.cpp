@@ -1,5 +1,6 @@
 // `trephine demo` windowed, end to end: an embedded server, the trainee window over loopback, a
 // scripted burr hole, and the screenshot it writes. Needs a display (xvfb-run).
+#include "gl_window_test.h"
 #include "ui/window.h"
 
 #include "screenshot.h"
@@ -35,9 +36,7 @@ std::string shoot(const std::string& name, const std::string& extra) {
 } // namespace
 
 TEST(DemoWindow, ScreenshotShowsBoneTheDrilledHoleAndPanels) {
-    std::string why;
-    if (!trephine::ui::displayAvailable(&why))
-        GTEST_SKIP() << "no display for the demo window (" << why << "); run under xvfb-run";
+    TREPHINE_NEED_DISPLAY("the demo window");
     Image plain = readPng(shoot("trephine_demo_plain.png", ""));
     Image drilled = readPng(shoot("trephine_demo_drilled.png", "--script burrhole"));
     ASSERT_EQ(plain.w, 1280);

@@ -1,6 +1,7 @@
 // `trephine study display`'s measurement on llvmpipe (needs a display: xvfb-run), with a small
 // window and few frames: both designs measured, positive rates, the GL renderer named. Speeds are
 // the benchmark's business (benchmark_ui), never asserted here.
+#include "gl_window_test.h"
 #include "ui/display_study.h"
 #include "ui/window.h"
 
@@ -15,9 +16,7 @@ using namespace trephine;
 using namespace trephine::ui;
 
 TEST(DisplayStudy, MeasuresBothDesignsInOneRun) {
-    std::string why;
-    if (!displayAvailable(&why))
-        GTEST_SKIP() << "no display for OpenGL (" << why << "); run under xvfb-run";
+    TREPHINE_NEED_DISPLAY("OpenGL");
     DisplayStudyConfig c;
     c.windowPx = 160;
     c.volumeSizes = {64, 96};

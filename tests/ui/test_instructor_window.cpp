@@ -1,6 +1,7 @@
 // `trephine instructor` windowed against an in-process server: a headless trainee SessionClient
 // holds its tool in view, and the instructor's screenshot shows that tool in the trainee's colour
 // where the server's camera projects it. Needs a display (xvfb-run).
+#include "gl_window_test.h"
 #include "ui/panels.h"
 #include "ui/window.h"
 
@@ -64,9 +65,7 @@ glm::vec3 anyPerpendicular(glm::vec3 n) {
 } // namespace
 
 TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
-    std::string why;
-    if (!ui::displayAvailable(&why))
-        GTEST_SKIP() << "no display for the instructor window (" << why << "); run under xvfb-run";
+    TREPHINE_NEED_DISPLAY("the instructor window");
     Volume skull = makeSkull(128);
     const SurfaceSite site = defaultBurrSite(skull);
     net::ServerConfig sc;
@@ -192,9 +191,7 @@ TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
 
 // A malformed --mark is one line naming it and a non-zero exit, before any window opens.
 TEST(InstructorWindow, MalformedMarkIsOneLineNamingIt) {
-    std::string why;
-    if (!ui::displayAvailable(&why))
-        GTEST_SKIP() << "no display for the instructor window (" << why << "); run under xvfb-run";
+    TREPHINE_NEED_DISPLAY("the instructor window");
     trephine::testing::TempDir dir;
     for (const char* bad : {"1,2", "1,2,x", "1,2,3,4", "nan,0,0:label"}) {
         SCOPED_TRACE(bad);

@@ -1,5 +1,6 @@
 // The Comparison panel's model (ComparisonHistory, without GL) and the panel itself drawn under
 // Xvfb: the toggle flips the design when clicked, and the panel shows text and plots.
+#include "gl_window_test.h"
 #include "ui/panel_data.h"
 #include "ui/panels.h"
 #include "ui/window.h"
@@ -71,9 +72,7 @@ TEST(ComparisonHistory, KeepsEachDesignsFiguresWhileTheOtherRuns) {
 }
 
 TEST(ComparisonPanel, DrawsBothDesignsAndTheToggleFlips) {
-    std::string why;
-    if (!displayAvailable(&why))
-        GTEST_SKIP() << "no display for the panel (" << why << "); run under xvfb-run";
+    TREPHINE_NEED_DISPLAY("the panel");
     WindowConfig wc;
     wc.width = 520;
     wc.height = 560;

@@ -1,6 +1,7 @@
 // `trephine trainee` windowed against an in-process server while an in-process instructor takes
 // it over: the trainee's screenshot says so on the solid band at the foot of its view. Needs a
 // display (xvfb-run).
+#include "gl_window_test.h"
 #include "ui/window.h"
 
 #include "libsim/skull.h"
@@ -25,9 +26,7 @@ using trephine::testing::Image;
 using trephine::testing::readPng;
 
 TEST(TakeOverWindow, TheTraineeIsToldItsDrillIsPaused) {
-    std::string why;
-    if (!ui::displayAvailable(&why))
-        GTEST_SKIP() << "no display for the trainee window (" << why << "); run under xvfb-run";
+    TREPHINE_NEED_DISPLAY("the trainee window");
     Volume skull = makeSkull(64);
     net::ServerConfig sc;
     sc.port = 0;
