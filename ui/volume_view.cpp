@@ -11,6 +11,7 @@
 
 #include "libsim/error.h"
 #include "libsim/renderer.h"
+#include "libsim/svg_plot.h" // formatString
 
 #include <algorithm>
 #include <chrono>
@@ -220,6 +221,16 @@ VolumeView::~VolumeView() {
 void VolumeView::upload(const Volume& volume) {
     if (volume.empty())
         throw Error("ui: VolumeView::upload: the volume is empty");
+    // The gradient texture holds an apron of one voxel on every side: n + 2 texels an axis.
+    GLint maxSize = 0;
+    glGetIntegerv(GL_MAX_3D_TEXTURE_SIZE, &maxSize);
+    const glm::ivec3 d = volume.dims();
+    if (std::max({d.x, d.y, d.z}) + 2 > maxSize)
+        throw Error("ui: the volume (" + std::to_string(d.x) + " x " + std::to_string(d.y) + " x " +
+                    std::to_string(d.z) + ") is too large for this OpenGL's 3D textures (" +
+                    std::to_string(maxSize) + " texels an axis, less 2 for the gradients' apron)");
+    while (glGetError() != GL_NO_ERROR) {
+    } // errors of earlier, unrelated calls are not this upload's
     m_dims = volume.dims();
     m_spacing = volume.spacing();
     auto make = [&](GLuint& tex, GLenum internal, glm::ivec3 size, GLenum format, GLenum type,
@@ -237,6 +248,13 @@ void VolumeView::upload(const Volume& volume) {
     make(m_gradientTex, GL_RGB16F, m_dims + 2, GL_RGB, GL_FLOAT, GL_LINEAR, nullptr);
     uploadGradients(volume, {glm::ivec3(-1), m_dims + 1});
     glBindTexture(GL_TEXTURE_3D, 0);
+    // Out of memory (256^3 takes ~140 MB of textures) or a size the driver refuses: say so
+    // rather than draw a blank or flat-shaded volume.
+    if (const GLenum e = glGetError(); e != GL_NO_ERROR) {
+        m_dims = glm::ivec3(0);
+        throw Error(formatString("ui: OpenGL refused the volume's textures (error 0x%04x%s)",
+                                 unsigned(e), e == GL_OUT_OF_MEMORY ? ": out of memory" : ""));
+    }
 }
 
 VolumeUpdateStats VolumeView::updateBox(const Volume& volume, const Box3i& box) {

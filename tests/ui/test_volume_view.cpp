@@ -9,6 +9,7 @@
 
 #include "libsim/camera.h"
 #include "libsim/dirty_rect.h"
+#include "libsim/error.h"
 #include "libsim/renderer.h"
 #include "libsim/skull.h"
 
@@ -172,4 +173,27 @@ TEST_F(VolumeViewTest, UpdateBoxShowsTheErosionLikeTheCpuRender) {
     EXPECT_GT(d.differingPixels, 200) << d.describe();
     PixelRect screen = dirtyScreenRect(cam, sphere, box);
     EXPECT_TRUE(screen.contains(d.bounds)) << d.describe();
+}
+
+// A volume wider than this OpenGL's 3D textures (less the gradients' apron) is refused with a
+// message naming the limit, instead of uploading nothing and drawing a blank view; the view
+// stays usable for a volume that fits.
+TEST_F(VolumeViewTest, AVolumeTooLargeForTheTexturesIsRefusedWithTheLimit) {
+    GLint maxSize = 0;
+    glGetIntegerv(GL_MAX_3D_TEXTURE_SIZE, &maxSize);
+    ASSERT_GT(maxSize, 8);
+    Volume wide({maxSize - 1, 4, 4}, glm::vec3(1.0f)); // fits alone, not with the apron
+    try {
+        view->upload(wide);
+        FAIL() << "a " << maxSize - 1 << "-voxel-wide volume was accepted";
+    } catch (const trephine::Error& e) {
+        const std::string what = e.what();
+        EXPECT_NE(what.find("too large"), std::string::npos) << what;
+        EXPECT_NE(what.find(std::to_string(maxSize)), std::string::npos) << what;
+    }
+    EXPECT_TRUE(view->empty());
+    const Volume sphere = makeSphere(32);
+    view->upload(sphere);
+    EXPECT_FALSE(view->empty());
+    EXPECT_EQ(glGetError(), GLenum(GL_NO_ERROR));
 }
