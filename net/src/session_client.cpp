@@ -78,10 +78,17 @@ void SessionClient::onEvent(const ENetEvent& ev) {
         h.role = m_config.role;
         h.name = m_config.name;
         h.codec = m_config.codec;
-        h.sync = m_config.sync;
+        h.sync = m_wantSync; // a switch asked for before the connection rides on the hello
         h.volumeCodec = m_config.volumeCodec;
         h.view = m_config.view;
         send(Channel::Control, encodeMessage(h));
+        // A view asked for before the connection went nowhere: ask again, after the hello.
+        if (!m_requested.empty()) {
+            ViewRequest r;
+            r.requestId = m_requested.rbegin()->first;
+            r.view = m_requested.rbegin()->second;
+            send(Channel::Control, encodeMessage(r));
+        }
         sendPing();
         return;
     }

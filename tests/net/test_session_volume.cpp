@@ -184,6 +184,27 @@ TEST(SessionVolume, DbiAndVolumeClientsOnOneServerBothConverge) {
     ASSERT_TRUE(waitConverged(server, {&dbi, &vol}));
 }
 
+// A switch and a view asked for before the connection is up are made once it is: the hello
+// carries the mode and the view request is sent again after it.
+TEST(SessionVolume, ASwitchAndAViewAskedBeforeConnectingAreMade) {
+    Volume sphere = makeSphere(48);
+    SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
+    server.start();
+    SessionClient client(clientConfig(presetView(sphere, "top"), Sync::Dbi));
+    client.requestSync(Sync::Volume);
+    client.requestView(presetView(sphere, "front"));
+    client.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&client},
+                          [&] {
+                              return client.sync() == Sync::Volume &&
+                                     client.localVolume() != nullptr &&
+                                     client.view() == presetView(sphere, "front");
+                          }))
+        << "sync " << int(client.sync())
+        << ", view is the front one: " << (client.view() == presetView(sphere, "front"));
+    ASSERT_TRUE(waitConverged(server, {&client}));
+}
+
 // Voxels put back after a cut raise densities inside bricks that still hold surface, where the
 // renderer's safety net cannot see it: the volume client's hit cache must not survive that, or
 // its rays resume too deep (a crash or a wrong picture). A narrow box keeps every brick occupied.
