@@ -81,7 +81,8 @@ struct NetPeer {
     ENetPeer* peer = nullptr;
     bool hello = false;
     Hello helloMsg;
-    Sync sync = Sync::Dbi; // the hello's, then the latest SyncMode
+    Sync sync = Sync::Dbi;          // the hello's, then the latest SyncMode
+    Codec volumeCodec = Codec::Lz4; // likewise
     int malformed = 0;
     bool kicked = false;
 };
@@ -652,6 +653,7 @@ void SessionServer::networkLoop() {
             p.hello = true;
             p.helloMsg = h;
             p.sync = h.sync;
+            p.volumeCodec = h.volumeCodec;
             report(id, [&](PeerReport& r) {
                 r.hello = true;
                 r.name = h.name;
@@ -735,7 +737,13 @@ void SessionServer::networkLoop() {
             if (!decodeMessage(data, m))
                 return false;
             const bool changed = p.sync != m.sync;
+            // The mode and codec the client already has: nothing to do. (Each switch to volume
+            // encodes the whole volume on the simulation thread; a client repeating it would
+            // slow every other one.)
+            if (!changed && m.volumeCodec == p.volumeCodec)
+                return true;
             p.sync = m.sync;
+            p.volumeCodec = m.volumeCodec;
             report(id, [&](PeerReport& r) {
                 r.sync = m.sync;
                 ++r.syncSwitches;
@@ -838,9 +846,14 @@ void SessionServer::networkLoop() {
                 return;
             }
             disableThrottle(ev.peer);
-            uint16_t id = s.nextId++;
-            if (s.nextId == 0)
-                s.nextId = 1;
+            // After 65535 joins the ids wrap: skip any still held (peers <= maxClients, so one
+            // is free within maxClients + 1 tries).
+            uint16_t id = 0;
+            do {
+                id = s.nextId++;
+                if (s.nextId == 0)
+                    s.nextId = 1;
+            } while (s.peers.count(id));
             ev.peer->data = reinterpret_cast<void*>(uintptr_t(id));
             s.peers[id].peer = ev.peer;
             report(id, [](PeerReport& r) { r.connectedUs = steadyNowUs(); });

@@ -205,6 +205,33 @@ TEST(SessionVolume, ASwitchAndAViewAskedBeforeConnectingAreMade) {
     ASSERT_TRUE(waitConverged(server, {&client}));
 }
 
+// A client repeating the mode and codec it already has costs the server nothing: no whole
+// volume is encoded and sent again (each one is a full pass over the volume on the simulation
+// thread, which every other client waits for).
+TEST(SessionVolume, ARepeatedSyncModeIsANoOp) {
+    Volume sphere = makeSphere(48);
+    SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
+    server.start();
+    SessionClient vol(clientConfig(presetView(sphere, "top"), Sync::Volume, Codec::Zstd));
+    vol.connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&vol}));
+    ASSERT_TRUE(waitConverged(server, {&vol}));
+    const uint64_t fullBefore = server.modeTotals(Sync::Volume).fullUpdates;
+    EXPECT_EQ(fullBefore, 1u);
+    SyncMode same{Sync::Volume, Codec::Zstd};
+    for (int i = 0; i < 5; ++i)
+        ASSERT_TRUE(vol.sendRaw(Channel::Control, encodeMessage(same)));
+    server.submitBoxCut(topBox()); // something after the requests, to know they were handled
+    ASSERT_TRUE(waitConverged(server, {&vol}));
+    EXPECT_EQ(server.modeTotals(Sync::Volume).fullUpdates, fullBefore);
+    EXPECT_EQ(vol.stats().malformed(), 0u);
+    // Another codec is a real request: the whole volume again, in it.
+    SyncMode other{Sync::Volume, Codec::Lz4};
+    ASSERT_TRUE(vol.sendRaw(Channel::Control, encodeMessage(other)));
+    ASSERT_TRUE(pumpUntil(
+        {&vol}, [&] { return server.modeTotals(Sync::Volume).fullUpdates == fullBefore + 1; }));
+}
+
 // Voxels put back after a cut raise densities inside bricks that still hold surface, where the
 // renderer's safety net cannot see it: the volume client's hit cache must not survive that, or
 // its rays resume too deep (a crash or a wrong picture). A narrow box keeps every brick occupied.
