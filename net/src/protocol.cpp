@@ -19,6 +19,9 @@ std::string refuseReasonText(uint32_t disconnectData) {
         return "the server is shutting down";
     case RefuseReason::BadHello:
         return "the server did not understand our hello";
+    case RefuseReason::VolumeTooLarge:
+        return "the volume is too large to send whole in this volume codec: use --sync dbi, or "
+               "a compressing --volume-codec";
     }
     return "the server closed the connection (reason " + std::to_string(disconnectData) + ")";
 }

@@ -244,6 +244,9 @@ struct SessionServer::Impl {
     std::mutex outMutex;
     std::map<uint16_t, PendingUpdate> outbox;
     std::map<uint16_t, PendingVolume> volumeOutbox;
+    // Volume clients whose whole volume does not fit a message in their codec: the network
+    // thread disconnects them, saying why (RefuseReason::VolumeTooLarge).
+    std::vector<uint16_t> volumeRefused;
     // Wakes the network thread's wait on the ENet socket when an update is posted, so it goes
     // out at once instead of after the rest of a 1 ms service timeout (-1: no eventfd; the
     // network thread then simply waits out its timeout).
@@ -355,7 +358,8 @@ struct SessionServer::Impl {
 
     // Queues the voxels of `box` (or, when `full`, the whole volume) for volume client `id`,
     // merged with its unsent volume update: the union box, taken from the volume now.
-    void postVolume(uint16_t id, const SimClient& c, Box3i box, bool full, bool materials,
+    // Returns false when the update does not fit a message (nothing is posted then).
+    bool postVolume(uint16_t id, const SimClient& c, Box3i box, bool full, bool materials,
                     uint64_t causeUs, uint32_t erodeUs) {
         std::optional<PendingVolume> old;
         {
@@ -376,7 +380,7 @@ struct SessionServer::Impl {
             box = volume.bounds();
         box = box.intersect(volume.bounds());
         if (box.empty())
-            return;
+            return true;
         VolumeUpdate u;
         u.sequence = ++sequence;
         u.causeServerUs = causeUs;
@@ -406,13 +410,9 @@ struct SessionServer::Impl {
                 m.erodeUs.add(double(erodeUs));
         }
         std::vector<uint8_t> message = encodeMessage(u);
-        if (message.empty()) {
-            std::fprintf(stderr,
-                         "trephine server: volume update of %dx%dx%d voxels does not fit "
-                         "a message; client %u skipped it\n",
-                         size.x, size.y, size.z, unsigned(id));
-            return;
-        }
+        if (message.empty())
+            return false; // over kMaxPayloadBytes once coded
+
         PendingVolume p{box,
                         full,
                         materials,
@@ -423,6 +423,23 @@ struct SessionServer::Impl {
         {
             std::lock_guard lock(outMutex);
             volumeOutbox[id] = std::move(p);
+        }
+        wakeNetwork();
+        return true;
+    }
+
+    // A box too large for a message goes as the whole volume, coded, which may fit; a whole
+    // volume that does not fit cannot be sent at all: the client is refused (network thread).
+    void postVolumeOrRefuse(uint16_t id, const SimClient& c, const Box3i& box, bool full,
+                            bool materials, uint64_t causeUs, uint32_t erodeUs) {
+        if (postVolume(id, c, box, full, materials, causeUs, erodeUs))
+            return;
+        if (!full && postVolume(id, c, volume.bounds(), true, true, causeUs, 0))
+            return;
+        {
+            std::lock_guard lock(outMutex);
+            volumeOutbox.erase(id);
+            volumeRefused.push_back(id);
         }
         wakeNetwork();
     }
@@ -544,7 +561,8 @@ void SessionServer::networkLoop() {
         std::lock_guard lock(s.reportMutex);
         f(s.peerReport[id]);
     };
-    auto sendTo = [&](ENetPeer* peer, Channel ch, const std::vector<uint8_t>& bytes) {
+    // False when ENet refused the packet (it is then not counted anywhere).
+    auto sendTo = [&](ENetPeer* peer, Channel ch, const std::vector<uint8_t>& bytes) -> bool {
         if (!bytes.empty() && s.host.send(peer, ch, bytes)) {
             m_stats.countOut(ch, bytes.size());
             if (uint16_t id = peerId(peer))
@@ -556,7 +574,9 @@ void SessionServer::networkLoop() {
                     else if (bytes[0] == uint8_t(MessageType::HapticRelay))
                         ++r.hapticRelays;
                 });
+            return true;
         }
+        return false;
     };
     auto viewTooLarge = [&](const ViewSpec& v) {
         return int64_t(v.width) * int64_t(v.height) > m_config.maxViewPixels;
@@ -903,8 +923,10 @@ void SessionServer::networkLoop() {
         s.host.service(0, onEvent);
         std::map<uint16_t, PendingUpdate> out;
         std::map<uint16_t, PendingVolume> outVolume;
+        std::vector<uint16_t> refused;
         {
             std::lock_guard lock(s.outMutex);
+            refused.swap(s.volumeRefused);
             out.swap(s.outbox);
             outVolume.swap(s.volumeOutbox);
         }
@@ -916,18 +938,33 @@ void SessionServer::networkLoop() {
             t.bytes += bytes;
             t.rawBytes += rawBytes;
         };
+        for (uint16_t id : refused) {
+            auto it = s.peers.find(id);
+            if (it == s.peers.end() || it->second.kicked)
+                continue;
+            std::fprintf(stderr,
+                         "trephine server: client %u: the whole volume does not fit a message "
+                         "in its volume codec; disconnected (volume sync refused)\n",
+                         unsigned(id));
+            it->second.kicked = true;
+            report(id, [](PeerReport& r) { r.kicked = true; });
+            enet_peer_disconnect(it->second.peer, uint32_t(RefuseReason::VolumeTooLarge));
+            s.releaseTakeOvers(id);
+            if (it->second.hello)
+                sendParticipants();
+        }
         for (auto& [id, u] : out) {
             auto it = s.peers.find(id);
             if (it != s.peers.end() && !it->second.kicked) {
-                sendTo(it->second.peer, Channel::Image, u.message);
-                countSent(Sync::Dbi, u.full, u.payloadBytes, u.rawBytes);
+                if (sendTo(it->second.peer, Channel::Image, u.message))
+                    countSent(Sync::Dbi, u.full, u.payloadBytes, u.rawBytes);
             }
         }
         for (auto& [id, u] : outVolume) {
             auto it = s.peers.find(id);
             if (it != s.peers.end() && !it->second.kicked) {
-                sendTo(it->second.peer, Channel::Volume, u.message);
-                countSent(Sync::Volume, u.full, u.payloadBytes, u.rawBytes);
+                if (sendTo(it->second.peer, Channel::Volume, u.message))
+                    countSent(Sync::Volume, u.full, u.payloadBytes, u.rawBytes);
             }
         }
         if (!out.empty() || !outVolume.empty())
@@ -1125,9 +1162,10 @@ void SessionServer::simulationLoop() {
                 continue;
             auto full = needVolume.find(id);
             if (full != needVolume.end())
-                s.postVolume(id, c, s.volume.bounds(), true, true, full->second, 0);
+                s.postVolumeOrRefuse(id, c, s.volume.bounds(), true, true, full->second, 0);
             else if (!changed.empty())
-                s.postVolume(id, c, changed, false, changedMaterials, causeUs, uint32_t(erodeUs));
+                s.postVolumeOrRefuse(id, c, changed, false, changedMaterials, causeUs,
+                                     uint32_t(erodeUs));
         }
         // Erosion only lowers densities, so the views' hit caches stay valid; voxels written
         // wholesale may raise them, which invalidates every cache (the next render restarts it).

@@ -17,6 +17,7 @@
 
 #include <chrono>
 #include <functional>
+#include <random>
 
 using namespace trephine;
 using namespace trephine::net;
@@ -230,6 +231,49 @@ TEST(SessionVolume, ARepeatedSyncModeIsANoOp) {
     ASSERT_TRUE(vol.sendRaw(Channel::Control, encodeMessage(other)));
     ASSERT_TRUE(pumpUntil(
         {&vol}, [&] { return server.modeTotals(Sync::Volume).fullUpdates == fullBefore + 1; }));
+}
+
+// A message over ENet's default packet limit (32 MiB) arrives: voxels written over the whole of a
+// 256^3 volume go as one raw box with its materials, 33.5 MB, which ENet used to refuse without a
+// word (the client kept a stale copy while the server counted the update as sent).
+TEST(SessionVolume, AnUpdateOverEnetsDefaultPacketLimitArrives) {
+    const Volume sphere = makeSphere(256);
+    SessionServer server(sphere, loopbackServerConfig("sphere:256", 2));
+    server.start();
+    SessionClient vol(clientConfig(presetView(sphere, "top"), Sync::Volume, Codec::Raw));
+    vol.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&vol}, [&] { return vol.localVolume() != nullptr || vol.closed(); }))
+        << vol.closeReason();
+    Volume changed = sphere;
+    changed.fill({{0, 0, 0}, {256, 256, 128}}, 0, Material::Air); // the lower half cut away
+    const size_t n = changed.voxelCount();
+    server.submitVoxels(changed.bounds(), {changed.densityData(), changed.densityData() + n},
+                        {changed.materialData(), changed.materialData() + n});
+    ASSERT_TRUE(pumpUntil({&vol}, [&] { return vol.volumeUpdatesApplied() >= 2 || vol.closed(); }))
+        << vol.closeReason();
+    EXPECT_TRUE(*vol.localVolume() == changed);
+    EXPECT_EQ(vol.stats().malformed(), 0u);
+}
+
+// A whole volume that does not fit a message even compressed (noise: 384^3 voxels, ~71 MB in
+// zstd, over the protocol's 64 MiB) cannot be sent: the client is told so, not left waiting.
+TEST(SessionVolume, AWholeVolumeTooLargeForAMessageRefusesVolumeSyncWithAReason) {
+    Volume noise({384, 384, 384}, glm::vec3(0.5f));
+    std::mt19937 rng(7);
+    for (size_t i = 0; i < noise.voxelCount(); ++i) {
+        const uint32_t r = rng();
+        const uint8_t d = uint8_t(r);
+        noise.densityData()[i] = d;
+        noise.materialData()[i] = d ? uint8_t(1 + (r >> 8) % 4) : uint8_t(Material::Air);
+    }
+    SessionServer server(noise, loopbackServerConfig("noise", 2));
+    server.start();
+    SessionClient vol(clientConfig(presetView(noise, "top"), Sync::Volume, Codec::Zstd));
+    vol.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&vol}, [&] { return vol.closed(); }));
+    EXPECT_EQ(vol.closeReason(), refuseReasonText(uint32_t(RefuseReason::VolumeTooLarge)));
+    EXPECT_EQ(vol.localVolume(), nullptr);
+    EXPECT_EQ(server.modeTotals(Sync::Volume).fullUpdates, 0u) << "nothing counted as sent";
 }
 
 // Voxels put back after a cut raise densities inside bricks that still hold surface, where the

@@ -34,6 +34,8 @@ enum class RefuseReason : uint32_t {
     ServerFull = 3, //
     Shutdown = 4,   // the server is stopping
     BadHello = 5,   // first message was not a valid hello
+    // volume sync: the whole volume does not fit a message in the client's volume codec
+    VolumeTooLarge = 6,
 };
 std::string refuseReasonText(uint32_t disconnectData);
 
