@@ -63,25 +63,35 @@ struct Sample {
 // first full volume has arrived.
 class LocalVolumeForce : public ForceSource {
 public:
+    // `shapeAt(t)`: the tool in the script at loop time t (a script may change tools on any row,
+    // as the server's drill follows every tool state).
     LocalVolumeForce(const net::SessionClient& client, std::shared_mutex& mutex,
-                     const ToolShape& shape)
-        : m_client(client), m_mutex(mutex), m_model(shape) {}
-    glm::vec3 force(const ToolPose& pose, double) override {
+                     std::function<ToolShape(double)> shapeAt)
+        : m_client(client), m_mutex(mutex), m_shapeAt(std::move(shapeAt)) {}
+    glm::vec3 force(const ToolPose& pose, double now) override {
+        const ForceModel& model = m_models.get(m_shapeAt(now)); // the haptic thread only
         std::shared_lock lock(m_mutex);
         const Volume* v = m_client.localVolume();
         if (!v)
             return glm::vec3(0.0f);
         ++m_ticks;
-        return m_model.compute(*v, pose).force;
+        return model.compute(*v, pose).force;
     }
     uint64_t ticks() const { return m_ticks.load(); }
+    size_t toolsUsed() const { return m_models.size(); }
 
 private:
     const net::SessionClient& m_client;
     std::shared_mutex& m_mutex;
-    ForceModel m_model;
+    std::function<ToolShape(double)> m_shapeAt;
+    ForceModelCache m_models;
     std::atomic<uint64_t> m_ticks{0};
 };
+
+ToolShape shapeOf(const net::ToolState& t) {
+    return ToolKind(t.toolKind) == ToolKind::Perforator ? ToolShape::perforator(t.diameterMm)
+                                                        : ToolShape::burr(t.diameterMm);
+}
 
 // The built-in burr hole: a 5 mm burr starts 1 mm above the default site and feeds in along the
 // normal at 1 mm/s, tool states at 100 Hz, then lifts (drilling off).
@@ -262,6 +272,8 @@ int runTrainee(const TraineeOptions& o) {
     uint64_t start = net::steadyNowUs();
     HapticLoopConfig loopConfig;
     loopConfig.sendRateHz = o.toolRateHz;
+    // Declared before the loop, so the loop (and its thread) ends before the force it calls.
+    std::unique_ptr<LocalVolumeForce> localForce;
     HapticLoop loop(device, loopConfig, [&](const DeviceState& state, double now) {
         net::ToolState t = sampleAt(now).tool;
         if (now >= scriptEnd) {
@@ -290,13 +302,9 @@ int runTrainee(const TraineeOptions& o) {
     start = net::steadyNowUs();
     nextPing = start;
     end = start + uint64_t(scriptEnd * 1e6);
-    std::unique_ptr<LocalVolumeForce> localForce;
     if (config.sync == net::Sync::Volume) {
-        const net::ToolState& t = script.front().tool;
-        localForce = std::make_unique<LocalVolumeForce>(client, volumeMutex,
-                                                        ToolKind(t.toolKind) == ToolKind::Perforator
-                                                            ? ToolShape::perforator(t.diameterMm)
-                                                            : ToolShape::burr(t.diameterMm));
+        localForce = std::make_unique<LocalVolumeForce>(
+            client, volumeMutex, [&](double t) { return shapeOf(sampleAt(t).tool); });
         loop.setForceSource(localForce.get());
     }
     loop.start();
@@ -367,8 +375,9 @@ int runTrainee(const TraineeOptions& o) {
                 st.hapticRoundTripUs.percentile(50), st.hapticRoundTripUs.percentile(99));
     if (localForce)
         std::printf("trainee: forces computed locally on the replicated volume in %llu of %llu "
-                    "haptic ticks (the rest: before the volume arrived)\n",
-                    (unsigned long long)localForce->ticks(), (unsigned long long)haptics.ticks);
+                    "haptic ticks (the rest: before the volume arrived), with %zu tool%s\n",
+                    (unsigned long long)localForce->ticks(), (unsigned long long)haptics.ticks,
+                    localForce->toolsUsed(), localForce->toolsUsed() == 1 ? "" : "s");
     if (!o.report.empty()) {
         net::ReportInfo info;
         info.server = o.connect;

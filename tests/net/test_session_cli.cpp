@@ -140,6 +140,37 @@ TEST(SessionCli, HeadlessTraineeRunsTheHapticLoopAndReportsIt) {
 
 // `trephine trainee --headless --sync volume`: the replicated-volume baseline computes its forces
 // locally on its copy of the volume, and the report names the mode.
+// A CSV script that changes tools: the volume trainee's local forces follow it (the server's
+// drill follows every tool state), not the first row's tool for the whole run.
+TEST(SessionCli, HeadlessVolumeTraineeForcesFollowTheScriptsToolChanges) {
+    Volume sphere = makeSphere(32);
+    SessionServer server(sphere, loopbackServerConfig("sphere:32"));
+    server.start();
+    const auto dir = std::filesystem::temp_directory_path();
+    const std::string tag = std::to_string(getpid());
+    const std::string csv = (dir / ("trephine_vtools_" + tag + ".csv")).string();
+    const std::string out = (dir / ("trephine_vtools_" + tag + ".txt")).string();
+    {
+        std::ofstream f(csv);
+        f << "time_s,x,y,z,qw,qx,qy,qz,speed,tool\n";
+        for (int i = 0; i <= 80; ++i) // a burr for 0.4 s, then the perforator
+            f << i * 0.01 << ",0,0,20,1,0,0,0,1," << (i < 40 ? "burr:4" : "perforator:8") << "\n";
+    }
+    std::string cmd = std::string(TREPHINE_BIN) +
+                      " trainee --connect 127.0.0.1:" + std::to_string(server.port()) +
+                      " --headless --sync volume --camera top --size 64 --script " + csv + " > " +
+                      out + " 2>&1";
+    ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
+    server.stop();
+    std::ifstream o(out);
+    std::string text((std::istreambuf_iterator<char>(o)), std::istreambuf_iterator<char>());
+    EXPECT_NE(text.find("haptic ticks (the rest: before the volume arrived), with 2 tools"),
+              std::string::npos)
+        << text;
+    std::filesystem::remove(csv);
+    std::filesystem::remove(out);
+}
+
 TEST(SessionCli, HeadlessVolumeTraineeComputesForcesOnItsOwnVolume) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, loopbackServerConfig("sphere:32"));
