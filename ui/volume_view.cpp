@@ -33,6 +33,11 @@ const char* kFs = R"(#version 330 core
 uniform sampler3D uDensity;  // R8, linear: the trilinear density
 uniform sampler3D uMaterial; // R8, fetched
 uniform sampler3D uGradient; // RGB16F, linear: central differences interpolated trilinearly
+// R8, fetched: per 4^3 brick the largest density of its voxels and the next one up on each axis
+// (every voxel a sample whose floor lies in the brick reads), as BrickGrid's maximum
+uniform sampler3D uBricks;
+uniform ivec3 uBrickDims;
+uniform bool uSkip;        // empty-space skipping (the pixels are the same without)
 uniform vec3 uDims;
 uniform ivec3 uDimsI;
 uniform vec3 uOrigin;      // eye, voxel coordinates
@@ -99,17 +104,44 @@ void main() {
     }
     int k = int(ceil(t0 / uDt)), kStart = k, kEnd = int(floor(t1 / uDt));
     float value = 0.0, last = 0.0;
+    int lastK = kStart - 2; // the index `last` was sampled at
     bool found = false;
     if (!outside && t0 <= t1) {
         for (; k <= kEnd; ++k) {
-            value = density(uOrigin + (float(k) * uDt) * dv);
+            vec3 p = uOrigin + (float(k) * uDt) * dv;
+            // A sample whose floor lies in a brick with no density at the iso-value is below it
+            // (a trilinear sample is a convex combination of voxels the brick's maximum covers):
+            // leap to the last sample before the ray leaves the brick and test that one, which
+            // also covers a rounding that put it just past the brick's face. Samples sit at the
+            // same k * dt as without skipping, so the first one inside is the same.
+            if (uSkip) {
+                ivec3 b = clamp(ivec3(floor(p)), ivec3(0), uDimsI - 1) >> 2;
+                if (texelFetch(uBricks, b, 0).r * 255.0 < kIso - 0.5) {
+                    float tExit = 3.4e38;
+                    for (int a = 0; a < 3; ++a) {
+                        if (dv[a] > 0.0 && b[a] < uBrickDims[a] - 1)
+                            tExit = min(tExit, (float(4 * b[a] + 4) - uOrigin[a]) / dv[a]);
+                        else if (dv[a] < 0.0 && b[a] > 0)
+                            tExit = min(tExit, (float(4 * b[a]) - uOrigin[a]) / dv[a]);
+                    }
+                    int kLast = int(min(floor(tExit / uDt), float(kEnd)));
+                    if (kLast > k) {
+                        k = kLast;
+                        p = uOrigin + (float(k) * uDt) * dv;
+                    }
+                }
+            }
+            value = density(p);
             if (value >= kIso) {
                 found = true;
                 break;
             }
             last = value;
+            lastK = k;
         }
     }
+    if (found && k > kStart && lastK != k - 1) // the sample before the hit was leapt over
+        last = density(uOrigin + (float(k - 1) * uDt) * dv);
     if (!found) {
         fragColor = uBackground;
         gl_FragDepth = 1.0;
@@ -194,6 +226,7 @@ VolumeView::VolumeView() {
     glUniform1i(glGetUniformLocation(m_program, "uDensity"), 0);
     glUniform1i(glGetUniformLocation(m_program, "uMaterial"), 1);
     glUniform1i(glGetUniformLocation(m_program, "uGradient"), 2);
+    glUniform1i(glGetUniformLocation(m_program, "uBricks"), 3);
     glm::vec3 colors[kMaterialCount];
     for (int m = 0; m < kMaterialCount; ++m)
         colors[m] = materialColor(Material(m));
@@ -208,8 +241,8 @@ VolumeView::VolumeView() {
 }
 
 VolumeView::~VolumeView() {
-    GLuint tex[] = {m_densityTex, m_materialTex, m_gradientTex, m_fboColor};
-    glDeleteTextures(4, tex);
+    GLuint tex[] = {m_densityTex, m_materialTex, m_gradientTex, m_brickTex, m_fboColor};
+    glDeleteTextures(5, tex);
     glDeleteRenderbuffers(1, &m_fboDepth);
     glDeleteFramebuffers(1, &m_fbo);
     glDeleteVertexArrays(1, &m_emptyVao);
@@ -247,6 +280,9 @@ void VolumeView::upload(const Volume& volume) {
     make(m_materialTex, GL_R8, m_dims, GL_RED, GL_UNSIGNED_BYTE, GL_NEAREST, volume.materialData());
     make(m_gradientTex, GL_RGB16F, m_dims + 2, GL_RGB, GL_FLOAT, GL_LINEAR, nullptr);
     uploadGradients(volume, {glm::ivec3(-1), m_dims + 1});
+    m_brickDims = (m_dims + 3) / 4;
+    make(m_brickTex, GL_R8, m_brickDims, GL_RED, GL_UNSIGNED_BYTE, GL_NEAREST, nullptr);
+    uploadBricks(volume, {glm::ivec3(0), m_brickDims});
     glBindTexture(GL_TEXTURE_3D, 0);
     // Out of memory (256^3 takes ~140 MB of textures) or a size the driver refuses: say so
     // rather than draw a blank or flat-shaded volume.
@@ -282,6 +318,9 @@ VolumeUpdateStats VolumeView::updateBox(const Volume& volume, const Box3i& box) 
     Box3i g{glm::max(b.lo - 1, glm::ivec3(-1)), glm::min(b.hi + 1, m_dims + 1)};
     uploadGradients(volume, g);
     stats.gradientVoxels = g.count();
+    // The bricks whose maximum reads a changed voxel: brick c covers voxels [4c, 4c + 5).
+    uploadBricks(volume, {glm::max((b.lo - 4 + 3) / 4, glm::ivec3(0)),
+                          glm::min((b.hi - 1) / 4 + 1, m_brickDims)});
     stats.gradientMs = msSince(t1);
     glBindTexture(GL_TEXTURE_3D, 0);
     return stats;
@@ -330,6 +369,36 @@ void VolumeView::uploadGradients(const Volume& volume, const Box3i& box) {
     }
 }
 
+// The largest density of each brick in `bricks` (brick coordinates, half-open) over the voxels
+// [4c, 4c + 5) per axis clipped to the volume (a sample whose floor is in the brick reads up to
+// one voxel beyond it; voxels outside the volume are air), uploaded to the brick texture.
+void VolumeView::uploadBricks(const Volume& volume, const Box3i& bricks) {
+    if (bricks.empty())
+        return;
+    const glm::ivec3 n = m_dims, s = bricks.size();
+    std::vector<uint8_t> maxima(size_t(bricks.count()), 0);
+    const uint8_t* d = volume.densityData();
+    size_t o = 0;
+    for (int bz = bricks.lo.z; bz < bricks.hi.z; ++bz)
+        for (int by = bricks.lo.y; by < bricks.hi.y; ++by)
+            for (int bx = bricks.lo.x; bx < bricks.hi.x; ++bx, ++o) {
+                const glm::ivec3 lo(4 * bx, 4 * by, 4 * bz);
+                const glm::ivec3 hi = glm::min(lo + 5, n);
+                uint8_t m = 0;
+                for (int z = lo.z; z < hi.z; ++z)
+                    for (int y = lo.y; y < hi.y; ++y) {
+                        const uint8_t* row = d + size_t(n.x) * (size_t(y) + size_t(n.y) * z);
+                        for (int x = lo.x; x < hi.x; ++x)
+                            m = std::max(m, row[x]);
+                    }
+                maxima[o] = m;
+            }
+    glBindTexture(GL_TEXTURE_3D, m_brickTex);
+    glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
+    glTexSubImage3D(GL_TEXTURE_3D, 0, bricks.lo.x, bricks.lo.y, bricks.lo.z, s.x, s.y, s.z, GL_RED,
+                    GL_UNSIGNED_BYTE, maxima.data());
+}
+
 // [SECTION] Drawing ----------------------------------------------------------------------------
 
 void VolumeView::draw(const Camera& camera) {
@@ -369,8 +438,10 @@ void VolumeView::draw(const Camera& camera) {
     glUniform1f(loc("uDt"), std::max(1e-3f, m_stepVoxels) * minSpacing);
     glUniformMatrix4fv(loc("uViewProj"), 1, GL_FALSE, glm::value_ptr(vpf));
 
-    const GLuint tex[3] = {m_densityTex, m_materialTex, m_gradientTex};
-    for (int i = 0; i < 3; ++i) {
+    glUniform3i(loc("uBrickDims"), m_brickDims.x, m_brickDims.y, m_brickDims.z);
+    glUniform1i(loc("uSkip"), m_skipEmpty ? 1 : 0);
+    const GLuint tex[4] = {m_densityTex, m_materialTex, m_gradientTex, m_brickTex};
+    for (int i = 0; i < 4; ++i) {
         glActiveTexture(GLenum(GL_TEXTURE0 + i));
         glBindTexture(GL_TEXTURE_3D, tex[i]);
     }

@@ -197,3 +197,45 @@ TEST_F(VolumeViewTest, AVolumeTooLargeForTheTexturesIsRefusedWithTheLimit) {
     EXPECT_FALSE(view->empty());
     EXPECT_EQ(glGetError(), GLenum(GL_NO_ERROR));
 }
+
+// Empty-space skipping over the brick texture leaves every pixel as it was: samples sit at the
+// same k * dt, and only samples proven below the iso-value are leapt over.
+TEST_F(VolumeViewTest, SkippingEmptySpaceChangesNoPixel) {
+    Volume skull = makeSkull(64);
+    std::vector<Camera> cams;
+    for (const char* preset : {"paper", "working", "left"})
+        cams.push_back(cameraPreset(preset, skull, {160, 160}));
+    skull.fill({{20, 20, 40}, {44, 44, 64}}, 0, Material::Air); // a hole to look into
+    view->upload(skull);
+    for (const Camera& cam : cams) {
+        SCOPED_TRACE(describe(cam));
+        view->setSkipEmpty(false);
+        view->render(cam);
+        const Dbi plain = view->readBack();
+        view->setSkipEmpty(true);
+        view->render(cam);
+        const Dbi skipped = view->readBack();
+        EXPECT_TRUE(skipped == plain) << compare(skipped, plain).describe();
+        EXPECT_GT(compare(plain, Dbi(160, 160)).differingPixels, 1000) << "the skull shows";
+    }
+}
+
+// updateBox keeps the brick texture in step both ways: bone set where every brick was empty (a
+// plate in the air in front of the sphere) shows, as in the CPU render.
+TEST_F(VolumeViewTest, UpdateBoxShowsBoneAddedInEmptySpace) {
+    Volume sphere = makeSphere(64);
+    Camera cam = sphereCamera(sphere);
+    view->upload(sphere);
+    const Box3i plate{{24, 24, 60}, {40, 40, 62}}; // in front of the sphere, towards the eye
+    for (int z = plate.lo.z; z < plate.hi.z; ++z)
+        for (int y = plate.lo.y; y < plate.hi.y; ++y)
+            for (int x = plate.lo.x; x < plate.hi.x; ++x)
+                sphere.set(x, y, z, 255, Material::Cortical);
+    view->updateBox(sphere, plate);
+    view->render(cam);
+    const Dbi gpu = view->readBack();
+    const Dbi cpu = Renderer(sphere).render(cam);
+    expectAgreement(agree(gpu, cpu, cam, 1.0f));
+    EXPECT_GT(compare(gpu, Renderer(makeSphere(64)).render(cam)).differingPixels, 100)
+        << "the plate shows";
+}
