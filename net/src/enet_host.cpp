@@ -155,10 +155,26 @@ int Host::service(uint32_t timeoutMs, const EventHandler& handler) {
     return handled;
 }
 
-bool Host::send(ENetPeer* peer, Channel channel, std::span<const uint8_t> bytes) {
+namespace {
+// ENet destroys a packet once it is sent (unreliable) or acknowledged (reliable), or with its
+// peer: the bytes leave the counter then, and the packet's share of the counter goes.
+void releaseInFlight(ENetPacket* packet) {
+    auto* counter = static_cast<Host::InFlight*>(packet->userData);
+    (*counter)->fetch_sub(int64_t(packet->dataLength), std::memory_order_relaxed);
+    delete counter;
+}
+} // namespace
+
+bool Host::send(ENetPeer* peer, Channel channel, std::span<const uint8_t> bytes,
+                const InFlight& inFlight) {
     ENetPacket* p = enet_packet_create(bytes.data(), bytes.size(), channelPacketFlags(channel));
     if (!p)
         return false;
+    if (inFlight) {
+        inFlight->fetch_add(int64_t(p->dataLength), std::memory_order_relaxed);
+        p->userData = new InFlight(inFlight);
+        p->freeCallback = releaseInFlight;
+    }
     if (enet_peer_send(peer, uint8_t(channel), p) != 0) {
         enet_packet_destroy(p);
         return false;

@@ -83,6 +83,9 @@ struct NetPeer {
     Hello helloMsg;
     Sync sync = Sync::Dbi;          // the hello's, then the latest SyncMode
     Codec volumeCodec = Codec::Lz4; // likewise
+    // Bytes of this peer's image and volume updates ENet still holds (ServerConfig::
+    // maxInFlightBytes).
+    Host::InFlight inFlight = std::make_shared<std::atomic<int64_t>>(0);
     int malformed = 0;
     bool kicked = false;
 };
@@ -562,8 +565,9 @@ void SessionServer::networkLoop() {
         f(s.peerReport[id]);
     };
     // False when ENet refused the packet (it is then not counted anywhere).
-    auto sendTo = [&](ENetPeer* peer, Channel ch, const std::vector<uint8_t>& bytes) -> bool {
-        if (!bytes.empty() && s.host.send(peer, ch, bytes)) {
+    auto sendTo = [&](ENetPeer* peer, Channel ch, const std::vector<uint8_t>& bytes,
+                      const Host::InFlight& inFlight = {}) -> bool {
+        if (!bytes.empty() && s.host.send(peer, ch, bytes, inFlight)) {
             m_stats.countOut(ch, bytes.size());
             if (uint16_t id = peerId(peer))
                 report(id, [&](PeerReport& r) {
@@ -927,8 +931,23 @@ void SessionServer::networkLoop() {
         {
             std::lock_guard lock(s.outMutex);
             refused.swap(s.volumeRefused);
-            out.swap(s.outbox);
-            outVolume.swap(s.volumeOutbox);
+            // A peer with too much still in ENet's hands gets nothing now: its update stays in
+            // the outbox, where the next changes merge into it (ServerConfig::maxInFlightBytes).
+            auto take = [&](auto& box, auto& into) {
+                for (auto it = box.begin(); it != box.end();) {
+                    auto peer = s.peers.find(it->first);
+                    if (peer != s.peers.end() && !peer->second.kicked &&
+                        peer->second.inFlight->load(std::memory_order_relaxed) >
+                            m_config.maxInFlightBytes) {
+                        ++it;
+                        continue;
+                    }
+                    into.insert(std::move(*it));
+                    it = box.erase(it);
+                }
+            };
+            take(s.outbox, out);
+            take(s.volumeOutbox, outVolume);
         }
         auto countSent = [&](Sync mode, bool full, uint32_t bytes, uint32_t rawBytes) {
             std::lock_guard lock(s.reportMutex);
@@ -956,19 +975,24 @@ void SessionServer::networkLoop() {
         for (auto& [id, u] : out) {
             auto it = s.peers.find(id);
             if (it != s.peers.end() && !it->second.kicked) {
-                if (sendTo(it->second.peer, Channel::Image, u.message))
+                if (sendTo(it->second.peer, Channel::Image, u.message, it->second.inFlight))
                     countSent(Sync::Dbi, u.full, u.payloadBytes, u.rawBytes);
             }
         }
         for (auto& [id, u] : outVolume) {
             auto it = s.peers.find(id);
             if (it != s.peers.end() && !it->second.kicked) {
-                if (sendTo(it->second.peer, Channel::Volume, u.message))
+                if (sendTo(it->second.peer, Channel::Volume, u.message, it->second.inFlight))
                     countSent(Sync::Volume, u.full, u.payloadBytes, u.rawBytes);
             }
         }
         if (!out.empty() || !outVolume.empty())
             s.host.flush();
+        for (const auto& [id, p] : s.peers) {
+            const int64_t held = p.inFlight->load(std::memory_order_relaxed);
+            if (held > m_peakInFlight.load(std::memory_order_relaxed))
+                m_peakInFlight.store(held, std::memory_order_relaxed);
+        }
         uint64_t now = steadyNowUs();
         if (now >= nextTick) {
             m_stats.tick(now);

@@ -5,8 +5,10 @@
 
 #include <enet/enet.h>
 
+#include <atomic>
 #include <cstdint>
 #include <functional>
+#include <memory>
 #include <span>
 #include <string>
 
@@ -74,8 +76,14 @@ public:
     // Returns the number of events handled.
     int service(uint32_t timeoutMs, const EventHandler& handler);
 
+    // Bytes of packets sent with it that ENet still holds (queued, or sent and not acknowledged):
+    // each packet keeps the counter alive until ENet releases it, so it outlives its peer.
+    using InFlight = std::shared_ptr<std::atomic<int64_t>>;
+
     // Queues a packet on the channel with that channel's flags; sent on the next service/flush.
-    bool send(ENetPeer* peer, Channel channel, std::span<const uint8_t> bytes);
+    // With `inFlight`, its size counts there until ENet releases the packet.
+    bool send(ENetPeer* peer, Channel channel, std::span<const uint8_t> bytes,
+              const InFlight& inFlight = {});
     void flush() { enet_host_flush(m_host); }
 
 private:

@@ -46,6 +46,11 @@ struct ServerConfig {
     // Between two drilling tool states the cutter sweeps the path in sub-steps of at most a
     // quarter voxel (sweepPoses); a move longer than this is a jump, drilled at its end only.
     float maxSweepMm = 10.0f;
+    // A client whose image and volume updates ENet still holds (queued, or not acknowledged) come
+    // to more than this many bytes gets no more for now: its next update waits in the server's
+    // outbox, where newer changes merge into it, so a slow link's backlog stays bounded (about
+    // this plus one update) and the client catches up with one merged update.
+    int64_t maxInFlightBytes = 4 << 20;
 };
 
 // What the server sent in one sync mode, and how many connected clients use it now.
@@ -91,6 +96,9 @@ public:
     // True when no tool state or view event waits and no image update is queued or unsent.
     bool idle();
     size_t clientCount() const { return m_clientCount.load(); }
+    // The most bytes of image and volume updates ENet held for one client at once (see
+    // ServerConfig::maxInFlightBytes), over the session.
+    int64_t peakInFlightBytes() const { return m_peakInFlight.load(); }
     uint64_t malformedTotal() const { return m_stats.malformed(); }
     uint64_t disconnectedForMalformed() const { return m_malformedKicks.load(); }
     uint64_t toolStatesApplied() const { return m_toolStatesApplied.load(); }
@@ -131,6 +139,7 @@ private:
     std::atomic<uint64_t> m_malformedKicks{0};
     std::atomic<uint64_t> m_toolStatesApplied{0};
     std::atomic<uint64_t> m_renders{0};
+    std::atomic<int64_t> m_peakInFlight{0};
     std::atomic<uint64_t> m_hapticSent{0};
     std::atomic<uint64_t> m_hapticRelayed{0};
     std::atomic<uint64_t> m_refusedFull{0};
