@@ -288,7 +288,9 @@ bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
     if (m_wantSync != Sync::Volume)
         return true;
     const bool switching = m_sync != Sync::Volume;
-    if (switching && (!u.full || int32_t(u.sequence - m_lastImageSeq) <= 0))
+    // (Compared only with an image actually received: with none, any full volume is new, whatever
+    // the server's counter, even past 2^31.)
+    if (switching && (!u.full || (m_imagesSeen && int32_t(u.sequence - m_lastImageSeq) <= 0)))
         return true; // from an earlier volume period; the switch waits for its full volume
     if (!u.full && !m_volume)
         return true;
@@ -361,6 +363,7 @@ bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
     const uint64_t done = steadyNowUs();
 
     m_lastVolumeSeq = u.sequence;
+    m_volumesSeen = true;
     m_lastSequence = u.sequence;
     ++m_updatesApplied;
     ++m_volumeUpdates;
@@ -400,8 +403,8 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
     // In volume mode images are stale, unless we are switching back and this is the full image
     // the server sent after the switch (newer than every volume update applied).
     const bool leavingVolume = m_sync == Sync::Volume;
-    if (leavingVolume &&
-        (m_wantSync != Sync::Dbi || !u.full || int32_t(u.sequence - m_lastVolumeSeq) <= 0))
+    if (leavingVolume && (m_wantSync != Sync::Dbi || !u.full ||
+                          (m_volumesSeen && int32_t(u.sequence - m_lastVolumeSeq) <= 0)))
         return true;
     // Which view does it belong to? Updates of a view we have left are stale, not malformed.
     const ViewSpec* view = nullptr;
@@ -462,6 +465,7 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
     m_dbi.apply(patch, u.x, u.y);
     m_lastSequence = u.sequence;
     m_lastImageSeq = u.sequence;
+    m_imagesSeen = true;
     ++m_updatesApplied;
     if (u.full) {
         ++m_fullUpdates;

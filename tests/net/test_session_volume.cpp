@@ -475,6 +475,41 @@ TEST(SessionVolume, ClientDropsAndCountsMalformedVolumeUpdates) {
     EXPECT_TRUE(*client.localVolume() == expected);
 }
 
+// A switch made before any update of the mode it leaves has arrived takes the new mode's first
+// full update whatever the server's sequence counter, even past 2^31 (a signed comparison with
+// the initial 0 took it for stale, and the client waited for ever).
+TEST(SessionVolume, AFirstFullUpdatePastTwoToTheThirtyFirstIsNotStale) {
+    trephine::testing::FakeServer fake;
+    ClientConfig cfg = clientConfig(ViewSpec{}, Sync::Dbi);
+    cfg.view.width = cfg.view.height = 32;
+    cfg.renderThreads = 1;
+    SessionClient client(cfg);
+    client.requestSync(Sync::Volume); // before any image: the hello asks for volume
+    client.connect(loopback(fake.port()));
+    auto pumpBoth = [&](const std::function<bool()>& pred) { return fake.pumpWith(client, pred); };
+    ASSERT_TRUE(pumpBoth([&] { return fake.peer && client.connected(); }));
+    Volume v = makeSphere(16);
+    Welcome w;
+    w.clientId = 1;
+    w.volumeDims = v.dims();
+    w.spacing = v.spacing();
+    w.volumeName = "sphere:16";
+    fake.send(Channel::Control, encodeMessage(w));
+    VolumeUpdate u;
+    u.sequence = 0x80000010u;
+    u.full = true;
+    u.materials = true;
+    u.sizeX = u.sizeY = u.sizeZ = 16;
+    EncodedVolume e = encodeVolumeFull(v, Codec::Lz4);
+    u.codec = e.codec;
+    u.rawBytes = e.rawBytes;
+    u.payload = std::move(e.payload);
+    fake.send(Channel::Volume, encodeMessage(u));
+    ASSERT_TRUE(pumpBoth([&] { return client.sync() == Sync::Volume; }))
+        << "sync " << int(client.sync()) << ", applied " << client.volumeUpdatesApplied();
+    EXPECT_TRUE(*client.localVolume() == v);
+}
+
 TEST(VolumeCodec, BoxDensitiesDeriveMaterialsAsErosionLeavesThem) {
     Volume v = makeSkull(32);
     Volume target = v;
