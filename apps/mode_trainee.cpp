@@ -286,6 +286,12 @@ int runTrainee(const TraineeOptions& o) {
         std::lock_guard lock(sendMutex);
         toSend.push_back(t);
     });
+    // The callback below reaches `loop`: however this function ends (an exception included),
+    // it is cleared before `loop` goes, since the client's destructor still polls.
+    struct ClearHapticCallback {
+        net::SessionClient& client;
+        ~ClearHapticCallback() { client.setHapticCallback({}); }
+    } clearHapticCallback{client};
     client.setHapticCallback([&](const net::HapticModel& m, uint64_t arrivalUs) {
         HapticModelData d;
         d.position = m.position;

@@ -1,7 +1,6 @@
 #include "net/enet_host.h"
 
 #include "libsim/error.h"
-#include "net/protocol.h"
 
 #include <atomic>
 #include <charconv>
@@ -37,10 +36,6 @@ uint32_t channelPacketFlags(Channel c) {
 }
 
 namespace {
-
-// The largest packet either end sends or takes: a message with the protocol's largest payload
-// and its fields. ENet's default (32 MiB) silently refused a raw 256^3 whole volume (33.5 MB).
-constexpr size_t kMaxPacketBytes = kMaxPayloadBytes + 64 * 1024;
 std::mutex g_libMutex;
 int g_libUsers = 0;
 } // namespace
@@ -104,7 +99,6 @@ Host Host::listen(uint16_t port, size_t maxPeers) {
     if (!h)
         throw Error("cannot listen on UDP port " + std::to_string(port) +
                     " (in use? try another --port)");
-    h->maximumPacketSize = kMaxPacketBytes;
     return Host(h);
 }
 
@@ -113,7 +107,6 @@ Host Host::client() {
     ENetHost* h = enet_host_create(nullptr, 1, size_t(Channel::Count), 0, 0);
     if (!h)
         throw Error("cannot create an ENet client host");
-    h->maximumPacketSize = kMaxPacketBytes;
     return Host(h);
 }
 

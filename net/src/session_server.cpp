@@ -413,8 +413,8 @@ struct SessionServer::Impl {
                 m.erodeUs.add(double(erodeUs));
         }
         std::vector<uint8_t> message = encodeMessage(u);
-        if (message.empty())
-            return false; // over kMaxPayloadBytes once coded
+        if (message.empty() || message.size() > kMaxSentMessageBytes)
+            return false; // too large once coded to go through ENet
 
         PendingVolume p{box,
                         full,
@@ -880,7 +880,11 @@ void SessionServer::networkLoop() {
             } while (s.peers.count(id));
             ev.peer->data = reinterpret_cast<void*>(uintptr_t(id));
             s.peers[id].peer = ev.peer;
-            report(id, [](PeerReport& r) { r.connectedUs = steadyNowUs(); });
+            // A fresh report: after the ids wrap, one may still hold a left peer's figures.
+            report(id, [](PeerReport& r) {
+                r = PeerReport{};
+                r.connectedUs = steadyNowUs();
+            });
             m_clientCount = s.peers.size();
             return;
         }

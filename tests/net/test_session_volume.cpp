@@ -233,10 +233,11 @@ TEST(SessionVolume, ARepeatedSyncModeIsANoOp) {
         {&vol}, [&] { return server.modeTotals(Sync::Volume).fullUpdates == fullBefore + 1; }));
 }
 
-// A message over ENet's default packet limit (32 MiB) arrives: voxels written over the whole of a
-// 256^3 volume go as one raw box with its materials, 33.5 MB, which ENet used to refuse without a
-// word (the client kept a stale copy while the server counted the update as sent).
-TEST(SessionVolume, AnUpdateOverEnetsDefaultPacketLimitArrives) {
+// An update too large to go through ENet in one message (voxels written over the whole of a
+// 256^3 volume: a raw box with its materials, 33.5 MB, over kMaxSentMessageBytes) goes as the
+// whole volume, compressed, instead of being dropped without a word (the client kept a stale copy
+// while the server counted the update as sent).
+TEST(SessionVolume, AnUpdateTooLargeForOneMessageGoesAsTheWholeVolume) {
     const Volume sphere = makeSphere(256);
     SessionServer server(sphere, loopbackServerConfig("sphere:256", 2));
     server.start();
@@ -252,13 +253,15 @@ TEST(SessionVolume, AnUpdateOverEnetsDefaultPacketLimitArrives) {
     ASSERT_TRUE(pumpUntil({&vol}, [&] { return vol.volumeUpdatesApplied() >= 2 || vol.closed(); }))
         << vol.closeReason();
     EXPECT_TRUE(*vol.localVolume() == changed);
+    EXPECT_EQ(vol.stats().modes[size_t(Sync::Volume)].fullUpdates, 2u) << "the join's and this";
     EXPECT_EQ(vol.stats().malformed(), 0u);
 }
 
-// A whole volume that does not fit a message even compressed (noise: 384^3 voxels, ~71 MB in
-// zstd, over the protocol's 64 MiB) cannot be sent: the client is told so, not left waiting.
+// A whole volume too large for a message even compressed (noise: 330^3 voxels, ~45 MB in zstd,
+// over the 30 MiB ENet can deliver: kMaxSentMessageBytes) cannot be sent: the client is told so,
+// not left waiting (ENet would have resent fragments until the connection timed out).
 TEST(SessionVolume, AWholeVolumeTooLargeForAMessageRefusesVolumeSyncWithAReason) {
-    Volume noise({384, 384, 384}, glm::vec3(0.5f));
+    Volume noise({330, 330, 330}, glm::vec3(0.5f));
     std::mt19937 rng(7);
     for (size_t i = 0; i < noise.voxelCount(); ++i) {
         const uint32_t r = rng();

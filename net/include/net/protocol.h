@@ -48,6 +48,12 @@ inline constexpr uint16_t kMaxAnnotations = 256;
 // Marks lie within this distance of the volume's centre (mm): the largest volume is 4096 voxels.
 inline constexpr float kMaxAnnotationDistanceMm = 1.0e5f;
 inline constexpr size_t kMaxPayloadBytes = 64u * 1024u * 1024u;
+// The largest message the server sends: ENet delivers a reliable packet only while its fragments
+// (1372 bytes at the default MTU) fit the receiver's acknowledgement window (7-8 windows of 4096
+// sequence numbers past the channel's position: 32-37 MiB), and it refuses packets over its
+// 32 MiB default anyway. A larger one is never sent (a box goes as the whole volume, compressed;
+// a whole volume over it refuses volume sync: RefuseReason::VolumeTooLarge).
+inline constexpr size_t kMaxSentMessageBytes = 30u * 1024u * 1024u;
 inline constexpr uint16_t kMaxVolumeDim = 4096; // as the welcome's range
 // The largest uncompressed volume layout a VolumeUpdate may announce (density + material bytes of
 // a 512^3 volume); ENet itself refuses packets over 32 MiB, so payloads stay under
