@@ -9,6 +9,7 @@
 
 #include "ui/gl_program.h"
 
+#include "libsim/brick_grid.h"
 #include "libsim/error.h"
 #include "libsim/renderer.h"
 #include "libsim/svg_plot.h" // formatString
@@ -369,30 +370,16 @@ void VolumeView::uploadGradients(const Volume& volume, const Box3i& box) {
     }
 }
 
-// The largest density of each brick in `bricks` (brick coordinates, half-open) over the voxels
-// [4c, 4c + 5) per axis clipped to the volume (a sample whose floor is in the brick reads up to
-// one voxel beyond it; voxels outside the volume are air), uploaded to the brick texture.
+// The largest density of each brick in `bricks` (brick coordinates, half-open) over its voxels
+// and the next one up on each axis, as BrickGrid's maximum, uploaded to the brick texture.
 void VolumeView::uploadBricks(const Volume& volume, const Box3i& bricks) {
+    static_assert(BrickGrid::kSize == 4 && BrickGrid::kApronLo == 0 && BrickGrid::kApronHi == 1,
+                  "the shader's bricks (4^3, brick b from floor(p) >> 2) are BrickGrid's");
     if (bricks.empty())
         return;
-    const glm::ivec3 n = m_dims, s = bricks.size();
-    std::vector<uint8_t> maxima(size_t(bricks.count()), 0);
-    const uint8_t* d = volume.densityData();
-    size_t o = 0;
-    for (int bz = bricks.lo.z; bz < bricks.hi.z; ++bz)
-        for (int by = bricks.lo.y; by < bricks.hi.y; ++by)
-            for (int bx = bricks.lo.x; bx < bricks.hi.x; ++bx, ++o) {
-                const glm::ivec3 lo(4 * bx, 4 * by, 4 * bz);
-                const glm::ivec3 hi = glm::min(lo + 5, n);
-                uint8_t m = 0;
-                for (int z = lo.z; z < hi.z; ++z)
-                    for (int y = lo.y; y < hi.y; ++y) {
-                        const uint8_t* row = d + size_t(n.x) * (size_t(y) + size_t(n.y) * z);
-                        for (int x = lo.x; x < hi.x; ++x)
-                            m = std::max(m, row[x]);
-                    }
-                maxima[o] = m;
-            }
+    std::vector<uint8_t> maxima;
+    BrickGrid::regionMax(volume, bricks.lo, bricks.hi - 1, maxima);
+    const glm::ivec3 s = bricks.size();
     glBindTexture(GL_TEXTURE_3D, m_brickTex);
     glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
     glTexSubImage3D(GL_TEXTURE_3D, 0, bricks.lo.x, bricks.lo.y, bricks.lo.z, s.x, s.y, s.z, GL_RED,

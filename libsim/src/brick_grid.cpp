@@ -36,11 +36,11 @@ void minOf3(uint8_t* __restrict o, const uint8_t* a, const uint8_t* b, const uin
 } // namespace
 
 void BrickGrid::regionMax(const Volume& volume, glm::ivec3 b0, glm::ivec3 b1,
-                          std::vector<uint8_t>& out) const {
+                          std::vector<uint8_t>& out) {
     // Separable maximum, each brick over its voxels plus apron: first along z and then y as
     // element-wise maxima of whole voxel rows (vectorised), so that only one row per brick row is
     // left for the x pass.
-    const glm::ivec3 n = m_volumeDims;
+    const glm::ivec3 n = volume.dims();
     const glm::ivec3 B = b1 - b0 + 1; // bricks of the region per axis
     const uint8_t* d = volume.densityData();
     auto range = [](int b, int limit) {

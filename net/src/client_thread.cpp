@@ -322,12 +322,6 @@ void ClientThread::run() {
                     m_state = LinkState::Connected;
                     m_closeReason.clear();
                     nextPublish = now;
-                    // A switch or a view asked for after this connection's hello was built (while
-                    // retrying, or before the welcome: requests wait for it) goes out now.
-                    if (m_wantedSync && *m_wantedSync != cc.sync)
-                        cp->requestSync(*m_wantedSync);
-                    if (m_wantedView && !(*m_wantedView == cc.view))
-                        cp->requestView(*m_wantedView);
                 }
                 std::deque<Command> cmds;
                 {
@@ -339,13 +333,13 @@ void ClientThread::run() {
                         if (cp->welcomed())
                             cp->sendToolState(*t);
                     } else if (auto* v = std::get_if<ViewCmd>(&c)) {
+                        // SessionClient holds a view or switch asked for before its connection
+                        // is up and makes it then (with the hello, or right after it).
                         m_wantedView = v->view;
-                        if (cp->welcomed())
-                            cp->requestView(v->view);
+                        cp->requestView(v->view);
                     } else if (auto* y = std::get_if<SyncCmd>(&c)) {
                         m_wantedSync = y->sync;
-                        if (cp->welcomed())
-                            cp->requestSync(y->sync);
+                        cp->requestSync(y->sync);
                     } else if (auto* a = std::get_if<Annotate>(&c)) {
                         if (cp->welcomed())
                             cp->annotate(*a);

@@ -273,6 +273,14 @@ void SessionClient::renderLocal() {
     m_dbi = m_renderer->render(toCamera(m_view), &m_hitCache);
 }
 
+namespace {
+// Whether `sequence` is no newer than `last` (wrapping compare); never, when nothing was received:
+// any sequence is new then, whatever the server's counter (even past 2^31).
+bool notNewer(uint32_t sequence, std::optional<uint32_t> last) {
+    return last && int32_t(sequence - *last) <= 0;
+}
+} // namespace
+
 bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
     uint64_t start = steadyNowUs();
     double gridUs = -1; // the renderer's brick-grid update, part of the apply
@@ -288,9 +296,7 @@ bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
     if (m_wantSync != Sync::Volume)
         return true;
     const bool switching = m_sync != Sync::Volume;
-    // (Compared only with an image actually received: with none, any full volume is new, whatever
-    // the server's counter, even past 2^31.)
-    if (switching && (!u.full || (m_imagesSeen && int32_t(u.sequence - m_lastImageSeq) <= 0)))
+    if (switching && (!u.full || notNewer(u.sequence, m_lastImageSeq)))
         return true; // from an earlier volume period; the switch waits for its full volume
     if (!u.full && !m_volume)
         return true;
@@ -363,7 +369,6 @@ bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
     const uint64_t done = steadyNowUs();
 
     m_lastVolumeSeq = u.sequence;
-    m_volumesSeen = true;
     m_lastSequence = u.sequence;
     ++m_updatesApplied;
     ++m_volumeUpdates;
@@ -403,8 +408,8 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
     // In volume mode images are stale, unless we are switching back and this is the full image
     // the server sent after the switch (newer than every volume update applied).
     const bool leavingVolume = m_sync == Sync::Volume;
-    if (leavingVolume && (m_wantSync != Sync::Dbi || !u.full ||
-                          (m_volumesSeen && int32_t(u.sequence - m_lastVolumeSeq) <= 0)))
+    if (leavingVolume &&
+        (m_wantSync != Sync::Dbi || !u.full || notNewer(u.sequence, m_lastVolumeSeq)))
         return true;
     // Which view does it belong to? Updates of a view we have left are stale, not malformed.
     const ViewSpec* view = nullptr;
@@ -465,7 +470,6 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
     m_dbi.apply(patch, u.x, u.y);
     m_lastSequence = u.sequence;
     m_lastImageSeq = u.sequence;
-    m_imagesSeen = true;
     ++m_updatesApplied;
     if (u.full) {
         ++m_fullUpdates;

@@ -652,17 +652,21 @@ void SessionServer::networkLoop() {
             marks.list.push_back(a);
         return encodeMessage(marks);
     };
+    // Disconnects a listed (or listing) peer, saying why; the others hear it has gone.
+    auto kick = [&](NetPeer& p, RefuseReason why) {
+        p.kicked = true;
+        report(peerId(p.peer), [](PeerReport& r) { r.kicked = true; });
+        enet_peer_disconnect(p.peer, uint32_t(why));
+        s.releaseTakeOvers(peerId(p.peer));
+        if (p.hello)
+            sendParticipants();
+    };
     auto malformed = [&](NetPeer& p) {
         m_stats.countMalformed();
         report(peerId(p.peer), [](PeerReport& r) { ++r.malformed; });
         if (++p.malformed > m_config.malformedLimit && !p.kicked) {
-            p.kicked = true;
             m_malformedKicks.fetch_add(1);
-            report(peerId(p.peer), [](PeerReport& r) { r.kicked = true; });
-            enet_peer_disconnect(p.peer, uint32_t(RefuseReason::Malformed));
-            s.releaseTakeOvers(peerId(p.peer));
-            if (p.hello)
-                sendParticipants();
+            kick(p, RefuseReason::Malformed);
         }
     };
 
@@ -969,12 +973,7 @@ void SessionServer::networkLoop() {
                          "trephine server: client %u: the whole volume does not fit a message "
                          "in its volume codec; disconnected (volume sync refused)\n",
                          unsigned(id));
-            it->second.kicked = true;
-            report(id, [](PeerReport& r) { r.kicked = true; });
-            enet_peer_disconnect(it->second.peer, uint32_t(RefuseReason::VolumeTooLarge));
-            s.releaseTakeOvers(id);
-            if (it->second.hello)
-                sendParticipants();
+            kick(it->second, RefuseReason::VolumeTooLarge);
         }
         for (auto& [id, u] : out) {
             auto it = s.peers.find(id);

@@ -77,6 +77,12 @@ public:
     }
     int64_t fullDistancePasses() const { return m_distancePasses; }
 
+    // Largest density of each brick of [b0, b1] (brick coordinates, inclusive) of `volume` with
+    // its apron, x fastest: the maximum maxDensity() holds (a GPU ray caster's skipping uses it
+    // too, ui/volume_view.cpp).
+    static void regionMax(const Volume& volume, glm::ivec3 b0, glm::ivec3 b1,
+                          std::vector<uint8_t>& out);
+
 private:
     // A full distance pass over the grid.
     void computeDistances();
@@ -87,9 +93,6 @@ private:
     // Recomputes the distances of the bricks [lo, hi] (inclusive) from the bricks that may hold
     // surface there and the stored distances of the bricks just outside.
     void sweepDistances(glm::ivec3 lo, glm::ivec3 hi);
-    // Largest density of each brick of [b0, b1] (inclusive) with its apron, x fastest.
-    void regionMax(const Volume& volume, glm::ivec3 b0, glm::ivec3 b1,
-                   std::vector<uint8_t>& out) const;
     uint64_t computeCellMask(const Volume& volume, glm::ivec3 b) const;
     // The runs of every line along each axis through the bricks [lo, hi] (inclusive), whole.
     void computeRuns(glm::ivec3 lo, glm::ivec3 hi);

@@ -229,8 +229,7 @@ private:
     Sync m_sync = Sync::Dbi, m_wantSync = Sync::Dbi;
     // The newest update sequence applied in each mode: a switch accepts only a full update newer
     // than everything of the mode it leaves (the two channels are not ordered with each other).
-    uint32_t m_lastImageSeq = 0, m_lastVolumeSeq = 0;
-    bool m_imagesSeen = false, m_volumesSeen = false; // the sequences above are of real updates
+    std::optional<uint32_t> m_lastImageSeq, m_lastVolumeSeq; // of the last update applied
     std::unique_ptr<Volume> m_volume;
     std::unique_ptr<ThreadPool> m_pool;
     std::unique_ptr<Renderer> m_renderer;
