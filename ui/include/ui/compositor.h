@@ -1,8 +1,9 @@
 // The paper's two-pass hybrid rendering (section 3.3). Pass 1 restores the DBI into an offscreen
-// framebuffer (RGBA8 colour, 32-bit float depth) from a colour and a depth texture with a
-// fullscreen triangle that writes gl_FragDepth; pass 2 draws meshes depth-tested against it with
-// the matrices the server rendered the DBI with. The framebuffer is the DBI's size, so pixels map
-// 1:1, and is blitted into the window. Image updates re-upload only their rectangle.
+// framebuffer (RGB8 colour, 32-bit float depth) by blitting colour and depth from a second
+// framebuffer that holds the DBI itself (an RGBA8 colour texture and a 32-bit float depth texture);
+// pass 2 draws meshes depth-tested against it with the matrices the server rendered the DBI with.
+// Both framebuffers are the DBI's size, so pixels map 1:1, and the composite is blitted into the
+// window. Image updates re-upload only their rectangle.
 #pragma once
 
 #include "libsim/camera.h"
@@ -60,10 +61,9 @@ private:
     void beginMeshes();
 
     int m_width = 0, m_height = 0;
-    GLuint m_colorTex = 0, m_depthTex = 0;
-    GLuint m_fbo = 0, m_fboColor = 0, m_fboDepth = 0;
-    GLuint m_emptyVao = 0;
-    GLuint m_restoreProgram = 0, m_meshProgram = 0;
+    GLuint m_colorTex = 0, m_depthTex = 0, m_dbiFbo = 0; // the DBI as uploaded
+    GLuint m_fbo = 0, m_fboColor = 0, m_fboDepth = 0;    // the composite
+    GLuint m_meshProgram = 0;
     GLint m_uModel = -1, m_uView = -1, m_uProj = -1, m_uOwner = -1;
     glm::mat4 m_view{1.0f}, m_proj{1.0f};
 };
