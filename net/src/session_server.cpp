@@ -311,7 +311,10 @@ struct SessionServer::Impl {
         u.y = uint16_t(rect.y);
         u.width = uint16_t(rect.w);
         u.height = uint16_t(rect.h);
-        u.codec = c.codec;
+        // A raw rectangle too large for one message goes lz4-coded (see kMaxImagePayloadBytes).
+        u.codec = c.codec == Codec::Raw && uint64_t(rect.area()) * 8 > kMaxImagePayloadBytes
+                      ? Codec::Lz4
+                      : c.codec;
         uint64_t e0 = steadyNowUs();
         const Dbi pixels = view.frame.extract(rect);
         Dbi undo;
@@ -327,7 +330,7 @@ struct SessionServer::Impl {
             u.rawBytes = p.rawBytes;
             u.payload = std::move(p.payload);
         } else {
-            EncodedImage e = encodeImage(pixels, c.codec, view.camera);
+            EncodedImage e = encodeImage(pixels, u.codec, view.camera);
             u.rawBytes = e.rawBytes;
             u.payload = std::move(e.payload);
         }
@@ -459,8 +462,23 @@ struct SessionServer::Impl {
 
 // [SECTION] lifetime
 
+namespace {
+
+// Throws on settings the server cannot honour (before anything starts).
+const ServerConfig& checkedConfig(const ServerConfig& config) {
+    if (config.maxViewPixels < 1 || config.maxViewPixels > kMaxServedViewPixels)
+        throw Error("server: the largest view must be 1 to " +
+                    std::to_string(kMaxServedViewPixels) +
+                    " pixels (a coded image must fit one message), not " +
+                    std::to_string(config.maxViewPixels));
+    return config;
+}
+
+} // namespace
+
 SessionServer::SessionServer(Volume volume, ServerConfig config)
-    : m_impl(std::make_unique<Impl>(std::move(volume), config)), m_config(std::move(config)) {}
+    : m_impl(std::make_unique<Impl>(std::move(volume), checkedConfig(config))),
+      m_config(std::move(config)) {}
 
 SessionServer::~SessionServer() {
     try {

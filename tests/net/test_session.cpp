@@ -248,6 +248,40 @@ TEST(Session, EveryToolPoseReachesTheOtherClients) {
     EXPECT_EQ(a.relaysReceived(), 0u) << "a client is not sent its own tool";
 }
 
+// A raw image of the largest view (2048 x 2048: 33.5 MB at 8 bytes a pixel) is more than ENet
+// delivers in one message: the server sends it lz4-coded, and the client shows it.
+TEST(Session, ARawClientOfTheLargestViewGetsItsPictureCoded) {
+    Volume sphere = makeSphere(48);
+    SessionServer server(sphere, testConfig("sphere:48"));
+    server.start();
+    ClientConfig cfg;
+    cfg.codec = Codec::Raw;
+    cfg.view = toViewSpec(cameraPreset("top", sphere, {2048, 2048}));
+    ASSERT_EQ(int64_t(cfg.view.width) * cfg.view.height, ServerConfig{}.maxViewPixels);
+    SessionClient client(cfg);
+    client.connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&client}));
+    const Camera cam = toCamera(cfg.view);
+    DepthCheck d = compareDepthMm(client.dbi(), server.renderView(cfg.view), cam);
+    EXPECT_TRUE(d.colorsEqual && d.backgroundEqual);
+    EXPECT_LE(d.maxErrorMm, DepthQuantizer(cam).stepMm() * 1.001 + 1e-6);
+    EXPECT_LT(client.stats().updateBytes.max(), double(kMaxSentMessageBytes));
+    EXPECT_EQ(client.stats().malformed(), 0u);
+}
+
+TEST(Session, AServerRefusesToServeViewsTooLargeForOneMessage) {
+    ServerConfig cfg = testConfig("sphere:8");
+    cfg.maxViewPixels = kMaxServedViewPixels + 1;
+    try {
+        SessionServer server(makeSphere(8), cfg);
+        FAIL() << "expected an error";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("largest view"), std::string::npos) << e.what();
+    }
+    cfg.maxViewPixels = kMaxServedViewPixels;
+    EXPECT_NO_THROW(SessionServer(makeSphere(8), cfg));
+}
+
 TEST(Session, MalformedInputIsDroppedCountedAndAPersistentOffenderDisconnected) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, testConfig("sphere:48"));

@@ -54,6 +54,13 @@ inline constexpr size_t kMaxPayloadBytes = 64u * 1024u * 1024u;
 // 32 MiB default anyway. A larger one is never sent (a box goes as the whole volume, compressed;
 // a whole volume over it refuses volume sync: RefuseReason::VolumeTooLarge).
 inline constexpr size_t kMaxSentMessageBytes = 30u * 1024u * 1024u;
+// Images: a raw rectangle costs 8 bytes a pixel; the lz4/zstd forms at most 5.25 before
+// compression (the predicted form's masks and residuals; the planar form 5) and at most ~0.4 %
+// more after it. A raw rectangle whose 8 bytes a pixel exceed this goes lz4-coded instead (the
+// client decodes whatever codec an update names); the largest view a server may serve
+// (ServerConfig::maxViewPixels) is one whose coded image always fits.
+inline constexpr size_t kMaxImagePayloadBytes = kMaxSentMessageBytes - 64u * 1024u;
+inline constexpr int64_t kMaxServedViewPixels = int64_t(kMaxImagePayloadBytes / 21 * 4 * 250 / 251);
 inline constexpr uint16_t kMaxVolumeDim = 4096; // as the welcome's range
 // The largest uncompressed volume layout a VolumeUpdate may announce (density + material bytes of
 // a 512^3 volume); ENet itself refuses packets over 32 MiB, so payloads stay under
