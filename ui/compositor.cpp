@@ -78,8 +78,7 @@ void Compositor::resize(int width, int height) {
     };
     // The DBI itself, as a framebuffer to blit from: colour and depth textures of the composite's
     // formats, so that the blit is a copy (on llvmpipe a memcpy: 0.04 ms for 500 x 500, where a
-    // shader pass writing gl_FragDepth took ~0.5 ms). The composite's colour is RGB8: a blit
-    // reads its alpha as 1, as the restore shader wrote it (the DBI's background carries 0).
+    // shader pass writing gl_FragDepth took ~0.5 ms).
     makeTex(m_colorTex, GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE);
     makeTex(m_depthTex, GL_DEPTH_COMPONENT32F, GL_DEPTH_COMPONENT, GL_FLOAT);
     if (!m_dbiFbo)
@@ -91,7 +90,7 @@ void Compositor::resize(int width, int height) {
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
     if (!complete)
         throw Error("ui: the DBI framebuffer is incomplete");
-    makeColorDepthTarget(m_fbo, m_fboColor, m_fboDepth, width, height, "composite", GL_RGB8);
+    makeColorDepthTarget(m_fbo, m_fboColor, m_fboDepth, width, height, "composite");
     uploadFull(Dbi(width, height));
 }
 
@@ -105,10 +104,16 @@ void Compositor::uploadRect(const PixelRect& rect, const Dbi& patch) {
     if (rect.empty() || !PixelRect{0, 0, m_width, m_height}.contains(rect) ||
         patch.width() != rect.w || patch.height() != rect.h)
         return;
+    // The colour goes up opaque: the DBI's background carries alpha 0, the composite wants 1
+    // everywhere (what a restore has always given), and a blit copies alpha as it is.
+    const size_t bytes = size_t(rect.w) * size_t(rect.h) * 4;
+    m_opaque.assign(patch.color(), patch.color() + bytes);
+    for (size_t i = 3; i < bytes; i += 4)
+        m_opaque[i] = 255;
     glPixelStorei(GL_UNPACK_ALIGNMENT, 1);
     glBindTexture(GL_TEXTURE_2D, m_colorTex);
     glTexSubImage2D(GL_TEXTURE_2D, 0, rect.x, rect.y, rect.w, rect.h, GL_RGBA, GL_UNSIGNED_BYTE,
-                    patch.color());
+                    m_opaque.data());
     glBindTexture(GL_TEXTURE_2D, m_depthTex);
     glTexSubImage2D(GL_TEXTURE_2D, 0, rect.x, rect.y, rect.w, rect.h, GL_DEPTH_COMPONENT, GL_FLOAT,
                     patch.depth());

@@ -364,6 +364,16 @@ int runTrainerWindow(const TrainerOptions& o) {
     haptics.setForceSource(&forces);
     client.start();
     haptics.start();
+    // However the window ends (an exception from a GL upload or a screenshot included), the
+    // haptic thread stops before the client it sends to is destroyed, then the client.
+    struct StopThreads {
+        HapticLoop& haptics;
+        net::ClientThread& client;
+        ~StopThreads() {
+            haptics.stop();
+            client.stop();
+        }
+    } stopThreads{haptics, client};
 
     std::future<Scene> sceneFuture;
     std::optional<Scene> scene;
@@ -385,6 +395,7 @@ int runTrainerWindow(const TrainerOptions& o) {
     Dbi cpuDbi;               // pass 1's picture on the CPU, for the cursor's depth lookups
     bool haveImage = false;   // the textures hold a full image of the current view
     uint32_t imageViewId = 0; // viewId of the image in the textures
+    net::ViewSpec imageView;  // and its view: the camera it was rendered with
     // [Replicated volume] the window's copy of the volume, mirrored in volumeView's textures.
     Volume gpuVolume;
     bool haveVolume = false;  // volumeView holds a whole volume
@@ -497,6 +508,7 @@ int runTrainerWindow(const TrainerOptions& o) {
                 comp.uploadFull(r.pixels);
                 haveImage = true;
                 imageViewId = r.viewId;
+                imageView = r.view;
                 if (picture != SyncDesign::Dbi)
                     ++switchesCompleted;
                 picture = SyncDesign::Dbi;
@@ -566,8 +578,14 @@ int runTrainerWindow(const TrainerOptions& o) {
         if (havePicture && firstPictureAt < 0)
             firstPictureAt = now;
         const bool switching = wanted != picture;
-        const bool viewMatches = snap->view.width == viewSize && snap->view.height == viewSize;
-        const Camera dbiCamera = net::toCamera(snap->view);
+        // The DBI is drawn, and picked, with the camera it was rendered with: a new view's full
+        // image can reach the textures before a snapshot names the view (tools drawn with the old
+        // matrices over the new picture for a frame, a jitter while orbiting). The local volume is
+        // drawn with the view the client holds now.
+        const net::ViewSpec& shownView =
+            picture == SyncDesign::Dbi && haveImage ? imageView : snap->view;
+        const bool viewMatches = shownView.width == viewSize && shownView.height == viewSize;
+        const Camera dbiCamera = net::toCamera(shownView);
         if (picture == SyncDesign::Volume && !(volumeCamera == dbiCamera))
             volumeDirty = true; // a new view: the picture for picking must be read back again
 
@@ -577,6 +595,11 @@ int runTrainerWindow(const TrainerOptions& o) {
             ++nextSwitch;
             requestDesign(wanted == SyncDesign::Dbi ? SyncDesign::Volume : SyncDesign::Dbi);
         }
+
+        // The frame begins (events polled, ImGui's new frame) before the tool reads the input:
+        // ImGui 1.86 zeroes io.MouseWheel at the end of each frame, so read before NewFrame the
+        // wheel was always 0, and keys came a frame late.
+        window.beginFrame();
 
         // Tool: the script, or the mouse device on the bone under the cursor.
         ImGuiIO& io = ImGui::GetIO();
@@ -671,7 +694,6 @@ int runTrainerWindow(const TrainerOptions& o) {
 
         // Composite: pass 1 the DBI (or the ray cast of the local volume), pass 2 the anatomy
         // and the tools with the same matrices and depth test, blitted top-left.
-        window.beginFrame();
         const float viewTop = 0.0f;
         if (havePicture && viewMatches) {
             if (picture == SyncDesign::Volume) {
@@ -914,7 +936,10 @@ int runTrainerWindow(const TrainerOptions& o) {
             const uint64_t ticks = hstats.ticks;
             const double hz = double(ticks - ticksAtLastSecond) / (now - lastSecondAt);
             std::vector<double>& fm = frameMs[int(picture)];
-            if (havePicture && !fm.empty()) {
+            // No point while a switch is under way: the server has stopped the old design's
+            // updates, so the second measures the wait, and it would stay as the old design's
+            // greyed figures once the switch completes.
+            if (havePicture && !fm.empty() && !switching) {
                 const net::ModeFigures& m = snap->modes[size_t(syncOf(picture))];
                 const LiveSecond& l = liveSecond[int(picture)];
                 ComparisonFigures f;
@@ -957,7 +982,7 @@ int runTrainerWindow(const TrainerOptions& o) {
             break;
         std::this_thread::sleep_until(frameStart + std::chrono::milliseconds(10));
     }
-    haptics.stop();
+    haptics.stop(); // (stopThreads would; the report below reads the stopped client)
     client.stop();
     for (SyncDesign d : {SyncDesign::Dbi, SyncDesign::Volume}) {
         if (!comparison.measured(d))

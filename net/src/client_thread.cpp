@@ -290,6 +290,7 @@ void ClientThread::run() {
                     r.pixels = full ? cp->dbi() : cp->dbi().extract(rect);
                     r.sequence = meta.sequence;
                     r.viewId = meta.viewId;
+                    r.view = cp->view();
                     r.bytes = uint32_t(meta.payload.size());
                     r.rawBytes = meta.rawBytes;
                     r.appliedUs = steadyNowUs();
@@ -362,6 +363,7 @@ void ClientThread::run() {
                     r.rect = cp->dbi().bounds();
                     r.pixels = cp->dbi();
                     r.viewId = cp->viewId();
+                    r.view = cp->view();
                     r.sequence = cp->lastUpdateSequence();
                     r.appliedUs = now;
                     pushRect(std::move(r));

@@ -150,8 +150,10 @@ TEST(ComparisonWindow, LiveSwitchDbiVolumeDbiLosesNoDrillingAndFillsBothFigures)
     TrainerReport report;
     TrainerOptions o = windowOptions(server.port(), "dbi", dir / "switch.png", &report);
     // The burr hole's script drills from 0 to 4 s after the first picture: both switches happen
-    // while it drills (each waits for the one before it to complete).
-    o.switchSyncAtS = {1.0, 2.6};
+    // while it drills (each waits for the one before it to complete). The volume design feeds the
+    // picture for 2.4 s: at least two of the window's 1 s ticks, one of them clear of a switch
+    // (no Comparison point is taken while a switch is under way).
+    o.switchSyncAtS = {1.0, 3.4};
     ASSERT_EQ(runTrainerWindow(o), 0);
 
     EXPECT_EQ(report.switchesRequested, 2);
@@ -193,5 +195,23 @@ TEST(ComparisonWindow, LiveSwitchDbiVolumeDbiLosesNoDrillingAndFillsBothFigures)
     // Incremental updates only: the whole volume sent at the switch (64^3 bytes raw) is not an
     // update of the drilling.
     EXPECT_LT(h.series(SyncDesign::Volume).last.rawBytesPerUpdate, 64.0 * 64 * 64 / 8);
+    server.stop();
+}
+
+// A screenshot the window cannot write ends it with the error (the haptic thread stopped before
+// the client it sends to is destroyed), not a crash.
+TEST(ComparisonWindow, AnUnwritableScreenshotEndsTheWindowWithItsError) {
+    TREPHINE_NEED_DISPLAY("the window");
+    const Volume skull = makeSkull(64);
+    net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64", 2));
+    server.start();
+    TrainerOptions o = windowOptions(server.port(), "volume", "/nonexistent-dir/shot.png", nullptr);
+    try {
+        runTrainerWindow(o);
+        FAIL() << "expected the screenshot's error";
+    } catch (const std::exception& e) {
+        EXPECT_NE(std::string(e.what()).find("/nonexistent-dir/shot.png"), std::string::npos)
+            << e.what();
+    }
     server.stop();
 }

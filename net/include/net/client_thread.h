@@ -39,6 +39,7 @@ struct AppliedRect {
     bool full = false; // a whole-window refresh: pixels is the whole DBI
     uint32_t sequence = 0;
     uint32_t viewId = 0;
+    ViewSpec view;         // the view of viewId: the camera the pixels were rendered with
     uint32_t bytes = 0;    // payload on the wire
     uint32_t rawBytes = 0; // before compression
     double latencyUs = -1; // cause at the server -> applied here (-1: unknown)

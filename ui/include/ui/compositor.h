@@ -1,6 +1,6 @@
 // The paper's two-pass hybrid rendering (section 3.3). Pass 1 restores the DBI into an offscreen
-// framebuffer (RGB8 colour, 32-bit float depth) by blitting colour and depth from a second
-// framebuffer that holds the DBI itself (an RGBA8 colour texture and a 32-bit float depth texture);
+// framebuffer (RGBA8 colour, 32-bit float depth) by blitting colour and depth from a second
+// framebuffer of the same formats that holds the DBI itself (colour uploaded opaque);
 // pass 2 draws meshes depth-tested against it with the matrices the server rendered the DBI with.
 // Both framebuffers are the DBI's size, so pixels map 1:1, and the composite is blitted into the
 // window. Image updates re-upload only their rectangle.
@@ -13,6 +13,7 @@
 
 #include <glm/mat4x4.hpp>
 #include <glm/vec4.hpp>
+#include <vector>
 
 namespace trephine::ui {
 
@@ -64,6 +65,7 @@ private:
     GLuint m_colorTex = 0, m_depthTex = 0, m_dbiFbo = 0; // the DBI as uploaded
     GLuint m_fbo = 0, m_fboColor = 0, m_fboDepth = 0;    // the composite
     GLuint m_meshProgram = 0;
+    std::vector<uint8_t> m_opaque; // uploadRect's colour with alpha 255
     GLint m_uModel = -1, m_uView = -1, m_uProj = -1, m_uOwner = -1;
     glm::mat4 m_view{1.0f}, m_proj{1.0f};
 };

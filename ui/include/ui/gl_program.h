@@ -13,10 +13,10 @@ extern const char* const kFullscreenTriangleVs;
 // `what` (e.g. "volume") on failure. Needs a current GL 3.3 core context.
 GLuint linkProgram(const char* vertexSource, const char* fragmentSource, const char* what);
 
-// (Re)allocates `color` (`colorFormat`, nearest) and `depth` (32-bit float renderbuffer) at
-// width x height and attaches them to `fbo`, creating any of the three that is 0. Leaves the
-// default framebuffer bound; throws trephine::Error naming `what` if the framebuffer is incomplete.
+// (Re)allocates `color` (RGBA8, nearest) and `depth` (32-bit float renderbuffer) at width x
+// height and attaches them to `fbo`, creating any of the three that is 0. Leaves the default
+// framebuffer bound; throws trephine::Error naming `what` if the framebuffer is incomplete.
 void makeColorDepthTarget(GLuint& fbo, GLuint& color, GLuint& depth, int width, int height,
-                          const char* what, GLint colorFormat = GL_RGBA8);
+                          const char* what);
 
 } // namespace trephine::ui
