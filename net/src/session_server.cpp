@@ -88,6 +88,7 @@ struct NetPeer {
     Host::InFlight inFlight = std::make_shared<std::atomic<int64_t>>(0);
     int malformed = 0;
     bool kicked = false;
+    uint64_t connectedUs = 0; // a peer still without a hello after ServerConfig::helloTimeoutS goes
 };
 
 // Per-peer figures for the server report (kept after the peer leaves).
@@ -294,6 +295,12 @@ struct SessionServer::Impl {
                 outbox.erase(it);
             }
         }
+        if (old && !view.frame.bounds().contains(old->rect)) {
+            // Not of this frame (a view change drops pending images; this is the safety net):
+            // the client's pixels are unknown, so it gets the whole frame.
+            old.reset();
+            full = true;
+        }
         if (old) {
             // It never left: the client does not have its pixels.
             if (!old->full && !old->undo.empty() && !c.shadow.empty())
@@ -302,6 +309,9 @@ struct SessionServer::Impl {
             full = full || old->full;
             causeUs = std::min(causeUs, old->causeUs);
         }
+        rect = full ? view.frame.bounds() : intersect(rect, view.frame.bounds());
+        if (rect.empty())
+            return;
         ImageUpdate u;
         u.sequence = ++sequence;
         u.viewId = c.viewId;
@@ -334,7 +344,11 @@ struct SessionServer::Impl {
             u.rawBytes = e.rawBytes;
             u.payload = std::move(e.payload);
         }
-        if (full)
+        // What the client holds, for predicted coding: only zstd clients get predicted updates,
+        // so only they need the copy (a whole frame: 33.5 MB for 2048 x 2048).
+        if (c.codec != Codec::Zstd)
+            c.shadow = Dbi();
+        else if (full)
             c.shadow = view.frame;
         else if (!c.shadow.empty())
             c.shadow.apply(pixels, rect.x, rect.y);
@@ -466,6 +480,8 @@ namespace {
 
 // Throws on settings the server cannot honour (before anything starts).
 const ServerConfig& checkedConfig(const ServerConfig& config) {
+    if (!(config.helloTimeoutS > 0.0f))
+        throw Error("server: the hello timeout must be positive");
     if (config.maxViewPixels < 1 || config.maxViewPixels > kMaxServedViewPixels)
         throw Error("server: the largest view must be 1 to " +
                     std::to_string(kMaxServedViewPixels) +
@@ -663,6 +679,8 @@ void SessionServer::networkLoop() {
         }
         sendToParticipants(encodeMessage(roster));
     };
+    bool annotationsDirty = false; // the marks changed since the list last went out
+    uint64_t annotationsSentUs = 0;
     // Every mark, in increasing id (a std::map).
     auto annotationList = [&] {
         Annotations marks;
@@ -753,6 +771,8 @@ void SessionServer::networkLoop() {
             ToolState t;
             if (!decodeMessage(data, t))
                 return false;
+            // Forces and cutting both take the unit rotation (the message only bounds its norm).
+            t.orientation = glm::normalize(t.orientation);
             try {
                 shapeOf(t).validate();
             } catch (const Error&) {
@@ -830,7 +850,7 @@ void SessionServer::networkLoop() {
                 s.annotations.clear();
                 break;
             }
-            sendToParticipants(annotationList());
+            annotationsDirty = true; // sent from the loop (kAnnotationsIntervalUs)
             return true;
         }
         case MessageType::TakeOver: {
@@ -902,6 +922,7 @@ void SessionServer::networkLoop() {
             } while (s.peers.count(id));
             ev.peer->data = reinterpret_cast<void*>(uintptr_t(id));
             s.peers[id].peer = ev.peer;
+            s.peers[id].connectedUs = steadyNowUs();
             // A fresh report: after the ids wrap, one may still hold a left peer's figures.
             report(id, [](PeerReport& r) {
                 r = PeerReport{};
@@ -1015,6 +1036,21 @@ void SessionServer::networkLoop() {
                 m_peakInFlight.store(held, std::memory_order_relaxed);
         }
         uint64_t now = steadyNowUs();
+        // A connection that never says hello would hold a client slot for good.
+        const uint64_t helloTimeoutUs = uint64_t(double(m_config.helloTimeoutS) * 1e6);
+        for (auto& [id, p] : s.peers)
+            if (!p.hello && !p.kicked && now - p.connectedUs > helloTimeoutUs) {
+                m_helloTimeouts.fetch_add(1);
+                kick(p, RefuseReason::BadHello);
+            }
+        // The marks go out at most every kAnnotationsIntervalUs, the whole list once: a peer
+        // editing fast (any hello may claim the instructor's role) cannot make the server queue a
+        // list per edit for every participant on the reliable channel.
+        if (annotationsDirty && now - annotationsSentUs >= kAnnotationsIntervalUs) {
+            sendToParticipants(annotationList());
+            annotationsDirty = false;
+            annotationsSentUs = now;
+        }
         if (now >= nextTick) {
             m_stats.tick(now);
             nextTick = now + 1000000;
@@ -1078,9 +1114,13 @@ void SessionServer::simulationLoop() {
                         needVolume[ev.client] = steadyNowUs();
                 }
                 // A volume client renders its views itself; the server only keeps the camera for
-                // a later switch to DBI.
-                if (c.sync == Sync::Dbi)
+                // a later switch to DBI. A DBI client's unsent image belongs to the view it
+                // leaves (maybe another size, even under the same id): dropped, the full image
+                // of the new view replaces it and the shadow.
+                if (c.sync == Sync::Dbi) {
                     needFull[ev.client] = steadyNowUs();
+                    s.dropPending(ev.client, Sync::Dbi);
+                }
                 break;
             }
             case SimEvent::Kind::Sync: {
@@ -1300,6 +1340,7 @@ std::string SessionServer::reportJson() const {
     j += "  \"malformed_dropped\": " + std::to_string(m_stats.malformed()) + ",\n";
     j += "  \"disconnected_for_malformed\": " + std::to_string(m_malformedKicks.load()) + ",\n";
     j += "  \"refused_server_full\": " + std::to_string(m_refusedFull.load()) + ",\n";
+    j += "  \"hello_timeouts\": " + std::to_string(m_helloTimeouts.load()) + ",\n";
     j += "  \"views_refused\": " + std::to_string(m_viewsRefused.load()) + ",\n";
     j += "  \"annotations_refused\": " + std::to_string(m_annotationsRefused.load()) + ",\n";
     j += "  \"take_overs_refused\": " + std::to_string(m_takeOversRefused.load()) + ",\n";

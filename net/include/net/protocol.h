@@ -47,6 +47,9 @@ inline constexpr uint16_t kMaxParticipants = 1024;
 inline constexpr uint16_t kMaxAnnotations = 256;
 // Marks lie within this distance of the volume's centre (mm): the largest volume is 4096 voxels.
 inline constexpr float kMaxAnnotationDistanceMm = 1.0e5f;
+// Tool positions likewise; a tool's orientation quaternion has a norm within [0.5, 2] (the server
+// normalises it).
+inline constexpr float kMaxToolDistanceMm = 1.0e5f;
 inline constexpr size_t kMaxPayloadBytes = 64u * 1024u * 1024u;
 // The largest message the server sends: ENet delivers a reliable packet only while its fragments
 // (1372 bytes at the default MTU) fit the receiver's acknowledgement window (7-8 windows of 4096
@@ -217,8 +220,12 @@ struct ToolState {
         return s.integer(sequence) && s.integer(clientTimeUs) &&
                s.ranged(toolKind, uint8_t(0), uint8_t(1)) && serializeFinite(s, diameterMm) &&
                diameterMm > 0.0f && diameterMm <= 20.0f && serializeVec3(s, position) &&
-               serializeQuat(s, orientation) && serializeFinite(s, speed) && speed >= 0.0f &&
-               speed <= 1.0f && s.boolean(drilling);
+               std::abs(position.x) <= kMaxToolDistanceMm &&
+               std::abs(position.y) <= kMaxToolDistanceMm &&
+               std::abs(position.z) <= kMaxToolDistanceMm && serializeQuat(s, orientation) &&
+               glm::dot(orientation, orientation) >= 0.25f &&
+               glm::dot(orientation, orientation) <= 4.0f && serializeFinite(s, speed) &&
+               speed >= 0.0f && speed <= 1.0f && s.boolean(drilling);
     }
 };
 

@@ -51,7 +51,13 @@ struct ServerConfig {
     // outbox, where newer changes merge into it, so a slow link's backlog stays bounded (about
     // this plus one update) and the client catches up with one merged update.
     int64_t maxInFlightBytes = 4 << 20;
+    // A connection that has not said hello after this many seconds is closed (BadHello): it
+    // would otherwise hold one of the maxClients slots for good.
+    float helloTimeoutS = 5.0f;
 };
+
+// The marks (Annotations) go to every participant at most this often, the whole list once.
+inline constexpr uint64_t kAnnotationsIntervalUs = 50000;
 
 // What the server sent in one sync mode, and how many connected clients use it now.
 struct ModeTotals {
@@ -108,6 +114,8 @@ public:
     // tool's own client.
     uint64_t hapticRelaysSent() const { return m_hapticRelayed.load(); }
     uint64_t refusedFull() const { return m_refusedFull.load(); }
+    // Connections closed for saying no hello within ServerConfig::helloTimeoutS.
+    uint64_t helloTimeouts() const { return m_helloTimeouts.load(); }
     uint64_t viewsRefused() const { return m_viewsRefused.load(); }
     // Annotate messages not applied: from trainees, or adds beyond kMaxAnnotations.
     uint64_t annotationsRefused() const { return m_annotationsRefused.load(); }
@@ -143,6 +151,7 @@ private:
     std::atomic<uint64_t> m_hapticSent{0};
     std::atomic<uint64_t> m_hapticRelayed{0};
     std::atomic<uint64_t> m_refusedFull{0};
+    std::atomic<uint64_t> m_helloTimeouts{0};
     std::atomic<uint64_t> m_viewsRefused{0};
     std::atomic<uint64_t> m_annotationsRefused{0};
     std::atomic<uint64_t> m_takeOversRefused{0};

@@ -1,0 +1,259 @@
+// A server facing peers that do not play by the rules: a view request reusing its id for a
+// smaller window while an update waits, a connection that never says hello, an instructor editing
+// marks as fast as it can send, tool states with an unnormalised rotation or a position far off.
+// Server and peers in one process over loopback; deadlines only guard against hangs.
+#include "net/enet_host.h"
+#include "net/protocol.h"
+#include "net/session_client.h"
+#include "net/session_server.h"
+#include "net/view.h"
+
+#include "libsim/skull.h"
+
+#include "loopback.h"
+
+#include <gtest/gtest.h>
+
+#include <glm/gtx/quaternion.hpp>
+
+#include <chrono>
+#include <optional>
+#include <thread>
+
+using namespace trephine;
+using namespace trephine::net;
+using trephine::testing::burrState;
+using trephine::testing::loopback;
+using trephine::testing::loopbackServerConfig;
+using trephine::testing::pumpUntil;
+using trephine::testing::sphereTop;
+
+namespace {
+
+// A hand-driven ENet client: it services (and so acknowledges) only when told to.
+struct RawPeer {
+    Host host = Host::client();
+    ENetPeer* peer = nullptr;
+    bool disconnected = false;
+    uint32_t disconnectData = 0;
+    std::vector<ImageUpdate> images;
+    int annotationLists = 0;
+    std::optional<Annotations> lastMarks;
+
+    bool connect(uint16_t port) {
+        peer = host.connect(loopback(port), kProtocolVersion);
+        bool up = false;
+        serviceUntil([&] { return up; },
+                     [&](const ENetEvent& e) { up = up || e.type == ENET_EVENT_TYPE_CONNECT; });
+        return up;
+    }
+    template <typename M>
+    void send(Channel channel, M m) {
+        host.send(peer, channel, encodeMessage(m));
+        host.flush(); // out, and nothing received: nothing acknowledged
+    }
+    // Services (receiving, acknowledging) until pred() holds; false after the guard.
+    bool serviceUntil(const std::function<bool()>& pred,
+                      const std::function<void(const ENetEvent&)>& extra = {},
+                      double guardS = 20.0) {
+        auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(guardS);
+        while (std::chrono::steady_clock::now() < deadline) {
+            host.service(2, [&](const ENetEvent& e) {
+                if (extra)
+                    extra(e);
+                if (e.type == ENET_EVENT_TYPE_DISCONNECT) {
+                    disconnected = true;
+                    disconnectData = e.data;
+                }
+                if (e.type != ENET_EVENT_TYPE_RECEIVE)
+                    return;
+                std::span<const uint8_t> bytes(e.packet->data, e.packet->dataLength);
+                ImageUpdate u;
+                Annotations marks;
+                if (decodeMessage(bytes, u)) {
+                    images.push_back(std::move(u));
+                } else if (decodeMessage(bytes, marks)) {
+                    ++annotationLists;
+                    lastMarks = std::move(marks);
+                }
+            });
+            if (pred())
+                return true;
+        }
+        return false;
+    }
+};
+
+void sleepMs(int ms) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(ms));
+}
+
+} // namespace
+
+// A client asks for a smaller window under the id of the view it has while an update of the old
+// one waits in the outbox (ENet still holds its unacknowledged full image). The waiting update is
+// dropped with the view it belongs to: the server sends the new window's full image, never pixels
+// read from outside it (before, the merge read the old rectangle past the smaller frame).
+TEST(SessionHostile, AViewRequestReusingItsIdForASmallerWindowSendsOnlyThatWindow) {
+    Volume sphere = makeSphere(64);
+    ServerConfig sc = loopbackServerConfig("sphere:64");
+    sc.maxInFlightBytes = 0; // anything unacknowledged holds the next update in the outbox
+    SessionServer server(sphere, sc);
+    server.start();
+    RawPeer c;
+    ASSERT_TRUE(c.connect(server.port()));
+    Hello h;
+    h.name = "hostile";
+    h.codec = Codec::Lz4;
+    h.view = toViewSpec(cameraPreset("top", sphere, {256, 256}));
+    c.send(Channel::Control, h);
+    sleepMs(400); // the full image goes out and stays unacknowledged
+    server.submitBoxCut(surfaceBox(sphere, 8));
+    sleepMs(300); // its rectangle waits in the outbox
+    ViewRequest r;
+    r.requestId = 0; // the hello's view id
+    r.view = toViewSpec(cameraPreset("top", sphere, {64, 64}));
+    c.send(Channel::Control, r);
+    sleepMs(300); // the view changes while the update still waits (nothing acknowledged yet)
+    ASSERT_TRUE(c.serviceUntil([&] {
+        return !c.images.empty() && c.images.back().full && c.images.back().width == 64;
+    })) << "the new window's full image";
+    ASSERT_TRUE(c.serviceUntil([&] { return server.idle(); }));
+    // The waiting update may still leave for the 256 x 256 view before the change; the only
+    // full image after the first is the 64 x 64 one (the merge made it 143 x 143), and nothing
+    // after it reaches outside 64 x 64.
+    size_t fullAt = 0;
+    for (size_t i = 1; i < c.images.size(); ++i) {
+        const ImageUpdate& u = c.images[i];
+        if (u.full) {
+            EXPECT_EQ(u.width, 64) << "update " << i;
+            EXPECT_EQ(u.height, 64) << "update " << i;
+            fullAt = fullAt ? fullAt : i;
+        } else if (fullAt) {
+            EXPECT_LE(u.x + u.width, 64) << "update " << i;
+            EXPECT_LE(u.y + u.height, 64) << "update " << i;
+        }
+    }
+    EXPECT_GT(fullAt, 0u);
+    server.stop();
+}
+
+// A connection that never says hello is closed after the hello timeout (BadHello), and its slot
+// goes to a real client (before, maxClients silent connections locked everyone out).
+TEST(SessionHostile, AConnectionThatNeverSaysHelloIsClosedAndFreesItsSlot) {
+    Volume sphere = makeSphere(32);
+    ServerConfig sc = loopbackServerConfig("sphere:32");
+    sc.maxClients = 1;
+    sc.helloTimeoutS = 0.3f;
+    SessionServer server(sphere, sc);
+    server.start();
+    RawPeer silent;
+    ASSERT_TRUE(silent.connect(server.port()));
+    ASSERT_TRUE(silent.serviceUntil([&] { return silent.disconnected; }));
+    EXPECT_EQ(silent.disconnectData, uint32_t(RefuseReason::BadHello));
+    EXPECT_EQ(server.helloTimeouts(), 1u);
+
+    ClientConfig cc = trephine::testing::namedClientConfig(sphere, "real", Role::Trainee, 64);
+    SessionClient client(cc);
+    client.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return client.hasFullImage() || client.closed(); }));
+    EXPECT_FALSE(client.closed()) << client.closeReason();
+    EXPECT_EQ(server.refusedFull(), 0u);
+    server.stop();
+}
+
+// An instructor adds and removes a mark as fast as it can send: the other participants get the
+// list coalesced (at most one every kAnnotationsIntervalUs), not one per edit, and end with the
+// right marks.
+TEST(SessionHostile, MarkEditsAsFastAsTheyComeGoOutCoalesced) {
+    Volume sphere = makeSphere(32);
+    SessionServer server(sphere, loopbackServerConfig("sphere:32"));
+    server.start();
+    ClientConfig ic = trephine::testing::namedClientConfig(sphere, "ins", Role::Instructor, 64);
+    SessionClient instructor(ic);
+    instructor.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&instructor}, [&] { return instructor.hasFullImage(); }));
+    RawPeer listener;
+    ASSERT_TRUE(listener.connect(server.port()));
+    Hello h;
+    h.name = "listener";
+    h.codec = Codec::Lz4;
+    h.view = ic.view;
+    listener.send(Channel::Control, h);
+    ASSERT_TRUE(listener.serviceUntil([&] { return !listener.images.empty(); }))
+        << "joined (its first image)";
+    const int before = listener.annotationLists; // none: no marks yet
+
+    constexpr int kEdits = 1000;
+    Annotate add;
+    add.op = Annotate::Op::Add;
+    add.position = {1.0f, 2.0f, 3.0f};
+    add.label = "m";
+    Annotate remove;
+    remove.op = Annotate::Op::Remove;
+    for (int i = 0; i < kEdits; ++i) {
+        if (i % 2 == 0) {
+            instructor.annotate(add);
+        } else {
+            remove.id = uint32_t(i / 2 + 1); // the mark just added (ids count from 1)
+            instructor.annotate(remove);
+        }
+        instructor.poll(0);
+    }
+    add.label = "last";
+    instructor.annotate(add);
+    ASSERT_TRUE(listener.serviceUntil([&] {
+        instructor.poll(0);
+        return listener.lastMarks && listener.lastMarks->list.size() == 1 &&
+               listener.lastMarks->list[0].label == "last";
+    })) << "the final list arrives; last: "
+        << (listener.lastMarks ? listener.lastMarks->list.size() : 999) << " marks, "
+        << listener.annotationLists << " lists, refused " << server.annotationsRefused();
+    const int lists = listener.annotationLists - before;
+    EXPECT_GE(lists, 1);
+    EXPECT_LT(lists, kEdits / 4) << "one list per edit is not coalesced";
+    server.stop();
+}
+
+// The force model and the drill take the unit rotation: a tool state whose quaternion is scaled
+// (a norm of 1.25, within what the message allows) feels the force of the unit one. A position
+// beyond kMaxToolDistanceMm, or a quaternion near zero, is malformed.
+TEST(SessionHostile, AToolStateWithAScaledRotationFeelsTheUnitRotationsForce) {
+    Volume sphere = makeSphere(48);
+    SessionServer server(sphere, loopbackServerConfig("sphere:48"));
+    server.start();
+    ClientConfig cc = trephine::testing::namedClientConfig(sphere, "t", Role::Trainee, 64);
+    SessionClient client(cc);
+    std::vector<HapticModel> models;
+    client.setHapticCallback([&](const HapticModel& m, uint64_t) { models.push_back(m); });
+    client.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return client.hasFullImage(); }));
+
+    SurfaceSite site = sphereTop(48);
+    site.normal = glm::normalize(glm::vec3(0.4f, 0.0f, 1.0f)); // tilted: the shaft matters
+    ToolState t = burrState(site, 9, 10, 1000000);
+    t.drilling = false; // touch, do not cut
+    t.speed = 0.0f;
+    client.sendToolState(t);
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return models.size() == 1; }));
+    ToolState scaled = t;
+    scaled.sequence = t.sequence + 1;
+    scaled.orientation = t.orientation * 1.25f;
+    client.sendToolState(scaled);
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return models.size() == 2; }));
+    EXPECT_GT(glm::length(models[0].force), 0.1f) << "the burr touches the bone";
+    EXPECT_LT(glm::length(models[1].force - models[0].force), 1e-4f)
+        << "scaled (" << models[1].force.x << ", " << models[1].force.y << ", " << models[1].force.z
+        << ") against unit (" << models[0].force.x << ", " << models[0].force.y << ", "
+        << models[0].force.z << ")";
+
+    ToolState far = t;
+    far.position.x = 2.0f * kMaxToolDistanceMm;
+    ToolState flat = t;
+    flat.orientation = glm::quat(0.01f, 0.0f, 0.0f, 0.0f);
+    // One serialize() checks both ways: what cannot be written cannot be read.
+    for (ToolState bad : {far, flat})
+        EXPECT_TRUE(encodeMessage(bad).empty());
+    EXPECT_FALSE(encodeMessage(scaled).empty());
+    server.stop();
+}
