@@ -23,8 +23,9 @@ void NetStats::countOut(Channel c, size_t bytes) {
 }
 
 void NetStats::tick(uint64_t nowUs) {
-    if (m_firstTickUs == 0) {
-        m_firstTickUs = m_lastTickUs = nowUs;
+    if (m_firstTickUs.load() == 0) {
+        m_lastTickUs = nowUs;
+        m_firstTickUs = nowUs;
         for (size_t c = 0; c < m_channels.size(); ++c)
             m_lastTick[c] = {m_channels[c].bytesIn.load(), m_channels[c].bytesOut.load(),
                              m_channels[c].msgsIn.load(), m_channels[c].msgsOut.load()};
@@ -48,7 +49,8 @@ void NetStats::tick(uint64_t nowUs) {
 }
 
 ChannelRates NetStats::averageRates(Channel c) const {
-    double dt = double(m_lastTickUs - m_firstTickUs) * 1e-6;
+    const uint64_t first = m_firstTickUs.load(), last = m_lastTickUs.load();
+    double dt = first && last > first ? double(last - first) * 1e-6 : 0.0;
     if (dt <= 0)
         return {};
     const auto& k = m_channels[size_t(c)];

@@ -106,7 +106,8 @@ private:
     std::array<Counters, size_t(Channel::Count)> m_channels;
     std::array<std::array<uint64_t, 4>, size_t(Channel::Count)> m_lastTick{};
     std::atomic<uint64_t> m_malformed{0};
-    uint64_t m_firstTickUs = 0, m_lastTickUs = 0;
+    // Atomic: averageRates (a server's reportJson) may read them while the network thread ticks.
+    std::atomic<uint64_t> m_firstTickUs{0}, m_lastTickUs{0};
     std::deque<std::array<ChannelRates, size_t(Channel::Count)>> m_history;
 };
 
