@@ -739,6 +739,7 @@ void SessionServer::networkLoop() {
                 w.spacing = s.volume.spacing();
             }
             w.volumeName = m_config.volumeName.substr(0, 256);
+            w.maxViewPixels = uint32_t(m_config.maxViewPixels);
             sendTo(p.peer, Channel::Control, encodeMessage(w));
             sendParticipants();
             if (!s.annotations.empty())

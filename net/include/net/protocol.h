@@ -23,8 +23,9 @@ namespace trephine::net {
 // the volume codec in the hello. 3: Participants (who is in the session, by name and role);
 // Annotate and Annotations (an instructor's marks on the skull). 4: the predicted image form's
 // base hash is four 64-bit FNV-1a lanes, a word a pixel (image_delta.cpp); TakeOver, and who
-// holds a trainee in Participants.
-inline constexpr uint32_t kProtocolVersion = 6;
+// holds a trainee in Participants. 5: the predicted form's mask of exactly predicted pixels.
+// 6: ImageUpdate's grid time. 7: the largest view the server serves, in the welcome.
+inline constexpr uint32_t kProtocolVersion = 7;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
 enum class RefuseReason : uint32_t {
@@ -183,12 +184,16 @@ struct Welcome {
     glm::ivec3 volumeDims{0};
     glm::vec3 spacing{1.0f};
     std::string volumeName;
+    // The largest view (width x height pixels) the server serves: a larger ViewRequest would be
+    // dropped, so the client refuses it itself (SessionClient::requestView).
+    uint32_t maxViewPixels = uint32_t(kMaxWindowSize) * kMaxWindowSize;
 
     template <typename S>
     bool serialize(S& s) {
         return s.integer(clientId) && s.integer(serverTimeUs) && s.ranged(volumeDims.x, 1, 4096) &&
                s.ranged(volumeDims.y, 1, 4096) && s.ranged(volumeDims.z, 1, 4096) &&
-               serializeVec3(s, spacing) && s.string(volumeName, 256);
+               serializeVec3(s, spacing) && s.string(volumeName, 256) &&
+               s.ranged(maxViewPixels, uint32_t(1), uint32_t(kMaxWindowSize) * kMaxWindowSize);
     }
 };
 
