@@ -359,6 +359,7 @@ bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
             m_requested.clear();
         }
         m_requestedViewId = m_viewId;
+        m_resyncRequestId.reset(); // the next DBI is a full one
         if (!m_config.renderLocally &&
             (m_dbi.width() != m_view.width || m_dbi.height() != m_view.height))
             m_dbi = Dbi(m_view.width, m_view.height);
@@ -444,9 +445,14 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
             ++m_predicted;
         if (st == PredictedStatus::BaseMismatch) {
             // Our copy is not what the server coded against: never show a wrong picture; ask
-            // for the whole view again (the server answers with a full image).
+            // for the whole view again (the server answers with a full image). Ask for the
+            // newest view still pending, not the one shown: a request for the old view would
+            // supersede it and bring the old view back. Once asked, the updates coded against
+            // the same stale copy until that full image comes need no request of their own.
             ++m_resyncs;
-            requestView(m_view);
+            if (!m_resyncRequestId)
+                m_resyncRequestId =
+                    requestView(m_requested.empty() ? m_view : m_requested.rbegin()->second);
             return true;
         }
     } else if (!decodeImage(u.payload, u.rawBytes, u.codec, u.width, u.height, camera, patch)) {
@@ -475,6 +481,10 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
         ++m_fullUpdates;
         if (u.viewId == m_viewId)
             m_hasFull = true;
+        // The resync's answer, or a newer request's (the server may replace an unsent full
+        // image by a newer view's): our copy is the server's again.
+        if (m_resyncRequestId && int32_t(u.viewId - *m_resyncRequestId) >= 0)
+            m_resyncRequestId.reset();
     }
     m_stats.updateBytes.add(double(u.payload.size()));
     m_stats.updateRawBytes.add(double(u.rawBytes));

@@ -124,7 +124,8 @@ public:
     uint64_t updatesApplied() const { return m_updatesApplied; }
     uint64_t fullUpdates() const { return m_fullUpdates; }
     uint64_t updatesRejected() const { return m_rejected; }
-    // Predicted image updates whose base differed from our pixels (each asked for a full image).
+    // Predicted image updates whose base differed from our pixels (not applied). The first asks
+    // for a full image of the newest view asked for; the others until it arrives ask nothing.
     uint64_t resyncs() const { return m_resyncs; }
     // Predicted image updates applied (coded against our own pixels, net/image_delta.h).
     uint64_t predictedApplied() const { return m_predicted; }
@@ -239,6 +240,8 @@ private:
     std::optional<HapticModel> m_latestHaptic;
     uint64_t m_hapticModels = 0;
     uint64_t m_resyncs = 0, m_predicted = 0;
+    // The view request a base mismatch made, until a full image of it (or of a newer one) comes.
+    std::optional<uint32_t> m_resyncRequestId;
     uint64_t m_relays = 0, m_updatesApplied = 0, m_fullUpdates = 0, m_rejected = 0, m_toolSent = 0;
     NetStats m_stats;
 };

@@ -1,0 +1,130 @@
+// Client-side review fixes, over loopback with the server in this process: a resync during a view
+// change keeps the view asked for and asks only once. Deadlines only guard against hangs; nothing
+// asserts wall time.
+#include "net/session_client.h"
+#include "net/session_server.h"
+
+#include "libsim/dirty_rect.h"
+#include "libsim/skull.h"
+#include "net/codec.h"
+#include "net/view.h"
+
+#include "loopback.h"
+
+#include <gtest/gtest.h>
+
+#include <chrono>
+#include <memory>
+#include <thread>
+
+using namespace trephine;
+using namespace trephine::net;
+using trephine::testing::loopback;
+using trephine::testing::loopbackServerConfig;
+using trephine::testing::pumpUntil;
+
+namespace {
+
+// What a zstd client should hold for `view`: the server's render, depth through the quantiser.
+Dbi quantised(const Dbi& render, const ViewSpec& view) {
+    DepthQuantizer q(toCamera(view));
+    Dbi out = render;
+    for (int y = 0; y < out.height(); ++y)
+        for (int x = 0; x < out.width(); ++x)
+            out.depth()[out.index(x, y)] = q.dequantize(q.quantize(render.depth(x, y)));
+    return out;
+}
+
+// Waits (without polling the client) until the server has sent everything it had.
+bool waitServerIdle(SessionServer& server) {
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    while (!server.idle())
+        if (std::chrono::steady_clock::now() > deadline)
+            return false;
+        else
+            std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    return true;
+}
+
+// A zstd client (predicted updates) of the paper view of skull:64 joined to its own server.
+struct PredictedSession {
+    Volume volume = makeSkull(64);
+    ViewSpec paper, top;
+    std::unique_ptr<SessionServer> server;
+    std::unique_ptr<SessionClient> client;
+
+    PredictedSession() {
+        volume.setSpacing(glm::vec3(paperSpacingMm(64)));
+        paper = toViewSpec(cameraPreset("paper", volume, {160, 160}));
+        top = toViewSpec(cameraPreset("top", volume, {160, 160}));
+        server = std::make_unique<SessionServer>(volume, loopbackServerConfig("skull:64", 2));
+        server->start();
+        ClientConfig cc;
+        cc.codec = Codec::Zstd;
+        cc.view = paper;
+        client = std::make_unique<SessionClient>(cc);
+        client->connect(loopback(server->port()));
+        EXPECT_TRUE(pumpUntil({client.get()}, [&] { return client->hasFullImage(); }));
+    }
+    ~PredictedSession() { server->stop(); }
+
+    // Damages the client's copy where a cut of `box` will be redrawn, so the predicted update of
+    // the cut fails its base check.
+    void damageWhereCutShows(const Box3i& box) {
+        const PixelRect rect = dirtyScreenRect(toCamera(paper), volume, box);
+        ASSERT_FALSE(rect.empty());
+        client->damagePixelForTest(rect.x + rect.w / 2, rect.y + rect.h / 2);
+    }
+    // Pumps until the full image of the newest request has come, then until the client holds
+    // exactly the server's picture of the view it shows.
+    bool settled() {
+        return pumpUntil({client.get()},
+                         [&] { return server->idle() && client->hasFullImage(); }) &&
+               pumpUntil({client.get()}, [&] {
+                   return server->idle() &&
+                          client->dbi() ==
+                              quantised(server->renderView(client->view()), client->view());
+               });
+    }
+};
+
+} // namespace
+
+// A predicted update of the view shown fails its base check while a view change is pending: the
+// resync asks for the pending view, not the shown one, so the view asked for is the one shown.
+TEST(ClientReview, AResyncDuringAViewChangeEndsOnTheViewAskedFor) {
+    PredictedSession s;
+    ASSERT_FALSE(s.paper == s.top);
+    const Box3i box = surfaceBox(s.volume, 6);
+    s.damageWhereCutShows(box);
+    s.server->submitBoxCut(box);
+    // The cut's predicted update leaves before the view request below reaches the server, so it
+    // comes before the new view's full image on the (ordered) image channel.
+    ASSERT_TRUE(waitServerIdle(*s.server));
+    s.client->requestView(s.top);
+    ASSERT_TRUE(pumpUntil({s.client.get()}, [&] { return s.client->resyncs() > 0; }));
+    ASSERT_TRUE(s.settled());
+    EXPECT_TRUE(s.client->view() == s.top)
+        << "showing the " << (s.client->view() == s.paper ? "old view" : "other view");
+    EXPECT_EQ(s.client->updatesRejected(), 0u);
+}
+
+// Every predicted update coded against the same stale copy fails its check until the full image
+// comes; only the first asks for one.
+TEST(ClientReview, AResyncAsksOnceUntilItsFullImageArrives) {
+    PredictedSession s;
+    s.damageWhereCutShows(surfaceBox(s.volume, 6));
+    const uint64_t requestsBefore = s.client->stats().totalMessagesOut(Channel::Control);
+    // Three growing cuts on one spot, each sent on its own before the client reads any: each
+    // update's rectangle covers the damaged pixel and the previous update's.
+    for (int n : {6, 10, 14}) {
+        s.server->submitBoxCut(surfaceBox(s.volume, n));
+        ASSERT_TRUE(waitServerIdle(*s.server));
+    }
+    ASSERT_TRUE(s.settled());
+    EXPECT_TRUE(s.client->view() == s.paper);
+    ASSERT_GE(s.client->resyncs(), 2u) << "more than one update met the stale copy";
+    EXPECT_EQ(s.client->stats().totalMessagesOut(Channel::Control) - requestsBefore, 1u)
+        << "view requests for " << s.client->resyncs() << " mismatching updates";
+    EXPECT_EQ(s.client->updatesRejected(), 0u);
+}
