@@ -67,6 +67,15 @@ AppliedVolumeBox copyBox(const Volume& v, const Box3i& box, bool full) {
     return b;
 }
 
+// The end-to-end latency of the update just applied (the newest record, when it is that update),
+// -1 for a full one (a join or a switch: not caused by drilling) or when unknown.
+double latencyOf(const SessionClient& c, uint32_t sequence, bool full) {
+    const auto& records = c.updateRecords();
+    if (full || records.empty() || records.back().sequence != sequence)
+        return -1;
+    return records.back().latencyUs;
+}
+
 ModeFigures figures(const ModeStats& m, double ratePerS) {
     ModeFigures f;
     f.updatesApplied = m.updates;
@@ -275,15 +284,15 @@ void ClientThread::run() {
                         b.bytes = uint32_t(meta.payload.size());
                         b.rawBytes = meta.rawBytes;
                         b.appliedUs = steadyNowUs();
-                        const auto& records = cp->updateRecords();
-                        if (!records.empty() && records.back().sequence == meta.sequence && !full)
-                            b.latencyUs = records.back().latencyUs;
+                        b.latencyUs = latencyOf(*cp, meta.sequence, full);
                         pushBox(std::move(b));
                     });
-            NewSamples newLatency, newRtt;
-            // Runs inside poll(), right after the update is applied to the client's DBI.
+            NewSamples newRtt;
+            // Runs inside poll(), right after the update is applied to the client's DBI. Its
+            // latency is its own record's, not the stats' latency window, which volume updates
+            // feed too.
             cp->setUpdateCallback(
-                [this, cp, &newLatency](const ImageUpdate& meta, const PixelRect& rect, bool full) {
+                [this, cp](const ImageUpdate& meta, const PixelRect& rect, bool full) {
                     AppliedRect r;
                     r.full = full;
                     r.rect = full ? cp->dbi().bounds() : rect;
@@ -294,7 +303,7 @@ void ClientThread::run() {
                     r.bytes = uint32_t(meta.payload.size());
                     r.rawBytes = meta.rawBytes;
                     r.appliedUs = steadyNowUs();
-                    r.latencyUs = newLatency.take(cp->stats().updateLatencyUs);
+                    r.latencyUs = latencyOf(*cp, meta.sequence, full);
                     pushRect(std::move(r));
                 });
             cp->setHapticCallback([this](const HapticModel& m, uint64_t) {

@@ -1,11 +1,13 @@
 // Client-side review fixes, over loopback with the server in this process: a resync during a view
-// change keeps the view asked for and asks only once. Deadlines only guard against hangs; nothing
-// asserts wall time.
+// change keeps the view asked for and asks only once; (ClientThread) each applied rectangle
+// carries its own update's latency. Deadlines only guard against hangs; nothing asserts wall time.
+#include "net/client_thread.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
 
 #include "libsim/dirty_rect.h"
 #include "libsim/skull.h"
+#include "libsim/tool.h"
 #include "net/codec.h"
 #include "net/view.h"
 
@@ -127,4 +129,88 @@ TEST(ClientReview, AResyncAsksOnceUntilItsFullImageArrives) {
     EXPECT_EQ(s.client->stats().totalMessagesOut(Channel::Control) - requestsBefore, 1u)
         << "view requests for " << s.client->resyncs() << " mismatching updates";
     EXPECT_EQ(s.client->updatesRejected(), 0u);
+}
+
+namespace {
+
+template <class F>
+bool waitFor(F pred, double seconds = 30.0) {
+    auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+    while (std::chrono::steady_clock::now() < end) {
+        if (pred())
+            return true;
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    return pred();
+}
+
+// Drills at `site` for `states` tool states 10 ms apart, 0.08 mm deeper each, from 1 mm above.
+void drillThrough(ClientThread& client, const SurfaceSite& site, int states) {
+    for (int i = 0; i < states; ++i) {
+        ToolState t;
+        t.toolKind = uint8_t(ToolKind::Burr);
+        t.diameterMm = 5.0f;
+        t.position = site.position - site.normal * (-1.0f + 0.08f * float(i));
+        t.orientation = glm::rotation(glm::vec3(0, 0, 1), site.normal);
+        t.speed = 1.0f;
+        t.drilling = true;
+        EXPECT_TRUE(client.sendToolState(t));
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+}
+
+} // namespace
+
+// Volume updates add their latencies to the client's latency window too: the full image that ends
+// a volume period must not carry their mean (it was caused by the switch, not by drilling), and
+// each drilled rectangle carries a latency of its own.
+TEST(ClientReview, TheFullImageAfterVolumeModeCarriesNoLatency) {
+    Volume skull = makeSkull(64);
+    const SurfaceSite site = defaultBurrSite(skull);
+    SessionServer server(skull, loopbackServerConfig("skull:64"));
+    server.start();
+    ClientThreadConfig cc;
+    cc.address = "127.0.0.1:" + std::to_string(server.port());
+    cc.client.view =
+        toViewSpec(cameraLookingAt(site.position, site.normal, 150.0f, 45.0f, {96, 96}, skull));
+    cc.client.renderLocally = false; // a window's client: no local render to wait for
+    ClientThread client(cc);
+    client.start();
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->hasFullImage; }));
+
+    ASSERT_TRUE(client.requestSync(Sync::Volume));
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->sync == Sync::Volume; }));
+    drillThrough(client, site, 25);
+    ASSERT_TRUE(waitFor([&] {
+        return server.idle() && client.snapshot()->modes[size_t(Sync::Volume)].latencyP50Us > 0;
+    })) << "volume updates with a latency";
+    client.drainRects();
+
+    ASSERT_TRUE(client.requestSync(Sync::Dbi));
+    ASSERT_TRUE(waitFor([&] {
+        auto s = client.snapshot();
+        return s->sync == Sync::Dbi && s->hasFullImage;
+    }));
+    int fulls = 0;
+    for (const AppliedRect& r : client.drainRects())
+        if (r.full) {
+            ++fulls;
+            EXPECT_LT(r.latencyUs, 0) << "the switch's full image, sequence " << r.sequence;
+        }
+    ASSERT_EQ(fulls, 1);
+
+    SurfaceSite beside = site; // fresh bone next to the first hole
+    beside.position += glm::normalize(glm::cross(site.normal, glm::vec3(1, 0, 0))) * 8.0f;
+    const uint64_t published = client.rectsPublished();
+    drillThrough(client, beside, 25);
+    ASSERT_TRUE(waitFor([&] { return client.rectsPublished() > published && server.idle(); }));
+    int drilled = 0;
+    for (const AppliedRect& r : client.drainRects())
+        if (!r.full) {
+            ++drilled;
+            EXPECT_GE(r.latencyUs, 0) << "drilled rectangle, sequence " << r.sequence;
+        }
+    EXPECT_GT(drilled, 0);
+    client.stop();
+    server.stop();
 }

@@ -42,7 +42,7 @@ struct AppliedRect {
     ViewSpec view;         // the view of viewId: the camera the pixels were rendered with
     uint32_t bytes = 0;    // payload on the wire
     uint32_t rawBytes = 0; // before compression
-    double latencyUs = -1; // cause at the server -> applied here (-1: unknown)
+    double latencyUs = -1; // cause at the server -> applied here (-1: unknown or full)
     uint64_t appliedUs = 0;
 };
 
