@@ -405,7 +405,12 @@ void ClientThread::run() {
                     if (m_rateHistory.size() > 120)
                         m_rateHistory.pop_front();
                     lastTickUs = now;
+                    // Behind by more than a tick (a stall: a large full volume applied, the thread
+                    // not scheduled), start afresh from now: catching up would tick once a poll,
+                    // each over ~1 ms, and publish rates of 0 or ~1000 a second.
                     nextTick += 1000000;
+                    if (nextTick <= now)
+                        nextTick = now + 1000000;
                 }
                 if (now >= nextPublish) {
                     if (double rtt = newRtt.take(cp->stats().rttUs); rtt >= 0)

@@ -1,6 +1,7 @@
 // Client-side review fixes, over loopback with the server in this process: a resync during a view
 // change keeps the view asked for and asks only once; (ClientThread) each applied rectangle
-// carries its own update's latency. Deadlines only guard against hangs; nothing asserts wall time.
+// carries its own update's latency, and the statistics tick restarts after a stall instead of
+// catching up. Deadlines only guard against hangs; nothing asserts wall time.
 #include "net/client_thread.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
@@ -15,6 +16,7 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
 #include <memory>
 #include <thread>
@@ -211,6 +213,53 @@ TEST(ClientReview, TheFullImageAfterVolumeModeCarriesNoLatency) {
             EXPECT_GE(r.latencyUs, 0) << "drilled rectangle, sequence " << r.sequence;
         }
     EXPECT_GT(drilled, 0);
+    client.stop();
+    server.stop();
+}
+
+// The network thread stalls for 2.5 s (here in the force-model hook; in a window, a large full
+// volume applied): its 1 s statistics tick must start afresh, not catch up one tick a poll with
+// ~1 ms intervals. The client pings every 0.25 s, so every tick of at least a second has sent
+// some control messages, and none a thousand a second.
+TEST(ClientReview, TheStatisticsTickRestartsAfterAStall) {
+    Volume sphere = makeSphere(32);
+    SessionServer server(sphere, loopbackServerConfig("sphere:32"));
+    server.start();
+    std::atomic<bool> stallArmed{false};
+    std::atomic<uint64_t> stallEndUs{0};
+    ClientThreadConfig cc;
+    cc.address = "127.0.0.1:" + std::to_string(server.port());
+    cc.client.view = toViewSpec(cameraPreset("top", sphere, {32, 32}));
+    cc.onHapticModel = [&](const HapticModel&) {
+        if (stallArmed.exchange(false)) {
+            std::this_thread::sleep_for(std::chrono::milliseconds(2500));
+            stallEndUs = steadyNowUs();
+        }
+    };
+    ClientThread client(cc);
+    client.start();
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->hasFullImage; }));
+    // Ticks from the second after this one on cover only welcomed time (pings every 0.25 s).
+    const size_t first = client.snapshot()->rateHistory.size() + 1;
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->rateHistory.size() > first; }));
+
+    stallArmed = true;
+    ToolState t;
+    t.toolKind = uint8_t(ToolKind::Burr);
+    t.diameterMm = 4.0f;
+    t.position = {0.0f, 0.0f, sphereRadiusMm(32) + 5.0f}; // in the air: a model, no cut
+    ASSERT_TRUE(client.sendToolState(t));
+    ASSERT_TRUE(waitFor([&] { return stallEndUs.load() != 0; }));
+    // The tick a second after the stall has been published.
+    ASSERT_TRUE(
+        waitFor([&] { return client.snapshot()->publishedUs > stallEndUs.load() + 1300000; }));
+    auto s = client.snapshot();
+    ASSERT_GT(s->rateHistory.size(), first + 2);
+    for (size_t i = first; i < s->rateHistory.size(); ++i) {
+        const double perS = s->rateHistory[i][size_t(Channel::Control)].messagesOutPerS;
+        EXPECT_GT(perS, 0.0) << "tick " << i << " of " << s->rateHistory.size();
+        EXPECT_LT(perS, 50.0) << "tick " << i << " of " << s->rateHistory.size();
+    }
     client.stop();
     server.stop();
 }

@@ -63,7 +63,7 @@ struct AppliedVolumeBox {
 // Per-sync-mode figures for the Comparison panel; each mode's stay while the other is active.
 struct ModeFigures {
     uint64_t updatesApplied = 0;
-    double updateRatePerS = 0;              // over the latest 1 s tick
+    double updateRatePerS = 0;              // over the latest tick (1 s; longer after a stall)
     double meanBytes = 0, meanRawBytes = 0; // per update
     double latencyP50Us = -1, latencyP99Us = -1;
     double applyP50Us = -1, clientRenderP50Us = -1;
