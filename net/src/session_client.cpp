@@ -528,6 +528,12 @@ uint32_t SessionClient::sendToolState(ToolState state) {
 }
 
 uint32_t SessionClient::requestView(const ViewSpec& view) {
+    // The server would drop it and we would wait for its image for good (in volume mode, show a
+    // view the server does not know, so a switch to DBI would never complete).
+    if (m_welcome && int64_t(view.width) * int64_t(view.height) > m_welcome->maxViewPixels) {
+        ++m_viewsRefused;
+        return 0;
+    }
     ViewRequest r;
     r.requestId = m_nextRequestId++;
     r.view = view;

@@ -263,3 +263,38 @@ TEST(ClientReview, TheStatisticsTickRestartsAfterAStall) {
     client.stop();
     server.stop();
 }
+
+// A view larger than the server serves (the welcome says how large) is refused by the client
+// itself: before, a volume client adopted it locally, the server dropped it, and a later switch
+// to DBI never completed (its full image named a view the client had left).
+TEST(ClientReview, AViewLargerThanTheServerServesIsRefusedAndASwitchToDbiStillCompletes) {
+    Volume sphere = makeSphere(32);
+    ServerConfig sc = loopbackServerConfig("sphere:32");
+    sc.maxViewPixels = 64 * 64;
+    SessionServer server(sphere, sc);
+    server.start();
+    ClientConfig cc;
+    cc.view = toViewSpec(cameraPreset("top", sphere, {64, 64}));
+    cc.sync = Sync::Volume;
+    cc.renderThreads = 1;
+    SessionClient client(cc);
+    client.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return client.localVolume() != nullptr; }));
+    EXPECT_EQ(client.welcome().maxViewPixels, 64u * 64u);
+    const ViewSpec shown = client.view();
+    EXPECT_EQ(client.requestView(toViewSpec(cameraPreset("top", sphere, {96, 96}))), 0u);
+    EXPECT_EQ(client.viewsRefused(), 1u);
+    EXPECT_EQ(client.view(), shown) << "the volume client kept its view";
+    client.requestSync(Sync::Dbi);
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return client.sync() == Sync::Dbi; }))
+        << "the switch to DBI completes";
+    EXPECT_TRUE(client.hasFullImage());
+    EXPECT_EQ(server.viewsRefused(), 0u) << "nothing the server had to drop";
+    // A view it serves still goes through.
+    const ViewSpec left = toViewSpec(cameraPreset("left", sphere, {64, 64}));
+    const uint32_t id = client.requestView(left);
+    EXPECT_NE(id, 0u);
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return client.viewId() == id; }));
+    EXPECT_EQ(client.view(), left);
+    server.stop();
+}

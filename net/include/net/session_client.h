@@ -99,8 +99,11 @@ public:
     uint32_t sendToolState(ToolState state);
     // Asks for a new view; the DBI switches when its full image arrives. Returns the request id.
     // In volume mode the view switches at once (rendered locally) and the server is told, so a
-    // switch to DBI gets this view.
+    // switch to DBI gets this view. A view larger than the welcome's maxViewPixels, which the
+    // server would drop, is refused here: nothing changes, nothing is sent, it returns 0 and
+    // counts in viewsRefused().
     uint32_t requestView(const ViewSpec& view);
+    uint64_t viewsRefused() const { return m_viewsRefused; }
     void sendPing();
     // [Instructor] Adds a mark, removes one or clears them all (Annotate); the server applies it
     // and sends everyone the new list. A trainee's are refused by the server. Labels are cut to
@@ -243,6 +246,7 @@ private:
     // The view request a base mismatch made, until a full image of it (or of a newer one) comes.
     std::optional<uint32_t> m_resyncRequestId;
     uint64_t m_relays = 0, m_updatesApplied = 0, m_fullUpdates = 0, m_rejected = 0, m_toolSent = 0;
+    uint64_t m_viewsRefused = 0;
     NetStats m_stats;
 };
 
