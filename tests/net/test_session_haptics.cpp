@@ -281,20 +281,21 @@ TEST(SessionLimits, OversizedViewsAreRefused) {
     refused.connect(loopback(server.port()));
     ASSERT_TRUE(pumpUntil({&refused}, [&] { return refused.closed(); }));
     EXPECT_EQ(refused.closeReason(), refuseReasonText(uint32_t(RefuseReason::BadHello)));
-    // A view request too large: dropped and counted; the client keeps its view and its session.
+    // A view request too large: the client knows the limit from the welcome and refuses it
+    // itself; it keeps its view and its session (the server's own drop of such a request, from a
+    // peer that sends it anyway: SessionHostile.AViewRequestOverTheLimitIsDroppedAndCounted).
     ClientConfig ok;
     ok.view = topView(sphere, 32);
     SessionClient client(ok);
     client.connect(loopback(server.port()));
     ASSERT_TRUE(pumpUntil({&client}, [&] { return client.hasFullImage(); }));
-    client.requestView(topView(sphere, 100));
-    ASSERT_TRUE(pumpUntil({&client}, [&] { return server.viewsRefused() == 1; }));
+    EXPECT_EQ(client.requestView(topView(sphere, 100)), 0u);
+    EXPECT_EQ(client.viewsRefused(), 1u);
+    client.poll(50);
     EXPECT_FALSE(client.closed());
     EXPECT_EQ(client.view().width, 32);
     EXPECT_EQ(server.malformedTotal(), 0u);
-    std::string report = server.reportJson();
-    EXPECT_NE(report.find("\"views_refused\": 1"), std::string::npos) << report;
-    EXPECT_NE(report.find("\"peers\""), std::string::npos);
+    EXPECT_EQ(server.viewsRefused(), 0u);
 }
 
 TEST(SessionLimits, ServerReportCountsMalformedPerPeer) {

@@ -257,3 +257,32 @@ TEST(SessionHostile, AToolStateWithAScaledRotationFeelsTheUnitRotationsForce) {
     EXPECT_FALSE(encodeMessage(scaled).empty());
     server.stop();
 }
+
+// A peer that asks for a view over maxViewPixels anyway (a SessionClient refuses it itself, knowing
+// the limit from the welcome): dropped and counted, not malformed; the peer keeps its session.
+TEST(SessionHostile, AViewRequestOverTheLimitIsDroppedAndCounted) {
+    Volume sphere = makeSphere(24);
+    ServerConfig sc = loopbackServerConfig("sphere:24");
+    sc.maxViewPixels = 64 * 64;
+    SessionServer server(sphere, sc);
+    server.start();
+    RawPeer c;
+    ASSERT_TRUE(c.connect(server.port()));
+    Hello h;
+    h.name = "pushy";
+    h.codec = Codec::Lz4;
+    h.view = toViewSpec(cameraPreset("top", sphere, {32, 32}));
+    c.send(Channel::Control, h);
+    ASSERT_TRUE(c.serviceUntil([&] { return !c.images.empty(); }));
+    ViewRequest r;
+    r.requestId = 1;
+    r.view = toViewSpec(cameraPreset("top", sphere, {100, 100}));
+    c.send(Channel::Control, r);
+    ASSERT_TRUE(c.serviceUntil([&] { return server.viewsRefused() == 1; }));
+    EXPECT_FALSE(c.disconnected);
+    EXPECT_EQ(server.malformedTotal(), 0u);
+    std::string report = server.reportJson();
+    EXPECT_NE(report.find("\"views_refused\": 1"), std::string::npos) << report;
+    EXPECT_NE(report.find("\"peers\""), std::string::npos);
+    server.stop();
+}
