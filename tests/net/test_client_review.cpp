@@ -26,18 +26,9 @@ using namespace trephine::net;
 using trephine::testing::loopback;
 using trephine::testing::loopbackServerConfig;
 using trephine::testing::pumpUntil;
+using trephine::testing::quantised;
 
 namespace {
-
-// What a zstd client should hold for `view`: the server's render, depth through the quantiser.
-Dbi quantised(const Dbi& render, const ViewSpec& view) {
-    DepthQuantizer q(toCamera(view));
-    Dbi out = render;
-    for (int y = 0; y < out.height(); ++y)
-        for (int x = 0; x < out.width(); ++x)
-            out.depth()[out.index(x, y)] = q.dequantize(q.quantize(render.depth(x, y)));
-    return out;
-}
 
 // Waits (without polling the client) until the server has sent everything it had.
 bool waitServerIdle(SessionServer& server) {

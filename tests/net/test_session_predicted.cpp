@@ -18,18 +18,9 @@ using namespace trephine::net;
 using trephine::testing::loopback;
 using trephine::testing::loopbackServerConfig;
 using trephine::testing::pumpUntil;
+using trephine::testing::quantised;
 
 namespace {
-
-// What a client should hold for `view`: the server's render with depth through the quantiser.
-Dbi quantised(const Dbi& render, const ViewSpec& view) {
-    DepthQuantizer q(toCamera(view));
-    Dbi out = render;
-    for (int y = 0; y < out.height(); ++y)
-        for (int x = 0; x < out.width(); ++x)
-            out.depth()[out.index(x, y)] = q.dequantize(q.quantize(render.depth(x, y)));
-    return out;
-}
 
 struct Fixture {
     Volume volume = makeSkull(64);

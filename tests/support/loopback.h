@@ -4,6 +4,7 @@
 
 #include "libsim/skull.h"
 #include "libsim/tool.h"
+#include "net/codec.h"
 #include "net/enet_host.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
@@ -96,6 +97,17 @@ inline net::ToolState burrState(const SurfaceSite& site, int i, int count, uint6
     t.speed = 1.0f;
     t.drilling = true;
     return t;
+}
+
+// What a zstd or lz4 client should hold for `view`: the server's render with its depth through
+// the quantiser (DepthQuantizer), colour as it is.
+inline Dbi quantised(const Dbi& render, const net::ViewSpec& view) {
+    net::DepthQuantizer q(net::toCamera(view));
+    Dbi out = render;
+    for (int y = 0; y < out.height(); ++y)
+        for (int x = 0; x < out.width(); ++x)
+            out.depth()[out.index(x, y)] = q.dequantize(q.quantize(render.depth(x, y)));
+    return out;
 }
 
 // The top of makeSphere(n), facing +z.
