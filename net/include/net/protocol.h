@@ -152,7 +152,18 @@ struct ViewSpec {
                serializeFinite(s, fovYDeg) && fovYDeg > 1.0f && fovYDeg < 179.0f &&
                serializeFinite(s, nearMm) && serializeFinite(s, farMm) && nearMm > 0.0f &&
                farMm > nearMm && s.ranged(width, uint16_t(1), kMaxWindowSize) &&
-               s.ranged(height, uint16_t(1), kMaxWindowSize);
+               s.ranged(height, uint16_t(1), kMaxWindowSize) && oriented();
+    }
+    // A camera needs a direction to look in and an up that is not along it (lookAt of either
+    // gives NaN matrices, so every pixel would be garbage).
+    bool oriented() const {
+        const glm::vec3 dir = target - eye;
+        const float d = std::sqrt(dir.x * dir.x + dir.y * dir.y + dir.z * dir.z);
+        const float u = std::sqrt(up.x * up.x + up.y * up.y + up.z * up.z);
+        const glm::vec3 c(dir.y * up.z - dir.z * up.y, dir.z * up.x - dir.x * up.z,
+                          dir.x * up.y - dir.y * up.x);
+        const float cross = std::sqrt(c.x * c.x + c.y * c.y + c.z * c.z);
+        return d > 1e-6f && u > 1e-6f && cross > 1e-4f * d * u;
     }
     bool operator==(const ViewSpec&) const = default;
 };
