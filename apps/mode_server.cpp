@@ -54,7 +54,8 @@ int runServer(const ServerOptions& o) {
                 (unsigned long long)server.toolStatesApplied(),
                 (unsigned long long)server.malformedTotal());
     server.stop();
-    if (!o.saveOnExit.empty())
+    // A failed --save-on-exit was said by stop(), with the emergency copy it made instead.
+    if (!o.saveOnExit.empty() && server.saveError().empty())
         std::printf("trephine server: wrote %s\n", o.saveOnExit.c_str());
     if (!o.report.empty()) {
         std::ofstream f(o.report);
@@ -62,7 +63,7 @@ int runServer(const ServerOptions& o) {
             throw Error("--report " + o.report + ": cannot write it");
         std::printf("trephine server: wrote %s\n", o.report.c_str());
     }
-    return 0;
+    return server.saveError().empty() ? 0 : 1;
 }
 
 } // namespace

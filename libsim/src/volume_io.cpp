@@ -20,6 +20,7 @@
 #include <cstring>
 #include <filesystem>
 #include <type_traits>
+#include <unistd.h>
 #include <zlib.h>
 
 namespace trephine {
@@ -207,8 +208,12 @@ size_t GzipSource::readSome(void* dst, size_t n) {
     return wanted - z.avail_out;
 }
 
-FileSink::FileSink(const std::string& path) : m_path(path) {
-    m_file = std::fopen(path.c_str(), "wb");
+FileSink::FileSink(const std::string& path)
+    : m_path(path), m_temp(path + ".trephine-" + std::to_string(::getpid()) + ".tmp") {
+    std::error_code ec;
+    if (fs::is_directory(path, ec))
+        fail(path, "cannot write: it is a folder");
+    m_file = std::fopen(m_temp.c_str(), "wb");
     if (!m_file)
         fail(path, "cannot write: " + systemError());
 }
@@ -216,9 +221,15 @@ FileSink::FileSink(const std::string& path) : m_path(path) {
 FileSink::~FileSink() {
     if (m_file)
         std::fclose(m_file);
+    if (!m_committed) {
+        std::error_code ec;
+        fs::remove(m_temp, ec);
+    }
 }
 
 void FileSink::write(const void* data, size_t n) {
+    if (!m_file)
+        fail(m_path, "cannot write: already finished");
     if (n && std::fwrite(data, 1, n, m_file) != n)
         fail(m_path, "cannot write: " + systemError());
 }
@@ -226,12 +237,22 @@ void FileSink::write(const void* data, size_t n) {
 void FileSink::finish() {
     std::FILE* f = m_file;
     m_file = nullptr;
-    if (std::fflush(f) != 0 || std::ferror(f)) {
+    if (!f)
+        return;
+    if (std::fflush(f) != 0 || std::ferror(f) || ::fsync(::fileno(f)) != 0) {
+        const std::string why = systemError();
         std::fclose(f);
-        fail(m_path, "cannot write: " + systemError());
+        fail(m_path, "cannot write: " + why);
     }
     if (std::fclose(f) != 0)
         fail(m_path, "cannot write: " + systemError());
+}
+
+void FileSink::commit() {
+    finish();
+    if (std::rename(m_temp.c_str(), m_path.c_str()) != 0)
+        fail(m_path, "cannot write: " + systemError());
+    m_committed = true;
 }
 
 GzipSink::GzipSink(ByteSink& out, const std::string& name)
@@ -785,10 +806,53 @@ Volume loadVolume(const std::string& spec) {
     return v;
 }
 
+namespace {
+
+// Where a .nhdr's detached data goes (writeNrrd names it the same way).
+std::string detachedDataPath(const std::string& path, bool compress) {
+    return path.substr(0, path.size() - 5) + (compress ? ".raw.gz" : ".raw");
+}
+
+// A detached data file is replaced only when it is this header's own (an earlier save of the same
+// .nhdr): OUT.raw beside a new OUT.nhdr may be someone's scan (`volume convert
+// 'raw:scan.raw?...' scan.nhdr` used to overwrite the scan it read).
+void checkDetachedData(const std::string& path, bool compress) {
+    const std::string dataPath = detachedDataPath(path, compress);
+    std::error_code ec;
+    if (!fs::exists(dataPath, ec))
+        return;
+    bool ours = false;
+    if (std::FILE* f = std::fopen(path.c_str(), "rb")) {
+        std::string head(4096, '\0');
+        head.resize(std::fread(head.data(), 1, head.size(), f));
+        std::fclose(f);
+        ours = head.rfind("NRRD", 0) == 0 &&
+               head.find("\ndata file: " + fs::path(dataPath).filename().string() + "\n") !=
+                   std::string::npos;
+    }
+    if (!ours)
+        fail(dataPath, "exists and is not " + fs::path(path).filename().string() +
+                           "'s data: not overwritten (remove it or save under another name)");
+}
+
+} // namespace
+
+void checkSaveTarget(const std::string& path, const SaveOptions& options) {
+    const std::string lower = toLower(path);
+    if (!(endsWith(lower, ".nrrd") || endsWith(lower, ".nhdr") || endsWith(lower, ".nii") ||
+          endsWith(lower, ".nii.gz")))
+        fail(path, "unknown output format: use .nrrd, .nhdr, .nii or .nii.gz");
+    if (endsWith(lower, ".nhdr"))
+        checkDetachedData(path, options.compress);
+    FileSink probe(path); // the folder takes a new file; removed again, `path` untouched
+}
+
 void saveVolume(const Volume& volume, const std::string& path, const SaveOptions& options) {
     if (volume.empty())
         fail(path, "cannot save an empty volume");
     std::string lower = toLower(path);
+    if (endsWith(lower, ".nhdr"))
+        checkDetachedData(path, options.compress);
     if (endsWith(lower, ".nrrd") || endsWith(lower, ".nhdr"))
         writeNrrd(volume, path, options.compress);
     else if (endsWith(lower, ".nii.gz"))

@@ -88,16 +88,22 @@ public:
     virtual void finish() = 0;
 };
 
+// Writes `path` without ever harming what is there: the bytes go to a temporary file beside it,
+// finish() flushes it to the disk, and only commit() renames it over `path`. A sink destroyed
+// before its commit (an error, an exception) removes the temporary file and leaves `path` as it
+// was. Writers of several files finish them all, then commit them all.
 class FileSink : public ByteSink {
 public:
     explicit FileSink(const std::string& path);
     ~FileSink() override;
     void write(const void* data, size_t n) override;
     void finish() override;
+    void commit();
 
 private:
-    std::string m_path;
+    std::string m_path, m_temp;
     std::FILE* m_file = nullptr;
+    bool m_committed = false;
 };
 
 class GzipSink : public ByteSink {

@@ -234,22 +234,19 @@ void writeNifti(const Volume& v, const std::string& path, bool compress) {
         putF(h, kSrowX + 4 * size_t(i), srow[i]);
     std::memcpy(h + kMagic, "n+1\0", 4);
 
-    try {
-        FileSink file(path);
-        std::unique_ptr<GzipSink> gz;
-        ByteSink* out = &file;
-        if (compress) {
-            gz = std::make_unique<GzipSink>(file, path);
-            out = gz.get();
-        }
-        out->write(h, sizeof h);
-        out->write(v.densityData(), v.voxelCount());
-        out->finish();
-    } catch (...) {
-        std::error_code ec;
-        fs::remove(path, ec);
-        throw;
+    // A temporary file renamed over `path` once complete (FileSink): a failure leaves whatever
+    // was there before untouched.
+    FileSink file(path);
+    std::unique_ptr<GzipSink> gz;
+    ByteSink* out = &file;
+    if (compress) {
+        gz = std::make_unique<GzipSink>(file, path);
+        out = gz.get();
     }
+    out->write(h, sizeof h);
+    out->write(v.densityData(), v.voxelCount());
+    out->finish();
+    file.commit();
 }
 
 } // namespace trephine::detail

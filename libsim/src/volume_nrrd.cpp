@@ -437,42 +437,39 @@ void writeNrrd(const Volume& v, const std::string& path, bool compress) {
     header += std::string(kLayoutKey) + ":=" + kLayoutValue + "\n";
     header += "trephine_materials:=" + materials + "\n";
 
-    try {
-        FileSink headerSink(path);
-        headerSink.write(header.data(), header.size());
-        std::unique_ptr<FileSink> dataFile;
-        ByteSink* out = &headerSink;
-        if (detachedData) {
-            headerSink.finish();
-            dataFile = std::make_unique<FileSink>(dataPath);
-            out = dataFile.get();
-        } else {
-            headerSink.write("\n", 1);
-        }
-        std::unique_ptr<GzipSink> gz;
-        if (compress) {
-            gz = std::make_unique<GzipSink>(*out, dataPath);
-            out = gz.get();
-        }
-        const size_t voxels = v.voxelCount();
-        constexpr size_t kChunk = size_t(1) << 16;
-        std::vector<uint8_t> pairs(2 * kChunk);
-        for (size_t i = 0; i < voxels; i += kChunk) {
-            size_t n = std::min(kChunk, voxels - i);
-            for (size_t k = 0; k < n; ++k) {
-                pairs[2 * k] = v.densityData()[i + k];
-                pairs[2 * k + 1] = v.materialData()[i + k];
-            }
-            out->write(pairs.data(), 2 * n);
-        }
-        out->finish();
-    } catch (...) {
-        std::error_code ec;
-        fs::remove(path, ec);
-        if (detachedData)
-            fs::remove(dataPath, ec);
-        throw;
+    // Temporary files, renamed over the targets only once both are complete (FileSink): a
+    // failure leaves whatever was there before untouched.
+    FileSink headerSink(path);
+    headerSink.write(header.data(), header.size());
+    std::unique_ptr<FileSink> dataFile;
+    ByteSink* out = &headerSink;
+    if (detachedData) {
+        headerSink.finish();
+        dataFile = std::make_unique<FileSink>(dataPath);
+        out = dataFile.get();
+    } else {
+        headerSink.write("\n", 1);
     }
+    std::unique_ptr<GzipSink> gz;
+    if (compress) {
+        gz = std::make_unique<GzipSink>(*out, dataPath);
+        out = gz.get();
+    }
+    const size_t voxels = v.voxelCount();
+    constexpr size_t kChunk = size_t(1) << 16;
+    std::vector<uint8_t> pairs(2 * kChunk);
+    for (size_t i = 0; i < voxels; i += kChunk) {
+        size_t n = std::min(kChunk, voxels - i);
+        for (size_t k = 0; k < n; ++k) {
+            pairs[2 * k] = v.densityData()[i + k];
+            pairs[2 * k + 1] = v.materialData()[i + k];
+        }
+        out->write(pairs.data(), 2 * n);
+    }
+    out->finish();
+    if (dataFile)
+        dataFile->commit();
+    headerSink.commit();
 }
 
 } // namespace trephine::detail

@@ -19,6 +19,7 @@
 #include <algorithm>
 #include <array>
 #include <cstdio>
+#include <filesystem>
 #include <optional>
 #include <shared_mutex>
 
@@ -482,6 +483,9 @@ namespace {
 const ServerConfig& checkedConfig(const ServerConfig& config) {
     if (!(config.helloTimeoutS > 0.0f))
         throw Error("server: the hello timeout must be positive");
+    // Now, not at the end of the session: a path that cannot be written would lose it all.
+    if (!config.saveOnExit.empty())
+        checkSaveTarget(config.saveOnExit);
     if (config.maxViewPixels < 1 || config.maxViewPixels > kMaxServedViewPixels)
         throw Error("server: the largest view must be 1 to " +
                     std::to_string(kMaxServedViewPixels) +
@@ -526,7 +530,30 @@ void SessionServer::stop() {
         m_simThread.join();
     if (!m_config.saveOnExit.empty()) {
         std::lock_guard lock(m_impl->volumeMutex);
-        saveVolume(m_impl->volume, m_config.saveOnExit);
+        try {
+            saveVolume(m_impl->volume, m_config.saveOnExit);
+            m_savedTo = m_config.saveOnExit;
+        } catch (const std::exception& e) {
+            // The session's drilling must not be lost to a full disk or a folder gone since the
+            // start: an emergency copy in the temporary folder, and both said on one line each.
+            m_saveError = e.what();
+            const auto stamp = std::chrono::system_clock::now().time_since_epoch();
+            const std::string copy =
+                (std::filesystem::temp_directory_path() /
+                 ("trephine-session-" + std::to_string(::getpid()) + "-" +
+                  std::to_string(std::chrono::duration_cast<std::chrono::seconds>(stamp).count()) +
+                  ".nrrd"))
+                    .string();
+            std::fprintf(stderr, "trephine server: %s\n", e.what());
+            try {
+                saveVolume(m_impl->volume, copy);
+                m_savedTo = copy;
+                std::fprintf(stderr, "trephine server: the final volume is saved in %s instead\n",
+                             copy.c_str());
+            } catch (const std::exception& e2) {
+                std::fprintf(stderr, "trephine server: no emergency copy either: %s\n", e2.what());
+            }
+        }
     }
 }
 

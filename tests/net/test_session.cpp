@@ -22,6 +22,7 @@
 #include <filesystem>
 #include <functional>
 #include <random>
+#include <thread>
 #include <unistd.h>
 
 using namespace trephine;
@@ -430,6 +431,38 @@ TEST(Session, StopWritesSaveOnExitWithEveryAppliedDrilling) {
     ASSERT_TRUE(pumpUntil({&client}, [&] { return client.closed(); }));
     EXPECT_NE(client.closeReason().find("shutting down"), std::string::npos);
     std::filesystem::remove(path);
+}
+
+// --save-on-exit is checked when the server is made, not when the session ends; and should the
+// save fail at the end all the same (the folder gone meanwhile), the drilled volume goes to an
+// emergency copy in the temporary folder instead of being lost.
+TEST(Session, ASaveOnExitThatCannotBeWrittenIsRefusedAtOnceOrSavedElsewhere) {
+    Volume sphere = makeSphere(32);
+    ServerConfig config = testConfig("sphere:32");
+    config.saveOnExit = tempPath("no-such-folder/final.nrrd");
+    EXPECT_THROW(SessionServer(sphere, config), Error);
+    config.saveOnExit = tempPath("final.txt");
+    EXPECT_THROW(SessionServer(sphere, config), Error);
+
+    const std::filesystem::path folder = tempPath("going");
+    std::filesystem::create_directories(folder);
+    config.saveOnExit = (folder / "final.nrrd").string();
+    auto server = std::make_unique<SessionServer>(sphere, config);
+    server->start();
+    server->submitBoxCut(surfaceBox(sphere, 6));
+    const auto guard = std::chrono::steady_clock::now() + std::chrono::seconds(30);
+    while (!server->idle() && std::chrono::steady_clock::now() < guard)
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    ASSERT_TRUE(server->idle());
+    std::filesystem::remove_all(folder);
+    server->stop();
+    EXPECT_NE(server->saveError().find("final.nrrd"), std::string::npos) << server->saveError();
+    ASSERT_FALSE(server->savedTo().empty());
+    EXPECT_NE(server->savedTo(), config.saveOnExit);
+    EXPECT_TRUE(loadVolume(server->savedTo()) == server->volumeSnapshot())
+        << "the drilled volume is in the emergency copy";
+    EXPECT_FALSE(server->volumeSnapshot() == sphere);
+    std::filesystem::remove(server->savedTo());
 }
 
 // Two drilling tool states 6 mm apart: the server sweeps the burr along the path between them, so

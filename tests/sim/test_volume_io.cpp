@@ -1,6 +1,7 @@
 // Volume specs and files: NRRD / NIfTI-1 / raw round trips, the density window and material
 // rules, byte order, and one clear one-line Error for every malformed input.
 #include "libsim/error.h"
+#include "libsim/skull.h"
 #include "libsim/volume_io.h"
 
 #include "test_support.h"
@@ -9,11 +10,14 @@
 
 #include <algorithm>
 #include <cmath>
+#include <csignal>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <map>
 #include <string>
+#include <sys/resource.h>
 #include <unistd.h>
 #include <vector>
 #include <zlib.h>
@@ -583,4 +587,91 @@ TEST(VolumeIo, SpecOptionsOnFiles) {
               glm::vec3(0.2f, 0.3f, 0.4f));
     expectError([&] { loadVolume(dir / "a.nrrd?dims=1,2,3"); }, "a.nrrd", "unknown option 'dims'");
     EXPECT_NE(volumeSpecHelp().find("raw:FILE?dims=X,Y,Z"), std::string::npos);
+}
+
+// A save that fails part-way (here the file-size limit: EFBIG, as a full disk would) leaves the
+// files that were there exactly as they were, and no temporary file behind: the bytes go to
+// temporary files beside them, renamed over them only once complete (before, the old file was
+// truncated, then deleted).
+TEST(VolumeIo, AFailedSaveLeavesTheFilesThatWereThereUntouched) {
+    TempDir dir;
+    const Volume small = makeSkull(32);
+    const Volume big = makeSkull(64);
+    auto snapshot = [&] {
+        std::map<std::string, Bytes> files;
+        for (const auto& e : std::filesystem::directory_iterator(dir.path)) {
+            std::ifstream in(e.path(), std::ios::binary);
+            files[e.path().filename().string()] =
+                Bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+        }
+        return files;
+    };
+    for (const char* name : {"scan.nrrd", "scan.nhdr", "scan.nii", "scan.nii.gz"}) {
+        SCOPED_TRACE(name);
+        const std::string path = (dir.path / name).string();
+        SaveOptions raw;
+        raw.compress = false;
+        saveVolume(small, path, raw);
+        const std::map<std::string, Bytes> before = snapshot();
+        size_t largest = 0;
+        for (const auto& [file, bytes] : before)
+            largest = std::max(largest, bytes.size());
+        ASSERT_GT(largest, 1000u);
+        // The limit lets the small volume's files through but not the big one's.
+        struct rlimit old {};
+        ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &old), 0);
+        auto* oldHandler = std::signal(SIGXFSZ, SIG_IGN);
+        struct rlimit lim = old;
+        lim.rlim_cur = rlim_t(largest + 4096);
+        ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &lim), 0);
+        EXPECT_THROW(saveVolume(big, path, raw), Error);
+        setrlimit(RLIMIT_FSIZE, &old);
+        std::signal(SIGXFSZ, oldHandler);
+        EXPECT_TRUE(snapshot() == before) << "the old files are untouched, nothing else is left";
+        EXPECT_EQ(loadVolume(path).dims(), small.dims());
+        std::filesystem::remove_all(dir.path);
+        std::filesystem::create_directories(dir.path);
+    }
+}
+
+// A .nhdr's data file OUT.raw is replaced only when it is that header's own: converting a
+// headerless scan.raw to scan.nhdr used to overwrite the scan it had just read.
+TEST(VolumeIo, ANhdrSaveNeverOverwritesADataFileThatIsNotItsOwn) {
+    TempDir dir;
+    const std::string scan = (dir.path / "scan.raw").string();
+    {
+        std::ofstream out(scan, std::ios::binary);
+        for (int i = 0; i < 16 * 16 * 16; ++i)
+            out.put(char(i % 251));
+    }
+    const Volume v = loadVolume("raw:" + scan + "?dims=16,16,16");
+    SaveOptions raw;
+    raw.compress = false;
+    const std::string header = (dir.path / "scan.nhdr").string();
+    try {
+        saveVolume(v, header, raw);
+        FAIL() << "expected an error";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("not overwritten"), std::string::npos) << e.what();
+    }
+    EXPECT_THROW(checkSaveTarget(header, raw), Error);
+    EXPECT_FALSE(std::filesystem::exists(header));
+    EXPECT_EQ(std::filesystem::file_size(scan), 16u * 16u * 16u) << "the scan is untouched";
+    EXPECT_EQ(loadVolume("raw:" + scan + "?dims=16,16,16").densityData()[250], 250);
+
+    // Its own pair is rewritten as often as wanted.
+    const std::string mine = (dir.path / "mine.nhdr").string();
+    saveVolume(v, mine, raw);
+    EXPECT_NO_THROW(checkSaveTarget(mine, raw));
+    saveVolume(makeSkull(32), mine, raw);
+    EXPECT_EQ(loadVolume(mine).dims(), glm::ivec3(32));
+
+    // Nothing to write to, or no format: refused before any work, nothing written.
+    EXPECT_THROW(checkSaveTarget((dir.path / "no-such-folder" / "x.nrrd").string()), Error);
+    EXPECT_THROW(checkSaveTarget((dir.path / "x.txt").string()), Error);
+    EXPECT_THROW(checkSaveTarget(dir.path.string() + "/"), Error);
+    int files = 0;
+    for ([[maybe_unused]] const auto& e : std::filesystem::directory_iterator(dir.path))
+        ++files;
+    EXPECT_EQ(files, 3) << "scan.raw, mine.nhdr, mine.raw";
 }

@@ -48,7 +48,14 @@ struct SaveOptions {
 // Writes by extension: .nrrd (attached data) or .nhdr (+ detached .raw or .raw.gz beside it) keep
 // density and materials; .nii / .nii.gz keep density only (uint8), so materials come back derived
 // from density. Throws Error when the path cannot be written or its extension is unknown.
+// The bytes go to temporary files beside the targets, renamed over them only once complete: a
+// failure leaves what was there untouched. A .nhdr's detached OUT.raw[.gz] is replaced only when
+// it is that header's own data (an earlier save of it): any other file of that name is left alone
+// and the save fails.
 void saveVolume(const Volume& volume, const std::string& path, const SaveOptions& options = {});
+// What saveVolume would refuse before writing anything: an unknown extension, a folder that takes
+// no new file, a detached data file that is not the header's own. Throws Error; writes nothing.
+void checkSaveTarget(const std::string& path, const SaveOptions& options = {});
 
 // The spec grammar, for --help texts.
 std::string volumeSpecHelp();

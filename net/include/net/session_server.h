@@ -113,6 +113,11 @@ public:
     // HapticRelay messages sent: each force model answered, once per instructor other than its
     // tool's own client.
     uint64_t hapticRelaysSent() const { return m_hapticRelayed.load(); }
+    // After stop() with ServerConfig::saveOnExit: where the final volume went (saveOnExit, or an
+    // emergency copy in the temporary folder when that failed; empty when neither could be
+    // written) and why saveOnExit failed (empty when it did not).
+    const std::string& savedTo() const { return m_savedTo; }
+    const std::string& saveError() const { return m_saveError; }
     uint64_t refusedFull() const { return m_refusedFull.load(); }
     // Connections closed for saying no hello within ServerConfig::helloTimeoutS.
     uint64_t helloTimeouts() const { return m_helloTimeouts.load(); }
@@ -150,6 +155,7 @@ private:
     std::atomic<int64_t> m_peakInFlight{0};
     std::atomic<uint64_t> m_hapticSent{0};
     std::atomic<uint64_t> m_hapticRelayed{0};
+    std::string m_savedTo, m_saveError;
     std::atomic<uint64_t> m_refusedFull{0};
     std::atomic<uint64_t> m_helloTimeouts{0};
     std::atomic<uint64_t> m_viewsRefused{0};
