@@ -131,7 +131,11 @@ Box3i drillHole(Volume& volume, const RayHit& hit, const DrillAt& d, bool& touch
     Box3i changed;
     touchedDura = false;
     const float end = d.depthMm - radius;
-    for (float u = -radius;; u = std::min(u + step, end)) {
+    // Counted steps (u from the count, not accumulated, which stops moving once the step falls
+    // under half u's ulp), the last at `end`.
+    const int64_t steps = std::max<int64_t>(1, int64_t(std::ceil((end + radius) / step)));
+    for (int64_t k = 0;; ++k) {
+        const float u = k >= steps ? end : std::min(-radius + float(k) * step, end);
         pose.position = surface + dir * u;
         for (int i = 0; i < 1000; ++i) { // at most 20 s of drilling at one place
             DrillResult r = driller.drill(volume, pose, 1.0f, 0.02f);

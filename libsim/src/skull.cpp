@@ -395,7 +395,11 @@ SurfaceSite defaultBurrSite(const Volume& skull) {
         const float step = 0.25f * hMin;
         glm::vec3 prev(col.x, col.y, 0.5f * ext.z);
         float prevD = sampleDensity(skull, skull.toVoxel(prev));
-        for (float z = 0.5f * ext.z - step; z > -0.5f * ext.z; z -= step) {
+        // Counted steps (z from the step count, not accumulated): a float z -= step stops moving
+        // where step falls under half z's ulp.
+        const int steps = int(std::min(double(ext.z) / double(step), 1e8));
+        for (int k = 1; k < steps; ++k) {
+            const float z = 0.5f * ext.z - float(k) * step;
             glm::vec3 p(col.x, col.y, z);
             float d = sampleDensity(skull, skull.toVoxel(p));
             if (d >= float(kSurfaceDensity) && prevD < float(kSurfaceDensity)) {

@@ -466,6 +466,7 @@ void checkRawSize(const FileSource& file, uint64_t offset, uint64_t need) {
 Volume decodeVoxels(ByteSource& src, glm::ivec3 dims, glm::vec3 spacing, const DecodeSpec& spec,
                     bool exactEnd) {
     checkDims(dims.x, dims.y, dims.z, src.name());
+    checkSpacing(src.name(), spacing);
     const uint64_t voxels = uint64_t(dims.x) * uint64_t(dims.y) * uint64_t(dims.z);
     const size_t voxelBytes = scalarSize(spec.type) * size_t(spec.components);
     const uint64_t need = voxels * voxelBytes;
@@ -630,14 +631,29 @@ std::optional<DensityWindow> parseWindowOption(const VolumeSpecQuery& q, const s
     return DensityWindow{w[0], w[1]};
 }
 
+void checkSpacing(const std::string& what, glm::dvec3 spacing) {
+    double lo = INFINITY, hi = 0.0;
+    for (int i = 0; i < 3; ++i) {
+        const double v = double(float(spacing[i])); // as it will be kept
+        if (!(v >= kMinSpacingMm && v <= kMaxSpacingMm))
+            fail(what, "spacing " + formatFloat(float(spacing.x)) + "," +
+                           formatFloat(float(spacing.y)) + "," + formatFloat(float(spacing.z)) +
+                           " mm: each must lie between 0.001 and 1000 mm");
+        lo = std::min(lo, v);
+        hi = std::max(hi, v);
+    }
+    if (hi > lo * kMaxSpacingRatio)
+        fail(what, "spacing " + formatFloat(float(spacing.x)) + "," +
+                       formatFloat(float(spacing.y)) + "," + formatFloat(float(spacing.z)) +
+                       " mm: one axis more than 1000 times another's");
+}
+
 glm::vec3 parseSpacingOption(const VolumeSpecQuery& q, const std::string& what,
                              glm::vec3 fallback) {
     if (!q.has("spacing"))
         return fallback;
     std::vector<double> s = parseNumbers(q.get("spacing"), 3, "spacing", what);
-    for (double v : s)
-        if (!(v > 0.0) || !std::isfinite(float(v)))
-            fail(what, "bad spacing=" + q.get("spacing") + ": spacings must be positive (mm)");
+    checkSpacing(what + " (spacing=" + q.get("spacing") + ")", {s[0], s[1], s[2]});
     return {float(s[0]), float(s[1]), float(s[2])};
 }
 

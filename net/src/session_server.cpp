@@ -296,13 +296,12 @@ struct SessionServer::Impl {
                 outbox.erase(it);
             }
         }
-        if (old && !view.frame.bounds().contains(old->rect)) {
-            // Not of this frame (a view change drops pending images; this is the safety net):
-            // the client's pixels are unknown, so it gets the whole frame.
-            old.reset();
+        // Not of this frame (a view change drops pending images; this is the safety net): the
+        // client's pixels are unknown, so it gets the whole frame.
+        const bool merge = old && view.frame.bounds().contains(old->rect);
+        if (old && !merge)
             full = true;
-        }
-        if (old) {
+        if (merge) {
             // It never left: the client does not have its pixels.
             if (!old->full && !old->undo.empty() && !c.shadow.empty())
                 c.shadow.apply(old->undo, old->rect.x, old->rect.y);

@@ -675,3 +675,27 @@ TEST(VolumeIo, ANhdrSaveNeverOverwritesADataFileThatIsNotItsOwn) {
         ++files;
     EXPECT_EQ(files, 3) << "scan.raw, mine.nhdr, mine.raw";
 }
+
+// Spacings from 1 um to 1 m and within 1000x of each other, checked the way they are kept
+// (float): a zero or vanishing one (1e-50 became 0) made the burr-site search and the ray caster
+// step forever.
+TEST(VolumeIo, SpacingsOutsideWhatTrephineCanWorkWithAreRefused) {
+    TempDir dir;
+    writeFile(dir / "v.raw", Bytes{0, 200});
+    const std::string raw = "raw:" + std::string(dir / "v.raw") + "?dims=2,1,1&spacing=";
+    for (const char* bad : {"1e-50,1,1", "1,1,1e6", "0.01,1,20", "0,1,1", "inf,1,1"}) {
+        SCOPED_TRACE(bad);
+        try {
+            loadVolume(raw + bad);
+            FAIL() << "expected an error";
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find("spacing"), std::string::npos) << e.what();
+            EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << "one line";
+        }
+    }
+    EXPECT_EQ(loadVolume(raw + "0.5,0.5,2").spacing(), glm::vec3(0.5f, 0.5f, 2.0f));
+    // A file's own spacing goes through the same check.
+    writeFile(dir / "tiny.nrrd",
+              concat(nrrdHeader("uchar", "2 1 1", "raw", "spacings: 1e-30 1 1"), Bytes{0, 200}));
+    EXPECT_THROW(loadVolume(dir / "tiny.nrrd"), Error);
+}

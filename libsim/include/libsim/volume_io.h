@@ -76,4 +76,11 @@ VolumeSpecQuery parseVolumeSpecQuery(const std::string& spec, const std::string&
 std::optional<DensityWindow> parseWindowOption(const VolumeSpecQuery& q, const std::string& what);
 glm::vec3 parseSpacingOption(const VolumeSpecQuery& q, const std::string& what, glm::vec3 fallback);
 
+// Voxel spacings Trephine works with, in mm: from 1 um to 1 m, and no axis more than
+// kMaxSpacingRatio times another's (a ray caster and the burr-site search step by the smallest
+// spacing across the largest extent; a zero or vanishing spacing made them run forever).
+inline constexpr double kMinSpacingMm = 1e-3, kMaxSpacingMm = 1e3, kMaxSpacingRatio = 1e3;
+// Throws Error naming `what` unless `spacing` is such a spacing (as float, the way it is kept).
+void checkSpacing(const std::string& what, glm::dvec3 spacing);
+
 } // namespace trephine
