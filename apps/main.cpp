@@ -6,6 +6,7 @@
 
 #include <cstdio>
 #include <exception>
+#include <new>
 
 int main(int argc, char** argv) {
     CLI::App app{"Trephine: a collaborative craniotomy-drilling trainer.\n"
@@ -33,6 +34,10 @@ int main(int argc, char** argv) {
         return app.exit(e);
     } catch (const trephine::Error& e) {
         std::fprintf(stderr, "trephine: %s\n", e.what());
+        return 1;
+    } catch (const std::bad_alloc&) {
+        std::fprintf(stderr, "trephine: out of memory (a volume or image too large for this "
+                             "machine?)\n");
         return 1;
     } catch (const std::exception& e) {
         std::fprintf(stderr, "trephine: unexpected error: %s\n", e.what());

@@ -148,11 +148,24 @@ std::vector<Sample> csvScript(const std::string& path) {
                 throw fail("column " + std::to_string(i + 1) + " is not a number");
             }
         }
+        // stod takes nan and inf, and a double beyond a float's range becomes inf as one: a NaN
+        // time never ended the run, a huge one overflowed the end time.
+        for (int i = 0; i < 9; ++i)
+            if (!std::isfinite(float(v[i])))
+                throw fail("column " + std::to_string(i + 1) + " is not a finite number");
+        if (!(v[0] >= 0.0 && v[0] <= 86400.0))
+            throw fail("time must be from 0 to 86400 s");
+        if (!(std::abs(v[1]) <= net::kMaxToolDistanceMm &&
+              std::abs(v[2]) <= net::kMaxToolDistanceMm &&
+              std::abs(v[3]) <= net::kMaxToolDistanceMm))
+            throw fail("position beyond 100 m of the volume's centre");
+        const glm::quat q = glm::quat(float(v[4]), float(v[5]), float(v[6]), float(v[7]));
+        if (!(glm::dot(q, q) > 1e-6f))
+            throw fail("the orientation quaternion is zero");
         Sample s;
         s.t = v[0];
         s.tool.position = {float(v[1]), float(v[2]), float(v[3])};
-        s.tool.orientation =
-            glm::normalize(glm::quat(float(v[4]), float(v[5]), float(v[6]), float(v[7])));
+        s.tool.orientation = glm::normalize(q);
         if (!(v[8] >= 0.0 && v[8] <= 1.0))
             throw fail("speed must be in [0, 1]");
         s.tool.speed = float(v[8]);
@@ -170,8 +183,10 @@ std::vector<Sample> csvScript(const std::string& path) {
                 shape = ToolShape::perforator(std::stof(tool.substr(11)));
             else
                 throw fail("tool must be burr:D or perforator[:D], not '" + tool + "'");
-        } catch (const Error&) {
-            throw;
+        } catch (const Error& e) {
+            if (std::string(e.what()).rfind("script ", 0) == 0)
+                throw;
+            throw fail(e.what()); // the tool's own complaint, with the file and line
         } catch (const std::exception&) {
             throw fail("tool diameter in '" + tool + "' is not a number");
         }

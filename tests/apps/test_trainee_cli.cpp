@@ -1,0 +1,47 @@
+// `trephine trainee --script` as a user runs it: a script with a value the trainee cannot use is
+// refused before anything connects, with one line naming the file, the line and the column.
+#include "test_support.h"
+
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <string>
+
+using namespace trephine::testing;
+
+namespace {
+
+CommandResult runScript(const TempDir& dir, const std::string& rows) {
+    const std::string path = dir / "script.csv";
+    std::ofstream(path) << rows;
+    // Nothing listens on port 9 of loopback: a script that passes would fail to connect instead.
+    return runTrephine(dir, "trainee --headless --connect 127.0.0.1:9 --duration 1 --script '" +
+                                path + "'");
+}
+
+} // namespace
+
+TEST(TraineeCli, AScriptWithValuesTheTraineeCannotUseIsRefusedWithItsLine) {
+    TempDir dir;
+    const std::string good = "0,0,0,50,1,0,0,0,0,burr:5\n";
+    const struct {
+        const char* row;
+        const char* says;
+    } cases[] = {
+        {"nan,0,0,50,1,0,0,0,0,burr:5\n", "line 2: column 1 is not a finite number"},
+        {"1,inf,0,50,1,0,0,0,0,burr:5\n", "line 2: column 2 is not a finite number"},
+        {"1,1e39,0,50,1,0,0,0,0,burr:5\n", "line 2: column 2 is not a finite number"},
+        {"1e300,0,0,50,1,0,0,0,0,burr:5\n", "line 2: column 1 is not a finite number"},
+        {"100000,0,0,50,1,0,0,0,0,burr:5\n", "line 2: time must be from 0 to 86400 s"},
+        {"1,0,0,50,0,0,0,0,0,burr:5\n", "line 2: the orientation quaternion is zero"},
+        {"1,0,0,50,1,0,0,0,0,burr:-3\n", "line 2: burr diameter -3 mm is out of range"},
+    };
+    for (const auto& c : cases) {
+        SCOPED_TRACE(c.row);
+        CommandResult r = runScript(dir, good + c.row);
+        EXPECT_EQ(r.exitCode, 1);
+        EXPECT_NE(r.err.find(c.says), std::string::npos) << r.err;
+        EXPECT_NE(r.err.find("script.csv"), std::string::npos) << r.err;
+        EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << "one line: " << r.err;
+    }
+}
