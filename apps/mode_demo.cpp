@@ -145,13 +145,13 @@ void addDemoMode(CLI::App& root, int& exitCode) {
     sub->add_option("--volume", o->volume, "Volume spec (see `trephine volume --help`)")
         ->capture_default_str();
     sub->add_option("--feed", o->feedMmPerS, "Perforator feed rate, mm/s")
-        ->check(CLI::Range(0.05f, 20.0f))
+        ->check(finiteRange(0.05, 20.0))
         ->capture_default_str();
     sub->add_option("--dt", o->dtMs, "Simulation step, ms")
-        ->check(CLI::Range(0.1f, 50.0f))
+        ->check(finiteRange(0.1, 50.0))
         ->capture_default_str();
     sub->add_option("--max-seconds", o->maxSeconds, "Simulated time limit, s")
-        ->check(CLI::Range(0.1f, 600.0f))
+        ->check(finiteRange(0.1, 600.0))
         ->capture_default_str();
     sub->callback([o, &exitCode] { exitCode = runDemo(*o); });
 }

@@ -466,7 +466,7 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
         ->check(CLI::Range(16, 4096))
         ->capture_default_str();
     sub->add_option("--duration", o->durationS, "Seconds of script to run (burrhole: its length)")
-        ->check(CLI::Range(0.0, 3600.0));
+        ->check(finiteRange(0.0, 3600.0));
     sub->add_option("--report", o->report, "Write statistics as JSON here");
     sub->add_option("--save-dbi", o->saveDbi, "Write the final DBI as OpenEXR here");
     sub->add_option("--name", o->name, "Name shown to others")->capture_default_str();
@@ -478,11 +478,11 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
         ->check(CLI::Range(0, 1000000))
         ->capture_default_str();
     sub->add_option("--timeout", o->timeoutS, "Window, with --screenshot: give up after this long")
-        ->check(CLI::Range(1.0, 3600.0))
+        ->check(finiteRange(1.0, 3600.0))
         ->capture_default_str();
     sub->add_option("--tool-rate", o->toolRateHz,
                     "Tool states per second sent by the haptic loop (20-1000)")
-        ->check(CLI::Range(20.0, 1000.0))
+        ->check(finiteRange(20.0, 1000.0))
         ->capture_default_str();
     sub->callback([o, &exitCode] { exitCode = runTrainee(*o); });
 }

@@ -64,14 +64,14 @@ void addWindowOptions(CLI::App* sub, WindowedOptions& o) {
     sub->add_option("--view", o.camera, "site (close view of the burr site) or a camera preset")
         ->capture_default_str();
     sub->add_option("--orbit", o.orbitDeg, "Initial orbit of the view about the site, degrees")
-        ->check(CLI::Range(-90.0f, 90.0f));
+        ->check(finiteRange(-90.0, 90.0));
     sub->add_option("--tilt", o.tiltDeg, "Initial tilt of the view, degrees")
-        ->check(CLI::Range(-60.0f, 60.0f));
+        ->check(finiteRange(-60.0, 60.0));
     sub->add_option("--window-size", o.size, "View size in pixels (square, 1:1 with the DBI)")
         ->check(CLI::Range(64, 2048))
         ->capture_default_str();
     sub->add_option("--timeout", o.timeoutS, "With --screenshot: give up after this many seconds")
-        ->check(CLI::Range(1.0, 3600.0))
+        ->check(finiteRange(1.0, 3600.0))
         ->capture_default_str();
     sub->add_option(
            "--sync", o.sync,
@@ -88,7 +88,7 @@ void addWindowOptions(CLI::App* sub, WindowedOptions& o) {
                     "Flip the Comparison toggle at these seconds after the first picture "
                     "(comma-separated; each waits for the switch before it)")
         ->delimiter(',')
-        ->check(CLI::Range(0.0, 3600.0));
+        ->check(finiteRange(0.0, 3600.0));
 }
 
 void addInstructorMode(CLI::App& root, int& exitCode) {

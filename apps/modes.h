@@ -4,7 +4,34 @@
 
 #include <CLI/CLI.hpp>
 
+#include <cmath>
+#include <string>
+
 namespace trephine::app {
+
+// CLI::Range compares, and NaN compares false with everything, so it lets `nan` through any
+// range (`--feed nan` ran 30 simulated seconds of NaN). For floating-point options: a finite
+// number within [lo, hi], and one that stays finite as a float.
+inline CLI::Validator finiteRange(double lo, double hi) {
+    const std::string range =
+        "[" + CLI::detail::to_string(lo) + " - " + CLI::detail::to_string(hi) + "]";
+    return CLI::Validator(
+        [lo, hi, range](std::string& text) -> std::string {
+            double v = 0.0;
+            size_t used = 0;
+            try {
+                v = std::stod(text, &used);
+            } catch (const std::exception&) {
+                return "Value " + text + " is not a number";
+            }
+            if (used != text.size() || !std::isfinite(float(v)))
+                return "Value " + text + " is not a finite number";
+            if (!(v >= lo && v <= hi))
+                return "Value " + text + " not in range " + range;
+            return {};
+        },
+        "FLOAT in " + range);
+}
 
 void addServerMode(CLI::App& root, int& exitCode);
 void addTraineeMode(CLI::App& root, int& exitCode);

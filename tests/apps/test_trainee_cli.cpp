@@ -45,3 +45,18 @@ TEST(TraineeCli, AScriptWithValuesTheTraineeCannotUseIsRefusedWithItsLine) {
         EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << "one line: " << r.err;
     }
 }
+
+// CLI::Range lets NaN through (every comparison with it is false): floating-point options use a
+// range that also wants a finite number, finite as a float.
+TEST(TraineeCli, NanAndInfiniteOptionValuesAreRefused) {
+    TempDir dir;
+    for (const char* args :
+         {"demo --headless --feed nan", "demo --headless --dt inf", "demo --headless --feed 1e39",
+          "trainee --headless --connect 127.0.0.1:9 --tool-rate nan",
+          "trainee --headless --connect 127.0.0.1:9 --duration -inf"}) {
+        SCOPED_TRACE(args);
+        CommandResult r = runTrephine(dir, args);
+        EXPECT_NE(r.exitCode, 0);
+        EXPECT_NE(r.err.find("not a finite number"), std::string::npos) << r.err;
+    }
+}
