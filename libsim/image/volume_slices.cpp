@@ -221,6 +221,10 @@ void saveVolumeSlices(const Volume& volume, const std::string& folder,
     if (volume.empty())
         fail(folder, "cannot save an empty volume");
     std::error_code ec;
+    // Into a new or empty folder only: slices already there would be read back with ours (a
+    // folder holds one volume), and converting a slice folder onto itself overwrote the original.
+    if (fs::exists(folder, ec) && !fs::is_empty(folder, ec))
+        fail(folder, "the folder is not empty: save slices into a new or empty folder");
     fs::create_directories(folder, ec);
     if (ec)
         fail(folder, "cannot create folder: " + ec.message());

@@ -114,6 +114,11 @@ TEST(VolumeSlices, SaveAndReadBack) {
     saveVolumeSlices(v, dir / "out");
     EXPECT_TRUE(fs::exists(dir / "out/slice_0011.png"));
     EXPECT_TRUE(openVolume(dir / "out") == v);
+    // Never into a folder that holds something: its slices would be read back with ours, and
+    // converting a slice folder onto itself overwrote the original.
+    Volume smaller(glm::ivec3(5, 4, 3), glm::vec3(1.0f));
+    expectError([&] { saveVolumeSlices(smaller, dir / "out"); }, dir / "out", "not empty");
+    EXPECT_TRUE(openVolume(dir / "out") == v) << "the slices there are untouched";
 }
 
 TEST(VolumeSlices, DelegatesOtherSpecsToLoadVolume) {
