@@ -28,6 +28,10 @@ int main(int argc, char** argv) {
     addVolumeMode(app, exitCode);
     addDevicesMode(app, exitCode);
 
+    // Parse errors on one line, like every other error (CLI11's own form is two, unprefixed).
+    app.failure_message([](const CLI::App*, const CLI::Error& e) {
+        return std::string("trephine: ") + e.what() + " (trephine --help)\n";
+    });
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {
