@@ -41,27 +41,10 @@ bool waitServerIdle(SessionServer& server) {
     return true;
 }
 
-// A zstd client (predicted updates) of the paper view of skull:64 joined to its own server.
-struct PredictedSession {
-    Volume volume = makeSkull(64);
-    ViewSpec paper, top;
-    std::unique_ptr<SessionServer> server;
-    std::unique_ptr<SessionClient> client;
-
-    PredictedSession() {
-        volume.setSpacing(glm::vec3(paperSpacingMm(64)));
-        paper = toViewSpec(cameraPreset("paper", volume, {160, 160}));
-        top = toViewSpec(cameraPreset("top", volume, {160, 160}));
-        server = std::make_unique<SessionServer>(volume, loopbackServerConfig("skull:64", 2));
-        server->start();
-        ClientConfig cc;
-        cc.codec = Codec::Zstd;
-        cc.view = paper;
-        client = std::make_unique<SessionClient>(cc);
-        client->connect(loopback(server->port()));
-        EXPECT_TRUE(pumpUntil({client.get()}, [&] { return client->hasFullImage(); }));
-    }
-    ~PredictedSession() { server->stop(); }
+// The predicted-coding session, and a second view to ask for.
+struct PredictedSession : trephine::testing::PaperZstdSession {
+    ViewSpec& paper = view;
+    ViewSpec top = toViewSpec(cameraPreset("top", volume, {160, 160}));
 
     // Damages the client's copy where a cut of `box` will be redrawn, so the predicted update of
     // the cut fails its base check.

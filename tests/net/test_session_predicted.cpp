@@ -22,24 +22,7 @@ using trephine::testing::quantised;
 
 namespace {
 
-struct Fixture {
-    Volume volume = makeSkull(64);
-    ViewSpec view;
-    std::unique_ptr<SessionServer> server;
-    std::unique_ptr<SessionClient> client;
-
-    Fixture() {
-        volume.setSpacing(glm::vec3(paperSpacingMm(64)));
-        view = toViewSpec(cameraPreset("paper", volume, {160, 160}));
-        server = std::make_unique<SessionServer>(volume, loopbackServerConfig("skull:64", 2));
-        server->start();
-        ClientConfig cc;
-        cc.codec = Codec::Zstd;
-        cc.view = view;
-        client = std::make_unique<SessionClient>(cc);
-        client->connect(loopback(server->port()));
-        EXPECT_TRUE(pumpUntil({client.get()}, [&] { return client->hasFullImage(); }));
-    }
+struct Fixture : trephine::testing::PaperZstdSession {
     bool converged() {
         return pumpUntil({client.get()}, [&] {
             return server->idle() && client->hasFullImage() &&

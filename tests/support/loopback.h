@@ -11,9 +11,11 @@
 #include "net/view.h"
 
 #include <glm/gtx/quaternion.hpp>
+#include <gtest/gtest.h>
 
 #include <chrono>
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -109,6 +111,29 @@ inline Dbi quantised(const Dbi& render, const net::ViewSpec& view) {
             out.depth()[out.index(x, y)] = q.dequantize(q.quantize(render.depth(x, y)));
     return out;
 }
+
+// A zstd client (predicted updates) of the paper view (160 x 160) of skull:64 at the paper's
+// spacing, joined to its own server (two render threads), which stops with it.
+struct PaperZstdSession {
+    Volume volume = makeSkull(64);
+    net::ViewSpec view;
+    std::unique_ptr<net::SessionServer> server;
+    std::unique_ptr<net::SessionClient> client;
+
+    PaperZstdSession() {
+        volume.setSpacing(glm::vec3(paperSpacingMm(64)));
+        view = net::toViewSpec(cameraPreset("paper", volume, {160, 160}));
+        server = std::make_unique<net::SessionServer>(volume, loopbackServerConfig("skull:64", 2));
+        server->start();
+        net::ClientConfig cc;
+        cc.codec = net::Codec::Zstd;
+        cc.view = view;
+        client = std::make_unique<net::SessionClient>(cc);
+        client->connect(loopback(server->port()));
+        EXPECT_TRUE(pumpUntil({client.get()}, [&] { return client->hasFullImage(); }));
+    }
+    ~PaperZstdSession() { server->stop(); }
+};
 
 // The top of makeSphere(n), facing +z.
 inline SurfaceSite sphereTop(int n) {
