@@ -219,3 +219,20 @@ TEST(Protocol, ParticipantsRoundTripAndRejectUnorderedIdsAndOverlongLists) {
     for (size_t n = 1; n < bytes.size(); ++n)
         EXPECT_FALSE(decodeMessage(std::span(bytes.data(), n), back)) << n;
 }
+
+// A camera that looks nowhere (eye at the target) or whose up lies along its view direction has
+// NaN matrices: such a view is malformed, whether in a hello or a view request.
+TEST(Protocol, AViewWithoutADirectionOrWithUpAlongItIsMalformed) {
+    ViewRequest r;
+    r.requestId = 1;
+    EXPECT_FALSE(encodeMessage(r).empty()) << "the default view is fine";
+    ViewRequest still = r;
+    still.view.eye = still.view.target;
+    EXPECT_TRUE(encodeMessage(still).empty());
+    ViewRequest along = r;
+    along.view.up = along.view.target - along.view.eye;
+    EXPECT_TRUE(encodeMessage(along).empty());
+    ViewRequest noUp = r;
+    noUp.view.up = glm::vec3(0.0f);
+    EXPECT_TRUE(encodeMessage(noUp).empty());
+}
