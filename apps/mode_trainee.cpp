@@ -20,15 +20,18 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cctype>
 #include <chrono>
 #include <cstdio>
 #include <deque>
+#include <filesystem>
 #include <fstream>
 #include <memory>
 #include <mutex>
 #include <shared_mutex>
 #include <sstream>
 #include <thread>
+#include <unistd.h>
 
 namespace trephine::app {
 
@@ -201,6 +204,12 @@ std::vector<Sample> csvScript(const std::string& path) {
     return out;
 }
 
+std::string toLowerAscii(std::string s) {
+    for (char& c : s)
+        c = char(std::tolower(uint8_t(c)));
+    return s;
+}
+
 int runTrainee(const TraineeOptions& o) {
     if (!o.headless) { // the window starts in --sync's design; its Comparison toggle switches
         WindowedOptions w;
@@ -219,6 +228,24 @@ int runTrainee(const TraineeOptions& o) {
         throw Error("--screenshot: the window's; a --headless trainee has none (--save-dbi writes "
                     "its picture)");
     ENetAddress address = net::parseAddress(o.connect);
+    // The outputs are checked first too: a typo found after the session would waste it.
+    auto checkOutput = [](const char* flag, const std::string& path) {
+        const std::filesystem::path folder = std::filesystem::path(path).has_parent_path()
+                                                 ? std::filesystem::path(path).parent_path()
+                                                 : std::filesystem::path(".");
+        std::error_code ec;
+        if (!std::filesystem::is_directory(folder, ec) || ::access(folder.c_str(), W_OK) != 0)
+            throw Error(std::string(flag) + " " + path + ": cannot write there (no folder " +
+                        folder.string() + " we may write to)");
+    };
+    if (!o.report.empty())
+        checkOutput("--report", o.report);
+    if (!o.saveDbi.empty()) {
+        if (!(o.saveDbi.size() > 4 &&
+              toLowerAscii(o.saveDbi.substr(o.saveDbi.size() - 4)) == ".exr"))
+            throw Error("--save-dbi " + o.saveDbi + ": a DBI file must end in .exr");
+        checkOutput("--save-dbi", o.saveDbi);
+    }
     // A CSV script is read first, so a bad file fails before anything connects.
     std::vector<Sample> script;
     if (o.script != "burrhole")

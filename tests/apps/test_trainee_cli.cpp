@@ -60,3 +60,16 @@ TEST(TraineeCli, NanAndInfiniteOptionValuesAreRefused) {
         EXPECT_NE(r.err.find("not a finite number"), std::string::npos) << r.err;
     }
 }
+
+// The outputs are checked before the session: a typo found at its end would waste it.
+TEST(TraineeCli, OutputsThatCannotBeWrittenAreRefusedBeforeConnecting) {
+    TempDir dir;
+    const std::string session = "trainee --headless --connect 127.0.0.1:9 --duration 1 ";
+    CommandResult r = runTrephine(dir, session + "--report '" + dir / "no-such/r.json" + "'");
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_NE(r.err.find("--report"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("cannot write there"), std::string::npos) << r.err;
+    r = runTrephine(dir, session + "--save-dbi '" + dir / "picture.png" + "'");
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_NE(r.err.find("must end in .exr"), std::string::npos) << r.err;
+}
