@@ -28,6 +28,15 @@ Volume::Volume(glm::ivec3 dims, glm::vec3 spacingMm) : m_dims(dims), m_spacing(s
     m_material.assign(n, uint8_t(Material::Air));
 }
 
+Volume::Volume(glm::ivec3 dims, glm::vec3 spacingMm, std::vector<uint8_t> density,
+               std::vector<uint8_t> material)
+    : m_dims(dims), m_spacing(spacingMm), m_density(std::move(density)),
+      m_material(std::move(material)) {
+    assert(dims.x > 0 && dims.y > 0 && dims.z > 0 && "Volume dimensions must be positive");
+    assert(m_density.size() == size_t(dims.x) * size_t(dims.y) * size_t(dims.z) &&
+           m_material.size() == m_density.size() && "Volume: one density and label a voxel");
+}
+
 std::vector<int64_t> Volume::materialCounts() const {
     // Labels past the known ones are counted as air; loaders never produce them.
     std::vector<int64_t> counts(kMaterialCount, 0);

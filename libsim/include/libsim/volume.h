@@ -39,6 +39,10 @@ public:
     Volume() = default;
     // All voxels start as air (density 0). Dimensions must be positive; spacing in mm per voxel.
     Volume(glm::ivec3 dims, glm::vec3 spacingMm);
+    // Takes the voxels (x fastest, dims.x * dims.y * dims.z of each; material labels below
+    // kMaterialCount) without copying them: a loader's buffers become the volume.
+    Volume(glm::ivec3 dims, glm::vec3 spacingMm, std::vector<uint8_t> density,
+           std::vector<uint8_t> material);
 
     glm::ivec3 dims() const { return m_dims; }
     glm::vec3 spacing() const { return m_spacing; }
