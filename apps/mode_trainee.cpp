@@ -20,7 +20,6 @@
 
 #include <algorithm>
 #include <atomic>
-#include <cctype>
 #include <chrono>
 #include <cstdio>
 #include <deque>
@@ -204,12 +203,6 @@ std::vector<Sample> csvScript(const std::string& path) {
     return out;
 }
 
-std::string toLowerAscii(std::string s) {
-    for (char& c : s)
-        c = char(std::tolower(uint8_t(c)));
-    return s;
-}
-
 int runTrainee(const TraineeOptions& o) {
     if (!o.headless) { // the window starts in --sync's design; its Comparison toggle switches
         WindowedOptions w;
@@ -241,9 +234,7 @@ int runTrainee(const TraineeOptions& o) {
     if (!o.report.empty())
         checkOutput("--report", o.report);
     if (!o.saveDbi.empty()) {
-        if (!(o.saveDbi.size() > 4 &&
-              toLowerAscii(o.saveDbi.substr(o.saveDbi.size() - 4)) == ".exr"))
-            throw Error("--save-dbi " + o.saveDbi + ": a DBI file must end in .exr");
+        checkDbiExrPath(o.saveDbi);
         checkOutput("--save-dbi", o.saveDbi);
     }
     // A CSV script is read first, so a bad file fails before anything connects.

@@ -32,14 +32,18 @@ bool hasExtension(const std::string& path, std::initializer_list<const char*> ex
 
 } // namespace
 
+void checkDbiExrPath(const std::string& path) {
+    if (!hasExtension(path, {".exr"}))
+        throw Error("cannot write DBI '" + path + "': a DBI file must end in .exr");
+}
+
 void writeDbiExr(const std::string& path, const Dbi& image) {
     writeDbiExr(path, image, image.bounds(), image.width(), image.height());
 }
 
 void writeDbiExr(const std::string& path, const Dbi& image, const PixelRect& rectInFrame,
                  int frameWidth, int frameHeight) {
-    if (!hasExtension(path, {".exr"}))
-        throw Error("cannot write DBI '" + path + "': a DBI file must end in .exr");
+    checkDbiExrPath(path);
     if (image.empty() || rectInFrame.w != image.width() || rectInFrame.h != image.height() ||
         !PixelRect{0, 0, frameWidth, frameHeight}.contains(rectInFrame))
         throw Error("cannot write DBI '" + path + "': the image does not fit its frame");

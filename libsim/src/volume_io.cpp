@@ -640,20 +640,17 @@ std::optional<DensityWindow> parseWindowOption(const VolumeSpecQuery& q, const s
 }
 
 void checkSpacing(const std::string& what, glm::dvec3 spacing) {
-    double lo = INFINITY, hi = 0.0;
-    for (int i = 0; i < 3; ++i) {
-        const double v = double(float(spacing[i])); // as it will be kept
-        if (!(v >= kMinSpacingMm && v <= kMaxSpacingMm))
-            fail(what, "spacing " + formatFloat(float(spacing.x)) + "," +
-                           formatFloat(float(spacing.y)) + "," + formatFloat(float(spacing.z)) +
-                           " mm: each must lie between 0.001 and 1000 mm");
-        lo = std::min(lo, v);
-        hi = std::max(hi, v);
-    }
-    if (hi > lo * kMaxSpacingRatio)
-        fail(what, "spacing " + formatFloat(float(spacing.x)) + "," +
-                       formatFloat(float(spacing.y)) + "," + formatFloat(float(spacing.z)) +
-                       " mm: one axis more than 1000 times another's");
+    const glm::vec3 kept(spacing); // as it will be kept
+    auto refuse = [&](const char* why) {
+        fail(what, "spacing " + formatFloat(kept.x) + "," + formatFloat(kept.y) + "," +
+                       formatFloat(kept.z) + " mm: " + why);
+    };
+    for (int i = 0; i < 3; ++i)
+        if (!(kept[i] >= kMinSpacingMm && kept[i] <= kMaxSpacingMm))
+            refuse("each must lie between 0.001 and 1000 mm");
+    if (double(std::max({kept.x, kept.y, kept.z})) >
+        double(std::min({kept.x, kept.y, kept.z})) * kMaxSpacingRatio)
+        refuse("one axis more than 1000 times another's");
 }
 
 glm::vec3 parseSpacingOption(const VolumeSpecQuery& q, const std::string& what,
@@ -830,12 +827,15 @@ Volume loadVolume(const std::string& spec) {
     return v;
 }
 
-namespace {
+namespace detail {
 
-// Where a .nhdr's detached data goes (writeNrrd names it the same way).
 std::string detachedDataPath(const std::string& path, bool compress) {
     return path.substr(0, path.size() - 5) + (compress ? ".raw.gz" : ".raw");
 }
+
+} // namespace detail
+
+namespace {
 
 // A detached data file is replaced only when it is this header's own (an earlier save of the same
 // .nhdr): OUT.raw beside a new OUT.nhdr may be someone's scan (`volume convert

@@ -171,6 +171,8 @@ void writeNifti(const Volume& v, const std::string& path, bool compress);
 std::string formatFloat(double v);
 bool endsWith(const std::string& s, const std::string& suffix);
 std::string toLower(std::string s);
+// The detached data file a .nhdr header `path` is written with: OUT.raw, or OUT.raw.gz compressed.
+std::string detachedDataPath(const std::string& path, bool compress);
 
 inline uint16_t bswap(uint16_t v) {
     return __builtin_bswap16(v);

@@ -397,9 +397,7 @@ Volume readNrrd(const std::string& path, const std::optional<DensityWindow>& win
 
 void writeNrrd(const Volume& v, const std::string& path, bool compress) {
     const bool detachedData = endsWith(toLower(path), ".nhdr");
-    std::string dataPath = path;
-    if (detachedData)
-        dataPath = path.substr(0, path.size() - 5) + (compress ? ".raw.gz" : ".raw");
+    const std::string dataPath = detachedData ? detachedDataPath(path, compress) : path;
 
     const glm::ivec3 d = v.dims();
     const glm::vec3 s = v.spacing();

@@ -11,6 +11,9 @@ namespace trephine {
 // Writes `image` as OpenEXR: channels R, G, B, A (half, colour / 255) and Z (float: the GL window
 // depth, bit for bit). Throws trephine::Error if the file cannot be written.
 void writeDbiExr(const std::string& path, const Dbi& image);
+// Throws the Error writeDbiExr would for `path`'s name (not ending in .exr), writing nothing: for
+// callers that write much later.
+void checkDbiExrPath(const std::string& path);
 // Writes a rectangle of a larger frame: `image` holds the pixels of `rectInFrame` (row 0 at the
 // bottom, as in the DBI) of a frameWidth x frameHeight window. The EXR's data window is the
 // rectangle at its place in the frame and its display window the full frame.
