@@ -90,6 +90,10 @@ struct NetPeer {
     int malformed = 0;
     bool kicked = false;
     uint64_t connectedUs = 0; // a peer still without a hello after ServerConfig::helloTimeoutS goes
+    // When the last mode switch went to the simulation, and whether a later one waits
+    // (kSyncSwitchIntervalUs).
+    uint64_t syncPushedUs = 0;
+    bool syncDeferred = false;
 };
 
 // Per-peer figures for the server report (kept after the peer leaves).
@@ -687,14 +691,28 @@ void SessionServer::networkLoop() {
         }
         s.host.flush();
     };
+    // The peer's latest mode and volume codec, to the simulation.
+    auto pushSync = [&](uint16_t id, NetPeer& p, uint64_t now) {
+        SimEvent ev = makeEvent(SimEvent::Kind::Sync, id);
+        ev.sync = p.sync;
+        ev.volumeCodec = p.volumeCodec;
+        s.push(std::move(ev));
+        p.syncPushedUs = now;
+        p.syncDeferred = false;
+    };
     // A control message to everyone who said hello (and was not kicked).
     auto sendToParticipants = [&](const std::vector<uint8_t>& bytes) {
         for (const auto& [pid, peer] : s.peers)
             if (peer.hello && !peer.kicked)
                 sendTo(peer.peer, Channel::Control, bytes);
     };
-    // The roster, to everyone whenever it changes.
-    auto sendParticipants = [&] {
+    // The roster, to everyone. Changes only mark it (sendParticipants); the loop sends it at most
+    // every kRosterIntervalUs, so a peer switching modes or taking over as fast as it can send
+    // cannot make the server queue a roster per message for every participant.
+    bool rosterDirty = false;
+    uint64_t rosterSentUs = 0;
+    auto sendParticipants = [&] { rosterDirty = true; };
+    auto sendRoster = [&] {
         Participants roster;
         for (const auto& [pid, peer] : s.peers) { // a std::map: increasing ids, as the wire wants
             if (!peer.hello || peer.kicked)
@@ -843,10 +861,14 @@ void SessionServer::networkLoop() {
             });
             if (changed)
                 sendParticipants();
-            SimEvent ev = makeEvent(SimEvent::Kind::Sync, id);
-            ev.sync = m.sync;
-            ev.volumeCodec = m.volumeCodec;
-            s.push(std::move(ev));
+            // Each switch to volume encodes the whole volume on the simulation thread, so a peer
+            // switching back and forth as fast as it can send would slow everyone: a switch
+            // within kSyncSwitchIntervalUs of the last one waits, and what reaches the simulation
+            // then is the latest mode.
+            if (now - p.syncPushedUs >= kSyncSwitchIntervalUs)
+                pushSync(id, p, now);
+            else
+                p.syncDeferred = true;
             return true;
         }
         case MessageType::Annotate: {
@@ -1078,6 +1100,16 @@ void SessionServer::networkLoop() {
             annotationsDirty = false;
             annotationsSentUs = now;
         }
+        if (rosterDirty && now - rosterSentUs >= kRosterIntervalUs) {
+            sendRoster();
+            rosterDirty = false;
+            rosterSentUs = now;
+        }
+        // A mode switch that came too soon after the last one reaches the simulation now, as the
+        // peer's latest mode (see the SyncMode handler).
+        for (auto& [id, p] : s.peers)
+            if (p.syncDeferred && !p.kicked && now - p.syncPushedUs >= kSyncSwitchIntervalUs)
+                pushSync(id, p, now);
         if (now >= nextTick) {
             m_stats.tick(now);
             nextTick = now + 1000000;

@@ -1,7 +1,8 @@
 // A server facing peers that do not play by the rules: a view request reusing its id for a
 // smaller window while an update waits, a connection that never says hello, an instructor editing
-// marks as fast as it can send, tool states with an unnormalised rotation or a position far off.
-// Server and peers in one process over loopback; deadlines only guard against hangs.
+// marks or switching sync modes as fast as it can send, tool states with an unnormalised rotation
+// or a position far off. Server and peers in one process over loopback; deadlines only guard
+// against hangs.
 #include "net/enet_host.h"
 #include "net/protocol.h"
 #include "net/session_client.h"
@@ -39,6 +40,8 @@ struct RawPeer {
     std::vector<ImageUpdate> images;
     int annotationLists = 0;
     std::optional<Annotations> lastMarks;
+    int rosters = 0;
+    std::optional<Participants> lastRoster;
 
     bool connect(uint16_t port) {
         peer = host.connect(loopback(port), kProtocolVersion);
@@ -70,11 +73,15 @@ struct RawPeer {
                 std::span<const uint8_t> bytes(e.packet->data, e.packet->dataLength);
                 ImageUpdate u;
                 Annotations marks;
+                Participants roster;
                 if (decodeMessage(bytes, u)) {
                     images.push_back(std::move(u));
                 } else if (decodeMessage(bytes, marks)) {
                     ++annotationLists;
                     lastMarks = std::move(marks);
+                } else if (decodeMessage(bytes, roster)) {
+                    ++rosters;
+                    lastRoster = std::move(roster);
                 }
             });
             if (pred())
@@ -284,5 +291,73 @@ TEST(SessionHostile, AViewRequestOverTheLimitIsDroppedAndCounted) {
     std::string report = server.reportJson();
     EXPECT_NE(report.find("\"views_refused\": 1"), std::string::npos) << report;
     EXPECT_NE(report.find("\"peers\""), std::string::npos);
+    server.stop();
+}
+
+// A client switches between DBI and volume sync as fast as it can send. Each switch to volume
+// would encode and send the whole volume, and each change of mode a roster to every participant:
+// the switches reach the simulation at most every kSyncSwitchIntervalUs and the rosters go out at
+// most every kRosterIntervalUs, and the latest mode wins (the client ends on DBI, with a full
+// image after its last switch, and the roster says so).
+TEST(SessionHostile, ModeSwitchesAsFastAsTheyComeAreCoalesced) {
+    Volume sphere = makeSphere(32);
+    SessionServer server(sphere, loopbackServerConfig("sphere:32"));
+    server.start();
+    RawPeer listener;
+    ASSERT_TRUE(listener.connect(server.port()));
+    Hello lh;
+    lh.name = "listener";
+    lh.codec = Codec::Lz4;
+    lh.view = toViewSpec(cameraPreset("top", sphere, {32, 32}));
+    listener.send(Channel::Control, lh);
+    ASSERT_TRUE(listener.serviceUntil([&] { return !listener.images.empty(); }));
+
+    RawPeer switcher;
+    ASSERT_TRUE(switcher.connect(server.port()));
+    Hello h = lh;
+    h.name = "switcher";
+    switcher.send(Channel::Control, h);
+    ASSERT_TRUE(switcher.serviceUntil([&] { return !switcher.images.empty(); }));
+    ASSERT_TRUE(listener.serviceUntil(
+        [&] { return listener.lastRoster && listener.lastRoster->list.size() == 2; }));
+    const int rostersBefore = listener.rosters;
+
+    // A switch every few milliseconds, for about a second: each would reach the simulation on
+    // its own.
+    constexpr int kSwitches = 300;
+    const uint64_t t0 = steadyNowUs();
+    for (int i = 0; i < kSwitches; ++i) {
+        SyncMode m;
+        m.sync = i % 2 == 0 ? Sync::Volume : Sync::Dbi; // the last one (odd) is DBI
+        m.volumeCodec = Codec::Lz4;
+        switcher.host.send(switcher.peer, Channel::Control, encodeMessage(m));
+        switcher.host.flush();
+        switcher.serviceUntil([] { return true; }); // 2 ms, and ENet's window moves on
+    }
+    switcher.host.flush();
+    // Everything delivered and applied: the switcher's last image is a full DBI of its view,
+    // sent after its last switch reached the simulation.
+    ASSERT_TRUE(switcher.serviceUntil([&] {
+        listener.serviceUntil([] { return true; });
+        return server.idle() && server.modeTotals(Sync::Dbi).clients == 2 &&
+               !switcher.images.empty() && switcher.images.back().full &&
+               steadyNowUs() - t0 > 2 * kSyncSwitchIntervalUs;
+    })) << "the switcher ends on DBI with a full image";
+    const double seconds = double(steadyNowUs() - t0) * 1e-6;
+    ASSERT_TRUE(listener.serviceUntil([&] {
+        return listener.lastRoster && listener.lastRoster->list.size() == 2 &&
+               listener.lastRoster->list[1].sync == Sync::Dbi;
+    })) << "the roster's last word: the switcher is on DBI";
+    listener.serviceUntil([] { return false; }, {}, 0.5); // whatever else was queued for it
+    EXPECT_FALSE(switcher.disconnected);
+    EXPECT_EQ(server.malformedTotal(), 0u);
+    // At most one volume per interval (and one more at each end), far fewer than 500.
+    const double intervals = seconds / (double(kSyncSwitchIntervalUs) * 1e-6);
+    const uint64_t volumes = server.modeTotals(Sync::Volume).fullUpdates;
+    EXPECT_LE(double(volumes), intervals + 2) << seconds << " s, " << volumes << " volumes";
+    const int rosters = listener.rosters - rostersBefore;
+    EXPECT_LE(double(rosters), seconds / (double(kRosterIntervalUs) * 1e-6) + 2)
+        << seconds << " s, " << rosters << " rosters";
+    EXPECT_LT(rosters, kSwitches / 4);
     server.stop();
 }
