@@ -7,6 +7,50 @@
 #include <cstdio>
 #include <exception>
 #include <new>
+#include <string>
+#include <vector>
+
+namespace {
+
+// The first word that should name a mode (or a study) and names none: "unknown mode 'X' (modes:
+// ...)", or, when the words stop before one is named, which ones there are; empty when all is
+// well (or help is asked for). Options are skipped: no option of the top level or of a mode with
+// subcommands takes a value.
+std::string unknownModeMessage(const CLI::App& app, int argc, char** argv) {
+    const CLI::App* at = &app;
+    auto names = [&] {
+        std::string list;
+        for (const CLI::App* sub : at->get_subcommands([](const CLI::App*) { return true; }))
+            list += (list.empty() ? "" : ", ") + sub->get_name();
+        return list;
+    };
+    auto which = [&] { return at == &app ? std::string("modes") : at->get_name() + " has"; };
+    for (int i = 1; i < argc; ++i) {
+        const std::string word = argv[i];
+        if (word == "-h" || word == "--help" || word == "--version")
+            return {};
+        if (word.empty() || word[0] == '-')
+            continue;
+        const std::vector<const CLI::App*> subs =
+            at->get_subcommands([](const CLI::App*) { return true; });
+        if (subs.empty())
+            return {};
+        const CLI::App* next = nullptr;
+        for (const CLI::App* sub : subs)
+            if (sub->check_name(word))
+                next = sub;
+        if (!next)
+            return "unknown " + std::string(at == &app ? "mode" : "subcommand") + " '" + word +
+                   "' (" + which() + ": " + names() + ")";
+        at = next;
+    }
+    if (at->get_subcommands([](const CLI::App*) { return true; }).empty())
+        return {};
+    return std::string(at == &app ? "a mode" : "a subcommand") + " is required (" + which() + ": " +
+           names() + ")";
+}
+
+} // namespace
 
 int main(int argc, char** argv) {
     CLI::App app{"Trephine: a collaborative craniotomy-drilling trainer.\n"
@@ -32,6 +76,11 @@ int main(int argc, char** argv) {
     app.failure_message([](const CLI::App*, const CLI::Error& e) {
         return std::string("trephine: ") + e.what() + " (trephine --help)\n";
     });
+    // A misspelt mode: CLI11 would say only that a subcommand is required.
+    if (std::string unknown = unknownModeMessage(app, argc, argv); !unknown.empty()) {
+        std::fprintf(stderr, "trephine: %s (trephine --help)\n", unknown.c_str());
+        return 2;
+    }
     try {
         app.parse(argc, argv);
     } catch (const CLI::ParseError& e) {

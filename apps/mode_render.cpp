@@ -60,6 +60,11 @@ std::vector<double> parseNumbers(const std::string& flag, const std::string& tex
 
 glm::vec3 parseVec3(const std::string& flag, const std::string& text) {
     std::vector<double> v = parseNumbers(flag, text, 3, "x,y,z in mm, e.g. 0,-300,0");
+    // A float holds more, but a camera kilometres away sees nothing of a skull.
+    constexpr double kMaxMm = 1e6;
+    for (double c : v)
+        if (std::abs(c) > kMaxMm)
+            throw Error(flag + " " + text + ": each coordinate must be within +-1e6 mm");
     return glm::vec3(float(v[0]), float(v[1]), float(v[2]));
 }
 

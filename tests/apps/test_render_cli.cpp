@@ -107,6 +107,7 @@ TEST(RenderCli, BadFlagsAreOneLineErrors) {
     expectOneLineError(render(dir, std::string(kView) + " --rect 100,80,40,40"), "--rect");
     expectOneLineError(render(dir, "--volume sphere:16 --camera sideways"), "sideways");
     expectOneLineError(render(dir, "--volume sphere:16 --eye 1,2"), "--eye");
+    expectOneLineError(render(dir, "--volume sphere:16 --eye 1e39,0,0"), "--eye"); // inf as float
     expectOneLineError(render(dir, std::string(kView) + " --out '" + (dir / "f.tif") + "'"),
                        ".exr");
     Result unknown = render(dir, "--volume sphere:16 --frobnicate");

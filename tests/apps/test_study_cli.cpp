@@ -216,6 +216,26 @@ TEST(StudyCli, BadFlagsGiveOneLine) {
     }
 }
 
+// A misspelt mode or study, or none, is named in one line with the choices (CLI11 alone said "A
+// subcommand is required", whatever the word).
+TEST(StudyCli, AMisspeltOrMissingModeIsNamedWithTheChoices) {
+    TempDir dir;
+    struct Case {
+        const char* args;
+        const char* says;
+    } cases[] = {{"stduy updates --quick", "unknown mode 'stduy' (modes: server,"},
+                 {"study update --quick", "unknown subcommand 'update' (study has: haptics,"},
+                 {"", "a mode is required (modes: server,"},
+                 {"study", "a subcommand is required (study has: haptics, updates, display, all)"}};
+    for (const Case& c : cases) {
+        CommandResult r = runTrephine(dir, c.args);
+        EXPECT_EQ(r.exitCode, 2) << c.args;
+        EXPECT_NE(r.err.find(c.says), std::string::npos) << c.args << ": " << r.err;
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << c.args << ": " << r.err;
+    }
+    EXPECT_EQ(runTrephine(dir, "study --help").exitCode, 0);
+}
+
 // --link off: the update study runs once, over loopback, and the report has no link sections.
 TEST(StudyCli, AllLinkOffRunsTheUpdateStudyOnce) {
     TempDir dir;
