@@ -205,7 +205,10 @@ struct UpdatesOptions {
     std::vector<std::string> methods; // empty: every method
     bool quick = false;
     bool sizesGiven = false;  // --sizes on the command line wins over --quick's sizes
+    bool cyclesGiven = false; // likewise --cycles, and --rounds
     bool roundsGiven = false; // without --rounds, fewer cycles than rounds means fewer rounds
+    // The volume, already opened from `volume` (study all checks it before its first study).
+    std::shared_ptr<const Volume> opened;
 };
 
 std::string makeOutDir(const std::string& out) {
@@ -225,8 +228,7 @@ void writeText(const std::filesystem::path& path, const std::string& text) {
 
 // The volume a study runs on; with the paper camera its spacing is set so the volume spans the
 // paper's 300 pixels (section 4.1).
-Volume studyVolume(const std::string& spec, const std::string& camera) {
-    Volume volume = openVolume(spec);
+Volume studyVolume(Volume volume, const std::string& camera) {
     if (camera == "paper") {
         const glm::ivec3 d = volume.dims();
         volume.setSpacing(glm::vec3(paperSpacingMm(std::max({d.x, d.y, d.z}))));
@@ -248,9 +250,11 @@ std::vector<net::UpdateStudyRow> runUpdatesStudy(const UpdatesOptions& o,
     if (o.quick) {
         if (!o.sizesGiven)
             config.sizes = {10, 40, 80};
-        config.cycles = 5;
+        if (!o.cyclesGiven)
+            config.cycles = 5;
         config.warmup = 1;
-        config.rounds = 1;
+        if (!o.roundsGiven)
+            config.rounds = 1;
     }
     if (config.cycles < 1 || config.cycles > 100000)
         throw Error("--cycles must be in [1, 100000]");
@@ -271,7 +275,7 @@ std::vector<net::UpdateStudyRow> runUpdatesStudy(const UpdatesOptions& o,
         known = known || n == o.camera;
     if (!known)
         throw Error("--camera: unknown preset '" + o.camera + "'");
-    Volume volume = studyVolume(o.volume, o.camera);
+    Volume volume = studyVolume(o.opened ? Volume(*o.opened) : openVolume(o.volume), o.camera);
     makeOutDir(o.out);
     std::printf("Update study: %s, camera %s, %dx%d, codec %s, %d cycles per method and size in "
                 "%d round%s, %s\n",
@@ -386,6 +390,9 @@ int runAllStudies(const AllOptions& o, const std::string& command) {
     const bool linkRun = o.link != "off";
     if (linkRun)
         net::LinkConditions::parse(o.link);
+    // A volume that does not open fails here, not after the haptics study has replaced the
+    // folder's haptics.csv.
+    auto volume = std::make_shared<const Volume>(openVolume(o.volume));
     makeOutDir(o.out);
     net::StudyReportInput input;
     input.command = command;
@@ -403,6 +410,7 @@ int runAllStudies(const AllOptions& o, const std::string& command) {
     UpdatesOptions u;
     u.out = o.out;
     u.volume = o.volume;
+    u.opened = volume;
     u.codec = o.codec;
     u.quick = o.quick;
     input.updates = runUpdatesStudy(u, input.updateConfig);
@@ -482,10 +490,13 @@ void addStudyMode(CLI::App& root, int& exitCode) {
         ->add_option("--methods", u->methods,
                      "Only these methods (dbi, dbi-fullrender, volume, volume-CODEC)")
         ->delimiter(',');
-    updates->add_flag("--quick", u->quick,
-                      "Sizes 10, 40, 80 and 5 cycles in one round: under a minute");
+    updates->add_flag(
+        "--quick", u->quick,
+        "Sizes 10, 40, 80 and 5 cycles in one round, under a minute (--sizes, --cycles and "
+        "--rounds given win)");
     updates->callback([u, updates, &exitCode] {
         u->sizesGiven = updates->count("--sizes") > 0;
+        u->cyclesGiven = updates->count("--cycles") > 0;
         u->roundsGiven = updates->count("--rounds") > 0;
         net::UpdateStudyConfig config;
         runUpdatesStudy(*u, config);

@@ -6,6 +6,7 @@
 
 #include <cstdlib>
 #include <filesystem>
+#include <fstream>
 #include <map>
 #include <sstream>
 #include <string>
@@ -179,6 +180,29 @@ TEST(StudyCli, AllChecksItsOptionsBeforeRunning) {
     EXPECT_NE(r.exitCode, 0);
     EXPECT_NE(r.err.find("rate=nan"), std::string::npos) << r.err;
     EXPECT_FALSE(std::filesystem::exists(dir / "all/haptics.csv"));
+}
+
+// Likewise a volume that does not open: the folder's earlier results stay as they were.
+TEST(StudyCli, AllWithAVolumeThatDoesNotOpenLeavesEarlierResultsAlone) {
+    TempDir dir;
+    std::filesystem::create_directories(dir / "all");
+    { std::ofstream(dir / "all/haptics.csv") << "yesterday's run\n"; }
+    CommandResult r = runTrephine(dir, "study all --quick --volume '" + dir / "nosuch.nrrd" +
+                                           "' --out '" + dir / "all" + "'");
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_NE(r.err.find("nosuch.nrrd"), std::string::npos) << r.err;
+    std::ifstream in(dir / "all/haptics.csv");
+    std::string line;
+    std::getline(in, line);
+    EXPECT_EQ(line, "yesterday's run");
+}
+
+// --cycles and --rounds given on the command line win over --quick's.
+TEST(StudyCli, UpdatesQuickKeepsTheCyclesGiven) {
+    TempDir dir;
+    const UpdatesRun run = runUpdates(dir, "--quick --sizes 8 --methods dbi --cycles 7");
+    ASSERT_EQ(run.csv.rows.size(), 1u);
+    EXPECT_EQ(num(run.csv.rows[0], "cycles"), 7);
 }
 
 // --link puts the link emulator between the clients and the server: at 20 Mbit/s a 16^3 volume
