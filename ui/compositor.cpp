@@ -225,4 +225,13 @@ Dbi Compositor::readBack() {
     return out;
 }
 
+void Compositor::readBackDepth(Dbi& into) {
+    if (into.width() != m_width || into.height() != m_height)
+        into = Dbi(m_width, m_height);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, m_fbo);
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    glReadPixels(0, 0, m_width, m_height, GL_DEPTH_COMPONENT, GL_FLOAT, into.depth());
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
+}
+
 } // namespace trephine::ui

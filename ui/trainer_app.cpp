@@ -700,9 +700,10 @@ int runTrainerWindow(const TrainerOptions& o) {
                 comp.beginEmpty(dbiCamera);
                 volumeView.draw(dbiCamera);
                 if (volumeDirty) {
-                    // The picture before the tools, for the cursor's depth lookups: read back
-                    // only when the volume or the view changed.
-                    cpuDbi = comp.readBack();
+                    // The picture's depth before the tools, for the cursor's depth lookups and
+                    // the marks' occlusion: read back only when the volume or the view changed,
+                    // and only the depth (the colour once, for the report, after the loop).
+                    comp.readBackDepth(cpuDbi);
                     volumeCamera = dbiCamera;
                     volumeDirty = false;
                 }
@@ -992,6 +993,13 @@ int runTrainerWindow(const TrainerOptions& o) {
                     "ms p99 %.2f ms, frame %.2f ms, haptics %.0f Hz\n",
                     syncDesignName(d), f.updatesPerS, f.bytesPerUpdate, f.rawBytesPerUpdate,
                     f.latencyP50Ms, f.latencyP99Ms, f.frameMs, f.hapticHz);
+    }
+    if (o.report && picture == SyncDesign::Volume && haveVolume &&
+        cpuDbi.width() == volumeCamera.width && cpuDbi.height() == volumeCamera.height) {
+        // The local volume's picture in colour, as last shown (the loop read back its depth).
+        comp.beginEmpty(volumeCamera);
+        volumeView.draw(volumeCamera);
+        cpuDbi = comp.readBack();
     }
     if (o.report) {
         TrainerReport& r = *o.report;

@@ -78,6 +78,28 @@ TEST_F(CompositorTest, RestoresTheDbiExactly) {
     EXPECT_EQ(compare(out, dbi).maxColorError, 0);
 }
 
+// The depth-only read back (the volume design's picking) gives readBack's depth, resizing a Dbi
+// of another size and leaving the colour of one of the right size alone.
+TEST_F(CompositorTest, ReadBackDepthGivesTheCompositesDepth) {
+    Camera cam = testCamera();
+    Dbi dbi = planeDbi(cam);
+    comp->uploadFull(dbi);
+    comp->begin(cam);
+    const Dbi full = comp->readBack();
+    Dbi small(3, 2);
+    comp->readBackDepth(small);
+    ASSERT_EQ(small.width(), cam.width);
+    ASSERT_EQ(small.height(), cam.height);
+    Dbi kept = dbi;
+    std::fill(kept.depth(), kept.depth() + size_t(cam.width) * size_t(cam.height), 0.5f);
+    comp->readBackDepth(kept);
+    for (const Dbi* d : {&small, &kept})
+        for (int y = 0; y < cam.height; ++y)
+            for (int x = 0; x < cam.width; ++x)
+                ASSERT_EQ(d->depth(x, y), full.depth(x, y)) << x << "," << y;
+    EXPECT_EQ(compare(kept, dbi).maxColorError, 0) << "the colour is not read";
+}
+
 TEST_F(CompositorTest, ToolIsHiddenExactlyWhereTheDbiIsNearer) {
     Camera cam = testCamera();
     Dbi dbi = planeDbi(cam);

@@ -54,8 +54,11 @@ public:
     // Copies the composite into the bound window framebuffer with its bottom-left at (x, y).
     void blitTo(int x, int y);
 
-    // [Tests] The composite's colour (RGBA8) and depth, row 0 at the bottom.
+    // The composite's colour (RGBA8) and depth, row 0 at the bottom.
     Dbi readBack();
+    // Its depth only, into `into`'s depth (`into` is made the composite's size first, black, when
+    // it is another size): all that picking and the marks' occlusion read, half readBack's bytes.
+    void readBackDepth(Dbi& into);
 
 private:
     void bindTarget(const Camera& camera);
