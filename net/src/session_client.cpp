@@ -445,14 +445,16 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
             ++m_predicted;
         if (st == PredictedStatus::BaseMismatch) {
             // Our copy is not what the server coded against: never show a wrong picture; ask
-            // for the whole view again (the server answers with a full image). Ask for the
-            // newest view still pending, not the one shown: a request for the old view would
-            // supersede it and bring the old view back. Once asked, the updates coded against
-            // the same stale copy until that full image comes need no request of their own.
+            // for the whole view again (the server answers with a full image). While a view
+            // change is pending, its full image is already on its way and replaces our copy:
+            // wait for that one (a request for the old view would supersede it and bring the old
+            // view back; one for the pending view again would cost a second full image). Once
+            // asked, the updates coded against the same stale copy until that full image comes
+            // need no request of their own.
             ++m_resyncs;
             if (!m_resyncRequestId)
                 m_resyncRequestId =
-                    requestView(m_requested.empty() ? m_view : m_requested.rbegin()->second);
+                    m_requested.empty() ? requestView(m_view) : m_requested.rbegin()->first;
             return true;
         }
     } else if (!decodeImage(u.payload, u.rawBytes, u.codec, u.width, u.height, camera, patch)) {

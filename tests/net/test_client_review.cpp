@@ -69,7 +69,8 @@ struct PredictedSession : trephine::testing::PaperZstdSession {
 } // namespace
 
 // A predicted update of the view shown fails its base check while a view change is pending: the
-// resync asks for the pending view, not the shown one, so the view asked for is the one shown.
+// resync waits for the pending view's full image (it asks for nothing: not the shown view, which
+// would bring the old view back, nor the pending one again), so the view asked for is shown.
 TEST(ClientReview, AResyncDuringAViewChangeEndsOnTheViewAskedFor) {
     PredictedSession s;
     ASSERT_FALSE(s.paper == s.top);
@@ -80,11 +81,14 @@ TEST(ClientReview, AResyncDuringAViewChangeEndsOnTheViewAskedFor) {
     // comes before the new view's full image on the (ordered) image channel.
     ASSERT_TRUE(waitServerIdle(*s.server));
     s.client->requestView(s.top);
+    const uint64_t requestsAfterViewChange = s.client->stats().totalMessagesOut(Channel::Control);
     ASSERT_TRUE(pumpUntil({s.client.get()}, [&] { return s.client->resyncs() > 0; }));
     ASSERT_TRUE(s.settled());
     EXPECT_TRUE(s.client->view() == s.top)
         << "showing the " << (s.client->view() == s.paper ? "old view" : "other view");
     EXPECT_EQ(s.client->updatesRejected(), 0u);
+    // The pending view's full image was on its way: the resync asked for nothing more.
+    EXPECT_EQ(s.client->stats().totalMessagesOut(Channel::Control), requestsAfterViewChange);
 }
 
 // Every predicted update coded against the same stale copy fails its check until the full image
