@@ -246,7 +246,8 @@ struct SessionServer::Impl {
     std::mutex inMutex;
     std::condition_variable inCv;
     std::vector<SimEvent> inbox;
-    bool busy = false; // the simulation thread is working on a batch (under inMutex)
+    size_t inboxTools = 0; // Tool events in the inbox (ServerConfig::maxQueuedToolStates)
+    bool busy = false;     // the simulation thread is working on a batch (under inMutex)
     std::atomic<bool> stopSim{false};
 
     // Simulation -> network.
@@ -284,6 +285,18 @@ struct SessionServer::Impl {
             inbox.push_back(std::move(ev));
         }
         inCv.notify_one();
+    }
+    // A tool state, unless `cap` of them already wait: false when dropped.
+    bool pushTool(SimEvent ev, size_t cap) {
+        {
+            std::lock_guard lock(inMutex);
+            if (inboxTools >= cap)
+                return false;
+            ++inboxTools;
+            inbox.push_back(std::move(ev));
+        }
+        inCv.notify_one();
+        return true;
     }
 
     // Queues `rect` of `view` for client `id`, merged with an unsent update of the same view so
@@ -835,7 +848,8 @@ void SessionServer::networkLoop() {
             SimEvent ev = makeEvent(SimEvent::Kind::Tool, id);
             ev.tool = t;
             ev.arrivedUs = now;
-            s.push(std::move(ev));
+            if (!s.pushTool(std::move(ev), m_config.maxQueuedToolStates))
+                m_toolStatesDropped.fetch_add(1);
             ToolRelay relay{id, t};
             std::vector<uint8_t> bytes = encodeMessage(relay);
             for (auto& [otherId, other] : s.peers)
@@ -1146,6 +1160,7 @@ void SessionServer::simulationLoop() {
                 return;
             batch.clear();
             batch.swap(s.inbox);
+            s.inboxTools = 0;
             s.busy = !batch.empty();
         }
         if (batch.empty())
@@ -1393,6 +1408,7 @@ std::string SessionServer::reportJson() const {
     j += "  \"max_clients\": " + std::to_string(m_config.maxClients) + ",\n";
     j += "  \"clients\": " + std::to_string(m_clientCount.load()) + ",\n";
     j += "  \"tool_states_applied\": " + std::to_string(m_toolStatesApplied.load()) + ",\n";
+    j += "  \"tool_states_dropped\": " + std::to_string(m_toolStatesDropped.load()) + ",\n";
     j += "  \"renders\": " + std::to_string(m_renders.load()) + ",\n";
     j += "  \"haptic_models_sent\": " + std::to_string(m_hapticSent.load()) + ",\n";
     j += "  \"haptic_relays_sent\": " + std::to_string(m_hapticRelayed.load()) + ",\n";

@@ -361,3 +361,44 @@ TEST(SessionHostile, ModeSwitchesAsFastAsTheyComeAreCoalesced) {
     EXPECT_LT(rosters, kSwitches / 4);
     server.stop();
 }
+
+// A client sends tool states faster than the simulation takes them (here while it erodes and
+// renders a large cut): at most maxQueuedToolStates wait, the rest are dropped and counted, as a
+// lossy link would drop them. Every state is either applied or counted, and the client keeps its
+// session.
+TEST(SessionHostile, ToolStatesBeyondTheQueueBoundAreDroppedAndCounted) {
+    Volume sphere = makeSphere(128);
+    ServerConfig sc = loopbackServerConfig("sphere:128");
+    sc.maxQueuedToolStates = 4;
+    sc.hapticModels = false;
+    SessionServer server(sphere, sc);
+    server.start();
+    ClientConfig cc = trephine::testing::namedClientConfig(sphere, "flood", Role::Trainee, 256);
+    SessionClient client(cc);
+    client.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return client.hasFullImage(); }));
+
+    const SurfaceSite site = sphereTop(128);
+    constexpr int kStates = 400;
+    server.submitBoxCut(surfaceBox(sphere, 100)); // keeps the simulation busy for a while
+    for (int i = 0; i < kStates; ++i) {
+        ToolState t = burrState(site, i, kStates, 1000000);
+        t.drilling = false; // touching only: every state is cheap to apply
+        t.speed = 0.0f;
+        client.sendToolState(t);
+    }
+    client.poll(0);
+    ASSERT_TRUE(pumpUntil({&client},
+                          [&] {
+                              return server.idle() &&
+                                     server.toolStatesApplied() + server.toolStatesDropped() ==
+                                         uint64_t(kStates);
+                          }))
+        << server.toolStatesApplied() << " applied, " << server.toolStatesDropped() << " dropped";
+    EXPECT_GT(server.toolStatesDropped(), 0u);
+    EXPECT_GT(server.toolStatesApplied(), 0u);
+    EXPECT_FALSE(client.closed()) << client.closeReason();
+    EXPECT_EQ(server.malformedTotal(), 0u);
+    EXPECT_NE(server.reportJson().find("\"tool_states_dropped\": "), std::string::npos);
+    server.stop();
+}

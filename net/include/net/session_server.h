@@ -46,6 +46,11 @@ struct ServerConfig {
     // Between two drilling tool states the cutter sweeps the path in sub-steps of at most a
     // quarter voxel (sweepPoses); a move longer than this is a jump, drilled at its end only.
     float maxSweepMm = 10.0f;
+    // Tool states waiting for the simulation, at most; more are dropped and counted
+    // (toolStatesDropped) until it catches up, as a lossy link would (tool states travel
+    // unreliable, newest wins). A client sending them faster than the simulation can drill would
+    // otherwise grow the queue without bound.
+    size_t maxQueuedToolStates = 4096;
     // A client whose image and volume updates ENet still holds (queued, or not acknowledged) come
     // to more than this many bytes gets no more for now: its next update waits in the server's
     // outbox, where newer changes merge into it, so a slow link's backlog stays bounded (about
@@ -113,6 +118,7 @@ public:
     uint64_t malformedTotal() const { return m_stats.malformed(); }
     uint64_t disconnectedForMalformed() const { return m_malformedKicks.load(); }
     uint64_t toolStatesApplied() const { return m_toolStatesApplied.load(); }
+    uint64_t toolStatesDropped() const { return m_toolStatesDropped.load(); }
     uint64_t rendersDone() const { return m_renders.load(); }
     uint64_t hapticModelsSent() const { return m_hapticSent.load(); }
     // HapticRelay messages sent: each force model answered, once per instructor other than its
@@ -156,6 +162,7 @@ private:
     std::atomic<size_t> m_clientCount{0};
     std::atomic<uint64_t> m_malformedKicks{0};
     std::atomic<uint64_t> m_toolStatesApplied{0};
+    std::atomic<uint64_t> m_toolStatesDropped{0};
     std::atomic<uint64_t> m_renders{0};
     std::atomic<int64_t> m_peakInFlight{0};
     std::atomic<uint64_t> m_hapticSent{0};
