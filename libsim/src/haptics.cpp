@@ -27,6 +27,14 @@ glm::vec3 clampForce(glm::vec3 f, float maxN) {
 
 // [SECTION] blender
 
+namespace {
+
+bool allFinite(glm::vec3 v) {
+    return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z);
+}
+
+} // namespace
+
 void ModelBlender::reset() {
     *this = ModelBlender(m_config);
 }
@@ -41,6 +49,11 @@ AffineForce ModelBlender::current() const {
 }
 
 void ModelBlender::setModel(const HapticModelData& m, double now) {
+    // One NaN in the mix would stay in every later blend (0 * NaN is NaN) and clampForce would
+    // zero the output for good: ignore such a model, and fade out if no good one follows.
+    if (!allFinite(m.position) || !allFinite(m.force) || !allFinite(m.gradient[0]) ||
+        !allFinite(m.gradient[1]) || !allFinite(m.gradient[2]))
+        return;
     AffineForce next = AffineForce::fromModel(m);
     if (m_hasModel) {
         m_from = current();

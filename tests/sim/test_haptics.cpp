@@ -131,6 +131,29 @@ TEST(Haptics, StaleModelFadesToZero) {
     EXPECT_LE(glm::length(blender.update(p, 1.001)), config.maxStepN + 1e-6);
 }
 
+// A model with a NaN or an infinity (a bug upstream, a corrupt source) is ignored: the force
+// neither drops to zero at once nor stays zero once good models come again.
+TEST(Haptics, NonFiniteModelIsIgnored) {
+    BlendConfig config;
+    config.maxStepN = 0.05;
+    ModelBlender blender(config);
+    const glm::vec3 p(1.0f, 2.0f, 3.0f);
+    blender.resetTo(modelAt(p, {0, 0, 3.0f}, 2.0f), 0.0);
+    EXPECT_NEAR(blender.update(p, 0.0).z, 3.0f, 1e-5f);
+    HapticModelData bad = modelAt(p, {0, 0, NAN}, 2.0f);
+    blender.setModel(bad, 0.01);
+    EXPECT_NEAR(blender.update(p, 0.01).z, 3.0f, 1e-5f); // no jump
+    bad = modelAt(p, {0, 0, 1.0f}, 2.0f);
+    bad.gradient[1][2] = INFINITY;
+    blender.setModel(bad, 0.02);
+    EXPECT_NEAR(blender.update(p, 0.02).z, 3.0f, 1e-5f);
+    blender.setModel(modelAt(p, {0, 0, 1.0f}, 2.0f), 0.03);
+    glm::vec3 f(0.0f);
+    for (int i = 30; i <= 200; ++i)
+        f = blender.update(p, i * 1e-3);
+    EXPECT_NEAR(f.z, 1.0f, 1e-5f);
+}
+
 TEST(Haptics, RecorderKeepsTheNewestSamples) {
     HapticRecorder rec(4);
     for (int i = 0; i < 10; ++i) {

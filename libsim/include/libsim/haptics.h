@@ -77,6 +77,7 @@ class ModelBlender {
 public:
     explicit ModelBlender(BlendConfig config = {}) : m_config(config) {}
 
+    // A model with a non-finite field is ignored.
     void setModel(const HapticModelData& m, double now);
     // Takes the model at once, without a blend: only for a start from rest in a known state (a
     // study's warm start, tests). A live loop uses setModel.
