@@ -146,6 +146,13 @@ void HapticLoop::setSendRate(double hz) {
 
 void HapticLoop::setModel(const HapticModelData& model, double now) {
     std::lock_guard lock(m_modelMutex);
+    // Two models within one tick may come reversed (the haptic channel is unsequenced): the one
+    // answering the older tool state must not replace the newer one still waiting.
+    if (m_pending && int32_t(model.toolSequence - m_pending->first.toolSequence) < 0) {
+        std::lock_guard statsLock(m_statsMutex);
+        m_stats.modelsDropped++;
+        return;
+    }
     m_pending = std::make_pair(model, now);
 }
 

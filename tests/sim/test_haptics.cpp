@@ -217,6 +217,23 @@ TEST(HapticLoop, DropsModelsThatArriveOutOfOrder) {
     EXPECT_EQ(loop.samples().back().modelForce, glm::vec3(0, 0, 2.0f));
 }
 
+// Two models arriving within one tick in reverse order (the haptic channel is unsequenced): the
+// one answering the newer tool state is applied, the older is dropped and counted.
+TEST(HapticLoop, KeepsTheNewerOfTwoModelsPendingInOneTick) {
+    TestDevice device;
+    HapticLoop loop(device, {}, nullptr);
+    HapticModelData newer = modelAt(device.position, {0, 0, 2.0f}, 0.0f);
+    newer.toolSequence = 10;
+    HapticModelData older = modelAt(device.position, {0, 0, 5.0f}, 0.0f);
+    older.toolSequence = 9;
+    loop.setModel(newer, 0.0);
+    loop.setModel(older, 0.0);
+    loop.step(0.0);
+    EXPECT_EQ(loop.samples().back().modelForce, glm::vec3(0, 0, 2.0f));
+    EXPECT_EQ(loop.stats().models, 1u);
+    EXPECT_EQ(loop.stats().modelsDropped, 1u);
+}
+
 TEST(HapticLoop, LocalForceSourceRunsTheForceModelInTheLoop) {
     Volume sphere = makeSphere(40);
     TestDevice device;

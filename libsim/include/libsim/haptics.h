@@ -188,8 +188,8 @@ public:
     HapticLoop& operator=(const HapticLoop&) = delete;
 
     // Thread-safe: the network thread hands over each model as it arrives (now: arrival time).
-    // A model answering an older tool state than one already applied (reordered by the network)
-    // is dropped and counted.
+    // A model answering an older tool state than one already applied or still pending (reordered
+    // by the network) is dropped and counted.
     void setModel(const HapticModelData& model, double now);
     // Local mode: a non-null source replaces the server's models (the loop does not own it).
     // Call while the loop is stopped.
