@@ -234,10 +234,14 @@ void HapticLoop::stop() {
 void HapticLoop::run() {
     pthread_setname_np(pthread_self(), "haptics");
     using Clock = std::chrono::steady_clock;
-    const auto t0 = Clock::now();
+    // One timeline across stop() and start(): a clock restarting from 0 sent no tool state and
+    // froze the blend until it passed the times the throttle and the blender held from before.
+    if (!m_clockStart)
+        m_clockStart = Clock::now();
+    const auto t0 = *m_clockStart;
     const auto period = std::chrono::duration_cast<Clock::duration>(
         std::chrono::duration<double>(1.0 / m_config.rateHz));
-    auto next = t0;
+    auto next = Clock::now();
     while (!m_stop.load(std::memory_order_relaxed)) {
         std::this_thread::sleep_until(next);
         const auto actual = Clock::now();

@@ -15,6 +15,7 @@
 #include "libsim/volume.h"
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <functional>
 #include <glm/mat3x3.hpp>
@@ -199,7 +200,8 @@ public:
     // One tick at time now (seconds): what the thread does each millisecond. Returns the sample.
     HapticSample step(double now);
 
-    // Runs step() at rateHz on a thread named "haptics" until stop().
+    // Runs step() at rateHz on a thread named "haptics" until stop(). Its clock (the `now` of
+    // step, and of setModel's arrival times) counts from the first start(), across restarts.
     void start();
     void stop();
     bool running() const { return m_thread.joinable(); }
@@ -230,6 +232,7 @@ private:
     double m_nextSend = -1.0;
     std::atomic<double> m_sendRateHz;
     std::atomic<bool> m_stop{false};
+    std::optional<std::chrono::steady_clock::time_point> m_clockStart; // the first start()
     std::thread m_thread;
 };
 
