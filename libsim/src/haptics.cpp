@@ -141,7 +141,9 @@ HapticLoop::~HapticLoop() {
 }
 
 void HapticLoop::setSendRate(double hz) {
-    m_sendRateHz = std::clamp(hz, 20.0, 1000.0);
+    // std::clamp lets NaN through, and one NaN period made the next send time NaN for good: no
+    // tool state was sent again, whatever rate came later.
+    m_sendRateHz = std::isnan(hz) ? 20.0 : std::clamp(hz, 20.0, 1000.0);
 }
 
 void HapticLoop::setModel(const HapticModelData& model, double now) {

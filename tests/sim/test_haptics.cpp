@@ -198,6 +198,21 @@ TEST(HapticLoop, StepsDeterministicallyAndThrottlesSends) {
     EXPECT_EQ(loop.samples().back().modelForce, glm::vec3(0, 0, 2.0f));
 }
 
+// A NaN rate (0 / 0 upstream) is clamped like any other out-of-range rate: to the slowest.
+TEST(HapticLoop, NaNSendRateStillSends) {
+    TestDevice device;
+    int sends = 0;
+    HapticLoop loop(device, {}, [&](const DeviceState&, double) { ++sends; });
+    loop.setSendRate(NAN);
+    for (int i = 0; i < 1000; ++i)
+        loop.step(i * 1e-3);
+    EXPECT_NEAR(sends, 20, 1);
+    loop.setSendRate(100.0);
+    for (int i = 1000; i < 2000; ++i)
+        loop.step(i * 1e-3);
+    EXPECT_NEAR(sends, 120, 1);
+}
+
 TEST(HapticLoop, DropsModelsThatArriveOutOfOrder) {
     TestDevice device;
     HapticLoop loop(device, {}, nullptr);
