@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <glm/gtc/quaternion.hpp>
 #include <hidapi.h>
 
@@ -74,6 +75,26 @@ bool SpaceMouseParser::feed(std::span<const uint8_t> r) {
     }
     m_state.ignored++;
     return false;
+}
+
+void SpaceMouseParser::release() {
+    m_state.translation = glm::ivec3(0);
+    m_state.rotation = glm::ivec3(0);
+    m_state.buttons = 0;
+}
+
+DeviceState spaceMouseStep(ToolPose& pose, double& lastRead, double now,
+                           const SpaceMouseState& state, bool lost,
+                           const SpaceMouseConfig& config) {
+    DeviceState s;
+    if (!lost && lastRead >= 0.0)
+        pose =
+            integrateSpaceMouse(pose, state, std::min(now - lastRead, kSpaceMouseMaxStepS), config);
+    lastRead = now;
+    s.pose = pose;
+    s.buttons = lost ? 0u : state.buttons;
+    s.valid = !lost;
+    return s;
 }
 
 ToolPose integrateSpaceMouse(const ToolPose& pose, const SpaceMouseState& s, double dt,
@@ -168,20 +189,24 @@ SpaceMouseDevice::~SpaceMouseDevice() {
 
 DeviceState SpaceMouseDevice::read(double now) {
     uint8_t buf[64];
-    for (int i = 0; i < 64; ++i) { // bounded: never starve the haptic tick
+    for (int i = 0; i < 64 && !m_lost; ++i) { // bounded: never starve the haptic tick
         int n = hid_read(m_impl->handle, buf, sizeof buf);
-        if (n <= 0)
+        if (n < 0) {
+            // Unplugged: the last deflection would otherwise keep moving the tool (up to the
+            // full-scale 60 mm/s) for as long as the loop runs.
+            m_lost = true;
+            m_parser.release();
+            std::fprintf(stderr,
+                         "trephine: %s stopped answering (unplugged?); the tool stays "
+                         "where it was\n",
+                         m_name.c_str());
+            break;
+        }
+        if (n == 0)
             break;
         m_parser.feed(std::span<const uint8_t>(buf, size_t(n)));
     }
-    if (m_lastRead >= 0.0)
-        m_pose = integrateSpaceMouse(m_pose, m_parser.state(), now - m_lastRead, m_config);
-    m_lastRead = now;
-    DeviceState s;
-    s.pose = m_pose;
-    s.buttons = m_parser.state().buttons;
-    s.valid = true;
-    return s;
+    return spaceMouseStep(m_pose, m_lastRead, now, m_parser.state(), m_lost, m_config);
 }
 
 } // namespace trephine

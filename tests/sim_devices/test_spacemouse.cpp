@@ -84,6 +84,41 @@ TEST(SpaceMouse, IntegratesWithGainAndDeadZone) {
     EXPECT_LT(integrateSpaceMouse(ToolPose{}, edge, 1.0, c).position.x, 0.2f);
 }
 
+// A read after a stall integrates at most kSpaceMouseMaxStepS of the deflection; a lost device
+// (unplugged mid-push) reports invalid with no button held and the tool stays where it was,
+// instead of drifting on the last deflection.
+TEST(SpaceMouse, AStallMovesTheToolABoundedStepAndALostDeviceHoldsStill) {
+    SpaceMouseConfig c;
+    c.translationGainMmPerS = 60.0;
+    SpaceMouseParser parser;
+    const uint8_t push[] = {1, 94, 1, 0, 0, 0, 0}; // x = 350: full push to the right
+    const uint8_t button[] = {3, 1};
+    ASSERT_TRUE(parser.feed(push));
+    ASSERT_TRUE(parser.feed(button));
+    ToolPose pose;
+    double last = -1.0;
+    DeviceState s = spaceMouseStep(pose, last, 1.0, parser.state(), false, c);
+    EXPECT_TRUE(s.valid);
+    EXPECT_EQ(s.pose.position.x, 0.0f) << "the first read only starts the clock";
+    s = spaceMouseStep(pose, last, 1.01, parser.state(), false, c);
+    EXPECT_NEAR(s.pose.position.x, 0.6f, 1e-4f); // 60 mm/s for 10 ms
+    EXPECT_EQ(s.buttons, 1u);
+    s = spaceMouseStep(pose, last, 31.01, parser.state(), false, c); // 30 s later
+    EXPECT_NEAR(s.pose.position.x, 0.6f + 60.0f * float(kSpaceMouseMaxStepS), 1e-3f)
+        << "not 1800 mm";
+
+    parser.release();
+    EXPECT_EQ(parser.state().translation, glm::ivec3(0));
+    EXPECT_EQ(parser.state().buttons, 0u);
+    const glm::vec3 held = pose.position;
+    for (double now : {31.02, 32.0, 40.0}) {
+        s = spaceMouseStep(pose, last, now, parser.state(), true, c);
+        EXPECT_FALSE(s.valid);
+        EXPECT_EQ(s.buttons, 0u);
+        EXPECT_EQ(s.pose.position, held);
+    }
+}
+
 TEST(SpaceMouse, KnowsTheVendorsAndProducts) {
     EXPECT_TRUE(isSpaceMouse(0x046d, 0xc626));  // SpaceNavigator
     EXPECT_TRUE(isSpaceMouse(0x256f, 0xc635));  // SpaceMouse Compact

@@ -37,6 +37,8 @@ class SpaceMouseParser {
 public:
     // Returns true when the report was understood and applied.
     bool feed(std::span<const uint8_t> report);
+    // The device is gone: no deflection, no button held (the counts stay).
+    void release();
     const SpaceMouseState& state() const { return m_state; }
 
 private:
@@ -53,6 +55,16 @@ struct SpaceMouseConfig {
 // x -> +x, y -> -y (push away: +y), z -> -z (lift: +z); rotations follow the same mapping.
 ToolPose integrateSpaceMouse(const ToolPose& pose, const SpaceMouseState& state, double dt,
                              const SpaceMouseConfig& config);
+
+// The longest time one read integrates: after a stall (a descheduled thread, a suspended laptop)
+// the tool moves as if the deflection had been held this long, not the whole gap.
+inline constexpr double kSpaceMouseMaxStepS = 0.1;
+
+// One read of the device at `now`: `pose` moved by `state`'s deflection held since `lastRead`
+// (at most kSpaceMouseMaxStepS of it; nothing on the first read, lastRead < 0), `lastRead` set to
+// `now`. A `lost` device reports invalid and leaves the pose where it was.
+DeviceState spaceMouseStep(ToolPose& pose, double& lastRead, double now,
+                           const SpaceMouseState& state, bool lost, const SpaceMouseConfig& config);
 
 // True for the vendor/product pairs of 3Dconnexion 6-DOF devices.
 bool isSpaceMouse(uint16_t vendorId, uint16_t productId);
@@ -76,6 +88,8 @@ public:
     DeviceState read(double now) override;
     void setForce(glm::vec3) override {}
     void setPose(const ToolPose& pose) { m_pose = pose; }
+    // hidapi failed to read (the device was unplugged): from then on read() reports invalid.
+    bool lost() const { return m_lost; }
 
 private:
     struct Impl;
@@ -85,6 +99,7 @@ private:
     SpaceMouseParser m_parser;
     ToolPose m_pose;
     double m_lastRead = -1.0;
+    bool m_lost = false;
 };
 
 } // namespace trephine
