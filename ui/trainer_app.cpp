@@ -174,24 +174,17 @@ public:
     WindowForceSource(const WindowDevice& device, BlendConfig blend)
         : m_device(device), m_blender(blend) {}
     void setClient(const net::ClientThread* client) { m_client = client; } // before the loop runs
-    // Any thread: the newest server model (blended in on the next tick).
-    void setModel(const HapticModelData& m) {
-        std::lock_guard lock(m_mutex);
-        m_pending = m;
-    }
+    // Any thread: the newest server model (blended in on the next tick; one answering an older
+    // tool state than the newest seen is dropped, as HapticLoop drops it).
+    void setModel(const HapticModelData& m) { m_serverModel.offer(m, 0.0); }
     // Any thread: compute forces locally (the picture comes from the local volume).
     void setLocal(bool local) { m_local = local; }
     uint64_t localTicks() const { return m_localTicks.load(); }
     uint64_t serverTicks() const { return m_serverTicks.load(); }
 
     glm::vec3 force(const ToolPose& pose, double now) override {
-        std::optional<HapticModelData> pending;
-        {
-            std::lock_guard lock(m_mutex);
-            pending.swap(m_pending);
-        }
-        if (pending)
-            m_blender.setModel(*pending, now);
+        if (const NewestModel::Taken taken = m_serverModel.take(); taken.model)
+            m_blender.setModel(taken.model->first, now);
         const glm::vec3 extrapolated = m_blender.update(pose.position, now);
         if (m_local.load(std::memory_order_relaxed) && m_client) {
             const WindowDevice::Tool t = m_device.tool();
@@ -220,8 +213,7 @@ private:
     const net::ClientThread* m_client = nullptr;
     ModelBlender m_blender;
     ForceModelCache m_models;
-    std::mutex m_mutex;
-    std::optional<HapticModelData> m_pending;
+    NewestModel m_serverModel;
     std::atomic<bool> m_local{false};
     std::atomic<uint64_t> m_localTicks{0}, m_serverTicks{0};
 };

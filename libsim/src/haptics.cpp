@@ -146,33 +146,46 @@ void HapticLoop::setSendRate(double hz) {
     m_sendRateHz = std::isnan(hz) ? 20.0 : std::clamp(hz, 20.0, 1000.0);
 }
 
+bool NewestModel::offer(const HapticModelData& model, double arrivedAt) {
+    std::lock_guard lock(m_mutex);
+    // Two models within one tick may come reversed: the one answering the older tool state must
+    // not replace the newer one still waiting.
+    if (m_pending && int32_t(model.toolSequence - m_pending->first.toolSequence) < 0)
+        return false;
+    m_pending = std::make_pair(model, arrivedAt);
+    return true;
+}
+
+NewestModel::Taken NewestModel::take() {
+    Taken t;
+    {
+        std::lock_guard lock(m_mutex);
+        t.model.swap(m_pending);
+    }
+    if (t.model && m_any && int32_t(t.model->first.toolSequence - m_lastSequence) < 0) {
+        t.model.reset();
+        t.dropped = true;
+    }
+    if (t.model) {
+        m_lastSequence = t.model->first.toolSequence;
+        m_any = true;
+    }
+    return t;
+}
+
 void HapticLoop::setModel(const HapticModelData& model, double now) {
-    std::lock_guard lock(m_modelMutex);
-    // Two models within one tick may come reversed (the haptic channel is unsequenced): the one
-    // answering the older tool state must not replace the newer one still waiting.
-    if (m_pending && int32_t(model.toolSequence - m_pending->first.toolSequence) < 0) {
+    if (!m_models.offer(model, now)) {
         std::lock_guard statsLock(m_statsMutex);
         m_stats.modelsDropped++;
-        return;
     }
-    m_pending = std::make_pair(model, now);
 }
 
 HapticSample HapticLoop::step(double now) {
-    std::optional<std::pair<HapticModelData, double>> pending;
-    {
-        std::lock_guard lock(m_modelMutex);
-        pending.swap(m_pending);
-    }
-    bool gotModel = false, dropped = false;
-    // Sequence numbers wrap: compare by signed difference.
-    if (pending && m_anyModel && int32_t(pending->first.toolSequence - m_lastSequence) < 0) {
-        pending.reset();
-        dropped = true;
-    }
+    const NewestModel::Taken taken = m_models.take();
+    const auto& pending = taken.model;
+    const bool dropped = taken.dropped;
+    bool gotModel = false;
     if (pending) {
-        m_lastSequence = pending->first.toolSequence;
-        m_anyModel = true;
         m_blender.setModel(pending->first, pending->second);
         m_lastModelForce = pending->first.force;
         gotModel = true;

@@ -250,6 +250,41 @@ TEST(HapticLoop, KeepsTheNewerOfTwoModelsPendingInOneTick) {
     EXPECT_EQ(loop.stats().modelsDropped, 1u);
 }
 
+// What HapticLoop and the window's force source share: of models offered reversed the newer
+// waits; one older than the last taken is dropped when taken; sequence numbers wrap.
+TEST(NewestModel, KeepsTheNewestAcrossOffersAndTakesAndWraps) {
+    NewestModel models;
+    HapticModelData m;
+    auto offer = [&](uint32_t sequence, float fz) {
+        m.toolSequence = sequence;
+        m.force = {0, 0, fz};
+        return models.offer(m, double(sequence));
+    };
+    EXPECT_TRUE(models.take().model == std::nullopt);
+    EXPECT_TRUE(offer(10, 2.0f));
+    EXPECT_FALSE(offer(9, 5.0f)) << "older than the one waiting";
+    NewestModel::Taken t = models.take();
+    ASSERT_TRUE(t.model);
+    EXPECT_EQ(t.model->first.force.z, 2.0f);
+    EXPECT_EQ(t.model->second, 10.0);
+    EXPECT_FALSE(t.dropped);
+    EXPECT_TRUE(offer(8, 7.0f)) << "nothing waits: taken in, judged when taken";
+    t = models.take();
+    EXPECT_FALSE(t.model) << "older than the last taken";
+    EXPECT_TRUE(t.dropped);
+
+    NewestModel wrapping;
+    m.toolSequence = 0xFFFFFFFEu;
+    EXPECT_TRUE(wrapping.offer(m, 0.0));
+    ASSERT_TRUE(wrapping.take().model);
+    m.toolSequence = 1; // three tool states later
+    m.force = {0, 0, 3.0f};
+    EXPECT_TRUE(wrapping.offer(m, 0.0));
+    t = wrapping.take();
+    ASSERT_TRUE(t.model) << "1 follows 0xFFFFFFFE";
+    EXPECT_EQ(t.model->first.force.z, 3.0f);
+}
+
 TEST(HapticLoop, LocalForceSourceRunsTheForceModelInTheLoop) {
     Volume sphere = makeSphere(40);
     TestDevice device;

@@ -157,6 +157,29 @@ private:
     ForceModel m_model;
 };
 
+// The newest server force model waiting for a haptic thread: offered from any thread, taken once
+// a tick by the haptic thread. The haptic channel is unsequenced, so models may come reversed: one
+// answering an older tool state than the one waiting, or than the last one taken, is dropped
+// (sequence numbers wrap: compared by signed difference).
+class NewestModel {
+public:
+    // `arrivedAt`: the arrival time handed back with it. False when dropped as older than the
+    // model waiting (which stays).
+    bool offer(const HapticModelData& model, double arrivedAt);
+    struct Taken {
+        std::optional<std::pair<HapticModelData, double>> model; // with its arrival time
+        bool dropped = false; // one waited, older than the last taken
+    };
+    // Haptic thread: the model waiting, if any and newer than the last one taken.
+    Taken take();
+
+private:
+    std::mutex m_mutex;
+    std::optional<std::pair<HapticModelData, double>> m_pending;
+    uint32_t m_lastSequence = 0; // of the last model taken (haptic thread only)
+    bool m_any = false;
+};
+
 // [SECTION] haptic loop
 
 struct HapticLoopConfig {
@@ -218,11 +241,8 @@ private:
     ForceSource* m_source = nullptr;
     ModelBlender m_blender;
 
-    mutable std::mutex m_modelMutex;
-    std::optional<std::pair<HapticModelData, double>> m_pending;
+    NewestModel m_models;
     glm::vec3 m_lastModelForce{0.0f};
-    uint32_t m_lastSequence = 0;
-    bool m_anyModel = false;
 
     mutable std::mutex m_statsMutex;
     HapticRecorder m_recorder;
