@@ -37,7 +37,9 @@ ForceRoundTripResult measureForceRoundTrip(const ENetAddress& server,
         if (m.clientTimeUs != sentUs || arrivalUs < sentUs)
             return;
         rtt.add(double(arrivalUs - sentUs));
-        serverUs.add(double(m.serverSentUs - m.serverReceivedUs));
+        // A server's two stamps out of order (not ours: some other build) would wrap to ~1.8e19.
+        if (m.serverSentUs >= m.serverReceivedUs)
+            serverUs.add(double(m.serverSentUs - m.serverReceivedUs));
         r.contacts += m.contact;
     });
     const uint64_t periodUs = config.rateHz > 0 ? uint64_t(1e6 / config.rateHz) : 0;
