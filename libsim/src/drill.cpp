@@ -44,9 +44,8 @@ struct Frame {
 };
 
 Frame makeFrame(const Volume& vol, const ToolPose& pose) {
-    // Same as ToolPose::toLocal for a unit quaternion; normalised so that a slightly
-    // denormalised one from a client cannot scale the cutter.
-    glm::mat3 toLocal = glm::mat3_cast(glm::conjugate(glm::normalize(pose.orientation)));
+    // Same as ToolPose::toLocal; the pose's quaternion is unit (Driller::drill normalises it).
+    glm::mat3 toLocal = glm::mat3_cast(glm::conjugate(pose.orientation));
     glm::vec3 s = vol.spacing();
     Frame f;
     f.origin = toLocal * (vol.voxelCenter({0, 0, 0}) - pose.position);
@@ -320,15 +319,18 @@ void erodePass(Volume& vol, const Frame& f, const Box3i& box, const Clip& clip, 
 
 // [SECTION] Driller
 
-DrillResult Driller::drill(Volume& volume, const ToolPose& pose, float speed, float dt) {
+DrillResult Driller::drill(Volume& volume, const ToolPose& rawPose, float speed, float dt) {
     assert(dt >= 0.0f && "Driller::drill: dt is a duration in seconds and must not be negative");
     DrillResult res;
-    const glm::quat& q = pose.orientation;
-    const glm::vec3& p = pose.position;
+    const glm::quat& q = rawPose.orientation;
+    const glm::vec3& p = rawPose.position;
     // A pose that is not finite (or a zero quaternion) touches nothing: poses come from clients.
     const float qq = q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w;
     if (volume.empty() || !std::isfinite(p.x + p.y + p.z) || !std::isfinite(qq) || qq < 1e-12f)
         return res;
+    // The unit rotation everywhere (frame, voxel boxes, the clutch's axis): a quaternion off unit
+    // length rotates and scales, which squashed the voxel boxes while the frame cut at full size.
+    const ToolPose pose{p, glm::normalize(q)};
     speed = speed > 0.0f ? std::min(speed, 1.0f) : 0.0f; // also maps NaN to 0
     const Frame frame = makeFrame(volume, pose);
     const bool perforator = m_shape.kind == ToolKind::Perforator;

@@ -417,6 +417,31 @@ TEST(Drill, PosesFromFarAwayOrNotFiniteTouchNothing) {
     EXPECT_TRUE(v == original);
 }
 
+// drill() normalises the orientation (a client's may be slightly off unit length): a scaled
+// quaternion cuts exactly what the unit one cuts, for both cutters. A half turn scaled to norm
+// 0.7 used to squash the voxel box (computed with the raw quaternion) to a sliver.
+TEST(Drill, AScaledQuaternionCutsWhatTheUnitOneCuts) {
+    const glm::quat halfTurn = glm::angleAxis(glm::pi<float>(), glm::vec3(0, 0, 1));
+    for (const glm::quat& q : {halfTurn, tilted()})
+        for (float scale : {0.7f, 0.98f, 1.3f})
+            for (const ToolShape& shape : {ToolShape::burr(5.0f), ToolShape::perforator()}) {
+                SCOPED_TRACE(shape.describe() + " scale " + std::to_string(scale));
+                Volume unit = makeBox(48), scaled = unit;
+                ToolPose a;
+                a.position = glm::vec3(0.3f, -0.2f, 0.1f);
+                a.orientation = q;
+                ToolPose b = a;
+                b.orientation = q * scale;
+                Driller d1(shape), d2(shape);
+                const DrillResult r1 = d1.drill(unit, a, 1.0f, 0.5f);
+                const DrillResult r2 = d2.drill(scaled, b, 1.0f, 0.5f);
+                EXPECT_GT(r1.voxelsTouched, 0);
+                EXPECT_EQ(r2.voxelsTouched, r1.voxelsTouched);
+                EXPECT_EQ(r2.changed, r1.changed);
+                EXPECT_TRUE(scaled == unit);
+            }
+}
+
 // [SECTION] Sweeping between sampled poses
 
 TEST(Drill, SweepPosesCutAMoveIntoEqualStepsEndingAtTheTarget) {

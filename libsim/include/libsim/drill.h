@@ -61,7 +61,8 @@ public:
 
     // speed in [0, 1] (fraction of full drill speed; clamped, NaN is 0); dt >= 0 in seconds.
     // Voxels whose centre lies inside the cutter at `pose` lose density; the cutter does not sweep
-    // between poses, so callers step small distances (well under a voxel per step).
+    // between poses, so callers step small distances (well under a voxel per step). The pose's
+    // orientation need not be unit length: it is normalised.
     DrillResult drill(Volume& volume, const ToolPose& pose, float speed, float dt);
 
     const ToolShape& shape() const { return m_shape; }
