@@ -388,7 +388,8 @@ std::vector<ToolPose> sweepPoses(const ToolPose& from, const ToolPose& to, float
     if (!std::isfinite(distance) || !(maxStepMm > 0.0f) || distance <= maxStepMm ||
         distance > maxSweepMm)
         return {to};
-    const int steps = std::min(kMaxSweepSteps, int(std::ceil(distance / maxStepMm)));
+    // Capped in float before converting: a tiny step gives a ratio no int holds.
+    const int steps = int(std::min(float(kMaxSweepSteps), std::ceil(distance / maxStepMm)));
     std::vector<ToolPose> poses;
     poses.reserve(size_t(steps));
     for (int i = 1; i < steps; ++i) {

@@ -466,6 +466,24 @@ TEST(Drill, SweepPosesCutAMoveIntoEqualStepsEndingAtTheTarget) {
               size_t(kMaxSweepSteps));
 }
 
+// A step so small (or a sweep limit so large) that the step count overflows an int still gives
+// kMaxSweepSteps equal steps ending at the target; it used to convert 5e30 to int (undefined;
+// INT_MIN on x86, and reserve() threw).
+TEST(Drill, SweepPosesCapsHugeStepCounts) {
+    const ToolPose a = ToolPose::fromAxis({0, 0, 0}, {0, 0, 1});
+    const ToolPose b = ToolPose::fromAxis({5.0f, 0, 0}, {0, 0, 1});
+    const float inf = std::numeric_limits<float>::infinity();
+    for (float step : {1e-30f, std::numeric_limits<float>::denorm_min(), 1e-9f}) {
+        std::vector<ToolPose> path;
+        ASSERT_NO_THROW(path = sweepPoses(a, b, step, inf));
+        ASSERT_EQ(path.size(), size_t(kMaxSweepSteps));
+        EXPECT_EQ(path.back().position, b.position);
+        EXPECT_NEAR(path[0].position.x, 5.0f / float(kMaxSweepSteps), 1e-5f);
+    }
+    const ToolPose far = ToolPose::fromAxis({1e5f, 0, 0}, {0, 0, 1});
+    EXPECT_EQ(sweepPoses(a, far, 1e-5f, inf).size(), size_t(kMaxSweepSteps));
+}
+
 // A burr moved 6 mm across bone between two sampled poses: drilled at the poses alone it leaves
 // bone standing between the two dents; swept, it cuts a continuous groove.
 TEST(Drill, ASweptStrokeCutsAGrooveWhereSampledPosesLeaveIslands) {
