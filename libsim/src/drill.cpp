@@ -241,7 +241,10 @@ bool boneAheadOfTip(const Volume& vol, const ToolPose& pose, float length) {
     float step = 0.5f * std::min({s.x, s.y, s.z});
     glm::vec3 ahead = -pose.axis();
     for (float t = 0.0f; t <= length + 1e-4f; t += step) {
-        glm::ivec3 v(glm::round(vol.toVoxel(pose.position + t * ahead)));
+        // Clamp in float before converting (a tool far outside gives coordinates no int holds);
+        // -1 and dims are outside, as they should be.
+        glm::ivec3 v(glm::clamp(glm::round(vol.toVoxel(pose.position + t * ahead)),
+                                glm::vec3(-1.0f), glm::vec3(vol.dims())));
         if (!vol.inside(v))
             continue;
         size_t i = vol.index(v);
