@@ -158,5 +158,64 @@ TEST(BrickGrid, ManyRandomCutsKeepLowerBounds) {
     EXPECT_EQ(g.fullDistancePasses(), 1);
 }
 
+// update() against a fresh build() over random erosions (partial and to air) and restores of the
+// original voxels, in a volume whose sides are not multiples of 4: maxima, cell masks and runs
+// equal a fresh build's after every update; distances equal where the update says bone appeared
+// (a full pass) and otherwise lower bounds with the same occupancy.
+TEST(BrickGrid, UpdateMatchesAFreshBuildOverRandomErosionsAndRestores) {
+    for (uint32_t seed : {1u, 2u, 3u, 4u}) {
+        SCOPED_TRACE(seed);
+        std::mt19937 rng(seed);
+        Volume original({45, 38, 41}, glm::vec3(1.0f));
+        std::uniform_int_distribution<int> x(0, 44), y(0, 37), z(0, 40), size(1, 12),
+            density(60, 255);
+        for (int i = 0; i < 30; ++i) {
+            const glm::ivec3 lo(x(rng), y(rng), z(rng));
+            fill(original,
+                 Box3i::fromMinMax(lo, lo + glm::ivec3(size(rng), size(rng), size(rng)))
+                     .intersect(original.bounds()),
+                 uint8_t(density(rng)), Material::Cortical);
+        }
+        Volume v = original;
+        BrickGrid g(v);
+        for (int i = 0; i < 150; ++i) {
+            SCOPED_TRACE(i);
+            const glm::ivec3 lo(x(rng) - 2, y(rng) - 2, z(rng) - 2);
+            const Box3i box =
+                Box3i::fromMinMax(lo, lo + glm::ivec3(size(rng), size(rng), size(rng)))
+                    .intersect(v.bounds());
+            const int kind = std::uniform_int_distribution<int>(0, 3)(rng);
+            const int dec = std::uniform_int_distribution<int>(1, 255)(rng);
+            for (int vz = box.lo.z; vz < box.hi.z; ++vz)
+                for (int vy = box.lo.y; vy < box.hi.y; ++vy)
+                    for (int vx = box.lo.x; vx < box.hi.x; ++vx) {
+                        if (kind == 0) { // restore
+                            v.set(vx, vy, vz, original.density(vx, vy, vz),
+                                  original.material(vx, vy, vz));
+                        } else {
+                            const int d = std::max(0, v.density(vx, vy, vz) - dec);
+                            v.set(vx, vy, vz, uint8_t(d), d ? Material::Cortical : Material::Air);
+                        }
+                    }
+            const bool gained = g.update(v, box);
+            const BrickGrid fresh(v);
+            ASSERT_EQ(g.dims(), fresh.dims());
+            ASSERT_EQ(g.maxData(), fresh.maxData());
+            for (size_t j = 0; j < fresh.maxData().size(); ++j) {
+                ASSERT_EQ(g.cellData()[j], fresh.cellData()[j]) << j;
+                ASSERT_EQ(g.distanceData()[j] == 0, fresh.distanceData()[j] == 0) << j;
+                if (gained)
+                    ASSERT_EQ(g.distanceData()[j], fresh.distanceData()[j]) << j;
+                else
+                    ASSERT_LE(g.distanceData()[j], fresh.distanceData()[j]) << j;
+                for (int axis = 0; axis < 3; ++axis)
+                    for (int positive = 0; positive < 2; ++positive)
+                        ASSERT_EQ(g.runData(axis, positive)[j], fresh.runData(axis, positive)[j])
+                            << j << " axis " << axis << " positive " << positive;
+            }
+        }
+    }
+}
+
 } // namespace
 } // namespace trephine

@@ -128,5 +128,79 @@ TEST(DirtyRect, EveryChangedPixelIsInsideBBScreenOnTheSphere) {
     checkContainment(makeSphere(48), {"front", "top"}, 25, 99);
 }
 
+// Hard cases for BB_screen: eyes inside the volume or a few voxels from it, views along an axis,
+// boxes at the volume's faces and corners, any change of a box's voxels (down to air or up to
+// solid). Rendered without skipping or caches, so only the rectangle is under test.
+TEST(DirtyRect, HoldsEveryChangedPixelForEyesInsideOrNearTheVolume) {
+    std::mt19937 rng(77);
+    Volume volume({24, 20, 22}, glm::vec3(1.0f, 1.25f, 0.8f));
+    std::uniform_int_distribution<int> byte(0, 255);
+    for (int z = 0; z < 22; ++z)
+        for (int y = 0; y < 20; ++y)
+            for (int x = 0; x < 24; ++x)
+                if (byte(rng) < 70)
+                    volume.set(x, y, z, uint8_t(byte(rng)), Material::Cortical);
+    ThreadPool pool;
+    RenderOptions plain;
+    plain.skipEmpty = false;
+    Renderer renderer(volume, &pool, plain);
+    std::uniform_real_distribution<float> unit(-1.0f, 1.0f);
+    const glm::vec3 ext = volume.extentMm();
+    int cases = 0, changedCases = 0;
+    for (int i = 0; i < 300; ++i) {
+        SCOPED_TRACE(i);
+        Camera c;
+        c.width = 48;
+        c.height = 40;
+        c.fovYDeg = 70.0f;
+        c.nearMm = 0.05f;
+        c.farMm = 200.0f;
+        // Inside the volume or within a few voxels of its faces.
+        c.eye = glm::vec3(unit(rng), unit(rng), unit(rng)) * (0.5f * ext + 4.0f);
+        if (i % 3 == 0) { // along an axis
+            glm::vec3 d(0.0f);
+            d[i / 3 % 3] = (i / 9) % 2 ? 1.0f : -1.0f;
+            c.target = c.eye + d * 10.0f;
+            c.up = d.z != 0.0f ? glm::vec3(0, 1, 0) : glm::vec3(0, 0, 1);
+        } else {
+            c.target = glm::vec3(unit(rng), unit(rng), unit(rng)) * 0.5f * ext;
+            c.up = glm::vec3(0, 0, 1);
+            if (glm::length(glm::cross(glm::normalize(c.target - c.eye), c.up)) < 0.1f)
+                c.up = glm::vec3(1, 0, 0);
+        }
+        const Dbi before = renderer.render(c);
+        // A box anywhere, often at a face or corner.
+        glm::ivec3 lo(0), hi(0);
+        for (int a = 0; a < 3; ++a) {
+            const int n = volume.dims()[a];
+            const int len = std::uniform_int_distribution<int>(1, 5)(rng);
+            const int where = std::uniform_int_distribution<int>(0, 2)(rng);
+            lo[a] = where == 0   ? 0
+                    : where == 1 ? n - len
+                                 : std::uniform_int_distribution<int>(0, n - len)(rng);
+            hi[a] = lo[a] + len;
+        }
+        const Box3i box = Box3i::fromMinMax(lo, hi);
+        Volume saved = volume;
+        const bool up = i % 2 == 0;
+        for (int z = lo.z; z < hi.z; ++z)
+            for (int y = lo.y; y < hi.y; ++y)
+                for (int x = lo.x; x < hi.x; ++x)
+                    volume.set(x, y, z, up ? 255 : 0, up ? Material::Cortical : Material::Air);
+        renderer.rebuild();
+        const Dbi after = renderer.render(c);
+        const DbiDiff diff = compare(before, after);
+        const PixelRect dirty = dirtyScreenRect(c, volume, box);
+        ++cases;
+        if (diff.differingPixels > 0)
+            ++changedCases;
+        ASSERT_TRUE(diff.differingPixels == 0 || dirty.contains(diff.bounds))
+            << describe(c) << ": BB_screen " << describe(dirty) << ", " << diff.describe();
+        volume = saved;
+        renderer.rebuild();
+    }
+    EXPECT_GT(changedCases, cases / 4);
+}
+
 } // namespace
 } // namespace trephine
