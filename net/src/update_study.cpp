@@ -122,6 +122,13 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
             Size z;
             z.n = n;
             z.box = surfaceBox(volume, n);
+            // Without bone at the top of the box the cuts would be cuts of air, measured as if
+            // they were drilling.
+            const glm::ivec3 c((z.box.lo.x + z.box.hi.x) / 2, (z.box.lo.y + z.box.hi.y) / 2,
+                               z.box.hi.z - 1);
+            if (z.box.empty() || now.density(c.x, c.y, c.z) < kSurfaceDensity)
+                throw Error("update study: the volume has no bone on its middle column, where the "
+                            "study cuts (the paper camera looks down +z at it)");
             z.screen = dirtyScreenRect(camera, volume, z.box);
             z.density.reserve(size_t(z.box.count()));
             z.material.reserve(size_t(z.box.count()));

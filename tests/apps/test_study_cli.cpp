@@ -2,6 +2,9 @@
 // sane values, and a report that names every figure.
 #include "test_support.h"
 
+#include "libsim/volume.h"
+#include "libsim/volume_io.h"
+
 #include <gtest/gtest.h>
 
 #include <cstdlib>
@@ -195,6 +198,18 @@ TEST(StudyCli, AllWithAVolumeThatDoesNotOpenLeavesEarlierResultsAlone) {
     std::string line;
     std::getline(in, line);
     EXPECT_EQ(line, "yesterday's run");
+}
+
+// A volume without bone where the study cuts: one line saying so, not a study of cuts of air.
+TEST(StudyCli, UpdatesOnAVolumeWithoutBoneOnItsMiddleColumnSaysSo) {
+    TempDir dir;
+    const std::string path = dir / "air.nrrd";
+    trephine::saveVolume(trephine::Volume(glm::ivec3(32), glm::vec3(1.0f)), path);
+    CommandResult r = runTrephine(dir, "study updates --quick --sizes 8 --volume '" + path +
+                                           "' --out '" + dir / "out" + "'");
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_NE(r.err.find("no bone on its middle column"), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
 }
 
 // --cycles and --rounds given on the command line win over --quick's.
