@@ -262,6 +262,7 @@ void ClientThread::run() {
         std::unique_ptr<SessionClient> client;
         try {
             client = std::make_unique<SessionClient>(cc);
+            client->continueToolSequence(m_toolSequence);
             client->connect(parseAddress(m_config.address));
         } catch (const std::exception& e) {
             m_closeReason = e.what();
@@ -428,6 +429,7 @@ void ClientThread::run() {
                 std::unique_lock lock(m_volumeRw);
                 m_localClient = nullptr;
             }
+            m_toolSequence = cp->toolSequence();
             client.reset();
         }
         if (m_stop)

@@ -19,7 +19,9 @@
 #include <atomic>
 #include <chrono>
 #include <memory>
+#include <mutex>
 #include <thread>
+#include <vector>
 
 using namespace trephine;
 using namespace trephine::net;
@@ -275,4 +277,58 @@ TEST(ClientReview, AViewLargerThanTheServerServesIsRefusedAndASwitchToDbiStillCo
     ASSERT_TRUE(pumpUntil({&client}, [&] { return client.viewId() == id; }));
     EXPECT_EQ(client.view(), left);
     server.stop();
+}
+
+// The server goes away and comes back on the same port: the client reconnects and its tool
+// sequence carries on from the first connection's, so whatever keeps the newest force model by
+// tool sequence (HapticLoop, the window's force source) takes the new connection's answers as
+// new (they restarted at 1 and were dropped as old until the count passed the old one).
+TEST(ClientReview, AReconnectedClientCarriesItsToolSequenceOn) {
+    Volume sphere = makeSphere(32);
+    auto server = std::make_unique<SessionServer>(sphere, loopbackServerConfig("sphere:32"));
+    const uint16_t port = server->port();
+    server->start();
+    std::mutex mutex;
+    std::vector<uint32_t> answered;
+    ClientThreadConfig cc;
+    cc.address = "127.0.0.1:" + std::to_string(port);
+    cc.client.view = toViewSpec(cameraPreset("top", sphere, {32, 32}));
+    cc.retryS = 0.1;
+    cc.onHapticModel = [&](const HapticModel& m) {
+        std::lock_guard lock(mutex);
+        answered.push_back(m.toolSequence);
+    };
+    ClientThread client(cc);
+    client.start();
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->hasFullImage; }));
+    ToolState t;
+    t.toolKind = uint8_t(ToolKind::Burr);
+    t.diameterMm = 4.0f;
+    t.position = {0.0f, 0.0f, sphereRadiusMm(32) + 5.0f}; // in the air: a model, no cut
+    auto count = [&] {
+        std::lock_guard lock(mutex);
+        return answered.size();
+    };
+    for (int i = 0; i < 5; ++i) {
+        ASSERT_TRUE(client.sendToolState(t));
+        ASSERT_TRUE(waitFor([&] { return count() == size_t(i + 1); }));
+    }
+    const uint32_t lastBefore = answered.back();
+
+    server->stop();
+    server.reset();
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->state != LinkState::Connected; }));
+    ServerConfig again = loopbackServerConfig("sphere:32");
+    again.port = port;
+    server = std::make_unique<SessionServer>(sphere, again);
+    server->start();
+    ASSERT_TRUE(waitFor([&] {
+        return client.snapshot()->state == LinkState::Connected && client.snapshot()->hasFullImage;
+    }));
+    ASSERT_TRUE(client.sendToolState(t));
+    ASSERT_TRUE(waitFor([&] { return count() == 6; }));
+    EXPECT_GT(int32_t(answered.back() - lastBefore), 0)
+        << "after reconnecting: " << answered.back() << ", before: " << lastBefore;
+    client.stop();
+    server->stop();
 }

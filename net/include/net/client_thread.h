@@ -202,6 +202,7 @@ private:
     LinkState m_state = LinkState::Connecting;
     std::string m_closeReason;
     int m_attempts = 0;
+    uint32_t m_toolSequence = 0; // carried from one connection to the next (run() only)
     std::optional<ViewSpec> m_wantedView;
     std::optional<Sync> m_wantedSync;
     std::array<double, 2> m_modeRates{};

@@ -97,6 +97,11 @@ public:
 
     // Sends our tool; sequence and clientTimeUs are filled in when zero. Returns the sequence.
     uint32_t sendToolState(ToolState state);
+    // The last sequence sendToolState filled in; continueToolSequence(s): the next one is s + 1.
+    // A reconnecting client carries its count on, so that what keeps the newest force model by
+    // tool sequence (NewestModel) does not take the new connection's answers for old ones.
+    uint32_t toolSequence() const { return m_toolSequence; }
+    void continueToolSequence(uint32_t last) { m_toolSequence = last; }
     // Asks for a new view; the DBI switches when its full image arrives. Returns the request id.
     // In volume mode the view switches at once (rendered locally) and the server is told, so a
     // switch to DBI gets this view. A view larger than the welcome's maxViewPixels, which the
