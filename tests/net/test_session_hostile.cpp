@@ -43,6 +43,17 @@ struct RawPeer {
     int rosters = 0;
     std::optional<Participants> lastRoster;
 
+    // Connects, says hello (lz4 images of `view`) and waits for the first image.
+    bool join(uint16_t port, const std::string& name, const ViewSpec& view) {
+        if (!connect(port))
+            return false;
+        Hello h;
+        h.name = name;
+        h.codec = Codec::Lz4;
+        h.view = view;
+        send(Channel::Control, h);
+        return serviceUntil([&] { return !images.empty(); });
+    }
     bool connect(uint16_t port) {
         peer = host.connect(loopback(port), kProtocolVersion);
         bool up = false;
@@ -181,14 +192,7 @@ TEST(SessionHostile, MarkEditsAsFastAsTheyComeGoOutCoalesced) {
     instructor.connect(loopback(server.port()));
     ASSERT_TRUE(pumpUntil({&instructor}, [&] { return instructor.hasFullImage(); }));
     RawPeer listener;
-    ASSERT_TRUE(listener.connect(server.port()));
-    Hello h;
-    h.name = "listener";
-    h.codec = Codec::Lz4;
-    h.view = ic.view;
-    listener.send(Channel::Control, h);
-    ASSERT_TRUE(listener.serviceUntil([&] { return !listener.images.empty(); }))
-        << "joined (its first image)";
+    ASSERT_TRUE(listener.join(server.port(), "listener", ic.view)) << "joined (its first image)";
     const int before = listener.annotationLists; // none: no marks yet
 
     constexpr int kEdits = 1000;
@@ -274,13 +278,7 @@ TEST(SessionHostile, AViewRequestOverTheLimitIsDroppedAndCounted) {
     SessionServer server(sphere, sc);
     server.start();
     RawPeer c;
-    ASSERT_TRUE(c.connect(server.port()));
-    Hello h;
-    h.name = "pushy";
-    h.codec = Codec::Lz4;
-    h.view = toViewSpec(cameraPreset("top", sphere, {32, 32}));
-    c.send(Channel::Control, h);
-    ASSERT_TRUE(c.serviceUntil([&] { return !c.images.empty(); }));
+    ASSERT_TRUE(c.join(server.port(), "pushy", toViewSpec(cameraPreset("top", sphere, {32, 32}))));
     ViewRequest r;
     r.requestId = 1;
     r.view = toViewSpec(cameraPreset("top", sphere, {100, 100}));
@@ -303,21 +301,11 @@ TEST(SessionHostile, ModeSwitchesAsFastAsTheyComeAreCoalesced) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, loopbackServerConfig("sphere:32"));
     server.start();
+    const ViewSpec view = toViewSpec(cameraPreset("top", sphere, {32, 32}));
     RawPeer listener;
-    ASSERT_TRUE(listener.connect(server.port()));
-    Hello lh;
-    lh.name = "listener";
-    lh.codec = Codec::Lz4;
-    lh.view = toViewSpec(cameraPreset("top", sphere, {32, 32}));
-    listener.send(Channel::Control, lh);
-    ASSERT_TRUE(listener.serviceUntil([&] { return !listener.images.empty(); }));
-
+    ASSERT_TRUE(listener.join(server.port(), "listener", view));
     RawPeer switcher;
-    ASSERT_TRUE(switcher.connect(server.port()));
-    Hello h = lh;
-    h.name = "switcher";
-    switcher.send(Channel::Control, h);
-    ASSERT_TRUE(switcher.serviceUntil([&] { return !switcher.images.empty(); }));
+    ASSERT_TRUE(switcher.join(server.port(), "switcher", view));
     ASSERT_TRUE(listener.serviceUntil(
         [&] { return listener.lastRoster && listener.lastRoster->list.size() == 2; }));
     const int rostersBefore = listener.rosters;
