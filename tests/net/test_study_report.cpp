@@ -176,3 +176,33 @@ TEST(StudyReport, ASecondRunOverTheLinkGetsItsOwnRatesFigureAndStages) {
     EXPECT_EQ(once.find("emulated link"), std::string::npos);
     EXPECT_NE(once.find("## Figure 7: update rates\n"), std::string::npos);
 }
+
+// A figure just short of its target must not print as the target beside MISS ("= 5.0x (target
+// >= 5x)" with MISS reads as a wrong verdict): it gets the digits that show the miss.
+TEST(StudyReport, AFigureJustShortOfItsTargetDoesNotPrintAsTheTarget) {
+    std::vector<UpdateStudyRow> rows = {row("dbi", 40, 496, 800, 4500),
+                                        row("volume", 40, 100, 1000, 1000)};
+    const std::vector<std::string> rate = rateTargetLines(rows);
+    ASSERT_EQ(rate.size(), 1u);
+    EXPECT_EQ(rate[0].rfind("MISS", 0), 0u) << rate[0];
+    EXPECT_NE(rate[0].find("= 4.96x"), std::string::npos) << rate[0];
+
+    // A pass keeps one decimal.
+    rows[0].updatesPerS = 504;
+    EXPECT_NE(rateTargetLines(rows)[0].find("= 5.0x"), std::string::npos);
+
+    // The sizes: 100.4 kB against the 1/10 of 1 MB at 80^3.
+    rows = {row("dbi", 80, 600, 51400, 147920), row("volume", 80, 100, 512000, 512000)};
+    const std::vector<std::string> size = sizeTargetLines(rows);
+    ASSERT_EQ(size.size(), 1u);
+    EXPECT_EQ(size[0].rfind("MISS", 0), 0u) << size[0];
+    EXPECT_EQ(size[0].find("= 0.100 "), std::string::npos) << size[0];
+
+    DisplayFigures d;
+    d.measured = true;
+    d.entries = {{"dbi composite", 998, 1, 1, 990}, {"volume 128^3", 50, 20, 20, 57}};
+    const std::vector<std::string> display = displayTargetLines(d);
+    ASSERT_EQ(display.size(), 1u);
+    EXPECT_EQ(display[0].rfind("MISS", 0), 0u) << display[0];
+    EXPECT_NE(display[0].find("= 19.96x (target"), std::string::npos) << display[0];
+}
