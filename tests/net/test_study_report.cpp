@@ -206,3 +206,17 @@ TEST(StudyReport, AFigureJustShortOfItsTargetDoesNotPrintAsTheTarget) {
     EXPECT_EQ(display[0].rfind("MISS", 0), 0u) << display[0];
     EXPECT_NE(display[0].find("= 19.96x (target"), std::string::npos) << display[0];
 }
+
+// The 1/10 target is the at 80^3, whatever sizes follow it (--sizes 10,80,100): a box
+// beyond 80^3 is held to the every-size target, and 80^3 keeps its own.
+TEST(StudyReport, TheTenthSizeTargetIsAt80EvenWithLargerBoxes) {
+    const std::vector<UpdateStudyRow> rows = {
+        row("dbi", 80, 600, 256000, 147920), row("dbi", 100, 600, 400000, 231120),
+        row("volume", 80, 100, 512000, 512000), row("volume", 100, 100, 1e6, 1e6)};
+    const std::vector<std::string> lines = sizeTargetLines(rows);
+    ASSERT_EQ(lines.size(), 2u);
+    EXPECT_EQ(lines[0].rfind("MISS update size 80^3", 0), 0u) << lines[0];
+    EXPECT_NE(lines[0].find("(target <= 0.1 at 80^3)"), std::string::npos) << lines[0];
+    EXPECT_EQ(lines[1].rfind("PASS update size 100^3", 0), 0u) << lines[1];
+    EXPECT_NE(lines[1].find("(target <= 1)"), std::string::npos) << lines[1];
+}
