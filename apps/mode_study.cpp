@@ -114,7 +114,10 @@ net::HapticsFigures runHapticsStudy(const HapticsOptions& o) {
                             rate, lat, r.forceRmsErrorN, r.forcePeakErrorN, r.energyInjectedJ * 1e3,
                             r.stable ? "yes" : "NO", r.maxPenetrationMm);
             }
+    // Buffered rows reach the file only here: a full disk shows at the close.
     csv.close();
+    if (!csv)
+        throw Error("cannot write " + csvPath + ": check that --out is a writable folder");
 
     const int reps = o.quick ? 500 : 3000;
     std::printf("\nForce model time per update (force + gradient, one core):\n");
@@ -222,6 +225,7 @@ std::string makeOutDir(const std::string& out) {
 void writeText(const std::filesystem::path& path, const std::string& text) {
     std::ofstream f(path);
     f << text;
+    f.close(); // a short text is only buffered until here: a full disk shows at the close
     if (!f)
         throw Error("cannot write " + path.string() + ": check that --out is a writable folder");
 }

@@ -92,3 +92,15 @@ TEST(HapticsCli, DevicesExitsZero) {
     EXPECT_EQ(r.exitCode, 0) << r.err;
     EXPECT_NE(r.out.find("always available"), std::string::npos) << r.out;
 }
+
+// A CSV whose bytes never reach the disk (here: a full device) is an error, not "wrote".
+TEST(HapticsCli, StudyFailsWhenTheCsvCannotBeWritten) {
+    if (!fs::exists("/dev/full"))
+        GTEST_SKIP() << "no /dev/full";
+    HapticsTempDir dir;
+    fs::create_symlink("/dev/full", dir.path / "haptics.csv");
+    CliResult r = run(dir, "study haptics --quick --volume box --out '" + dir.path.string() + "'");
+    EXPECT_NE(r.exitCode, 0) << r.out;
+    EXPECT_NE(r.err.find("haptics.csv"), std::string::npos) << r.err;
+    EXPECT_EQ(r.out.find("wrote"), std::string::npos) << r.out;
+}

@@ -220,6 +220,21 @@ TEST(StudyCli, UpdatesQuickKeepsTheCyclesGiven) {
     EXPECT_EQ(num(run.csv.rows[0], "cycles"), 7);
 }
 
+// A CSV whose bytes never reach the disk (here: a full device) is an error, not "wrote".
+TEST(StudyCli, UpdatesFailsWhenTheCsvCannotBeWritten) {
+    if (!std::filesystem::exists("/dev/full"))
+        GTEST_SKIP() << "no /dev/full";
+    TempDir dir;
+    std::filesystem::create_directories(dir / "out");
+    std::filesystem::create_symlink("/dev/full", dir / "out/updates.csv");
+    CommandResult r = runTrephine(dir, "study updates --quick --sizes 8 --methods dbi --cycles 1 "
+                                       "--volume skull:64 --out '" +
+                                           dir / "out" + "'");
+    EXPECT_NE(r.exitCode, 0) << r.out;
+    EXPECT_NE(r.err.find("updates.csv"), std::string::npos) << r.err;
+    EXPECT_EQ(r.out.find("wrote"), std::string::npos) << r.out;
+}
+
 // --link puts the link emulator between the clients and the server: at 20 Mbit/s a 16^3 volume
 // update (4096 bytes) cannot arrive in under 1.6 ms, which loopback delivers in microseconds.
 TEST(StudyCli, UpdatesLinkEmulatesTheNetwork) {
