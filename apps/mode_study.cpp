@@ -240,8 +240,9 @@ Volume studyVolume(Volume volume, const std::string& camera) {
     return volume;
 }
 
-std::vector<net::UpdateStudyRow> runUpdatesStudy(const UpdatesOptions& o,
-                                                 net::UpdateStudyConfig& config) {
+// The update study's config from the options, checked (the volume is checked by
+// net::checkUpdateStudy).
+void configureUpdatesStudy(const UpdatesOptions& o, net::UpdateStudyConfig& config) {
     config.sizes = o.sizes;
     config.volumeName = o.volume;
     config.camera = o.camera;
@@ -279,6 +280,11 @@ std::vector<net::UpdateStudyRow> runUpdatesStudy(const UpdatesOptions& o,
         known = known || n == o.camera;
     if (!known)
         throw Error("--camera: unknown preset '" + o.camera + "'");
+}
+
+std::vector<net::UpdateStudyRow> runUpdatesStudy(const UpdatesOptions& o,
+                                                 net::UpdateStudyConfig& config) {
+    configureUpdatesStudy(o, config);
     Volume volume = studyVolume(o.opened ? Volume(*o.opened) : openVolume(o.volume), o.camera);
     makeOutDir(o.out);
     std::printf("Update study: %s, camera %s, %dx%d, codec %s, %d cycles per method and size in "
@@ -397,6 +403,18 @@ int runAllStudies(const AllOptions& o, const std::string& command) {
     // A volume that does not open fails here, not after the haptics study has replaced the
     // folder's haptics.csv.
     auto volume = std::make_shared<const Volume>(openVolume(o.volume));
+    UpdatesOptions u;
+    u.out = o.out;
+    u.volume = o.volume;
+    u.opened = volume;
+    u.codec = o.codec;
+    u.quick = o.quick;
+    {
+        // Likewise a volume too small for the cuts, or without bone where they fall.
+        net::UpdateStudyConfig config;
+        configureUpdatesStudy(u, config);
+        net::checkUpdateStudy(studyVolume(*volume, u.camera), config);
+    }
     makeOutDir(o.out);
     net::StudyReportInput input;
     input.command = command;
@@ -411,12 +429,6 @@ int runAllStudies(const AllOptions& o, const std::string& command) {
     input.haptics = runHapticsStudy(h);
 
     std::printf("\n== 2/%d updates over loopback ==\n", studies);
-    UpdatesOptions u;
-    u.out = o.out;
-    u.volume = o.volume;
-    u.opened = volume;
-    u.codec = o.codec;
-    u.quick = o.quick;
     input.updates = runUpdatesStudy(u, input.updateConfig);
 
     if (linkRun) {

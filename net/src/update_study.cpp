@@ -69,7 +69,7 @@ std::vector<std::string> updateStudyMethods(Codec codec) {
     return names;
 }
 
-std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStudyConfig& config) {
+void checkUpdateStudy(const Volume& volume, const UpdateStudyConfig& config) {
     if (config.sizes.empty())
         throw Error("update study: no box sizes given");
     for (int n : config.sizes)
@@ -79,6 +79,24 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
         throw Error("update study: rounds must be in [1, cycles] (" +
                     std::to_string(config.rounds) + " rounds, " + std::to_string(config.cycles) +
                     " cycles)");
+    const std::vector<Method> methods = methodsFor(config.codec);
+    for (const std::string& name : config.methods)
+        if (std::none_of(methods.begin(), methods.end(),
+                         [&](const Method& m) { return m.name == name; }))
+            throw Error("update study: unknown method '" + name + "'");
+    for (int n : config.sizes) {
+        const Box3i box = surfaceBox(volume, n);
+        // Without bone at the top of the box the cuts would be cuts of air, measured as if they
+        // were drilling.
+        const glm::ivec3 c((box.lo.x + box.hi.x) / 2, (box.lo.y + box.hi.y) / 2, box.hi.z - 1);
+        if (box.empty() || volume.density(c.x, c.y, c.z) < kSurfaceDensity)
+            throw Error("update study: the volume has no bone on its middle column, where the "
+                        "study cuts (the paper camera looks down +z at it)");
+    }
+}
+
+std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStudyConfig& config) {
+    checkUpdateStudy(volume, config);
     const Camera camera = cameraPreset(config.camera, volume, {config.window, config.window});
 
     ServerConfig sc;
@@ -97,10 +115,6 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
 
     std::vector<Method> methods = methodsFor(config.codec);
     if (!config.methods.empty()) {
-        for (const std::string& name : config.methods)
-            if (std::none_of(methods.begin(), methods.end(),
-                             [&](const Method& m) { return m.name == name; }))
-                throw Error("update study: unknown method '" + name + "'");
         std::erase_if(methods, [&](const Method& m) {
             return std::find(config.methods.begin(), config.methods.end(), m.name) ==
                    config.methods.end();
@@ -122,13 +136,6 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
             Size z;
             z.n = n;
             z.box = surfaceBox(volume, n);
-            // Without bone at the top of the box the cuts would be cuts of air, measured as if
-            // they were drilling.
-            const glm::ivec3 c((z.box.lo.x + z.box.hi.x) / 2, (z.box.lo.y + z.box.hi.y) / 2,
-                               z.box.hi.z - 1);
-            if (z.box.empty() || now.density(c.x, c.y, c.z) < kSurfaceDensity)
-                throw Error("update study: the volume has no bone on its middle column, where the "
-                            "study cuts (the paper camera looks down +z at it)");
             z.screen = dirtyScreenRect(camera, volume, z.box);
             z.density.reserve(size_t(z.box.count()));
             z.material.reserve(size_t(z.box.count()));

@@ -200,6 +200,23 @@ TEST(StudyCli, AllWithAVolumeThatDoesNotOpenLeavesEarlierResultsAlone) {
     EXPECT_EQ(line, "yesterday's run");
 }
 
+// Likewise a volume that opens but is too small for the update study's cuts (--quick: up to
+// 80^3): refused before the haptics study replaces the folder's haptics.csv.
+TEST(StudyCli, AllWithAVolumeTooSmallForTheCutsLeavesEarlierResultsAlone) {
+    TempDir dir;
+    std::filesystem::create_directories(dir / "all");
+    { std::ofstream(dir / "all/haptics.csv") << "yesterday's run\n"; }
+    CommandResult r =
+        runTrephine(dir, "study all --quick --volume skull:32 --out '" + dir / "all" + "'");
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_NE(r.err.find("does not fit the volume"), std::string::npos) << r.err;
+    EXPECT_EQ(r.out.find("haptics"), std::string::npos) << r.out;
+    std::ifstream in(dir / "all/haptics.csv");
+    std::string line;
+    std::getline(in, line);
+    EXPECT_EQ(line, "yesterday's run");
+}
+
 // A volume without bone where the study cuts: one line saying so, not a study of cuts of air.
 TEST(StudyCli, UpdatesOnAVolumeWithoutBoneOnItsMiddleColumnSaysSo) {
     TempDir dir;

@@ -71,6 +71,11 @@ struct UpdateStudyRow {
 // The study's methods, in order, for a codec ("dbi", "dbi-fullrender", "volume", "volume-lz4").
 std::vector<std::string> updateStudyMethods(Codec codec);
 
+// Throws the one-line trephine::Error that runUpdateStudy would for this volume and config (a box
+// size that does not fit, rounds out of range, an unknown method, no bone where the study cuts)
+// without starting anything, so `study all` can refuse before its first study.
+void checkUpdateStudy(const Volume& volume, const UpdateStudyConfig& config);
+
 // Runs the whole study on `volume` (which should be what config.volumeName names). Throws
 // trephine::Error with one line when a cycle times out or the server cannot start.
 std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStudyConfig& config);
