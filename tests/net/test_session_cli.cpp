@@ -8,6 +8,7 @@
 #include "libsim/volume_io.h"
 
 #include "loopback.h"
+#include "test_support.h"
 
 #include <gtest/gtest.h>
 
@@ -28,6 +29,7 @@ using namespace trephine;
 using namespace trephine::net;
 
 using trephine::testing::loopbackServerConfig;
+using trephine::testing::shellQuote;
 
 TEST(SessionCli, SigtermWritesSaveOnExitWithTheDrilling) {
     std::string path = (std::filesystem::temp_directory_path() /
@@ -114,10 +116,10 @@ TEST(SessionCli, HeadlessTraineeRunsTheHapticLoopAndReportsIt) {
     std::string report = (std::filesystem::temp_directory_path() /
                           ("trephine_trainee_" + std::to_string(getpid()) + ".json"))
                              .string();
-    std::string cmd = std::string(TREPHINE_BIN) +
+    std::string cmd = shellQuote(TREPHINE_BIN) +
                       " trainee --connect 127.0.0.1:" + std::to_string(server.port()) +
                       " --headless --camera top --size 64 --duration 1 --tool-rate 50 --report " +
-                      report + " > /dev/null 2>&1";
+                      shellQuote(report) + " > /dev/null 2>&1";
     ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
     server.stop();
     std::ifstream r(report);
@@ -156,10 +158,10 @@ TEST(SessionCli, HeadlessVolumeTraineeForcesFollowTheScriptsToolChanges) {
         for (int i = 0; i <= 80; ++i) // a burr for 0.4 s, then the perforator
             f << i * 0.01 << ",0,0,20,1,0,0,0,1," << (i < 40 ? "burr:4" : "perforator:8") << "\n";
     }
-    std::string cmd = std::string(TREPHINE_BIN) +
+    std::string cmd = shellQuote(TREPHINE_BIN) +
                       " trainee --connect 127.0.0.1:" + std::to_string(server.port()) +
-                      " --headless --sync volume --camera top --size 64 --script " + csv + " > " +
-                      out + " 2>&1";
+                      " --headless --sync volume --camera top --size 64 --script " +
+                      shellQuote(csv) + " > " + shellQuote(out) + " 2>&1";
     ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
     server.stop();
     std::ifstream o(out);
@@ -179,10 +181,10 @@ TEST(SessionCli, HeadlessVolumeTraineeComputesForcesOnItsOwnVolume) {
     const std::string tag = std::to_string(getpid());
     const std::string report = (dir / ("trephine_vtrainee_" + tag + ".json")).string();
     const std::string out = (dir / ("trephine_vtrainee_" + tag + ".txt")).string();
-    std::string cmd = std::string(TREPHINE_BIN) +
+    std::string cmd = shellQuote(TREPHINE_BIN) +
                       " trainee --connect 127.0.0.1:" + std::to_string(server.port()) +
                       " --headless --sync volume --camera top --size 64 --duration 1 --report " +
-                      report + " > " + out + " 2>&1";
+                      shellQuote(report) + " > " + shellQuote(out) + " 2>&1";
     ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
     server.stop();
     std::ifstream o(out), r(report);

@@ -39,6 +39,14 @@ inline std::string slurp(const std::string& path) {
     return std::string(std::istreambuf_iterator<char>(f), {});
 }
 
+// `s` as one shell word: single-quoted, a quote inside as '\''.
+inline std::string shellQuote(const std::string& s) {
+    std::string q = "'";
+    for (char c : s)
+        q += c == '\'' ? std::string("'\\''") : std::string(1, c);
+    return q + "'";
+}
+
 struct CommandResult {
     int exitCode = -1;
     std::string out;
@@ -50,7 +58,7 @@ struct CommandResult {
 inline CommandResult runTrephine(const TempDir& dir, const std::string& args) {
     const std::string out = dir / "stdout.txt", err = dir / "stderr.txt";
     std::string cmd =
-        std::string("'") + TREPHINE_BIN + "' " + args + " >'" + out + "' 2>'" + err + "'";
+        shellQuote(TREPHINE_BIN) + " " + args + " >" + shellQuote(out) + " 2>" + shellQuote(err);
     int status = std::system(cmd.c_str());
     CommandResult r;
     r.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;

@@ -4,6 +4,7 @@
 #include "ui/window.h"
 
 #include "screenshot.h"
+#include "test_support.h"
 #include <OpenImageIO/imageio.h>
 
 #include <gtest/gtest.h>
@@ -18,6 +19,7 @@ namespace {
 
 using trephine::testing::Image;
 using trephine::testing::readPng;
+using trephine::testing::shellQuote;
 
 bool boneColoured(const uint8_t* p) {
     return p[0] > 150 && p[1] > 140 && p[2] > 110 && p[0] >= p[2] && p[0] - p[2] < 90;
@@ -26,8 +28,9 @@ bool boneColoured(const uint8_t* p) {
 std::string shoot(const std::string& name, const std::string& extra) {
     std::string out = (std::filesystem::temp_directory_path() / name).string();
     std::filesystem::remove(out);
-    std::string cmd = std::string(TREPHINE_BIN) + " demo --volume skull:128 --screenshot " + out +
-                      " --frames 3 --timeout 80 " + extra + " > " + out + ".log 2>&1";
+    std::string cmd = shellQuote(TREPHINE_BIN) + " demo --volume skull:128 --screenshot " +
+                      shellQuote(out) + " --frames 3 --timeout 80 " + extra + " > " +
+                      shellQuote(out + ".log") + " 2>&1";
     int rc = std::system(cmd.c_str());
     EXPECT_EQ(rc, 0) << cmd;
     return out;

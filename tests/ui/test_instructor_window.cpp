@@ -35,6 +35,7 @@ namespace {
 
 using trephine::testing::Image;
 using trephine::testing::readPng;
+using trephine::testing::shellQuote;
 
 // A lit pixel of `colour`'s hue: the compositor scales the base colour by its headlight term.
 bool hasHue(const uint8_t* p, glm::vec4 colour) {
@@ -126,9 +127,9 @@ TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
     std::snprintf(mark, sizeof mark, " --mark '%.3f,%.3f,%.3f:entry point' --mark '%.3f,%.3f,%.3f'",
                   double(markAt.x), double(markAt.y), double(markAt.z), double(hiddenAt.x),
                   double(hiddenAt.y), double(hiddenAt.z));
-    const std::string cmd = std::string(TREPHINE_BIN) + " instructor --connect " + address + mark +
-                            " --window-size 500 --screenshot " + out +
-                            " --frames 3 --timeout 80 > " + out + ".log 2>&1";
+    const std::string cmd = shellQuote(TREPHINE_BIN) + " instructor --connect " + address + mark +
+                            " --window-size 500 --screenshot " + shellQuote(out) +
+                            " --frames 3 --timeout 80 > " + shellQuote(out + ".log") + " 2>&1";
     const int rc = std::system(cmd.c_str());
     const uint64_t relays = server.hapticRelaysSent();
     for (int i = 0; i < 200 && traineeMarks == 0; ++i) // the list reaches the trainee too

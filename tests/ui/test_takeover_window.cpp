@@ -24,6 +24,7 @@ using namespace trephine;
 
 using trephine::testing::Image;
 using trephine::testing::readPng;
+using trephine::testing::shellQuote;
 
 TEST(TakeOverWindow, TheTraineeIsToldItsDrillIsPaused) {
     TREPHINE_NEED_DISPLAY("the trainee window");
@@ -66,9 +67,9 @@ TEST(TakeOverWindow, TheTraineeIsToldItsDrillIsPaused) {
     const std::string out =
         (std::filesystem::temp_directory_path() / "trephine_taken_over.png").string();
     std::filesystem::remove(out);
-    const std::string cmd = std::string(TREPHINE_BIN) + " trainee --connect " + address +
-                            " --name Ada --size 500 --screenshot " + out +
-                            " --frames 20 --timeout 80 > " + out + ".log 2>&1";
+    const std::string cmd = shellQuote(TREPHINE_BIN) + " trainee --connect " + address +
+                            " --name Ada --size 500 --screenshot " + shellQuote(out) +
+                            " --frames 20 --timeout 80 > " + shellQuote(out + ".log") + " 2>&1";
     const int rc = std::system(cmd.c_str());
     stop = true;
     instructor.join();
