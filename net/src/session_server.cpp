@@ -721,10 +721,15 @@ void SessionServer::networkLoop() {
     };
     // The roster, to everyone. Changes only mark it (sendParticipants); the loop sends it at most
     // every kRosterIntervalUs, so a peer switching modes or taking over as fast as it can send
-    // cannot make the server queue a roster per message for every participant.
-    bool rosterDirty = false;
+    // cannot make the server queue a roster per message for every participant. Joins and leaves
+    // (`now`) go out at once: the others keep a newcomer's relayed tool only once a roster lists
+    // it, and a connection makes at most one of each.
+    bool rosterDirty = false, rosterNow = false;
     uint64_t rosterSentUs = 0;
-    auto sendParticipants = [&] { rosterDirty = true; };
+    auto sendParticipants = [&](bool now = false) {
+        rosterDirty = true;
+        rosterNow = rosterNow || now;
+    };
     auto sendRoster = [&] {
         Participants roster;
         for (const auto& [pid, peer] : s.peers) { // a std::map: increasing ids, as the wire wants
@@ -752,7 +757,7 @@ void SessionServer::networkLoop() {
         enet_peer_disconnect(p.peer, uint32_t(why));
         s.releaseTakeOvers(peerId(p.peer));
         if (p.hello)
-            sendParticipants();
+            sendParticipants(true);
     };
     auto malformed = [&](NetPeer& p) {
         m_stats.countMalformed();
@@ -798,7 +803,7 @@ void SessionServer::networkLoop() {
             w.volumeName = m_config.volumeName.substr(0, 256);
             w.maxViewPixels = uint32_t(m_config.maxViewPixels);
             sendTo(p.peer, Channel::Control, encodeMessage(w));
-            sendParticipants();
+            sendParticipants(true);
             if (!s.annotations.empty())
                 sendTo(p.peer, Channel::Control, annotationList());
             SimEvent ev = makeEvent(SimEvent::Kind::Join, id);
@@ -1007,7 +1012,7 @@ void SessionServer::networkLoop() {
                 s.push(makeEvent(SimEvent::Kind::Leave, id));
                 m_clientCount = s.peers.size();
                 if (listed)
-                    sendParticipants();
+                    sendParticipants(true);
             }
             return;
         }
@@ -1114,9 +1119,9 @@ void SessionServer::networkLoop() {
             annotationsDirty = false;
             annotationsSentUs = now;
         }
-        if (rosterDirty && now - rosterSentUs >= kRosterIntervalUs) {
+        if (rosterDirty && (rosterNow || now - rosterSentUs >= kRosterIntervalUs)) {
             sendRoster();
-            rosterDirty = false;
+            rosterDirty = rosterNow = false;
             rosterSentUs = now;
         }
         // A mode switch that came too soon after the last one reaches the simulation now, as the

@@ -232,6 +232,11 @@ TEST(Session, EveryToolPoseReachesTheOtherClients) {
     for (SessionClient* x : {&a, &b, &c})
         x->connect(loopback(server.port()));
     ASSERT_TRUE(connectAll({&a, &b, &c}));
+    // A relay of an id the newest roster does not list is not kept (relays and rosters travel on
+    // different channels): wait until b and c know a.
+    const uint16_t aId = a.welcome().clientId;
+    auto lists = [&](const SessionClient& x) { return x.participants().count(aId) > 0; };
+    ASSERT_TRUE(pumpUntil({&a, &b, &c}, [&] { return lists(b) && lists(c); }));
     SurfaceSite site = sphereTop(32);
     for (int i = 0; i < 50; ++i) {
         ToolState t = burrState(site, i, 50, 1000);
@@ -242,7 +247,6 @@ TEST(Session, EveryToolPoseReachesTheOtherClients) {
     }
     ASSERT_TRUE(pumpUntil({&a, &b, &c},
                           [&] { return b.relaysReceived() == 50 && c.relaysReceived() == 50; }));
-    uint16_t aId = a.welcome().clientId;
     ASSERT_TRUE(b.others().count(aId));
     EXPECT_EQ(b.others().at(aId).sequence, 50u);
     EXPECT_EQ(c.others().at(aId).position, burrState(site, 49, 50, 1000).position);

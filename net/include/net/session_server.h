@@ -63,7 +63,8 @@ struct ServerConfig {
 
 // The marks (Annotations) go to every participant at most this often, the whole list once.
 inline constexpr uint64_t kAnnotationsIntervalUs = 50000;
-// The roster (Participants) likewise, whatever changed it.
+// The roster (Participants) likewise after a design switch or a take-over (joins and leaves go
+// out at once).
 inline constexpr uint64_t kRosterIntervalUs = 50000;
 // A client's sync mode switches reach the simulation at most this often; one that comes sooner
 // waits, and the latest mode is applied then (each switch to volume encodes the whole volume).
