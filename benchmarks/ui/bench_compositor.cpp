@@ -116,6 +116,31 @@ void BM_UploadRect(benchmark::State& state) {
 }
 BENCHMARK(BM_UploadRect)->Arg(64)->Arg(128)->Arg(193)->Unit(benchmark::kMicrosecond)->UseRealTime();
 
+// The volume design's read back after a change, for picking: the whole composite (what the window
+// read before) against its depth alone (Compositor::readBackDepth, what it reads now), 500 x 500.
+void BM_ReadBack500(benchmark::State& state) {
+    Gl& gl = Gl::get();
+    if (!gl.comp) {
+        state.SkipWithError(("no display: " + gl.why).c_str());
+        return;
+    }
+    const bool depthOnly = state.range(0) != 0;
+    gl.comp->uploadFull(testDbi(500));
+    Camera cam;
+    cam.width = cam.height = 500;
+    Dbi into(500, 500);
+    for (auto _ : state) {
+        gl.comp->begin(cam);
+        if (depthOnly)
+            gl.comp->readBackDepth(into);
+        else
+            into = gl.comp->readBack();
+        benchmark::DoNotOptimize(into.depth());
+    }
+    state.SetLabel(depthOnly ? "depth only" : "colour and depth");
+}
+BENCHMARK(BM_ReadBack500)->Arg(0)->Arg(1)->Unit(benchmark::kMicrosecond)->UseRealTime();
+
 // [Display] The paper's view (camera preset `paper`, 500 x 500) of the skull at the physical size
 // of the paper's 128^3 volume: the DBI client's frame (pass 1 + a burr + blit) against the same
 // frame with VolumeView's local ray cast (skull:128 and skull:256) in place of pass 1.
