@@ -1,0 +1,596 @@
+// Hostile and truncated input against every decoder a peer's bytes reach: valid messages and
+// payloads of every kind, mutated (truncated at every length, bits flipped, bytes inserted and
+// deleted, length and count fields set to 0, to huge and to negative-as-unsigned values, sizes
+// that claim far more than the data holds, rectangles and boxes outside the view or the volume),
+// must be refused or decode to something in range: never a crash, a hang or undefined behaviour
+// (run it under -fsanitize=address,undefined). Valid inputs must still decode. The seeds are fixed
+// and the counts bounded; TREPHINE_FUZZ_SCALE=N runs N times as many mutations for a long run.
+#include "net/codec.h"
+#include "net/image_delta.h"
+#include "net/protocol.h"
+#include "net/view.h"
+
+#include "libsim/camera.h"
+#include "libsim/dbi.h"
+#include "libsim/volume.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <cstdlib>
+#include <random>
+
+using namespace trephine;
+using namespace trephine::net;
+
+namespace {
+
+// [SECTION] mutations
+
+int fuzzScale() {
+    const char* s = std::getenv("TREPHINE_FUZZ_SCALE");
+    const int n = s ? std::atoi(s) : 1;
+    return std::max(n, 1);
+}
+
+// Values a hostile peer puts in a length, count or size field, little-endian over `width` bytes.
+constexpr uint64_t kSpecialValues[] = {0,          1,          0x7f,       0x80,
+                                       0xff,       0x7fff,     0x8000,     0xffff,
+                                       0x7fffffff, 0x80000000, 0xffffffff, ~uint64_t(0)};
+
+void writeLittleEndian(std::vector<uint8_t>& b, size_t at, uint64_t v, size_t width) {
+    for (size_t i = 0; i < width && at + i < b.size(); ++i)
+        b[at + i] = uint8_t(v >> (8 * i));
+}
+
+// Deterministic edits of a byte string (std::mt19937 is the same sequence everywhere; the
+// distributions are not, so draws use plain modulo).
+class Mutator {
+public:
+    explicit Mutator(uint32_t seed) : m_rng(seed) {}
+
+    uint32_t below(uint32_t n) { return n ? uint32_t(m_rng() % n) : 0; }
+
+    std::vector<uint8_t> mutate(std::vector<uint8_t> b) {
+        const uint32_t edits = 1 + below(4);
+        for (uint32_t e = 0; e < edits; ++e) {
+            const size_t at = below(uint32_t(b.size()));
+            switch (below(8)) {
+            case 0: // flip a bit
+                if (!b.empty())
+                    b[at] ^= uint8_t(1u << below(8));
+                break;
+            case 1: // a random byte
+                if (!b.empty())
+                    b[at] = uint8_t(m_rng());
+                break;
+            case 2: // a hostile value in a field of 1, 2, 4 or 8 bytes
+                writeLittleEndian(b, at, kSpecialValues[below(std::size(kSpecialValues))],
+                                  size_t(1) << below(4));
+                break;
+            case 3: // truncated
+                b.resize(below(uint32_t(b.size()) + 1));
+                break;
+            case 4: { // bytes inserted
+                const size_t n = 1 + below(8);
+                std::vector<uint8_t> ins(n);
+                for (uint8_t& v : ins)
+                    v = uint8_t(m_rng());
+                b.insert(b.begin() + std::ptrdiff_t(at), ins.begin(), ins.end());
+                break;
+            }
+            case 5: // bytes deleted
+                b.erase(b.begin() + std::ptrdiff_t(at),
+                        b.begin() + std::ptrdiff_t(std::min(b.size(), at + 1 + below(8))));
+                break;
+            case 6: // a run copied over another place (repeated structure)
+                if (b.size() > 2) {
+                    const size_t from = below(uint32_t(b.size())), n = 1 + below(16);
+                    for (size_t i = 0; i < n && from + i < b.size() && at + i < b.size(); ++i)
+                        b[at + i] = b[from + i];
+                }
+                break;
+            default: // appended junk
+                b.push_back(uint8_t(m_rng()));
+                break;
+            }
+        }
+        return b;
+    }
+
+private:
+    std::mt19937 m_rng;
+};
+
+// Every truncation, every hostile value at every offset, then `random` random mutations.
+template <typename F>
+void forEachMutation(const std::vector<uint8_t>& valid, uint32_t seed, int random, F&& f) {
+    for (size_t len = 0; len < valid.size(); ++len)
+        f(std::vector<uint8_t>(valid.begin(), valid.begin() + std::ptrdiff_t(len)));
+    for (size_t at = 0; at < valid.size(); ++at)
+        for (size_t width : {1, 2, 4, 8})
+            for (uint64_t v : kSpecialValues) {
+                std::vector<uint8_t> b = valid;
+                writeLittleEndian(b, at, v, width);
+                f(std::move(b));
+            }
+    Mutator m(seed);
+    for (int i = 0; i < random; ++i)
+        f(m.mutate(valid));
+}
+
+// [SECTION] messages
+
+template <typename M>
+bool decodesCanonically(std::span<const uint8_t> packet) {
+    M m;
+    if (!decodeMessage(packet, m))
+        return false;
+    // What decodes is in range, so it encodes again, to the same bytes (the format has one
+    // encoding of every value).
+    EXPECT_EQ(encodeMessage(m), std::vector<uint8_t>(packet.begin(), packet.end()))
+        << "type " << int(M::kType);
+    return true;
+}
+
+// Decodes a packet as whatever type its first byte names, as the server and the client do.
+bool decodeAny(std::span<const uint8_t> p) {
+    switch (MessageType(peekMessageType(p))) {
+    case MessageType::Hello:
+        return decodesCanonically<Hello>(p);
+    case MessageType::Welcome:
+        return decodesCanonically<Welcome>(p);
+    case MessageType::ViewRequest:
+        return decodesCanonically<ViewRequest>(p);
+    case MessageType::ToolState:
+        return decodesCanonically<ToolState>(p);
+    case MessageType::ToolRelay:
+        return decodesCanonically<ToolRelay>(p);
+    case MessageType::HapticModel:
+        return decodesCanonically<HapticModel>(p);
+    case MessageType::ImageUpdate:
+        return decodesCanonically<ImageUpdate>(p);
+    case MessageType::VolumeUpdate:
+        return decodesCanonically<VolumeUpdate>(p);
+    case MessageType::Ping:
+        return decodesCanonically<Ping>(p);
+    case MessageType::Pong:
+        return decodesCanonically<Pong>(p);
+    case MessageType::Participants:
+        return decodesCanonically<Participants>(p);
+    case MessageType::SyncMode:
+        return decodesCanonically<SyncMode>(p);
+    case MessageType::HapticRelay:
+        return decodesCanonically<HapticRelay>(p);
+    case MessageType::Annotate:
+        return decodesCanonically<Annotate>(p);
+    case MessageType::Annotations:
+        return decodesCanonically<Annotations>(p);
+    case MessageType::TakeOver:
+        return decodesCanonically<TakeOver>(p);
+    }
+    return false;
+}
+
+ViewSpec sampleView(uint16_t w, uint16_t h) {
+    ViewSpec v;
+    v.eye = {10, 20, 300};
+    v.target = {1, 2, 3};
+    v.up = {0, 1, 0};
+    v.fovYDeg = 50;
+    v.nearMm = 110;
+    v.farMm = 550;
+    v.width = w;
+    v.height = h;
+    return v;
+}
+
+ToolState sampleTool() {
+    ToolState t;
+    t.sequence = 77;
+    t.clientTimeUs = 123456789;
+    t.toolKind = 1;
+    t.diameterMm = 3.5f;
+    t.position = {1.5f, -2.0f, 30.0f};
+    t.orientation = glm::quat(0.9f, 0.1f, 0.3f, 0.2f);
+    t.speed = 0.75f;
+    t.drilling = true;
+    return t;
+}
+
+HapticModel sampleModel() {
+    HapticModel h;
+    h.toolSequence = 9;
+    h.serverReceivedUs = 1000;
+    h.serverSentUs = 1200;
+    h.clientTimeUs = 900;
+    h.position = {1, 2, 3};
+    h.force = {0.5f, -0.25f, 2};
+    h.gradient = glm::mat3(1.0f) * 0.3f;
+    h.contact = true;
+    return h;
+}
+
+template <typename M>
+std::vector<uint8_t> encoded(M m) {
+    std::vector<uint8_t> out = encodeMessage(m);
+    EXPECT_FALSE(out.empty()) << "type " << int(M::kType);
+    return out;
+}
+
+// One valid packet of every message type, payloads included.
+std::vector<std::vector<uint8_t>> sampleMessages() {
+    std::vector<std::vector<uint8_t>> all;
+    Hello hello;
+    hello.role = Role::Instructor;
+    hello.name = "Dr. Fuzz";
+    hello.codec = Codec::Zstd;
+    hello.sync = Sync::Volume;
+    hello.volumeCodec = Codec::Lz4;
+    hello.view = sampleView(640, 480);
+    all.push_back(encoded(hello));
+    Welcome welcome;
+    welcome.clientId = 3;
+    welcome.serverTimeUs = 42;
+    welcome.volumeDims = {9, 7, 5};
+    welcome.spacing = {0.5f, 0.5f, 0.75f};
+    welcome.volumeName = "skull";
+    welcome.maxViewPixels = 1024 * 1024;
+    all.push_back(encoded(welcome));
+    all.push_back(encoded(ViewRequest{5, sampleView(300, 200)}));
+    all.push_back(encoded(sampleTool()));
+    all.push_back(encoded(ToolRelay{4, sampleTool()}));
+    all.push_back(encoded(sampleModel()));
+    ImageUpdate image;
+    image.sequence = 11;
+    image.viewId = 2;
+    image.x = 3;
+    image.y = 4;
+    image.width = 5;
+    image.height = 6;
+    image.codec = Codec::Lz4;
+    image.erodeUs = 1;
+    image.renderUs = 4;
+    image.gridUs = 2;
+    image.predicted = true;
+    image.baseHash = 0xdeadbeef;
+    image.payload = compressBytes(std::vector<uint8_t>(40, 7), Codec::Lz4);
+    image.rawBytes = 40;
+    all.push_back(encoded(image));
+    VolumeUpdate volume;
+    volume.sequence = 12;
+    volume.x = 1;
+    volume.y = 2;
+    volume.z = 3;
+    volume.sizeX = 2;
+    volume.sizeY = 3;
+    volume.sizeZ = 1;
+    volume.materials = true;
+    volume.codec = Codec::Zstd;
+    volume.rawBytes = 12;
+    volume.payload = compressBytes(std::vector<uint8_t>(12, 1), Codec::Zstd);
+    all.push_back(encoded(volume));
+    all.push_back(encoded(Ping{99}));
+    all.push_back(encoded(Pong{99, 100}));
+    Participants roster;
+    roster.list = {{1, Role::Instructor, Sync::Dbi, "a", 0},
+                   {2, Role::Trainee, Sync::Volume, "bee", 1},
+                   {7, Role::Trainee, Sync::Dbi, "", 0}};
+    all.push_back(encoded(roster));
+    all.push_back(encoded(SyncMode{Sync::Volume, Codec::Zstd}));
+    all.push_back(encoded(HapticRelay{6, sampleModel()}));
+    all.push_back(encoded(Annotate{Annotate::Op::Add, 0, {1, 2, 3}, "here"}));
+    Annotations marks;
+    marks.list = {{1, 2, {0, 0, 0}, "one"}, {5, 2, {-1, 4, 9}, "five"}};
+    all.push_back(encoded(marks));
+    all.push_back(encoded(TakeOver{2}));
+    return all;
+}
+
+// [SECTION] image payloads
+
+// A DBI of a tilted plane as `camera` sees it, with a hole of background pixels.
+Dbi planeImage(const Camera& camera, int w, int h, uint32_t seed) {
+    Dbi img(w, h);
+    const glm::dmat4 vp = viewProjection(camera);
+    std::mt19937 rng(seed);
+    for (int y = 0; y < h; ++y)
+        for (int x = 0; x < w; ++x) {
+            if ((x - w / 3) * (x - w / 3) + (y - h / 2) * (y - h / 2) < 6)
+                continue; // background
+            const glm::dvec3 p(x - w / 2.0, y - h / 2.0, 0.3 * x - 0.2 * y + 0.01 * (rng() % 8));
+            img.depth()[img.index(x, y)] = windowDepth(vp, p);
+            uint8_t* c = img.color(x, y);
+            c[0] = uint8_t(200 + x % 50);
+            c[1] = uint8_t(100 + (rng() % 4));
+            c[2] = uint8_t(y * 3);
+            c[3] = 255;
+        }
+    return img;
+}
+
+Camera imageCamera(int w, int h) {
+    Camera c = toCamera(sampleView(uint16_t(w), uint16_t(h)));
+    c.eye = {0, 0, 300};
+    c.target = {0, 0, 0};
+    return c;
+}
+
+constexpr int kImageW = 13, kImageH = 9; // odd sizes: partial mask bytes, scalar tails
+
+// Hostile rectangle sizes (the decoder takes int width and height).
+constexpr int kHostileSizes[] = {0,    -1,   1,     kImageW - 1, kImageW + 1, kImageH,
+                                 4096, 4097, 65535, INT32_MIN,   INT32_MAX};
+
+// Hostile raw-byte counts for a payload that should be `valid` bytes before compression.
+std::vector<uint32_t> hostileRawBytes(uint32_t valid) {
+    return {0,
+            1,
+            valid - 1,
+            valid + 1,
+            valid * 2,
+            uint32_t(kMaxPayloadBytes),
+            kMaxVolumeRawBytes,
+            kMaxVolumeRawBytes + 1,
+            0x7fffffff,
+            0x80000000,
+            0xffffffff};
+}
+
+} // namespace
+
+TEST(DecoderFuzz, EveryMessageTypeRefusesMutationsOrDecodesThemInRange) {
+    const std::vector<std::vector<uint8_t>> samples = sampleMessages();
+    ASSERT_EQ(samples.size(), size_t(kMessageTypeCount - 1)); // one of every type
+    const int random = 1500 * fuzzScale();
+    size_t mutated = 0, decoded = 0;
+    for (size_t s = 0; s < samples.size(); ++s) {
+        ASSERT_TRUE(decodeAny(samples[s])) << "valid sample of type " << int(samples[s][0]);
+        forEachMutation(samples[s], uint32_t(1000 + s), random, [&](std::vector<uint8_t> b) {
+            ++mutated;
+            decoded += decodeAny(b) ? 1 : 0;
+        });
+    }
+    // Most mutations must be refused: a decoder that accepts anything would pass the rest.
+    EXPECT_LT(decoded, mutated / 2) << decoded << " of " << mutated << " mutations decoded";
+}
+
+TEST(DecoderFuzz, ImagePayloadsRefuseMutationsAndHostileSizes) {
+    const Camera camera = imageCamera(kImageW, kImageH);
+    const Dbi image = planeImage(camera, kImageW, kImageH, 5);
+    const int random = 2000 * fuzzScale();
+    for (Codec codec : {Codec::Raw, Codec::Lz4, Codec::Zstd}) {
+        SCOPED_TRACE(codecName(codec));
+        const EncodedImage e = encodeImage(image, codec, camera);
+        Dbi expected;
+        ASSERT_TRUE(decodeImage(e.payload, e.rawBytes, codec, kImageW, kImageH, camera, expected));
+        for (int w : kHostileSizes)
+            for (int h : kHostileSizes)
+                for (uint32_t raw : hostileRawBytes(e.rawBytes)) {
+                    Dbi out;
+                    if (decodeImage(e.payload, raw, codec, w, h, camera, out)) {
+                        // Only an honest size can decode, to a picture of that size.
+                        EXPECT_EQ(out.width(), w);
+                        EXPECT_EQ(out.height(), h);
+                        EXPECT_EQ(raw, e.rawBytes);
+                    }
+                }
+        // Another codec's payload under this codec's name.
+        for (Codec other : {Codec::Raw, Codec::Lz4, Codec::Zstd}) {
+            const EncodedImage o = encodeImage(image, other, camera);
+            Dbi out;
+            if (other != codec) {
+                EXPECT_FALSE(
+                    decodeImage(o.payload, e.rawBytes, codec, kImageW, kImageH, camera, out));
+            }
+        }
+        forEachMutation(e.payload, 20 + uint32_t(codec), random, [&](std::vector<uint8_t> b) {
+            Dbi out;
+            if (decodeImage(b, e.rawBytes, codec, kImageW, kImageH, camera, out)) {
+                EXPECT_EQ(out.width(), kImageW);
+                EXPECT_EQ(out.height(), kImageH);
+            }
+        });
+    }
+}
+
+TEST(DecoderFuzz, PredictedPayloadsRefuseMutationsAndLeaveTheImageAlone) {
+    const Camera camera = imageCamera(kImageW, kImageH);
+    const DepthQuantizer quantizer(camera);
+    // What the client holds (through the planar codec, as a client would) and the picture now.
+    Dbi base;
+    const Dbi before = planeImage(camera, kImageW, kImageH, 5);
+    const EncodedImage held = encodeImage(before, Codec::Lz4, camera);
+    ASSERT_TRUE(
+        decodeImage(held.payload, held.rawBytes, Codec::Lz4, kImageW, kImageH, camera, base));
+    Dbi next = planeImage(camera, kImageW, kImageH, 6);
+    for (int y = 2; y < 5; ++y)
+        for (int x = 6; x < 10; ++x) {
+            next.depth()[next.index(x, y)] = kBackgroundDepth;
+            std::copy(kBackgroundRgba, kBackgroundRgba + 4, next.color(x, y));
+        }
+    const int random = 2000 * fuzzScale();
+    for (Codec codec : {Codec::Lz4, Codec::Zstd}) {
+        SCOPED_TRACE(codecName(codec));
+        const PredictedImage p = encodePredicted(next, base, codec, quantizer);
+        ASSERT_GT(p.changedPixels, 0);
+        Dbi expected = base;
+        ASSERT_EQ(decodePredicted(p.payload, p.rawBytes, codec, p.baseHash, quantizer, expected),
+                  PredictedStatus::Ok);
+        auto tryDecode = [&](std::span<const uint8_t> payload, uint32_t raw, Codec c, uint32_t hash,
+                             const Dbi& held) {
+            Dbi image = held;
+            const PredictedStatus st = decodePredicted(payload, raw, c, hash, quantizer, image);
+            if (st != PredictedStatus::Ok) {
+                EXPECT_TRUE(image == held) << "a refused update changed the pixels";
+            }
+            return st;
+        };
+        for (uint32_t raw : hostileRawBytes(p.rawBytes))
+            for (Codec c : {Codec::Raw, Codec::Lz4, Codec::Zstd})
+                if (raw != p.rawBytes || c != codec) {
+                    EXPECT_NE(tryDecode(p.payload, raw, c, p.baseHash, base), PredictedStatus::Ok);
+                }
+        // Another base: the hash check refuses it.
+        EXPECT_EQ(tryDecode(p.payload, p.rawBytes, codec, p.baseHash ^ 1, base),
+                  PredictedStatus::BaseMismatch);
+        EXPECT_EQ(tryDecode(p.payload, p.rawBytes, codec, p.baseHash, next),
+                  PredictedStatus::BaseMismatch);
+        // A rectangle of another size than the update's, and one that is empty.
+        for (int w : {1, kImageW - 1, kImageW + 1})
+            tryDecode(p.payload, p.rawBytes, codec, p.baseHash, planeImage(camera, w, kImageH, 7));
+        EXPECT_EQ(tryDecode(p.payload, p.rawBytes, codec, p.baseHash, Dbi()),
+                  PredictedStatus::Malformed);
+        // The raw layout itself mutated (masks, counts, residuals), then compressed properly,
+        // and the compressed payload mutated.
+        std::vector<uint8_t> raw;
+        ASSERT_TRUE(decompressBytes(p.payload, codec, p.rawBytes, raw));
+        forEachMutation(raw, 40 + uint32_t(codec), random, [&](std::vector<uint8_t> b) {
+            const std::vector<uint8_t> c = compressBytes(b, codec);
+            tryDecode(c, uint32_t(b.size()), codec, p.baseHash, base);
+        });
+        forEachMutation(p.payload, 50 + uint32_t(codec), random, [&](std::vector<uint8_t> b) {
+            tryDecode(b, p.rawBytes, codec, p.baseHash, base);
+        });
+    }
+}
+
+// [SECTION] volume payloads
+
+namespace {
+
+Volume sampleVolume(glm::ivec3 dims) {
+    Volume v(dims, glm::vec3(0.5f));
+    uint8_t* d = v.densityData();
+    uint8_t* m = v.materialData();
+    for (size_t i = 0; i < v.voxelCount(); ++i) {
+        d[i] = uint8_t(i % 7 == 0 ? 0 : 40 + i % 200);
+        m[i] = uint8_t(d[i] == 0 ? 0 : 1 + i % (kMaterialCount - 1));
+    }
+    return v;
+}
+
+// What the client does with a VolumeUpdate packet (SessionClient::applyVolume, without the
+// renderer): decode, check the box against the welcome's dims, decompress, write the voxels.
+bool applyLikeClient(std::span<const uint8_t> packet, Volume& volume) {
+    VolumeUpdate u;
+    if (!decodeMessage(packet, u))
+        return false;
+    const glm::ivec3 dims = volume.dims();
+    const Box3i box{{u.x, u.y, u.z}, {u.x + u.sizeX, u.y + u.sizeY, u.z + u.sizeZ}};
+    if (box.hi.x > dims.x || box.hi.y > dims.y || box.hi.z > dims.z)
+        return false;
+    if (u.full) {
+        if (!(box == Box3i{glm::ivec3(0), dims}))
+            return false;
+        Volume v;
+        if (!decodeVolumeFull(u.payload, u.rawBytes, u.codec, dims, volume.spacing(), v))
+            return false;
+        EXPECT_EQ(v.dims(), dims);
+        volume = std::move(v);
+        return true;
+    }
+    std::vector<uint8_t> voxels;
+    if (!decompressBytes(u.payload, u.codec, u.rawBytes, voxels))
+        return false;
+    EXPECT_EQ(voxels.size(), size_t(u.rawBytes));
+    const size_t n = size_t(box.count());
+    std::span<const uint8_t> densities(voxels.data(), n), materials;
+    if (u.materials)
+        materials = std::span<const uint8_t>(voxels.data() + n, n);
+    return applyVolumeBox(volume, box, densities, materials);
+}
+
+VolumeUpdate volumeMessage(const EncodedVolume& e, const Box3i& box, bool full, bool materials) {
+    VolumeUpdate u;
+    u.sequence = 3;
+    u.full = full;
+    u.materials = materials;
+    u.x = uint16_t(box.lo.x);
+    u.y = uint16_t(box.lo.y);
+    u.z = uint16_t(box.lo.z);
+    u.sizeX = uint16_t(box.size().x);
+    u.sizeY = uint16_t(box.size().y);
+    u.sizeZ = uint16_t(box.size().z);
+    u.codec = e.codec;
+    u.rawBytes = e.rawBytes;
+    u.payload = e.payload;
+    return u;
+}
+
+} // namespace
+
+TEST(DecoderFuzz, VolumeUpdatesRefuseMutationsAndNeverWriteOutsideTheVolume) {
+    const glm::ivec3 dims{9, 7, 5};
+    const Volume server = sampleVolume(dims);
+    const Box3i box{{2, 1, 0}, {7, 5, 4}};
+    std::vector<std::vector<uint8_t>> packets;
+    for (Codec codec : {Codec::Raw, Codec::Lz4, Codec::Zstd}) {
+        for (bool materials : {false, true})
+            packets.push_back(encoded(volumeMessage(encodeVolumeBox(server, box, codec, materials),
+                                                    box, false, materials)));
+        if (codec != Codec::Raw)
+            packets.push_back(encoded(volumeMessage(encodeVolumeFull(server, codec),
+                                                    Box3i{glm::ivec3(0), dims}, true, true)));
+    }
+    const int random = 1500 * fuzzScale();
+    for (size_t i = 0; i < packets.size(); ++i) {
+        SCOPED_TRACE(i);
+        ASSERT_FALSE(packets[i].empty());
+        Volume client(dims, server.spacing());
+        ASSERT_TRUE(applyLikeClient(packets[i], client));
+        forEachMutation(packets[i], 60 + uint32_t(i), random, [&](std::vector<uint8_t> b) {
+            Volume v(dims, server.spacing());
+            applyLikeClient(b, v);
+            EXPECT_EQ(v.dims(), dims);
+        });
+    }
+}
+
+TEST(DecoderFuzz, VolumeDecodersRefuseHostileSizesAndLabels) {
+    const glm::ivec3 dims{9, 7, 5};
+    const Volume server = sampleVolume(dims);
+    for (Codec codec : {Codec::Lz4, Codec::Zstd}) {
+        SCOPED_TRACE(codecName(codec));
+        const EncodedVolume full = encodeVolumeFull(server, codec);
+        Volume v;
+        ASSERT_TRUE(
+            decodeVolumeFull(full.payload, full.rawBytes, codec, dims, server.spacing(), v));
+        EXPECT_TRUE(v == server);
+        for (glm::ivec3 d : {glm::ivec3(0, 7, 5), glm::ivec3(-9, -7, 5), glm::ivec3(9, 7, 4),
+                             glm::ivec3(4097, 1, 1), glm::ivec3(INT32_MIN, INT32_MIN, 1),
+                             glm::ivec3(4096, 4096, 4096), glm::ivec3(5, 7, 9)})
+            for (uint32_t raw : hostileRawBytes(full.rawBytes)) {
+                Volume out;
+                if (decodeVolumeFull(full.payload, raw, codec, d, server.spacing(), out)) {
+                    EXPECT_EQ(out.voxelCount() * 2, size_t(raw));
+                }
+            }
+        for (uint32_t raw : hostileRawBytes(full.rawBytes)) {
+            std::vector<uint8_t> out;
+            EXPECT_FALSE(decompressBytes(full.payload, codec, raw, out));
+            EXPECT_FALSE(decompressBytes({}, codec, raw, out));
+        }
+        // An unknown material label in an otherwise valid full volume.
+        std::vector<uint8_t> raw;
+        ASSERT_TRUE(decompressBytes(full.payload, codec, full.rawBytes, raw));
+        raw.back() = uint8_t(kMaterialCount);
+        EXPECT_FALSE(decodeVolumeFull(compressBytes(raw, codec), full.rawBytes, codec, dims,
+                                      server.spacing(), v));
+    }
+    // Boxes partly or wholly outside the volume, empty or inverted, and sizes that disagree (the
+    // client builds boxes from u16 origins and sizes, so their corners stay far from overflow).
+    Volume v = server;
+    const std::vector<uint8_t> bytes(9 * 7 * 5 * 2, 1);
+    for (Box3i b :
+         {Box3i{{-1, 0, 0}, {2, 2, 2}}, Box3i{{8, 6, 4}, {10, 7, 5}}, Box3i{{0, 0, 0}, {0, 5, 5}},
+          Box3i{{5, 5, 5}, {2, 2, 2}}, Box3i{{0, 0, 0}, {4096, 1, 1}}, Box3i{}})
+        EXPECT_FALSE(applyVolumeBox(v, b, std::span(bytes.data(), size_t(b.count() > 0 ? 1 : 0))));
+    const Box3i b{{1, 1, 1}, {3, 3, 3}};
+    EXPECT_FALSE(applyVolumeBox(v, b, std::span(bytes.data(), 7)));
+    EXPECT_FALSE(applyVolumeBox(v, b, std::span(bytes.data(), 8), std::span(bytes.data(), 7)));
+    const std::vector<uint8_t> labels(8, uint8_t(kMaterialCount));
+    EXPECT_FALSE(applyVolumeBox(v, b, std::span(bytes.data(), 8), labels));
+    EXPECT_TRUE(v == server) << "a refused box changed the volume";
+}
