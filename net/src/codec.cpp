@@ -113,6 +113,15 @@ size_t zstdDecompress(void* dst, size_t capacity, const void* src, size_t size) 
                : ZSTD_decompress(dst, capacity, src, size);
 }
 
+// Whether `payload` can decompress to `rawBytes` at all: LZ4 writes fewer than 255 bytes per input
+// byte (a match grows by at most 255 a length byte) and zstd at most a 128 KiB block per 4 bytes
+// (a block header and an RLE byte). A larger claim is malformed and refused before its buffer is
+// allocated: a few bytes could otherwise make a receiver allocate and clear hundreds of MiB.
+bool canHold(std::span<const uint8_t> payload, Codec codec, size_t rawBytes) {
+    const uint64_t most = codec == Codec::Lz4 ? 255 : 32768;
+    return uint64_t(payload.size()) * most >= uint64_t(rawBytes);
+}
+
 size_t planarBytes(size_t pixels) {
     return pixels * 5;
 }
@@ -213,7 +222,7 @@ bool decodeImage(std::span<const uint8_t> payload, uint32_t rawBytes, Codec code
         std::memcpy(out.depth(), payload.data() + n * 4, n * 4);
         return true;
     }
-    if (rawBytes != planarBytes(n))
+    if (rawBytes != planarBytes(n) || !canHold(payload, codec, rawBytes))
         return false;
     std::vector<uint8_t> planar(rawBytes);
     if (codec == Codec::Lz4) {
@@ -259,7 +268,8 @@ bool decompressBytes(std::span<const uint8_t> payload, Codec codec, size_t rawBy
         out.assign(payload.begin(), payload.end());
         return true;
     }
-    if (rawBytes > size_t(kMaxVolumeRawBytes) || payload.empty())
+    if (rawBytes > size_t(kMaxVolumeRawBytes) || payload.empty() ||
+        !canHold(payload, codec, rawBytes))
         return false;
     out.resize(rawBytes);
     if (codec == Codec::Lz4) {

@@ -19,6 +19,7 @@
 #include <algorithm>
 #include <cstdint>
 #include <cstdlib>
+#include <new>
 #include <random>
 
 using namespace trephine;
@@ -593,4 +594,75 @@ TEST(DecoderFuzz, VolumeDecodersRefuseHostileSizesAndLabels) {
     const std::vector<uint8_t> labels(8, uint8_t(kMaterialCount));
     EXPECT_FALSE(applyVolumeBox(v, b, std::span(bytes.data(), 8), labels));
     EXPECT_TRUE(v == server) << "a refused box changed the volume";
+}
+
+// [SECTION] size claims
+
+// The largest single allocation this thread makes while a probe is alive. Every operator new of
+// the test binary goes through here; it only forwards to malloc unless a probe watches.
+namespace {
+thread_local bool t_probing = false;
+thread_local size_t t_largestAllocation = 0;
+
+struct AllocationProbe {
+    AllocationProbe() { t_probing = true, t_largestAllocation = 0; }
+    ~AllocationProbe() { t_probing = false; }
+    size_t largest() const { return t_largestAllocation; }
+};
+} // namespace
+
+// GCC sees free() on what operator new returned and warns; here they are one malloc and free.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+#endif
+void* operator new(size_t n) {
+    if (t_probing)
+        t_largestAllocation = std::max(t_largestAllocation, n);
+    if (void* p = std::malloc(n ? n : 1))
+        return p;
+    throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept {
+    std::free(p);
+}
+void operator delete(void* p, size_t) noexcept {
+    std::free(p);
+}
+
+TEST(DecoderFuzz, ASizeClaimBeyondWhatThePayloadCanHoldIsRefusedBeforeAllocatingIt) {
+    // A few bytes claiming a 2048 x 2048 picture (20 MiB before compression), a 512^3 volume
+    // (256 MiB) or a 64 MiB predicted layout: refused without allocating what they claim.
+    const Camera camera = imageCamera(2048, 2048);
+    Dbi held(2048, 2048);
+    for (Codec codec : {Codec::Lz4, Codec::Zstd}) {
+        SCOPED_TRACE(codecName(codec));
+        const std::vector<uint8_t> tiny = compressBytes(std::vector<uint8_t>(64, 0), codec);
+        AllocationProbe probe;
+        Dbi out;
+        EXPECT_FALSE(decodeImage(tiny, 5 * 2048 * 2048, codec, 2048, 2048, camera, out));
+        std::vector<uint8_t> bytes;
+        EXPECT_FALSE(decompressBytes(tiny, codec, kMaxVolumeRawBytes, bytes));
+        Volume v;
+        EXPECT_FALSE(
+            decodeVolumeFull(tiny, kMaxVolumeRawBytes, codec, glm::ivec3(512), glm::vec3(0.5f), v));
+        EXPECT_EQ(decodePredicted(tiny, uint32_t(kMaxPayloadBytes), codec, 0,
+                                  DepthQuantizer(camera), held),
+                  PredictedStatus::Malformed);
+        EXPECT_LT(probe.largest(), size_t(1) << 20);
+    }
+    // The bound leaves room for the most compressible honest payloads: a picture of background
+    // only, and a volume of air.
+    const Dbi background(1024, 1024);
+    for (Codec codec : {Codec::Lz4, Codec::Zstd}) {
+        SCOPED_TRACE(codecName(codec));
+        const Camera c = imageCamera(1024, 1024);
+        const EncodedImage e = encodeImage(background, codec, c);
+        Dbi out;
+        EXPECT_TRUE(decodeImage(e.payload, e.rawBytes, codec, 1024, 1024, c, out));
+        EXPECT_TRUE(out == background);
+        const std::vector<uint8_t> air(size_t(16) << 20, 0);
+        std::vector<uint8_t> bytes;
+        EXPECT_TRUE(decompressBytes(compressBytes(air, codec), codec, air.size(), bytes));
+        EXPECT_TRUE(bytes == air);
+    }
 }
