@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <random>
 
 using namespace trephine::net;
@@ -235,4 +236,30 @@ TEST(Protocol, AViewWithoutADirectionOrWithUpAlongItIsMalformed) {
     ViewRequest noUp = r;
     noUp.view.up = glm::vec3(0.0f);
     EXPECT_TRUE(encodeMessage(noUp).empty());
+}
+
+TEST(Protocol, AWelcomeWithASpacingNoVolumeMayHaveIsMalformed) {
+    // The client's renderer steps by the smallest spacing across the largest extent: a zero,
+    // negative, vanishing or very anisotropic spacing would make it march (all but) forever.
+    Welcome w;
+    w.volumeDims = {64, 64, 64};
+    w.spacing = {0.5f, 0.5f, 0.75f};
+    const std::vector<uint8_t> valid = encodeMessage(w);
+    ASSERT_FALSE(valid.empty());
+    const size_t at = 1 + 2 + 8 + 12; // type, client id, server time, dims
+    auto withSpacing = [&](glm::vec3 s) {
+        std::vector<uint8_t> b = valid;
+        std::memcpy(b.data() + at, &s, sizeof s);
+        Welcome back;
+        return decodeMessage(b, back) && back.spacing == s;
+    };
+    EXPECT_TRUE(withSpacing({0.5f, 0.5f, 0.75f}));
+    EXPECT_TRUE(withSpacing({0.001f, 0.001f, 1.0f})); // a ratio of 1000 is the most
+    EXPECT_TRUE(withSpacing({1000.0f, 1000.0f, 1000.0f}));
+    for (glm::vec3 s : {glm::vec3(0.0f, 1.0f, 1.0f), glm::vec3(-0.5f), glm::vec3(1e-6f, 1.0f, 1.0f),
+                        glm::vec3(1e-4f), glm::vec3(2000.0f), glm::vec3(0.001f, 1.5f, 1.0f),
+                        glm::vec3(-0.0f, 1.0f, 1.0f)})
+        EXPECT_FALSE(withSpacing(s)) << s.x << " " << s.y << " " << s.z;
+    w.spacing = glm::vec3(0.0f);
+    EXPECT_TRUE(encodeMessage(w).empty()); // nor does a server send one
 }

@@ -5,6 +5,8 @@
 
 #include "net/serialize.h"
 
+#include "libsim/volume_io.h"
+
 #include <glm/gtc/quaternion.hpp>
 #include <glm/mat3x3.hpp>
 #include <glm/vec3.hpp>
@@ -115,6 +117,21 @@ bool serializeQuat(S& s, glm::quat& q) {
            serializeFinite(s, q.z);
 }
 
+// A voxel spacing (mm) that a volume file may have (libsim's checkSpacing): each axis within
+// [kMinSpacingMm, kMaxSpacingMm], none over kMaxSpacingRatio times another's. A client's renderer
+// steps by the smallest spacing across the largest extent: a zero, negative or vanishing one from
+// the wire would make it march forever.
+template <typename S>
+bool serializeSpacing(S& s, glm::vec3& v) {
+    if (!serializeVec3(s, v))
+        return false;
+    for (int i = 0; i < 3; ++i)
+        if (!(double(v[i]) >= kMinSpacingMm && double(v[i]) <= kMaxSpacingMm))
+            return false;
+    return double(std::max({v.x, v.y, v.z})) <=
+           double(std::min({v.x, v.y, v.z})) * kMaxSpacingRatio;
+}
+
 // A u16 count (at most maxCount) and that many entries, in strictly increasing id(entry): no
 // duplicates, and one order for every receiver.
 template <typename S, typename T, typename Id>
@@ -203,7 +220,7 @@ struct Welcome {
     bool serialize(S& s) {
         return s.integer(clientId) && s.integer(serverTimeUs) && s.ranged(volumeDims.x, 1, 4096) &&
                s.ranged(volumeDims.y, 1, 4096) && s.ranged(volumeDims.z, 1, 4096) &&
-               serializeVec3(s, spacing) && s.string(volumeName, 256) &&
+               serializeSpacing(s, spacing) && s.string(volumeName, 256) &&
                s.ranged(maxViewPixels, uint32_t(1), uint32_t(kMaxWindowSize) * kMaxWindowSize);
     }
 };
