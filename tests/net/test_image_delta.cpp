@@ -11,6 +11,7 @@
 
 #include <bit>
 #include <cmath>
+#include <limits>
 
 #include <random>
 
@@ -92,6 +93,35 @@ TEST(DepthQuantizer, RowFunctionsAreTheOneValueFunctionsBitForBit) {
         for (size_t i = 0; i < in.size(); ++i)
             ASSERT_EQ(out[i], q.quantize(in[i])) << preset << " depth " << in[i];
     }
+}
+
+TEST(DepthQuantizer, ADepthThatIsNotANumberIsTheBackground) {
+    // A raw image update carries its float depths as sent, so a hostile server's NaN reaches the
+    // client's picture, which the predicted form quantises (the base hash) before decoding.
+    // Converting NaN to an integer code is undefined behaviour; it quantises as the background.
+    Volume v = makeSkull(64);
+    v.setSpacing(glm::vec3(paperSpacingMm(64)));
+    const Camera camera = cameraPreset("working", v, {4, 2});
+    const DepthQuantizer q(camera);
+    const float nan = std::numeric_limits<float>::quiet_NaN();
+    std::vector<float> in{nan, -nan, 0.5f, nan, 1.0f, nan};
+    std::vector<uint16_t> out(in.size());
+    q.quantizeRow(in.data(), out.data(), in.size());
+    for (size_t i = 0; i < in.size(); ++i) {
+        EXPECT_EQ(out[i], q.quantize(in[i])) << "depth " << in[i];
+        if (std::isnan(in[i]))
+            EXPECT_EQ(out[i], DepthQuantizer::kBackground) << "depth " << in[i];
+    }
+    // The way in: a raw update of NaN depths decodes (its bits are its bits), and a predicted
+    // update against those pixels is refused (their hash is not the server's) without UB.
+    Dbi held(4, 2);
+    std::fill(held.depth(), held.depth() + 8, nan);
+    EncodedImage e = encodeImage(held, Codec::Raw, camera);
+    Dbi decoded;
+    ASSERT_TRUE(decodeImage(e.payload, e.rawBytes, Codec::Raw, 4, 2, camera, decoded));
+    const PredictedImage p = encodePredicted(Dbi(4, 2), held, Codec::Zstd, q);
+    EXPECT_EQ(decodePredicted(p.payload, p.rawBytes, Codec::Zstd, p.baseHash ^ 1, q, decoded),
+              PredictedStatus::BaseMismatch);
 }
 
 TEST(PredictedImage, ReconstructsExactlyWhatTheOrdinaryCodecGivesAndIsSmaller) {

@@ -32,7 +32,8 @@ public:
 
     // Inline: the predicted image form quantises every pixel of a rectangle at both ends.
     uint16_t quantize(float windowDepth) const {
-        if (windowDepth >= kBackgroundDepth)
+        // NaN too (a raw update's depths are whatever was sent): its code would be undefined.
+        if (!(windowDepth < kBackgroundDepth))
             return kBackground;
         // Eye distance under glm::perspective (eyeZFromWindowDepth, negated), then linear codes.
         const double ndc = double(windowDepth) * 2.0 - 1.0;
