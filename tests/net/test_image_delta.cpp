@@ -109,8 +109,9 @@ TEST(DepthQuantizer, ADepthThatIsNotANumberIsTheBackground) {
     q.quantizeRow(in.data(), out.data(), in.size());
     for (size_t i = 0; i < in.size(); ++i) {
         EXPECT_EQ(out[i], q.quantize(in[i])) << "depth " << in[i];
-        if (std::isnan(in[i]))
+        if (std::isnan(in[i])) {
             EXPECT_EQ(out[i], DepthQuantizer::kBackground) << "depth " << in[i];
+        }
     }
     // The way in: a raw update of NaN depths decodes (its bits are its bits), and a predicted
     // update against those pixels is refused (their hash is not the server's) without UB.
