@@ -537,8 +537,16 @@ uint32_t SessionClient::requestView(const ViewSpec& view) {
         return 0;
     }
     ViewRequest r;
-    r.requestId = m_nextRequestId++;
+    r.requestId = m_nextRequestId;
     r.view = view;
+    // A view the wire refuses (no direction, farther than kMaxViewDistanceMm, ...) would never be
+    // answered: refused here like one too large.
+    const std::vector<uint8_t> bytes = encodeMessage(r);
+    if (bytes.empty()) {
+        ++m_viewsRefused;
+        return 0;
+    }
+    ++m_nextRequestId;
     m_requestedViewId = r.requestId;
     if (m_sync == Sync::Volume && m_wantSync == Sync::Volume && m_volume) {
         // We render it ourselves, now; the server only keeps it for a switch to DBI.
@@ -551,7 +559,7 @@ uint32_t SessionClient::requestView(const ViewSpec& view) {
     } else {
         m_requested[r.requestId] = view;
     }
-    send(Channel::Control, encodeMessage(r));
+    send(Channel::Control, bytes);
     return r.requestId;
 }
 

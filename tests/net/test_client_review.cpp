@@ -264,6 +264,10 @@ TEST(ClientReview, AViewLargerThanTheServerServesIsRefusedAndASwitchToDbiStillCo
     const ViewSpec shown = client.view();
     EXPECT_EQ(client.requestView(toViewSpec(cameraPreset("top", sphere, {96, 96}))), 0u);
     EXPECT_EQ(client.viewsRefused(), 1u);
+    ViewSpec farAway = shown; // a view the wire refuses: never answered, so never asked
+    farAway.eye.z = 2.0f * kMaxViewDistanceMm;
+    EXPECT_EQ(client.requestView(farAway), 0u);
+    EXPECT_EQ(client.viewsRefused(), 2u);
     EXPECT_EQ(client.view(), shown) << "the volume client kept its view";
     client.requestSync(Sync::Dbi);
     ASSERT_TRUE(pumpUntil({&client}, [&] { return client.sync() == Sync::Dbi; }))

@@ -238,6 +238,27 @@ TEST(Protocol, AViewWithoutADirectionOrWithUpAlongItIsMalformed) {
     EXPECT_TRUE(encodeMessage(noUp).empty());
 }
 
+// An eye or target beyond kMaxViewDistanceMm, or a far plane beyond kMaxViewFarMm, is malformed:
+// the server's ray caster counts samples in int, which a far plane or eye near 1e38 mm would
+// overflow. (One serialize() checks both ways: what cannot be written cannot be read.)
+TEST(Protocol, AViewFartherThanTheLimitsIsMalformed) {
+    ViewRequest r;
+    r.requestId = 1;
+    ViewRequest farEye = r;
+    farEye.view.eye.z = 1e38f;
+    EXPECT_TRUE(encodeMessage(farEye).empty());
+    ViewRequest farTarget = r;
+    farTarget.view.target.x = -2.0f * kMaxViewDistanceMm;
+    EXPECT_TRUE(encodeMessage(farTarget).empty());
+    ViewRequest farPlane = r;
+    farPlane.view.farMm = 1e38f;
+    EXPECT_TRUE(encodeMessage(farPlane).empty());
+    ViewRequest edge = r;
+    edge.view.eye.z = kMaxViewDistanceMm;
+    edge.view.farMm = kMaxViewFarMm;
+    EXPECT_FALSE(encodeMessage(edge).empty()) << "the limits themselves are fine";
+}
+
 TEST(Protocol, AWelcomeWithASpacingNoVolumeMayHaveIsMalformed) {
     // The client's renderer steps by the smallest spacing across the largest extent: a zero,
     // negative, vanishing or very anisotropic spacing would make it march (all but) forever.

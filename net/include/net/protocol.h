@@ -53,6 +53,10 @@ inline constexpr float kMaxAnnotationDistanceMm = 1.0e5f;
 // Tool positions likewise; a tool's orientation quaternion has a norm within [0.5, 2] (the server
 // normalises it).
 inline constexpr float kMaxToolDistanceMm = 1.0e5f;
+// A view's eye and target likewise, and its far plane at most this far (mm): the ray caster counts
+// samples in int, which a far plane of 1e38 mm would overflow.
+inline constexpr float kMaxViewDistanceMm = 1.0e5f;
+inline constexpr float kMaxViewFarMm = 1.0e6f;
 inline constexpr size_t kMaxPayloadBytes = 64u * 1024u * 1024u;
 // The largest message the server sends: ENet delivers a reliable packet only while its fragments
 // (1372 bytes at the default MTU) fit the receiver's acknowledgement window (7-8 windows of 4096
@@ -168,8 +172,13 @@ struct ViewSpec {
         return serializeVec3(s, eye) && serializeVec3(s, target) && serializeVec3(s, up) &&
                serializeFinite(s, fovYDeg) && fovYDeg > 1.0f && fovYDeg < 179.0f &&
                serializeFinite(s, nearMm) && serializeFinite(s, farMm) && nearMm > 0.0f &&
-               farMm > nearMm && s.ranged(width, uint16_t(1), kMaxWindowSize) &&
+               farMm > nearMm && farMm <= kMaxViewFarMm && within(eye) && within(target) &&
+               s.ranged(width, uint16_t(1), kMaxWindowSize) &&
                s.ranged(height, uint16_t(1), kMaxWindowSize) && oriented();
+    }
+    static bool within(glm::vec3 p) {
+        return std::abs(p.x) <= kMaxViewDistanceMm && std::abs(p.y) <= kMaxViewDistanceMm &&
+               std::abs(p.z) <= kMaxViewDistanceMm;
     }
     // A camera needs a direction to look in and an up that is not along it (lookAt of either
     // gives NaN matrices, so every pixel would be garbage).

@@ -105,8 +105,9 @@ public:
     // Asks for a new view; the DBI switches when its full image arrives. Returns the request id.
     // In volume mode the view switches at once (rendered locally) and the server is told, so a
     // switch to DBI gets this view. A view larger than the welcome's maxViewPixels, which the
-    // server would drop, is refused here: nothing changes, nothing is sent, it returns 0 and
-    // counts in viewsRefused().
+    // server would drop, or one the wire refuses (ViewSpec::serialize: no direction, an eye or
+    // far plane beyond the limits), is refused here: nothing changes, nothing is sent, it returns
+    // 0 and counts in viewsRefused().
     uint32_t requestView(const ViewSpec& view);
     uint64_t viewsRefused() const { return m_viewsRefused; }
     void sendPing();
