@@ -99,6 +99,11 @@ std::vector<float> ForceHistory::series(const std::deque<Sample>& s, int compone
 }
 
 int ParticipantForces::update(double now, const std::map<uint16_t, net::HapticModel>& models) {
+    // The client drops the model of whoever left the session (or of everyone, on a reconnect):
+    // their plot goes with it at once, not 5 s later under a bare "client N", and their sequence
+    // too, so that an id given to someone new starts afresh.
+    std::erase_if(byClient, [&](const auto& e) { return !models.count(e.first); });
+    std::erase_if(lastSequence, [&](const auto& e) { return !models.count(e.first); });
     int added = 0;
     for (const auto& [id, m] : models) {
         auto seen = lastSequence.find(id);

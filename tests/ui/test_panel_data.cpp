@@ -134,6 +134,28 @@ TEST(ParticipantForces, OneHistoryPerParticipantFromNewModelsOnly) {
     EXPECT_EQ(p.byClient.count(5), 0u);
 }
 
+// The client drops a participant's relayed model when the roster no longer lists it: its plot
+// goes at once (it was kept, as "client N", until its samples aged out), and an id the server
+// gives to someone new later starts with no old sequence to beat.
+TEST(ParticipantForces, AParticipantWhoLeftIsDroppedAtOnce) {
+    ParticipantForces p;
+    p.windowS = 5.0;
+    std::map<uint16_t, net::HapticModel> models;
+    models[2].toolSequence = 100;
+    models[5].toolSequence = 7;
+    EXPECT_EQ(p.update(0.0, models), 2);
+    models.erase(5); // participant 5 left
+    p.update(0.1, models);
+    EXPECT_EQ(p.byClient.count(5), 0u) << "no plot for a participant who left";
+    EXPECT_EQ(p.byClient.count(2), 1u);
+    // Someone new is given id 2 (its tool sequence starts again): a new model, a new sample.
+    models.erase(2);
+    p.update(0.2, models);
+    models[2].toolSequence = 1;
+    EXPECT_EQ(p.update(0.3, models), 1);
+    EXPECT_EQ(p.byClient.at(2).server.size(), 1u);
+}
+
 TEST(Panels, ParticipantsAreNamedFromTheRosterOrByTheirId) {
     std::map<uint16_t, net::ParticipantInfo> roster;
     roster[3] = {3, net::Role::Instructor, net::Sync::Dbi, "Dr. Cho"};

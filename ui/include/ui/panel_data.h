@@ -60,7 +60,8 @@ struct ForceHistory {
 };
 
 // [Instructor] one force history per other participant, from the newest relayed model of each
-// (ClientSnapshot::relayedModels). A participant with no new model for windowS is dropped.
+// (ClientSnapshot::relayedModels). A participant with no new model for windowS is dropped, and one
+// whose model is no longer listed (it left) at once.
 struct ParticipantForces {
     double windowS = 5.0;
     std::map<uint16_t, ForceHistory> byClient;
