@@ -715,6 +715,9 @@ int runTrainerWindow(const TrainerOptions& o) {
         // Overlays in the view: labels, dirty boxes, connection state.
         ImDrawList* fg = ImGui::GetForegroundDrawList();
         if (havePicture && viewMatches) {
+            // Labels and marks belong to the view: one that projects outside it (orbited or
+            // zoomed away) is cut at its edge, not drawn over the panels beside and under it.
+            fg->PushClipRect(ImVec2(0.0f, viewTop), ImVec2(float(viewSize), viewTop + viewSize));
             glm::dmat4 vp = viewProjection(dbiCamera);
             auto label = [&](glm::vec3 p, glm::vec3 axis, glm::vec4 c, const std::string& text) {
                 WindowPoint w = projectToWindow(vp, dbiCamera, glm::dvec3(p + axis * 40.0f));
@@ -763,6 +766,7 @@ int runTrainerWindow(const TrainerOptions& o) {
                     fg->AddText(at, markCol, a.label.c_str());
                 }
             }
+            fg->PopClipRect();
             drawDirtyBoxOverlay(boxState, boxHistory, now, 0.0f, viewTop, viewSize);
         }
         {

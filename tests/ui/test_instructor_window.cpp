@@ -3,6 +3,7 @@
 // where the server's camera projects it. Needs a display (xvfb-run).
 #include "gl_window_test.h"
 #include "ui/panels.h"
+#include "ui/trainer_app.h"
 #include "ui/window.h"
 
 #include "libsim/camera.h"
@@ -11,6 +12,7 @@
 #include "net/session_client.h"
 #include "net/session_server.h"
 
+#include "loopback.h"
 #include "screenshot.h"
 #include "test_support.h"
 #include <OpenImageIO/imageio.h>
@@ -202,4 +204,53 @@ TEST(InstructorWindow, MalformedMarkIsOneLineNamingIt) {
         EXPECT_NE(r.err.find(std::string("--mark '") + bad + "'"), std::string::npos) << r.err;
         EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
     }
+}
+
+// A mark that projects outside the view (here 100 mm below the site, under the view's lower edge)
+// is not drawn over the panels: its ring was drawn in the Forces panel under the view.
+TEST(InstructorWindow, AMarkOutsideTheViewIsNotDrawnOverThePanels) {
+    TREPHINE_NEED_DISPLAY("the instructor window");
+    const Volume skull = makeSkull(64);
+    const SurfaceSite site = defaultBurrSite(skull);
+    net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64"));
+    server.start();
+    constexpr int kView = 256;
+    const Camera cam =
+        cameraLookingAt(site.position, site.normal, 170.0f, 45.0f, {kView, kView}, skull);
+    const glm::vec3 look = glm::normalize(cam.target - cam.eye);
+    const glm::vec3 up = glm::normalize(cam.up - look * glm::dot(cam.up, look));
+    const glm::vec3 inView = cam.target + up * 20.0f, below = cam.target - up * 100.0f;
+    const glm::dmat4 vp = viewProjection(cam);
+    auto pixelOf = [&](glm::vec3 p) { // image rows from the top
+        WindowPoint w = projectToWindow(vp, cam, glm::dvec3(p));
+        return glm::ivec2(int(w.window.x), kView - 1 - int(w.window.y));
+    };
+    const glm::ivec2 in = pixelOf(inView), out = pixelOf(below);
+    ASSERT_TRUE(in.x > 10 && in.x < kView - 10 && in.y > 10 && in.y < kView - 10);
+    ASSERT_TRUE(out.x > 10 && out.x < kView - 10 && out.y > kView + 20) << out.x << "," << out.y;
+    auto mark = [](glm::vec3 p) {
+        char text[96];
+        std::snprintf(text, sizeof text, "%.3f,%.3f,%.3f", double(p.x), double(p.y), double(p.z));
+        return std::string(text);
+    };
+
+    trephine::testing::TempDir dir;
+    ui::TrainerOptions o;
+    o.address = "127.0.0.1:" + std::to_string(server.port());
+    o.name = "Dr Cho";
+    o.instructor = true;
+    o.size = kView;
+    o.marks = {mark(inView), mark(below)};
+    o.screenshot = dir / "marks.png";
+    o.frames = 2;
+    o.timeoutS = 60.0;
+    o.visible = false;
+    ASSERT_EQ(ui::runTrainerWindow(o), 0);
+    server.stop();
+
+    const Image img = readPng(o.screenshot);
+    ASSERT_GT(img.h, kView + 40);
+    EXPECT_GE(countHue(img, in.x, in.y, 10, ui::markColor()), 40) << "the mark in the view";
+    EXPECT_LT(countHue(img, out.x, out.y, 10, ui::markColor()), 5)
+        << "no mark ring in the panel under the view";
 }
