@@ -53,6 +53,9 @@ struct TraineeOptions {
     std::string screenshot;    // window: as `trephine instructor --screenshot`
     int frames = 0;            // window: as `trephine instructor --frames` (0: run until closed)
     double timeoutS = 90.0;
+    // The first option given that only a --headless trainee uses ("": none); the window refuses it
+    // rather than run without it.
+    std::string headlessOnly;
 };
 
 struct Sample {
@@ -204,6 +207,9 @@ std::vector<Sample> csvScript(const std::string& path) {
 }
 
 int runTrainee(const TraineeOptions& o) {
+    if (!o.headless && !o.headlessOnly.empty())
+        throw Error(o.headlessOnly + ": only a --headless trainee uses it; the trainee window has "
+                                     "no such option (add --headless, or leave it out)");
     if (!o.headless) { // the window starts in --sync's design; its Comparison toggle switches
         WindowedOptions w;
         w.connect = o.connect;
@@ -502,7 +508,13 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
                     "Tool states per second sent by the haptic loop (20-1000)")
         ->check(finiteRange(20.0, 1000.0))
         ->capture_default_str();
-    sub->callback([o, &exitCode] { exitCode = runTrainee(*o); });
+    sub->callback([o, sub, &exitCode] {
+        for (const char* flag :
+             {"--script", "--camera", "--duration", "--report", "--save-dbi", "--tool-rate"})
+            if (o->headlessOnly.empty() && sub->count(flag))
+                o->headlessOnly = flag;
+        exitCode = runTrainee(*o);
+    });
 }
 
 } // namespace trephine::app
