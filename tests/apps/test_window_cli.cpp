@@ -25,7 +25,7 @@ TEST(WindowCli, AHeadlessTraineeHasNoScreenshot) {
 // run, no end after --duration, the default view instead of --camera).
 TEST(WindowCli, TheTraineeWindowRefusesOptionsOnlyAHeadlessTraineeUses) {
     TempDir dir;
-    for (const std::string option :
+    for (const std::string& option :
          {"--report " + shellQuote(dir / "r.json"), std::string("--script burrhole"),
           std::string("--camera top"), std::string("--duration 5"),
           "--save-dbi " + shellQuote(dir / "d.exr"), std::string("--tool-rate 50")}) {
