@@ -213,7 +213,8 @@ std::string markdownTable(const std::vector<std::string>& header,
     };
     std::string md = "|";
     for (const std::string& h : header)
-        md += " " + cell(h) + " |";
+        // append, not " " + string: GCC 12 warns falsely (-Wrestrict) on that.
+        md.append(" ").append(cell(h)).append(" |");
     md += "\n|";
     for (size_t i = 0; i < header.size(); ++i)
         md += i == 0 ? "---|" : "---:|";
@@ -221,7 +222,7 @@ std::string markdownTable(const std::vector<std::string>& header,
     for (const auto& row : rows) {
         md += "|";
         for (size_t i = 0; i < header.size(); ++i)
-            md += " " + (i < row.size() ? cell(row[i]) : std::string()) + " |";
+            md.append(" ").append(i < row.size() ? cell(row[i]) : std::string()).append(" |");
         md += "\n";
     }
     return md;
