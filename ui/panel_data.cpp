@@ -3,6 +3,7 @@
 #include "libsim/stats.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <glm/geometric.hpp>
 
 namespace trephine::ui {
@@ -65,6 +66,19 @@ double NetworkHistory::latencyPercentile(double p) const {
         if (u.latencyUs >= 0)
             v.push_back(u.latencyUs);
     return v.empty() ? -1.0 : percentile(v, p);
+}
+
+std::string NetworkHistory::latencyCaption(double maxUs) const {
+    auto ms = [](double us) {
+        if (us < 0.0)
+            return std::string("-");
+        char b[32];
+        std::snprintf(b, sizeof b, "%.1f ms", us * 1e-3);
+        return std::string(b);
+    };
+    char range[48];
+    std::snprintf(range, sizeof range, " (0-%.0f ms)", maxUs * 1e-3);
+    return "latency p50 " + ms(latencyPercentile(50)) + " p99 " + ms(latencyPercentile(99)) + range;
 }
 
 void ForceHistory::addServer(double t, glm::vec3 f) {

@@ -58,11 +58,9 @@ void drawNetworkPanel(const net::ClientSnapshot& snap, const NetworkHistory& his
     plot("rtt", history.rttMs, "ms");
     const double maxUs = 20000.0;
     auto hist = history.latencyHistogram(20, maxUs);
-    char overlay[96];
-    std::snprintf(overlay, sizeof overlay, "latency p50 %.1f ms p99 %.1f ms (0-20 ms)",
-                  history.latencyPercentile(50) * 1e-3, history.latencyPercentile(99) * 1e-3);
-    ImGui::PlotHistogram("##latency", hist.data(), int(hist.size()), 0, overlay, 0.0f, FLT_MAX,
-                         ImVec2(-1, 60));
+    const std::string overlay = history.latencyCaption(maxUs);
+    ImGui::PlotHistogram("##latency", hist.data(), int(hist.size()), 0, overlay.c_str(), 0.0f,
+                         FLT_MAX, ImVec2(-1, 60));
     ImGui::End();
 }
 

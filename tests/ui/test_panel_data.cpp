@@ -30,6 +30,17 @@ TEST(NetworkHistory, RateCompressionAndHistogram) {
     EXPECT_GE(h.latencyPercentile(50), 0.0);
 }
 
+// Before any latency is measured the caption says so ("-"), not "-0.0 ms" from the -1 that
+// latencyPercentile returns for none.
+TEST(NetworkHistory, TheLatencyCaptionShowsADashBeforeAnyLatency) {
+    NetworkHistory h;
+    EXPECT_EQ(h.latencyCaption(20000.0), "latency p50 - p99 - (0-20 ms)");
+    h.addUpdate({0.1, -1.0, 100, 400, true}); // a full image: no latency
+    EXPECT_EQ(h.latencyCaption(20000.0), "latency p50 - p99 - (0-20 ms)");
+    h.addUpdate({0.2, 2500.0, 100, 400, false});
+    EXPECT_EQ(h.latencyCaption(20000.0), "latency p50 2.5 ms p99 2.5 ms (0-20 ms)");
+}
+
 TEST(NetworkHistory, SeriesAreCapped) {
     NetworkHistory h;
     h.seriesLength = 3;

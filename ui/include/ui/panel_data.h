@@ -10,6 +10,7 @@
 #include <deque>
 #include <glm/vec3.hpp>
 #include <map>
+#include <string>
 #include <vector>
 
 namespace trephine::ui {
@@ -39,6 +40,8 @@ struct NetworkHistory {
     // Counts of latencies in `buckets` equal bins over [0, maxUs); larger ones go in the last.
     std::vector<float> latencyHistogram(int buckets, double maxUs) const;
     double latencyPercentile(double p) const; // -1 when none
+    // The latency histogram's caption: p50 and p99 in ms, "-" before any latency was measured.
+    std::string latencyCaption(double maxUs) const;
 };
 
 // Forces over the last seconds: the server's samples (f at P_N) and the extrapolated force the
