@@ -12,7 +12,7 @@ bool drawViewPanel(ViewControls& view, bool waitingForImage, const std::string& 
         changed |= ImGui::SliderFloat("tilt", &view.pitchDeg, -60.0f, 60.0f, "%.0f deg");
         changed |= ImGui::SliderFloat("distance", &view.distanceMm, 80.0f, 500.0f, "%.0f mm");
         if (ImGui::Button("reset")) {
-            view.yawDeg = view.pitchDeg = 0.0f;
+            view.reset();
             changed = true;
         }
         ImGui::SameLine();

@@ -477,6 +477,7 @@ int runTrainerWindow(const TrainerOptions& o) {
                 else
                     baseCamera = cameraPreset(o.camera, scene->volume, {viewSize, viewSize});
                 viewControls.distanceMm = glm::length(baseCamera.eye - baseCamera.target);
+                viewControls.setHome(); // --orbit, --tilt and this distance
                 wantedCamera = makeCamera();
                 client.requestView(net::toViewSpec(wantedCamera));
             } catch (const std::exception& e) {

@@ -175,3 +175,22 @@ TEST(Panels, ParticipantsAreNamedFromTheRosterOrByTheirId) {
     EXPECT_EQ(ui::participantName(roster, 4), "client 4") << "no name given";
     EXPECT_EQ(ui::participantName(roster, 9), "client 9") << "not listed yet";
 }
+
+// *reset* goes back to the view the window opened with (--orbit, --tilt, its camera's distance),
+// not to orbit and tilt 0 at whatever distance the slider was left.
+TEST(ViewControls, ResetGoesBackToTheOpeningView) {
+    ViewControls v;
+    v.yawDeg = 15.0f;
+    v.pitchDeg = 30.0f;
+    v.distanceMm = 170.0f;
+    v.setHome();
+    v.yawDeg = -60.0f;
+    v.pitchDeg = 5.0f;
+    v.distanceMm = 420.0f;
+    v.dirty = false;
+    v.reset();
+    EXPECT_EQ(v.yawDeg, 15.0f);
+    EXPECT_EQ(v.pitchDeg, 30.0f);
+    EXPECT_EQ(v.distanceMm, 170.0f);
+    EXPECT_TRUE(v.dirty) << "a new view to ask for";
+}

@@ -70,6 +70,14 @@ glm::vec4 markColor();
 struct ViewControls {
     float yawDeg = 0.0f, pitchDeg = 0.0f, distanceMm = 200.0f;
     bool dirty = false; // changed since the last request
+    // Where *reset* goes back to: the view the window opened with (--orbit, --tilt, and the
+    // camera's distance).
+    float homeYawDeg = 0.0f, homePitchDeg = 0.0f, homeDistanceMm = 200.0f;
+    void setHome() { homeYawDeg = yawDeg, homePitchDeg = pitchDeg, homeDistanceMm = distanceMm; }
+    void reset() {
+        yawDeg = homeYawDeg, pitchDeg = homePitchDeg, distanceMm = homeDistanceMm;
+        dirty = true;
+    }
 };
 // True when the user changed the view this frame.
 bool drawViewPanel(ViewControls& view, bool waitingForImage, const std::string& describeCamera);
