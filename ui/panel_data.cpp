@@ -145,6 +145,10 @@ void ParticipantForces::expire(double now) {
 }
 
 void DirtyBoxHistory::add(const Box& b) {
+    // A full update replaces the whole picture (a new view, a switch of design): the rectangles
+    // before it belong to a picture no longer shown.
+    if (b.full)
+        boxes.clear();
     boxes.push_back(b);
     while (boxes.size() > keep)
         boxes.pop_front();

@@ -579,8 +579,10 @@ int runTrainerWindow(const TrainerOptions& o) {
             picture == SyncDesign::Dbi && haveImage ? imageView : snap->view;
         const bool viewMatches = shownView.width == viewSize && shownView.height == viewSize;
         const Camera dbiCamera = net::toCamera(shownView);
-        if (picture == SyncDesign::Volume && !(volumeCamera == dbiCamera))
-            volumeDirty = true; // a new view: the picture for picking must be read back again
+        if (picture == SyncDesign::Volume && !(volumeCamera == dbiCamera)) {
+            volumeDirty = true;       // a new view: the picture for picking must be read back again
+            boxHistory.boxes.clear(); // the old view's rectangles (a DBI's go with its full image)
+        }
 
         // The scripted toggle: flip at the next time, once the switch before it has completed.
         if (nextSwitch < o.switchSyncAtS.size() && firstPictureAt >= 0 && !switching &&

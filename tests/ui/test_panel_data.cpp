@@ -78,6 +78,19 @@ TEST(DirtyBoxHistory, FadesAndKeepsTheNewest) {
     EXPECT_TRUE(d.visible(6.0).empty());
 }
 
+// A full update (a new view's picture) forgets the rectangles of the picture it replaces: they were
+// drawn over the new view for another 1.5 s.
+TEST(DirtyBoxHistory, AFullUpdateForgetsTheBoxesOfThePictureItReplaces) {
+    DirtyBoxHistory d;
+    d.add({0.0, {10, 10, 20, 20}, 1, 100, 1000.0, false});
+    d.add({0.1, {40, 40, 20, 20}, 2, 100, 1000.0, false});
+    d.add({0.2, {0, 0, 500, 500}, 3, 9000, -1.0, true});
+    ASSERT_EQ(d.visible(0.3).size(), 1u);
+    EXPECT_EQ(d.visible(0.3).front().sequence, 3u);
+    d.add({0.4, {5, 5, 8, 8}, 4, 100, 1000.0, false});
+    EXPECT_EQ(d.visible(0.5).size(), 2u);
+}
+
 TEST(Meshes, BurrToolHasItsSphereAtTheOrigin) {
     MeshData m = makeToolMesh(ToolShape::burr(5.0f));
     ASSERT_GT(m.triangleCount(), 100u);

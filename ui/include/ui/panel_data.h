@@ -89,6 +89,7 @@ struct DirtyBoxHistory {
     size_t keep = 64;
     std::deque<Box> boxes; // newest last
 
+    // A full update first forgets the boxes before it (they belong to the picture it replaces).
     void add(const Box& b);
     // 1 when new, falling linearly to 0 at fadeS.
     float alpha(const Box& b, double now) const;
