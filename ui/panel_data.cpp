@@ -68,6 +68,15 @@ double NetworkHistory::latencyPercentile(double p) const {
     return v.empty() ? -1.0 : percentile(v, p);
 }
 
+std::string defaultMarkLabel(const std::vector<net::AnnotationInfo>& marks) {
+    for (size_t n = marks.size() + 1;; ++n) {
+        const std::string label = "mark " + std::to_string(n);
+        if (std::none_of(marks.begin(), marks.end(),
+                         [&](const net::AnnotationInfo& m) { return m.label == label; }))
+            return label;
+    }
+}
+
 std::string NetworkHistory::latencyCaption(double maxUs) const {
     auto ms = [](double us) {
         if (us < 0.0)

@@ -836,9 +836,8 @@ int runTrainerWindow(const TrainerOptions& o) {
             net::Annotate a;
             a.op = net::Annotate::Op::Add;
             a.position = *pointerPick;
-            a.label = markControls.label[0]
-                          ? std::string(markControls.label)
-                          : "mark " + std::to_string(snap->annotations.size() + 1);
+            a.label = markControls.label[0] ? std::string(markControls.label)
+                                            : defaultMarkLabel(snap->annotations);
             client.annotate(a);
         }
         if (markControls.clearAll) {

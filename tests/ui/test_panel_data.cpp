@@ -91,6 +91,17 @@ TEST(DirtyBoxHistory, AFullUpdateForgetsTheBoxesOfThePictureItReplaces) {
     EXPECT_EQ(d.visible(0.5).size(), 2u);
 }
 
+// "mark N" never repeats a label on the skull: after "mark 1" of two is removed, the next is not
+// a second "mark 2".
+TEST(MarkLabels, ADefaultLabelIsNeverOneAlreadyOnTheSkull) {
+    std::vector<net::AnnotationInfo> marks;
+    EXPECT_EQ(defaultMarkLabel(marks), "mark 1");
+    marks.push_back({2, 1, {}, "mark 2"}); // "mark 1" was removed
+    EXPECT_EQ(defaultMarkLabel(marks), "mark 3");
+    marks.push_back({3, 1, {}, "entry point"});
+    EXPECT_EQ(defaultMarkLabel(marks), "mark 3");
+}
+
 TEST(Meshes, BurrToolHasItsSphereAtTheOrigin) {
     MeshData m = makeToolMesh(ToolShape::burr(5.0f));
     ASSERT_GT(m.triangleCount(), 100u);

@@ -139,4 +139,8 @@ struct ComparisonHistory {
     double ratio(double ComparisonFigures::*figure) const;
 };
 
+// The label of a mark placed without one: "mark N", N the number of marks + 1, or the next number
+// no mark's label already has (after a removal, "mark 2" may still be on the skull).
+std::string defaultMarkLabel(const std::vector<net::AnnotationInfo>& marks);
+
 } // namespace trephine::ui
