@@ -68,6 +68,18 @@ double NetworkHistory::latencyPercentile(double p) const {
     return v.empty() ? -1.0 : percentile(v, p);
 }
 
+std::optional<uint16_t>
+ScriptedTakeOver::due(int attempt, const std::map<uint16_t, net::ParticipantInfo>& participants) {
+    if (who.empty() || sentOnAttempt == attempt)
+        return std::nullopt;
+    for (const auto& [id, p] : participants)
+        if (p.role == net::Role::Trainee && (p.name == who || std::to_string(id) == who)) {
+            sentOnAttempt = attempt;
+            return id;
+        }
+    return std::nullopt;
+}
+
 std::string defaultMarkLabel(const std::vector<net::AnnotationInfo>& marks) {
     for (size_t n = marks.size() + 1;; ++n) {
         const std::string label = "mark " + std::to_string(n);

@@ -288,7 +288,7 @@ int runTrainerWindow(const TrainerOptions& o) {
         throw Error("window: --take-over: only an instructor takes over a trainee");
     TakeOverControls takeOverControls;
     takeOverControls.canTakeOver = o.instructor;
-    bool takeOverSent = o.takeOver.empty();
+    ScriptedTakeOver scriptedTakeOver{o.takeOver};
     std::optional<glm::vec3> pointerPick; // the bone under the pointer, last seen over the view
     const int viewSize = o.size;
     WindowConfig wc;
@@ -854,14 +854,9 @@ int runTrainerWindow(const TrainerOptions& o) {
         markControls.addAtPointer = markControls.clearAll = false;
         markControls.removeId = 0;
         // Take over (the panel's buttons, --take-over once the trainee is listed) or hand back.
-        if (!takeOverSent && snap->welcome && snap->state == net::LinkState::Connected)
-            for (const auto& [id, p] : snap->participants)
-                if (p.role == net::Role::Trainee &&
-                    (p.name == o.takeOver || std::to_string(id) == o.takeOver)) {
-                    client.takeOver(id);
-                    takeOverSent = true;
-                    break;
-                }
+        if (snap->welcome && snap->state == net::LinkState::Connected)
+            if (const auto id = scriptedTakeOver.due(snap->attempts, snap->participants))
+                client.takeOver(*id);
         if (takeOverControls.asked)
             client.takeOver(*takeOverControls.asked);
         takeOverControls.asked.reset();

@@ -102,6 +102,24 @@ TEST(MarkLabels, ADefaultLabelIsNeverOneAlreadyOnTheSkull) {
     EXPECT_EQ(defaultMarkLabel(marks), "mark 3");
 }
 
+// --take-over asks once per connection, once the trainee is listed; after a reconnect (the server
+// hands a trainee back when its instructor leaves) it asks again.
+TEST(ScriptedTakeOver, AsksOncePerConnectionOnceTheTraineeIsListed) {
+    ScriptedTakeOver t{"Ada"};
+    std::map<uint16_t, net::ParticipantInfo> roster;
+    roster[1] = {1, net::Role::Instructor, net::Sync::Dbi, "Ada", 0}; // an instructor named Ada
+    EXPECT_FALSE(t.due(1, roster));
+    roster[3] = {3, net::Role::Trainee, net::Sync::Dbi, "Ada", 0};
+    EXPECT_EQ(t.due(1, roster), std::optional<uint16_t>(3));
+    EXPECT_FALSE(t.due(1, roster)) << "once per connection";
+    roster.erase(3);
+    roster[2] = {2, net::Role::Trainee, net::Sync::Dbi, "Ada", 0};
+    EXPECT_EQ(t.due(2, roster), std::optional<uint16_t>(2)) << "the next connection asks again";
+    ScriptedTakeOver byId{"2"};
+    EXPECT_EQ(byId.due(1, roster), std::optional<uint16_t>(2));
+    EXPECT_FALSE(ScriptedTakeOver{}.due(1, roster)) << "none asked for";
+}
+
 TEST(Meshes, BurrToolHasItsSphereAtTheOrigin) {
     MeshData m = makeToolMesh(ToolShape::burr(5.0f));
     ASSERT_GT(m.triangleCount(), 100u);

@@ -10,6 +10,7 @@
 #include <deque>
 #include <glm/vec3.hpp>
 #include <map>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -137,6 +138,17 @@ struct ComparisonHistory {
     double ageS(SyncDesign d, double now) const;
     // DBI over volume for a figure both designs have measured (e.g. updatesPerS), 0 otherwise.
     double ratio(double ComparisonFigures::*figure) const;
+};
+
+// `--take-over NAME|ID`: the trainee to take over now, once per connection. A reconnect (a new
+// connection attempt) asks again: the server hands a trainee back when its instructor leaves.
+struct ScriptedTakeOver {
+    std::string who; // a trainee's name or id; empty: none asked for
+    int sentOnAttempt = -1;
+    // The trainee to send a TakeOver for on connection `attempt`, if one is listed and none was
+    // sent on this connection yet (marks it sent).
+    std::optional<uint16_t> due(int attempt,
+                                const std::map<uint16_t, net::ParticipantInfo>& participants);
 };
 
 // The label of a mark placed without one: "mark N", N the number of marks + 1, or the next number
