@@ -207,6 +207,17 @@ TEST(StudyReport, AFigureJustShortOfItsTargetDoesNotPrintAsTheTarget) {
     EXPECT_NE(display[0].find("= 19.96x (target"), std::string::npos) << display[0];
 }
 
+// Figure 7's dbi / volume column prints the ratio as the target line does: 4.96 reads 4.96x, not
+// 5.0x beside the line's MISS.
+TEST(StudyReport, FigureSevensRatioAgreesWithTheTargetLine) {
+    StudyReportInput in = input();
+    in.updates = {row("dbi", 40, 496, 800, 4500), row("volume", 40, 100, 1000, 1000)};
+    const std::string md = report(in);
+    EXPECT_NE(md.find("= 4.96x (target"), std::string::npos);
+    EXPECT_NE(md.find("| 4.96x |"), std::string::npos) << md.substr(0, 4000);
+    EXPECT_EQ(md.find("| 5.0x |"), std::string::npos);
+}
+
 // The 1/10 target is the at 80^3, whatever sizes follow it (--sizes 10,80,100): a box
 // beyond 80^3 is held to the every-size target, and 80^3 keeps its own.
 TEST(StudyReport, TheTenthSizeTargetIsAt80EvenWithLargerBoxes) {
