@@ -25,10 +25,12 @@
 
 using namespace trephine;
 using namespace trephine::net;
+using trephine::testing::drillThrough;
 using trephine::testing::loopback;
 using trephine::testing::loopbackServerConfig;
 using trephine::testing::pumpUntil;
 using trephine::testing::quantised;
+using trephine::testing::waitFor;
 
 namespace {
 
@@ -112,36 +114,6 @@ TEST(ClientReview, AResyncAsksOnceUntilItsFullImageArrives) {
         << "view requests for " << s.client->resyncs() << " mismatching updates";
     EXPECT_EQ(s.client->updatesRejected(), 0u);
 }
-
-namespace {
-
-template <class F>
-bool waitFor(F pred, double seconds = 30.0) {
-    auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-    while (std::chrono::steady_clock::now() < end) {
-        if (pred())
-            return true;
-        std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    }
-    return pred();
-}
-
-// Drills at `site` for `states` tool states 10 ms apart, 0.08 mm deeper each, from 1 mm above.
-void drillThrough(ClientThread& client, const SurfaceSite& site, int states) {
-    for (int i = 0; i < states; ++i) {
-        ToolState t;
-        t.toolKind = uint8_t(ToolKind::Burr);
-        t.diameterMm = 5.0f;
-        t.position = site.position - site.normal * (-1.0f + 0.08f * float(i));
-        t.orientation = glm::rotation(glm::vec3(0, 0, 1), site.normal);
-        t.speed = 1.0f;
-        t.drilling = true;
-        EXPECT_TRUE(client.sendToolState(t));
-        std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
-}
-
-} // namespace
 
 // Volume updates add their latencies to the client's latency window too: the full image that ends
 // a volume period must not carry their mean (it was caused by the switch, not by drilling), and

@@ -4,6 +4,7 @@
 
 #include "libsim/skull.h"
 #include "libsim/tool.h"
+#include "net/client_thread.h"
 #include "net/codec.h"
 #include "net/enet_host.h"
 #include "net/session_client.h"
@@ -17,6 +18,7 @@
 #include <functional>
 #include <memory>
 #include <string>
+#include <thread>
 #include <vector>
 
 namespace trephine::testing {
@@ -138,6 +140,35 @@ struct PaperZstdSession {
 // The top of makeSphere(n), facing +z.
 inline SurfaceSite sphereTop(int n) {
     return {{0.0f, 0.0f, sphereRadiusMm(n)}, {0.0f, 0.0f, 1.0f}};
+}
+
+// Polls `pred` every 5 ms until it holds (true) or `seconds` pass (pred's last answer): for
+// clients on their own thread (ClientThread), which need no pumping.
+template <class F>
+bool waitFor(F pred, double seconds = 30.0) {
+    auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+    while (std::chrono::steady_clock::now() < end) {
+        if (pred())
+            return true;
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    return pred();
+}
+
+// Drills at `site` through a ClientThread: `states` 5 mm burr tool states 10 ms apart, 0.08 mm
+// deeper each, from 1 mm above.
+inline void drillThrough(net::ClientThread& client, const SurfaceSite& site, int states) {
+    for (int i = 0; i < states; ++i) {
+        net::ToolState t;
+        t.toolKind = uint8_t(ToolKind::Burr);
+        t.diameterMm = 5.0f;
+        t.position = site.position - site.normal * (-1.0f + 0.08f * float(i));
+        t.orientation = glm::rotation(glm::vec3(0, 0, 1), site.normal);
+        t.speed = 1.0f;
+        t.drilling = true;
+        EXPECT_TRUE(client.sendToolState(t));
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
 }
 
 } // namespace trephine::testing

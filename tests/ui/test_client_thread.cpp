@@ -20,20 +20,9 @@
 using namespace trephine;
 using namespace trephine::net;
 
-namespace {
-
+using trephine::testing::drillThrough;
 using trephine::testing::loopbackServerConfig;
-template <class F>
-bool waitFor(F pred, double seconds) {
-    auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-    while (std::chrono::steady_clock::now() < end) {
-        if (pred())
-            return true;
-        std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    }
-    return pred();
-}
-} // namespace
+using trephine::testing::waitFor;
 
 TEST(ClientThread, PublishesSnapshotsAndDrilledRectangles) {
     Volume skull = makeSkull(64);
@@ -71,17 +60,7 @@ TEST(ClientThread, PublishesSnapshotsAndDrilledRectangles) {
     ASSERT_FALSE(mirror.empty());
     const Dbi first = mirror;
     // Drill in at the site for 0.5 s of tool states.
-    for (int i = 0; i < 50; ++i) {
-        ToolState t;
-        t.toolKind = uint8_t(ToolKind::Burr);
-        t.diameterMm = 5.0f;
-        t.position = site.position - site.normal * (-1.0f + 0.08f * float(i));
-        t.orientation = glm::rotation(glm::vec3(0, 0, 1), site.normal);
-        t.speed = 1.0f;
-        t.drilling = true;
-        EXPECT_TRUE(client.sendToolState(t));
-        std::this_thread::sleep_for(std::chrono::milliseconds(10));
-    }
+    drillThrough(client, site, 50);
     ASSERT_TRUE(waitFor([&] { return client.rectsPublished() > 1 && server.idle(); }, 20.0));
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
     drain();
