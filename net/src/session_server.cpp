@@ -247,7 +247,9 @@ struct SessionServer::Impl {
     std::condition_variable inCv;
     std::vector<SimEvent> inbox;
     size_t inboxTools = 0; // Tool events in the inbox (ServerConfig::maxQueuedToolStates)
-    bool busy = false;     // the simulation thread is working on a batch (under inMutex)
+    // Peers whose mode switch waits for kSyncSwitchIntervalUs (NetPeer::syncDeferred): not idle.
+    std::atomic<int> syncsDeferred{0};
+    bool busy = false; // the simulation thread is working on a batch (under inMutex)
     std::atomic<bool> stopSim{false};
 
     // Simulation -> network.
@@ -611,6 +613,8 @@ Volume SessionServer::volumeSnapshot() {
 }
 
 bool SessionServer::idle() {
+    if (m_impl->syncsDeferred.load() > 0)
+        return false;
     {
         std::lock_guard lock(m_impl->inMutex);
         if (!m_impl->inbox.empty() || m_impl->busy)
@@ -711,6 +715,8 @@ void SessionServer::networkLoop() {
         ev.volumeCodec = p.volumeCodec;
         s.push(std::move(ev));
         p.syncPushedUs = now;
+        if (p.syncDeferred)
+            --s.syncsDeferred;
         p.syncDeferred = false;
     };
     // A control message to everyone who said hello (and was not kicked).
@@ -884,10 +890,12 @@ void SessionServer::networkLoop() {
             // switching back and forth as fast as it can send would slow everyone: a switch
             // within kSyncSwitchIntervalUs of the last one waits, and what reaches the simulation
             // then is the latest mode.
-            if (now - p.syncPushedUs >= kSyncSwitchIntervalUs)
+            if (now - p.syncPushedUs >= kSyncSwitchIntervalUs) {
                 pushSync(id, p, now);
-            else
+            } else if (!p.syncDeferred) {
                 p.syncDeferred = true;
+                ++s.syncsDeferred;
+            }
             return true;
         }
         case MessageType::Annotate: {
@@ -1007,6 +1015,8 @@ void SessionServer::networkLoop() {
             auto gone = id ? s.peers.find(id) : s.peers.end();
             if (gone != s.peers.end()) {
                 const bool listed = gone->second.hello && !gone->second.kicked;
+                if (gone->second.syncDeferred)
+                    --s.syncsDeferred; // it left: nothing to switch
                 s.peers.erase(gone);
                 s.releaseTakeOvers(id);
                 s.push(makeEvent(SimEvent::Kind::Leave, id));

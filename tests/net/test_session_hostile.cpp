@@ -390,3 +390,29 @@ TEST(SessionHostile, ToolStatesBeyondTheQueueBoundAreDroppedAndCounted) {
     EXPECT_NE(server.reportJson().find("\"tool_states_dropped\": "), std::string::npos);
     server.stop();
 }
+
+// A mode switch that waits out kSyncSwitchIntervalUs is work still to do: the server is not idle
+// until it has reached the simulation and its full image has gone out.
+TEST(SessionHostile, AServerWithAPacedModeSwitchWaitingIsNotIdle) {
+    Volume sphere = makeSphere(32);
+    SessionServer server(sphere, loopbackServerConfig("sphere:32"));
+    server.start();
+    RawPeer c;
+    ASSERT_TRUE(
+        c.join(server.port(), "switcher", toViewSpec(cameraPreset("top", sphere, {32, 32}))));
+    ASSERT_TRUE(c.serviceUntil([&] { return server.idle(); }));
+    SyncMode m;
+    m.volumeCodec = Codec::Lz4;
+    m.sync = Sync::Volume;
+    c.send(Channel::Control, m);
+    m.sync = Sync::Dbi; // sooner than kSyncSwitchIntervalUs after the first: it waits
+    c.send(Channel::Control, m);
+    ASSERT_TRUE(c.serviceUntil(
+        [&] { return server.reportJson().find("\"sync_switches\": 2") != std::string::npos; }));
+    EXPECT_FALSE(server.idle()) << "the switch back to DBI still waits";
+    const size_t images = c.images.size();
+    ASSERT_TRUE(c.serviceUntil([&] { return server.idle(); }));
+    ASSERT_GT(c.images.size(), images);
+    EXPECT_TRUE(c.images.back().full) << "the DBI after the switch back";
+    server.stop();
+}

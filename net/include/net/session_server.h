@@ -110,7 +110,8 @@ public:
     // A fresh full render of the current volume for a view (what a converged client holds).
     Dbi renderView(const ViewSpec& view);
     Volume volumeSnapshot();
-    // True when no tool state or view event waits and no image update is queued or unsent.
+    // True when no tool state, view event or paced mode switch waits and no image update is
+    // queued or unsent.
     bool idle();
     size_t clientCount() const { return m_clientCount.load(); }
     // The most bytes of image and volume updates ENet held for one client at once (see
