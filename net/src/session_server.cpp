@@ -96,6 +96,28 @@ struct NetPeer {
     bool syncDeferred = false;
 };
 
+// A message the network thread sends whole, at most once every `intervalUs`: changes mark it and
+// the loop sends it when due, so changes as fast as a peer can send go out together. A change
+// marked `urgent` goes out at the next pass.
+struct Coalesced {
+    uint64_t intervalUs;
+    bool dirty = false, urgent = false;
+    uint64_t sentUs = 0;
+
+    void mark(bool now = false) {
+        dirty = true;
+        urgent = urgent || now;
+    }
+    // True (and counted as sent) when it should go out at time `now`.
+    bool due(uint64_t now) {
+        if (!dirty || (!urgent && now - sentUs < intervalUs))
+            return false;
+        dirty = urgent = false;
+        sentUs = now;
+        return true;
+    }
+};
+
 // Per-peer figures for the server report (kept after the peer leaves).
 struct PeerReport {
     std::string name;
@@ -730,12 +752,8 @@ void SessionServer::networkLoop() {
     // cannot make the server queue a roster per message for every participant. Joins and leaves
     // (`now`) go out at once: the others keep a newcomer's relayed tool only once a roster lists
     // it, and a connection makes at most one of each.
-    bool rosterDirty = false, rosterNow = false;
-    uint64_t rosterSentUs = 0;
-    auto sendParticipants = [&](bool now = false) {
-        rosterDirty = true;
-        rosterNow = rosterNow || now;
-    };
+    Coalesced rosterOut{kRosterIntervalUs};
+    auto sendParticipants = [&](bool now = false) { rosterOut.mark(now); };
     auto sendRoster = [&] {
         Participants roster;
         for (const auto& [pid, peer] : s.peers) { // a std::map: increasing ids, as the wire wants
@@ -747,8 +765,7 @@ void SessionServer::networkLoop() {
         }
         sendToParticipants(encodeMessage(roster));
     };
-    bool annotationsDirty = false; // the marks changed since the list last went out
-    uint64_t annotationsSentUs = 0;
+    Coalesced marksOut{kAnnotationsIntervalUs}; // the marks' list, when they change
     // Every mark, in increasing id (a std::map).
     auto annotationList = [&] {
         Annotations marks;
@@ -926,7 +943,7 @@ void SessionServer::networkLoop() {
                 s.annotations.clear();
                 break;
             }
-            annotationsDirty = true; // sent from the loop (kAnnotationsIntervalUs)
+            marksOut.mark(); // sent from the loop (kAnnotationsIntervalUs)
             return true;
         }
         case MessageType::TakeOver: {
@@ -1124,16 +1141,10 @@ void SessionServer::networkLoop() {
         // The marks go out at most every kAnnotationsIntervalUs, the whole list once: a peer
         // editing fast (any hello may claim the instructor's role) cannot make the server queue a
         // list per edit for every participant on the reliable channel.
-        if (annotationsDirty && now - annotationsSentUs >= kAnnotationsIntervalUs) {
+        if (marksOut.due(now))
             sendToParticipants(annotationList());
-            annotationsDirty = false;
-            annotationsSentUs = now;
-        }
-        if (rosterDirty && (rosterNow || now - rosterSentUs >= kRosterIntervalUs)) {
+        if (rosterOut.due(now))
             sendRoster();
-            rosterDirty = rosterNow = false;
-            rosterSentUs = now;
-        }
         // A mode switch that came too soon after the last one reaches the simulation now, as the
         // peer's latest mode (see the SyncMode handler).
         for (auto& [id, p] : s.peers)
