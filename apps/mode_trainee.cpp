@@ -468,10 +468,15 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
         root.add_subcommand("trainee", "Join a session as a trainee (window or headless)");
     sub->add_option("--connect", o->connect, "Server address HOST:PORT")->required();
     sub->add_flag("--headless", o->headless, "No window: run a script and report statistics");
+    // Options only a --headless trainee uses: listed under their own heading, and refused by the
+    // window (runTrainee) rather than ignored.
+    static const std::string kHeadlessOnly = "Headless only (with --headless)";
     sub->add_option("--script", o->script, "burrhole, or a CSV trajectory (docs/scripts.md)")
-        ->capture_default_str();
+        ->capture_default_str()
+        ->group(kHeadlessOnly);
     sub->add_option("--camera", o->camera, "View preset, as in `trephine render`")
-        ->capture_default_str();
+        ->capture_default_str()
+        ->group(kHeadlessOnly);
     sub->add_option("--codec", o->codec, "Image codec: raw, lz4 or zstd")
         ->check(CLI::IsMember({"raw", "lz4", "zstd"}))
         ->capture_default_str();
@@ -490,9 +495,11 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
         ->check(CLI::Range(16, 4096))
         ->capture_default_str();
     sub->add_option("--duration", o->durationS, "Seconds of script to run (burrhole: its length)")
-        ->check(finiteRange(0.0, 3600.0));
-    sub->add_option("--report", o->report, "Write statistics as JSON here");
-    sub->add_option("--save-dbi", o->saveDbi, "Write the final DBI as OpenEXR here");
+        ->check(finiteRange(0.0, 3600.0))
+        ->group(kHeadlessOnly);
+    sub->add_option("--report", o->report, "Write statistics as JSON here")->group(kHeadlessOnly);
+    sub->add_option("--save-dbi", o->saveDbi, "Write the final DBI as OpenEXR here")
+        ->group(kHeadlessOnly);
     sub->add_option("--name", o->name, "Name shown to others")->capture_default_str();
     sub->add_option("--screenshot", o->screenshot,
                     "Window: write it to this PNG once the view has settled, then exit");
@@ -507,12 +514,12 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
     sub->add_option("--tool-rate", o->toolRateHz,
                     "Tool states per second sent by the haptic loop (20-1000)")
         ->check(finiteRange(20.0, 1000.0))
-        ->capture_default_str();
+        ->capture_default_str()
+        ->group(kHeadlessOnly);
     sub->callback([o, sub, &exitCode] {
-        for (const char* flag :
-             {"--script", "--camera", "--duration", "--report", "--save-dbi", "--tool-rate"})
-            if (o->headlessOnly.empty() && sub->count(flag))
-                o->headlessOnly = flag;
+        for (const CLI::Option* opt : sub->get_options())
+            if (o->headlessOnly.empty() && opt->get_group() == kHeadlessOnly && opt->count())
+                o->headlessOnly = opt->get_name();
         exitCode = runTrainee(*o);
     });
 }
