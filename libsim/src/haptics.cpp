@@ -11,11 +11,23 @@ namespace trephine {
 // [SECTION] model and extrapolation
 
 AffineForce AffineForce::fromModel(const HapticModelData& m) {
-    return {glm::dvec3(m.position), glm::dvec3(m.force), glm::dmat3(m.gradient)};
+    return {glm::dvec3(m.position), glm::dvec3(m.force), glm::dmat3(m.gradient),
+            glm::dvec3(m.force)};
 }
 
 glm::vec3 extrapolate(const HapticModelData& m, glm::vec3 p) {
     return m.force + m.gradient * (p - m.position);
+}
+
+glm::dvec3 unilateral(glm::dvec3 f, glm::dvec3 push) {
+    const double strength = glm::length(push);
+    if (!(strength > 0.0))
+        return f;
+    const glm::dvec3 u = push / strength;
+    const double along = glm::dot(f, u);
+    if (along >= 0.0)
+        return f;
+    return f - std::min(1.0, strength / kUnilateralFullN) * along * u;
 }
 
 glm::vec3 clampForce(glm::vec3 f, float maxN) {
@@ -45,6 +57,7 @@ AffineForce ModelBlender::current() const {
     out.anchor = m_to.anchor;
     out.force = (1.0 - m_alpha) * m_from.at(m_to.anchor) + m_alpha * m_to.force;
     out.gradient = (1.0 - m_alpha) * m_from.gradient + m_alpha * m_to.gradient;
+    out.push = (1.0 - m_alpha) * m_from.push + m_alpha * m_to.push;
     return out;
 }
 
@@ -58,7 +71,7 @@ void ModelBlender::setModel(const HapticModelData& m, double now) {
     if (m_hasModel) {
         m_from = current();
     } else {
-        m_from = AffineForce{next.anchor, glm::dvec3(0.0), glm::dmat3(0.0)};
+        m_from = AffineForce{next.anchor, glm::dvec3(0.0), glm::dmat3(0.0), glm::dvec3(0.0)};
     }
     m_to = next;
     m_alpha = 0.0;
@@ -89,21 +102,35 @@ glm::vec3 ModelBlender::update(glm::vec3 p, double now) {
     if (!m_fading && now - m_lastModelTime > m_config.staleTimeoutS) {
         // Fading is a blend towards the zero field.
         m_from = current();
-        m_to = AffineForce{m_from.anchor, glm::dvec3(0.0), glm::dmat3(0.0)};
+        m_to = AffineForce{m_from.anchor, glm::dvec3(0.0), glm::dmat3(0.0), m_from.push};
         m_alpha = 0.0;
         m_blendTime = m_config.fadeTimeS;
         m_fading = true;
     }
     const glm::dvec3 fromF = m_from.at(pd), toF = m_to.at(pd);
+    // The mix at alpha a, made unilateral (`unilateral`) against the same mix of the pushes: at a
+    // new model nothing changes (its `from` is the mix of the moment, push included).
+    auto mixAt = [&](double a) {
+        const glm::dvec3 f = (1.0 - a) * fromF + a * toF;
+        return m_config.unilateral ? unilateral(f, (1.0 - a) * m_from.push + a * m_to.push) : f;
+    };
     if (m_alpha < 1.0 && dt > 0.0) {
         double step = m_blendTime > 0.0 ? dt / m_blendTime : 1.0;
         const double diff = glm::length(toF - fromF);
         if (diff > 0.0)
             step = std::min(step, m_config.maxStepN / diff);
+        // The bound is exact for the plain mix; where the unilateral part turns with alpha the
+        // output can move more, so shorten the step until it keeps to maxStepN.
+        const glm::dvec3 now0 = mixAt(m_alpha);
+        for (int i = 0; i < 30; ++i) {
+            const double moved = glm::length(mixAt(std::min(1.0, m_alpha + step)) - now0);
+            if (moved <= m_config.maxStepN)
+                break;
+            step *= 0.9 * m_config.maxStepN / moved;
+        }
         m_alpha = std::min(1.0, m_alpha + step);
     }
-    const glm::dvec3 f = (1.0 - m_alpha) * fromF + m_alpha * toF;
-    return clampForce(glm::vec3(f), m_config.maxForceN);
+    return clampForce(glm::vec3(mixAt(m_alpha)), m_config.maxForceN);
 }
 
 // [SECTION] recorder

@@ -7,8 +7,10 @@
 
 #include <atomic>
 #include <cmath>
+#include <deque>
 #include <glm/geometric.hpp>
 #include <gtest/gtest.h>
+#include <random>
 #include <sstream>
 #include <thread>
 
@@ -153,6 +155,76 @@ TEST(Haptics, NonFiniteModelIsIgnored) {
     for (int i = 30; i <= 200; ++i)
         f = blender.update(p, i * 1e-3);
     EXPECT_NEAR(f.z, 1.0f, 1e-5f);
+}
+
+// Equation 1 is linear: a hand lifting the tool off the bone carries the extrapolation past the
+// surface, where it reverses and pulls the tool back in (2 N and -6 N/mm, 1 mm up: -4 N). A
+// contact only pushes, so the blender removes the part against the contact's push.
+TEST(Haptics, ALiftedToolIsNotPulledIntoTheBone) {
+    HapticModelData m = modelAt({0.0f, 0.0f, 10.0f}, {0.0f, 0.0f, 2.0f}, 0.0f);
+    m.gradient[2][2] = -6.0f; // a flat face: stiff along its normal only
+    ModelBlender blender;
+    blender.resetTo(m, 0.0);
+    auto at = [&](glm::vec3 d) { return blender.update(m.position + d, 0.0); };
+    EXPECT_NEAR(
+        glm::length(extrapolate(m, m.position + glm::vec3(0, 0, 1.0f)) - glm::vec3(0, 0, -4.0f)),
+        0.0f, 1e-5f); // Equation 1 itself is unchanged
+    EXPECT_EQ(at({0, 0, 1.0f}), glm::vec3(0.0f));
+    EXPECT_EQ(at({0.7f, -0.2f, 3.0f}), glm::vec3(0.0f));
+    // In contact nothing changes: pressed in, and lifted but not past the surface.
+    EXPECT_NEAR(at({0, 0, -0.5f}).z, 5.0f, 1e-5f);
+    EXPECT_NEAR(at({0, 0, 0.2f}).z, 0.8f, 1e-5f);
+    // Only the part against the push goes; the rest of the extrapolation stays.
+    m.gradient = glm::mat3(-6.0f);
+    blender.resetTo(m, 0.0);
+    const glm::vec3 f = at({0.5f, 0.0f, 1.0f}); // Equation 1: (-3, 0, -4)
+    EXPECT_NEAR(f.x, -3.0f, 1e-5f);
+    EXPECT_NEAR(f.y, 0.0f, 1e-5f);
+    EXPECT_NEAR(f.z, 0.0f, 1e-5f);
+}
+
+TEST(Haptics, UnilateralIsContinuousDownToNoPush) {
+    const glm::dvec3 f(0.0, 0.0, -4.0);
+    EXPECT_EQ(unilateral(f, {0.0, 0.0, 2.0}), glm::dvec3(0.0));
+    EXPECT_EQ(unilateral(f, {0.0, 0.0, -2.0}), f); // along the push: kept
+    EXPECT_EQ(unilateral(f, glm::dvec3(0.0)), f);  // no contact direction: kept
+    // A push weaker than kUnilateralFullN removes in proportion, so nothing jumps as it fades.
+    const glm::dvec3 half = unilateral(f, {0.0, 0.0, 0.5 * kUnilateralFullN});
+    EXPECT_NEAR(half.z, -2.0, 1e-12);
+}
+
+// Models whose extrapolations are cut by the unilateral rule in different directions, switching
+// mid-blend: the output at a fixed position still moves at most maxStepN a tick, and every blend
+// still completes.
+TEST(Haptics, UnilateralBlendingKeepsTheStepBound) {
+    BlendConfig config;
+    config.maxStepN = 0.1;
+    ModelBlender blender(config);
+    const glm::vec3 p(0.0f, 0.0f, 10.0f);
+    std::mt19937 rng(7);
+    std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+    glm::vec3 prev = blender.update(p, 0.0);
+    double maxStep = 0.0;
+    int tick = 0, completed = 0, cut = 0;
+    for (int k = 0; k < 300; ++k) {
+        const glm::vec3 dir = glm::normalize(glm::vec3(u(rng), u(rng), u(rng)) + 1e-3f);
+        // Anchored up to 1.5 mm from p, behind or ahead of it along the push.
+        const glm::vec3 anchor = p - dir * (1.5f * u(rng)) + 0.3f * glm::vec3(u(rng), u(rng), 0);
+        HapticModelData m = modelAt(anchor, dir * (1.0f + 3.0f * std::abs(u(rng))), 6.0f);
+        cut += glm::dot(extrapolate(m, p), dir) < 0.0f;
+        blender.setModel(m, tick * 1e-3);
+        // Every third model is replaced mid-blend; the others are given up to 2 s to blend in.
+        const int ticks = k % 3 == 0 ? 4 : 2000;
+        for (int i = 0; i < ticks && !(i > 0 && blender.blendFraction() == 1.0); ++i, ++tick) {
+            const glm::vec3 out = blender.update(p, tick * 1e-3);
+            maxStep = std::max(maxStep, double(glm::length(out - prev)));
+            prev = out;
+        }
+        completed += blender.blendFraction() == 1.0;
+    }
+    EXPECT_GT(cut, 50);
+    EXPECT_LE(maxStep, config.maxStepN + 1e-5);
+    EXPECT_EQ(completed, 200);
 }
 
 TEST(Haptics, RecorderKeepsTheNewestSamples) {
@@ -368,6 +440,56 @@ TEST(HapticsStudy, BlendingWithoutTheGradientIsNotEnough) {
     config.multirateUsesGradient = false;
     HapticsCaseResult r = runHapticsCase(box, site, config, {HapticMethod::Multirate, 20.0, 0.0});
     EXPECT_FALSE(r.stable) << hapticsCsvRow(r);
+}
+
+// The real force model on a flat bone face: the hand lifts a pressed-in 2 mm burr off at 50 mm/s
+// with 20 Hz models 25 ms late. The contact itself never pulls (truth >= 0 along the normal); plain
+// Equation 1 carries the last in-contact model past the surface and pulls the tool back in.
+TEST(HapticsStudy, LiftingOffFeelsNoPullIntoTheBone) {
+    Volume box = makeBox(48);
+    const SurfaceSite site = boxTopSite(box);
+    const ToolShape shape = ToolShape::burr(2.0f);
+    const ForceModel model(shape);
+    const glm::vec3 n = site.normal;
+    // The burr's centre 0.6 mm below the point where it touches, then up by 4 mm.
+    const glm::vec3 start = site.position + n * (1.0f - 0.6f);
+    auto pullWith = [&](bool unilateralOn, float* truthMin) {
+        BlendConfig config;
+        config.unilateral = unilateralOn;
+        ModelBlender blender(config);
+        std::deque<std::pair<double, HapticModelData>> inFlight;
+        float minAlong = 0.0f;
+        *truthMin = 0.0f;
+        for (int i = 0; i <= 120; ++i) {
+            const double t = i * 1e-3;
+            ToolPose pose =
+                ToolPose::fromAxis(start + n * float(std::max(0.0, t - 0.02) * 50.0), site.normal);
+            const ForceResult truth = model.compute(box, pose);
+            if (i % 50 == 0) { // 20 Hz, answered 25 ms later
+                HapticModelData m;
+                m.position = pose.position;
+                m.force = truth.force;
+                m.gradient = truth.gradient;
+                m.contact = truth.contact;
+                if (i == 0)
+                    blender.resetTo(m, t);
+                else
+                    inFlight.emplace_back(t + 0.025, m);
+            }
+            while (!inFlight.empty() && inFlight.front().first <= t + 1e-9) {
+                blender.setModel(inFlight.front().second, t);
+                inFlight.pop_front();
+            }
+            minAlong = std::min(minAlong, glm::dot(blender.update(pose.position, t), n));
+            *truthMin = std::min(*truthMin, glm::dot(truth.force, n));
+        }
+        return minAlong;
+    };
+    float truthMin = 0.0f;
+    const float plain = pullWith(false, &truthMin);
+    EXPECT_GE(truthMin, 0.0f);
+    EXPECT_LT(plain, -1.0f) << "plain Equation 1 pulls into the bone";
+    EXPECT_GE(pullWith(true, &truthMin), 0.0f);
 }
 
 TEST(HapticsStudy, CsvHeaderIsExact) {

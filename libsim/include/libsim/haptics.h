@@ -45,6 +45,9 @@ struct AffineForce {
     glm::dvec3 anchor{0.0}; // P_N
     glm::dvec3 force{0.0};  // at the anchor
     glm::dmat3 gradient{0.0};
+    // The way the contact pushes: the model's own f(P_N) (for a blend, the same mix of its
+    // fields' pushes). Not f at another field's anchor, which the extrapolation may have reversed.
+    glm::dvec3 push{0.0};
 
     static AffineForce fromModel(const HapticModelData& m);
     glm::dvec3 at(glm::dvec3 p) const { return force + gradient * (p - anchor); }
@@ -52,6 +55,13 @@ struct AffineForce {
 
 // Equation 1 of the paper. Exactly m.force at p == m.position.
 glm::vec3 extrapolate(const HapticModelData& m, glm::vec3 p);
+
+// A contact only pushes: f less its component against `push` (the way the contact pushes), so
+// Equation 1 extrapolated past the surface (the hand lifting off) does not pull the tool into the
+// bone. Below kUnilateralFullN of push the removal is scaled down in proportion, so the result is
+// continuous in both arguments (no direction at all: f unchanged).
+inline constexpr double kUnilateralFullN = 0.01;
+glm::dvec3 unilateral(glm::dvec3 f, glm::dvec3 push);
 
 // Scales f to |f| <= maxN (keeps its direction).
 glm::vec3 clampForce(glm::vec3 f, float maxN);
@@ -69,6 +79,9 @@ struct BlendConfig {
     double staleTimeoutS = 0.25; // no model for this long: fade the force out
     double fadeTimeS = 0.1;      // fading from full force to zero takes at least this long
     float maxForceN = kDefaultMaxForceN;
+    // A contact only pushes (`unilateral`); false: the paper's plain Equation 1, which pulls a
+    // tool lifted past the surface back in (kept to measure the difference).
+    bool unilateral = true;
 };
 
 // The haptic-rate side of multi-rate: owned by one thread, fed models with their arrival time.
