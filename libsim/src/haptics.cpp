@@ -130,7 +130,12 @@ glm::vec3 ModelBlender::update(glm::vec3 p, double now) {
         }
         m_alpha = std::min(1.0, m_alpha + step);
     }
-    return clampForce(glm::vec3(mixAt(m_alpha)), m_config.maxForceN);
+    // Clamped in doubles: a huge but finite field (1e37 N/mm) overflows a float to infinity,
+    // which clampForce takes for a NaN and zeroes, where it should give the limit.
+    const glm::dvec3 f = mixAt(m_alpha);
+    const double mag = glm::length(f);
+    const double maxN = m_config.maxForceN;
+    return clampForce(glm::vec3(mag > maxN ? f * (maxN / mag) : f), m_config.maxForceN);
 }
 
 // [SECTION] recorder

@@ -183,6 +183,16 @@ TEST(Haptics, ALiftedToolIsNotPulledIntoTheBone) {
     EXPECT_NEAR(f.z, 0.0f, 1e-5f);
 }
 
+// A huge but finite field is clamped to the limit, not zeroed as if it were a NaN.
+TEST(Haptics, AHugeFiniteFieldGivesTheForceLimit) {
+    HapticModelData m = modelAt({0.0f, 0.0f, 10.0f}, {0.0f, 0.0f, 2.0f}, 1e37f);
+    ModelBlender blender;
+    blender.resetTo(m, 0.0);
+    const glm::vec3 f = blender.update(m.position - glm::vec3(0.0f, 0.0f, 1.0f), 0.0);
+    EXPECT_NEAR(f.z, blender.config().maxForceN, 1e-4f);
+    EXPECT_NEAR(glm::length(f), blender.config().maxForceN, 1e-4f);
+}
+
 TEST(Haptics, UnilateralIsContinuousDownToNoPush) {
     const glm::dvec3 f(0.0, 0.0, -4.0);
     EXPECT_EQ(unilateral(f, {0.0, 0.0, 2.0}), glm::dvec3(0.0));
