@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <glm/gtc/quaternion.hpp>
 #include <hidapi.h>
+#include <span>
 
 namespace trephine {
 
@@ -116,15 +117,33 @@ ToolPose integrateSpaceMouse(const ToolPose& pose, const SpaceMouseState& s, dou
     return out;
 }
 
-bool isSpaceMouse(uint16_t vendorId, uint16_t productId) {
-    if (vendorId == k3DconnexionVendorId)
-        return true;
-    if (vendorId != kLogitechVendorId)
+bool isSpaceMouse(uint16_t vendorId, uint16_t productId, uint16_t usagePage, uint16_t usage) {
+    auto listed = [productId](std::span<const uint16_t> products) {
+        return std::find(products.begin(), products.end(), productId) != products.end();
+    };
+    if (vendorId == kLogitechVendorId) {
+        // 3Dconnexion products sold under Logitech's vendor ID (SpaceNavigator and kin).
+        static constexpr uint16_t kProducts[] = {0xc603, 0xc605, 0xc606, 0xc621, 0xc623, 0xc625,
+                                                 0xc626, 0xc627, 0xc628, 0xc629, 0xc62b, 0xc640};
+        return listed(kProducts);
+    }
+    if (vendorId != k3DconnexionVendorId)
         return false;
-    // 3Dconnexion products sold under Logitech's vendor ID (SpaceNavigator and kin).
-    static constexpr uint16_t kProducts[] = {0xc603, 0xc605, 0xc606, 0xc621, 0xc623, 0xc625,
-                                             0xc626, 0xc627, 0xc628, 0xc629, 0xc62b, 0xc640};
-    return std::find(std::begin(kProducts), std::end(kProducts), productId) != std::end(kProducts);
+    // The same vendor ID covers mice, keyboards and receivers carrying several of them, so here an
+    // interface whose usage is known must be the multi-axis controller.
+    const bool usageKnown = usagePage != 0 || usage != 0;
+    const bool multiAxis = usagePage == kHidGenericDesktopPage && usage == kHidMultiAxisUsage;
+    if (usageKnown && !multiAxis)
+        return false;
+    // SpaceMouse Wireless (cable, receiver), Pro Wireless (cable, receiver), Enterprise, Compact,
+    // Module, and the Universal Receiver.
+    static constexpr uint16_t kProducts[] = {0xc62e, 0xc62f, 0xc631, 0xc632,
+                                             0xc633, 0xc635, 0xc636, 0xc652};
+    // Not 6-DOF: CadMouse, CadMouse Wireless, and two spacenavd refuses (c62c, c641).
+    static constexpr uint16_t kNot6Dof[] = {0xc650, 0xc651, 0xc62c, 0xc641};
+    if (listed(kNot6Dof))
+        return false;
+    return listed(kProducts) || multiAxis;
 }
 
 namespace {
@@ -150,7 +169,9 @@ std::vector<HidDeviceInfo> enumerateHidDevices() {
         info.productId = d->product_id;
         info.manufacturer = narrow(d->manufacturer_string);
         info.product = narrow(d->product_string);
-        info.usable = isSpaceMouse(d->vendor_id, d->product_id);
+        info.usagePage = d->usage_page;
+        info.usage = d->usage;
+        info.usable = isSpaceMouse(d->vendor_id, d->product_id, d->usage_page, d->usage);
         out.push_back(std::move(info));
     }
     hid_free_enumeration(list);

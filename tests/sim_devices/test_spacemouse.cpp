@@ -126,8 +126,25 @@ TEST(SpaceMouse, KnowsTheVendorsAndProducts) {
     EXPECT_FALSE(isSpaceMouse(0x1234, 0xc626));
 }
 
+// 3Dconnexion's own vendor ID also covers mice and keyboards: the CadMouse is no 6-DOF device.
+TEST(SpaceMouse, RefusesThe3DconnexionProductsThatAreNotSpaceMice) {
+    EXPECT_FALSE(isSpaceMouse(0x256f, 0xc650));             // CadMouse
+    EXPECT_FALSE(isSpaceMouse(0x256f, 0xc651));             // CadMouse Wireless
+    EXPECT_FALSE(isSpaceMouse(0x256f, 0xc650, 0x01, 0x08)); // refused even if it said so
+    EXPECT_FALSE(isSpaceMouse(0x256f, 0xc6ff));             // unknown, no usage
+    EXPECT_TRUE(isSpaceMouse(0x256f, 0xc6ff, 0x01, 0x08));  // unknown, multi-axis controller
+    EXPECT_TRUE(isSpaceMouse(0x256f, 0xc62e));              // SpaceMouse Wireless (cable)
+    EXPECT_TRUE(isSpaceMouse(0x256f, 0xc633, 0x01, 0x08));  // SpaceMouse Enterprise
+    // The Universal Receiver's interfaces: the SpaceMouse's is taken, a paired CadMouse's
+    // (Generic Desktop, Mouse) is not.
+    EXPECT_TRUE(isSpaceMouse(0x256f, 0xc652, 0x01, 0x08));
+    EXPECT_FALSE(isSpaceMouse(0x256f, 0xc652, 0x01, 0x02));
+    // Under Logitech's vendor ID the product IDs are 3Dconnexion's alone: the usage is not asked.
+    EXPECT_TRUE(isSpaceMouse(0x046d, 0xc626, 0x01, 0x04));
+}
+
 TEST(SpaceMouse, EnumerationWithoutDevicesIsClean) {
     // No assertion on the count: this machine may have HID devices. It must not crash.
     for (const HidDeviceInfo& d : enumerateHidDevices())
-        EXPECT_EQ(d.usable, isSpaceMouse(d.vendorId, d.productId));
+        EXPECT_EQ(d.usable, isSpaceMouse(d.vendorId, d.productId, d.usagePage, d.usage));
 }

@@ -66,12 +66,21 @@ inline constexpr double kSpaceMouseMaxStepS = 0.1;
 DeviceState spaceMouseStep(ToolPose& pose, double& lastRead, double now,
                            const SpaceMouseState& state, bool lost, const SpaceMouseConfig& config);
 
-// True for the vendor/product pairs of 3Dconnexion 6-DOF devices.
-bool isSpaceMouse(uint16_t vendorId, uint16_t productId);
+// HID usage of a 6-DOF device's interface: Generic Desktop (page 1), Multi-axis Controller (8).
+inline constexpr uint16_t kHidGenericDesktopPage = 0x01, kHidMultiAxisUsage = 0x08;
+
+// True for 3Dconnexion 6-DOF devices (the product IDs spacenavd drives). Under 3Dconnexion's own
+// vendor ID the CadMouse and other non-6-DOF products are refused, and a product not listed is
+// taken when its interface's usage (hidraw reports it; 0 when unknown) says multi-axis
+// controller; there a known usage that is not that refuses any product (a receiver carrying a
+// SpaceMouse and a CadMouse shows one interface for each). Logitech's IDs go by product alone.
+bool isSpaceMouse(uint16_t vendorId, uint16_t productId, uint16_t usagePage = 0,
+                  uint16_t usage = 0);
 
 struct HidDeviceInfo {
     std::string path;
     uint16_t vendorId = 0, productId = 0;
+    uint16_t usagePage = 0, usage = 0; // of this interface (0: unknown)
     std::string manufacturer, product;
     bool usable = false; // a SpaceMouse we can drive
 };
