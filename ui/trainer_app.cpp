@@ -385,6 +385,7 @@ int runTrainerWindow(const TrainerOptions& o) {
     DirtyBoxHistory boxHistory;
 
     Dbi cpuDbi;               // pass 1's picture on the CPU, for the cursor's depth lookups
+    Camera cpuDbiCamera;      // the camera cpuDbi was rendered (or read back) with
     bool haveImage = false;   // the textures hold a full image of the current view
     uint32_t imageViewId = 0; // viewId of the image in the textures
     net::ViewSpec imageView;  // and its view: the camera it was rendered with
@@ -507,6 +508,7 @@ int runTrainerWindow(const TrainerOptions& o) {
                 picture = SyncDesign::Dbi;
                 pictureSinceUs = r.appliedUs;
                 cpuDbi = std::move(r.pixels);
+                cpuDbiCamera = net::toCamera(r.view);
             } else if (haveImage && r.viewId == imageViewId) {
                 comp.uploadRect(r.rect, r.pixels);
                 if (picture == SyncDesign::Dbi && cpuDbi.bounds().contains(r.rect))
@@ -635,7 +637,11 @@ int runTrainerWindow(const TrainerOptions& o) {
                 toolControls.pushMm =
                     std::clamp(toolControls.pushMm + io.MouseWheel * 0.25f, -5.0f, 10.0f);
                 int px = int(io.MousePos.x), py = viewSize - 1 - int(io.MousePos.y);
-                if (auto hit = pickSurface(cpuDbi, dbiCamera, px, py)) {
+                // Unprojected with the camera cpuDbi was made with: in volume mode its depth is
+                // read back after this pick, so for one frame after a view change (or a switch
+                // from DBI) it is still the old picture's, which the new camera would turn into a
+                // point off the bone.
+                if (auto hit = pickSurface(cpuDbi, cpuDbiCamera, px, py)) {
                     pointerPick = *hit;
                     ToolShape shape =
                         toolControls.kind == 1
@@ -699,7 +705,7 @@ int runTrainerWindow(const TrainerOptions& o) {
                     // the marks' occlusion: read back only when the volume or the view changed,
                     // and only the depth (the colour once, for the report, after the loop).
                     comp.readBackDepth(cpuDbi);
-                    volumeCamera = dbiCamera;
+                    volumeCamera = cpuDbiCamera = dbiCamera;
                     volumeDirty = false;
                 }
             } else {
