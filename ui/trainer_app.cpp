@@ -77,35 +77,6 @@ Scene buildScene(const std::string& volumeName) {
     return s;
 }
 
-glm::vec3 anyPerpendicular(glm::vec3 n) {
-    return glm::normalize(
-        glm::cross(n, std::abs(n.z) < 0.9f ? glm::vec3(0, 0, 1) : glm::vec3(1, 0, 0)));
-}
-
-// The scripted burr hole: plunge at the site, widen in a spiral, then rest the drill to one side.
-struct ScriptPose {
-    glm::vec3 position;
-    glm::vec3 axis;
-    bool drilling;
-    bool done;
-};
-ScriptPose burrholePose(const SurfaceSite& site, double t) {
-    const glm::vec3 n = site.normal, e1 = anyPerpendicular(n), e2 = glm::cross(n, e1);
-    const float depth = 2.0f;
-    if (t < 1.0) {
-        float d = -1.0f + float(t) * (depth + 1.0f);
-        return {site.position - n * d, n, true, false};
-    }
-    if (t < 4.0) {
-        float u = float((t - 1.0) / 3.0);
-        float r = 6.0f * u, a = glm::two_pi<float>() * 3.0f * u;
-        return {site.position - n * depth + (e1 * std::cos(a) + e2 * std::sin(a)) * r, n, true,
-                false};
-    }
-    // Resting beside the hole, leaning away so the hole stays in view.
-    return {site.position + e1 * 16.0f + n * 4.0f, glm::normalize(n + e1 * 0.7f), false, t > 4.3};
-}
-
 struct ToolMeshCache {
     Compositor* comp = nullptr;
     std::map<std::pair<int, int>, GpuMesh> meshes;

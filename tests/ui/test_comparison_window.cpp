@@ -115,7 +115,7 @@ TEST(ComparisonWindow, VolumeModeShowsTheSkullAndTheDrilledHole) {
     EXPECT_LT(a.colourOff, a.bothHit / 100) << "colours agree within a few levels";
 
     // The screenshot: bone-coloured where the server's render has bone (a ring away from the
-    // resting drill, outside the hole), and at the site the intact skull's bone is gone.
+    // resting drill, outside the hole); and at the site the intact skull's bone is gone.
     const Dbi intact = Renderer(skull).render(report.camera);
     Image img = readPng(shot);
     ASSERT_GE(img.w, kView);
@@ -131,13 +131,16 @@ TEST(ComparisonWindow, VolumeModeShowsTheSkullAndTheDrilledHole) {
                 ringBone += boneColoured(img.at(x, row));
             }
             if (r < kView * 0.024) {
+                // In the picture itself (the screenshot has the fading dirty boxes over the site,
+                // which alone changed most of these pixels while they were fresh): the bone seen
+                // there lies deeper than the intact skull's.
                 ++centre;
-                centreChanged += maxChannelDiff(img.at(x, row), intact.color(x, y)) > 30;
+                centreChanged += report.view.depth(x, y) > intact.depth(x, y) + 1e-4f;
             }
         }
     EXPECT_GT(ring, 100);
     EXPECT_GT(ringBone, ring * 8 / 10) << "bone-coloured where the server's render has bone";
-    EXPECT_GT(centreChanged, centre / 2) << "the drilled hole at the site";
+    EXPECT_GT(centreChanged, centre * 3 / 4) << "the drilled hole at the site";
     server.stop();
 }
 

@@ -63,3 +63,35 @@ TEST(MouseTool, BurrTouchesThePointAndPushesAlongTheLineOfSight) {
     ToolPose perf = toolPoseAt(s, v.cam, ToolShape::perforator(), 0.0f);
     EXPECT_NEAR(glm::length(perf.position - s), 0.0f, 1e-4f);
 }
+
+// The scripted burr hole moves as a hand would: no jump between 1 ms ticks (the haptic loop's
+// rate), drilling only while in the bone, and at rest beside the hole when done. It used to jump
+// 18 mm from the hole's floor to the rest pose in one tick, which threw the force extrapolated
+// from the last in-hole model to the limit.
+TEST(BurrholeScript, MovesContinuouslyAndEndsAtRestBesideTheHole) {
+    const SurfaceSite site{glm::vec3(10.0f, -5.0f, 60.0f),
+                           glm::normalize(glm::vec3(0.2f, 0.1f, 1.0f))};
+    ScriptPose prev = burrholePose(site, 0.0);
+    double maxStepMm = 0.0, lastDrilling = -1.0, doneAt = -1.0;
+    for (int i = 1; i <= 6000; ++i) {
+        const double t = i * 1e-3;
+        const ScriptPose p = burrholePose(site, t);
+        maxStepMm = std::max(maxStepMm, double(glm::distance(p.position, prev.position)));
+        EXPECT_LT(glm::distance(p.axis, prev.axis), 0.01f) << "t " << t;
+        if (p.drilling)
+            lastDrilling = t;
+        if (p.done && doneAt < 0.0)
+            doneAt = t;
+        prev = p;
+    }
+    EXPECT_LE(maxStepMm, 0.05); // 50 mm/s at most
+    EXPECT_GT(lastDrilling, 3.9);
+    EXPECT_LT(lastDrilling, 4.0);
+    ASSERT_GT(doneAt, 4.0);
+    // At rest: 4 mm above the surface, well beside the hole (6 mm radius), not drilling.
+    EXPECT_NEAR(glm::dot(prev.position - site.position, site.normal), 4.0f, 1e-4f);
+    const glm::vec3 lateral = prev.position - site.position -
+                              site.normal * glm::dot(prev.position - site.position, site.normal);
+    EXPECT_GT(glm::length(lateral), 12.0f);
+    EXPECT_FALSE(prev.drilling);
+}

@@ -1,9 +1,11 @@
-// The mouse as a drilling device (no GL, tested headless): the point of bone under the cursor,
-// from the DBI's depth and the camera it was rendered with, and the tool pose placed there.
+// The window's drilling devices without GL (tested headless): the mouse (the point of bone under
+// the cursor, from the DBI's depth and the camera it was rendered with, and the tool pose placed
+// there) and the scripted burr hole.
 #pragma once
 
 #include "libsim/camera.h"
 #include "libsim/dbi.h"
+#include "libsim/skull.h"
 #include "libsim/tool.h"
 
 #include <optional>
@@ -18,5 +20,17 @@ std::optional<glm::vec3> pickSurface(const Dbi& dbi, const Camera& camera, int p
 // further along the line of sight (negative: lifted off). A burr's centre sits one radius out so
 // that the sphere touches the point; the perforator's apex sits on it.
 ToolPose toolPoseAt(glm::vec3 surface, const Camera& camera, const ToolShape& shape, float pushMm);
+
+// The scripted burr hole (`--script burrhole`) at time t (s): plunge at the site, widen in a
+// spiral, lift out along the hole's axis and rest the drill to one side. The tool moves
+// continuously, as a hand would (at most about 40 mm/s), so forces extrapolated along it are
+// ones a hand could meet.
+struct ScriptPose {
+    glm::vec3 position;
+    glm::vec3 axis;
+    bool drilling;
+    bool done;
+};
+ScriptPose burrholePose(const SurfaceSite& site, double t);
 
 } // namespace trephine::ui
