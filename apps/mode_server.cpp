@@ -1,15 +1,18 @@
 // `trephine server`: hold the skull and serve trainees and instructors over ENet until SIGINT or
-// SIGTERM, then apply every queued tool state and write --save-on-exit.
+// SIGTERM, then apply every queued tool state and write --save-on-exit (the volume, and the
+// instructors' marks beside it, which a later `--volume` of that file reads back).
 #include "modes.h"
 
 #include "libsim/error.h"
 #include "libsim_image/volume_slices.h"
+#include "net/marks_file.h"
 #include "net/session_server.h"
 
 #include <atomic>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
+#include <filesystem>
 #include <fstream>
 #include <thread>
 
@@ -35,6 +38,15 @@ struct ServerOptions {
 int runServer(const ServerOptions& o) {
     Volume volume = openVolume(o.volume);
     net::ServerConfig config;
+    // A session saved by --save-on-exit left its marks beside the volume: they come back too.
+    const std::string marks = net::marksPathFor(o.volume);
+    std::error_code ec;
+    if (std::filesystem::is_regular_file(o.volume, ec) &&
+        std::filesystem::is_regular_file(marks, ec)) {
+        config.marks = net::readMarksFile(marks);
+        std::printf("trephine server: %zu mark%s from %s\n", config.marks.size(),
+                    config.marks.size() == 1 ? "" : "s", marks.c_str());
+    }
     config.port = o.port;
     config.volumeName = o.volume;
     config.saveOnExit = o.saveOnExit;
@@ -56,7 +68,8 @@ int runServer(const ServerOptions& o) {
     server.stop();
     // A failed --save-on-exit was said by stop(), with the emergency copy it made instead.
     if (!o.saveOnExit.empty() && server.saveError().empty())
-        std::printf("trephine server: wrote %s\n", o.saveOnExit.c_str());
+        std::printf("trephine server: wrote %s and %s\n", o.saveOnExit.c_str(),
+                    net::marksPathFor(o.saveOnExit).c_str());
     if (!o.report.empty()) {
         std::ofstream f(o.report);
         if (!(f << server.reportJson()))
@@ -75,8 +88,10 @@ void addServerMode(CLI::App& root, int& exitCode) {
     sub->add_option("--port", o->port, "UDP port (0: any free port)")->capture_default_str();
     sub->add_option("--volume", o->volume, "Volume spec (see `trephine volume --help`)")
         ->capture_default_str();
-    sub->add_option("--save-on-exit", o->saveOnExit,
-                    "Write the final volume here when the server stops (.nrrd keeps materials)");
+    sub->add_option(
+        "--save-on-exit", o->saveOnExit,
+        "Write the final volume here when the server stops (.nrrd keeps materials), and "
+        "the instructors' marks beside it (FILE.marks, read back by --volume FILE)");
     sub->add_option("--render-threads", o->renderThreads, "Render workers (0: all cores)")
         ->check(CLI::Range(0, 256));
     sub->add_option("--max-clients", o->maxClients,

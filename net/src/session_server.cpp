@@ -9,6 +9,7 @@
 #include "libsim/volume_io.h"
 #include "net/codec.h"
 #include "net/image_delta.h"
+#include "net/marks_file.h"
 #include "net/view.h"
 
 #include <poll.h>
@@ -524,8 +525,15 @@ const ServerConfig& checkedConfig(const ServerConfig& config) {
     if (!(config.helloTimeoutS > 0.0f))
         throw Error("server: the hello timeout must be positive");
     // Now, not at the end of the session: a path that cannot be written would lose it all.
-    if (!config.saveOnExit.empty())
+    if (!config.saveOnExit.empty()) {
         checkSaveTarget(config.saveOnExit);
+        const std::string marks = marksPathFor(config.saveOnExit);
+        std::error_code ec;
+        const auto status = std::filesystem::status(marks, ec);
+        if (std::filesystem::exists(status) && !std::filesystem::is_regular_file(status))
+            throw Error("--save-on-exit: " + marks + ", where the marks go, is not a regular file");
+    }
+    checkMarks(config.marks, "server: the starting marks");
     if (config.maxViewPixels < 1 || config.maxViewPixels > kMaxServedViewPixels)
         throw Error("server: the largest view must be 1 to " +
                     std::to_string(kMaxServedViewPixels) +
@@ -538,7 +546,12 @@ const ServerConfig& checkedConfig(const ServerConfig& config) {
 
 SessionServer::SessionServer(Volume volume, ServerConfig config)
     : m_impl(std::make_unique<Impl>(std::move(volume), checkedConfig(config))),
-      m_config(std::move(config)) {}
+      m_config(std::move(config)) {
+    for (const AnnotationInfo& m : m_config.marks) {
+        const uint32_t id = m_impl->nextAnnotationId++;
+        m_impl->annotations[id] = {id, 0, m.position, m.label};
+    }
+}
 
 SessionServer::~SessionServer() {
     try {
@@ -570,8 +583,17 @@ void SessionServer::stop() {
         m_simThread.join();
     if (!m_config.saveOnExit.empty()) {
         std::lock_guard lock(m_impl->volumeMutex);
+        // The marks too (the network thread, their keeper, has stopped), always, even none: an
+        // older file beside the volume would bring back marks this session removed.
+        std::vector<AnnotationInfo> marks;
+        for (const auto& [id, a] : m_impl->annotations)
+            marks.push_back(a);
+        auto saveSession = [&](const std::string& path) {
+            saveVolume(m_impl->volume, path);
+            writeMarksFile(marksPathFor(path), marks);
+        };
         try {
-            saveVolume(m_impl->volume, m_config.saveOnExit);
+            saveSession(m_config.saveOnExit);
             m_savedTo = m_config.saveOnExit;
         } catch (const std::exception& e) {
             // The session's drilling must not be lost to a full disk or a folder gone since the
@@ -586,10 +608,12 @@ void SessionServer::stop() {
                     .string();
             std::fprintf(stderr, "trephine server: %s\n", e.what());
             try {
-                saveVolume(m_impl->volume, copy);
+                saveSession(copy);
                 m_savedTo = copy;
-                std::fprintf(stderr, "trephine server: the final volume is saved in %s instead\n",
-                             copy.c_str());
+                std::fprintf(stderr,
+                             "trephine server: the final volume and marks are saved in %s (and "
+                             "%s) instead\n",
+                             copy.c_str(), marksPathFor(copy).c_str());
             } catch (const std::exception& e2) {
                 std::fprintf(stderr, "trephine server: no emergency copy either: %s\n", e2.what());
             }

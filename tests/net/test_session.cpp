@@ -1,5 +1,6 @@
 // The networked session over loopback: a SessionServer (its own threads) and poll-driven
 // SessionClients in one process. Deadlines only guard against hangs; nothing asserts wall time.
+#include "net/marks_file.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
 
@@ -435,6 +436,7 @@ TEST(Session, StopWritesSaveOnExitWithEveryAppliedDrilling) {
     ASSERT_TRUE(pumpUntil({&client}, [&] { return client.closed(); }));
     EXPECT_NE(client.closeReason().find("shutting down"), std::string::npos);
     std::filesystem::remove(path);
+    std::filesystem::remove(marksPathFor(path));
 }
 
 // --save-on-exit is checked when the server is made, not when the session ends; and should the
@@ -447,6 +449,11 @@ TEST(Session, ASaveOnExitThatCannotBeWrittenIsRefusedAtOnceOrSavedElsewhere) {
     EXPECT_THROW(SessionServer(sphere, config), Error);
     config.saveOnExit = tempPath("final.txt");
     EXPECT_THROW(SessionServer(sphere, config), Error);
+    // Where the marks would go is a folder.
+    std::filesystem::create_directories(tempPath("blocked.nrrd.marks"));
+    config.saveOnExit = tempPath("blocked.nrrd");
+    EXPECT_THROW(SessionServer(sphere, config), Error);
+    std::filesystem::remove(tempPath("blocked.nrrd.marks"));
 
     const std::filesystem::path folder = tempPath("going");
     std::filesystem::create_directories(folder);
@@ -466,7 +473,10 @@ TEST(Session, ASaveOnExitThatCannotBeWrittenIsRefusedAtOnceOrSavedElsewhere) {
     EXPECT_TRUE(loadVolume(server->savedTo()) == server->volumeSnapshot())
         << "the drilled volume is in the emergency copy";
     EXPECT_FALSE(server->volumeSnapshot() == sphere);
+    EXPECT_TRUE(std::filesystem::is_regular_file(marksPathFor(server->savedTo())))
+        << "the marks beside it";
     std::filesystem::remove(server->savedTo());
+    std::filesystem::remove(marksPathFor(server->savedTo()));
 }
 
 // Two drilling tool states 6 mm apart: the server sweeps the burr along the path between them, so

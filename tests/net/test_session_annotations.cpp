@@ -2,14 +2,21 @@
 // removes and clears marks and every participant, a late joiner included, holds the same list;
 // a trainee's edits and adds beyond the limit are refused (counted, not applied); malformed
 // messages are dropped and counted. Deadlines only guard against hangs.
+#include "net/marks_file.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
 
+#include "libsim/error.h"
 #include "libsim/skull.h"
+#include "libsim/volume_io.h"
 
 #include "loopback.h"
+#include "test_support.h"
 
+#include <filesystem>
+#include <fstream>
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 using namespace trephine;
 using namespace trephine::net;
@@ -114,4 +121,119 @@ TEST(Annotations, InstructorsMarksReachEveryoneAndTraineesAreRefused) {
     for (SessionClient* c : all)
         EXPECT_EQ(c->stats().malformed(), 0u);
     server.stop();
+}
+
+// The marks outlive the server: --save-on-exit writes them beside the volume, and a server
+// started from that session holds them again, for a newcomer as for anyone.
+TEST(Annotations, MarksSavedOnExitComeBackInTheNextSession) {
+    Volume sphere = makeSphere(32);
+    trephine::testing::TempDir dir;
+    const std::string saved = dir / "session.nrrd";
+    ServerConfig config = loopbackServerConfig("sphere:32");
+    config.saveOnExit = saved;
+    {
+        SessionServer server(sphere, config);
+        server.start();
+        SessionClient cho(namedClientConfig(sphere, "Dr. Cho", Role::Instructor, 32));
+        cho.connect(loopback(server.port()));
+        ASSERT_TRUE(pumpUntil({&cho}, [&] { return cho.welcomed(); }));
+        cho.annotate(add({0.25f, -1.5f, 10.125f}, "entry \"A\"\n2nd line\\"));
+        cho.annotate(add({5, 0, 9}, "gone"));
+        cho.annotate(add({-3, 4, 1e4f}, ""));
+        ASSERT_TRUE(pumpUntil({&cho}, [&] { return cho.annotations().size() == 3; }));
+        Annotate remove;
+        remove.op = Annotate::Op::Remove;
+        remove.id = cho.annotations()[1].id;
+        cho.annotate(remove);
+        ASSERT_TRUE(pumpUntil({&cho}, [&] { return cho.annotations().size() == 2; }));
+        server.stop();
+        ASSERT_TRUE(server.saveError().empty()) << server.saveError();
+    }
+    const std::vector<AnnotationInfo> marks = readMarksFile(marksPathFor(saved));
+    ASSERT_EQ(marks.size(), 2u);
+    EXPECT_EQ(marks[0].position, glm::vec3(0.25f, -1.5f, 10.125f));
+    EXPECT_EQ(marks[0].label, "entry \"A\"\n2nd line\\");
+    EXPECT_EQ(marks[1].position, glm::vec3(-3, 4, 1e4f));
+    EXPECT_EQ(marks[1].label, "");
+
+    ServerConfig next = loopbackServerConfig("session.nrrd");
+    next.marks = marks;
+    SessionServer server(loadVolume(saved), next);
+    server.start();
+    SessionClient ben(namedClientConfig(sphere, "Ben", Role::Trainee, 32));
+    ben.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&ben}, [&] { return ben.annotations().size() == 2; }));
+    EXPECT_EQ(ben.annotations()[0].label, marks[0].label);
+    EXPECT_EQ(ben.annotations()[1].position, marks[1].position);
+    EXPECT_EQ(ben.annotations()[0].author, 0u) << "from the file, not from a participant";
+    // A session whose marks were all removed saves an empty list: no old mark comes back.
+    server.stop();
+}
+
+TEST(MarksFile, MalformedFilesAreRefusedInOneLineNamingTheLine) {
+    trephine::testing::TempDir dir;
+    const std::string path = dir / "m.marks";
+    auto refusal = [&](const std::string& text) -> std::string {
+        std::ofstream(path, std::ios::binary) << text;
+        try {
+            readMarksFile(path);
+        } catch (const Error& e) {
+            return e.what();
+        }
+        return "";
+    };
+    const std::string h = "trephine-marks 1\n";
+    EXPECT_NE(refusal("").find("not a marks file"), std::string::npos);
+    EXPECT_NE(refusal("mark 1 2 3 \"x\"\n").find(":1: not a marks file"), std::string::npos);
+    EXPECT_NE(refusal(h + "mark 1 2 \"x\"\n").find(":2: coordinate"), std::string::npos);
+    EXPECT_NE(refusal(h + "mark 1 2 nan \"x\"\n").find("coordinate `nan`"), std::string::npos);
+    EXPECT_NE(refusal(h + "mark 1 2 1e6 \"x\"\n").find("within 1e5 mm"), std::string::npos);
+    EXPECT_NE(refusal(h + "# c\n\nmark 1 2 3 x\n").find(":4: the label must be in double quotes"),
+              std::string::npos);
+    EXPECT_NE(refusal(h + "mark 1 2 3 \"x\n").find("closing quote is missing"), std::string::npos);
+    EXPECT_NE(refusal(h + "mark 1 2 3 \"x\" y\n").find("after the label"), std::string::npos);
+    EXPECT_NE(refusal(h + "mark 1 2 3 \"\\q\"\n").find("unknown escape"), std::string::npos);
+    EXPECT_NE(refusal(h + "mark 1 2 3 \"\\x4\"\n").find("two hex digits"), std::string::npos);
+    EXPECT_NE(refusal(h + "mark 1 2 3 \"" + std::string(kMaxNameLength + 1, 'a') + "\"\n")
+                  .find("longer than"),
+              std::string::npos);
+    std::string many = h;
+    for (int i = 0; i <= kMaxAnnotations; ++i)
+        many += "mark 0 0 0 \"\"\n";
+    EXPECT_NE(refusal(many).find("more than 256 marks"), std::string::npos);
+    for (const std::string& text : {std::string(""), h + "mark 1 2 nan \"x\"\n"})
+        EXPECT_EQ(refusal(text).find('\n'), std::string::npos);
+    // Comments, blank lines, CRLF and escapes read back.
+    std::ofstream(path, std::ios::binary)
+        << "trephine-marks 1\r\n# a comment\r\n\r\nmark 1.5 -2 3 \"a\\tb\\x01\"\r\n";
+    const std::vector<AnnotationInfo> m = readMarksFile(path);
+    ASSERT_EQ(m.size(), 1u);
+    EXPECT_EQ(m[0].id, 1u);
+    EXPECT_EQ(m[0].position, glm::vec3(1.5f, -2, 3));
+    EXPECT_EQ(m[0].label, "a\tb\x01");
+}
+
+// Writing goes through a temporary file: a write that fails leaves the earlier file whole.
+TEST(MarksFile, AFailedWriteLeavesTheEarlierFileWhole) {
+    trephine::testing::TempDir dir;
+    const std::string path = dir / "m.marks";
+    AnnotationInfo a;
+    a.position = {1, 2, 3};
+    a.label = "keep";
+    writeMarksFile(path, {a});
+    EXPECT_THROW(writeMarksFile(dir / "no-such-folder/m.marks", {a}), Error);
+    // Never renamed over a device (as root, /dev/full itself would be replaced) or a folder.
+    EXPECT_THROW(writeMarksFile("/dev/full", {a}), Error);
+    EXPECT_TRUE(std::filesystem::is_character_file("/dev/full"));
+    EXPECT_THROW(writeMarksFile(dir.path.string(), {a}), Error);
+    // The temporary file cannot be made (a folder in its way): the earlier file stays.
+    std::filesystem::create_directories(path + ".tmp-" + std::to_string(::getpid()));
+    AnnotationInfo other = a;
+    other.label = "lost?";
+    EXPECT_THROW(writeMarksFile(path, {other, other}), Error);
+    ASSERT_EQ(readMarksFile(path).size(), 1u);
+    AnnotationInfo far = a;
+    far.position.x = 2e5f;
+    EXPECT_THROW(writeMarksFile(path, {far}), Error);
+    EXPECT_EQ(readMarksFile(path)[0].label, "keep");
 }

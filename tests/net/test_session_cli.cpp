@@ -1,5 +1,6 @@
 // `trephine server` as a process: SIGTERM stops it cleanly, --save-on-exit holds every drilling
 // step it applied and --report is written; `trephine trainee --headless` runs its haptic loop.
+#include "net/marks_file.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
 #include "net/view.h"
@@ -14,6 +15,7 @@
 
 #include <glm/gtx/quaternion.hpp>
 
+#include <algorithm>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
@@ -95,7 +97,9 @@ TEST(SessionCli, SigtermWritesSaveOnExitWithTheDrilling) {
     Volume saved = loadVolume(path);
     EXPECT_EQ(saved.dims(), sphere.dims());
     EXPECT_FALSE(saved == sphere) << "the applied drilling is in the saved volume";
+    EXPECT_TRUE(readMarksFile(marksPathFor(path)).empty()) << "no marks, and a file saying so";
     std::filesystem::remove(path);
+    std::filesystem::remove(marksPathFor(path));
     // --report: per-channel and per-peer statistics, written when the server stopped.
     std::ifstream r(report);
     std::string json((std::istreambuf_iterator<char>(r)), std::istreambuf_iterator<char>());
@@ -196,4 +200,59 @@ TEST(SessionCli, HeadlessVolumeTraineeComputesForcesOnItsOwnVolume) {
     EXPECT_NE(json.find("\"sync\": \"volume\""), std::string::npos) << json;
     std::filesystem::remove(report);
     std::filesystem::remove(out);
+}
+
+// A saved session's marks come back with its volume: `--volume FILE` reads FILE.marks, says so,
+// and serves them; a malformed marks file stops the server before it starts, in one line.
+TEST(SessionCli, AServerStartedFromASavedSessionServesItsMarks) {
+    trephine::testing::TempDir dir;
+    const std::string volume = dir / "session.nrrd";
+    saveVolume(makeSphere(32), volume);
+    AnnotationInfo a, b;
+    a.position = {1, 2, 3};
+    a.label = "entry";
+    b.position = {-4, 0, 9};
+    b.label = "avoid";
+    writeMarksFile(marksPathFor(volume), {a, b});
+    int fds[2];
+    ASSERT_EQ(pipe(fds), 0);
+    pid_t pid = fork();
+    ASSERT_GE(pid, 0);
+    if (pid == 0) {
+        dup2(fds[1], 1);
+        close(fds[0]);
+        execl(TREPHINE_BIN, TREPHINE_BIN, "server", "--port", "0", "--volume", volume.c_str(),
+              "--render-threads", "1", (char*)nullptr);
+        _exit(127);
+    }
+    close(fds[1]);
+    FILE* out = fdopen(fds[0], "r");
+    char line[512] = {};
+    ASSERT_NE(fgets(line, sizeof line, out), nullptr);
+    EXPECT_NE(std::string(line).find("2 marks from " + marksPathFor(volume)), std::string::npos)
+        << line;
+    ASSERT_NE(fgets(line, sizeof line, out), nullptr);
+    const std::string text = line;
+    const auto at = text.find("on port ");
+    ASSERT_NE(at, std::string::npos) << text;
+    SessionClient client(ClientConfig{});
+    client.connect(parseAddress("127.0.0.1:" + std::to_string(std::stoi(text.substr(at + 8)))));
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (client.annotations().size() < 2 && !client.closed() &&
+           std::chrono::steady_clock::now() < deadline)
+        client.poll(1);
+    kill(pid, SIGTERM);
+    int status = 0;
+    ASSERT_EQ(waitpid(pid, &status, 0), pid);
+    fclose(out);
+    ASSERT_EQ(client.annotations().size(), 2u);
+    EXPECT_EQ(client.annotations()[0].label, "entry");
+    EXPECT_EQ(client.annotations()[1].position, b.position);
+
+    std::ofstream(marksPathFor(volume)) << "trephine-marks 1\nmark 1 2 \"x\"\n";
+    const trephine::testing::CommandResult r =
+        trephine::testing::runTrephine(dir, "server --port 0 --volume " + shellQuote(volume));
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_NE(r.err.find("session.nrrd.marks:2: coordinate"), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
 }

@@ -38,8 +38,13 @@ struct ServerConfig {
     // Answer each tool state with a HapticModel (Channel::Haptic), relayed to every instructor as
     // a HapticRelay.
     bool hapticModels = true;
-    std::string volumeName;  // sent in the welcome
-    std::string saveOnExit;  // when set, stop() writes the final volume here (saveVolume)
+    std::string volumeName; // sent in the welcome
+    // When set, stop() writes the final volume here (saveVolume) and the instructors' marks
+    // beside it (marksPathFor(saveOnExit), net/marks_file.h), so a later server can start from
+    // both.
+    std::string saveOnExit;
+    // The marks the session starts with (a saved session's, readMarksFile): ids 1..n, author 0.
+    std::vector<AnnotationInfo> marks;
     int malformedLimit = 50; // a peer that sends more malformed packets is disconnected
     int renderThreads = 0;   // 0: hardware concurrency
     float maxStepS = 0.05f;  // longest drilling step taken from one tool state to the next
@@ -128,7 +133,8 @@ public:
     uint64_t hapticRelaysSent() const { return m_hapticRelayed.load(); }
     // After stop() with ServerConfig::saveOnExit: where the final volume went (saveOnExit, or an
     // emergency copy in the temporary folder when that failed; empty when neither could be
-    // written) and why saveOnExit failed (empty when it did not).
+    // written; the marks went to marksPathFor of it) and why saveOnExit failed (empty when it did
+    // not).
     const std::string& savedTo() const { return m_savedTo; }
     const std::string& saveError() const { return m_saveError; }
     uint64_t refusedFull() const { return m_refusedFull.load(); }
