@@ -26,6 +26,7 @@
 #include <string>
 #include <sys/wait.h>
 #include <unistd.h>
+#include <vector>
 
 using namespace trephine;
 using namespace trephine::net;
@@ -33,31 +34,72 @@ using namespace trephine::net;
 using trephine::testing::loopbackServerConfig;
 using trephine::testing::shellQuote;
 
+namespace {
+
+// `trephine server ARGS` as a child process, its stdout read line by line.
+struct ServerProcess {
+    pid_t pid = -1;
+    FILE* out = nullptr;
+
+    explicit ServerProcess(std::vector<std::string> args) {
+        int fds[2];
+        if (pipe(fds) != 0)
+            return;
+        args.insert(args.begin(), {TREPHINE_BIN, "server"});
+        pid = fork();
+        if (pid == 0) {
+            dup2(fds[1], 1);
+            close(fds[0]);
+            std::vector<char*> argv;
+            for (std::string& a : args)
+                argv.push_back(a.data());
+            argv.push_back(nullptr);
+            execv(TREPHINE_BIN, argv.data());
+            _exit(127);
+        }
+        close(fds[1]);
+        out = fdopen(fds[0], "r");
+    }
+    ~ServerProcess() {
+        if (pid > 0)
+            stop();
+    }
+    // The next line it printed ("" at the end).
+    std::string line() {
+        char buf[512] = {};
+        return out && fgets(buf, sizeof buf, out) ? std::string(buf) : std::string();
+    }
+    // SIGTERM, then its exit status (-1: it did not exit normally).
+    int stop() {
+        kill(pid, SIGTERM);
+        int status = 0;
+        const bool waited = waitpid(pid, &status, 0) == pid;
+        pid = -1;
+        if (out)
+            fclose(out);
+        out = nullptr;
+        return waited && WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    }
+};
+
+// The port in the server's "... on port N; Ctrl-C stops" line, or -1.
+int portIn(const std::string& text) {
+    const auto at = text.find("on port ");
+    return at == std::string::npos ? -1 : std::stoi(text.substr(at + 8));
+}
+
+} // namespace
+
 TEST(SessionCli, SigtermWritesSaveOnExitWithTheDrilling) {
     std::string path = (std::filesystem::temp_directory_path() /
                         ("trephine_sigterm_" + std::to_string(getpid()) + ".nrrd"))
                            .string();
     std::string report = path + ".json";
-    int fds[2];
-    ASSERT_EQ(pipe(fds), 0);
-    pid_t pid = fork();
-    ASSERT_GE(pid, 0);
-    if (pid == 0) {
-        dup2(fds[1], 1);
-        close(fds[0]);
-        execl(TREPHINE_BIN, TREPHINE_BIN, "server", "--port", "0", "--volume", "sphere:32",
-              "--render-threads", "1", "--save-on-exit", path.c_str(), "--report", report.c_str(),
-              (char*)nullptr);
-        _exit(127);
-    }
-    close(fds[1]);
-    FILE* out = fdopen(fds[0], "r");
-    char line[512] = {};
-    ASSERT_NE(fgets(line, sizeof line, out), nullptr) << "the server printed nothing";
-    std::string text = line;
-    auto at = text.find("on port ");
-    ASSERT_NE(at, std::string::npos) << text;
-    int port = std::stoi(text.substr(at + 8));
+    ServerProcess server({"--port", "0", "--volume", "sphere:32", "--render-threads", "1",
+                          "--save-on-exit", path, "--report", report});
+    const std::string text = server.line();
+    const int port = portIn(text);
+    ASSERT_GT(port, 0) << "the server printed: " << text;
 
     Volume sphere = makeSphere(32);
     ClientConfig cfg;
@@ -85,15 +127,11 @@ TEST(SessionCli, SigtermWritesSaveOnExitWithTheDrilling) {
     while (client.updatesApplied() < 2 && std::chrono::steady_clock::now() < deadline)
         client.poll(1);
     ASSERT_GE(client.updatesApplied(), 2u);
-    kill(pid, SIGTERM);
+    kill(server.pid, SIGTERM);
     while (!client.closed() && std::chrono::steady_clock::now() < deadline)
         client.poll(1);
     EXPECT_NE(client.closeReason().find("shutting down"), std::string::npos);
-    int status = 0;
-    ASSERT_EQ(waitpid(pid, &status, 0), pid);
-    fclose(out);
-    ASSERT_TRUE(WIFEXITED(status));
-    EXPECT_EQ(WEXITSTATUS(status), 0);
+    EXPECT_EQ(server.stop(), 0);
     Volume saved = loadVolume(path);
     EXPECT_EQ(saved.dims(), sphere.dims());
     EXPECT_FALSE(saved == sphere) << "the applied drilling is in the saved volume";
@@ -214,37 +252,18 @@ TEST(SessionCli, AServerStartedFromASavedSessionServesItsMarks) {
     b.position = {-4, 0, 9};
     b.label = "avoid";
     writeMarksFile(marksPathFor(volume), {a, b});
-    int fds[2];
-    ASSERT_EQ(pipe(fds), 0);
-    pid_t pid = fork();
-    ASSERT_GE(pid, 0);
-    if (pid == 0) {
-        dup2(fds[1], 1);
-        close(fds[0]);
-        execl(TREPHINE_BIN, TREPHINE_BIN, "server", "--port", "0", "--volume", volume.c_str(),
-              "--render-threads", "1", (char*)nullptr);
-        _exit(127);
-    }
-    close(fds[1]);
-    FILE* out = fdopen(fds[0], "r");
-    char line[512] = {};
-    ASSERT_NE(fgets(line, sizeof line, out), nullptr);
-    EXPECT_NE(std::string(line).find("2 marks from " + marksPathFor(volume)), std::string::npos)
-        << line;
-    ASSERT_NE(fgets(line, sizeof line, out), nullptr);
-    const std::string text = line;
-    const auto at = text.find("on port ");
-    ASSERT_NE(at, std::string::npos) << text;
+    ServerProcess server({"--port", "0", "--volume", volume, "--render-threads", "1"});
+    const std::string first = server.line();
+    EXPECT_NE(first.find("2 marks from " + marksPathFor(volume)), std::string::npos) << first;
+    const int port = portIn(server.line());
+    ASSERT_GT(port, 0);
     SessionClient client(ClientConfig{});
-    client.connect(parseAddress("127.0.0.1:" + std::to_string(std::stoi(text.substr(at + 8)))));
+    client.connect(parseAddress("127.0.0.1:" + std::to_string(port)));
     const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
     while (client.annotations().size() < 2 && !client.closed() &&
            std::chrono::steady_clock::now() < deadline)
         client.poll(1);
-    kill(pid, SIGTERM);
-    int status = 0;
-    ASSERT_EQ(waitpid(pid, &status, 0), pid);
-    fclose(out);
+    EXPECT_EQ(server.stop(), 0);
     ASSERT_EQ(client.annotations().size(), 2u);
     EXPECT_EQ(client.annotations()[0].label, "entry");
     EXPECT_EQ(client.annotations()[1].position, b.position);
