@@ -89,6 +89,31 @@ std::string defaultMarkLabel(const std::vector<net::AnnotationInfo>& marks) {
     }
 }
 
+void MarkUndo::removing(const std::vector<net::AnnotationInfo>& shown, uint32_t id) {
+    auto it = std::find_if(shown.begin(), shown.end(),
+                           [&](const net::AnnotationInfo& m) { return m.id == id; });
+    if (it != shown.end())
+        m_taken = {*it};
+}
+
+void MarkUndo::clearing(const std::vector<net::AnnotationInfo>& shown) {
+    if (!shown.empty())
+        m_taken = shown;
+}
+
+std::vector<net::Annotate> MarkUndo::undo() {
+    std::vector<net::Annotate> adds;
+    for (const net::AnnotationInfo& m : m_taken) {
+        net::Annotate a;
+        a.op = net::Annotate::Op::Add;
+        a.position = m.position;
+        a.label = m.label;
+        adds.push_back(std::move(a));
+    }
+    m_taken.clear();
+    return adds;
+}
+
 std::string NetworkHistory::latencyCaption(double maxUs) const {
     auto ms = [](double us) {
         if (us < 0.0)

@@ -3,6 +3,7 @@
 
 #include "libsim/tool.h"
 
+#include <cstdio>
 #include <imgui.h>
 
 namespace trephine::ui {
@@ -116,9 +117,18 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
         ImGui::SameLine();
         if (ImGui::SmallButton("mark the pointer [M]"))
             marks.addAtPointer = true;
-        ImGui::SameLine();
-        if (ImGui::SmallButton("clear marks"))
-            marks.clearAll = true;
+        if (!snap.annotations.empty()) {
+            ImGui::SameLine();
+            if (ImGui::SmallButton("clear marks"))
+                marks.clearAll = true;
+        }
+        if (marks.undoable) {
+            ImGui::SameLine();
+            char undo[48];
+            std::snprintf(undo, sizeof undo, "undo removal (%zu)", marks.undoable);
+            if (ImGui::SmallButton(undo))
+                marks.undo = true;
+        }
         ImGui::InputTextWithHint("##label", "label of the next mark", marks.label,
                                  sizeof marks.label);
     }

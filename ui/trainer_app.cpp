@@ -254,6 +254,7 @@ int runTrainerWindow(const TrainerOptions& o) {
         scriptedMarks.push_back(parseMark(m));
     bool marksSent = scriptedMarks.empty();
     MarkControls markControls;
+    MarkUndo markUndo; // the last removal of marks, for the Session panel's undo
     markControls.canMark = o.instructor;
     if (!o.takeOver.empty() && !o.instructor)
         throw Error("window: --take-over: only an instructor takes over a trainee");
@@ -818,18 +819,24 @@ int runTrainerWindow(const TrainerOptions& o) {
             client.annotate(a);
         }
         if (markControls.clearAll) {
+            markUndo.clearing(snap->annotations);
             net::Annotate a;
             a.op = net::Annotate::Op::Clear;
             client.annotate(a);
         }
         if (markControls.removeId) {
+            markUndo.removing(snap->annotations, markControls.removeId);
             net::Annotate a;
             a.op = net::Annotate::Op::Remove;
             a.id = markControls.removeId;
             client.annotate(a);
         }
-        markControls.addAtPointer = markControls.clearAll = false;
+        if (markControls.undo)
+            for (const net::Annotate& a : markUndo.undo())
+                client.annotate(a);
+        markControls.addAtPointer = markControls.clearAll = markControls.undo = false;
         markControls.removeId = 0;
+        markControls.undoable = markUndo.pending();
         // Take over (the panel's buttons, --take-over once the trainee is listed) or hand back.
         if (snap->welcome && snap->state == net::LinkState::Connected)
             if (const auto id = scriptedTakeOver.due(snap->attempts, snap->participants))

@@ -236,3 +236,36 @@ TEST(ViewControls, ResetGoesBackToTheOpeningView) {
     EXPECT_EQ(v.distanceMm, 170.0f);
     EXPECT_TRUE(v.dirty) << "a new view to ask for";
 }
+
+// An instructor's *remove* or *clear marks* can be undone: the marks come back as Adds with
+// their places and labels; the newest removal is the one remembered, and an undo forgets it.
+TEST(MarkUndo, PutsBackWhatTheLastRemovalTook) {
+    std::vector<net::AnnotationInfo> shown;
+    for (uint32_t i = 1; i <= 3; ++i) {
+        net::AnnotationInfo m;
+        m.id = i;
+        m.author = 7;
+        m.position = glm::vec3(float(i), 2.0f, 3.0f);
+        m.label = "m" + std::to_string(i);
+        shown.push_back(m);
+    }
+    MarkUndo undo;
+    EXPECT_EQ(undo.pending(), 0u);
+    EXPECT_TRUE(undo.undo().empty());
+    undo.removing(shown, 99); // not listed (already gone): nothing to remember
+    EXPECT_EQ(undo.pending(), 0u);
+    undo.removing(shown, 2);
+    ASSERT_EQ(undo.pending(), 1u);
+    undo.clearing(shown);
+    ASSERT_EQ(undo.pending(), 3u);
+    const std::vector<net::Annotate> adds = undo.undo();
+    ASSERT_EQ(adds.size(), 3u);
+    for (size_t i = 0; i < 3; ++i) {
+        EXPECT_EQ(adds[i].op, net::Annotate::Op::Add);
+        EXPECT_EQ(adds[i].position, shown[i].position);
+        EXPECT_EQ(adds[i].label, shown[i].label);
+    }
+    EXPECT_EQ(undo.pending(), 0u);
+    undo.clearing({}); // clearing nothing keeps nothing
+    EXPECT_EQ(undo.pending(), 0u);
+}

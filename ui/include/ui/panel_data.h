@@ -155,4 +155,21 @@ struct ScriptedTakeOver {
 // no mark's label already has (after a removal, "mark 2" may still be on the skull).
 std::string defaultMarkLabel(const std::vector<net::AnnotationInfo>& marks);
 
+// One step of undo for an instructor's removals: *remove* or *clear marks* takes marks off the
+// skull for everyone, and a slip of the mouse must not lose them. Remembers what the last
+// removal took (as the list showed it) and turns it back into Adds (new ids, same places and
+// labels). A removal replaces what was remembered; nothing is kept across windows.
+class MarkUndo {
+public:
+    // Call with the list as shown, before the Remove or Clear is sent.
+    void removing(const std::vector<net::AnnotationInfo>& shown, uint32_t id);
+    void clearing(const std::vector<net::AnnotationInfo>& shown);
+    // The Adds that put the last removal back; forgets it.
+    std::vector<net::Annotate> undo();
+    size_t pending() const { return m_taken.size(); }
+
+private:
+    std::vector<net::AnnotationInfo> m_taken;
+};
+
 } // namespace trephine::ui

@@ -50,6 +50,8 @@ struct MarkControls {
     bool addAtPointer = false; // asked this frame ("mark the pointer" or the M key)
     bool clearAll = false;
     uint32_t removeId = 0; // 0: none
+    size_t undoable = 0;   // marks the last removal took (the window's MarkUndo)
+    bool undo = false;     // asked this frame: put them back
 };
 // Taking over a trainee's drilling (TakeOver): an instructor's buttons in the participants list.
 // The panel only records what was asked this frame; the window sends it.
