@@ -449,6 +449,28 @@ int runAllStudies(const AllOptions& o, const std::string& command) {
     writeText(path, report);
     std::printf("\nwrote %s (with updates.svg%s and bytes.svg)\n", path.string().c_str(),
                 linkRun ? ", updates-link.svg" : "");
+    // Files of ours an earlier run left in DIR that this run did not write (--link off, or no
+    // display) would sit beside a report that does not mention them, as if they were its figures.
+    // They go once the new report is in place (a run that fails before leaves the old set whole).
+    std::vector<std::string> stale;
+    if (!linkRun)
+        stale.insert(stale.end(), {"updates-link.csv", "updates-link.svg"});
+    if (!input.display.measured)
+        stale.push_back("display.csv");
+    std::string removed;
+    for (const std::string& name : stale) {
+        const auto file = std::filesystem::path(o.out) / name;
+        std::error_code ec;
+        if (std::filesystem::is_directory(file, ec))
+            continue; // not one of ours
+        if (std::filesystem::remove(file, ec))
+            removed += (removed.empty() ? "" : ", ") + name;
+        else if (ec)
+            throw Error("cannot remove the earlier run's " + file.string() + ": " + ec.message());
+    }
+    if (!removed.empty())
+        std::printf("removed %s from an earlier run: this run has no such results\n",
+                    removed.c_str());
     return 0;
 }
 

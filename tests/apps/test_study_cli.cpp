@@ -308,15 +308,32 @@ TEST(StudyCli, AMisspeltOrMissingModeIsNamedWithTheChoices) {
 }
 
 // --link off: the update study runs once, over loopback, and the report has no link sections.
+// An earlier run's link results (and, with no display here, its display.csv) in the same folder
+// would sit beside a report that does not mention them: they are removed, and that is said.
 TEST(StudyCli, AllLinkOffRunsTheUpdateStudyOnce) {
     TempDir dir;
     const std::string out = dir / "study";
+    std::filesystem::create_directories(out);
+    for (const char* name : {"updates-link.csv", "updates-link.svg", "display.csv", "notes.txt"})
+        std::ofstream(out + "/" + name) << "an earlier run\n";
+    // No display: the display study is not run, so display.csv is stale too.
+    const char* display = std::getenv("DISPLAY");
+    const std::string savedDisplay = display ? display : "";
+    unsetenv("DISPLAY");
     CommandResult r = runTrephine(dir, "study all --quick --link off --out '" + out + "'");
+    if (display)
+        setenv("DISPLAY", savedDisplay.c_str(), 1);
     ASSERT_EQ(r.exitCode, 0) << r.out << r.err;
     EXPECT_NE(r.out.find("== 3/3 display =="), std::string::npos) << r.out;
     checkUpdates(readCsv(out + "/updates.csv"), {10, 40, 80});
     EXPECT_FALSE(std::filesystem::exists(out + "/updates-link.csv"));
     EXPECT_FALSE(std::filesystem::exists(out + "/updates-link.svg"));
+    EXPECT_FALSE(std::filesystem::exists(out + "/display.csv"));
+    EXPECT_NE(r.out.find("removed updates-link.csv, updates-link.svg, display.csv from an earlier "
+                         "run"),
+              std::string::npos)
+        << r.out;
+    EXPECT_EQ(slurp(out + "/notes.txt"), "an earlier run\n") << "not ours: left alone";
     EXPECT_EQ(slurp(out + "/report.md").find("emulated link"), std::string::npos);
 }
 
