@@ -280,8 +280,9 @@ void addRenderMode(CLI::App& root, int& exitCode) {
     sub->add_option("--up", o->up, "x,y,z: up direction (overrides the preset)");
     sub->add_option("--fov", o->fov, "Vertical field of view in degrees (overrides the preset)");
     sub->add_option("--size", o->size, "Window WIDTHxHEIGHT in pixels")->capture_default_str();
-    sub->add_option("--out", o->out, "Write the DBI as OpenEXR (R, G, B, A, Z)");
-    sub->add_option("--png", o->png, "Write the colour as PNG");
+    sub->add_option("--out", o->out, "Write the DBI as OpenEXR (R, G, B, A, Z)")
+        ->check(outputFile());
+    sub->add_option("--png", o->png, "Write the colour as PNG")->check(outputFile());
     sub->add_option("--rect", o->rect,
                     "X,Y,W,H: render only this rectangle (pixels, top-left origin); the EXR's "
                     "data window sits at its place in the full frame");

@@ -89,9 +89,10 @@ void addServerMode(CLI::App& root, int& exitCode) {
     sub->add_option("--volume", o->volume, "Volume spec (see `trephine volume --help`)")
         ->capture_default_str();
     sub->add_option(
-        "--save-on-exit", o->saveOnExit,
-        "Write the final volume here when the server stops (.nrrd keeps materials), and "
-        "the instructors' marks beside it (FILE.marks, read back by --volume FILE)");
+           "--save-on-exit", o->saveOnExit,
+           "Write the final volume here when the server stops (.nrrd keeps materials), and "
+           "the instructors' marks beside it (FILE.marks, read back by --volume FILE)")
+        ->check(outputFile());
     sub->add_option("--render-threads", o->renderThreads, "Render workers (0: all cores)")
         ->check(CLI::Range(0, 256));
     sub->add_option("--max-clients", o->maxClients,
@@ -99,7 +100,8 @@ void addServerMode(CLI::App& root, int& exitCode) {
         ->check(CLI::Range(1, 1024))
         ->capture_default_str();
     sub->add_option("--report", o->report,
-                    "Write server statistics as JSON here when it stops (per channel and peer)");
+                    "Write server statistics as JSON here when it stops (per channel and peer)")
+        ->check(outputFile());
     sub->callback([o, &exitCode] { exitCode = runServer(*o); });
 }
 

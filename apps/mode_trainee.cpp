@@ -497,12 +497,16 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
     sub->add_option("--duration", o->durationS, "Seconds of script to run (burrhole: its length)")
         ->check(finiteRange(0.0, 3600.0))
         ->group(kHeadlessOnly);
-    sub->add_option("--report", o->report, "Write statistics as JSON here")->group(kHeadlessOnly);
+    sub->add_option("--report", o->report, "Write statistics as JSON here")
+        ->check(outputFile())
+        ->group(kHeadlessOnly);
     sub->add_option("--save-dbi", o->saveDbi, "Write the final DBI as OpenEXR here")
+        ->check(outputFile())
         ->group(kHeadlessOnly);
     sub->add_option("--name", o->name, "Name shown to others")->capture_default_str();
     sub->add_option("--screenshot", o->screenshot,
-                    "Window: write it to this PNG once the view has settled, then exit");
+                    "Window: write it to this PNG once the view has settled, then exit")
+        ->check(outputFile());
     sub->add_option("--frames", o->frames,
                     "Window: settled frames before the screenshot (without one: frames to run, 0 "
                     "until closed)")

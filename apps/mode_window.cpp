@@ -57,7 +57,8 @@ int runWindowedClient(const WindowedOptions& o) {
 
 void addWindowOptions(CLI::App* sub, WindowedOptions& o) {
     sub->add_option("--screenshot", o.screenshot,
-                    "Write the window to this PNG once the view has settled, then exit");
+                    "Write the window to this PNG once the view has settled, then exit")
+        ->check(outputFile());
     sub->add_option("--frames", o.frames,
                     "Settled frames to render before the screenshot (without one: frames to run)")
         ->check(CLI::Range(0, 1000000));

@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 
 #include <cmath>
+#include <filesystem>
 #include <string>
 
 namespace trephine::app {
@@ -31,6 +32,23 @@ inline CLI::Validator finiteRange(double lo, double hi) {
             return {};
         },
         "FLOAT in " + range);
+}
+
+// For options naming a file to write: an empty value (`--save-on-exit "$UNSET"`) read as "not
+// given" and silently wrote nothing, the drilled skull included; a folder failed only when the
+// run was over. Both are refused as the command line is read.
+inline CLI::Validator outputFile() {
+    return CLI::Validator(
+        [](std::string& path) -> std::string {
+            if (path.empty())
+                return "an empty path: name the file to write";
+            std::error_code ec;
+            if (std::filesystem::is_directory(path, ec))
+                return path + " is a folder: name a file to write (in it, e.g. " +
+                       (std::filesystem::path(path) / "NAME").string() + ")";
+            return {};
+        },
+        "FILE");
 }
 
 void addServerMode(CLI::App& root, int& exitCode);

@@ -1,0 +1,62 @@
+// Options that name a file to write, as a user gets them wrong: refused with one line naming the
+// option before anything runs, so nothing made in the run (a drilled skull, a session's
+// statistics) is lost at its end.
+#include "test_support.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <string>
+
+using namespace trephine::testing;
+
+namespace {
+
+// `trephine ARGS` under `timeout`: a server that wrongly starts would otherwise never end.
+CommandResult runBounded(const TempDir& dir, const std::string& args) {
+    const std::string out = dir / "stdout.txt", err = dir / "stderr.txt";
+    const std::string cmd = "timeout -s KILL 20 " + shellQuote(TREPHINE_BIN) + " " + args + " >" +
+                            shellQuote(out) + " 2>" + shellQuote(err);
+    const int status = std::system(cmd.c_str());
+    CommandResult r;
+    r.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    r.out = slurp(out);
+    r.err = slurp(err);
+    return r;
+}
+
+} // namespace
+
+// An empty value (`--save-on-exit "$UNSET"`) read as "not given": the server ran the session and
+// wrote nothing when it stopped. A folder was found only at the end of the run.
+TEST(OutputPathsCli, AnEmptyPathOrAFolderIsRefusedBeforeTheRun) {
+    TempDir dir;
+    const std::string folder = shellQuote(dir.path.string());
+    const struct {
+        std::string args;
+        const char* option;
+    } cases[] = {
+        {"server --port 0 --volume sphere:16 --save-on-exit ''", "--save-on-exit"},
+        {"server --port 0 --volume sphere:16 --report ''", "--report"},
+        {"server --port 0 --volume sphere:16 --report " + folder, "--report"},
+        {"trainee --headless --connect 127.0.0.1:9 --report ''", "--report"},
+        {"trainee --headless --connect 127.0.0.1:9 --save-dbi " + folder, "--save-dbi"},
+        {"trainee --connect 127.0.0.1:9 --screenshot ''", "--screenshot"},
+        {"instructor --connect 127.0.0.1:9 --screenshot " + folder, "--screenshot"},
+        {"demo --screenshot ''", "--screenshot"},
+        {"render --volume sphere:16 --size 16x16 --out ''", "--out"},
+        {"render --volume sphere:16 --size 16x16 --png " + folder, "--png"},
+    };
+    for (const auto& c : cases) {
+        SCOPED_TRACE(c.args);
+        CommandResult r = runBounded(dir, c.args);
+        EXPECT_NE(r.exitCode, 0);
+        EXPECT_NE(r.exitCode, -1) << "killed: it ran instead of refusing";
+        EXPECT_EQ(r.err.rfind(std::string("trephine: ") + c.option + ": ", 0), 0u) << r.err;
+        EXPECT_TRUE(r.err.find("an empty path") != std::string::npos ||
+                    r.err.find("is a folder") != std::string::npos)
+            << r.err;
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+        EXPECT_EQ(r.out, "");
+    }
+}
