@@ -36,6 +36,9 @@ struct ServerOptions {
 };
 
 int runServer(const ServerOptions& o) {
+    // Written when the session ends: a folder that is not there would lose its statistics.
+    if (!o.report.empty())
+        checkOutputFolder("--report", o.report);
     Volume volume = openVolume(o.volume);
     net::ServerConfig config;
     // A session saved by --save-on-exit left its marks beside the volume: they come back too.

@@ -30,7 +30,6 @@
 #include <shared_mutex>
 #include <sstream>
 #include <thread>
-#include <unistd.h>
 
 namespace trephine::app {
 
@@ -228,20 +227,11 @@ int runTrainee(const TraineeOptions& o) {
                     "its picture)");
     ENetAddress address = net::parseAddress(o.connect);
     // The outputs are checked first too: a typo found after the session would waste it.
-    auto checkOutput = [](const char* flag, const std::string& path) {
-        const std::filesystem::path folder = std::filesystem::path(path).has_parent_path()
-                                                 ? std::filesystem::path(path).parent_path()
-                                                 : std::filesystem::path(".");
-        std::error_code ec;
-        if (!std::filesystem::is_directory(folder, ec) || ::access(folder.c_str(), W_OK) != 0)
-            throw Error(std::string(flag) + " " + path + ": cannot write there (no folder " +
-                        folder.string() + " we may write to)");
-    };
     if (!o.report.empty())
-        checkOutput("--report", o.report);
+        checkOutputFolder("--report", o.report);
     if (!o.saveDbi.empty()) {
         checkDbiExrPath(o.saveDbi);
-        checkOutput("--save-dbi", o.saveDbi);
+        checkOutputFolder("--save-dbi", o.saveDbi);
     }
     // A CSV script is read first, so a bad file fails before anything connects.
     std::vector<Sample> script;

@@ -4,9 +4,12 @@
 
 #include <CLI/CLI.hpp>
 
+#include "libsim/error.h"
+
 #include <cmath>
 #include <filesystem>
 #include <string>
+#include <unistd.h>
 
 namespace trephine::app {
 
@@ -49,6 +52,18 @@ inline CLI::Validator outputFile() {
             return {};
         },
         "FILE");
+}
+
+// Throws unless the folder `path` is to be written in exists and we may write there: for outputs
+// written at the end of a run, checked before it starts (a typo found after a session wastes it).
+inline void checkOutputFolder(const std::string& flag, const std::string& path) {
+    const std::filesystem::path folder = std::filesystem::path(path).has_parent_path()
+                                             ? std::filesystem::path(path).parent_path()
+                                             : std::filesystem::path(".");
+    std::error_code ec;
+    if (!std::filesystem::is_directory(folder, ec) || ::access(folder.c_str(), W_OK) != 0)
+        throw Error(flag + " " + path + ": cannot write there (no folder " + folder.string() +
+                    " we may write to)");
 }
 
 void addServerMode(CLI::App& root, int& exitCode);

@@ -6,6 +6,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <filesystem>
+#include <fstream>
 #include <string>
 
 using namespace trephine::testing;
@@ -57,6 +59,24 @@ TEST(OutputPathsCli, AnEmptyPathOrAFolderIsRefusedBeforeTheRun) {
                     r.err.find("is a folder") != std::string::npos)
             << r.err;
         EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+        EXPECT_EQ(r.out, "");
+    }
+}
+
+// The server's --report is written when the session ends: a folder that is not there (or a file
+// where the folder should be) lost the session's statistics after it, and is refused before it
+// starts, as the trainee's --report always was.
+TEST(OutputPathsCli, TheServerReportFolderIsCheckedBeforeTheSession) {
+    TempDir dir;
+    std::ofstream(dir / "file.txt") << "a file\n";
+    for (const std::string& report : {dir / "nosuch/server.json", dir / "file.txt/server.json"}) {
+        SCOPED_TRACE(report);
+        CommandResult r =
+            runBounded(dir, "server --port 0 --volume sphere:16 --report " + shellQuote(report));
+        EXPECT_EQ(r.exitCode, 1);
+        EXPECT_EQ(r.err, "trephine: --report " + report + ": cannot write there (no folder " +
+                             std::filesystem::path(report).parent_path().string() +
+                             " we may write to)\n");
         EXPECT_EQ(r.out, "");
     }
 }
