@@ -8,6 +8,7 @@
 #include "net/session_server.h"
 
 #include "libsim/drill.h"
+#include "libsim/error.h"
 #include "libsim/skull.h"
 #include "libsim/stats.h"
 #include "libsim_image/volume_slices.h"
@@ -110,6 +111,11 @@ int runHeadlessDemo(const DemoOptions& o) {
 
 int runDemo(DemoOptions& o) {
     std::string why;
+    // A screenshot needs the window: the headless demo would exit 0 without writing it.
+    if (!o.window.screenshot.empty() && o.headless)
+        throw Error("--screenshot: the window's; the --headless demo has none (leave one out)");
+    if (!o.window.screenshot.empty() && !windowAvailable(&why))
+        throw Error("--screenshot: no window to take it from: " + why + " (run under xvfb-run -a)");
     if (!o.headless && !windowAvailable(&why)) {
         std::printf("demo: no window (%s); running the headless demo\n", why.c_str());
         o.headless = true;

@@ -4,6 +4,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cstdlib>
+#include <filesystem>
 #include <string>
 
 using trephine::testing::CommandResult;
@@ -39,4 +41,32 @@ TEST(WindowCli, TheTraineeWindowRefusesOptionsOnlyAHeadlessTraineeUses) {
             << r.err;
         EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << "one line: " << r.err;
     }
+}
+
+// The demo falls back to its headless run without a display; with --screenshot it exited 0
+// without writing the picture asked for. Now one line says why there is none.
+TEST(WindowCli, TheDemoRefusesAScreenshotItCannotTake) {
+    TempDir dir;
+    const std::string shot = dir / "demo.png";
+    CommandResult r =
+        runTrephine(dir, "demo --headless --frames 1 --screenshot " + shellQuote(shot));
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_EQ(r.err.rfind("trephine: --screenshot: ", 0), 0u) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(shot));
+
+    // No display at all (DISPLAY unset for this run): the same, where the demo used to drill
+    // headless and exit 0.
+    const char* display = std::getenv("DISPLAY");
+    const std::string savedDisplay = display ? display : "";
+    unsetenv("DISPLAY");
+    r = runTrephine(dir, "demo --frames 1 --screenshot " + shellQuote(shot));
+    if (display)
+        setenv("DISPLAY", savedDisplay.c_str(), 1);
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_NE(r.err.find("trephine: --screenshot: no window to take it from: no DISPLAY is set"),
+              std::string::npos)
+        << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(shot));
 }
