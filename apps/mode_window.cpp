@@ -2,6 +2,7 @@
 // runWindowedClient when it runs without --headless.
 #include "mode_window.h"
 
+#include "libsim/camera.h"
 #include "libsim/error.h"
 #include "modes.h"
 
@@ -62,7 +63,13 @@ void addWindowOptions(CLI::App* sub, WindowedOptions& o) {
     sub->add_option("--frames", o.frames,
                     "Settled frames to render before the screenshot (without one: frames to run)")
         ->check(CLI::Range(0, 1000000));
+    // Checked here: the window only met an unknown name once the volume had arrived, then ran
+    // on without a picture (with --screenshot, until --timeout said "without a settled view").
+    std::vector<std::string> views{"site"};
+    for (const std::string& n : cameraPresetNames())
+        views.push_back(n);
     sub->add_option("--view", o.camera, "site (close view of the burr site) or a camera preset")
+        ->check(CLI::IsMember(views))
         ->capture_default_str();
     sub->add_option("--orbit", o.orbitDeg, "Initial orbit of the view about the site, degrees")
         ->check(finiteRange(-90.0, 90.0));

@@ -70,3 +70,17 @@ TEST(WindowCli, TheDemoRefusesAScreenshotItCannotTake) {
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
     EXPECT_FALSE(std::filesystem::exists(shot));
 }
+
+// An unknown --view was met only once the volume had arrived: the window then ran on without a
+// picture (with --screenshot, until --timeout said only "without a settled view").
+TEST(WindowCli, AnUnknownViewIsRefusedWithTheChoices) {
+    TempDir dir;
+    for (const char* mode : {"instructor --connect 127.0.0.1:9", "demo"}) {
+        SCOPED_TRACE(mode);
+        CommandResult r = runTrephine(dir, std::string(mode) + " --view nowhere --frames 1");
+        EXPECT_NE(r.exitCode, 0);
+        EXPECT_NE(r.err.find("--view: nowhere not in {site,paper,working,"), std::string::npos)
+            << r.err;
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    }
+}
