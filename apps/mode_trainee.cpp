@@ -493,7 +493,9 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
     sub->add_option("--save-dbi", o->saveDbi, "Write the final DBI as OpenEXR here")
         ->check(outputFile())
         ->group(kHeadlessOnly);
-    sub->add_option("--name", o->name, "Name shown to others")->capture_default_str();
+    sub->add_option("--name", o->name, "Name shown to others")
+        ->check(participantName())
+        ->capture_default_str();
     sub->add_option("--screenshot", o->screenshot,
                     "Window: write it to this PNG once the view has settled, then exit")
         ->check(outputFile());

@@ -106,7 +106,9 @@ void addInstructorMode(CLI::App& root, int& exitCode) {
     CLI::App* sub = root.add_subcommand(
         "instructor", "Join a session as an instructor: the window shows every participant's tool");
     sub->add_option("--connect", o->connect, "Server address HOST:PORT")->required();
-    sub->add_option("--name", o->name, "Name shown to others")->capture_default_str();
+    sub->add_option("--name", o->name, "Name shown to others")
+        ->check(participantName())
+        ->capture_default_str();
     sub->add_option("--codec", o->codec, "Image codec: raw, lz4 or zstd")
         ->check(CLI::IsMember({"raw", "lz4", "zstd"}))
         ->capture_default_str();

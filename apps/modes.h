@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 
 #include "libsim/error.h"
+#include "net/protocol.h"
 
 #include <cmath>
 #include <filesystem>
@@ -64,6 +65,19 @@ inline void checkOutputFolder(const std::string& flag, const std::string& path) 
     if (!std::filesystem::is_directory(folder, ec) || ::access(folder.c_str(), W_OK) != 0)
         throw Error(flag + " " + path + ": cannot write there (no folder " + folder.string() +
                     " we may write to)");
+}
+
+// For --name: the server refuses a hello whose name is longer than the protocol carries, which a
+// client heard only as "the server did not understand our hello".
+inline CLI::Validator participantName() {
+    return CLI::Validator(
+        [](std::string& name) -> std::string {
+            if (name.size() > net::kMaxNameLength)
+                return "a name of " + std::to_string(name.size()) + " bytes is too long (at most " +
+                       std::to_string(net::kMaxNameLength) + ")";
+            return {};
+        },
+        "NAME");
 }
 
 void addServerMode(CLI::App& root, int& exitCode);

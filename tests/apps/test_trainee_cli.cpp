@@ -4,6 +4,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <fstream>
 #include <string>
 
@@ -72,4 +73,20 @@ TEST(TraineeCli, OutputsThatCannotBeWrittenAreRefusedBeforeConnecting) {
     r = runTrephine(dir, session + "--save-dbi '" + dir / "picture.png" + "'");
     EXPECT_EQ(r.exitCode, 1);
     EXPECT_NE(r.err.find("must end in .exr"), std::string::npos) << r.err;
+}
+
+// The protocol carries names of up to 64 bytes; a longer --name was sent anyway and the server's
+// refusal read "the server did not understand our hello". Now refused before connecting.
+TEST(TraineeCli, ANameTooLongForTheProtocolIsRefusedBeforeConnecting) {
+    TempDir dir;
+    const std::string name(65, 'a');
+    for (const std::string& mode : {std::string("trainee --headless"), std::string("instructor")}) {
+        SCOPED_TRACE(mode);
+        CommandResult r = runTrephine(dir, mode + " --connect 127.0.0.1:9 --name " + name);
+        EXPECT_NE(r.exitCode, 0);
+        EXPECT_NE(r.err.find("--name: a name of 65 bytes is too long (at most 64)"),
+                  std::string::npos)
+            << r.err;
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    }
 }
