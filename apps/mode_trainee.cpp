@@ -20,6 +20,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <charconv>
 #include <chrono>
 #include <cstdio>
 #include <deque>
@@ -28,7 +29,6 @@
 #include <memory>
 #include <mutex>
 #include <shared_mutex>
-#include <sstream>
 #include <thread>
 
 namespace trephine::app {
@@ -118,41 +118,75 @@ std::vector<Sample> burrholeScript(const Volume& volume, double durationS) {
     return out;
 }
 
+// A whole cell as a decimal number (spaces around it allowed): stod read "0x10" as hex 16 and
+// "5mm" or "1.5.2" as their leading number, so a mistyped cell drilled somewhere else.
+bool parseNumberCell(const std::string& cell, double& v) {
+    const char* p = cell.data();
+    const char* end = p + cell.size();
+    while (p < end && std::isspace(uint8_t(*p)))
+        ++p;
+    while (end > p && std::isspace(uint8_t(end[-1])))
+        --end;
+    if (p < end && *p == '+')
+        ++p;
+    auto [ptr, ec] = std::from_chars(p, end, v);
+    return p < end && ec == std::errc() && ptr == end;
+}
+
 // time_s,x,y,z,qw,qx,qy,qz,speed,tool with tool `burr:D` or `perforator[:D]`; '#' comments and
 // a header line are skipped.
 std::vector<Sample> csvScript(const std::string& path) {
+    std::error_code ec;
+    if (std::filesystem::is_directory(path, ec))
+        throw Error("script " + path + ": a folder, not a CSV file (use `burrhole` or a CSV file)");
     std::ifstream in(path);
     if (!in)
         throw Error("script " + path + ": cannot open it (use `burrhole` or a CSV file)");
     std::vector<Sample> out;
     std::string line;
     int lineNo = 0;
-    while (std::getline(in, line)) {
+    auto fail = [&](const std::string& what) {
+        return Error("script " + path + " line " + std::to_string(lineNo) + ": " + what);
+    };
+    // Lines of at most kMaxLine characters: std::getline on a file with no newline (/dev/zero, a
+    // binary file) grew one line until memory ran out.
+    constexpr size_t kMaxLine = 4096;
+    auto readLine = [&] {
         ++lineNo;
+        line.clear();
+        for (int c; (c = in.get()) != std::char_traits<char>::eof();) {
+            if (c == '\n')
+                return true;
+            if (line.size() == kMaxLine)
+                throw fail("longer than " + std::to_string(kMaxLine) +
+                           " characters: not a CSV trajectory");
+            line += char(c);
+        }
+        return !line.empty();
+    };
+    while (readLine()) {
+        if (!line.empty() && line.back() == '\r')
+            line.pop_back();
         if (line.empty() || line[0] == '#' ||
             (lineNo == 1 && !std::isdigit(uint8_t(line[0])) && line[0] != '-' && line[0] != '.'))
             continue;
-        std::stringstream ss(line);
-        std::string cell;
+        // Every cell, an empty last one too: "...,burr:5," has 11 columns, not 10.
         std::vector<std::string> cells;
-        while (std::getline(ss, cell, ','))
-            cells.push_back(cell);
-        auto fail = [&](const std::string& what) {
-            return Error("script " + path + " line " + std::to_string(lineNo) + ": " + what);
-        };
+        for (size_t at = 0;;) {
+            const size_t comma = line.find(',', at);
+            cells.push_back(line.substr(at, comma - at));
+            if (comma == std::string::npos)
+                break;
+            at = comma + 1;
+        }
         if (cells.size() != 10)
             throw fail("expected 10 columns time_s,x,y,z,qw,qx,qy,qz,speed,tool, found " +
                        std::to_string(cells.size()));
         double v[9];
-        for (int i = 0; i < 9; ++i) {
-            try {
-                size_t used = 0;
-                v[i] = std::stod(cells[size_t(i)], &used);
-            } catch (const std::exception&) {
+        for (int i = 0; i < 9; ++i)
+            if (!parseNumberCell(cells[size_t(i)], v[i]))
                 throw fail("column " + std::to_string(i + 1) + " is not a number");
-            }
-        }
-        // stod takes nan and inf, and a double beyond a float's range becomes inf as one: a NaN
+        // A number takes nan and inf, and a double beyond a float's range becomes inf as one: a NaN
         // time never ended the run, a huge one overflowed the end time.
         for (int i = 0; i < 9; ++i)
             if (!std::isfinite(float(v[i])))
@@ -178,21 +212,25 @@ std::vector<Sample> csvScript(const std::string& path) {
         while (!tool.empty() && std::isspace(uint8_t(tool.back())))
             tool.pop_back();
         ToolShape shape;
+        auto diameter = [&](size_t from) {
+            double d = 0.0;
+            if (!parseNumberCell(tool.substr(from), d))
+                throw fail("tool diameter in '" + tool + "' is not a number");
+            return float(d);
+        };
         try {
             if (tool.rfind("burr:", 0) == 0)
-                shape = ToolShape::burr(std::stof(tool.substr(5)));
+                shape = ToolShape::burr(diameter(5));
             else if (tool == "perforator")
                 shape = ToolShape::perforator();
             else if (tool.rfind("perforator:", 0) == 0)
-                shape = ToolShape::perforator(std::stof(tool.substr(11)));
+                shape = ToolShape::perforator(diameter(11));
             else
                 throw fail("tool must be burr:D or perforator[:D], not '" + tool + "'");
         } catch (const Error& e) {
             if (std::string(e.what()).rfind("script ", 0) == 0)
                 throw;
             throw fail(e.what()); // the tool's own complaint, with the file and line
-        } catch (const std::exception&) {
-            throw fail("tool diameter in '" + tool + "' is not a number");
         }
         s.tool.toolKind = uint8_t(shape.kind);
         s.tool.diameterMm = shape.diameterMm;

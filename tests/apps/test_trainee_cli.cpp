@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <filesystem>
 #include <fstream>
 #include <string>
 
@@ -88,5 +89,55 @@ TEST(TraineeCli, ANameTooLongForTheProtocolIsRefusedBeforeConnecting) {
                   std::string::npos)
             << r.err;
         EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    }
+}
+
+// Cells that are not wholly a number: stod read "0x10" as hex 16, "5mm" and "1.5.2" as their
+// leading number and a trailing comma's empty 11th column not at all, so a mistyped script
+// drilled somewhere other than written.
+TEST(TraineeCli, AScriptCellThatIsNotWhollyANumberIsRefused) {
+    TempDir dir;
+    const std::string good = "0,0,0,50,1,0,0,0,0,burr:5\n";
+    const struct {
+        const char* row;
+        const char* says;
+    } cases[] = {
+        {"0x10,0,0,50,1,0,0,0,0,burr:5\n", "line 2: column 1 is not a number"},
+        {"1,0,0,50mm,1,0,0,0,0,burr:5\n", "line 2: column 4 is not a number"},
+        {"1,1.5.2,0,50,1,0,0,0,0,burr:5\n", "line 2: column 2 is not a number"},
+        {"1,0,0,50,1,0,0,0,,burr:5\n", "line 2: column 9 is not a number"},
+        {"1,0,0,50,1,0,0,0,0,burr:5x\n", "line 2: tool diameter in 'burr:5x' is not a number"},
+        {"1,0,0,50,1,0,0,0,0,perforator:\n",
+         "line 2: tool diameter in 'perforator:' is not a number"},
+        {"1,0,0,50,1,0,0,0,0,burr:5,\n", "line 2: expected 10 columns"},
+    };
+    for (const auto& c : cases) {
+        SCOPED_TRACE(c.row);
+        CommandResult r = runScript(dir, good + c.row);
+        EXPECT_EQ(r.exitCode, 1);
+        EXPECT_NE(r.err.find(c.says), std::string::npos) << r.err;
+        EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << "one line: " << r.err;
+    }
+    // Spaces around a number and Windows line ends are fine: this one fails only to connect.
+    CommandResult r = runScript(dir, good + " 1 , 0,0,50,1,0,0,0,+0.5,burr: 5\r\n");
+    EXPECT_EQ(r.err.find("script"), std::string::npos) << r.err;
+}
+
+// A script that is a folder read as "no samples"; one with no line ends (/dev/zero, a binary
+// file) grew a single line until memory ran out.
+TEST(TraineeCli, AScriptThatIsNotATextFileIsRefused) {
+    TempDir dir;
+    const std::string folder = dir / "scripts";
+    std::filesystem::create_directories(folder);
+    CommandResult r =
+        runTrephine(dir, "trainee --headless --connect 127.0.0.1:9 --script " + shellQuote(folder));
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_EQ(r.err, "trephine: script " + folder +
+                         ": a folder, not a CSV file (use `burrhole` or a CSV file)\n");
+    if (std::filesystem::exists("/dev/zero")) {
+        r = runTrephine(dir, "trainee --headless --connect 127.0.0.1:9 --script /dev/zero");
+        EXPECT_EQ(r.exitCode, 1);
+        EXPECT_EQ(r.err, "trephine: script /dev/zero line 1: longer than 4096 characters: not a "
+                         "CSV trajectory\n");
     }
 }
