@@ -7,6 +7,7 @@
 #include "libsim_image/volume_slices.h"
 
 #include <cstdio>
+#include <filesystem>
 #include <memory>
 #include <string>
 
@@ -109,6 +110,16 @@ void addVolumeMode(CLI::App& root, int& exitCode) {
     convert->footer(volumeSpecHelp());
     convert->callback([convertOptions, &exitCode] {
         const VolumeOptions& o = *convertOptions;
+        // Before the volume is read: "slices:" alone failed after it as ": cannot create folder:
+        // Invalid argument", naming nothing.
+        if (o.out == "slices:")
+            throw Error("OUT slices:: name the folder for the slices, e.g. slices:out/");
+        // And "slices:FILE" said "the folder is not empty" of a file.
+        std::error_code ec;
+        if (o.out.rfind("slices:", 0) == 0 && std::filesystem::exists(o.out.substr(7), ec) &&
+            !std::filesystem::is_directory(o.out.substr(7), ec))
+            throw Error("OUT " + o.out + ": " + o.out.substr(7) +
+                        " is a file, not a folder: name a new or empty folder for the slices");
         Volume v = openWithOptions(o);
         if (o.out.rfind("slices:", 0) == 0)
             saveVolumeSlices(v, o.out.substr(7));

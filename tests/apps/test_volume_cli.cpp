@@ -95,3 +95,21 @@ TEST(VolumeCli, MissingFileAndBadFlags) {
     EXPECT_EQ(help.exitCode, 0);
     EXPECT_NE(help.out.find("raw:FILE?dims=X,Y,Z"), std::string::npos) << help.out;
 }
+
+// `slices:` with no folder failed as ": cannot create folder: Invalid argument", naming nothing,
+// and `slices:FILE` said "the folder is not empty" of a file; both are named before the volume
+// is read, and the file is left as it was.
+TEST(VolumeCli, ConvertToSlicesNamesAMissingOrWrongFolder) {
+    TempDir dir;
+    Result r = runTrephine(dir, "volume convert sphere:16 slices:");
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_EQ(r.err, "trephine: OUT slices:: name the folder for the slices, e.g. slices:out/\n");
+
+    const std::string file = dir / "head.nrrd";
+    std::ofstream(file) << "not slices\n";
+    r = runTrephine(dir, "volume convert sphere:16 " + quote("slices:" + file));
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_EQ(r.err, "trephine: OUT slices:" + file + ": " + file +
+                         " is a file, not a folder: name a new or empty folder for the slices\n");
+    EXPECT_EQ(trephine::testing::slurp(file), "not slices\n");
+}
