@@ -74,8 +74,7 @@ int runServer(const ServerOptions& o) {
         std::printf("trephine server: wrote %s and %s\n", o.saveOnExit.c_str(),
                     net::marksPathFor(o.saveOnExit).c_str());
     if (!o.report.empty()) {
-        std::ofstream f(o.report);
-        if (!(f << server.reportJson()))
+        if (!writeReplacing(o.report, server.reportJson()))
             throw Error("--report " + o.report + ": cannot write it");
         std::printf("trephine server: wrote %s\n", o.report.c_str());
     }

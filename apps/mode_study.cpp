@@ -93,8 +93,11 @@ net::HapticsFigures runHapticsStudy(const HapticsOptions& o) {
     std::error_code ec;
     std::filesystem::create_directories(o.out, ec);
     const std::string csvPath = (std::filesystem::path(o.out) / "haptics.csv").string();
-    std::ofstream csv(csvPath);
-    if (!csv)
+    // The rows go to a file beside haptics.csv, put in its place once complete: a run that fails
+    // or is interrupted leaves an earlier haptics.csv whole.
+    ReplacingFile csvFile(csvPath);
+    std::ofstream& csv = csvFile.stream();
+    if (!csvFile.good())
         throw Error("cannot write " + csvPath + ": check that --out is a writable folder");
     csv << hapticsCsvHeader() << "\n";
 
@@ -115,8 +118,7 @@ net::HapticsFigures runHapticsStudy(const HapticsOptions& o) {
                             r.stable ? "yes" : "NO", r.maxPenetrationMm);
             }
     // Buffered rows reach the file only here: a full disk shows at the close.
-    csv.close();
-    if (!csv)
+    if (!csvFile.commit())
         throw Error("cannot write " + csvPath + ": check that --out is a writable folder");
 
     const int reps = o.quick ? 500 : 3000;
@@ -222,11 +224,10 @@ std::string makeOutDir(const std::string& out) {
     return out;
 }
 
+// Through a temporary file renamed over `path` once complete: a failed write (a full disk) leaves
+// an earlier run's file whole, where it used to leave it empty.
 void writeText(const std::filesystem::path& path, const std::string& text) {
-    std::ofstream f(path);
-    f << text;
-    f.close(); // a short text is only buffered until here: a full disk shows at the close
-    if (!f)
+    if (!writeReplacing(path.string(), text))
         throw Error("cannot write " + path.string() + ": check that --out is a writable folder");
 }
 

@@ -475,8 +475,7 @@ int runTrainee(const TraineeOptions& o) {
         info.hapticModels = client.hapticModelsReceived();
         info.modelsApplied = haptics.models;
         info.modelsDropped = haptics.modelsDropped;
-        std::ofstream f(o.report);
-        if (!(f << net::reportJson(info, st)))
+        if (!writeReplacing(o.report, net::reportJson(info, st)))
             throw Error("--report " + o.report + ": cannot write it");
     }
     if (!o.saveDbi.empty())

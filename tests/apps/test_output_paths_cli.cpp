@@ -80,3 +80,26 @@ TEST(OutputPathsCli, TheServerReportFolderIsCheckedBeforeTheSession) {
         EXPECT_EQ(r.out, "");
     }
 }
+
+// The server's --report written when it stops, on a disk where no file may grow: the failure is
+// said, and the report of an earlier session at that path is left whole (it was emptied).
+TEST(OutputPathsCli, AServerReportThatCannotBeWrittenLeavesTheEarlierOneWhole) {
+    TempDir dir;
+    const std::string report = dir / "server.json";
+    std::ofstream(report) << "{\"earlier\": true}\n";
+    // RLIMIT_FSIZE 0 with SIGXFSZ ignored: every write to a regular file fails with EFBIG; the
+    // output goes through a pipe, which the limit does not touch. SIGTERM after 2 s stops it.
+    const std::string cmd =
+        "( ulimit -f 0; trap '' XFSZ; exec timeout --preserve-status -s TERM 2 " +
+        shellQuote(TREPHINE_BIN) + " server --port 0 --volume sphere:16 --report " +
+        shellQuote(report) + " ) 2>&1 | cat > " + shellQuote(dir / "log.txt");
+    ASSERT_EQ(std::system(cmd.c_str()), 0);
+    const std::string log = slurp(dir / "log.txt");
+    EXPECT_NE(log.find("trephine: --report " + report + ": cannot write it"), std::string::npos)
+        << log;
+    EXPECT_EQ(slurp(report), "{\"earlier\": true}\n");
+    size_t files = 0;
+    for (const auto& e : std::filesystem::directory_iterator(dir.path))
+        files += e.path().filename() != "log.txt";
+    EXPECT_EQ(files, 1u) << "no temporary file left behind";
+}

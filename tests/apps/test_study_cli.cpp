@@ -371,3 +371,29 @@ TEST(StudyCli, AllQuickWritesAReportNamingEveryFigure) {
         EXPECT_EQ(report.find("Not measured"), std::string::npos);
     }
 }
+
+// A CSV that cannot be written (here: no file may grow, as on a full disk) fails the run, and an
+// earlier run's file of that name is left whole: it was opened, so emptied, before the write
+// that failed.
+TEST(StudyCli, AFailedWriteLeavesTheEarlierCsvWhole) {
+    TempDir dir;
+    const std::string out = dir / "out";
+    std::filesystem::create_directories(out);
+    std::ofstream(out + "/updates.csv") << "method,box\nyesterday,8\n";
+    // RLIMIT_FSIZE 0 with SIGXFSZ ignored: every write to a regular file fails with EFBIG. The
+    // output goes through a pipe, which the limit does not touch.
+    const std::string cmd = "( ulimit -f 0; trap '' XFSZ; exec " + shellQuote(TREPHINE_BIN) +
+                            " study updates --quick --sizes 8 --methods dbi --cycles 1 --volume "
+                            "skull:64 --out " +
+                            shellQuote(out) + " ) 2>&1 | cat > " + shellQuote(dir / "log.txt");
+    ASSERT_EQ(std::system(cmd.c_str()), 0);
+    const std::string log = slurp(dir / "log.txt");
+    EXPECT_NE(log.find("trephine: cannot write " + out + "/updates.csv"), std::string::npos) << log;
+    EXPECT_EQ(slurp(out + "/updates.csv"), "method,box\nyesterday,8\n");
+    size_t files = 0;
+    for (const auto& e : std::filesystem::directory_iterator(out)) {
+        (void)e;
+        ++files;
+    }
+    EXPECT_EQ(files, 1u) << "no temporary file left behind";
+}
