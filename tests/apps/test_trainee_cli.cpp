@@ -21,31 +21,38 @@ CommandResult runScript(const TempDir& dir, const std::string& rows) {
                                 path + "'");
 }
 
-} // namespace
+struct RowCase {
+    const char* row;  // the script's second line (after a good first one)
+    const char* says; // in the refusal
+};
 
-TEST(TraineeCli, AScriptWithValuesTheTraineeCannotUseIsRefusedWithItsLine) {
-    TempDir dir;
+// Each row after a good one is refused: exit 1, one line that says why.
+void expectRefused(const TempDir& dir, std::initializer_list<RowCase> cases) {
     const std::string good = "0,0,0,50,1,0,0,0,0,burr:5\n";
-    const struct {
-        const char* row;
-        const char* says;
-    } cases[] = {
-        {"nan,0,0,50,1,0,0,0,0,burr:5\n", "line 2: column 1 is not a finite number"},
-        {"1,inf,0,50,1,0,0,0,0,burr:5\n", "line 2: column 2 is not a finite number"},
-        {"1,1e39,0,50,1,0,0,0,0,burr:5\n", "line 2: column 2 is not a finite number"},
-        {"1e300,0,0,50,1,0,0,0,0,burr:5\n", "line 2: column 1 is not a finite number"},
-        {"100000,0,0,50,1,0,0,0,0,burr:5\n", "line 2: time must be from 0 to 86400 s"},
-        {"1,0,0,50,0,0,0,0,0,burr:5\n", "line 2: the orientation quaternion is zero"},
-        {"1,0,0,50,1,0,0,0,0,burr:-3\n", "line 2: burr diameter -3 mm is out of range"},
-    };
-    for (const auto& c : cases) {
+    for (const RowCase& c : cases) {
         SCOPED_TRACE(c.row);
         CommandResult r = runScript(dir, good + c.row);
         EXPECT_EQ(r.exitCode, 1);
         EXPECT_NE(r.err.find(c.says), std::string::npos) << r.err;
-        EXPECT_NE(r.err.find("script.csv"), std::string::npos) << r.err;
+        EXPECT_NE(r.err.find("script.csv"), std::string::npos) << "names the file: " << r.err;
         EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << "one line: " << r.err;
     }
+}
+
+} // namespace
+
+TEST(TraineeCli, AScriptWithValuesTheTraineeCannotUseIsRefusedWithItsLine) {
+    TempDir dir;
+    expectRefused(
+        dir, {
+                 {"nan,0,0,50,1,0,0,0,0,burr:5\n", "line 2: column 1 is not a finite number"},
+                 {"1,inf,0,50,1,0,0,0,0,burr:5\n", "line 2: column 2 is not a finite number"},
+                 {"1,1e39,0,50,1,0,0,0,0,burr:5\n", "line 2: column 2 is not a finite number"},
+                 {"1e300,0,0,50,1,0,0,0,0,burr:5\n", "line 2: column 1 is not a finite number"},
+                 {"100000,0,0,50,1,0,0,0,0,burr:5\n", "line 2: time must be from 0 to 86400 s"},
+                 {"1,0,0,50,0,0,0,0,0,burr:5\n", "line 2: the orientation quaternion is zero"},
+                 {"1,0,0,50,1,0,0,0,0,burr:-3\n", "line 2: burr diameter -3 mm is out of range"},
+             });
 }
 
 // CLI::Range lets NaN through (every comparison with it is false): floating-point options use a
@@ -97,29 +104,20 @@ TEST(TraineeCli, ANameTooLongForTheProtocolIsRefusedBeforeConnecting) {
 // drilled somewhere other than written.
 TEST(TraineeCli, AScriptCellThatIsNotWhollyANumberIsRefused) {
     TempDir dir;
-    const std::string good = "0,0,0,50,1,0,0,0,0,burr:5\n";
-    const struct {
-        const char* row;
-        const char* says;
-    } cases[] = {
-        {"0x10,0,0,50,1,0,0,0,0,burr:5\n", "line 2: column 1 is not a number"},
-        {"1,0,0,50mm,1,0,0,0,0,burr:5\n", "line 2: column 4 is not a number"},
-        {"1,1.5.2,0,50,1,0,0,0,0,burr:5\n", "line 2: column 2 is not a number"},
-        {"1,0,0,50,1,0,0,0,,burr:5\n", "line 2: column 9 is not a number"},
-        {"1,0,0,50,1,0,0,0,0,burr:5x\n", "line 2: tool diameter in 'burr:5x' is not a number"},
-        {"1,0,0,50,1,0,0,0,0,perforator:\n",
-         "line 2: tool diameter in 'perforator:' is not a number"},
-        {"1,0,0,50,1,0,0,0,0,burr:5,\n", "line 2: expected 10 columns"},
-    };
-    for (const auto& c : cases) {
-        SCOPED_TRACE(c.row);
-        CommandResult r = runScript(dir, good + c.row);
-        EXPECT_EQ(r.exitCode, 1);
-        EXPECT_NE(r.err.find(c.says), std::string::npos) << r.err;
-        EXPECT_EQ(r.err.find('\n'), r.err.size() - 1) << "one line: " << r.err;
-    }
+    expectRefused(dir, {
+                           {"0x10,0,0,50,1,0,0,0,0,burr:5\n", "line 2: column 1 is not a number"},
+                           {"1,0,0,50mm,1,0,0,0,0,burr:5\n", "line 2: column 4 is not a number"},
+                           {"1,1.5.2,0,50,1,0,0,0,0,burr:5\n", "line 2: column 2 is not a number"},
+                           {"1,0,0,50,1,0,0,0,,burr:5\n", "line 2: column 9 is not a number"},
+                           {"1,0,0,50,1,0,0,0,0,burr:5x\n",
+                            "line 2: tool diameter in 'burr:5x' is not a number"},
+                           {"1,0,0,50,1,0,0,0,0,perforator:\n",
+                            "line 2: tool diameter in 'perforator:' is not a number"},
+                           {"1,0,0,50,1,0,0,0,0,burr:5,\n", "line 2: expected 10 columns"},
+                       });
     // Spaces around a number and Windows line ends are fine: this one fails only to connect.
-    CommandResult r = runScript(dir, good + " 1 , 0,0,50,1,0,0,0,+0.5,burr: 5\r\n");
+    CommandResult r =
+        runScript(dir, "0,0,0,50,1,0,0,0,0,burr:5\n 1 , 0,0,50,1,0,0,0,+0.5,burr: 5\r\n");
     EXPECT_EQ(r.err.find("script"), std::string::npos) << r.err;
 }
 
