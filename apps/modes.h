@@ -5,6 +5,7 @@
 #include <CLI/CLI.hpp>
 
 #include "libsim/error.h"
+#include "libsim/replacing_file.h"
 #include "net/protocol.h"
 
 #include <cmath>
@@ -15,6 +16,9 @@
 #include <unistd.h>
 
 namespace trephine::app {
+
+using trephine::ReplacingFile;
+using trephine::writeReplacing;
 
 // CLI::Range compares, and NaN compares false with everything, so it lets `nan` through any
 // range (`--feed nan` ran 30 simulated seconds of NaN). For floating-point options: a finite
@@ -80,67 +84,6 @@ inline CLI::Validator participantName() {
             return {};
         },
         "NAME");
-}
-
-// An output file written through a temporary file beside it, renamed over it only by commit():
-// a run that fails before (a full disk, an error, Ctrl-C) leaves an earlier file of that name
-// whole, where opening it had already emptied it. A symbolic link is followed (the link stays);
-// a path that is no regular file (a device such as /dev/full) is written directly.
-class ReplacingFile {
-public:
-    explicit ReplacingFile(const std::string& path) : m_path(path) {
-        namespace fs = std::filesystem;
-        std::error_code ec;
-        fs::path target = path;
-        if (fs::is_symlink(target, ec)) {
-            const fs::path resolved = fs::weakly_canonical(target, ec);
-            if (!ec)
-                target = resolved;
-        }
-        if (fs::exists(target, ec) && !fs::is_regular_file(target, ec)) {
-            m_stream.open(path, std::ios::binary);
-            return;
-        }
-        m_target = target.string();
-        m_temp = m_target + ".trephine-" + std::to_string(::getpid()) + ".tmp";
-        m_stream.open(m_temp, std::ios::binary);
-    }
-    ~ReplacingFile() {
-        if (!m_temp.empty() && !m_committed) {
-            m_stream.close();
-            std::error_code ec;
-            std::filesystem::remove(m_temp, ec);
-        }
-    }
-    ReplacingFile(const ReplacingFile&) = delete;
-    ReplacingFile& operator=(const ReplacingFile&) = delete;
-
-    std::ofstream& stream() { return m_stream; }
-    bool good() const { return bool(m_stream); }
-    // Flushes, closes and puts the file in place; false (the earlier file untouched) on failure.
-    bool commit() {
-        m_stream.close();
-        if (!m_stream)
-            return false;
-        if (m_temp.empty())
-            return true;
-        if (std::rename(m_temp.c_str(), m_target.c_str()) != 0)
-            return false;
-        m_committed = true;
-        return true;
-    }
-
-private:
-    std::string m_path, m_target, m_temp;
-    std::ofstream m_stream;
-    bool m_committed = false;
-};
-
-// `text` into `path` through a ReplacingFile; false when it could not be written.
-inline bool writeReplacing(const std::string& path, const std::string& text) {
-    ReplacingFile f(path);
-    f.stream() << text;
-    return f.commit();
 }
 
 void addServerMode(CLI::App& root, int& exitCode);

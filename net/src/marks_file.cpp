@@ -1,6 +1,7 @@
 #include "net/marks_file.h"
 
 #include "libsim/error.h"
+#include "libsim/replacing_file.h"
 
 #include <cerrno>
 #include <cmath>
@@ -9,7 +10,6 @@
 #include <filesystem>
 #include <fstream>
 #include <sstream>
-#include <unistd.h>
 
 namespace trephine::net {
 
@@ -137,35 +137,16 @@ void checkMarks(const std::vector<AnnotationInfo>& marks, const std::string& wha
 
 void writeMarksFile(const std::string& path, const std::vector<AnnotationInfo>& marks) {
     checkMarks(marks, path);
-    // Renamed over only a regular file (or nothing): never over a device or a folder.
-    std::error_code ec;
-    const auto status = std::filesystem::status(path, ec);
-    if (std::filesystem::exists(status) && !std::filesystem::is_regular_file(status))
-        throw Error(path + ": cannot write the marks there (not a regular file)");
-    const std::string tmp = path + ".tmp-" + std::to_string(::getpid());
-    {
-        std::ofstream f(tmp, std::ios::binary | std::ios::trunc);
-        f << kHeader << '\n';
-        char buf[128];
-        for (const AnnotationInfo& m : marks) {
-            std::snprintf(buf, sizeof buf, "mark %.9g %.9g %.9g ", double(m.position.x),
-                          double(m.position.y), double(m.position.z));
-            f << buf << quoted(m.label) << '\n';
-        }
-        f.flush();
-        if (!f) {
-            f.close();
-            std::error_code ignored;
-            std::filesystem::remove(tmp, ignored);
-            throw Error(path + ": cannot write the marks (" + std::strerror(errno) + ")");
-        }
+    ReplacingFile f(path);
+    f.stream() << kHeader << '\n';
+    char buf[128];
+    for (const AnnotationInfo& m : marks) {
+        std::snprintf(buf, sizeof buf, "mark %.9g %.9g %.9g ", double(m.position.x),
+                      double(m.position.y), double(m.position.z));
+        f.stream() << buf << quoted(m.label) << '\n';
     }
-    std::filesystem::rename(tmp, path, ec);
-    if (ec) {
-        std::error_code ignored;
-        std::filesystem::remove(tmp, ignored);
-        throw Error(path + ": cannot write the marks (" + ec.message() + ")");
-    }
+    if (!f.commit())
+        throw Error(path + ": cannot write the marks (" + std::strerror(errno) + ")");
 }
 
 std::vector<AnnotationInfo> readMarksFile(const std::string& path) {

@@ -227,7 +227,7 @@ TEST(MarksFile, AFailedWriteLeavesTheEarlierFileWhole) {
     EXPECT_TRUE(std::filesystem::is_character_file("/dev/full"));
     EXPECT_THROW(writeMarksFile(dir.path.string(), {a}), Error);
     // The temporary file cannot be made (a folder in its way): the earlier file stays.
-    std::filesystem::create_directories(path + ".tmp-" + std::to_string(::getpid()));
+    std::filesystem::create_directories(path + ".trephine-" + std::to_string(::getpid()) + ".tmp");
     AnnotationInfo other = a;
     other.label = "lost?";
     EXPECT_THROW(writeMarksFile(path, {other, other}), Error);

@@ -19,8 +19,8 @@ namespace trephine::net {
 // The marks file that goes with a saved volume.
 std::string marksPathFor(const std::string& volumePath);
 
-// Writes the marks (id and author are not kept) through a temporary file renamed over `path`,
-// so a failed write leaves any earlier file whole. Throws trephine::Error.
+// Writes the marks (id and author are not kept) through a ReplacingFile, so a failed write leaves
+// any earlier file whole. Throws trephine::Error.
 void writeMarksFile(const std::string& path, const std::vector<AnnotationInfo>& marks);
 
 // Reads a marks file: ids 1..n in file order, author 0. Throws trephine::Error (one line, naming

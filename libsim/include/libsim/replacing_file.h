@@ -1,0 +1,73 @@
+// An output file written through a temporary file beside it and renamed over it only once
+// complete: reports, study CSVs, marks files. A failed run leaves an earlier file whole.
+#pragma once
+
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <unistd.h>
+
+namespace trephine {
+
+// An output file written through a temporary file beside it, renamed over it only by commit():
+// a run that fails before (a full disk, an error, Ctrl-C) leaves an earlier file of that name
+// whole, where opening it had already emptied it. A symbolic link is followed (the link stays);
+// a path that is no regular file (a device such as /dev/full) is written directly.
+class ReplacingFile {
+public:
+    explicit ReplacingFile(const std::string& path) : m_path(path) {
+        namespace fs = std::filesystem;
+        std::error_code ec;
+        fs::path target = path;
+        if (fs::is_symlink(target, ec)) {
+            const fs::path resolved = fs::weakly_canonical(target, ec);
+            if (!ec)
+                target = resolved;
+        }
+        if (fs::exists(target, ec) && !fs::is_regular_file(target, ec)) {
+            m_stream.open(path, std::ios::binary);
+            return;
+        }
+        m_target = target.string();
+        m_temp = m_target + ".trephine-" + std::to_string(::getpid()) + ".tmp";
+        m_stream.open(m_temp, std::ios::binary);
+    }
+    ~ReplacingFile() {
+        if (!m_temp.empty() && !m_committed) {
+            m_stream.close();
+            std::error_code ec;
+            std::filesystem::remove(m_temp, ec);
+        }
+    }
+    ReplacingFile(const ReplacingFile&) = delete;
+    ReplacingFile& operator=(const ReplacingFile&) = delete;
+
+    std::ofstream& stream() { return m_stream; }
+    bool good() const { return bool(m_stream); }
+    // Flushes, closes and puts the file in place; false (the earlier file untouched) on failure.
+    bool commit() {
+        m_stream.close();
+        if (!m_stream)
+            return false;
+        if (m_temp.empty())
+            return true;
+        if (std::rename(m_temp.c_str(), m_target.c_str()) != 0)
+            return false;
+        m_committed = true;
+        return true;
+    }
+
+private:
+    std::string m_path, m_target, m_temp;
+    std::ofstream m_stream;
+    bool m_committed = false;
+};
+
+// `text` into `path` through a ReplacingFile; false when it could not be written.
+inline bool writeReplacing(const std::string& path, const std::string& text) {
+    ReplacingFile f(path);
+    f.stream() << text;
+    return f.commit();
+}
+
+} // namespace trephine
