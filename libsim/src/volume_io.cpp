@@ -156,6 +156,18 @@ bool FileSource::readLine(std::string& line, size_t maxLength) {
     return true;
 }
 
+bool FileSource::skipLine(size_t maxLength) {
+    size_t length = 0;
+    int c;
+    while ((c = std::fgetc(m_file)) != EOF && c != '\n')
+        if (++length > maxLength)
+            fail(name(), "a line to skip is longer than " + std::to_string(maxLength) +
+                             " characters: not a text line");
+    if (c == EOF && std::ferror(m_file))
+        fail(name(), "read error: " + systemError());
+    return c != EOF || length > 0;
+}
+
 bool isGzipMagic(const uint8_t* bytes, size_t n) {
     return n >= 2 && bytes[0] == 0x1f && bytes[1] == 0x8b;
 }

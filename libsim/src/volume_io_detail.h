@@ -52,6 +52,9 @@ public:
     // Reads one header line (without "\n" or "\r\n"). False at end of file. Lines longer than
     // maxLength throw Error.
     bool readLine(std::string& line, size_t maxLength);
+    // Skips one line, keeping nothing. False at end of file. Lines longer than maxLength throw
+    // Error.
+    bool skipLine(size_t maxLength);
 
 protected:
     size_t readSome(void* dst, size_t n) override;

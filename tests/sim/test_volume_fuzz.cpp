@@ -746,3 +746,36 @@ TEST(VolumeFuzz, GzipStreamsThatLieRefuseOrLoadSanely) {
     EXPECT_GT(tally.loaded, 0);
     EXPECT_GT(tally.refused, 0);
 }
+
+// [SECTION] defects the fuzzing found
+
+// Loads spec expecting a one-line Error containing `problem`; returns the largest allocation.
+size_t expectRefused(const std::string& spec, const std::string& problem) {
+    AllocationProbe probe;
+    try {
+        loadVolume(spec);
+        ADD_FAILURE() << spec << ": loaded; expected an Error saying '" << problem << "'";
+    } catch (const Error& e) {
+        const std::string msg = e.what();
+        EXPECT_NE(msg.find(problem), std::string::npos) << msg;
+        EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+    }
+    return probe.largest();
+}
+
+TEST(VolumeFuzz, ALineSkipOverBinaryDataKeepsNothingAndStopsAtOneMebibyte) {
+    // `line skip` read each skipped line into memory, up to 1 GiB: a header pointing it at 8 MiB
+    // without a newline allocated 8 MiB (at /dev/zero: 2 GB and 23 s before the Error).
+    FuzzDir dir;
+    writeFile(dir / "d.raw", Bytes(size_t(8) << 20, 'x'));
+    writeFile(dir / "d.nhdr",
+              bytesOf(nrrdHeader("uchar", "line skip: 1\n", "raw") + "data file: d.raw\n"));
+    EXPECT_LT(expectRefused(dir / "d.nhdr", "longer than 1048576 characters"), size_t(1) << 20);
+    // Lines that are text are skipped as before.
+    Bytes data = bytesOf("# a text header\n\n" + std::string(size_t(1) << 20, 'y') + "\n");
+    data.resize(data.size() + kVoxels, 7);
+    writeFile(dir / "d.raw", data);
+    writeFile(dir / "d.nhdr",
+              bytesOf(nrrdHeader("uchar", "line skip: 3\n", "raw") + "data file: d.raw\n"));
+    EXPECT_EQ(loadVolume(dir / "d.nhdr").densityData()[kVoxels - 1], 7);
+}
