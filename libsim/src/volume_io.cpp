@@ -74,6 +74,8 @@ std::string toLower(std::string s) {
 
 namespace {
 constexpr size_t kChunkBytes = size_t(1) << 18;
+// Data past the voxels is counted up to the voxels' size or this, whichever is more.
+constexpr uint64_t kMaxTrailingCount = uint64_t(64) << 20;
 
 std::string systemError() {
     return std::strerror(errno);
@@ -516,7 +518,14 @@ Volume decodeVoxels(ByteSource& src, glm::ivec3 dims, glm::vec3 spacing, const D
         done += n;
     }
     if (exactEnd) {
-        uint64_t extra = src.skip(~uint64_t(0));
+        // Counted only so far: a small gzip stream that inflates to gigabytes past the voxels is
+        // refused after this much, not after inflating all of it (1 GiB of zeros behind a
+        // one-voxel header took 3.3 s).
+        const uint64_t limit = std::max(need, kMaxTrailingCount);
+        uint64_t extra = src.skip(limit + 1);
+        if (extra > limit)
+            fail(src.name(), "dimensions do not match the data: they need " + std::to_string(need) +
+                                 " bytes of data, found more than " + std::to_string(need + limit));
         if (extra > 0)
             fail(src.name(), "dimensions do not match the data: they need " + std::to_string(need) +
                                  " bytes of data, found " + std::to_string(need + extra));
