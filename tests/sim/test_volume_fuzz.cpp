@@ -15,6 +15,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <csignal>
 #include <cstdint>
 #include <cstdlib>
 #include <cstring>
@@ -24,6 +25,8 @@
 #include <new>
 #include <random>
 #include <string>
+#include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 #include <vector>
 #include <zlib.h>
@@ -803,4 +806,43 @@ TEST(VolumeFuzz, DataPastTheVoxelsOfAGzipStreamIsCountedOnlySoFar) {
                              "gzip\n\n"),
                      gzip(Bytes(100, 0))));
     expectRefused(dir / "more.nrrd", "they need 1 bytes of data, found 100");
+}
+
+// Loads spec in a child process: true when it throws an Error containing `problem` within
+// `seconds` (a reader that hangs is killed).
+bool refusedWithin(int seconds, const std::string& spec, const std::string& problem) {
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+        int code = 2;
+        try {
+            loadVolume(spec);
+        } catch (const Error& e) {
+            code = std::string(e.what()).find(problem) != std::string::npos ? 0 : 3;
+        } catch (...) {
+        }
+        ::_exit(code);
+    }
+    for (int i = 0; i < seconds * 100; ++i) {
+        int status = 0;
+        if (::waitpid(pid, &status, WNOHANG) == pid)
+            return WIFEXITED(status) && WEXITSTATUS(status) == 0;
+        ::usleep(10000);
+    }
+    ::kill(pid, SIGKILL);
+    ::waitpid(pid, nullptr, 0);
+    return false;
+}
+
+TEST(VolumeFuzz, DataFilesThatAreDevicesOrPipesAreRefusedInsteadOfReadForever) {
+    // A NRRD's detached data came from any path: `data file: /dev/urandom` with a large line
+    // skip read forever, and a FIFO blocked on opening.
+    FuzzDir dir;
+    const std::string header = nrrdHeader("uchar", "", "raw");
+    writeFile(dir / "urandom.nhdr",
+              bytesOf(header + "data file: /dev/urandom\nline skip: 9223372036854775807\n"));
+    EXPECT_TRUE(refusedWithin(10, dir / "urandom.nhdr", "not a regular file"));
+    ASSERT_EQ(::mkfifo((dir / "fifo.raw").c_str(), 0600), 0);
+    writeFile(dir / "fifo.nhdr", bytesOf(header + "data file: fifo.raw\n"));
+    EXPECT_TRUE(refusedWithin(10, dir / "fifo.nhdr", "not a regular file"));
+    EXPECT_TRUE(refusedWithin(10, "raw:" + dir / "fifo.raw?dims=1,1,1", "not a regular file"));
 }
