@@ -103,7 +103,12 @@ Volume loadVolumeSlices(const std::string& folder, glm::vec3 spacingMm,
         fail(folder, "no image slices found (expected files such as PNG or TIFF)");
     std::sort(names.begin(), names.end(), naturalLess);
 
-    Volume volume;
+    // The voxels grow slice by slice as slices are read, by doubling capped at the volume, and
+    // become the Volume without a copy: a folder whose first slice is honest and the rest are not
+    // costs what was read (the whole volume was allocated first: 2 GiB for a 1024^2 slice and 1023
+    // broken files).
+    std::vector<uint8_t> densities, materials;
+    size_t total = 0;
     int width = 0, height = 0;
     OIIO::TypeDesc::BASETYPE baseType = OIIO::TypeDesc::UNKNOWN;
     std::string firstName;
@@ -128,7 +133,7 @@ Volume loadVolumeSlices(const std::string& folder, glm::vec3 spacingMm,
                 fail(folder, std::to_string(width) + "x" + std::to_string(height) + "x" +
                                  std::to_string(names.size()) +
                                  " voxels are too many: at most 1024^3 are accepted");
-            volume = Volume({width, height, int(names.size())}, spacingMm);
+            total = size_t(width) * size_t(height) * names.size();
         } else if (spec.width != width || spec.height != height) {
             fail(path, "slice is " + std::to_string(spec.width) + "x" +
                            std::to_string(spec.height) + " but " + firstName + " is " +
@@ -139,7 +144,14 @@ Volume loadVolumeSlices(const std::string& folder, glm::vec3 spacingMm,
                            firstName + "'s: all slices must share a pixel type");
         }
         const size_t n = size_t(width) * size_t(height);
-        uint8_t* density = volume.densityData() + z * n;
+        if ((z + 1) * n > densities.capacity()) {
+            const size_t want = std::min(total, std::max((z + 1) * n, 2 * densities.size()));
+            densities.reserve(want);
+            materials.reserve(want);
+        }
+        densities.resize((z + 1) * n);
+        materials.resize((z + 1) * n);
+        uint8_t* density = densities.data() + z * n;
         const bool passThrough = type == OIIO::TypeDesc::UINT8 && !window;
         bool ok;
         if (passThrough) {
@@ -190,11 +202,12 @@ Volume loadVolumeSlices(const std::string& folder, glm::vec3 spacingMm,
         }
         if (!ok)
             fail(path, "cannot read image: " + firstLine(in->geterror()));
-        uint8_t* material = volume.materialData() + z * n;
+        uint8_t* material = materials.data() + z * n;
         for (size_t i = 0; i < n; ++i)
             material[i] = uint8_t(materialFromDensity(density[i]));
     }
-    return volume;
+    return Volume({width, height, int(names.size())}, spacingMm, std::move(densities),
+                  std::move(materials));
 }
 
 Volume openVolume(const std::string& spec) {

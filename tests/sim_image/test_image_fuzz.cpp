@@ -1,0 +1,276 @@
+// Hostile and truncated image files against the readers of sim_image: folders of 2D slices (PNG,
+// TIFF, through OpenImageIO) and DBI files (OpenEXR). Small valid files are mutated (truncated,
+// bits flipped, bytes inserted and deleted, size fields set to huge, zero and negative values) and
+// must either be refused with one line of trephine::Error or load as something sane: never a
+// crash, undefined behaviour (run it under -fsanitize=address,undefined) or an allocation far
+// beyond what the file holds. The seeds are fixed and the counts bounded; TREPHINE_FUZZ_SCALE=N
+// runs N times as many mutations for a long run.
+#include "libsim/error.h"
+#include "libsim_image/dbi_io.h"
+#include "libsim_image/volume_slices.h"
+
+#include <gtest/gtest.h>
+
+#include <OpenImageIO/imageio.h>
+
+#include <algorithm>
+#include <cstdint>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <new>
+#include <random>
+#include <string>
+#include <unistd.h>
+#include <vector>
+
+namespace fs = std::filesystem;
+using namespace trephine;
+
+// [SECTION] allocation probe
+
+// The largest single allocation this thread makes while a probe is alive. Every operator new of
+// the test binary goes through here; it only forwards to malloc unless a probe watches.
+namespace {
+thread_local bool t_probing = false;
+thread_local size_t t_largestAllocation = 0;
+
+struct AllocationProbe {
+    AllocationProbe() { t_probing = true, t_largestAllocation = 0; }
+    ~AllocationProbe() { t_probing = false; }
+    size_t largest() const { return t_largestAllocation; }
+};
+} // namespace
+
+// GCC sees free() on what operator new returned and warns; here they are one malloc and free.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+#endif
+void* operator new(size_t n) {
+    if (t_probing)
+        t_largestAllocation = std::max(t_largestAllocation, n);
+    if (void* p = std::malloc(n ? n : 1))
+        return p;
+    throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept {
+    std::free(p);
+}
+void operator delete(void* p, size_t) noexcept {
+    std::free(p);
+}
+
+namespace {
+
+using Bytes = std::vector<uint8_t>;
+
+// [SECTION] mutations
+
+int fuzzScale() {
+    const char* s = std::getenv("TREPHINE_FUZZ_SCALE");
+    const int n = s ? std::atoi(s) : 1;
+    return std::max(n, 1);
+}
+
+constexpr uint64_t kSpecialValues[] = {0,          1,          0x7f,       0x80,
+                                       0xff,       0x7fff,     0x8000,     0xffff,
+                                       0x7fffffff, 0x80000000, 0xffffffff, ~uint64_t(0)};
+
+void writeLittleEndian(Bytes& b, size_t at, uint64_t v, size_t width) {
+    for (size_t i = 0; i < width && at + i < b.size(); ++i)
+        b[at + i] = uint8_t(v >> (8 * i));
+}
+
+void writeBigEndian(Bytes& b, size_t at, uint64_t v, size_t width) {
+    for (size_t i = 0; i < width && at + i < b.size(); ++i)
+        b[at + i] = uint8_t(v >> (8 * (width - 1 - i)));
+}
+
+// Deterministic edits of a byte string (std::mt19937 is the same sequence everywhere; the
+// distributions are not, so draws use plain modulo).
+class Mutator {
+public:
+    explicit Mutator(uint32_t seed) : m_rng(seed) {}
+
+    uint32_t below(uint32_t n) { return n ? uint32_t(m_rng() % n) : 0; }
+
+    Bytes mutate(Bytes b) {
+        const uint32_t edits = 1 + below(3);
+        for (uint32_t e = 0; e < edits; ++e) {
+            const size_t at = below(uint32_t(b.size()));
+            switch (below(7)) {
+            case 0: // flip a bit
+                if (!b.empty())
+                    b[at] ^= uint8_t(1u << below(8));
+                break;
+            case 1: // a random byte
+                if (!b.empty())
+                    b[at] = uint8_t(m_rng());
+                break;
+            case 2: // a hostile value in a field of 1, 2, 4 or 8 bytes, either byte order
+                if (below(2))
+                    writeLittleEndian(b, at, kSpecialValues[below(std::size(kSpecialValues))],
+                                      size_t(1) << below(4));
+                else
+                    writeBigEndian(b, at, kSpecialValues[below(std::size(kSpecialValues))],
+                                   size_t(1) << below(4));
+                break;
+            case 3: // truncated
+                b.resize(below(uint32_t(b.size()) + 1));
+                break;
+            case 4: { // bytes inserted
+                const size_t n = 1 + below(8);
+                Bytes ins(n);
+                for (uint8_t& v : ins)
+                    v = uint8_t(m_rng());
+                b.insert(b.begin() + std::ptrdiff_t(at), ins.begin(), ins.end());
+                break;
+            }
+            case 5: // bytes deleted
+                b.erase(b.begin() + std::ptrdiff_t(at),
+                        b.begin() + std::ptrdiff_t(std::min(b.size(), at + 1 + below(8))));
+                break;
+            default: // appended junk
+                b.push_back(uint8_t(m_rng()));
+                break;
+            }
+        }
+        return b;
+    }
+
+private:
+    std::mt19937 m_rng;
+};
+
+// [SECTION] files
+
+// A fresh folder, removed with everything in it on destruction: in memory (/dev/shm) unless TMPDIR
+// says otherwise, since many small files written to a disk-backed /tmp take seconds.
+struct FuzzDir {
+    fs::path path;
+    FuzzDir() {
+        static int counter = 0;
+        std::error_code ec;
+        fs::path base = fs::temp_directory_path();
+        if (!std::getenv("TMPDIR") && fs::is_directory("/dev/shm", ec) &&
+            ::access("/dev/shm", W_OK) == 0)
+            base = "/dev/shm";
+        path = base / ("trephine_image_fuzz_" + std::to_string(::getpid()) + "_" +
+                       std::to_string(counter++));
+        fs::remove_all(path, ec);
+        fs::create_directories(path);
+    }
+    ~FuzzDir() {
+        std::error_code ec;
+        fs::remove_all(path, ec);
+    }
+    FuzzDir(const FuzzDir&) = delete;
+    FuzzDir& operator=(const FuzzDir&) = delete;
+    std::string operator/(const std::string& name) const { return (path / name).string(); }
+};
+
+// Replaces the file by a new one (truncating in place makes ext4 flush it on close).
+void writeFile(const std::string& path, const Bytes& data) {
+    std::error_code ec;
+    fs::remove(path, ec);
+    std::ofstream f(path, std::ios::binary);
+    f.write(reinterpret_cast<const char*>(data.data()), std::streamsize(data.size()));
+}
+
+template <typename T>
+void writeImage(const std::string& path, int w, int h, int channels, OIIO::TypeDesc type) {
+    std::vector<T> pixels(size_t(w) * size_t(h) * size_t(channels));
+    for (size_t i = 0; i < pixels.size(); ++i)
+        pixels[i] = T((i * 37) % 200);
+    auto out = OIIO::ImageOutput::create(path);
+    ASSERT_TRUE(out) << OIIO::geterror();
+    OIIO::ImageSpec spec(w, h, channels, type);
+    ASSERT_TRUE(out->open(path, spec)) << out->geterror();
+    ASSERT_TRUE(out->write_image(type, pixels.data())) << out->geterror();
+    ASSERT_TRUE(out->close());
+}
+
+// [SECTION] the checks
+
+struct Tally {
+    int loaded = 0;
+    int refused = 0;
+};
+
+// OpenImageIO's read_image reads through a buffer of 64 MiB, whatever the image's size.
+constexpr size_t kOiioChunkBytes = size_t(64) << 20;
+
+// Beyond OpenImageIO's chunk buffer, what deflate (1032:1) on 1-bit pixels unpacked to bytes can
+// honestly hold.
+size_t allocationBound(size_t fileBytes) {
+    return kOiioChunkBytes + 8256 * fileBytes;
+}
+
+template <typename F>
+void expectRefusedOrSane(const std::string& what, size_t fileBytes, Tally& tally, F&& load) {
+    AllocationProbe probe;
+    try {
+        load();
+        t_probing = false;
+        ++tally.loaded;
+    } catch (const Error& e) {
+        t_probing = false;
+        ++tally.refused;
+        const std::string msg = e.what();
+        EXPECT_FALSE(msg.empty()) << what;
+        EXPECT_EQ(msg.find('\n'), std::string::npos) << what << ": not one line: " << msg;
+    } catch (const std::exception& e) {
+        t_probing = false;
+        ADD_FAILURE() << what << ": threw " << typeid(e).name() << " (" << e.what()
+                      << ") instead of trephine::Error";
+    }
+    EXPECT_LE(probe.largest(), allocationBound(fileBytes))
+        << what << ": allocated " << probe.largest() << " bytes for a file of " << fileBytes;
+}
+
+// Every truncation in a long run (by default ever sparser), `random` mutations.
+template <typename F>
+void forEachMutation(const Bytes& valid, uint32_t seed, int random, F&& f) {
+    const bool every = fuzzScale() > 1;
+    for (size_t len = 0; len < valid.size(); len += every ? 1 : 1 + len / 16)
+        f(Bytes(valid.begin(), valid.begin() + std::ptrdiff_t(len)));
+    Mutator m(seed);
+    for (int i = 0; i < random; ++i)
+        f(m.mutate(valid));
+}
+
+} // namespace
+
+// [SECTION] defects the fuzzing found
+
+// Runs f expecting a one-line Error containing `problem`; returns the largest allocation.
+template <typename F>
+size_t expectRefused(F&& f, const std::string& problem) {
+    AllocationProbe probe;
+    try {
+        f();
+        ADD_FAILURE() << "no Error; expected one saying '" << problem << "'";
+    } catch (const Error& e) {
+        const std::string msg = e.what();
+        EXPECT_NE(msg.find(problem), std::string::npos) << msg;
+        EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+    }
+    return probe.largest();
+}
+
+TEST(ImageFuzz, ASliceFolderAllocatesOnlyWhatItsSlicesHold) {
+    // The whole volume was allocated from the first slice's size times the number of files:
+    // an honest 1024 x 1024 slice among 1023 broken files cost 2 GiB before the first of them
+    // failed.
+    FuzzDir dir;
+    const std::string folder = dir / "slices";
+    fs::create_directories(folder);
+    writeImage<uint8_t>(folder + "/s0000.png", 1024, 1024, 1, OIIO::TypeDesc::UINT8);
+    for (int z = 1; z < 1024; ++z)
+        writeFile(folder + "/s" + std::to_string(10000 + z).substr(1) + ".png", {});
+    // OpenImageIO's read_image takes 64 MiB for its chunk buffer, whatever the image.
+    EXPECT_LE(expectRefused([&] { loadVolumeSlices(folder, glm::vec3(1.0f)); }, "s0001.png"),
+              kOiioChunkBytes);
+}
