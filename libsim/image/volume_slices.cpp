@@ -1,6 +1,7 @@
 // Folders of 2D image slices through OpenImageIO, and openVolume on top of the core's loadVolume.
 #include "libsim_image/volume_slices.h"
 
+#include "image_limits.h"
 #include "libsim/error.h"
 
 #include <OpenImageIO/imageio.h>
@@ -15,6 +16,7 @@
 namespace trephine {
 
 namespace fs = std::filesystem;
+using detail::plausibleImageBytes;
 
 namespace {
 
@@ -119,6 +121,17 @@ Volume loadVolumeSlices(const std::string& folder, glm::vec3 spacingMm,
         if (!in)
             fail(path, "cannot read image: " + firstLine(OIIO::geterror()));
         const OIIO::ImageSpec& spec = in->spec();
+        // Before anything is allocated for it (by us or by OpenImageIO): a 109-byte PNG claiming
+        // 32768 x 32768 pixels cost 2.2 GB and an RGBA16 one 4.3 GB before the read failed.
+        std::error_code sizeError;
+        const uint64_t fileBytes = fs::file_size(path, sizeError);
+        const uint64_t claimed = spec.image_bytes(true);
+        if (!sizeError && !plausibleImageBytes(claimed, fileBytes))
+            fail(path, "the header claims " + std::to_string(spec.width) + "x" +
+                           std::to_string(spec.height) + " pixels of " +
+                           std::to_string(spec.nchannels) + " channels (" +
+                           std::to_string(claimed) + " bytes) but the file holds only " +
+                           std::to_string(fileBytes) + " bytes: a corrupt image");
         if (spec.depth > 1)
             fail(path, "is a 3-D image; slices must be 2-D");
         auto type = OIIO::TypeDesc::BASETYPE(spec.format.basetype);

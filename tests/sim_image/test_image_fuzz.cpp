@@ -274,3 +274,58 @@ TEST(ImageFuzz, ASliceFolderAllocatesOnlyWhatItsSlicesHold) {
     EXPECT_LE(expectRefused([&] { loadVolumeSlices(folder, glm::vec3(1.0f)); }, "s0001.png"),
               kOiioChunkBytes);
 }
+
+// The CRC-32 of PNG chunks (and zlib).
+uint32_t crc32Of(const uint8_t* p, size_t n) {
+    uint32_t c = 0xffffffffu;
+    for (size_t i = 0; i < n; ++i) {
+        c ^= p[i];
+        for (int k = 0; k < 8; ++k)
+            c = (c >> 1) ^ (0xedb88320u & (0u - (c & 1u)));
+    }
+    return ~c;
+}
+
+// A valid PNG whose IHDR claims width x height (with a matching CRC).
+Bytes pngClaiming(const std::string& path, uint32_t width, uint32_t height, int channels,
+                  OIIO::TypeDesc type) {
+    if (type == OIIO::TypeDesc::UINT16)
+        writeImage<uint16_t>(path, 8, 8, channels, type);
+    else
+        writeImage<uint8_t>(path, 8, 8, channels, type);
+    std::ifstream f(path, std::ios::binary);
+    Bytes b{std::istreambuf_iterator<char>(f), {}};
+    EXPECT_EQ(std::string(b.begin() + 12, b.begin() + 16), "IHDR");
+    writeBigEndian(b, 16, width, 4);
+    writeBigEndian(b, 20, height, 4);
+    writeBigEndian(b, 29, crc32Of(b.data() + 12, 17), 4);
+    return b;
+}
+
+TEST(ImageFuzz, ASliceClaimingMorePixelsThanItsFileCanHoldIsRefusedBeforeReading) {
+    // A 109-byte PNG claiming 32768 x 32768 pixels cost 2.2 GB (an RGBA16 one 4.3 GB and 14 s)
+    // before the read failed: the volume, our read buffer and OpenImageIO's each took the claim.
+    FuzzDir dir;
+    for (auto [channels, type] :
+         {std::pair{1, OIIO::TypeDesc::UINT8}, std::pair{4, OIIO::TypeDesc::UINT16}}) {
+        const std::string folder = dir / (channels == 1 ? "gray8" : "rgba16");
+        fs::create_directories(folder);
+        const Bytes png = pngClaiming(folder + "/s0.png", 32768, 32768, channels, type);
+        writeFile(folder + "/s0.png", png);
+        EXPECT_LT(expectRefused([&] { loadVolumeSlices(folder, glm::vec3(1.0f)); },
+                                "the header claims 32768x32768 pixels of " +
+                                    std::to_string(channels) + " channels"),
+                  size_t(1) << 20);
+    }
+    // An honest blank slice of 4096 x 4096 compresses far less than that.
+    const std::string folder = dir / "honest";
+    fs::create_directories(folder);
+    auto out = OIIO::ImageOutput::create(folder + "/s0.png");
+    ASSERT_TRUE(out);
+    const std::vector<uint8_t> blank(size_t(4096) * 4096, 0);
+    ASSERT_TRUE(
+        out->open(folder + "/s0.png", OIIO::ImageSpec(4096, 4096, 1, OIIO::TypeDesc::UINT8)));
+    ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, blank.data()));
+    ASSERT_TRUE(out->close());
+    EXPECT_EQ(loadVolumeSlices(folder, glm::vec3(1.0f)).dims(), glm::ivec3(4096, 4096, 1));
+}
