@@ -4,8 +4,11 @@
 
 #include <OpenImageIO/imageio.h>
 #include <algorithm>
+#include <cctype>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
+#include <fstream>
 #include <vector>
 
 namespace trephine {
@@ -28,6 +31,50 @@ bool hasExtension(const std::string& path, std::initializer_list<const char*> ex
         if (ext == e)
             return true;
     return false;
+}
+
+// OpenEXR allocates each header attribute's declared size before reading its value (a 597-byte
+// file whose 'Software' string claimed 2 GiB allocated 2 GiB), so the sizes are checked against
+// the file first. Returns the problem, or "" when the header is sound or not OpenEXR at all (then
+// OpenImageIO says what it is).
+std::string exrHeaderProblem(const std::string& path) {
+    std::ifstream f(path, std::ios::binary);
+    uint8_t head[8];
+    if (!f.read(reinterpret_cast<char*>(head), sizeof head) ||
+        std::memcmp(head, "\x76\x2f\x31\x01", 4) != 0)
+        return {};
+    std::error_code ec;
+    const uint64_t fileBytes = std::filesystem::file_size(path, ec);
+    if (ec)
+        return {};
+    auto readName = [&](std::string& out) {
+        out.clear();
+        char c;
+        while (f.get(c) && c != '\0' && out.size() <= 255)
+            out.push_back(std::isprint(static_cast<unsigned char>(c)) ? c : '?'); // one line
+        return bool(f) && c == '\0';
+    };
+    std::string name, type;
+    // The first (a DBI's only) header: attributes up to an empty name.
+    while (true) {
+        if (!readName(name))
+            return "corrupt OpenEXR header: truncated or an attribute name too long";
+        if (name.empty())
+            return {};
+        if (!readName(type))
+            return "corrupt OpenEXR header: attribute '" + name + "' has no type";
+        uint8_t sizeBytes[4];
+        if (!f.read(reinterpret_cast<char*>(sizeBytes), 4))
+            return "corrupt OpenEXR header: truncated in attribute '" + name + "'";
+        const int32_t size = int32_t(uint32_t(sizeBytes[0]) | uint32_t(sizeBytes[1]) << 8 |
+                                     uint32_t(sizeBytes[2]) << 16 | uint32_t(sizeBytes[3]) << 24);
+        const uint64_t at = uint64_t(f.tellg());
+        if (size < 0 || at + uint64_t(size) > fileBytes)
+            return "corrupt OpenEXR header: attribute '" + name + "' claims " +
+                   std::to_string(size) + " bytes, the file holds " +
+                   std::to_string(fileBytes > at ? fileBytes - at : 0) + " more";
+        f.seekg(std::streamoff(size), std::ios::cur);
+    }
 }
 
 } // namespace
@@ -86,6 +133,8 @@ void writeDbiExr(const std::string& path, const Dbi& image, const PixelRect& rec
 DbiFile readDbiExr(const std::string& path) {
     if (!std::filesystem::exists(path))
         throw Error("cannot read DBI '" + path + "': no such file");
+    if (const std::string problem = exrHeaderProblem(path); !problem.empty())
+        throw Error("cannot read DBI '" + path + "': " + problem);
     auto in = OIIO::ImageInput::open(path);
     if (!in)
         throw Error("cannot read DBI '" + path + "': " + firstLine(OIIO::geterror()));

@@ -329,3 +329,32 @@ TEST(ImageFuzz, ASliceClaimingMorePixelsThanItsFileCanHoldIsRefusedBeforeReading
     ASSERT_TRUE(out->close());
     EXPECT_EQ(loadVolumeSlices(folder, glm::vec3(1.0f)).dims(), glm::ivec3(4096, 4096, 1));
 }
+
+// A DBI file with the value of its attribute `name` claiming `size` bytes.
+Bytes exrWithAttributeSize(const std::string& path, const std::string& name, int32_t size) {
+    writeDbiExr(path, Dbi(4, 3));
+    std::ifstream f(path, std::ios::binary);
+    Bytes b{std::istreambuf_iterator<char>(f), {}};
+    const std::string key = name + '\0';
+    auto at = std::search(b.begin() + 8, b.end(), key.begin(), key.end());
+    EXPECT_NE(at, b.end()) << name;
+    auto type = std::find(at + std::ptrdiff_t(key.size()), b.end(), '\0');
+    writeLittleEndian(b, size_t(type - b.begin()) + 1, uint32_t(size), 4);
+    return b;
+}
+
+TEST(ImageFuzz, ADbiWhoseHeaderAttributesClaimMoreThanTheFileIsRefusedBeforeOpenExrReadsThem) {
+    // OpenEXR allocates an attribute's declared size before reading its value: a 597-byte DBI
+    // whose 'Software' string claimed 2 GiB allocated 2 GiB before failing.
+    FuzzDir dir;
+    const std::string path = dir / "f.exr";
+    for (const char* name : {"Software", "dataWindow", "channels"}) {
+        SCOPED_TRACE(name);
+        writeFile(path, exrWithAttributeSize(path, name, 0x7f000000));
+        EXPECT_LT(expectRefused([&] { readDbiExr(path); },
+                                std::string("attribute '") + name + "' claims 2130706432 bytes"),
+                  size_t(1) << 20);
+        writeFile(path, exrWithAttributeSize(path, name, -1));
+        expectRefused([&] { readDbiExr(path); }, "f.exr");
+    }
+}
