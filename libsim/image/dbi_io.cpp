@@ -33,6 +33,24 @@ bool hasExtension(const std::string& path, std::initializer_list<const char*> ex
     return false;
 }
 
+// The size of an OpenEXR attribute type's value, or -1 for types of any size.
+int fixedSize(const std::string& type) {
+    static const std::pair<const char*, int> kSizes[] = {
+        {"box2i", 16},    {"box2f", 16},   {"compression", 1},
+        {"lineOrder", 1}, {"envmap", 1},   {"deepImageState", 1},
+        {"float", 4},     {"double", 8},   {"int", 4},
+        {"v2i", 8},       {"v2f", 8},      {"v2d", 16},
+        {"v3i", 12},      {"v3f", 12},     {"v3d", 24},
+        {"m33f", 36},     {"m33d", 72},    {"m44f", 64},
+        {"m44d", 128},    {"rational", 8}, {"keycode", 28},
+        {"timecode", 8},  {"tiledesc", 9}, {"chromaticities", 32},
+    };
+    for (const auto& [name, size] : kSizes)
+        if (type == name)
+            return size;
+    return -1;
+}
+
 // OpenEXR allocates each header attribute's declared size before reading its value (a 597-byte
 // file whose 'Software' string claimed 2 GiB allocated 2 GiB), so the sizes are checked against
 // the file first. Returns the problem, or "" when the header is sound or not OpenEXR at all (then
@@ -73,6 +91,12 @@ std::string exrHeaderProblem(const std::string& path) {
             return "corrupt OpenEXR header: attribute '" + name + "' claims " +
                    std::to_string(size) + " bytes, the file holds " +
                    std::to_string(fileBytes > at ? fileBytes - at : 0) + " more";
+        // OpenEXR reads a value of a fixed-size type whatever its declared size, and takes the
+        // bytes after it as the next attribute: any other size puts it out of step with this
+        // check (a 'compression' of 129 bytes hid an attribute that claimed 1.7 GB).
+        if (const int fixed = fixedSize(type); fixed >= 0 && size != fixed)
+            return "corrupt OpenEXR header: attribute '" + name + "' of type " + type + " has " +
+                   std::to_string(size) + " bytes, expected " + std::to_string(fixed);
         f.seekg(std::streamoff(size), std::ios::cur);
     }
 }

@@ -358,3 +358,25 @@ TEST(ImageFuzz, ADbiWhoseHeaderAttributesClaimMoreThanTheFileIsRefusedBeforeOpen
         expectRefused([&] { readDbiExr(path); }, "f.exr");
     }
 }
+
+TEST(ImageFuzz, ADbiWhoseFixedSizeAttributesHaveAnotherSizeIsRefused) {
+    // OpenEXR reads a 'compression' value as 1 byte whatever its declared size and parses the
+    // bytes after it as the next attribute: a declared size of 129 hid, from the check of sizes
+    // against the file, an attribute claiming 1.7 GB (found by fuzzing DBI files). Here
+    // OpenEXR allocated 64 MiB before failing.
+    FuzzDir dir;
+    const std::string path = dir / "f.exr";
+    Bytes b = exrWithAttributeSize(path, "compression", 129);
+    const std::string key = "dataWindow";
+    auto at = std::search(b.begin(), b.end(), key.begin(), key.end());
+    ASSERT_NE(at, b.end());
+    // The attribute after it (read by OpenEXR, skipped by a reader trusting the size) claims 1.7
+    // GB.
+    const size_t after = size_t(at - b.begin()) + key.size() + 1 + 6;
+    writeLittleEndian(b, after, 0x69696969, 4);
+    writeFile(path, b);
+    EXPECT_LT(
+        expectRefused([&] { readDbiExr(path); },
+                      "attribute 'compression' of type compression has 129 bytes, expected 1"),
+        size_t(1) << 20);
+}
