@@ -476,7 +476,7 @@ auto hostileNiftiFields(const Bytes& valid, bool bigEndian) {
         for (const char* magic : {"ni1", "n+2", "", "n+1x"}) {
             Bytes b = valid;
             char m[4] = {};
-            std::strncpy(m, magic, 4);
+            std::memcpy(m, magic, std::min<size_t>(std::strlen(magic), 4)); // no terminator
             std::memcpy(b.data() + 344, m, 4);
             check(b);
         }
