@@ -6,6 +6,8 @@
 #include <zstd.h>
 
 #include <algorithm>
+#include <bit>
+#include <cfloat>
 #include <cmath>
 #include <cstring>
 
@@ -45,8 +47,10 @@ float DepthQuantizer::dequantize(uint16_t q) const {
     // Window depth of eye z = -dist under glm::perspective (GL clip conventions).
     double n = m_near, f = m_far, z = -dist;
     double ndc = (-(f + n) / (f - n) * z - 2.0 * f * n / (f - n)) / -z;
-    // The largest float below 1, so the far plane never reads back as the background.
-    return std::min(float(ndc * 0.5 + 0.5), std::nextafter(1.0f, 0.0f));
+    // At most the largest float below 1, so the far plane never reads back as the background; at
+    // least 0: code 0 (the near plane) rounds to ndc just below -1 for many near/far pairs, which
+    // read back as -1.1e-16 (down to -3.8e-12), a depth outside [0, 1].
+    return std::clamp(float(ndc * 0.5 + 0.5), 0.0f, std::nextafter(1.0f, 0.0f));
 }
 
 // GCC vectors (two SSE2 registers on baseline x86-64): every operation is the scalar one lane by
@@ -73,6 +77,7 @@ void DepthQuantizer::dequantizeRow(const uint16_t* codes, float* windowDepth, si
         const v4df ndc = (-(f0 + n0) / (f0 - n0) * z - 2.0 * f0 * n0 / (f0 - n0)) / -z;
         v4sf d = __builtin_convertvector(ndc * 0.5 + 0.5, v4sf);
         d = d < below1 ? d : v4sf{below1, below1, below1, below1};
+        d = d < 0.0f ? v4sf{0.0f, 0.0f, 0.0f, 0.0f} : d; // as std::clamp in dequantize
         d = q == int32_t(kBackground)
                 ? v4sf{kBackgroundDepth, kBackgroundDepth, kBackgroundDepth, kBackgroundDepth}
                 : d;
@@ -120,6 +125,21 @@ size_t zstdDecompress(void* dst, size_t capacity, const void* src, size_t size) 
 bool canHold(std::span<const uint8_t> payload, Codec codec, size_t rawBytes) {
     const uint64_t most = codec == Codec::Lz4 ? 255 : 32768;
     return uint64_t(payload.size()) * most >= uint64_t(rawBytes);
+}
+
+// Whether the n float32 depths at `bytes` (a raw update's, host order as the codec sends them)
+// are depths a renderer writes: +0, or a normal float in (0, 1] (1 is the background). NaN, the
+// infinities, negative numbers, -0, subnormals and values above 1 are not (docs/protocol.md).
+// Bits as unsigned: +0 is 0, the positive normal floats up to 1 one interval; no branch a value.
+bool depthsInRange(const uint8_t* bytes, size_t n) {
+    constexpr uint32_t kLo = std::bit_cast<uint32_t>(FLT_MIN), kHi = std::bit_cast<uint32_t>(1.0f);
+    uint32_t bad = 0;
+    for (size_t i = 0; i < n; ++i) {
+        uint32_t b;
+        std::memcpy(&b, bytes + 4 * i, 4);
+        bad |= uint32_t(b != 0) & uint32_t(b - kLo > kHi - kLo);
+    }
+    return bad == 0;
 }
 
 size_t planarBytes(size_t pixels) {
@@ -215,7 +235,8 @@ bool decodeImage(std::span<const uint8_t> payload, uint32_t rawBytes, Codec code
         return false;
     const size_t n = size_t(width) * size_t(height);
     if (codec == Codec::Raw) {
-        if (payload.size() != n * 8 || rawBytes != payload.size())
+        if (payload.size() != n * 8 || rawBytes != payload.size() ||
+            !depthsInRange(payload.data() + n * 4, n))
             return false;
         out = Dbi(width, height);
         std::memcpy(out.color(), payload.data(), n * 4);

@@ -17,6 +17,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <bit>
+#include <cfloat>
 #include <cstdint>
 #include <cstdlib>
 #include <new>
@@ -311,6 +313,15 @@ Dbi planeImage(const Camera& camera, int w, int h, uint32_t seed) {
     return img;
 }
 
+// Depths in range (docs/protocol.md): +0 or a normal float in (0, 1] at every pixel.
+bool depthsInRange(const Dbi& image) {
+    const float* d = image.depth();
+    for (size_t i = 0; i < size_t(image.width()) * size_t(image.height()); ++i)
+        if (!(std::bit_cast<uint32_t>(d[i]) == 0 || (d[i] >= FLT_MIN && d[i] <= 1.0f)))
+            return false;
+    return true;
+}
+
 Camera imageCamera(int w, int h) {
     Camera c = toCamera(sampleView(uint16_t(w), uint16_t(h)));
     c.eye = {0, 0, 300};
@@ -391,8 +402,22 @@ TEST(DecoderFuzz, ImagePayloadsRefuseMutationsAndHostileSizes) {
             if (decodeImage(b, e.rawBytes, codec, kImageW, kImageH, camera, out)) {
                 EXPECT_EQ(out.width(), kImageW);
                 EXPECT_EQ(out.height(), kImageH);
+                EXPECT_TRUE(depthsInRange(out));
             }
         });
+        // A raw depth a renderer never writes, at every pixel in turn: refused.
+        if (codec == Codec::Raw) {
+            for (uint32_t bits : {0x80000000u, 0x00000001u, 0x007fffffu, 0x3f800001u, 0x7f800000u,
+                                  0x7fc00000u, 0xffc00000u, 0xbf800000u}) {
+                for (size_t i = 0; i < size_t(kImageW) * kImageH; ++i) {
+                    std::vector<uint8_t> b = e.payload;
+                    writeLittleEndian(b, size_t(kImageW) * kImageH * 4 + 4 * i, bits, 4);
+                    Dbi out;
+                    EXPECT_FALSE(decodeImage(b, e.rawBytes, codec, kImageW, kImageH, camera, out))
+                        << std::hex << bits << " at pixel " << std::dec << i;
+                }
+            }
+        }
     }
 }
 
@@ -425,6 +450,8 @@ TEST(DecoderFuzz, PredictedPayloadsRefuseMutationsAndLeaveTheImageAlone) {
             const PredictedStatus st = decodePredicted(payload, raw, c, hash, quantizer, image);
             if (st != PredictedStatus::Ok) {
                 EXPECT_TRUE(image == held) << "a refused update changed the pixels";
+            } else {
+                EXPECT_TRUE(depthsInRange(image));
             }
             return st;
         };

@@ -113,13 +113,15 @@ TEST(DepthQuantizer, ADepthThatIsNotANumberIsTheBackground) {
             EXPECT_EQ(out[i], DepthQuantizer::kBackground) << "depth " << in[i];
         }
     }
-    // The way in: a raw update of NaN depths decodes (its bits are its bits), and a predicted
-    // update against those pixels is refused (their hash is not the server's) without UB.
+    // The way in is closed: a raw update of NaN depths is malformed (docs/protocol.md). A picture
+    // holding NaN anyway has a predicted update against it refused (its hash is not the
+    // server's) without UB.
     Dbi held(4, 2);
     std::fill(held.depth(), held.depth() + 8, nan);
     EncodedImage e = encodeImage(held, Codec::Raw, camera);
     Dbi decoded;
-    ASSERT_TRUE(decodeImage(e.payload, e.rawBytes, Codec::Raw, 4, 2, camera, decoded));
+    EXPECT_FALSE(decodeImage(e.payload, e.rawBytes, Codec::Raw, 4, 2, camera, decoded));
+    decoded = held;
     const PredictedImage p = encodePredicted(Dbi(4, 2), held, Codec::Zstd, q);
     EXPECT_EQ(decodePredicted(p.payload, p.rawBytes, Codec::Zstd, p.baseHash ^ 1, q, decoded),
               PredictedStatus::BaseMismatch);

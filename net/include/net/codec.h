@@ -63,7 +63,8 @@ struct EncodedImage {
 // Encodes a whole image (a rectangle already extracted from the full DBI).
 EncodedImage encodeImage(const Dbi& image, Codec codec, const Camera& camera);
 // Decodes into `out` (resized to width x height); false when the payload is malformed (wrong
-// size, corrupt compression) — never a crash.
+// size, corrupt compression, a raw depth that is not +0 or a normal float in (0, 1]) — never a
+// crash. Every depth decoded lies in [0, 1]: the quantised codecs cannot produce any other.
 bool decodeImage(std::span<const uint8_t> payload, uint32_t rawBytes, Codec codec, int width,
                  int height, const Camera& camera, Dbi& out);
 
