@@ -89,12 +89,20 @@ void DepthQuantizer::dequantizeRow(const uint16_t* codes, float* windowDepth, si
 
 namespace {
 
+// The largest zstd window a payload may ask for (2^20, 1 MiB): level 1 writes at most 2^19. A
+// frame asking more is refused: the streaming decoder would allocate its window.
+constexpr int kZstdWindowLogMax = 20;
+
 // One zstd context per thread, kept: creating one per call cost ~9 us a compression and ~8 us a
 // decompression, a tenth of a small stroke's update (measured on 5 kB). ZSTD_compress and
 // ZSTD_decompress are exactly these calls on a fresh context.
 struct ZstdContexts {
     ZSTD_CCtx* c = ZSTD_createCCtx();
     ZSTD_DCtx* d = ZSTD_createDCtx();
+    ZstdContexts() {
+        if (d)
+            ZSTD_DCtx_setParameter(d, ZSTD_d_windowLogMax, kZstdWindowLogMax);
+    }
     ~ZstdContexts() {
         ZSTD_freeCCtx(c);
         ZSTD_freeDCtx(d);
@@ -112,19 +120,126 @@ size_t zstdCompress(void* dst, size_t capacity, const void* src, size_t size) {
                : ZSTD_compress(dst, capacity, src, size, 1);
 }
 
-size_t zstdDecompress(void* dst, size_t capacity, const void* src, size_t size) {
-    ZstdContexts& z = zstdContexts();
-    return z.d ? ZSTD_decompressDCtx(z.d, dst, capacity, src, size)
-               : ZSTD_decompress(dst, capacity, src, size);
-}
-
 // Whether `payload` can decompress to `rawBytes` at all: LZ4 writes fewer than 255 bytes per input
 // byte (a match grows by at most 255 a length byte) and zstd at most a 128 KiB block per 4 bytes
-// (a block header and an RLE byte). A larger claim is malformed and refused before its buffer is
-// allocated: a few bytes could otherwise make a receiver allocate and clear hundreds of MiB.
+// (a block header and an RLE byte). A larger claim is refused at once. This alone still let 8 KiB
+// claim 256 MiB: decompressInto keeps the allocation to what the payload really holds.
 bool canHold(std::span<const uint8_t> payload, Codec codec, size_t rawBytes) {
     const uint64_t most = codec == Codec::Lz4 ? 255 : 32768;
     return uint64_t(payload.size()) * most >= uint64_t(rawBytes);
+}
+
+// Claims up to this are allocated at once (a hostile one costs at most this, freed at once); a
+// larger buffer is only allocated as the payload proves it holds that much (decompressInto).
+constexpr size_t kEagerBytes = size_t(1) << 20;
+
+// zstd: exactly one frame (magic number first, nothing after it) whose header states its content
+// size, equal to the claim. ZSTD_compressCCtx always writes the size (Codec.ZstdFramesStateTheir
+// ContentSize), so only a hostile or broken peer's frame fails this.
+bool zstdFrameClaims(std::span<const uint8_t> payload, size_t rawBytes) {
+    if (payload.size() < 4)
+        return false;
+    uint32_t magic;
+    std::memcpy(&magic, payload.data(), 4);
+    return magic == ZSTD_MAGICNUMBER &&
+           ZSTD_findFrameCompressedSize(payload.data(), payload.size()) == payload.size() &&
+           ZSTD_getFrameContentSize(payload.data(), payload.size()) == uint64_t(rawBytes);
+}
+
+// The exact number of bytes an LZ4 block decodes to, read from its sequences without decoding
+// them (literals skipped, match lengths added), or SIZE_MAX for a block that cannot decode: a
+// length running past the end, a match offset of 0 or before the start of the output, a block
+// not ending in literals, or more output than `limit`. O(sequences), no allocation.
+size_t lz4DecodedSize(std::span<const uint8_t> block, size_t limit) {
+    const uint8_t* p = block.data();
+    const uint8_t* const end = p + block.size();
+    auto length = [&](size_t n, size_t& out) {
+        out = n;
+        if (n != 15)
+            return true;
+        uint8_t b;
+        do {
+            if (p == end)
+                return false;
+            b = *p++;
+            out += b;
+        } while (b == 255);
+        return true;
+    };
+    size_t out = 0;
+    while (p < end) {
+        const unsigned token = *p++;
+        size_t literals, match;
+        if (!length(token >> 4, literals) || size_t(end - p) < literals)
+            return SIZE_MAX;
+        p += literals;
+        out += literals;
+        if (out > limit)
+            return SIZE_MAX;
+        if (p == end)
+            return out; // the last sequence: literals only
+        if (end - p < 2)
+            return SIZE_MAX;
+        const size_t offset = size_t(p[0]) | size_t(p[1]) << 8;
+        p += 2;
+        if (offset == 0 || offset > out || !length(token & 15, match))
+            return SIZE_MAX;
+        out += match + 4;
+        if (out > limit)
+            return SIZE_MAX;
+    }
+    return SIZE_MAX; // empty, or ended with a match
+}
+
+// Decompresses `payload` into `out`, resized to exactly rawBytes; false when it does not give
+// exactly that. The allocation follows what the payload really holds, not what its sender claims:
+// up to kEagerBytes at once; beyond, lz4 is allocated once its sequences have been added up to
+// exactly rawBytes, and zstd (whose compressed blocks do not state their output) decodes as a
+// stream into a buffer that starts at kEagerBytes and grows eightfold, capped at rawBytes, each
+// time real output fills it (at most 8 times the output, 1.25 times rawBytes at the peak of an
+// honest payload). zstd's own window buffer is bounded by kZstdWindowLogMax.
+bool decompressInto(std::span<const uint8_t> payload, Codec codec, size_t rawBytes,
+                    std::vector<uint8_t>& out) {
+    if (codec == Codec::Lz4) {
+        if (rawBytes > kEagerBytes && lz4DecodedSize(payload, rawBytes) != rawBytes)
+            return false;
+        out.resize(rawBytes);
+        const int got = LZ4_decompress_safe(reinterpret_cast<const char*>(payload.data()),
+                                            reinterpret_cast<char*>(out.data()),
+                                            int(payload.size()), int(out.size()));
+        return got == int(out.size());
+    }
+    if (!zstdFrameClaims(payload, rawBytes))
+        return false;
+    ZstdContexts& z = zstdContexts();
+    if (rawBytes <= kEagerBytes || !z.d) {
+        out.resize(rawBytes);
+        const size_t got =
+            z.d ? ZSTD_decompressDCtx(z.d, out.data(), out.size(), payload.data(), payload.size())
+                : ZSTD_decompress(out.data(), out.size(), payload.data(), payload.size());
+        return !ZSTD_isError(got) && got == out.size();
+    }
+    ZSTD_DCtx_reset(z.d, ZSTD_reset_session_only);
+    out.resize(kEagerBytes);
+    ZSTD_inBuffer in{payload.data(), payload.size(), 0};
+    ZSTD_outBuffer o{out.data(), out.size(), 0};
+    for (;;) {
+        const size_t inWas = in.pos, outWas = o.pos;
+        const size_t left = ZSTD_decompressStream(z.d, &o, &in);
+        if (ZSTD_isError(left))
+            return false;
+        if (left == 0) // the frame is complete (zstd checked its content size)
+            return o.pos == rawBytes && in.pos == in.size;
+        if (o.pos == o.size) {
+            if (o.size == rawBytes)
+                return false; // more than claimed
+            out.resize(std::min(rawBytes, 8 * out.size()));
+            o.dst = out.data();
+            o.size = out.size();
+        } else if (in.pos == inWas && o.pos == outWas) {
+            return false; // the frame wants input that is not there
+        }
+    }
 }
 
 // Whether the n float32 depths at `bytes` (a raw update's, host order as the codec sends them)
@@ -245,18 +360,9 @@ bool decodeImage(std::span<const uint8_t> payload, uint32_t rawBytes, Codec code
     }
     if (rawBytes != planarBytes(n) || !canHold(payload, codec, rawBytes))
         return false;
-    std::vector<uint8_t> planar(rawBytes);
-    if (codec == Codec::Lz4) {
-        int got = LZ4_decompress_safe(reinterpret_cast<const char*>(payload.data()),
-                                      reinterpret_cast<char*>(planar.data()), int(payload.size()),
-                                      int(planar.size()));
-        if (got != int(planar.size()))
-            return false;
-    } else {
-        size_t got = zstdDecompress(planar.data(), planar.size(), payload.data(), payload.size());
-        if (ZSTD_isError(got) || got != planar.size())
-            return false;
-    }
+    std::vector<uint8_t> planar;
+    if (!decompressInto(payload, codec, rawBytes, planar))
+        return false;
     fromPlanar(planar, width, height, camera, out);
     return true;
 }
@@ -292,15 +398,7 @@ bool decompressBytes(std::span<const uint8_t> payload, Codec codec, size_t rawBy
     if (rawBytes > size_t(kMaxVolumeRawBytes) || payload.empty() ||
         !canHold(payload, codec, rawBytes))
         return false;
-    out.resize(rawBytes);
-    if (codec == Codec::Lz4) {
-        int got = LZ4_decompress_safe(reinterpret_cast<const char*>(payload.data()),
-                                      reinterpret_cast<char*>(out.data()), int(payload.size()),
-                                      int(out.size()));
-        return got == int(out.size());
-    }
-    size_t got = zstdDecompress(out.data(), out.size(), payload.data(), payload.size());
-    return !ZSTD_isError(got) && got == out.size();
+    return decompressInto(payload, codec, rawBytes, out);
 }
 
 EncodedVolume encodeVolumeBox(const Volume& volume, const Box3i& box, Codec codec, bool materials) {

@@ -15,10 +15,13 @@
 #include "libsim/volume.h"
 
 #include <gtest/gtest.h>
+#include <lz4.h>
+#include <zstd.h>
 
 #include <algorithm>
 #include <bit>
 #include <cfloat>
+#include <cmath>
 #include <cstdint>
 #include <cstdlib>
 #include <new>
@@ -691,5 +694,162 @@ TEST(DecoderFuzz, ASizeClaimBeyondWhatThePayloadCanHoldIsRefusedBeforeAllocating
         std::vector<uint8_t> bytes;
         EXPECT_TRUE(decompressBytes(compressBytes(air, codec), codec, air.size(), bytes));
         EXPECT_TRUE(bytes == air);
+    }
+}
+
+namespace {
+
+// A complete zstd frame whose header states `claimed` bytes of content but whose blocks hold only
+// `real` bytes (2 bits of randomness a byte), then a last empty raw block: structurally whole, its
+// header and the claim agree, and only decoding finds out that it lies.
+std::vector<uint8_t> lyingZstdFrame(size_t claimed, size_t real) {
+    std::vector<uint8_t> src(real);
+    std::mt19937 rng(9);
+    for (uint8_t& b : src)
+        b = uint8_t(rng() & 3);
+    ZSTD_CCtx* c = ZSTD_createCCtx();
+    ZSTD_CCtx_setParameter(c, ZSTD_c_compressionLevel, 1);
+    ZSTD_CCtx_setPledgedSrcSize(c, claimed);
+    std::vector<uint8_t> out(ZSTD_compressBound(real) + 64);
+    ZSTD_inBuffer in{src.data(), src.size(), 0};
+    ZSTD_outBuffer o{out.data(), out.size(), 0};
+    const size_t left = ZSTD_compressStream2(c, &o, &in, ZSTD_e_flush);
+    ZSTD_freeCCtx(c);
+    EXPECT_FALSE(ZSTD_isError(left));
+    out.resize(o.pos);
+    for (uint8_t b : {0x01, 0x00, 0x00}) // last block, raw, 0 bytes
+        out.push_back(b);
+    EXPECT_EQ(ZSTD_findFrameCompressedSize(out.data(), out.size()), out.size());
+    EXPECT_EQ(ZSTD_getFrameContentSize(out.data(), out.size()), uint64_t(claimed));
+    return out;
+}
+
+// Every decoder a zstd or lz4 payload reaches, with a claim of `raw` bytes (the image and volume
+// decoders when the claim is their size).
+bool anyDecodes(std::span<const uint8_t> payload, Codec codec, uint32_t raw) {
+    std::vector<uint8_t> bytes;
+    bool ok = decompressBytes(payload, codec, raw, bytes);
+    if (raw % 5 == 0) {
+        const int side = int(std::sqrt(double(raw / 5)));
+        if (size_t(side) * side * 5 == raw) {
+            Dbi out;
+            ok |= decodeImage(payload, raw, codec, side, side, imageCamera(side, side), out);
+        }
+    }
+    return ok;
+}
+
+} // namespace
+
+// The zstd bound of 32768 times the payload let an 8 KiB frame claim 256 MiB and the receiver
+// allocate all of it before finding out (measured: 268435456 bytes). A frame must now state its
+// content size, equal to the claim, and beyond 1 MiB the output buffer grows only as real output
+// arrives: a lying frame costs at most 1 MiB. lz4 is allocated once its sequences add up to the
+// claim.
+TEST(DecoderFuzz, AClaimThePayloadDoesNotReallyHoldCostsAtMostAMebibyte) {
+    const std::vector<uint8_t> lying = lyingZstdFrame(kMaxVolumeRawBytes, 32 * 1024);
+    EXPECT_LE(lying.size(), size_t(16 * 1024));
+    const std::vector<uint8_t> lyingImage = lyingZstdFrame(5 * 2048 * 2048, 32 * 1024);
+    const std::vector<uint8_t> lyingPredicted = lyingZstdFrame(kMaxPayloadBytes, 32 * 1024);
+    // lz4: a megabyte of noise, and valid sequences that decode to less than claimed.
+    std::vector<uint8_t> noise(size_t(1) << 20);
+    std::mt19937 rng(4);
+    for (uint8_t& b : noise)
+        b = uint8_t(rng());
+    const std::vector<uint8_t> shortLz4 =
+        compressBytes(std::vector<uint8_t>(3 << 20, 7), Codec::Lz4);
+    const Camera camera = imageCamera(2048, 2048);
+    Dbi held(2048, 2048);
+    {
+        AllocationProbe probe;
+        std::vector<uint8_t> bytes;
+        EXPECT_FALSE(decompressBytes(lying, Codec::Zstd, kMaxVolumeRawBytes, bytes));
+        Volume v;
+        EXPECT_FALSE(decodeVolumeFull(lying, kMaxVolumeRawBytes, Codec::Zstd, glm::ivec3(512),
+                                      glm::vec3(0.5f), v));
+        Dbi out;
+        EXPECT_FALSE(
+            decodeImage(lyingImage, 5 * 2048 * 2048, Codec::Zstd, 2048, 2048, camera, out));
+        EXPECT_EQ(decodePredicted(lyingPredicted, uint32_t(kMaxPayloadBytes), Codec::Zstd, 0,
+                                  DepthQuantizer(camera), held),
+                  PredictedStatus::Malformed);
+        EXPECT_FALSE(decompressBytes(noise, Codec::Lz4, 255u << 20, bytes));
+        EXPECT_FALSE(decompressBytes(shortLz4, Codec::Lz4, 255u << 20, bytes));
+        EXPECT_FALSE(decompressBytes(shortLz4, Codec::Lz4, (3u << 20) + 1, bytes));
+        EXPECT_FALSE(decodeImage(noise, 5 * 2048 * 2048, Codec::Lz4, 2048, 2048, camera, out));
+        EXPECT_LE(probe.largest(), size_t(1) << 20);
+    }
+    // Honest payloads of every size still decode, through the growing buffer too (1, 8, then
+    // 20 MiB), and so do claims within a mebibyte.
+    for (size_t size :
+         {size_t(1), size_t(1000), size_t(1) << 20, (size_t(1) << 20) + 1, size_t(20) << 20}) {
+        std::vector<uint8_t> data(size);
+        for (size_t i = 0; i < size; ++i)
+            data[i] = uint8_t(i * 2654435761u >> 13 & (i % 3 ? 0xff : 0x0f));
+        for (Codec codec : {Codec::Lz4, Codec::Zstd}) {
+            SCOPED_TRACE(testing::Message() << codecName(codec) << " " << size);
+            const std::vector<uint8_t> payload = compressBytes(data, codec);
+            std::vector<uint8_t> bytes;
+            ASSERT_TRUE(decompressBytes(payload, codec, size, bytes));
+            EXPECT_TRUE(bytes == data);
+            EXPECT_FALSE(decompressBytes(payload, codec, size + 1, bytes));
+            EXPECT_FALSE(decompressBytes(payload, codec, size - 1, bytes));
+        }
+    }
+}
+
+// Our encoder writes the content size in the (one) frame it makes; other frames are malformed:
+// no content size, another content size, two frames, bytes after the frame, a skippable frame
+// first, a window over 1 MiB.
+TEST(DecoderFuzz, ZstdPayloadsAreOneFrameThatStatesItsContentSize) {
+    for (size_t size : {size_t(1), size_t(777), size_t(300000), size_t(3) << 20}) {
+        SCOPED_TRACE(size);
+        std::vector<uint8_t> data(size);
+        for (size_t i = 0; i < size; ++i)
+            data[i] = uint8_t(i % 251 < 40 ? i : 0);
+        const std::vector<uint8_t> ours = compressBytes(data, Codec::Zstd);
+        EXPECT_EQ(ZSTD_getFrameContentSize(ours.data(), ours.size()), uint64_t(size));
+        EXPECT_EQ(ZSTD_findFrameCompressedSize(ours.data(), ours.size()), ours.size());
+        const uint32_t raw = uint32_t(size);
+        std::vector<uint8_t> bytes;
+        ASSERT_TRUE(decompressBytes(ours, Codec::Zstd, raw, bytes));
+
+        auto compressWith = [&](auto&& configure, std::span<const uint8_t> src) {
+            ZSTD_CCtx* c = ZSTD_createCCtx();
+            ZSTD_CCtx_setParameter(c, ZSTD_c_compressionLevel, 1);
+            configure(c);
+            std::vector<uint8_t> out(ZSTD_compressBound(src.size()));
+            const size_t n = ZSTD_compress2(c, out.data(), out.size(), src.data(), src.size());
+            ZSTD_freeCCtx(c);
+            EXPECT_FALSE(ZSTD_isError(n));
+            out.resize(n);
+            return out;
+        };
+        const std::vector<uint8_t> noSize = compressWith(
+            [](ZSTD_CCtx* c) { ZSTD_CCtx_setParameter(c, ZSTD_c_contentSizeFlag, 0); }, data);
+        EXPECT_EQ(ZSTD_getFrameContentSize(noSize.data(), noSize.size()), ZSTD_CONTENTSIZE_UNKNOWN);
+        EXPECT_FALSE(anyDecodes(noSize, Codec::Zstd, raw));
+        // Two frames of half the bytes each: ZSTD_decompress would join them.
+        std::vector<uint8_t> two = compressBytes(std::span(data).first(size / 2), Codec::Zstd);
+        const std::vector<uint8_t> second =
+            compressBytes(std::span(data).subspan(size / 2), Codec::Zstd);
+        two.insert(two.end(), second.begin(), second.end());
+        EXPECT_FALSE(anyDecodes(two, Codec::Zstd, raw));
+        std::vector<uint8_t> trailing = ours;
+        trailing.push_back(0);
+        EXPECT_FALSE(anyDecodes(trailing, Codec::Zstd, raw));
+        std::vector<uint8_t> skippable{0x50, 0x2a, 0x4d, 0x18, 0, 0, 0, 0};
+        skippable.insert(skippable.end(), ours.begin(), ours.end());
+        EXPECT_FALSE(anyDecodes(skippable, Codec::Zstd, raw));
+        // A 2^24 window (what level 1 never asks): the stream decoder would allocate it.
+        if (size > (size_t(1) << 20)) {
+            const std::vector<uint8_t> wide = compressWith(
+                [](ZSTD_CCtx* c) {
+                    ZSTD_CCtx_setParameter(c, ZSTD_c_windowLog, 24);
+                    ZSTD_CCtx_setParameter(c, ZSTD_c_compressionLevel, 19);
+                },
+                data);
+            EXPECT_FALSE(anyDecodes(wide, Codec::Zstd, raw));
+        }
     }
 }
