@@ -77,6 +77,7 @@ struct Frame {
     float dt; // sample step along the ray, mm
     float minSpacing;
     double maxSampleT;       // distance from the eye to the farthest corner of the volume
+    float tLimit;            // kMaxSampleIndex * dt: no ray marches beyond (see makeFrame)
     const uint8_t* distance; // brick grid distances; null: no skipping
     const uint64_t* cells;   // brick grid cell masks
     const uint8_t* runs[6];  // brick grid runs of empty bricks, [2 axis + positive]
@@ -87,6 +88,10 @@ struct Frame {
 // See makeFrame: float positions are exact to ~6e-8 of their magnitude, and skipping needs them
 // within 1/765 voxel (see march).
 constexpr float kMaxSkipEyeVoxels = 2048.0f;
+
+// Sample indices are int (and a hit cache keeps them as int32_t): the farthest sample of any ray
+// has at most this index, half of INT_MAX, so rounding can never take one past it. See makeFrame.
+constexpr double kMaxSampleIndex = double(1 << 30);
 
 Frame makeFrame(const Volume& volume, const Camera& camera, const RenderOptions& options,
                 const BrickGrid& bricks) {
@@ -134,7 +139,6 @@ Frame makeFrame(const Volume& volume, const Camera& camera, const RenderOptions&
     f.wx = f.viewProj[0][3], f.wy = f.viewProj[1][3], f.wz = f.viewProj[2][3];
     f.w0 = f.viewProj[3][3];
     f.minSpacing = std::min({f.spacing.x, f.spacing.y, f.spacing.z});
-    f.dt = std::max(1e-3f, options.stepVoxels) * f.minSpacing;
     f.maxSampleT = 0.0;
     glm::dvec3 h = glm::dvec3(volume.extentMm()) * 0.5 + glm::dvec3(f.spacing); // + a voxel
     for (int i = 0; i < 8; ++i)
@@ -142,6 +146,18 @@ Frame makeFrame(const Volume& volume, const Camera& camera, const RenderOptions&
                                 glm::length(glm::dvec3((i & 1) ? h.x : -h.x, (i & 2) ? h.y : -h.y,
                                                        (i & 4) ? h.z : -h.z) -
                                             f.eye));
+    // Sample k is at t = k dt and every sample lies in the volume, so k <= maxSampleT / dt: up to
+    // 3.5e9 with the eye 1e6 mm out on each axis (trephine render --eye) and 0.001 mm voxels, past
+    // INT_MAX. Where that would pass kMaxSampleIndex the step widens so that it does not. Such a
+    // view loses nothing by it: there float t is already rounded to ulp(2^30 dt), 64 to 128 dt,
+    // so the samples were no finer. Every view a client may ask for (eye within 1e5 mm, 4096
+    // voxels, spacings within 1000x of each other) at the default half-voxel step stays under
+    // 3.7e8 and keeps its step bit for bit.
+    f.dt = std::max(1e-3f, options.stepVoxels) * f.minSpacing;
+    const double dtFloor = f.maxSampleT / kMaxSampleIndex;
+    if (double(f.dt) < dtFloor)
+        f.dt = std::nextafter(float(dtFloor), INFINITY);
+    f.tLimit = float(kMaxSampleIndex) * f.dt; // >= maxSampleT
     // Skipping relies on sample positions being within ~1e-3 voxel of the exact ray (float
     // rounding grows with the distance of the eye, in voxels): beyond that, march everything.
     glm::vec3 eyeVoxels = glm::abs(f.origin - glm::vec3(f.n) * 0.5f);
@@ -533,6 +549,9 @@ March marchToSurface(const Frame& f, const Ray& r, float tSkipTo, int32_t kResum
             t1 = std::min(t1, std::max(ta, tb));
         }
     }
+    // Beyond the volume anyway; but float rounding of a far eye's slabs must not take t1, and
+    // with it kEnd, past int (tLimit / dt is 2^30).
+    t1 = std::min(t1, f.tLimit);
     if (!(t0 <= t1))
         return m;
     const float dt = f.dt;

@@ -888,4 +888,73 @@ TEST(HitCache, ACacheForAnotherCameraIsNeverUsed) {
 }
 
 } // namespace
+// Sample indices are int: sample k of a ray is at k * dt from the eye, dt half the smallest
+// spacing. With 0.001 mm voxels (the smallest a volume may have) and the eye 1e6 mm out on every
+// axis (trephine render --eye allows it) the volume's samples have indices around 3.5e9, past
+// INT_MAX: converting them was undefined behaviour (x86 gave INT_MIN and every ray missed). The
+// renderer widens the step instead (to 1.6e-3 mm here), so the same plate seen from 1e6 mm away
+// shows as it does from an equivalent view ten times nearer (indices 3.5e8, step unchanged),
+// whose field of view is ten times wider. Far out, float positions are coarse (the eye is 1e9
+// voxels away: ulp 64 voxels along z), so depths agree to 0.5 mm, and the silhouette may differ by
+// a pixel.
+TEST(Renderer, AFarEyeAndTheSmallestSpacingKeepSampleIndicesInIntAndThePicture) {
+    // A plate 48 x 48 mm and 0.9 mm thick: 1 mm voxels across, 0.001 mm through.
+    const glm::ivec3 dims{64, 64, 1024};
+    Volume volume(dims, glm::vec3(1.0f, 1.0f, 0.001f));
+    for (int z = 64; z < 960; ++z)
+        for (int y = 8; y < 56; ++y)
+            for (int x = 8; x < 56; ++x) {
+                const size_t i = volume.index(x, y, z);
+                volume.densityData()[i] = 255;
+                volume.materialData()[i] = uint8_t(Material::Cortical);
+            }
+    Renderer renderer(volume);
+    auto view = [&](float distanceScale) {
+        Camera c;
+        c.eye = glm::vec3(1.0f, 1.0f, 1.0f) * distanceScale;
+        c.target = glm::vec3(0.0f);
+        c.up = glm::vec3(0.0f, 0.0f, 1.0f);
+        // 80 mm across at the plate, whatever the distance.
+        const double distance = double(glm::length(c.eye));
+        c.fovYDeg = float(glm::degrees(2.0 * std::atan(40.0 / distance)));
+        c.width = c.height = 32;
+        fitNearFar(c, glm::vec3(0.0f), 45.0f);
+        return c;
+    };
+    const Camera farView = view(1.0e6f), nearView = view(1.0e5f);
+    ASSERT_GT(double(glm::length(farView.eye)) / (0.5 * 0.001), double(INT32_MAX));
+    const Dbi far = renderer.render(farView), near = renderer.render(nearView);
+    int hits = 0, differ = 0;
+    double worstMm = 0.0;
+    for (int y = 0; y < 32; ++y)
+        for (int x = 0; x < 32; ++x) {
+            const bool farHit = !isBackground(far, x, y), nearHit = !isBackground(near, x, y);
+            if (farHit != nearHit) {
+                ++differ;
+                continue;
+            }
+            if (!farHit)
+                continue;
+            ++hits;
+            // Depth behind the target, in eye-space millimetres.
+            const double a =
+                -eyeZFromWindowDepth(farView, far.depth(x, y)) - double(glm::length(farView.eye));
+            const double b = -eyeZFromWindowDepth(nearView, near.depth(x, y)) -
+                             double(glm::length(nearView.eye));
+            worstMm = std::max(worstMm, std::abs(a - b));
+        }
+    EXPECT_GT(hits, 150) << "the plate covers about a quarter of the window";
+    EXPECT_LE(differ, 8) << "more than the silhouette differs";
+    EXPECT_LT(worstMm, 0.5);
+    // A ray straight down the middle agrees too (castRay takes the same path as render).
+    const RayHit farRay = renderer.castRay(farView, 16, 16);
+    const RayHit nearRay = renderer.castRay(nearView, 16, 16);
+    ASSERT_TRUE(farRay.hit);
+    ASSERT_TRUE(nearRay.hit);
+    EXPECT_LT(glm::length(farRay.position - nearRay.position), 0.5);
+    std::printf("[ info ] far eye: %d bone pixels alike, %d differ, worst depth %.4f mm, "
+                "hit points %.4f mm apart\n",
+                hits, differ, worstMm, double(glm::length(farRay.position - nearRay.position)));
+}
+
 } // namespace trephine

@@ -53,8 +53,9 @@ inline constexpr float kMaxAnnotationDistanceMm = 1.0e5f;
 // Tool positions likewise; a tool's orientation quaternion has a norm within [0.5, 2] (the server
 // normalises it).
 inline constexpr float kMaxToolDistanceMm = 1.0e5f;
-// A view's eye and target likewise, and its far plane at most this far (mm): the ray caster counts
-// samples in int, which a far plane of 1e38 mm would overflow.
+// A view's eye and target likewise, and its far plane at most this far (mm): further out float
+// positions lose a skull's detail (the ray caster's int sample indices stay in range for any view:
+// it widens its step, docs/rendering.md).
 inline constexpr float kMaxViewDistanceMm = 1.0e5f;
 inline constexpr float kMaxViewFarMm = 1.0e6f;
 inline constexpr size_t kMaxPayloadBytes = 64u * 1024u * 1024u;
