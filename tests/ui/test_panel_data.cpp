@@ -246,7 +246,7 @@ TEST(MarkUndo, PutsBackWhatTheLastRemovalTook) {
         m.id = i;
         m.author = 7;
         m.position = glm::vec3(float(i), 2.0f, 3.0f);
-        m.label = "m" + std::to_string(i);
+        m.label = std::string(1, char('0' + i)) + " mark";
         shown.push_back(m);
     }
     MarkUndo undo;
