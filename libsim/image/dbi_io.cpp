@@ -205,9 +205,13 @@ DbiFile readDbiExr(const std::string& path) {
     return file;
 }
 
-void writeColorPng(const std::string& path, const Dbi& image) {
+void checkColorPngPath(const std::string& path) {
     if (!hasExtension(path, {".png"}))
         throw Error("cannot write '" + path + "': a colour image must end in .png");
+}
+
+void writeColorPng(const std::string& path, const Dbi& image) {
+    checkColorPngPath(path);
     if (image.empty())
         throw Error("cannot write '" + path + "': the image is empty");
     std::vector<uint8_t> rgb(size_t(image.width()) * image.height() * 3);

@@ -114,5 +114,17 @@ TEST(RenderCli, BadFlagsAreOneLineErrors) {
     EXPECT_NE(unknown.exitCode, 0);
 }
 
+// A wrong --png is refused before anything is rendered or written: it used to fail only after
+// --out had been written.
+TEST(RenderCli, AWrongOutputNameIsRefusedBeforeAnyFileIsWritten) {
+    TempDir dir;
+    const std::string exr = dir / "ok.exr";
+    expectOneLineError(
+        render(dir, std::string(kView) + " --out '" + exr + "' --png '" + (dir / "bad.txt") + "'"),
+        ".png");
+    EXPECT_FALSE(std::filesystem::exists(exr));
+    EXPECT_FALSE(std::filesystem::exists(dir / "bad.txt"));
+}
+
 } // namespace
 } // namespace trephine

@@ -34,5 +34,7 @@ DbiFile readDbiExr(const std::string& path);
 
 // Writes the colour of `image` as an 8-bit RGB PNG, top row first.
 void writeColorPng(const std::string& path, const Dbi& image);
+// Throws the Error writeColorPng would for `path`'s name (not ending in .png), writing nothing.
+void checkColorPngPath(const std::string& path);
 
 } // namespace trephine
