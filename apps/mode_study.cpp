@@ -40,6 +40,8 @@ struct HapticsOptions {
     std::string volume = "skull:128";
     float burrMm = 2.0f;
     bool quick = false;
+    // Given on the command line: they win over --quick's reduced grid, as in `study updates`.
+    bool ratesGiven = false, latenciesGiven = false;
 };
 
 // Wall time of one force + gradient at a contact pose (median of many): the figure the paper
@@ -80,8 +82,10 @@ net::HapticsFigures runHapticsStudy(const HapticsOptions& o) {
     std::vector<double> rates = o.updateRates, latencies = o.latencies;
     if (o.quick) {
         config.durationS = 1.0;
-        rates = {20, 100};
-        latencies = {0, 50};
+        if (!o.ratesGiven)
+            rates = {20, 100};
+        if (!o.latenciesGiven)
+            latencies = {0, 50};
     }
     for (double r : rates)
         if (!(r > 0.0 && r <= config.hapticRateHz))
@@ -494,8 +498,12 @@ void addStudyMode(CLI::App& root, int& exitCode) {
     haptics->add_option("--volume", o->volume, "Volume spec, or `box` for a flat bone block")
         ->capture_default_str();
     haptics->add_option("--burr", o->burrMm, "Burr diameter, mm (1-6)")->capture_default_str();
-    haptics->add_flag("--quick", o->quick, "A reduced grid in well under a minute");
-    haptics->callback([o, &exitCode] {
+    haptics->add_flag("--quick", o->quick,
+                      "A reduced grid in well under a minute (--update-rates and --latencies "
+                      "given win)");
+    haptics->callback([o, haptics, &exitCode] {
+        o->ratesGiven = haptics->count("--update-rates") > 0;
+        o->latenciesGiven = haptics->count("--latencies") > 0;
         runHapticsStudy(*o);
         exitCode = 0;
     });

@@ -78,6 +78,28 @@ TEST(HapticsCli, StudyWritesTheCsv) {
     EXPECT_NE(r.out.find("perforator"), std::string::npos) << r.out;
 }
 
+// --quick reduces the grid, but rates and latencies given on the command line win (they were
+// silently replaced by 20, 100 Hz x 0, 50 ms).
+TEST(HapticsCli, QuickKeepsTheRatesAndLatenciesGiven) {
+    HapticsTempDir dir;
+    const fs::path out = dir.path / "quick";
+    CliResult r = run(dir, "study haptics --quick --volume box --update-rates 50 --latencies 25 "
+                           "--out '" +
+                               out.string() + "'");
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    std::istringstream csv(readAll(out / "haptics.csv"));
+    std::string line;
+    std::getline(csv, line);
+    int rows = 0;
+    while (std::getline(csv, line)) {
+        if (line.empty())
+            continue;
+        ++rows;
+        EXPECT_NE(line.find(",50,25,"), std::string::npos) << line;
+    }
+    EXPECT_EQ(rows, 2); // 1 rate x 1 latency x 2 methods
+}
+
 TEST(HapticsCli, BadRateIsOneLineError) {
     HapticsTempDir dir;
     CliResult r =
