@@ -5,6 +5,7 @@
 #include "mode_window.h"
 #include "modes.h"
 
+#include "libsim/camera.h"
 #include "libsim/error.h"
 #include "libsim/haptics.h"
 #include "libsim/skull.h"
@@ -493,7 +494,9 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
     auto o = std::make_shared<TraineeOptions>();
     CLI::App* sub =
         root.add_subcommand("trainee", "Join a session as a trainee (window or headless)");
-    sub->add_option("--connect", o->connect, "Server address HOST:PORT")->required();
+    sub->add_option("--connect", o->connect, "Server address HOST:PORT")
+        ->check(serverAddress())
+        ->required();
     sub->add_flag("--headless", o->headless, "No window: run a script and report statistics");
     // Options only a --headless trainee uses: listed under their own heading, and refused by the
     // window (runTrainee) rather than ignored.
@@ -501,7 +504,9 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
     sub->add_option("--script", o->script, "burrhole, or a CSV trajectory (docs/scripts.md)")
         ->capture_default_str()
         ->group(kHeadlessOnly);
+    // Checked as the command line is read: an unknown preset was refused only once connected.
     sub->add_option("--camera", o->camera, "View preset, as in `trephine render`")
+        ->check(CLI::IsMember(cameraPresetNames()))
         ->capture_default_str()
         ->group(kHeadlessOnly);
     sub->add_option("--codec", o->codec, "Image codec: raw, lz4 or zstd")

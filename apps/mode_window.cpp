@@ -105,7 +105,9 @@ void addInstructorMode(CLI::App& root, int& exitCode) {
     o->name = "instructor";
     CLI::App* sub = root.add_subcommand(
         "instructor", "Join a session as an instructor: the window shows every participant's tool");
-    sub->add_option("--connect", o->connect, "Server address HOST:PORT")->required();
+    sub->add_option("--connect", o->connect, "Server address HOST:PORT")
+        ->check(serverAddress())
+        ->required();
     sub->add_option("--name", o->name, "Name shown to others")
         ->check(participantName())
         ->capture_default_str();

@@ -61,6 +61,29 @@ inline CLI::Validator outputFile() {
         "FILE");
 }
 
+// For --connect: HOST:PORT (or HOST, :PORT or PORT; 127.0.0.1 and 7777 by default) with a port a
+// server can listen on. Port 0 was taken and then waited 10 s for "no answer"; a port over 65535
+// was said only when the window tried to connect. The host is resolved when connecting.
+inline CLI::Validator serverAddress() {
+    return CLI::Validator(
+        [](std::string& text) -> std::string {
+            const size_t colon = text.rfind(':');
+            const bool digitsOnly =
+                !text.empty() && text.find_first_not_of("0123456789") == std::string::npos;
+            const std::string port = colon != std::string::npos ? text.substr(colon + 1)
+                                     : digitsOnly               ? text
+                                                                : std::string("7777");
+            if (colon != std::string::npos && text.find(':') != colon)
+                return "'" + text + "' is not HOST:PORT";
+            if (port.empty() || port.size() > 5 ||
+                port.find_first_not_of("0123456789") != std::string::npos || std::stoul(port) < 1 ||
+                std::stoul(port) > 65535)
+                return "'" + text + "' is not HOST:PORT (the port must be a number 1-65535)";
+            return {};
+        },
+        "HOST:PORT");
+}
+
 // Throws unless the folder `path` is to be written in exists and we may write there: for outputs
 // written at the end of a run, checked before it starts (a typo found after a session wastes it).
 inline void checkOutputFolder(const std::string& flag, const std::string& path) {

@@ -99,6 +99,30 @@ TEST(TraineeCli, ANameTooLongForTheProtocolIsRefusedBeforeConnecting) {
     }
 }
 
+// A --connect no server can listen on, and an unknown --camera preset, are refused as the
+// command line is read: port 0 waited 10 s for "no answer", and the camera was met only once
+// connected. (No display here: the window modes say so before connecting, so only checks made
+// while the command line is read can show in their message.)
+TEST(TraineeCli, ABadAddressOrCameraIsRefusedBeforeConnecting) {
+    TempDir dir;
+    const struct {
+        std::string args, says;
+    } cases[] = {
+        {"trainee --headless --connect 127.0.0.1:0", "the port must be a number 1-65535"},
+        {"trainee --headless --connect localhost:65536", "the port must be a number 1-65535"},
+        {"trainee --headless --connect a:b:1", "'a:b:1' is not HOST:PORT"},
+        {"instructor --connect host:", "the port must be a number 1-65535"},
+        {"trainee --headless --connect 127.0.0.1:9 --camera nowhere", "nowhere not in {"},
+    };
+    for (const auto& c : cases) {
+        SCOPED_TRACE(c.args);
+        CommandResult r = runTrephine(dir, c.args + " --duration 30");
+        EXPECT_NE(r.exitCode, 0);
+        EXPECT_NE(r.err.find(c.says), std::string::npos) << r.err;
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    }
+}
+
 // Cells that are not wholly a number: stod read "0x10" as hex 16, "5mm" and "1.5.2" as their
 // leading number and a trailing comma's empty 11th column not at all, so a mistyped script
 // drilled somewhere other than written.
