@@ -60,8 +60,10 @@ void addWindowOptions(CLI::App* sub, WindowedOptions& o) {
     sub->add_option("--screenshot", o.screenshot,
                     "Write the window to this PNG once the view has settled, then exit")
         ->check(outputFile());
-    sub->add_option("--frames", o.frames,
-                    "Settled frames to render before the screenshot (without one: frames to run)")
+    sub->add_option(
+           "--frames", o.frames,
+           "Settled frames to render before the screenshot (without one: frames showing the "
+           "picture to run)")
         ->check(CLI::Range(0, 1000000));
     // Checked here: the window only met an unknown name once the volume had arrived, then ran
     // on without a picture (with --screenshot, until --timeout said "without a settled view").
@@ -78,7 +80,9 @@ void addWindowOptions(CLI::App* sub, WindowedOptions& o) {
     sub->add_option("--window-size", o.size, "View size in pixels (square, 1:1 with the DBI)")
         ->check(CLI::Range(64, 2048))
         ->capture_default_str();
-    sub->add_option("--timeout", o.timeoutS, "With --screenshot: give up after this many seconds")
+    sub->add_option("--timeout", o.timeoutS,
+                    "With --screenshot or --frames: give up (exit 1) after this many seconds "
+                    "without the view")
         ->check(finiteRange(1.0, 3600.0))
         ->capture_default_str();
     sub->add_option(

@@ -409,7 +409,7 @@ int runTrainerWindow(const TrainerOptions& o) {
     double nextSecond = 1.0, lastRectAt = 0.0, scriptStart = -1;
     uint64_t updatesAtLastSecond = 0;
     bool scriptDone = o.script.empty();
-    int settledFrames = 0, frames = 0;
+    int settledFrames = 0, frames = 0, pictureFrames = 0;
     int exitCode = 0;
     const auto t0 = Clock::now();
     auto seconds = [&] { return std::chrono::duration<double>(Clock::now() - t0).count(); };
@@ -956,8 +956,20 @@ int runTrainerWindow(const TrainerOptions& o) {
             }
             break;
         }
-        if (o.screenshot.empty() && o.frames > 0 && frames >= o.frames)
-            break;
+        // --frames without a screenshot: that many frames showing the picture, or, with none
+        // by --timeout, a failure said in one line (it used to exit 0 after N frames of
+        // "connecting", which a scripted run took for success).
+        if (o.screenshot.empty() && o.frames > 0) {
+            pictureFrames += havePicture && viewMatches;
+            if (pictureFrames >= o.frames)
+                break;
+            if (now > o.timeoutS && pictureFrames == 0) {
+                std::fprintf(stderr, "trephine: no picture from %s after %.0f s (%s)\n",
+                             o.address.c_str(), now, net::linkStateName(snap->state));
+                exitCode = 1;
+                break;
+            }
+        }
         std::this_thread::sleep_until(frameStart + std::chrono::milliseconds(10));
     }
     haptics.stop(); // (stopThreads would; the report below reads the stopped client)

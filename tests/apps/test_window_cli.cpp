@@ -84,3 +84,18 @@ TEST(WindowCli, AnUnknownViewIsRefusedWithTheChoices) {
         EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
     }
 }
+
+// --frames without a screenshot counts frames showing the picture: with no server there is none,
+// and by --timeout the window says so in one line and exits 1 (it exited 0 after N frames of
+// "connecting", which a scripted run took for success). Without a display there is no window to
+// run at all, which is a failure too.
+TEST(WindowCli, FramesWithoutAnyPictureFailByTheTimeout) {
+    TempDir dir;
+    CommandResult r =
+        runTrephine(dir, "trainee --connect 127.0.0.1:9 --size 64 --frames 3 --timeout 1");
+    EXPECT_EQ(r.exitCode, 1) << r.err;
+    if (std::getenv("DISPLAY")) {
+        EXPECT_NE(r.err.find("no picture from 127.0.0.1:9 after"), std::string::npos) << r.err;
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    }
+}

@@ -45,8 +45,12 @@ struct TrainerOptions {
     int size = 500;         // DBI and view size in pixels (1:1 with the window)
     std::string script;     // "" (mouse) or "burrhole": a scripted drilling
     std::string screenshot; // write the window here after `frames` settled frames, then exit
-    int frames = 0;         // 0: run until the window closes (or the screenshot is taken)
-    double timeoutS = 90.0; // with --screenshot: give up (exit 1) after this long
+    // Without a screenshot: frames showing the picture to run, then exit (0: until the window
+    // closes).
+    int frames = 0;
+    // With --screenshot or --frames: give up (exit 1) after this long without a settled view
+    // (screenshot) or any picture (frames).
+    double timeoutS = 90.0;
     bool visible = true;
     // A scripted Comparison toggle: seconds after the first picture at which the toggle is
     // flipped, as if clicked. Each waits until the switch before it has completed; the view is not
