@@ -1,6 +1,7 @@
 #include "libsim_image/dbi_io.h"
 
 #include "libsim/error.h"
+#include "libsim/replacing_file.h"
 
 #include <OpenImageIO/imageio.h>
 #include <algorithm>
@@ -9,6 +10,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <vector>
 
 namespace trephine {
@@ -101,6 +103,23 @@ std::string exrHeaderProblem(const std::string& path) {
     }
 }
 
+// Writes `pixels` (spec's size and channels, as `type`) to `file` and reads it back: OpenImageIO
+// does not report every failed write (a PNG or EXR that may not grow past a limit closed "fine",
+// truncated), so a file that does not read back whole is a failure too.
+void writeImageWhole(const std::string& file, const OIIO::ImageSpec& spec, OIIO::TypeDesc type,
+                     const void* pixels, const std::function<void(const std::string&)>& fail) {
+    auto out = OIIO::ImageOutput::create(file);
+    if (!out)
+        fail(firstLine(OIIO::geterror()));
+    if (!out->open(file, spec) || !out->write_image(type, pixels) || !out->close())
+        fail(firstLine(out->geterror()));
+    auto in = OIIO::ImageInput::open(file);
+    std::vector<uint8_t> back(spec.image_pixels() * size_t(spec.nchannels) * type.size());
+    if (!in || !in->read_image(0, 0, 0, spec.nchannels, type, back.data()) || in->has_error())
+        fail("the file written does not read back whole (is the disk full?)");
+    in->close();
+}
+
 } // namespace
 
 void checkDbiExrPath(const std::string& path) {
@@ -146,12 +165,16 @@ void writeDbiExr(const std::string& path, const Dbi& image, const PixelRect& rec
             out[4] = image.depth(x, y);
         }
     }
-    auto out = OIIO::ImageOutput::create(path);
-    if (!out)
-        throw Error("cannot write DBI '" + path + "': " + firstLine(OIIO::geterror()));
-    if (!out->open(path, spec) || !out->write_image(OIIO::TypeDesc::FLOAT, pixels.data()) ||
-        !out->close())
-        throw Error("cannot write DBI '" + path + "': " + firstLine(out->geterror()));
+    // Through a temporary file: a write that fails (a full disk) leaves an earlier file whole.
+    auto fail = [&](const std::string& why) {
+        throw Error("cannot write DBI '" + path + "': " + why);
+    };
+    replaceVia(
+        path,
+        [&](const std::string& file) {
+            writeImageWhole(file, spec, OIIO::TypeDesc::FLOAT, pixels.data(), fail);
+        },
+        fail);
 }
 
 DbiFile readDbiExr(const std::string& path) {
@@ -221,12 +244,13 @@ void writeColorPng(const std::string& path, const Dbi& image) {
             std::copy_n(image.color(x, y), 3, &rgb[(size_t(row) * image.width() + x) * 3]);
     }
     OIIO::ImageSpec spec(image.width(), image.height(), 3, OIIO::TypeDesc::UINT8);
-    auto out = OIIO::ImageOutput::create(path);
-    if (!out)
-        throw Error("cannot write '" + path + "': " + firstLine(OIIO::geterror()));
-    if (!out->open(path, spec) || !out->write_image(OIIO::TypeDesc::UINT8, rgb.data()) ||
-        !out->close())
-        throw Error("cannot write '" + path + "': " + firstLine(out->geterror()));
+    auto fail = [&](const std::string& why) { throw Error("cannot write '" + path + "': " + why); };
+    replaceVia(
+        path,
+        [&](const std::string& file) {
+            writeImageWhole(file, spec, OIIO::TypeDesc::UINT8, rgb.data(), fail);
+        },
+        fail);
 }
 
 } // namespace trephine

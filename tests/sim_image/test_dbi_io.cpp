@@ -5,10 +5,12 @@
 #include "libsim/error.h"
 
 #include <OpenImageIO/imageio.h>
+#include <csignal>
 #include <filesystem>
 #include <fstream>
 #include <gtest/gtest.h>
 #include <random>
+#include <sys/resource.h>
 
 namespace trephine {
 namespace {
@@ -126,6 +128,48 @@ void expectOneLineError(const std::function<void()>& f, const std::string& menti
         EXPECT_NE(msg.find(mention), std::string::npos) << msg;
         EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
     }
+}
+
+// A write that fails part way (here: the process may not grow a file past 4 KiB, as on a full
+// disk) leaves the earlier EXR and PNG of that name whole, and no temporary file behind; it used
+// to have truncated them already.
+TEST_F(DbiIo, AWriteThatFailsLeavesTheEarlierFileWhole) {
+    const Dbi small = randomDbi(8, 8, 1), big = randomDbi(256, 256, 2);
+    const std::string exr = path("kept.exr"), png = path("kept.png");
+    writeDbiExr(exr, small);
+    writeColorPng(png, small);
+    const auto exrBytes = fs::file_size(exr), pngBytes = fs::file_size(png);
+    rlimit old{};
+    ASSERT_EQ(getrlimit(RLIMIT_FSIZE, &old), 0);
+    const auto oldHandler = std::signal(SIGXFSZ, SIG_IGN);
+    rlimit tight = old;
+    tight.rlim_cur = 4096;
+    ASSERT_EQ(setrlimit(RLIMIT_FSIZE, &tight), 0);
+    bool exrThrew = false, pngThrew = false;
+    try {
+        writeDbiExr(exr, big);
+    } catch (const Error&) {
+        exrThrew = true;
+    }
+    try {
+        writeColorPng(png, big);
+    } catch (const Error&) {
+        pngThrew = true;
+    }
+    setrlimit(RLIMIT_FSIZE, &old);
+    std::signal(SIGXFSZ, oldHandler);
+    EXPECT_TRUE(exrThrew);
+    EXPECT_TRUE(pngThrew);
+    EXPECT_EQ(fs::file_size(exr), exrBytes);
+    EXPECT_EQ(fs::file_size(png), pngBytes);
+    EXPECT_EQ(readDbiExr(exr).image.width(), 8);
+    int files = 0;
+    for (const auto& e : fs::directory_iterator(m_dir))
+        files += e.is_regular_file();
+    EXPECT_EQ(files, 2) << "no temporary file left";
+    // And a write that succeeds replaces the file.
+    writeColorPng(png, big);
+    EXPECT_GT(fs::file_size(png), pngBytes);
 }
 
 TEST_F(DbiIo, FilesThatAreNotDbisAreOneLineErrors) {

@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <string>
 #include <unistd.h>
 
@@ -68,6 +69,44 @@ inline bool writeReplacing(const std::string& path, const std::string& text) {
     ReplacingFile f(path);
     f.stream() << text;
     return f.commit();
+}
+
+// The same for writers that take a file name (OpenImageIO picks the format by its extension):
+// `write` is called with a temporary name beside `path` that keeps its extension
+// (NAME.trephine-PID.tmp.EXT), and the result is renamed over `path` once `write` returns; if it
+// throws, the temporary file is removed and the exception goes on. A symbolic link is followed; a
+// path that is no regular file (a device) is handed to `write` as it is. Throws trephine::Error
+// (through `fail`, one line naming `path`) when the rename fails.
+inline void replaceVia(const std::string& path,
+                       const std::function<void(const std::string&)>& write,
+                       const std::function<void(const std::string&)>& fail) {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    fs::path target = path;
+    if (fs::is_symlink(target, ec)) {
+        const fs::path resolved = fs::weakly_canonical(target, ec);
+        if (!ec)
+            target = resolved;
+    }
+    if (fs::exists(target, ec) && !fs::is_regular_file(target, ec)) {
+        write(path);
+        return;
+    }
+    fs::path temp = target;
+    temp.replace_filename(target.stem().string() + ".trephine-" + std::to_string(::getpid()) +
+                          ".tmp" + target.extension().string());
+    try {
+        write(temp.string());
+    } catch (...) {
+        fs::remove(temp, ec);
+        throw;
+    }
+    fs::rename(temp, target, ec);
+    if (ec) {
+        std::error_code ignored;
+        fs::remove(temp, ignored);
+        fail(ec.message());
+    }
 }
 
 } // namespace trephine
