@@ -99,7 +99,41 @@ std::string exrHeaderProblem(const std::string& path) {
         if (const int fixed = fixedSize(type); fixed >= 0 && size != fixed)
             return "corrupt OpenEXR header: attribute '" + name + "' of type " + type + " has " +
                    std::to_string(size) + " bytes, expected " + std::to_string(fixed);
-        f.seekg(std::streamoff(size), std::ios::cur);
+        // Two types OpenEXR reads by their content, not their size: a channel list up to its
+        // empty name (a list of another size put the next attribute, one claiming 2 GB, out of
+        // step with this check), and a preview of width x height RGBA pixels (allocated first).
+        const auto outOfStep = [&](uint64_t content) {
+            return "corrupt OpenEXR header: attribute '" + name + "' of type " + type + " has " +
+                   std::to_string(size) + " bytes, its content " + std::to_string(content);
+        };
+        if (type == "chlist") {
+            uint64_t content = 0;
+            std::string channel;
+            while (content < uint64_t(size)) {
+                if (!readName(channel))
+                    return outOfStep(uint64_t(f.tellg()) - at);
+                content += channel.size() + 1;
+                if (channel.empty())
+                    break;
+                content += 16; // pixel type, pLinear and reserved, x and y sampling
+                f.seekg(16, std::ios::cur);
+            }
+            if (!channel.empty() || content != uint64_t(size))
+                return outOfStep(content);
+        } else if (type == "preview") {
+            uint8_t wh[8];
+            if (size < 8 || !f.read(reinterpret_cast<char*>(wh), 8))
+                return outOfStep(8);
+            auto u32 = [&](int i) {
+                return uint64_t(wh[i]) | uint64_t(wh[i + 1]) << 8 | uint64_t(wh[i + 2]) << 16 |
+                       uint64_t(wh[i + 3]) << 24;
+            };
+            const uint64_t content = 8 + 4 * u32(0) * u32(4);
+            if (content != uint64_t(size))
+                return outOfStep(content);
+        }
+        f.clear();
+        f.seekg(std::streamoff(at + uint64_t(size)), std::ios::beg);
     }
 }
 

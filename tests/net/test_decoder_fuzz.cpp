@@ -15,6 +15,8 @@
 #include "libsim/volume.h"
 
 #include <gtest/gtest.h>
+
+#include "fuzz.h"
 #include <lz4.h>
 #include <zstd.h>
 
@@ -32,82 +34,7 @@ using namespace trephine::net;
 
 namespace {
 
-// [SECTION] mutations
-
-int fuzzScale() {
-    const char* s = std::getenv("TREPHINE_FUZZ_SCALE");
-    const int n = s ? std::atoi(s) : 1;
-    return std::max(n, 1);
-}
-
-// Values a hostile peer puts in a length, count or size field, little-endian over `width` bytes.
-constexpr uint64_t kSpecialValues[] = {0,          1,          0x7f,       0x80,
-                                       0xff,       0x7fff,     0x8000,     0xffff,
-                                       0x7fffffff, 0x80000000, 0xffffffff, ~uint64_t(0)};
-
-void writeLittleEndian(std::vector<uint8_t>& b, size_t at, uint64_t v, size_t width) {
-    for (size_t i = 0; i < width && at + i < b.size(); ++i)
-        b[at + i] = uint8_t(v >> (8 * i));
-}
-
-// Deterministic edits of a byte string (std::mt19937 is the same sequence everywhere; the
-// distributions are not, so draws use plain modulo).
-class Mutator {
-public:
-    explicit Mutator(uint32_t seed) : m_rng(seed) {}
-
-    uint32_t below(uint32_t n) { return n ? uint32_t(m_rng() % n) : 0; }
-
-    std::vector<uint8_t> mutate(std::vector<uint8_t> b) {
-        const uint32_t edits = 1 + below(4);
-        for (uint32_t e = 0; e < edits; ++e) {
-            const size_t at = below(uint32_t(b.size()));
-            switch (below(8)) {
-            case 0: // flip a bit
-                if (!b.empty())
-                    b[at] ^= uint8_t(1u << below(8));
-                break;
-            case 1: // a random byte
-                if (!b.empty())
-                    b[at] = uint8_t(m_rng());
-                break;
-            case 2: // a hostile value in a field of 1, 2, 4 or 8 bytes
-                writeLittleEndian(b, at, kSpecialValues[below(std::size(kSpecialValues))],
-                                  size_t(1) << below(4));
-                break;
-            case 3: // truncated
-                b.resize(below(uint32_t(b.size()) + 1));
-                break;
-            case 4: { // bytes inserted
-                const size_t n = 1 + below(8);
-                std::vector<uint8_t> ins(n);
-                for (uint8_t& v : ins)
-                    v = uint8_t(m_rng());
-                b.insert(b.begin() + std::ptrdiff_t(at), ins.begin(), ins.end());
-                break;
-            }
-            case 5: // bytes deleted
-                b.erase(b.begin() + std::ptrdiff_t(at),
-                        b.begin() + std::ptrdiff_t(std::min(b.size(), at + 1 + below(8))));
-                break;
-            case 6: // a run copied over another place (repeated structure)
-                if (b.size() > 2) {
-                    const size_t from = below(uint32_t(b.size())), n = 1 + below(16);
-                    for (size_t i = 0; i < n && from + i < b.size() && at + i < b.size(); ++i)
-                        b[at + i] = b[from + i];
-                }
-                break;
-            default: // appended junk
-                b.push_back(uint8_t(m_rng()));
-                break;
-            }
-        }
-        return b;
-    }
-
-private:
-    std::mt19937 m_rng;
-};
+using namespace trephine::testing;
 
 // Every truncation, every hostile value at every offset, then `random` random mutations.
 template <typename F>
@@ -628,36 +555,7 @@ TEST(DecoderFuzz, VolumeDecodersRefuseHostileSizesAndLabels) {
 
 // [SECTION] size claims
 
-// The largest single allocation this thread makes while a probe is alive. Every operator new of
-// the test binary goes through here; it only forwards to malloc unless a probe watches.
-namespace {
-thread_local bool t_probing = false;
-thread_local size_t t_largestAllocation = 0;
-
-struct AllocationProbe {
-    AllocationProbe() { t_probing = true, t_largestAllocation = 0; }
-    ~AllocationProbe() { t_probing = false; }
-    size_t largest() const { return t_largestAllocation; }
-};
-} // namespace
-
-// GCC sees free() on what operator new returned and warns; here they are one malloc and free.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-#endif
-void* operator new(size_t n) {
-    if (t_probing)
-        t_largestAllocation = std::max(t_largestAllocation, n);
-    if (void* p = std::malloc(n ? n : 1))
-        return p;
-    throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept {
-    std::free(p);
-}
-void operator delete(void* p, size_t) noexcept {
-    std::free(p);
-}
+TREPHINE_FUZZ_ALLOCATION_PROBE()
 
 TEST(DecoderFuzz, ASizeClaimBeyondWhatThePayloadCanHoldIsRefusedBeforeAllocatingIt) {
     // A few bytes claiming a 2048 x 2048 picture (20 MiB before compression), a 512^3 volume
@@ -787,7 +685,7 @@ TEST(DecoderFuzz, AClaimThePayloadDoesNotReallyHoldCostsAtMostAMebibyte) {
         for (size_t i = 0; i < size; ++i)
             data[i] = uint8_t(i * 2654435761u >> 13 & (i % 3 ? 0xff : 0x0f));
         for (Codec codec : {Codec::Lz4, Codec::Zstd}) {
-            SCOPED_TRACE(testing::Message() << codecName(codec) << " " << size);
+            SCOPED_TRACE(::testing::Message() << codecName(codec) << " " << size);
             const std::vector<uint8_t> payload = compressBytes(data, codec);
             std::vector<uint8_t> bytes;
             ASSERT_TRUE(decompressBytes(payload, codec, size, bytes));

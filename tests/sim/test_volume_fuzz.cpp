@@ -13,6 +13,8 @@
 
 #include <gtest/gtest.h>
 
+#include "fuzz.h"
+
 #include <algorithm>
 #include <cmath>
 #include <csignal>
@@ -36,144 +38,13 @@ using namespace trephine;
 
 // [SECTION] allocation probe
 
-// The largest single allocation this thread makes while a probe is alive. Every operator new of
-// the test binary goes through here; it only forwards to malloc unless a probe watches.
-namespace {
-thread_local bool t_probing = false;
-thread_local size_t t_largestAllocation = 0;
-
-struct AllocationProbe {
-    AllocationProbe() { t_probing = true, t_largestAllocation = 0; }
-    ~AllocationProbe() { t_probing = false; }
-    size_t largest() const { return t_largestAllocation; }
-};
-} // namespace
-
-// GCC sees free() on what operator new returned and warns; here they are one malloc and free.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-#endif
-void* operator new(size_t n) {
-    if (t_probing)
-        t_largestAllocation = std::max(t_largestAllocation, n);
-    if (void* p = std::malloc(n ? n : 1))
-        return p;
-    throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept {
-    std::free(p);
-}
-void operator delete(void* p, size_t) noexcept {
-    std::free(p);
-}
+TREPHINE_FUZZ_ALLOCATION_PROBE()
 
 namespace {
 
-using Bytes = std::vector<uint8_t>;
-
-// [SECTION] mutations
-
-int fuzzScale() {
-    const char* s = std::getenv("TREPHINE_FUZZ_SCALE");
-    const int n = s ? std::atoi(s) : 1;
-    return std::max(n, 1);
-}
-
-// Values a hostile file puts in a size, count or offset field, little-endian over `width` bytes.
-constexpr uint64_t kSpecialValues[] = {0,          1,          0x7f,       0x80,
-                                       0xff,       0x7fff,     0x8000,     0xffff,
-                                       0x7fffffff, 0x80000000, 0xffffffff, ~uint64_t(0)};
-
-void writeLittleEndian(Bytes& b, size_t at, uint64_t v, size_t width) {
-    for (size_t i = 0; i < width && at + i < b.size(); ++i)
-        b[at + i] = uint8_t(v >> (8 * i));
-}
-
-// Deterministic edits of a byte string (std::mt19937 is the same sequence everywhere; the
-// distributions are not, so draws use plain modulo).
-class Mutator {
-public:
-    explicit Mutator(uint32_t seed) : m_rng(seed) {}
-
-    uint32_t below(uint32_t n) { return n ? uint32_t(m_rng() % n) : 0; }
-
-    Bytes mutate(Bytes b) {
-        const uint32_t edits = 1 + below(4);
-        for (uint32_t e = 0; e < edits; ++e) {
-            const size_t at = below(uint32_t(b.size()));
-            switch (below(8)) {
-            case 0: // flip a bit
-                if (!b.empty())
-                    b[at] ^= uint8_t(1u << below(8));
-                break;
-            case 1: // a random byte
-                if (!b.empty())
-                    b[at] = uint8_t(m_rng());
-                break;
-            case 2: // a hostile value in a field of 1, 2, 4 or 8 bytes
-                writeLittleEndian(b, at, kSpecialValues[below(std::size(kSpecialValues))],
-                                  size_t(1) << below(4));
-                break;
-            case 3: // truncated
-                b.resize(below(uint32_t(b.size()) + 1));
-                break;
-            case 4: { // bytes inserted
-                const size_t n = 1 + below(8);
-                Bytes ins(n);
-                for (uint8_t& v : ins)
-                    v = uint8_t(m_rng());
-                b.insert(b.begin() + std::ptrdiff_t(at), ins.begin(), ins.end());
-                break;
-            }
-            case 5: // bytes deleted
-                b.erase(b.begin() + std::ptrdiff_t(at),
-                        b.begin() + std::ptrdiff_t(std::min(b.size(), at + 1 + below(8))));
-                break;
-            case 6: // a run copied over another place (repeated structure)
-                if (b.size() > 2) {
-                    const size_t from = below(uint32_t(b.size())), n = 1 + below(16);
-                    for (size_t i = 0; i < n && from + i < b.size() && at + i < b.size(); ++i)
-                        b[at + i] = b[from + i];
-                }
-                break;
-            default: // appended junk
-                b.push_back(uint8_t(m_rng()));
-                break;
-            }
-        }
-        return b;
-    }
-
-private:
-    std::mt19937 m_rng;
-};
+using namespace trephine::testing;
 
 // [SECTION] files
-
-// A fresh folder, removed with everything in it on destruction: in memory (/dev/shm) unless TMPDIR
-// says otherwise, since thousands of small files written to a disk-backed /tmp take seconds.
-struct FuzzDir {
-    fs::path path;
-    FuzzDir() {
-        static int counter = 0;
-        std::error_code ec;
-        fs::path base = fs::temp_directory_path();
-        if (!std::getenv("TMPDIR") && fs::is_directory("/dev/shm", ec) &&
-            ::access("/dev/shm", W_OK) == 0)
-            base = "/dev/shm";
-        path = base /
-               ("trephine_fuzz_" + std::to_string(::getpid()) + "_" + std::to_string(counter++));
-        fs::remove_all(path, ec);
-        fs::create_directories(path);
-    }
-    ~FuzzDir() {
-        std::error_code ec;
-        fs::remove_all(path, ec);
-    }
-    FuzzDir(const FuzzDir&) = delete;
-    FuzzDir& operator=(const FuzzDir&) = delete;
-    std::string operator/(const std::string& name) const { return (path / name).string(); }
-};
 
 // Replaces the file by a new one: truncating it in place would make ext4 flush it to the disk on
 // close (its guard for files rewritten in place), a thousand times slower.

@@ -11,6 +11,8 @@
 
 #include <gtest/gtest.h>
 
+#include "fuzz.h"
+
 #include <OpenImageIO/imageio.h>
 
 #include <algorithm>
@@ -31,145 +33,13 @@ using namespace trephine;
 
 // [SECTION] allocation probe
 
-// The largest single allocation this thread makes while a probe is alive. Every operator new of
-// the test binary goes through here; it only forwards to malloc unless a probe watches.
-namespace {
-thread_local bool t_probing = false;
-thread_local size_t t_largestAllocation = 0;
-
-struct AllocationProbe {
-    AllocationProbe() { t_probing = true, t_largestAllocation = 0; }
-    ~AllocationProbe() { t_probing = false; }
-    size_t largest() const { return t_largestAllocation; }
-};
-} // namespace
-
-// GCC sees free() on what operator new returned and warns; here they are one malloc and free.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-#endif
-void* operator new(size_t n) {
-    if (t_probing)
-        t_largestAllocation = std::max(t_largestAllocation, n);
-    if (void* p = std::malloc(n ? n : 1))
-        return p;
-    throw std::bad_alloc();
-}
-void operator delete(void* p) noexcept {
-    std::free(p);
-}
-void operator delete(void* p, size_t) noexcept {
-    std::free(p);
-}
+TREPHINE_FUZZ_ALLOCATION_PROBE()
 
 namespace {
 
-using Bytes = std::vector<uint8_t>;
-
-// [SECTION] mutations
-
-int fuzzScale() {
-    const char* s = std::getenv("TREPHINE_FUZZ_SCALE");
-    const int n = s ? std::atoi(s) : 1;
-    return std::max(n, 1);
-}
-
-constexpr uint64_t kSpecialValues[] = {0,          1,          0x7f,       0x80,
-                                       0xff,       0x7fff,     0x8000,     0xffff,
-                                       0x7fffffff, 0x80000000, 0xffffffff, ~uint64_t(0)};
-
-void writeLittleEndian(Bytes& b, size_t at, uint64_t v, size_t width) {
-    for (size_t i = 0; i < width && at + i < b.size(); ++i)
-        b[at + i] = uint8_t(v >> (8 * i));
-}
-
-void writeBigEndian(Bytes& b, size_t at, uint64_t v, size_t width) {
-    for (size_t i = 0; i < width && at + i < b.size(); ++i)
-        b[at + i] = uint8_t(v >> (8 * (width - 1 - i)));
-}
-
-// Deterministic edits of a byte string (std::mt19937 is the same sequence everywhere; the
-// distributions are not, so draws use plain modulo).
-class Mutator {
-public:
-    explicit Mutator(uint32_t seed) : m_rng(seed) {}
-
-    uint32_t below(uint32_t n) { return n ? uint32_t(m_rng() % n) : 0; }
-
-    Bytes mutate(Bytes b) {
-        const uint32_t edits = 1 + below(3);
-        for (uint32_t e = 0; e < edits; ++e) {
-            const size_t at = below(uint32_t(b.size()));
-            switch (below(7)) {
-            case 0: // flip a bit
-                if (!b.empty())
-                    b[at] ^= uint8_t(1u << below(8));
-                break;
-            case 1: // a random byte
-                if (!b.empty())
-                    b[at] = uint8_t(m_rng());
-                break;
-            case 2: // a hostile value in a field of 1, 2, 4 or 8 bytes, either byte order
-                if (below(2))
-                    writeLittleEndian(b, at, kSpecialValues[below(std::size(kSpecialValues))],
-                                      size_t(1) << below(4));
-                else
-                    writeBigEndian(b, at, kSpecialValues[below(std::size(kSpecialValues))],
-                                   size_t(1) << below(4));
-                break;
-            case 3: // truncated
-                b.resize(below(uint32_t(b.size()) + 1));
-                break;
-            case 4: { // bytes inserted
-                const size_t n = 1 + below(8);
-                Bytes ins(n);
-                for (uint8_t& v : ins)
-                    v = uint8_t(m_rng());
-                b.insert(b.begin() + std::ptrdiff_t(at), ins.begin(), ins.end());
-                break;
-            }
-            case 5: // bytes deleted
-                b.erase(b.begin() + std::ptrdiff_t(at),
-                        b.begin() + std::ptrdiff_t(std::min(b.size(), at + 1 + below(8))));
-                break;
-            default: // appended junk
-                b.push_back(uint8_t(m_rng()));
-                break;
-            }
-        }
-        return b;
-    }
-
-private:
-    std::mt19937 m_rng;
-};
+using namespace trephine::testing;
 
 // [SECTION] files
-
-// A fresh folder, removed with everything in it on destruction: in memory (/dev/shm) unless TMPDIR
-// says otherwise, since many small files written to a disk-backed /tmp take seconds.
-struct FuzzDir {
-    fs::path path;
-    FuzzDir() {
-        static int counter = 0;
-        std::error_code ec;
-        fs::path base = fs::temp_directory_path();
-        if (!std::getenv("TMPDIR") && fs::is_directory("/dev/shm", ec) &&
-            ::access("/dev/shm", W_OK) == 0)
-            base = "/dev/shm";
-        path = base / ("trephine_image_fuzz_" + std::to_string(::getpid()) + "_" +
-                       std::to_string(counter++));
-        fs::remove_all(path, ec);
-        fs::create_directories(path);
-    }
-    ~FuzzDir() {
-        std::error_code ec;
-        fs::remove_all(path, ec);
-    }
-    FuzzDir(const FuzzDir&) = delete;
-    FuzzDir& operator=(const FuzzDir&) = delete;
-    std::string operator/(const std::string& name) const { return (path / name).string(); }
-};
 
 // Replaces the file by a new one (truncating in place makes ext4 flush it on close).
 void writeFile(const std::string& path, const Bytes& data) {
@@ -486,4 +356,39 @@ TEST(ImageFuzz, ADbiWhoseFixedSizeAttributesHaveAnotherSizeIsRefused) {
         expectRefused([&] { readDbiExr(path); },
                       "attribute 'compression' of type compression has 129 bytes, expected 1"),
         size_t(1) << 20);
+}
+
+TEST(ImageFuzz, ADbiWhoseChannelListHasAnotherSizeIsRefused) {
+    // OpenEXR reads a channel list up to its empty name, whatever its declared size, and parses
+    // what follows as the next attribute: a list declared 93 bytes too long hid, from the check
+    // of sizes against the file, an attribute of unknown type claiming 2 GB (found by the DBI
+    // fuzzing above once its mutations copied runs of bytes).
+    FuzzDir dir;
+    const std::string path = dir / "f.exr";
+    writeDbiExr(path, Dbi(4, 3));
+    const Bytes valid = readFile(path);
+    const std::string key = std::string("channels\0chlist\0", 16);
+    const auto at = std::search(valid.begin(), valid.end(), key.begin(), key.end());
+    ASSERT_NE(at, valid.end());
+    const size_t sizeAt = size_t(at - valid.begin()) + key.size();
+    const uint32_t size = uint32_t(valid[sizeAt]) | uint32_t(valid[sizeAt + 1]) << 8;
+    for (int32_t delta : {-1, 1, 93}) {
+        SCOPED_TRACE(delta);
+        Bytes b = valid;
+        writeLittleEndian(b, sizeAt, uint32_t(int32_t(size) + delta), 4);
+        // The attribute after the list: an unknown type (read whole by OpenEXR) claiming 2 GB.
+        const std::string next = std::string("compression\0compression\0", 24);
+        auto n = std::search(b.begin(), b.end(), next.begin(), next.end());
+        ASSERT_NE(n, b.end());
+        const size_t type = size_t(n - b.begin()) + 12;
+        std::memcpy(b.data() + type, "unknownxxxx", 11);
+        writeLittleEndian(b, type + 12, 0x77777777, 4);
+        writeFile(path, b);
+        EXPECT_LT(expectRefused([&] { readDbiExr(path); },
+                                "attribute 'channels' of type chlist has " +
+                                    std::to_string(int32_t(size) + delta) + " bytes, its content"),
+                  size_t(1) << 20);
+    }
+    writeFile(path, valid);
+    EXPECT_EQ(readDbiExr(path).image.width(), 4);
 }
