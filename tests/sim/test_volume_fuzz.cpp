@@ -13,6 +13,8 @@
 
 #include <gtest/gtest.h>
 
+#include "byte_files.h"
+
 #include "fuzz.h"
 
 #include <algorithm>
@@ -46,20 +48,6 @@ using namespace trephine::testing;
 
 // [SECTION] files
 
-// Replaces the file by a new one: truncating it in place would make ext4 flush it to the disk on
-// close (its guard for files rewritten in place), a thousand times slower.
-void writeFile(const std::string& path, const Bytes& data) {
-    std::error_code ec;
-    fs::remove(path, ec);
-    std::ofstream f(path, std::ios::binary);
-    f.write(reinterpret_cast<const char*>(data.data()), std::streamsize(data.size()));
-}
-
-Bytes readFile(const std::string& path) {
-    std::ifstream f(path, std::ios::binary);
-    return Bytes(std::istreambuf_iterator<char>(f), {});
-}
-
 Bytes bytesOf(const std::string& s) {
     return Bytes(s.begin(), s.end());
 }
@@ -67,34 +55,6 @@ Bytes bytesOf(const std::string& s) {
 Bytes concat(Bytes a, const Bytes& b) {
     a.insert(a.end(), b.begin(), b.end());
     return a;
-}
-
-Bytes gzip(const Bytes& data) {
-    z_stream z{};
-    deflateInit2(&z, 6, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY);
-    Bytes out(deflateBound(&z, uLong(data.size())) + 64);
-    z.next_in = const_cast<Bytef*>(data.data());
-    z.avail_in = uInt(data.size());
-    z.next_out = out.data();
-    z.avail_out = uInt(out.size());
-    EXPECT_EQ(deflate(&z, Z_FINISH), Z_STREAM_END);
-    out.resize(z.total_out);
-    deflateEnd(&z);
-    return out;
-}
-
-// Values as bytes in the given order.
-template <typename T>
-Bytes encode(const std::vector<T>& values, bool bigEndian) {
-    Bytes out;
-    for (T v : values) {
-        uint8_t b[sizeof(T)];
-        std::memcpy(b, &v, sizeof(T));
-        if (bigEndian)
-            std::reverse(b, b + sizeof(T));
-        out.insert(out.end(), b, b + sizeof(T));
-    }
-    return out;
 }
 
 // Voxel values of a 5 x 4 x 3 volume: a spread of Hounsfield numbers, and for floats NaN and

@@ -8,6 +8,8 @@
 
 #include <gtest/gtest.h>
 
+#include "byte_files.h"
+
 #include <algorithm>
 #include <cmath>
 #include <csignal>
@@ -29,49 +31,9 @@ namespace {
 
 using namespace trephine::testing;
 
-using Bytes = std::vector<uint8_t>;
-
-void writeFile(const std::string& path, const Bytes& data) {
-    std::ofstream f(path, std::ios::binary);
-    f.write(reinterpret_cast<const char*>(data.data()), std::streamsize(data.size()));
-}
-
-Bytes readFile(const std::string& path) {
-    std::ifstream f(path, std::ios::binary);
-    return Bytes(std::istreambuf_iterator<char>(f), {});
-}
-
 Bytes concat(const std::string& text, const Bytes& data) {
     Bytes out(text.begin(), text.end());
     out.insert(out.end(), data.begin(), data.end());
-    return out;
-}
-
-Bytes gzip(const Bytes& data) {
-    z_stream z{};
-    deflateInit2(&z, 6, Z_DEFLATED, 15 + 16, 8, Z_DEFAULT_STRATEGY);
-    Bytes out(deflateBound(&z, uLong(data.size())) + 64);
-    z.next_in = const_cast<Bytef*>(data.data());
-    z.avail_in = uInt(data.size());
-    z.next_out = out.data();
-    z.avail_out = uInt(out.size());
-    EXPECT_EQ(deflate(&z, Z_FINISH), Z_STREAM_END);
-    out.resize(z.total_out);
-    deflateEnd(&z);
-    return out;
-}
-
-// Values as bytes in the given order.
-template <typename T>
-Bytes encode(const std::vector<T>& values, bool bigEndian) {
-    Bytes out;
-    for (T v : values) {
-        uint8_t b[sizeof(T)];
-        std::memcpy(b, &v, sizeof(T));
-        if (bigEndian)
-            std::reverse(b, b + sizeof(T));
-        out.insert(out.end(), b, b + sizeof(T));
-    }
     return out;
 }
 

@@ -11,6 +11,8 @@
 
 #include <gtest/gtest.h>
 
+#include "byte_files.h"
+
 #include "fuzz.h"
 
 #include <OpenImageIO/imageio.h>
@@ -40,19 +42,6 @@ namespace {
 using namespace trephine::testing;
 
 // [SECTION] files
-
-// Replaces the file by a new one (truncating in place makes ext4 flush it on close).
-void writeFile(const std::string& path, const Bytes& data) {
-    std::error_code ec;
-    fs::remove(path, ec);
-    std::ofstream f(path, std::ios::binary);
-    f.write(reinterpret_cast<const char*>(data.data()), std::streamsize(data.size()));
-}
-
-Bytes readFile(const std::string& path) {
-    std::ifstream f(path, std::ios::binary);
-    return Bytes(std::istreambuf_iterator<char>(f), {});
-}
 
 template <typename T>
 void writeImage(const std::string& path, int w, int h, int channels, OIIO::TypeDesc type) {

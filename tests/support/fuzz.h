@@ -21,7 +21,7 @@
 
 namespace trephine::testing {
 
-using Bytes = std::vector<uint8_t>;
+using Bytes = std::vector<uint8_t>; // as in byte_files.h
 
 // TREPHINE_FUZZ_SCALE=N runs N times as many mutations (default 1: a fast run for CI).
 inline int fuzzScale() {
