@@ -5,10 +5,27 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <optional>
 #include <string>
 #include <unistd.h>
 
 namespace trephine {
+
+// Where a replacing write of `path` goes: the file a symbolic link names (the link stays), or
+// `path`; nothing when `path` exists and is no regular file (a device: written in place).
+inline std::optional<std::filesystem::path> replacementTarget(const std::string& path) {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    fs::path target = path;
+    if (fs::is_symlink(target, ec)) {
+        const fs::path resolved = fs::weakly_canonical(target, ec);
+        if (!ec)
+            target = resolved;
+    }
+    if (fs::exists(target, ec) && !fs::is_regular_file(target, ec))
+        return std::nullopt;
+    return target;
+}
 
 // An output file written through a temporary file beside it, renamed over it only by commit():
 // a run that fails before (a full disk, an error, Ctrl-C) leaves an earlier file of that name
@@ -17,19 +34,12 @@ namespace trephine {
 class ReplacingFile {
 public:
     explicit ReplacingFile(const std::string& path) : m_path(path) {
-        namespace fs = std::filesystem;
-        std::error_code ec;
-        fs::path target = path;
-        if (fs::is_symlink(target, ec)) {
-            const fs::path resolved = fs::weakly_canonical(target, ec);
-            if (!ec)
-                target = resolved;
-        }
-        if (fs::exists(target, ec) && !fs::is_regular_file(target, ec)) {
+        const auto target = replacementTarget(path);
+        if (!target) {
             m_stream.open(path, std::ios::binary);
             return;
         }
-        m_target = target.string();
+        m_target = target->string();
         m_temp = m_target + ".trephine-" + std::to_string(::getpid()) + ".tmp";
         m_stream.open(m_temp, std::ios::binary);
     }
@@ -81,17 +91,13 @@ inline void replaceVia(const std::string& path,
                        const std::function<void(const std::string&)>& write,
                        const std::function<void(const std::string&)>& fail) {
     namespace fs = std::filesystem;
-    std::error_code ec;
-    fs::path target = path;
-    if (fs::is_symlink(target, ec)) {
-        const fs::path resolved = fs::weakly_canonical(target, ec);
-        if (!ec)
-            target = resolved;
-    }
-    if (fs::exists(target, ec) && !fs::is_regular_file(target, ec)) {
+    const auto resolved = replacementTarget(path);
+    if (!resolved) {
         write(path);
         return;
     }
+    const fs::path target = *resolved;
+    std::error_code ec;
     fs::path temp = target;
     temp.replace_filename(target.stem().string() + ".trephine-" + std::to_string(::getpid()) +
                           ".tmp" + target.extension().string());
