@@ -98,6 +98,10 @@ glm::vec3 ModelBlender::update(glm::vec3 p, double now) {
     m_ticked = true;
     if (!m_hasModel)
         return glm::vec3(0.0f);
+    // A position that is not a number gives no force and leaves the blend where it is: the step
+    // shortening below met a NaN distance, and std::min(1, NaN) finished the blend in one tick.
+    if (!allFinite(p))
+        return glm::vec3(0.0f);
     const glm::dvec3 pd(p);
     if (!m_fading && now - m_lastModelTime > m_config.staleTimeoutS) {
         // Fading is a blend towards the zero field.

@@ -157,6 +157,30 @@ TEST(Haptics, NonFiniteModelIsIgnored) {
     EXPECT_NEAR(f.z, 1.0f, 1e-5f);
 }
 
+// A device position that is not a number (a glitching driver) gives no force and does not move
+// the blend on: the step shortening met a NaN distance, made the step NaN, and std::min(1, NaN)
+// finished the blend in that one tick, so the next good tick jumped the whole way (5 N here).
+TEST(Haptics, ANonFinitePositionDoesNotFinishTheBlend) {
+    BlendConfig config;
+    config.maxStepN = 0.05;
+    for (bool unilateralOn : {true, false}) {
+        config.unilateral = unilateralOn;
+        ModelBlender blender(config);
+        const glm::vec3 p(1.0f, 2.0f, 3.0f);
+        blender.resetTo(modelAt(p, {0, 0, 6.0f}, 2.0f), 0.0);
+        EXPECT_NEAR(blender.update(p, 0.0).z, 6.0f, 1e-5f);
+        blender.setModel(modelAt(p, {0, 0, 1.0f}, 2.0f), 0.001);
+        glm::vec3 prev = blender.update(p, 0.001);
+        for (float bad : {NAN, INFINITY}) {
+            EXPECT_EQ(blender.update(glm::vec3(bad, 2.0f, 3.0f), 0.002), glm::vec3(0.0f));
+            EXPECT_LT(blender.blendFraction(), 0.1) << bad;
+            const glm::vec3 f = blender.update(p, 0.003);
+            EXPECT_LE(glm::length(f - prev), config.maxStepN + 1e-5) << bad;
+            prev = f;
+        }
+    }
+}
+
 // Equation 1 is linear: a hand lifting the tool off the bone carries the extrapolation past the
 // surface, where it reverses and pulls the tool back in (2 N and -6 N/mm, 1 mm up: -4 N). A
 // contact only pushes, so the blender removes the part against the contact's push.
