@@ -1,4 +1,5 @@
 #include "ui/panel_data.h"
+#include "ui/panels.h"
 
 #include "libsim/stats.h"
 
@@ -112,6 +113,42 @@ std::vector<net::Annotate> MarkUndo::undo() {
     }
     m_taken.clear();
     return adds;
+}
+
+std::vector<net::Annotate> markRequests(MarkControls& controls, MarkUndo& undo,
+                                        const net::ClientSnapshot& snap,
+                                        const std::optional<glm::vec3>& pointerPick) {
+    std::vector<net::Annotate> out;
+    if (snap.welcome && snap.state == net::LinkState::Connected) {
+        if (controls.addAtPointer && pointerPick) {
+            net::Annotate a;
+            a.op = net::Annotate::Op::Add;
+            a.position = *pointerPick;
+            a.label = controls.label[0] ? std::string(controls.label)
+                                        : defaultMarkLabel(snap.annotations);
+            out.push_back(std::move(a));
+        }
+        if (controls.clearAll) {
+            undo.clearing(snap.annotations);
+            net::Annotate a;
+            a.op = net::Annotate::Op::Clear;
+            out.push_back(std::move(a));
+        }
+        if (controls.removeId) {
+            undo.removing(snap.annotations, controls.removeId);
+            net::Annotate a;
+            a.op = net::Annotate::Op::Remove;
+            a.id = controls.removeId;
+            out.push_back(std::move(a));
+        }
+        if (controls.undo)
+            for (net::Annotate& a : undo.undo())
+                out.push_back(std::move(a));
+    }
+    controls.addAtPointer = controls.clearAll = controls.undo = false;
+    controls.removeId = 0;
+    controls.undoable = undo.pending();
+    return out;
 }
 
 std::string NetworkHistory::latencyCaption(double maxUs) const {

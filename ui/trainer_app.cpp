@@ -810,33 +810,8 @@ int runTrainerWindow(const TrainerOptions& o) {
                 client.annotate(a);
             marksSent = true;
         }
-        if (markControls.addAtPointer && pointerPick) {
-            net::Annotate a;
-            a.op = net::Annotate::Op::Add;
-            a.position = *pointerPick;
-            a.label = markControls.label[0] ? std::string(markControls.label)
-                                            : defaultMarkLabel(snap->annotations);
+        for (const net::Annotate& a : markRequests(markControls, markUndo, *snap, pointerPick))
             client.annotate(a);
-        }
-        if (markControls.clearAll) {
-            markUndo.clearing(snap->annotations);
-            net::Annotate a;
-            a.op = net::Annotate::Op::Clear;
-            client.annotate(a);
-        }
-        if (markControls.removeId) {
-            markUndo.removing(snap->annotations, markControls.removeId);
-            net::Annotate a;
-            a.op = net::Annotate::Op::Remove;
-            a.id = markControls.removeId;
-            client.annotate(a);
-        }
-        if (markControls.undo)
-            for (const net::Annotate& a : markUndo.undo())
-                client.annotate(a);
-        markControls.addAtPointer = markControls.clearAll = markControls.undo = false;
-        markControls.removeId = 0;
-        markControls.undoable = markUndo.pending();
         // Take over (the panel's buttons, --take-over once the trainee is listed) or hand back.
         if (snap->welcome && snap->state == net::LinkState::Connected)
             if (const auto id = scriptedTakeOver.due(snap->attempts, snap->participants))

@@ -269,3 +269,54 @@ TEST(MarkUndo, PutsBackWhatTheLastRemovalTook) {
     undo.clearing({}); // clearing nothing keeps nothing
     EXPECT_EQ(undo.pending(), 0u);
 }
+
+// The window sends what the mark controls ask for only while the link is up: the client drops an
+// Annotate otherwise. An undo asked while reconnecting stays pending (it was forgotten, and the
+// marks with it), and a removal asked then is not remembered (undoing it re-added marks that
+// were never taken off).
+TEST(MarkUndo, WaitsForTheLinkToSendAnUndo) {
+    net::ClientSnapshot snap;
+    snap.state = net::LinkState::Connected;
+    snap.welcome = net::Welcome{};
+    for (uint32_t i = 1; i <= 2; ++i) {
+        net::AnnotationInfo m;
+        m.id = i;
+        m.position = glm::vec3(float(i), 0.0f, 0.0f);
+        m.label = i == 1 ? "a" : "b";
+        snap.annotations.push_back(m);
+    }
+    MarkControls controls;
+    MarkUndo undo;
+    controls.clearAll = true;
+    std::vector<net::Annotate> sent = markRequests(controls, undo, snap, std::nullopt);
+    ASSERT_EQ(sent.size(), 1u);
+    EXPECT_EQ(sent[0].op, net::Annotate::Op::Clear);
+    EXPECT_FALSE(controls.clearAll);
+    EXPECT_EQ(controls.undoable, 2u);
+
+    net::ClientSnapshot down = snap; // the link dropped; the list as last shown
+    down.state = net::LinkState::Connecting;
+    down.welcome.reset();
+    controls.undo = true;
+    EXPECT_TRUE(markRequests(controls, undo, down, std::nullopt).empty());
+    EXPECT_FALSE(controls.undo);
+    EXPECT_EQ(controls.undoable, 2u) << "kept for when the link is back";
+    controls.removeId = 1;
+    EXPECT_TRUE(markRequests(controls, undo, down, std::nullopt).empty());
+    EXPECT_EQ(controls.undoable, 2u) << "a removal that was not sent is not remembered";
+
+    snap.annotations.clear();
+    controls.undo = true;
+    sent = markRequests(controls, undo, snap, std::nullopt);
+    ASSERT_EQ(sent.size(), 2u);
+    EXPECT_EQ(sent[0].op, net::Annotate::Op::Add);
+    EXPECT_EQ(sent[0].label, "a");
+    EXPECT_EQ(sent[1].label, "b");
+    EXPECT_EQ(controls.undoable, 0u);
+
+    controls.addAtPointer = true; // the default label: the next number no mark has
+    sent = markRequests(controls, undo, snap, glm::vec3(1.0f, 2.0f, 3.0f));
+    ASSERT_EQ(sent.size(), 1u);
+    EXPECT_EQ(sent[0].position, glm::vec3(1.0f, 2.0f, 3.0f));
+    EXPECT_EQ(sent[0].label, defaultMarkLabel(snap.annotations));
+}

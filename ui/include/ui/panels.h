@@ -53,6 +53,14 @@ struct MarkControls {
     size_t undoable = 0;   // marks the last removal took (the window's MarkUndo)
     bool undo = false;     // asked this frame: put them back
 };
+// What the marks asked for this frame (`controls`, then reset) comes to, as Annotates to send: an
+// Add at the pointer, a Clear or a Remove (remembered in `undo` first) and the undo's Adds. Only
+// while the link is up and welcomed (the client drops an Annotate otherwise): a removal asked
+// without one is not remembered (undoing it re-added marks still on the skull), and an undo
+// asked without one stays pending (it was forgotten, its marks lost).
+std::vector<net::Annotate> markRequests(MarkControls& controls, MarkUndo& undo,
+                                        const net::ClientSnapshot& snap,
+                                        const std::optional<glm::vec3>& pointerPick);
 // Taking over a trainee's drilling (TakeOver): an instructor's buttons in the participants list.
 // The panel only records what was asked this frame; the window sends it.
 struct TakeOverControls {
