@@ -590,7 +590,16 @@ void SessionServer::stop() {
             marks.push_back(a);
         auto saveSession = [&](const std::string& path) {
             saveVolume(m_impl->volume, path);
-            writeMarksFile(marksPathFor(path), marks);
+            try {
+                writeMarksFile(marksPathFor(path), marks);
+            } catch (...) {
+                // The new volume is in place: an older marks file left beside it would come back
+                // with it (marks this session removed, none of those it placed).
+                std::error_code ec;
+                if (std::filesystem::is_regular_file(marksPathFor(path), ec))
+                    std::filesystem::remove(marksPathFor(path), ec);
+                throw;
+            }
         };
         try {
             saveSession(m_config.saveOnExit);

@@ -214,6 +214,37 @@ TEST(MarksFile, MalformedFilesAreRefusedInOneLineNamingTheLine) {
 }
 
 // Writing goes through a temporary file: a write that fails leaves the earlier file whole.
+// The volume is written but its marks cannot be (a folder in the way of their temporary file): an
+// older marks file must not stay beside the new volume, where `--volume` would read it back.
+TEST(Annotations, AFailedMarksWriteLeavesNoOlderMarksBesideTheNewVolume) {
+    Volume sphere = makeSphere(32);
+    trephine::testing::TempDir dir;
+    const std::string saved = dir / "session.nrrd";
+    AnnotationInfo old;
+    old.position = {1, 2, 3};
+    old.label = "removed in this session";
+    writeMarksFile(marksPathFor(saved), {old});
+    ServerConfig config = loopbackServerConfig("sphere:32");
+    config.saveOnExit = saved;
+    std::string copy;
+    {
+        SessionServer server(sphere, config);
+        server.start();
+        std::filesystem::create_directories(marksPathFor(saved) + ".trephine-" +
+                                            std::to_string(::getpid()) + ".tmp");
+        server.stop();
+        EXPECT_FALSE(server.saveError().empty());
+        copy = server.savedTo();
+    }
+    ASSERT_TRUE(std::filesystem::is_regular_file(saved)) << "the volume itself was written";
+    EXPECT_FALSE(std::filesystem::exists(marksPathFor(saved)))
+        << "the older marks would come back with the new volume";
+    ASSERT_FALSE(copy.empty());
+    EXPECT_TRUE(readMarksFile(marksPathFor(copy)).empty()) << "the emergency copy has them";
+    std::filesystem::remove(copy);
+    std::filesystem::remove(marksPathFor(copy));
+}
+
 TEST(MarksFile, AFailedWriteLeavesTheEarlierFileWhole) {
     trephine::testing::TempDir dir;
     const std::string path = dir / "m.marks";
