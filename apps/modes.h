@@ -67,6 +67,8 @@ inline CLI::Validator outputFile() {
 inline CLI::Validator serverAddress() {
     return CLI::Validator(
         [](std::string& text) -> std::string {
+            if (text.empty())
+                return "an empty address: give HOST:PORT";
             const size_t colon = text.rfind(':');
             const bool digitsOnly =
                 !text.empty() && text.find_first_not_of("0123456789") == std::string::npos;

@@ -145,14 +145,16 @@ void writeMarksFile(const std::string& path, const std::vector<AnnotationInfo>& 
                       double(m.position.y), double(m.position.z));
         f.stream() << buf << quoted(m.label) << '\n';
     }
+    // (No reason from errno: the stream and the rename leave it unreliable.)
     if (!f.commit())
-        throw Error(path + ": cannot write the marks (" + std::strerror(errno) + ")");
+        throw Error(path +
+                    ": cannot write the marks (a full disk, or a folder that takes no file?)");
 }
 
 std::vector<AnnotationInfo> readMarksFile(const std::string& path) {
     std::ifstream f(path, std::ios::binary);
     if (!f)
-        throw Error(path + ": cannot open the marks file");
+        throw Error(path + ": cannot open the marks file (" + std::strerror(errno) + ")");
     std::vector<AnnotationInfo> out;
     std::string line;
     int n = 0;

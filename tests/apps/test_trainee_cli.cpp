@@ -111,6 +111,7 @@ TEST(TraineeCli, ABadAddressOrCameraIsRefusedBeforeConnecting) {
         {"trainee --headless --connect 127.0.0.1:0", "the port must be a number 1-65535"},
         {"trainee --headless --connect localhost:65536", "the port must be a number 1-65535"},
         {"trainee --headless --connect a:b:1", "'a:b:1' is not HOST:PORT"},
+        {"trainee --headless --connect ''", "an empty address"},
         {"instructor --connect host:", "the port must be a number 1-65535"},
         {"trainee --headless --connect 127.0.0.1:9 --camera nowhere", "nowhere not in {"},
     };

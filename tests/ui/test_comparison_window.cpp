@@ -114,8 +114,9 @@ TEST(ComparisonWindow, VolumeModeShowsTheSkullAndTheDrilledHole) {
     EXPECT_LT(a.maskMismatch, a.bothHit / 100) << "hit/miss differs only on silhouettes";
     EXPECT_LT(a.colourOff, a.bothHit / 100) << "colours agree within a few levels";
 
-    // The screenshot: bone-coloured where the server's render has bone (a ring away from the
-    // resting drill, outside the hole); and at the site the intact skull's bone is gone.
+    // The screenshot is bone-coloured where the server's render has bone (a ring away from the
+    // resting drill, outside the hole); and at the site the picture's bone lies deeper than the
+    // intact skull's.
     const Dbi intact = Renderer(skull).render(report.camera);
     Image img = readPng(shot);
     ASSERT_GE(img.w, kView);
