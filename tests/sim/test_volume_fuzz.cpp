@@ -85,29 +85,8 @@ std::string nrrdHeader(const std::string& type, const std::string& extra,
 
 // A NIfTI-1 header of our 5 x 4 x 3 volume, 352 bytes with the empty extension block.
 Bytes niftiHeader(int16_t datatype, int16_t bitpix, bool bigEndian) {
-    Bytes h(352, 0);
-    auto put = [&](size_t off, auto v) {
-        uint8_t b[sizeof v];
-        std::memcpy(b, &v, sizeof v);
-        if (bigEndian)
-            std::reverse(b, b + sizeof v);
-        std::memcpy(h.data() + off, b, sizeof v);
-    };
-    put(0, int32_t(348));
-    const int16_t dim[8] = {3, kNx, kNy, kNz, 1, 1, 1, 1};
-    for (int i = 0; i < 8; ++i)
-        put(40 + 2 * size_t(i), dim[i]);
-    put(70, datatype);
-    put(72, bitpix);
-    const float pd[4] = {1.0f, 0.5f, 0.75f, 1.25f};
-    for (int i = 0; i < 4; ++i)
-        put(76 + 4 * size_t(i), pd[i]);
-    put(108, 352.0f);
-    put(112, 1.5f);
-    put(116, -20.0f);
-    h[123] = 2;
-    std::memcpy(h.data() + 344, "n+1", 4);
-    return h;
+    return trephine::testing::niftiHeader({kNx, kNy, kNz}, datatype, bitpix, {0.5f, 0.75f, 1.25f},
+                                          1.5f, -20.0f, bigEndian);
 }
 
 // [SECTION] the check
@@ -584,17 +563,8 @@ TEST(VolumeFuzz, GzipStreamsThatLieRefuseOrLoadSanely) {
 // [SECTION] defects the fuzzing found
 
 // Loads spec expecting a one-line Error containing `problem`; returns the largest allocation.
-size_t expectRefused(const std::string& spec, const std::string& problem) {
-    AllocationProbe probe;
-    try {
-        loadVolume(spec);
-        ADD_FAILURE() << spec << ": loaded; expected an Error saying '" << problem << "'";
-    } catch (const Error& e) {
-        const std::string msg = e.what();
-        EXPECT_NE(msg.find(problem), std::string::npos) << msg;
-        EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
-    }
-    return probe.largest();
+size_t expectSpecRefused(const std::string& spec, const std::string& problem) {
+    return expectRefused([&] { loadVolume(spec); }, problem);
 }
 
 TEST(VolumeFuzz, ALineSkipOverBinaryDataKeepsNothingAndStopsAtOneMebibyte) {
@@ -604,7 +574,7 @@ TEST(VolumeFuzz, ALineSkipOverBinaryDataKeepsNothingAndStopsAtOneMebibyte) {
     writeFile(dir / "d.raw", Bytes(size_t(8) << 20, 'x'));
     writeFile(dir / "d.nhdr",
               bytesOf(nrrdHeader("uchar", "line skip: 1\n", "raw") + "data file: d.raw\n"));
-    EXPECT_LT(expectRefused(dir / "d.nhdr", "longer than 1048576 characters"), size_t(1) << 20);
+    EXPECT_LT(expectSpecRefused(dir / "d.nhdr", "longer than 1048576 characters"), size_t(1) << 20);
     // Lines that are text are skipped as before.
     Bytes data = bytesOf("# a text header\n\n" + std::string(size_t(1) << 20, 'y') + "\n");
     data.resize(data.size() + kVoxels, 7);
@@ -628,15 +598,16 @@ TEST(VolumeFuzz, DataPastTheVoxelsOfAGzipStreamIsCountedOnlySoFar) {
               concat(bytesOf("NRRD0004\ntype: uchar\ndimension: 3\nsizes: 1 1 1\nencoding: "
                              "gzip\n\n"),
                      body));
-    expectRefused(dir / "bomb.nrrd",
-                  "dimensions do not match the data: they need 1 bytes of data, found more than " +
-                      std::to_string((uint64_t(64) << 20) + 1));
+    expectSpecRefused(
+        dir / "bomb.nrrd",
+        "dimensions do not match the data: they need 1 bytes of data, found more than " +
+            std::to_string((uint64_t(64) << 20) + 1));
     // A little data too many is still counted exactly.
     writeFile(dir / "more.nrrd",
               concat(bytesOf("NRRD0004\ntype: uchar\ndimension: 3\nsizes: 1 1 1\nencoding: "
                              "gzip\n\n"),
                      gzip(Bytes(100, 0))));
-    expectRefused(dir / "more.nrrd", "they need 1 bytes of data, found 100");
+    expectSpecRefused(dir / "more.nrrd", "they need 1 bytes of data, found 100");
 }
 
 // Loads spec in a child process: true when it throws an Error containing `problem` within

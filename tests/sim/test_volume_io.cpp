@@ -87,34 +87,6 @@ std::string nrrdHeader(const std::string& type, const std::string& sizes,
            "\nencoding: " + encoding + "\n" + (extra.empty() ? "" : extra + "\n") + "\n";
 }
 
-// A single-file NIfTI-1 header (352 bytes with the empty extension block).
-Bytes niftiHeader(glm::ivec3 dims, int16_t datatype, int16_t bitpix, glm::vec3 pixdim, float slope,
-                  float inter, bool bigEndian) {
-    Bytes h(352, 0);
-    auto put = [&](size_t off, auto v) {
-        uint8_t b[sizeof v];
-        std::memcpy(b, &v, sizeof v);
-        if (bigEndian)
-            std::reverse(b, b + sizeof v);
-        std::memcpy(h.data() + off, b, sizeof v);
-    };
-    put(0, int32_t(348));
-    const int16_t dim[8] = {3, int16_t(dims.x), int16_t(dims.y), int16_t(dims.z), 1, 1, 1, 1};
-    for (int i = 0; i < 8; ++i)
-        put(40 + 2 * size_t(i), dim[i]);
-    put(70, datatype);
-    put(72, bitpix);
-    const float pd[4] = {1.0f, pixdim.x, pixdim.y, pixdim.z};
-    for (int i = 0; i < 4; ++i)
-        put(76 + 4 * size_t(i), pd[i]);
-    put(108, 352.0f);
-    put(112, slope);
-    put(116, inter);
-    h[123] = 2;
-    std::memcpy(h.data() + 344, "n+1", 4);
-    return h;
-}
-
 // Hounsfield values and their densities through the default window (-300..900).
 const std::vector<int16_t> kHu = {-1000, -300, 0, 300, 600, 900, 1500, 800};
 const std::vector<uint8_t> kHuDensity = {0, 0, 64, 128, 191, 255, 255, 234};

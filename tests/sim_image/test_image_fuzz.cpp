@@ -14,6 +14,7 @@
 #include "byte_files.h"
 
 #include "fuzz.h"
+#include "image_files.h"
 
 #include <OpenImageIO/imageio.h>
 
@@ -48,12 +49,7 @@ void writeImage(const std::string& path, int w, int h, int channels, OIIO::TypeD
     std::vector<T> pixels(size_t(w) * size_t(h) * size_t(channels));
     for (size_t i = 0; i < pixels.size(); ++i)
         pixels[i] = T((i * 37) % 200);
-    auto out = OIIO::ImageOutput::create(path);
-    ASSERT_TRUE(out) << OIIO::geterror();
-    OIIO::ImageSpec spec(w, h, channels, type);
-    ASSERT_TRUE(out->open(path, spec)) << out->geterror();
-    ASSERT_TRUE(out->write_image(type, pixels.data())) << out->geterror();
-    ASSERT_TRUE(out->close());
+    trephine::testing::writeImage(path, w, h, channels, type, pixels);
 }
 
 // [SECTION] the checks
@@ -210,21 +206,6 @@ TEST(ImageFuzz, DbiFilesRefuseMutationsOrLoadSanely) {
 }
 
 // [SECTION] defects the fuzzing found
-
-// Runs f expecting a one-line Error containing `problem`; returns the largest allocation.
-template <typename F>
-size_t expectRefused(F&& f, const std::string& problem) {
-    AllocationProbe probe;
-    try {
-        f();
-        ADD_FAILURE() << "no Error; expected one saying '" << problem << "'";
-    } catch (const Error& e) {
-        const std::string msg = e.what();
-        EXPECT_NE(msg.find(problem), std::string::npos) << msg;
-        EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
-    }
-    return probe.largest();
-}
 
 TEST(ImageFuzz, ASliceFolderAllocatesOnlyWhatItsSlicesHold) {
     // The whole volume was allocated from the first slice's size times the number of files:

@@ -7,6 +7,8 @@
 
 #include <gtest/gtest.h>
 
+#include "image_files.h"
+
 #include <OpenImageIO/imageio.h>
 
 #include <filesystem>
@@ -22,17 +24,6 @@ using namespace trephine;
 namespace {
 
 using namespace trephine::testing;
-template <typename T>
-void writeImage(const std::string& path, int w, int h, int channels, OIIO::TypeDesc type,
-                const std::vector<T>& pixels) {
-    auto out = OIIO::ImageOutput::create(path);
-    ASSERT_TRUE(out) << OIIO::geterror();
-    OIIO::ImageSpec spec(w, h, channels, type);
-    ASSERT_TRUE(out->open(path, spec)) << out->geterror();
-    ASSERT_TRUE(out->write_image(type, pixels.data())) << out->geterror();
-    ASSERT_TRUE(out->close());
-}
-
 void expectError(const std::function<void()>& f, const std::string& name,
                  const std::string& problem) {
     try {

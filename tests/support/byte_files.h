@@ -1,5 +1,5 @@
 // Bytes in and out of files for the file-format tests: whole-file reads and writes, values in a
-// chosen byte order, and gzip.
+// chosen byte order, gzip, and a NIfTI-1 header.
 #pragma once
 
 #include <gtest/gtest.h>
@@ -9,6 +9,7 @@
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <glm/vec3.hpp>
 #include <iterator>
 #include <string>
 #include <system_error>
@@ -60,6 +61,34 @@ inline Bytes gzip(const Bytes& data) {
     out.resize(z.total_out);
     deflateEnd(&z);
     return out;
+}
+
+// A single-file NIfTI-1 header (352 bytes with the empty extension block).
+inline Bytes niftiHeader(glm::ivec3 dims, int16_t datatype, int16_t bitpix, glm::vec3 pixdim,
+                         float slope, float inter, bool bigEndian) {
+    Bytes h(352, 0);
+    auto put = [&](size_t off, auto v) {
+        uint8_t b[sizeof v];
+        std::memcpy(b, &v, sizeof v);
+        if (bigEndian)
+            std::reverse(b, b + sizeof v);
+        std::memcpy(h.data() + off, b, sizeof v);
+    };
+    put(0, int32_t(348));
+    const int16_t dim[8] = {3, int16_t(dims.x), int16_t(dims.y), int16_t(dims.z), 1, 1, 1, 1};
+    for (int i = 0; i < 8; ++i)
+        put(40 + 2 * size_t(i), dim[i]);
+    put(70, datatype);
+    put(72, bitpix);
+    const float pd[4] = {1.0f, pixdim.x, pixdim.y, pixdim.z};
+    for (int i = 0; i < 4; ++i)
+        put(76 + 4 * size_t(i), pd[i]);
+    put(108, 352.0f);
+    put(112, slope);
+    put(116, inter);
+    h[123] = 2;
+    std::memcpy(h.data() + 344, "n+1", 4);
+    return h;
 }
 
 } // namespace trephine::testing

@@ -6,6 +6,10 @@
 // once, at namespace scope, in exactly one source file of a test binary.
 #pragma once
 
+#include "libsim/error.h"
+
+#include <gtest/gtest.h>
+
 #include <algorithm>
 #include <cstddef>
 #include <cstdint>
@@ -144,6 +148,22 @@ struct AllocationProbe {
     ~AllocationProbe() { t_probing = false; }
     size_t largest() const { return t_largestAllocation; }
 };
+
+// Runs f expecting a one-line trephine::Error containing `problem`; returns the largest single
+// allocation f made.
+template <typename F>
+size_t expectRefused(F&& f, const std::string& problem) {
+    AllocationProbe probe;
+    try {
+        f();
+        ADD_FAILURE() << "no Error; expected one saying '" << problem << "'";
+    } catch (const Error& e) {
+        const std::string msg = e.what();
+        EXPECT_NE(msg.find(problem), std::string::npos) << msg;
+        EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+    }
+    return probe.largest();
+}
 
 } // namespace trephine::testing
 
