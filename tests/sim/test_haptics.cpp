@@ -217,6 +217,17 @@ TEST(Haptics, AHugeFiniteFieldGivesTheForceLimit) {
     EXPECT_NEAR(glm::length(f), blender.config().maxForceN, 1e-4f);
 }
 
+// A model taken just as the tool touches the bone has a tiny push and the full stiffness: lifted
+// 1 mm, it too must not pull (with the cut ramped over 0.01 N it pulled 3 N into the bone).
+TEST(Haptics, AModelTakenJustAtTouchIsCutToo) {
+    HapticModelData m = modelAt({0.0f, 0.0f, 10.0f}, {0.0f, 0.0f, 0.005f}, 0.0f);
+    m.gradient[2][2] = -6.0f;
+    ModelBlender blender;
+    blender.resetTo(m, 0.0);
+    EXPECT_GE(blender.update(m.position + glm::vec3(0, 0, 1.0f), 0.0).z, 0.0f);
+    EXPECT_NEAR(blender.update(m.position - glm::vec3(0, 0, 0.5f), 0.0).z, 3.005f, 1e-4f);
+}
+
 TEST(Haptics, UnilateralIsContinuousDownToNoPush) {
     const glm::dvec3 f(0.0, 0.0, -4.0);
     EXPECT_EQ(unilateral(f, {0.0, 0.0, 2.0}), glm::dvec3(0.0));

@@ -60,7 +60,9 @@ glm::vec3 extrapolate(const HapticModelData& m, glm::vec3 p);
 // Equation 1 extrapolated past the surface (the hand lifting off) does not pull the tool into the
 // bone. Below kUnilateralFullN of push the removal is scaled down in proportion, so the result is
 // continuous in both arguments (no direction at all: f unchanged).
-inline constexpr double kUnilateralFullN = 0.01;
+// Small: a model taken just as the tool touches (f = 0.005 N, -6 N/mm) must still be cut, or
+// lifting 1 mm pulls 3 N into the bone; the per-tick step bound holds however steep the ramp.
+inline constexpr double kUnilateralFullN = 1e-4;
 glm::dvec3 unilateral(glm::dvec3 f, glm::dvec3 push);
 
 // Scales f to |f| <= maxN (keeps its direction).
