@@ -3,6 +3,7 @@
 
 #include "image_limits.h"
 #include "libsim/error.h"
+#include "quiet_stderr.h"
 
 #include <OpenImageIO/imageio.h>
 
@@ -115,6 +116,7 @@ Volume loadVolumeSlices(const std::string& folder, glm::vec3 spacingMm,
     OIIO::TypeDesc::BASETYPE baseType = OIIO::TypeDesc::UNKNOWN;
     std::string firstName;
     std::vector<uint8_t> bytes;
+    const QuietStderr quiet; // our own line says what libpng would (restored before it is said)
     for (size_t z = 0; z < names.size(); ++z) {
         const std::string path = (fs::path(folder) / names[z]).string();
         auto in = OIIO::ImageInput::open(path);

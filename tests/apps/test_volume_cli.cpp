@@ -113,3 +113,18 @@ TEST(VolumeCli, ConvertToSlicesNamesAMissingOrWrongFolder) {
                          " is a file, not a folder: name a new or empty folder for the slices\n");
     EXPECT_EQ(trephine::testing::slurp(file), "not slices\n");
 }
+
+// A corrupt slice in a folder is one line naming it: libpng (inside OpenImageIO) printed its own
+// "libpng error: ..." line before ours.
+TEST(VolumeCli, ACorruptSliceIsOneLineNamingIt) {
+    TempDir dir;
+    const std::string folder = dir / "slices";
+    ASSERT_EQ(runTrephine(dir, "volume convert sphere:16 slices:" + quote(folder)).exitCode, 0);
+    const std::string first = (fs::path(folder) / "slice_0000.png").string();
+    std::string bytes = slurp((fs::path(folder) / "slice_0005.png").string());
+    std::ofstream(first, std::ios::binary) << bytes.substr(0, 60);
+    Result r = runTrephine(dir, "volume info " + quote(folder));
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_NE(r.err.find("slice_0000.png"), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+}
