@@ -414,3 +414,20 @@ TEST(ClientThread, StartsInVolumeModeAndOverflowBecomesOneFullCopy) {
     client.stop();
     server.stop();
 }
+
+// An undo of a cleared list re-adds every mark in one frame, beside a tool state and a view
+// request: the command queue takes them all (it held 256, so the last mark was dropped).
+TEST(ClientThread, AWholeListOfMarksFitsTheCommandQueueInOneFrame) {
+    ClientThreadConfig config;
+    ClientThread thread(config); // not started: commands only queue
+    EXPECT_TRUE(thread.sendToolState(ToolState{}));
+    EXPECT_TRUE(thread.requestView(ViewSpec{}));
+    int refused = 0;
+    for (int i = 0; i < kMaxAnnotations; ++i) {
+        Annotate a;
+        a.op = Annotate::Op::Add;
+        a.position = glm::vec3(float(i), 0.0f, 0.0f);
+        refused += !thread.annotate(a);
+    }
+    EXPECT_EQ(refused, 0);
+}

@@ -114,7 +114,9 @@ struct ClientThreadConfig {
     double retryS = 2.0;                    // wait before reconnecting after a failure or drop
     double connectTimeoutS = 5.0;
     size_t maxQueuedRects = 256; // beyond this the queue is replaced by one full copy of the DBI
-    size_t maxCommands = 256;
+    // Commands waiting for the network thread, at most (more are refused): room for a whole
+    // list of marks at once (an undo of a cleared list re-adds them all in one frame) and more.
+    size_t maxCommands = 4 * kMaxAnnotations;
     // Called on the network thread for every force model as it arrives (e.g. HapticLoop::setModel,
     // which is thread-safe); must be quick.
     std::function<void(const HapticModel&)> onHapticModel;
