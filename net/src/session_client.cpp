@@ -569,8 +569,14 @@ void SessionClient::sendPing() {
 }
 
 void SessionClient::annotate(Annotate a) {
-    if (a.label.size() > kMaxNameLength)
-        a.label.resize(kMaxNameLength);
+    // Cut to what the wire carries, at a character boundary: half a UTF-8 character would show
+    // as garbage in everyone's list.
+    if (a.label.size() > kMaxNameLength) {
+        size_t n = kMaxNameLength;
+        while (n > 0 && (uint8_t(a.label[n]) & 0xC0) == 0x80)
+            --n;
+        a.label.resize(n);
+    }
     send(Channel::Control, encodeMessage(a));
 }
 

@@ -123,6 +123,23 @@ TEST(Annotations, InstructorsMarksReachEveryoneAndTraineesAreRefused) {
     server.stop();
 }
 
+// A label longer than the wire carries is cut at a character boundary: 63 bytes and a two-byte
+// "é" were cut after the é's first byte.
+TEST(Annotations, ALongLabelIsCutAtACharacterBoundary) {
+    Volume sphere = makeSphere(32);
+    SessionServer server(sphere, loopbackServerConfig("sphere:32"));
+    server.start();
+    SessionClient cho(namedClientConfig(sphere, "Dr. Cho", Role::Instructor, 32));
+    cho.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&cho}, [&] { return cho.welcomed(); }));
+    cho.annotate(add({0, 0, 10}, std::string(63, 'a') + "\xc3\xa9 and more"));
+    cho.annotate(add({0, 0, 11}, std::string(70, 'b')));
+    ASSERT_TRUE(pumpUntil({&cho}, [&] { return cho.annotations().size() == 2; }));
+    EXPECT_EQ(cho.annotations()[0].label, std::string(63, 'a'));
+    EXPECT_EQ(cho.annotations()[1].label, std::string(kMaxNameLength, 'b'));
+    server.stop();
+}
+
 // The marks outlive the server: --save-on-exit writes them beside the volume, and a server
 // started from that session holds them again, for a newcomer as for anyone.
 TEST(Annotations, MarksSavedOnExitComeBackInTheNextSession) {
