@@ -68,6 +68,15 @@ void ModelBlender::setModel(const HapticModelData& m, double now) {
         !allFinite(m.gradient[1]) || !allFinite(m.gradient[2]))
         return;
     AffineForce next = AffineForce::fromModel(m);
+    // A gradient beyond any contact's stiffness (a bug upstream, a hostile server) is scaled down
+    // to kMaxGradientNPerMm: a 1e37 N/mm field held the device at the force limit, since no
+    // bounded step can blend out of it in doubles.
+    double norm = 0.0;
+    for (int c = 0; c < 3; ++c)
+        norm += glm::dot(next.gradient[c], next.gradient[c]);
+    norm = std::sqrt(norm);
+    if (norm > kMaxGradientNPerMm)
+        next.gradient *= kMaxGradientNPerMm / norm;
     if (m_hasModel) {
         m_from = current();
     } else {
@@ -118,28 +127,29 @@ glm::vec3 ModelBlender::update(glm::vec3 p, double now) {
         const glm::dvec3 f = (1.0 - a) * fromF + a * toF;
         return m_config.unilateral ? unilateral(f, (1.0 - a) * m_from.push + a * m_to.push) : f;
     };
+    // The output at alpha a: clamped to maxForceN in doubles (a huge but finite field, 1e37 N/mm,
+    // overflowed a float to infinity, which clampForce takes for a NaN and zeroes).
+    const double maxN = m_config.maxForceN;
+    auto outAt = [&](double a) {
+        const glm::dvec3 f = mixAt(a);
+        const double mag = glm::length(f);
+        return mag > maxN ? f * (maxN / mag) : f;
+    };
     if (m_alpha < 1.0 && dt > 0.0) {
+        // The step the blend time allows, shortened until the output (as the device feels it,
+        // clamped) moves at most maxStepN. Bounding by the unclamped fields instead stalled a
+        // blend away from a huge field for good: its step was maxStepN / 1e37.
         double step = m_blendTime > 0.0 ? dt / m_blendTime : 1.0;
-        const double diff = glm::length(toF - fromF);
-        if (diff > 0.0)
-            step = std::min(step, m_config.maxStepN / diff);
-        // The bound is exact for the plain mix; where the unilateral part turns with alpha the
-        // output can move more, so shorten the step until it keeps to maxStepN.
-        const glm::dvec3 now0 = mixAt(m_alpha);
-        for (int i = 0; i < 30; ++i) {
-            const double moved = glm::length(mixAt(std::min(1.0, m_alpha + step)) - now0);
+        const glm::dvec3 now0 = outAt(m_alpha);
+        for (int i = 0; i < 60; ++i) {
+            const double moved = glm::length(outAt(std::min(1.0, m_alpha + step)) - now0);
             if (moved <= m_config.maxStepN)
                 break;
             step *= 0.9 * m_config.maxStepN / moved;
         }
         m_alpha = std::min(1.0, m_alpha + step);
     }
-    // Clamped in doubles: a huge but finite field (1e37 N/mm) overflows a float to infinity,
-    // which clampForce takes for a NaN and zeroes, where it should give the limit.
-    const glm::dvec3 f = mixAt(m_alpha);
-    const double mag = glm::length(f);
-    const double maxN = m_config.maxForceN;
-    return clampForce(glm::vec3(mag > maxN ? f * (maxN / mag) : f), m_config.maxForceN);
+    return clampForce(glm::vec3(outAt(m_alpha)), m_config.maxForceN);
 }
 
 // [SECTION] recorder

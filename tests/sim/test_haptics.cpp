@@ -228,6 +228,29 @@ TEST(Haptics, AModelTakenJustAtTouchIsCutToo) {
     EXPECT_NEAR(blender.update(m.position - glm::vec3(0, 0, 0.5f), 0.0).z, 3.005f, 1e-4f);
 }
 
+// After a huge but finite field the next model still blends in, within its blend time and the
+// per-tick bound: the step was bounded by the unclamped fields' difference (1e37 N), so the blend
+// never moved and the device stayed at the force limit.
+TEST(Haptics, ABlendAwayFromAHugeFieldCompletes) {
+    BlendConfig config;
+    config.maxStepN = 0.25;
+    ModelBlender blender(config);
+    const glm::vec3 p(0.0f, 0.0f, 9.0f);
+    blender.resetTo(modelAt({0.0f, 0.0f, 10.0f}, {0.0f, 0.0f, 2.0f}, 1e37f), 0.0);
+    glm::vec3 prev = blender.update(p, 0.0);
+    EXPECT_NEAR(glm::length(prev), config.maxForceN, 1e-3f);
+    blender.setModel(modelAt({0.0f, 0.0f, 9.0f}, {0.0f, 0.0f, 2.0f}, 6.0f), 0.01);
+    double maxStep = 0.0;
+    for (int i = 1; i <= 200; ++i) {
+        const glm::vec3 f = blender.update(p, 0.01 + i * 1e-3);
+        maxStep = std::max(maxStep, double(glm::length(f - prev)));
+        prev = f;
+    }
+    EXPECT_EQ(blender.blendFraction(), 1.0);
+    EXPECT_NEAR(prev.z, 2.0f, 1e-5f);
+    EXPECT_LE(maxStep, config.maxStepN + 1e-5);
+}
+
 TEST(Haptics, UnilateralIsContinuousDownToNoPush) {
     const glm::dvec3 f(0.0, 0.0, -4.0);
     EXPECT_EQ(unilateral(f, {0.0, 0.0, 2.0}), glm::dvec3(0.0));

@@ -65,6 +65,10 @@ glm::vec3 extrapolate(const HapticModelData& m, glm::vec3 p);
 inline constexpr double kUnilateralFullN = 1e-4;
 glm::dvec3 unilateral(glm::dvec3 f, glm::dvec3 push);
 
+// The stiffest field a model may carry (Frobenius norm of its gradient, N/mm), about 170 times the
+// force model's 6 N/mm; a steeper one is scaled down to it (ModelBlender::setModel).
+inline constexpr double kMaxGradientNPerMm = 1000.0;
+
 // Scales f to |f| <= maxN (keeps its direction).
 glm::vec3 clampForce(glm::vec3 f, float maxN);
 
