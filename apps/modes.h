@@ -17,9 +17,6 @@
 
 namespace trephine::app {
 
-using trephine::ReplacingFile;
-using trephine::writeReplacing;
-
 // CLI::Range compares, and NaN compares false with everything, so it lets `nan` through any
 // range (`--feed nan` ran 30 simulated seconds of NaN). For floating-point options: a finite
 // number within [lo, hi], and one that stays finite as a float.
@@ -70,8 +67,7 @@ inline CLI::Validator serverAddress() {
             if (text.empty())
                 return "an empty address: give HOST:PORT";
             const size_t colon = text.rfind(':');
-            const bool digitsOnly =
-                !text.empty() && text.find_first_not_of("0123456789") == std::string::npos;
+            const bool digitsOnly = text.find_first_not_of("0123456789") == std::string::npos;
             const std::string port = colon != std::string::npos ? text.substr(colon + 1)
                                      : digitsOnly               ? text
                                                                 : std::string("7777");

@@ -5,6 +5,7 @@
 #include "libsim/error.h"
 #include "libsim/force_model.h"
 #include "libsim/renderer.h"
+#include "libsim/replacing_file.h"
 #include "libsim/thread_pool.h"
 #include "libsim/volume_io.h"
 #include "net/codec.h"
@@ -527,10 +528,10 @@ const ServerConfig& checkedConfig(const ServerConfig& config) {
     // Now, not at the end of the session: a path that cannot be written would lose it all.
     if (!config.saveOnExit.empty()) {
         checkSaveTarget(config.saveOnExit);
+        // The marks' file is replaced as ReplacingFile does, which writes a device or a folder in
+        // place: a folder there would fail only at the end.
         const std::string marks = marksPathFor(config.saveOnExit);
-        std::error_code ec;
-        const auto status = std::filesystem::status(marks, ec);
-        if (std::filesystem::exists(status) && !std::filesystem::is_regular_file(status))
+        if (!replacementTarget(marks))
             throw Error("--save-on-exit: " + marks + ", where the marks go, is not a regular file");
     }
     checkMarks(config.marks, "server: the starting marks");
