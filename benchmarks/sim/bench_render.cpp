@@ -361,6 +361,36 @@ BENCHMARK(BM_RenderPaperHoleFullFrame)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
+// The replicated-volume client's view less the hole's BB_screen (the four rectangles around it),
+// through the cache as BM_RenderPaperHoleFullFrame/cached:1 does: with BM_RenderPaperHoleCached
+// (BB_screen alone) it splits the volume client's re-render into the rays the DBI server casts
+// too and the rest. The two add up to the full frame (80^3, one thread: 2.25 + 3.88 ms against
+// 6.14 ms), so the server's rays cost the volume client what they cost the server, and
+// `study updates` takes them out of both cycles for its free-ray-casting ceiling.
+void BM_RenderPaperHoleOutsideRect(benchmark::State& state) {
+    PaperHole& h = paperHole(int(state.range(0)));
+    const PixelRect& r = h.rect;
+    const PixelRect parts[4] = {
+        PixelRect(0, 0, 500, r.y), PixelRect(0, r.y + r.h, 500, 500 - r.y - r.h),
+        PixelRect(0, r.y, r.x, r.h), PixelRect(r.x + r.w, r.y, 500 - r.x - r.w, r.h)};
+    Dbi frame(500, 500);
+    HitCache cache;
+    double total = 0.0;
+    for (auto _ : state) {
+        state.PauseTiming();
+        cache = h.cacheBeforeCut;
+        state.ResumeTiming();
+        auto t0 = Clock::now();
+        for (const PixelRect& p : parts)
+            h.renderer->render(h.camera, p, frame, &cache);
+        total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+        benchmark::DoNotOptimize(frame.depth());
+    }
+    state.counters["frame_ms"] = state.iterations() ? total / double(state.iterations()) : 0.0;
+    state.counters["threads"] = skull256().pool->size();
+}
+BENCHMARK(BM_RenderPaperHoleOutsideRect)->Arg(80)->Unit(benchmark::kMillisecond)->UseRealTime();
+
 // Keeping the brick grid in step with the cut (one thread; part of the server's erode stage).
 void BM_RenderPaperHoleGridUpdate(benchmark::State& state) {
     PaperHole& h = paperHole(int(state.range(0)));

@@ -132,9 +132,13 @@ double rateRatioWithoutRayCasting(const std::vector<UpdateStudyRow>& rows, int n
     const UpdateStudyRow* v = find(rows, "volume", n);
     if (!d || !v || d->stages.render <= 0)
         return 0.0;
-    const double rest =
-        d->latencyP50Ms - (d->stages.render - std::min(d->stages.grid, d->stages.render));
-    return rest > 0 ? v->latencyP50Ms / rest : 0.0;
+    const double casting = d->stages.render - std::min(d->stages.grid, d->stages.render);
+    // The volume client casts the same rays (BB_screen is part of its view, and its renderer and
+    // hit cache are the server's): they leave its cycle too, as far as its render stage goes.
+    const double volumeCasting = std::min(casting, std::max(v->stages.clientRender, 0.0));
+    const double rest = d->latencyP50Ms - casting;
+    const double volumeRest = v->latencyP50Ms - volumeCasting;
+    return rest > 0 && volumeRest > 0 ? volumeRest / rest : 0.0;
 }
 
 std::vector<std::string> rateMissNotes(const std::vector<UpdateStudyRow>& rows, bool emulatedLink) {
@@ -160,9 +164,11 @@ std::vector<std::string> rateMissNotes(const std::vector<UpdateStudyRow>& rows, 
                     "as the DBI server's. `--link rate=100` runs the paper's 100 Mbit/s LAN "
                     "instead, as `study all` does by default after loopback (docs/study.md).");
     if (!ceilings.empty())
-        notes.push_back("Were the DBI server's ray casting free (its render stage less the "
-                        "brick-grid update), its other stages' medians would still cap dbi / "
-                        "volume at about " +
+        notes.push_back("Were BB_screen's rays free to cast (the DBI server's render stage "
+                        "less the brick-grid update, and as much of the volume client's "
+                        "re-render, which casts the same rays with the same renderer as part of "
+                        "its view), the other stages' medians would still cap dbi / volume at "
+                        "about " +
                         ceilings +
                         formatString(": where that is under %.0fx, no renderer reaches the "
                                      "target on this machine and network.",
