@@ -3,15 +3,20 @@
 
 #include "libsim/tool.h"
 
+#include <algorithm>
 #include <cstdio>
 #include <imgui.h>
 
 namespace trephine::ui {
 
+float steppedPush(float pushMm, float steps) {
+    return std::clamp(pushMm + steps * kPushStepMm, kPushMinMm, kPushMaxMm);
+}
+
 glm::vec4 participantColor(int index) {
     static const glm::vec4 k[] = {{0.20f, 0.45f, 0.85f, 1}, {0.85f, 0.35f, 0.20f, 1},
                                   {0.30f, 0.70f, 0.30f, 1}, {0.75f, 0.30f, 0.75f, 1},
-                                  {0.90f, 0.75f, 0.20f, 1}, {0.25f, 0.75f, 0.80f, 1}};
+                                  {0.95f, 0.55f, 0.70f, 1}, {0.25f, 0.75f, 0.80f, 1}};
     constexpr size_t n = sizeof k / sizeof k[0];
     // 0 is this client's own colour; every other index cycles through the rest.
     return index <= 0 ? k[0] : k[1 + size_t(index - 1) % (n - 1)];
@@ -150,7 +155,7 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
     ImGui::RadioButton("perforator [P]", &tool.kind, 1);
     ImGui::SliderFloat("burr mm [ ]", &tool.burrMm, kBurrMinDiameterMm, kBurrMaxDiameterMm, "%.1f");
     ImGui::SliderFloat("speed", &tool.speed, 0.0f, 1.0f, "%.2f");
-    ImGui::SliderFloat("depth mm [wheel]", &tool.pushMm, -5.0f, 10.0f, "%.1f");
+    ImGui::SliderFloat("depth mm [wheel]", &tool.pushMm, kPushMinMm, kPushMaxMm, "%.1f");
     const uint16_t holder = takenOverBy(snap.participants, self);
     const uint16_t held = takeOver.canTakeOver ? heldBy(snap.participants, self) : 0;
     if (held)

@@ -596,9 +596,9 @@ int runTrainerWindow(const TrainerOptions& o) {
                 if (ImGui::IsKeyPressed(GLFW_KEY_RIGHT_BRACKET))
                     toolControls.burrMm = std::min(kBurrMaxDiameterMm, toolControls.burrMm + 0.5f);
                 if (ImGui::IsKeyPressed(GLFW_KEY_DOWN))
-                    toolControls.pushMm += 0.25f;
+                    toolControls.pushMm = steppedPush(toolControls.pushMm, 1.0f);
                 if (ImGui::IsKeyPressed(GLFW_KEY_UP))
-                    toolControls.pushMm -= 0.25f;
+                    toolControls.pushMm = steppedPush(toolControls.pushMm, -1.0f);
                 if (markControls.canMark && ImGui::IsKeyPressed(GLFW_KEY_M))
                     markControls.addAtPointer = true;
             }
@@ -606,8 +606,7 @@ int runTrainerWindow(const TrainerOptions& o) {
                                   io.MousePos.x < float(viewSize) &&
                                   io.MousePos.y < float(viewSize) && !io.WantCaptureMouse;
             if (overView) {
-                toolControls.pushMm =
-                    std::clamp(toolControls.pushMm + io.MouseWheel * 0.25f, -5.0f, 10.0f);
+                toolControls.pushMm = steppedPush(toolControls.pushMm, io.MouseWheel);
                 int px = int(io.MousePos.x), py = viewSize - 1 - int(io.MousePos.y);
                 // Unprojected with the camera cpuDbi was made with: in volume mode its depth is
                 // read back after this pick, so for one frame after a view change (or a switch

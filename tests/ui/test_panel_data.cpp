@@ -218,6 +218,34 @@ TEST(Panels, ParticipantsAreNamedFromTheRosterOrByTheirId) {
     EXPECT_EQ(ui::participantName(roster, 9), "client 9") << "not listed yet";
 }
 
+// Every participant's tool and name are told apart from the marks (a yellow participant read as
+// an instructor's mark) and from this client's own colour.
+TEST(Panels, NoParticipantColourIsTheMarksYellow) {
+    const glm::vec3 mark(markColor());
+    for (int i = 0; i < 12; ++i) {
+        const glm::vec3 c(participantColor(i));
+        EXPECT_GT(glm::distance(c, mark), 0.35f) << "participant " << i;
+        if (i > 0) {
+            EXPECT_NE(participantColor(i), participantColor(0)) << "participant " << i;
+        }
+    }
+}
+
+// Arrow keys and the wheel move the push depth in steps and never past the slider's range (held
+// down, Down's key repeat drove the burr through the inner table).
+TEST(ToolControls, PushStepsStayInTheSlidersRange) {
+    float push = 0.0f;
+    push = steppedPush(push, 1.0f);
+    EXPECT_FLOAT_EQ(push, kPushStepMm);
+    for (int i = 0; i < 1000; ++i)
+        push = steppedPush(push, 1.0f);
+    EXPECT_EQ(push, kPushMaxMm);
+    for (int i = 0; i < 1000; ++i)
+        push = steppedPush(push, -1.0f);
+    EXPECT_EQ(push, kPushMinMm);
+    EXPECT_EQ(steppedPush(0.0f, 3.0f), 3.0f * kPushStepMm) << "three wheel notches";
+}
+
 // *reset* goes back to the view the window opened with (--orbit, --tilt, its camera's distance),
 // not to orbit and tilt 0 at whatever distance the slider was left.
 TEST(ViewControls, ResetGoesBackToTheOpeningView) {

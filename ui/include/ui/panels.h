@@ -41,6 +41,11 @@ struct ToolControls {
     bool drilling = false; // mouse button held (or the script drills)
     bool canDrill = true;  // a trainee nobody holds, or an instructor holding one (TakeOver)
 };
+// The range of ToolControls::pushMm (the slider's), and one step of the wheel or an arrow key.
+constexpr float kPushMinMm = -5.0f, kPushMaxMm = 10.0f, kPushStepMm = 0.25f;
+// pushMm moved by `steps` steps (the wheel's notches, +1 for Down, -1 for Up), kept in the range:
+// held down, an arrow key's repeat drove the tip through the inner table.
+float steppedPush(float pushMm, float steps);
 // The marks on the skull (the server's Annotations): listed for everyone; an instructor also
 // labels the next one, marks the bone under the pointer, removes one or clears them. The panel
 // only records what was asked this frame; the window sends it.
