@@ -96,15 +96,21 @@ bool drawComparisonPanel(SyncDesign& wanted, SyncDesign live, const ComparisonHi
     }
 
     // Live plots: one row per figure, DBI on the left, volume on the right.
-    auto plots = [&](const char* name, std::vector<float> S::*series, const char* unit) {
+    // The caption is the table's figure, "-" where none was measured yet.
+    auto plots = [&](const char* name, std::vector<float> S::*series,
+                     double ComparisonFigures::*figure, const char* unit) {
         const float w = (ImGui::GetContentRegionAvail().x - ImGui::GetStyle().ItemSpacing.x) * 0.5f;
         for (int i = 0; i < kSyncDesignCount; ++i) {
             SyncDesign d = order[i];
             const std::vector<float>& v = history.series(d).*series;
+            const double value = history.series(d).last.*figure;
             char overlay[64], id[64];
-            std::snprintf(overlay, sizeof overlay, "%s %s: %.1f %s",
-                          d == SyncDesign::Dbi ? "DBI" : "Vol", name, v.empty() ? 0.0f : v.back(),
-                          unit);
+            if (history.measured(d) && value >= 0)
+                std::snprintf(overlay, sizeof overlay, "%s %s: %.1f %s",
+                              d == SyncDesign::Dbi ? "DBI" : "Vol", name, value, unit);
+            else
+                std::snprintf(overlay, sizeof overlay, "%s %s: -",
+                              d == SyncDesign::Dbi ? "DBI" : "Vol", name);
             std::snprintf(id, sizeof id, "##%s%d", name, i);
             if (i > 0)
                 ImGui::SameLine();
@@ -113,12 +119,13 @@ bool drawComparisonPanel(SyncDesign& wanted, SyncDesign live, const ComparisonHi
             ImGui::PopStyleVar();
         }
     };
-    plots("updates", &S::updatesPerS, "/s");
-    plots("bytes", &S::bytesPerUpdate, "B");
-    plots("p50", &S::latencyP50Ms, "ms");
-    plots("p99", &S::latencyP99Ms, "ms");
-    plots("frame", &S::frameMs, "ms");
-    plots("haptic", &S::hapticHz, "Hz");
+    using F = ComparisonFigures;
+    plots("updates", &S::updatesPerS, &F::updatesPerS, "/s");
+    plots("bytes", &S::bytesPerUpdate, &F::bytesPerUpdate, "B");
+    plots("p50", &S::latencyP50Ms, &F::latencyP50Ms, "ms");
+    plots("p99", &S::latencyP99Ms, &F::latencyP99Ms, "ms");
+    plots("frame", &S::frameMs, &F::frameMs, "ms");
+    plots("haptic", &S::hapticHz, &F::hapticHz, "Hz");
     ImGui::End();
     return flipped;
 }

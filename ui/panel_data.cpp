@@ -258,14 +258,8 @@ const char* syncDesignName(SyncDesign d) {
 
 void ComparisonHistory::record(SyncDesign design, double now, const ComparisonFigures& f) {
     Series& s = designs[int(design)];
-    pushCapped(s.updatesPerS, float(f.updatesPerS), seriesLength);
-    pushCapped(s.bytesPerUpdate, float(std::max(0.0, f.bytesPerUpdate)), seriesLength);
-    pushCapped(s.rawBytesPerUpdate, float(std::max(0.0, f.rawBytesPerUpdate)), seriesLength);
-    pushCapped(s.latencyP50Ms, float(std::max(0.0, f.latencyP50Ms)), seriesLength);
-    pushCapped(s.latencyP99Ms, float(std::max(0.0, f.latencyP99Ms)), seriesLength);
-    pushCapped(s.frameMs, float(f.frameMs), seriesLength);
-    pushCapped(s.hapticHz, float(f.hapticHz), seriesLength);
-    // A second without updates keeps the last measured bytes and latencies for the table.
+    // A second without updates keeps the last measured bytes and latencies, for the table and
+    // the plots alike (plotted as 0 they read "0.0 ms" beside the table's 23 ms).
     const ComparisonFigures before = s.last;
     s.last = f;
     if (f.bytesPerUpdate < 0 && s.points > 0) {
@@ -276,6 +270,13 @@ void ComparisonHistory::record(SyncDesign design, double now, const ComparisonFi
         s.last.latencyP50Ms = before.latencyP50Ms;
         s.last.latencyP99Ms = before.latencyP99Ms;
     }
+    pushCapped(s.updatesPerS, float(f.updatesPerS), seriesLength);
+    pushCapped(s.bytesPerUpdate, float(std::max(0.0, s.last.bytesPerUpdate)), seriesLength);
+    pushCapped(s.rawBytesPerUpdate, float(std::max(0.0, s.last.rawBytesPerUpdate)), seriesLength);
+    pushCapped(s.latencyP50Ms, float(std::max(0.0, s.last.latencyP50Ms)), seriesLength);
+    pushCapped(s.latencyP99Ms, float(std::max(0.0, s.last.latencyP99Ms)), seriesLength);
+    pushCapped(s.frameMs, float(f.frameMs), seriesLength);
+    pushCapped(s.hapticHz, float(f.hapticHz), seriesLength);
     s.lastT = now;
     ++s.points;
     active = design;

@@ -29,8 +29,15 @@ void drawNetworkPanel(const net::ClientSnapshot& snap, const NetworkHistory& his
                 (unsigned long long)snap.malformed, (unsigned long long)snap.updatesRejected);
     ImGui::Text("updates     %.0f /s   %llu applied (%llu full)", history.updateRate(now),
                 (unsigned long long)snap.updatesApplied, (unsigned long long)snap.fullUpdates);
-    ImGui::Text("codec       %s   compression %.1fx", snap.codec.c_str(),
-                history.compressionRatio());
+    // The codec of the updates the picture takes now: volume mode's boxes and full copies are
+    // not image updates (a full copy of a raw-box client travels zstd: encodeVolumeFull).
+    if (snap.sync == net::Sync::Volume)
+        ImGui::Text("codec       boxes %s, full %s   compression %.1fx", snap.volumeCodec.c_str(),
+                    snap.volumeCodec == "raw" ? "zstd" : snap.volumeCodec.c_str(),
+                    history.compressionRatio());
+    else
+        ImGui::Text("codec       %s   compression %.1fx", snap.codec.c_str(),
+                    history.compressionRatio());
     if (ImGui::BeginTable("channels", 3, ImGuiTableFlags_BordersInnerH)) {
         ImGui::TableSetupColumn("channel");
         ImGui::TableSetupColumn("in kbit/s");
@@ -59,8 +66,10 @@ void drawNetworkPanel(const net::ClientSnapshot& snap, const NetworkHistory& his
     const double maxUs = 20000.0;
     auto hist = history.latencyHistogram(20, maxUs);
     const std::string overlay = history.latencyCaption(maxUs);
+    // ImGui 1.86's plots take a size literally (only 0 means the default): the panel's width is
+    // asked for, as -1 for "to the right edge" (other widgets' convention) drew a sliver.
     ImGui::PlotHistogram("##latency", hist.data(), int(hist.size()), 0, overlay.c_str(), 0.0f,
-                         FLT_MAX, ImVec2(-1, 60));
+                         FLT_MAX, ImVec2(ImGui::GetContentRegionAvail().x, 60));
     ImGui::End();
 }
 

@@ -5,7 +5,8 @@
 
 namespace trephine::ui {
 
-bool drawViewPanel(ViewControls& view, bool waitingForImage, const std::string& describeCamera) {
+bool drawViewPanel(ViewControls& view, bool waitingForImage, const char* picture,
+                   const Camera* camera) {
     bool changed = false;
     if (ImGui::Begin("View")) {
         changed |= ImGui::SliderFloat("orbit", &view.yawDeg, -90.0f, 90.0f, "%.0f deg");
@@ -17,10 +18,18 @@ bool drawViewPanel(ViewControls& view, bool waitingForImage, const std::string& 
         }
         ImGui::SameLine();
         if (waitingForImage)
-            ImGui::TextColored(ImVec4(1.0f, 0.75f, 0.2f, 1), "waiting for the new DBI...");
+            ImGui::TextColored(ImVec4(1.0f, 0.75f, 0.2f, 1), "waiting for the new %s...", picture);
         else
-            ImGui::TextDisabled("DBI up to date");
-        ImGui::TextWrapped("%s", describeCamera.c_str());
+            ImGui::TextDisabled("%s up to date", picture);
+        if (camera) {
+            ImGui::Text("eye (%.0f, %.0f, %.0f) target (%.0f, %.0f, %.0f)", camera->eye.x,
+                        camera->eye.y, camera->eye.z, camera->target.x, camera->target.y,
+                        camera->target.z);
+            if (ImGui::IsItemHovered())
+                ImGui::SetTooltip("%s", describe(*camera).c_str());
+        } else {
+            ImGui::TextDisabled("no image yet");
+        }
     }
     ImGui::End();
     if (changed)

@@ -821,7 +821,8 @@ int runTrainerWindow(const TrainerOptions& o) {
         ImGui::SetNextWindowPos(ImVec2(right, sessionH), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(colW, viewPanelH), ImGuiCond_FirstUseEver);
         drawViewPanel(viewControls, snap->waitingForView || !havePicture,
-                      havePicture ? describe(dbiCamera) : std::string("no image yet"));
+                      picture == SyncDesign::Volume ? "local render" : "DBI",
+                      havePicture ? &dbiCamera : nullptr);
         ImGui::SetNextWindowPos(ImVec2(right, networkY), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(colW, H - networkY), ImGuiCond_FirstUseEver);
         drawNetworkPanel(*snap, netHistory, now);

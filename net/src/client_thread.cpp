@@ -205,6 +205,7 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
     s->attempts = m_attempts;
     s->publishedUs = nowUs;
     s->codec = codecName(m_config.client.codec);
+    s->volumeCodec = codecName(m_config.client.volumeCodec);
     s->sync = s->requestedSync = m_wantedSync.value_or(m_config.client.sync);
     s->hapticModel = m_haptic;
     s->hapticModels = m_hapticModels;

@@ -52,14 +52,17 @@ TEST(ComparisonHistory, KeepsEachDesignsFiguresWhileTheOtherRuns) {
     EXPECT_DOUBLE_EQ(h.ageS(SyncDesign::Dbi, 9.5), 3.5);
     EXPECT_DOUBLE_EQ(h.ageS(SyncDesign::Volume, 9.5), 1.5);
     EXPECT_DOUBLE_EQ(h.ratio(&ComparisonFigures::updatesPerS), 60.0 / 2.5);
-    // A second without updates (-1 bytes and latencies) plots as 0; the table keeps the last
-    // second that had updates. A design whose first second had none stays unknown.
+    // A second without updates (-1 bytes and latencies) keeps the last second that had updates,
+    // in the table and in the plots (a 0 there read "0.0 ms" beside the table's figure). A
+    // design whose first second had none stays unknown (plotted as 0, captioned "-").
     ComparisonFigures none = figures(1);
     none.latencyP50Ms = none.latencyP99Ms = none.bytesPerUpdate = none.rawBytesPerUpdate = -1;
     h.record(SyncDesign::Dbi, 10.0, none);
     const auto& d = h.series(SyncDesign::Dbi);
-    EXPECT_FLOAT_EQ(d.latencyP50Ms.back(), 0.0f);
-    EXPECT_FLOAT_EQ(d.bytesPerUpdate.back(), 0.0f);
+    EXPECT_FLOAT_EQ(d.latencyP50Ms.back(), float(figures(6).latencyP50Ms));
+    EXPECT_FLOAT_EQ(d.latencyP99Ms.back(), float(figures(6).latencyP99Ms));
+    EXPECT_FLOAT_EQ(d.bytesPerUpdate.back(), float(figures(6).bytesPerUpdate));
+    EXPECT_FLOAT_EQ(d.updatesPerS.back(), float(figures(1).updatesPerS)) << "the second's rate";
     EXPECT_EQ(d.last.latencyP50Ms, figures(6).latencyP50Ms);
     EXPECT_EQ(d.last.bytesPerUpdate, figures(6).bytesPerUpdate);
     EXPECT_EQ(d.last.rawBytesPerUpdate, figures(6).rawBytesPerUpdate);
@@ -68,6 +71,7 @@ TEST(ComparisonHistory, KeepsEachDesignsFiguresWhileTheOtherRuns) {
     fresh.record(SyncDesign::Volume, 1.0, none);
     EXPECT_EQ(fresh.series(SyncDesign::Volume).last.latencyP50Ms, -1.0);
     EXPECT_EQ(fresh.series(SyncDesign::Volume).last.bytesPerUpdate, -1.0);
+    EXPECT_FLOAT_EQ(fresh.series(SyncDesign::Volume).latencyP50Ms.back(), 0.0f);
     EXPECT_STREQ(syncDesignName(SyncDesign::Volume), "Volume (local copy)");
 }
 

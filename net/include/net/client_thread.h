@@ -100,8 +100,9 @@ struct ClientSnapshot {
     double rttUs = -1, rttP50Us = -1;
     double latencyP50Us = -1, latencyP99Us = -1;
     double meanBytes = 0, meanRawBytes = 0; // per update
-    std::string codec;
-    Sync sync = Sync::Dbi;            // the mode feeding the picture
+    std::string codec;                      // image updates (DBI mode)
+    std::string volumeCodec; // volume box updates (volume mode; a full copy is zstd when raw)
+    Sync sync = Sync::Dbi;   // the mode feeding the picture
     Sync requestedSync = Sync::Dbi;   // differs from sync while a switch waits for its full update
     std::array<ModeFigures, 2> modes; // by Sync
     std::array<ChannelRates, size_t(Channel::Count)> rates{}; // latest 1 s tick

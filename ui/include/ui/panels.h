@@ -94,8 +94,12 @@ struct ViewControls {
         dirty = true;
     }
 };
-// True when the user changed the view this frame.
-bool drawViewPanel(ViewControls& view, bool waitingForImage, const std::string& describeCamera);
+// True when the user changed the view this frame. `picture` names what shows the view ("DBI",
+// or "local render" in volume mode); `camera`, the view it was made with (none yet: no picture):
+// its eye and target on one line, the whole camera in a tooltip (three wrapped lines made the
+// panel scroll in the default window).
+bool drawViewPanel(ViewControls& view, bool waitingForImage, const char* picture,
+                   const Camera* camera);
 
 // [Comparison] one toggle between the two designs and, for both, live plots and the current
 // update rate, bytes per update (and raw), update latency p50/p99, client frame time and haptic
