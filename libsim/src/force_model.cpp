@@ -180,14 +180,19 @@ ForceResult ForceModel::compute(const Volume& volume, const ToolPose& pose, floa
 }
 
 const ForceModel& ForceModelCache::get(const ToolShape& shape) {
-    for (const auto& m : m_models) {
-        const ToolShape& s = m->shape();
+    for (auto it = m_models.begin(); it != m_models.end(); ++it) {
+        const ToolShape& s = (*it)->shape();
         if (s.kind == shape.kind && s.diameterMm == shape.diameterMm &&
-            s.tipLengthMm == shape.tipLengthMm && s.cutLengthMm == shape.cutLengthMm)
-            return *m;
+            s.tipLengthMm == shape.tipLengthMm && s.cutLengthMm == shape.cutLengthMm) {
+            std::rotate(m_models.begin(), it, it + 1); // to the front: most recently used
+            return *m_models.front();
+        }
     }
-    m_models.push_back(std::make_unique<ForceModel>(shape, m_config));
-    return *m_models.back();
+    auto model = std::make_unique<ForceModel>(shape, m_config); // validates first
+    if (m_models.size() >= m_capacity)
+        m_models.pop_back();
+    m_models.insert(m_models.begin(), std::move(model));
+    return *m_models.front();
 }
 
 } // namespace trephine

@@ -146,6 +146,22 @@ TEST(ForceModel, CacheBuildsOneModelPerShape) {
     EXPECT_THROW(cache.get(ToolShape{ToolKind::Burr, 40.0f}), Error);
 }
 
+// A peer may send a new valid diameter with every tool state: the cache keeps the shapes in use
+// and drops the least recently used, instead of growing with every diameter ever seen.
+TEST(ForceModel, CacheKeepsAtMostItsCapacityAndTheShapesInUse) {
+    ForceModelCache cache({}, 4);
+    const ForceModel* perforator = &cache.get(ToolShape::perforator());
+    for (int i = 0; i < 1000; ++i) {
+        const float d = 1.0f + 5.0f * float(i) / 1000.0f;
+        EXPECT_EQ(cache.get(ToolShape::burr(d)).shape().diameterMm, d);
+        EXPECT_LE(cache.size(), 4u);
+        // Used all along: never dropped, never rebuilt.
+        EXPECT_EQ(&cache.get(ToolShape::perforator()), perforator) << "after diameter " << d;
+    }
+    EXPECT_EQ(cache.size(), 4u);
+    EXPECT_EQ(ForceModelCache().capacity(), ForceModelCache::kDefaultCapacity);
+}
+
 TEST(ForceModel, GradientMatchesFiniteDifferencesBurr2) {
     checkGradient(ToolShape::burr(2.0f), {}, 20);
 }

@@ -69,17 +69,26 @@ private:
 };
 
 // One ForceModel per tool shape, built on first use: the server's network thread answers each
-// tool state with `cache.get(shape).compute(...)` without rebuilding shells. Not thread-safe: one
-// cache per thread. Throws Error (from ToolShape::validate) for a shape the factories do not make.
+// tool state with `cache.get(shape).compute(...)` without rebuilding shells. At most `capacity`
+// shapes, the least recently used dropped first: every diameter in the burr's range is valid, so
+// a peer sending a new one with each tool state (or a burr-size slider dragged) grew it without
+// bound (20,000 diameters: +250 MB, and a lookup scanned them all). The reference `get` returns
+// is valid until the next `get`. Not thread-safe: one cache per thread. Throws Error (from
+// ToolShape::validate) for a shape the factories do not make.
 class ForceModelCache {
 public:
-    explicit ForceModelCache(ForceModelConfig config = {}) : m_config(config) {}
+    static constexpr size_t kDefaultCapacity = 16;
+    explicit ForceModelCache(ForceModelConfig config = {}, size_t capacity = kDefaultCapacity)
+        : m_config(config), m_capacity(std::max<size_t>(capacity, 1)) {}
     const ForceModel& get(const ToolShape& shape);
     size_t size() const { return m_models.size(); }
+    size_t capacity() const { return m_capacity; }
 
 private:
     ForceModelConfig m_config;
-    std::vector<std::unique_ptr<ForceModel>> m_models; // a few shapes: a linear scan is fine
+    size_t m_capacity;
+    // Most recently used first; a few shapes: a linear scan is fine.
+    std::vector<std::unique_ptr<ForceModel>> m_models;
 };
 
 // The shell a ForceModel uses for `shape` at a given point spacing (0: automatic).
