@@ -27,6 +27,10 @@ void drawNetworkPanel(const net::ClientSnapshot& snap, const NetworkHistory& his
                           "needed a resend, recomputed by ENet about every 10 s.");
     ImGui::Text("dropped     %llu malformed, %llu updates rejected",
                 (unsigned long long)snap.malformed, (unsigned long long)snap.updatesRejected);
+    if (snap.viewsRefused > 0)
+        ImGui::TextColored(ImVec4(1.0f, 0.75f, 0.2f, 1),
+                           "            %llu views too large for the server",
+                           (unsigned long long)snap.viewsRefused);
     ImGui::Text("updates     %.0f /s   %llu applied (%llu full)", history.updateRate(now),
                 (unsigned long long)snap.updatesApplied, (unsigned long long)snap.fullUpdates);
     // The codec of the updates the picture takes now: volume mode's boxes and full copies are

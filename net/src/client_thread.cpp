@@ -222,6 +222,7 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
         s->updatesApplied = c->updatesApplied();
         s->fullUpdates = c->fullUpdates();
         s->updatesRejected = c->updatesRejected();
+        s->viewsRefused = c->viewsRefused();
         s->toolStatesSent = c->toolStatesSent();
         s->relaysReceived = c->relaysReceived();
         s->relayedModels = c->relayedModels();
@@ -333,6 +334,11 @@ void ClientThread::run() {
                 } else if (m_state != LinkState::Connected) {
                     m_state = LinkState::Connected;
                     m_closeReason.clear();
+                    // A view asked for while connecting, which the welcome shows too large (the
+                    // client dropped it): not for the next hello either.
+                    if (m_wantedView && int64_t(m_wantedView->width) * m_wantedView->height >
+                                            cp->welcome().maxViewPixels)
+                        m_wantedView.reset();
                     nextPublish = now;
                 }
                 std::deque<Command> cmds;
@@ -346,9 +352,11 @@ void ClientThread::run() {
                             cp->sendToolState(*t);
                     } else if (auto* v = std::get_if<ViewCmd>(&c)) {
                         // SessionClient holds a view or switch asked for before its connection
-                        // is up and makes it then (with the hello, or right after it).
-                        m_wantedView = v->view;
-                        cp->requestView(v->view);
+                        // is up and makes it then (with the hello, or right after it). A view it
+                        // refused (larger than the server serves) is not wanted again: in the
+                        // next hello it had every reconnect refused.
+                        if (cp->requestView(v->view) != 0)
+                            m_wantedView = v->view;
                     } else if (auto* y = std::get_if<SyncCmd>(&c)) {
                         m_wantedSync = y->sync;
                         cp->requestSync(y->sync);

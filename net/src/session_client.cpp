@@ -117,6 +117,19 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         if (!decodeMessage(data, w))
             return false;
         m_welcome = w;
+        // Views asked for before the welcome could not be checked against the server's limit:
+        // the server drops one too large, and we would wait for its image for good (every later
+        // resync waits on the newest request too).
+        for (auto it = m_requested.begin(); it != m_requested.end();) {
+            if (int64_t(it->second.width) * int64_t(it->second.height) > w.maxViewPixels) {
+                ++m_viewsRefused;
+                it = m_requested.erase(it);
+            } else {
+                ++it;
+            }
+        }
+        if (m_requestedViewId != m_viewId && !m_requested.contains(m_requestedViewId))
+            m_requestedViewId = m_requested.empty() ? m_viewId : m_requested.rbegin()->first;
         // Voxels that overtook the welcome on their own channel: place them now, in order.
         for (VolumeUpdate& early : std::exchange(m_earlyVolume, {}))
             if (!applyVolume(early, nowUs)) {

@@ -255,6 +255,68 @@ TEST(ClientReview, AViewLargerThanTheServerServesIsRefusedAndASwitchToDbiStillCo
     server.stop();
 }
 
+// A view asked for before the welcome cannot be checked against the server's limit then: once
+// the welcome says the limit, the client drops it (the server drops it too) instead of waiting
+// for its image for good, and the hello's view is the picture.
+TEST(ClientReview, ATooLargeViewAskedBeforeTheWelcomeIsDroppedThen) {
+    Volume sphere = makeSphere(32);
+    ServerConfig sc = loopbackServerConfig("sphere:32");
+    sc.maxViewPixels = 100 * 100;
+    SessionServer server(sphere, sc);
+    server.start();
+    ClientConfig cc;
+    cc.view = toViewSpec(cameraPreset("top", sphere, {64, 64}));
+    SessionClient client(cc);
+    EXPECT_NE(client.requestView(toViewSpec(cameraPreset("left", sphere, {200, 200}))), 0u)
+        << "no limit known yet";
+    client.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return client.hasFullImage(); }))
+        << "waited for the dropped view's image";
+    EXPECT_EQ(client.viewsRefused(), 1u);
+    EXPECT_EQ(client.view(), cc.view);
+    // Later views still go through.
+    const ViewSpec left = toViewSpec(cameraPreset("left", sphere, {64, 64}));
+    const uint32_t id = client.requestView(left);
+    ASSERT_NE(id, 0u);
+    ASSERT_TRUE(
+        pumpUntil({&client}, [&] { return client.viewId() == id && client.hasFullImage(); }));
+    server.stop();
+}
+
+// A view the client refused (larger than the server serves) is not the one the next connection's
+// hello asks for: it had every reconnect refused as a bad hello, for good.
+TEST(ClientReview, ARefusedViewDoesNotBreakTheNextConnection) {
+    Volume sphere = makeSphere(32);
+    ServerConfig sc = loopbackServerConfig("sphere:32");
+    sc.maxViewPixels = 100 * 100;
+    auto server = std::make_unique<SessionServer>(sphere, sc);
+    const uint16_t port = server->port();
+    server->start();
+    ClientThreadConfig cc;
+    cc.address = "127.0.0.1:" + std::to_string(port);
+    cc.client.view = toViewSpec(cameraPreset("top", sphere, {64, 64}));
+    cc.retryS = 0.1;
+    ClientThread client(cc);
+    client.start();
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->hasFullImage; }));
+    client.requestView(toViewSpec(cameraPreset("left", sphere, {200, 200})));
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->viewsRefused == 1; }));
+    server->stop();
+    server.reset();
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->state != LinkState::Connected; }));
+    sc.port = port;
+    server = std::make_unique<SessionServer>(sphere, sc);
+    server->start();
+    EXPECT_TRUE(waitFor([&] {
+        auto s = client.snapshot();
+        return s->state == LinkState::Connected && s->hasFullImage;
+    })) << "closed: "
+        << client.snapshot()->closeReason;
+    EXPECT_EQ(client.snapshot()->view, cc.client.view);
+    client.stop();
+    server->stop();
+}
+
 // The server goes away and comes back on the same port: the client reconnects and its tool
 // sequence carries on from the first connection's, so whatever keeps the newest force model by
 // tool sequence (HapticLoop, the window's force source) takes the new connection's answers as

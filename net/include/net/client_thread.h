@@ -97,6 +97,7 @@ struct ClientSnapshot {
     // Statistics.
     uint64_t updatesApplied = 0, fullUpdates = 0, updatesRejected = 0, toolStatesSent = 0,
              relaysReceived = 0, malformed = 0;
+    uint64_t viewsRefused = 0; // views asked for that the server does not serve (too large)
     double rttUs = -1, rttP50Us = -1;
     double latencyP50Us = -1, latencyP99Us = -1;
     double meanBytes = 0, meanRawBytes = 0; // per update
