@@ -408,9 +408,13 @@ int runTrainee(const TraineeOptions& o) {
         last.drilling = false;
         client.sendToolState(last);
     }
-    // Let the last updates arrive: stop after 0.5 s without one.
+    // Let the last updates arrive: stop after 0.5 s without one, and 2 s after the script at the
+    // latest (others drilling on kept it waiting for as long as they drilled, and their updates
+    // then counted as ours).
+    const uint64_t drainUntil = net::steadyNowUs() + 2000000;
     uint64_t lastCount = client.updatesApplied(), quietSince = net::steadyNowUs();
-    while (!client.closed() && net::steadyNowUs() - quietSince < 500000) {
+    while (!client.closed() && net::steadyNowUs() - quietSince < 500000 &&
+           net::steadyNowUs() < drainUntil) {
         client.poll(5);
         if (client.updatesApplied() != lastCount) {
             lastCount = client.updatesApplied();

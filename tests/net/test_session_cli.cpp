@@ -16,6 +16,7 @@
 #include <glm/gtx/quaternion.hpp>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <csignal>
 #include <cstdio>
@@ -25,6 +26,7 @@
 #include <iterator>
 #include <string>
 #include <sys/wait.h>
+#include <thread>
 #include <unistd.h>
 #include <vector>
 
@@ -179,6 +181,52 @@ TEST(SessionCli, HeadlessTraineeRunsTheHapticLoopAndReportsIt) {
     EXPECT_GT(number("force_round_trip_p50_us"), 0.0) << json;
     EXPECT_GT(server.hapticModelsSent(), 0u);
     EXPECT_LE(double(server.hapticModelsSent()), sent); // unsequenced: loss is allowed
+    std::filesystem::remove(report);
+}
+
+// Others drilling on after a headless trainee's script ends do not keep it waiting: it waited for
+// 0.5 s without any update, however long they went on, and reported their updates as its own.
+TEST(SessionCli, AHeadlessTraineeDoesNotWaitForOthersToStopDrilling) {
+    Volume sphere = makeSphere(32);
+    SessionServer server(sphere, loopbackServerConfig("sphere:32"));
+    server.start();
+    // Someone else changes the top of the sphere ten times a second for up to 20 s.
+    const Box3i box{{12, 12, 26}, {20, 20, 32}};
+    std::vector<uint8_t> density, material;
+    for (int z = box.lo.z; z < box.hi.z; ++z)
+        for (int y = box.lo.y; y < box.hi.y; ++y)
+            for (int x = box.lo.x; x < box.hi.x; ++x) {
+                density.push_back(sphere.density(x, y, z));
+                material.push_back(uint8_t(sphere.material(x, y, z)));
+            }
+    std::atomic<bool> done{false};
+    std::thread other([&] {
+        for (int i = 0; i < 200 && !done; ++i) {
+            if (i % 2)
+                server.submitVoxels(box, density, material);
+            else
+                server.submitBoxCut(box);
+            std::this_thread::sleep_for(std::chrono::milliseconds(100));
+        }
+    });
+    const std::string report = (std::filesystem::temp_directory_path() /
+                                ("trephine_trainee_drain_" + std::to_string(getpid()) + ".json"))
+                                   .string();
+    const std::string cmd = shellQuote(TREPHINE_BIN) +
+                            " trainee --connect 127.0.0.1:" + std::to_string(server.port()) +
+                            " --headless --camera top --size 64 --duration 1 --report " +
+                            shellQuote(report) + " > /dev/null 2>&1";
+    const int status = std::system(cmd.c_str());
+    done = true;
+    other.join();
+    server.stop();
+    ASSERT_EQ(status, 0) << cmd;
+    std::ifstream r(report);
+    const std::string json((std::istreambuf_iterator<char>(r)), std::istreambuf_iterator<char>());
+    const auto at = json.find("\"duration_s\": ");
+    ASSERT_NE(at, std::string::npos) << json;
+    // The second of script, then at most 2 s for the last updates (not the others' 20 s).
+    EXPECT_LT(std::stod(json.substr(at + 14)), 8.0) << json;
     std::filesystem::remove(report);
 }
 
