@@ -310,7 +310,13 @@ int runTrainee(const TraineeOptions& o) {
                     volumeName + "' here too: " + e.what());
     }
     Camera camera = cameraPreset(o.camera, volume, {o.size, o.size});
-    client.requestView(net::toViewSpec(camera));
+    // Refused (larger than the server serves, or not a view the wire carries): it would run on
+    // and report the 1x1 placeholder as its picture.
+    if (client.requestView(net::toViewSpec(camera)) == 0)
+        throw Error("trainee: the server serves views of at most " +
+                    std::to_string(client.welcome().maxViewPixels) + " pixels; --size " +
+                    std::to_string(o.size) + " asks for " +
+                    std::to_string(int64_t(o.size) * o.size) + ": give a smaller --size");
     if (!pumpUntil(30.0, [&] { return client.hasFullImage(); }))
         throw Error("trainee: no image from " + o.connect + ": " + client.closeReason());
 

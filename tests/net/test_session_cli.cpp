@@ -230,6 +230,29 @@ TEST(SessionCli, AHeadlessTraineeDoesNotWaitForOthersToStopDrilling) {
     std::filesystem::remove(report);
 }
 
+// A headless trainee whose --size is larger than the server serves stops in one line naming the
+// limit (it ran on with its 1x1 placeholder view and reported that as its picture).
+TEST(SessionCli, AHeadlessTraineeLargerThanTheServerServesStopsInOneLine) {
+    Volume sphere = makeSphere(32);
+    ServerConfig sc = loopbackServerConfig("sphere:32");
+    sc.maxViewPixels = 100 * 100;
+    SessionServer server(sphere, sc);
+    server.start();
+    trephine::testing::TempDir dir;
+    const auto r = trephine::testing::runTrephine(
+        dir, "trainee --connect 127.0.0.1:" + std::to_string(server.port()) +
+                 " --headless --camera top --size 200 --duration 1 --report " +
+                 shellQuote(dir / "r.json"));
+    server.stop();
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_NE(r.err.find("the server serves views of at most 10000 pixels; --size 200 asks for "
+                         "40000: give a smaller --size"),
+              std::string::npos)
+        << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(dir / "r.json"));
+}
+
 // `trephine trainee --headless --sync volume`: the replicated-volume baseline computes its forces
 // locally on its copy of the volume, and the report names the mode.
 // A CSV script that changes tools: the volume trainee's local forces follow it (the server's
