@@ -1190,9 +1190,17 @@ void SessionServer::networkLoop() {
         }
     }
 
-    // Say goodbye so clients print a reason, and give the goodbyes a moment to leave.
-    for (auto& [id, p] : s.peers)
+    // Say goodbye so clients print a reason, and give the goodbyes a moment to leave. Every peer
+    // is gone from here on, whether or not its goodbye is acknowledged in time: the report says
+    // so (it listed them as connected, and counted them per mode, beside "clients": 0).
+    const uint64_t goodbyeUs = steadyNowUs();
+    for (auto& [id, p] : s.peers) {
         enet_peer_disconnect(p.peer, uint32_t(RefuseReason::Shutdown));
+        report(id, [&](PeerReport& r) {
+            if (r.disconnectedUs == 0)
+                r.disconnectedUs = goodbyeUs;
+        });
+    }
     uint64_t deadline = steadyNowUs() + 200000;
     while (!s.peers.empty() && steadyNowUs() < deadline)
         s.host.service(5, [&](const ENetEvent& ev) {

@@ -522,3 +522,23 @@ TEST(Session, TheServerSweepsTheCutterBetweenDrillingToolStates) {
     EXPECT_FALSE(cutAt(now, -3.0f, 5.0f)) << "nor where the drill was off";
     server.stop();
 }
+
+// A server stopped with clients still connected says goodbye to them, and its report lists them
+// as gone: they were left "connected": true and counted per mode beside "clients": 0.
+TEST(Session, TheReportAfterAStopListsNoClientAsConnected) {
+    Volume sphere = makeSphere(24);
+    SessionServer server(sphere, trephine::testing::loopbackServerConfig("sphere:24"));
+    server.start();
+    ClientConfig cc;
+    cc.view = toViewSpec(cameraPreset("top", sphere, {32, 32}));
+    SessionClient client(cc);
+    client.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return client.hasFullImage(); }));
+    EXPECT_NE(server.reportJson().find("\"connected\": true"), std::string::npos);
+    server.stop(); // the client is not serviced: its goodbye is never acknowledged
+    const std::string report = server.reportJson();
+    EXPECT_NE(report.find("\"clients\": 0"), std::string::npos) << report;
+    EXPECT_EQ(report.find("\"connected\": true"), std::string::npos) << report;
+    EXPECT_NE(report.find("\"connected\": false"), std::string::npos) << report;
+    EXPECT_EQ(report.find("\"clients\": 1"), std::string::npos) << "no mode counts it: " << report;
+}
