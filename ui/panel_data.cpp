@@ -252,6 +252,15 @@ std::vector<DirtyBoxHistory::Box> DirtyBoxHistory::visible(double now) const {
     return out;
 }
 
+std::vector<DirtyBoxHistory::Box> DirtyBoxHistory::overlay(double now, size_t n) const {
+    std::vector<Box> out;
+    for (auto it = boxes.rbegin(); it != boxes.rend() && out.size() < n; ++it)
+        if (!it->full && alpha(*it, now) > 0.0f)
+            out.push_back(*it);
+    std::reverse(out.begin(), out.end());
+    return out;
+}
+
 const char* syncDesignName(SyncDesign d) {
     return d == SyncDesign::Dbi ? "DBI (server renders)" : "Volume (local copy)";
 }

@@ -50,15 +50,21 @@ void drawDirtyBoxOverlay(const DirtyBoxPanelState& state, const DirtyBoxHistory&
     if (!state.overlay)
         return;
     ImDrawList* dl = ImGui::GetBackgroundDrawList();
-    for (const auto& b : boxes.visible(now)) {
-        if (b.full)
-            continue;
+    // Outlines of the newest few, fading; only the newest is tinted, so the bone and the burr
+    // under them stay visible while drilling adds boxes at one place.
+    const std::vector<DirtyBoxHistory::Box> shown = boxes.overlay(now);
+    for (size_t i = 0; i < shown.size(); ++i) {
+        const auto& b = shown[i];
+        const bool newest = i + 1 == shown.size();
         float a = boxes.alpha(b, now);
         float x0 = viewOriginX + float(b.rect.x);
         float y0 = viewOriginY + float(viewHeight - (b.rect.y + b.rect.h));
         ImVec2 p0(x0, y0), p1(x0 + float(b.rect.w), y0 + float(b.rect.h));
-        dl->AddRectFilled(p0, p1, ImGui::GetColorU32(ImVec4(1.0f, 0.85f, 0.1f, 0.10f * a)));
-        dl->AddRect(p0, p1, ImGui::GetColorU32(ImVec4(1.0f, 0.85f, 0.1f, 0.9f * a)), 0.0f, 0, 1.5f);
+        if (newest)
+            dl->AddRectFilled(p0, p1, ImGui::GetColorU32(ImVec4(1.0f, 0.85f, 0.1f, 0.08f * a)));
+        dl->AddRect(p0, p1,
+                    ImGui::GetColorU32(ImVec4(1.0f, 0.85f, 0.1f, (newest ? 0.9f : 0.4f) * a)), 0.0f,
+                    0, newest ? 1.5f : 1.0f);
     }
 }
 

@@ -74,6 +74,25 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
         if (id == self)
             continue;
         glm::vec4 c = participantColor(int(id));
+        // A trainee's take-over control leads its row: after the name and tool it was pushed off
+        // a 380-pixel panel ("take o").
+        if (p.role == net::Role::Trainee) {
+            ImGui::PushID(int(id));
+            if (p.takenOverBy == self && self != 0) {
+                if (ImGui::SmallButton("hand back"))
+                    takeOver.asked = uint16_t(0);
+                ImGui::SameLine();
+            } else if (p.takenOverBy != 0) {
+                ImGui::TextDisabled("held by %s",
+                                    participantName(snap.participants, p.takenOverBy).c_str());
+                ImGui::SameLine();
+            } else if (takeOver.canTakeOver) {
+                if (ImGui::SmallButton("take over"))
+                    takeOver.asked = id;
+                ImGui::SameLine();
+            }
+            ImGui::PopID();
+        }
         ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), "  %s  %s, %s",
                            participantName(snap.participants, id).c_str(),
                            p.role == net::Role::Instructor ? "instructor" : "trainee",
@@ -86,24 +105,6 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
                                                                                    : "burr",
                                double(t->second.diameterMm), t->second.drilling ? " drilling" : "");
         }
-        if (p.role != net::Role::Trainee)
-            continue;
-        // Taken over: by whom; an instructor takes over or hands back here.
-        ImGui::PushID(int(id));
-        if (p.takenOverBy == self && self != 0) {
-            ImGui::SameLine();
-            if (ImGui::SmallButton("hand back"))
-                takeOver.asked = uint16_t(0);
-        } else if (p.takenOverBy != 0) {
-            ImGui::SameLine();
-            ImGui::TextDisabled("held by %s",
-                                participantName(snap.participants, p.takenOverBy).c_str());
-        } else if (takeOver.canTakeOver) {
-            ImGui::SameLine();
-            if (ImGui::SmallButton("take over"))
-                takeOver.asked = id;
-        }
-        ImGui::PopID();
     }
     // Tools of ids the roster does not list yet (its message may trail the first relays).
     for (const auto& [id, t] : snap.others) {

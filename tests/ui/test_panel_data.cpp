@@ -80,6 +80,22 @@ TEST(DirtyBoxHistory, FadesAndKeepsTheNewest) {
 
 // A full update (a new view's picture) forgets the rectangles of the picture it replaces: they were
 // drawn over the new view for another 1.5 s.
+// Drilling adds dozens of boxes a second at one place: the overlay draws the newest few, never a
+// full update's (the whole picture), so the site is not buried under stacked fills.
+TEST(DirtyBoxHistory, TheOverlayDrawsOnlyTheNewestFewRectangles) {
+    DirtyBoxHistory h;
+    h.add({0.0, PixelRect(0, 0, 500, 500), 1, 100, -1, true});
+    for (uint32_t i = 0; i < 60; ++i)
+        h.add({0.01 * i, PixelRect(200, 200, 50, 50), 2 + i, 100, -1, false});
+    const auto shown = h.overlay(0.6, 8);
+    ASSERT_EQ(shown.size(), 8u);
+    EXPECT_EQ(shown.back().sequence, 61u) << "newest last";
+    EXPECT_EQ(shown.front().sequence, 54u);
+    for (const auto& b : shown)
+        EXPECT_FALSE(b.full);
+    EXPECT_TRUE(h.overlay(10.0).empty()) << "all faded";
+}
+
 TEST(DirtyBoxHistory, AFullUpdateForgetsTheBoxesOfThePictureItReplaces) {
     DirtyBoxHistory d;
     d.add({0.0, {10, 10, 20, 20}, 1, 100, 1000.0, false});

@@ -96,6 +96,10 @@ struct DirtyBoxHistory {
     float alpha(const Box& b, double now) const;
     // Boxes still visible at `now`.
     std::vector<Box> visible(double now) const;
+    // The overlay's boxes: the newest `n` visible rectangles (full updates left out), newest
+    // last. Drilling adds dozens a second at one place: all of them, each filled, stacked into a
+    // solid block that hid the burr and the hole.
+    std::vector<Box> overlay(double now, size_t n = 8) const;
 };
 
 // [Comparison] the figures the study reports, measured live for both designs (DBI and replicated
