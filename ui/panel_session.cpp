@@ -170,7 +170,7 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
         ImGui::TextColored(tool.drilling ? ImVec4(1, 0.4f, 0.3f, 1) : ImVec4(0.6f, 0.6f, 0.6f, 1),
                            tool.drilling ? "DRILLING" : "hold the left button to drill");
     else
-        ImGui::TextDisabled("instructor: pointer only (take over a trainee to drill)");
+        ImGui::TextDisabled("pointer only: take over a trainee to drill");
     ImGui::End();
 }
 

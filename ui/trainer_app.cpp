@@ -832,8 +832,9 @@ int runTrainerWindow(const TrainerOptions& o) {
         if (drawComparisonPanel(shown, picture, comparison, now) && shown != wanted)
             requestDesign(shown);
         if (ImGui::Begin("Comparison")) { // appends to the panel: what only the window knows
-            ImGui::TextDisabled("frame ms: frame start to swap + glFinish (median of 1 s)");
-            ImGui::TextDisabled("volume GPU apply: full %.1f ms (%llu), box p50 %.2f ms (%llu)",
+            // Short lines: the 400-pixel panel cut the longer ones off.
+            ImGui::TextDisabled("frame ms: start to swap + glFinish, median of 1 s");
+            ImGui::TextDisabled("volume GPU: full %.1f ms (%llu), box p50 %.2f ms (%llu)",
                                 volumeUploadMs.size() ? volumeUploadMs.percentile(50) : 0.0,
                                 (unsigned long long)volumeUploads,
                                 volumeBoxMs.size() ? volumeBoxMs.percentile(50) : 0.0,
