@@ -195,6 +195,38 @@ std::vector<float> ForceHistory::series(const std::deque<Sample>& s, int compone
     return out;
 }
 
+std::vector<float> ForceHistory::resample(const std::deque<Sample>& s, int component, double t0,
+                                          double t1, int n) {
+    std::vector<float> out;
+    if (s.empty() || n <= 0)
+        return out;
+    out.reserve(size_t(n));
+    auto value = [&](const Sample& x) {
+        return component >= 3 ? glm::length(x.f) : x.f[component];
+    };
+    size_t next = 0; // the first sample after the current time
+    for (int i = 0; i < n; ++i) {
+        const double t = n > 1 ? t0 + (t1 - t0) * double(i) / double(n - 1) : t1;
+        while (next < s.size() && s[next].t <= t)
+            ++next;
+        out.push_back(value(s[next == 0 ? 0 : next - 1]));
+    }
+    return out;
+}
+
+float ForceHistory::scaleN() const {
+    float m = 0.0f;
+    for (const auto* q : {&server, &extrapolated})
+        for (const Sample& x : *q)
+            m = std::max(m, glm::length(x.f));
+    float scale = 0.5f;
+    for (float decade = 1.0f; scale < m; decade *= 10.0f)
+        for (float step : {1.0f, 2.0f, 5.0f})
+            if (scale < m)
+                scale = std::max(scale, step * decade);
+    return scale;
+}
+
 int ParticipantForces::update(double now, const std::map<uint16_t, net::HapticModel>& models) {
     // The client drops the model of whoever left the session (or of everyone, on a reconnect):
     // their plot goes with it at once, not 5 s later under a bare "client N", and their sequence

@@ -341,6 +341,7 @@ int runTrainerWindow(const TrainerOptions& o) {
 
     std::future<Scene> sceneFuture;
     std::optional<Scene> scene;
+    std::string sceneVolume; // the volume name the scene was (or is being) built for
     std::string sceneError;
     Camera baseCamera; // the view before orbiting
     ViewControls viewControls;
@@ -424,7 +425,7 @@ int runTrainerWindow(const TrainerOptions& o) {
                                {viewSize, viewSize}, scene->volume);
     };
 
-    while (!window.shouldClose()) {
+    while (!window.shouldClose() && !(o.quit && o.quit->load())) {
         const auto frameStart = Clock::now();
         const double now = seconds();
         auto snap = client.snapshot();
@@ -435,13 +436,23 @@ int runTrainerWindow(const TrainerOptions& o) {
         const uint16_t holding = o.instructor ? heldBy(snap->participants, selfId) : 0;
         toolControls.canDrill = o.instructor ? holding != 0 : heldByOther == 0;
 
-        // Volume-derived scene once the welcome names the volume.
-        if (snap->welcome && !scene && !sceneFuture.valid() && sceneError.empty())
-            sceneFuture = std::async(std::launch::async, buildScene, snap->welcome->volumeName);
+        // Volume-derived scene once the welcome names the volume, and again when a reconnect's
+        // welcome names another (a server restarted on another volume: the old skull's scalp,
+        // drape and camera stayed around the new one).
+        if (snap->welcome && scene && !sceneFuture.valid() &&
+            snap->welcome->volumeName != sceneVolume) {
+            scene.reset();
+            sceneError.clear();
+        }
+        if (snap->welcome && !scene && !sceneFuture.valid() && sceneError.empty()) {
+            sceneVolume = snap->welcome->volumeName;
+            sceneFuture = std::async(std::launch::async, buildScene, sceneVolume);
+        }
         if (sceneFuture.valid() &&
             sceneFuture.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
             try {
                 scene = sceneFuture.get();
+                comp.destroy(fieldMesh); // the previous volume's, if any
                 fieldMesh = comp.upload(scene->field);
                 if (o.camera == "site")
                     baseCamera =
@@ -649,9 +660,13 @@ int runTrainerWindow(const TrainerOptions& o) {
         if (o.instructor)
             participantForces.update(now, snap->relayedModels);
         // The 1 kHz extrapolated force, straight from the haptic loop's recorder.
+        // The loop keeps its own clock: its newest tick is now on the window's, so the two
+        // series share one time axis in the Forces panel.
         forceHistory.extrapolated.clear();
-        for (const HapticSample& h : haptics.samples())
-            forceHistory.extrapolated.push_back({h.time, h.force});
+        const std::vector<HapticSample> ticks = haptics.samples();
+        const double tickShift = ticks.empty() ? 0.0 : now - ticks.back().time;
+        for (const HapticSample& h : ticks)
+            forceHistory.extrapolated.push_back({h.time + tickShift, h.force});
         const HapticLoopStats hstats = haptics.stats();
         if (now >= nextSecond) {
             const auto& rt = snap->rates;
@@ -682,7 +697,8 @@ int runTrainerWindow(const TrainerOptions& o) {
             } else {
                 comp.begin(dbiCamera);
             }
-            comp.draw(fieldMesh, glm::mat4(1.0f));
+            if (scene)
+                comp.draw(fieldMesh, glm::mat4(1.0f));
             for (const auto& [id, t] : snap->others)
                 comp.draw(tools.get(ToolKind(t.toolKind), t.diameterMm),
                           toolMatrix(t.position, t.orientation), participantColor(int(id)));
@@ -846,7 +862,7 @@ int runTrainerWindow(const TrainerOptions& o) {
         ImGui::End();
         ImGui::SetNextWindowPos(ImVec2(0, float(viewSize)), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(right, H - float(viewSize)), ImGuiCond_FirstUseEver);
-        drawForcesPanel(forceHistory, hstats.achievedRateHz,
+        drawForcesPanel(forceHistory, hstats.achievedRateHz, now,
                         o.instructor ? &participantForces : nullptr, &snap->participants);
         ImGui::SetNextWindowPos(ImVec2(side, comparisonH), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(sideW, H - comparisonH), ImGuiCond_FirstUseEver);
@@ -971,8 +987,9 @@ int runTrainerWindow(const TrainerOptions& o) {
         r.comparison = comparison;
         r.picture = picture;
         r.view = cpuDbi;
-        r.camera =
-            picture == SyncDesign::Volume ? volumeCamera : net::toCamera(client.snapshot()->view);
+        // The camera `view` was made with (the snapshot's view is the placeholder once the
+        // client has stopped, or another while a new view's image is on its way).
+        r.camera = picture == SyncDesign::Volume ? volumeCamera : cpuDbiCamera;
         r.switchesRequested = switchesRequested;
         r.switchesCompleted = switchesCompleted;
         r.volumeUploads = volumeUploads;

@@ -20,9 +20,14 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <functional>
+#include <memory>
 #include <string>
+#include <thread>
 
 using namespace trephine;
 using namespace trephine::ui;
@@ -218,4 +223,57 @@ TEST(ComparisonWindow, AnUnwritableScreenshotEndsTheWindowWithItsError) {
             << e.what();
     }
     server.stop();
+}
+
+// The server restarts on the same port with another volume while the window is open: the
+// window rejoins and rebuilds its scene and camera for the new volume (the old skull's scalp,
+// drape and camera stayed, around the new volume's picture).
+TEST(ComparisonWindow, AReconnectToAnotherVolumeRebuildsTheScene) {
+    TREPHINE_NEED_DISPLAY("the window");
+    const Volume first = makeSphere(32), second = makeBox(48);
+    auto server = std::make_unique<net::SessionServer>(
+        first, trephine::testing::loopbackServerConfig("sphere:32"));
+    const uint16_t port = server->port();
+    server->start();
+    TrainerReport report;
+    std::atomic<bool> quit{false};
+    TrainerOptions o;
+    o.address = "127.0.0.1:" + std::to_string(port);
+    o.camera = "top";
+    o.size = 128;
+    o.visible = false;
+    o.report = &report;
+    o.quit = &quit;
+    int rc = -1;
+    std::thread window([&] { rc = runTrainerWindow(o); });
+    auto waitUntil = [](const std::function<bool()>& pred) {
+        const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+        while (!pred() && std::chrono::steady_clock::now() < deadline)
+            std::this_thread::sleep_for(std::chrono::milliseconds(20));
+        return pred();
+    };
+    // The window has joined and asked for its view of the sphere; then the server goes, and a
+    // new one serves the box on the same port.
+    const bool joined = waitUntil([&] { return server->rendersDone() >= 2; });
+    server->stop();
+    server.reset();
+    net::ServerConfig sc = trephine::testing::loopbackServerConfig("box:48");
+    sc.port = port;
+    server = std::make_unique<net::SessionServer>(second, sc);
+    server->start();
+    // Rejoined, and asked for a view of its own again (the scene rebuilt for the box).
+    const bool rejoined = waitUntil([&] { return server->rendersDone() >= 2; });
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    quit = true;
+    window.join();
+    ASSERT_TRUE(joined);
+    ASSERT_TRUE(rejoined);
+    ASSERT_EQ(rc, 0);
+    auto distance = [](const Camera& c) { return glm::length(c.eye - c.target); };
+    const float boxTop = distance(cameraPreset("top", second, {128, 128}));
+    const float sphereTop = distance(cameraPreset("top", first, {128, 128}));
+    ASSERT_GT(std::abs(boxTop - sphereTop), 5.0f) << "the two volumes' views differ";
+    EXPECT_NEAR(distance(report.camera), boxTop, 0.5f) << "the new volume's camera";
+
+    server->stop();
 }

@@ -64,6 +64,37 @@ TEST(ForceHistory, WindowRateAndSeries) {
     EXPECT_EQ(ForceHistory::series(f.extrapolated, 2).back(), 1.0f);
 }
 
+// The server's f (tens a second) and the loop's F (1 kHz) on one time axis: resampled over the
+// same window, the same moment lands on the same point whatever the rate (by sample index, a
+// step 1 s before the end drew ~20 % from the right in f and ~25 % in F).
+TEST(ForceHistory, ResampledSeriesShareOneTimeAxisAndOneScale) {
+    ForceHistory h;
+    for (int i = 0; i <= 50; ++i) { // 10 per second for 5 s: a step to 1.5 N at t = 4
+        const double t = double(i) / 10.0;
+        h.addServer(t, glm::vec3(0, 0, t >= 3.975 ? 1.5f : 0.2f));
+    }
+    for (int i = 0; i <= 4000; ++i) { // 1 kHz over the last 4 s: the same step, to 1.9 N
+        const double t = 1.0 + double(i) / 1000.0;
+        h.extrapolated.push_back({t, glm::vec3(0, 0, t >= 3.975 ? 1.9f : 0.3f)});
+    }
+    const auto f = ForceHistory::resample(h.server, 3, 1.0, 5.0, 81);
+    const auto F = ForceHistory::resample(h.extrapolated, 2, 1.0, 5.0, 81);
+    ASSERT_EQ(f.size(), 81u);
+    ASSERT_EQ(F.size(), 81u);
+    for (int i = 0; i < 81; ++i) { // point i is t = 1 + 0.05 i: the step at i = 60 in both
+        EXPECT_EQ(f[i] > 1.0f, i >= 60) << i;
+        EXPECT_EQ(F[i] > 1.0f, i >= 60) << i;
+    }
+    // Before a series' first sample: its first value, not a false zero.
+    EXPECT_FLOAT_EQ(ForceHistory::resample(h.extrapolated, 2, 0.0, 1.0, 3).front(), 0.3f);
+    EXPECT_TRUE(ForceHistory::resample({}, 3, 0.0, 1.0, 3).empty());
+    // One scale for both, the largest force rounded up: 1.9 N -> 2 N.
+    EXPECT_EQ(h.scaleN(), 2.0f);
+    h.addServer(5.1, glm::vec3(7.3f, 0, 0));
+    EXPECT_EQ(h.scaleN(), 10.0f);
+    EXPECT_EQ(ForceHistory().scaleN(), 0.5f) << "no force: the smallest scale";
+}
+
 TEST(DirtyBoxHistory, FadesAndKeepsTheNewest) {
     DirtyBoxHistory d;
     d.fadeS = 1.0;

@@ -28,7 +28,9 @@ void drawDirtyBoxOverlay(const DirtyBoxPanelState& state, const DirtyBoxHistory&
 // [Forces] |F| and x/y/z of the server's samples and the haptic loop's extrapolated force
 // (loopRateHz: the rate the loop achieves). For an instructor (`participants` not null), one more
 // plot per other participant from the server's relayed models, named and coloured as its tool.
-void drawForcesPanel(const ForceHistory& forces, double loopRateHz,
+// Every plot shows the same last 4 s up to `now` (the histories' clock) on one force scale, said
+// in the panel.
+void drawForcesPanel(const ForceHistory& forces, double loopRateHz, double now,
                      const ParticipantForces* participants = nullptr,
                      const std::map<uint16_t, net::ParticipantInfo>* roster = nullptr);
 

@@ -10,6 +10,7 @@
 #include "ui/panel_data.h"
 
 #include <array>
+#include <atomic>
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -63,6 +64,8 @@ struct TrainerOptions {
     // is not settled (no screenshot) before the server lists the take-over.
     std::string takeOver;
     TrainerReport* report = nullptr; // [Tests] filled when the window closes
+    // [Tests] The window closes (exit 0) once this is set, as if its close button was clicked.
+    const std::atomic<bool>* quit = nullptr;
 };
 
 // Runs the window until it closes. Returns the process exit code; throws trephine::Error when no
