@@ -45,6 +45,23 @@ std::vector<int64_t> Volume::materialCounts() const {
     return counts;
 }
 
+void Volume::copyBox(const Box3i& box, std::vector<uint8_t>& density,
+                     std::vector<uint8_t>& material) const {
+    assert(box.intersect(bounds()) == box && "Volume::copyBox: the box must lie inside the volume");
+    density.clear();
+    material.clear();
+    density.reserve(size_t(box.count()));
+    material.reserve(size_t(box.count()));
+    for (int z = box.lo.z; z < box.hi.z; ++z)
+        for (int y = box.lo.y; y < box.hi.y; ++y) {
+            const size_t i = index(box.lo.x, y, z), row = size_t(box.hi.x - box.lo.x);
+            density.insert(density.end(), m_density.begin() + ptrdiff_t(i),
+                           m_density.begin() + ptrdiff_t(i + row));
+            material.insert(material.end(), m_material.begin() + ptrdiff_t(i),
+                            m_material.begin() + ptrdiff_t(i + row));
+        }
+}
+
 void Volume::fill(const Box3i& box, uint8_t density, Material m) {
     const Box3i b = box.intersect(bounds());
     if (b.empty())

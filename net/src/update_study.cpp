@@ -137,14 +137,7 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
             z.n = n;
             z.box = surfaceBox(volume, n);
             z.screen = dirtyScreenRect(camera, volume, z.box);
-            z.density.reserve(size_t(z.box.count()));
-            z.material.reserve(size_t(z.box.count()));
-            for (int zz = z.box.lo.z; zz < z.box.hi.z; ++zz)
-                for (int y = z.box.lo.y; y < z.box.hi.y; ++y)
-                    for (int x = z.box.lo.x; x < z.box.hi.x; ++x) {
-                        z.density.push_back(now.density(x, y, zz));
-                        z.material.push_back(uint8_t(now.material(x, y, zz)));
-                    }
+            now.copyBox(z.box, z.density, z.material);
             sizes.push_back(std::move(z));
         }
     }

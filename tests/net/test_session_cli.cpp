@@ -193,12 +193,7 @@ TEST(SessionCli, AHeadlessTraineeDoesNotWaitForOthersToStopDrilling) {
     // Someone else changes the top of the sphere ten times a second for up to 20 s.
     const Box3i box{{12, 12, 26}, {20, 20, 32}};
     std::vector<uint8_t> density, material;
-    for (int z = box.lo.z; z < box.hi.z; ++z)
-        for (int y = box.lo.y; y < box.hi.y; ++y)
-            for (int x = box.lo.x; x < box.hi.x; ++x) {
-                density.push_back(sphere.density(x, y, z));
-                material.push_back(uint8_t(sphere.material(x, y, z)));
-            }
+    sphere.copyBox(box, density, material);
     std::atomic<bool> done{false};
     std::thread other([&] {
         for (int i = 0; i < 200 && !done; ++i) {

@@ -291,12 +291,7 @@ TEST(SessionVolume, VoxelsPutBackRestartTheVolumeClientsHitCache) {
     ASSERT_TRUE(connectAll({&vol}));
     const Box3i box{{22, 22, 36}, {26, 26, 46}};
     std::vector<uint8_t> density, material;
-    for (int z = box.lo.z; z < box.hi.z; ++z)
-        for (int y = box.lo.y; y < box.hi.y; ++y)
-            for (int x = box.lo.x; x < box.hi.x; ++x) {
-                density.push_back(sphere.density(x, y, z));
-                material.push_back(uint8_t(sphere.material(x, y, z)));
-            }
+    sphere.copyBox(box, density, material);
     const Dbi intact = vol.dbi();
     for (int round = 0; round < 3; ++round) {
         server.submitBoxCut(box);

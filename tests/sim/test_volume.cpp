@@ -1,8 +1,11 @@
 // Box3i and Volume basics: the types every other layer leans on.
 #include "libsim/box.h"
+#include "libsim/skull.h"
 #include "libsim/volume.h"
 
 #include <gtest/gtest.h>
+
+#include <algorithm>
 
 using namespace trephine;
 
@@ -109,4 +112,28 @@ TEST(Volume, FillSetsExactlyTheBoxClippedToTheVolume) {
     v.fill(Box3i::fromMinMax({10, 10, 10}, {12, 12, 12}), 99, Material::Dura); // outside: nothing
     v.fill(Box3i{}, 99, Material::Dura);                                       // empty: nothing
     EXPECT_EQ(v.density(0, 1, 1), 200);
+}
+
+// copyBox gives a box's bytes x fastest, as putting the box back takes them: filled back in after
+// a cut, the volume is as it was.
+TEST(Volume, CopyBoxGivesTheBytesThatPutTheBoxBack) {
+    Volume v = makeSphere(16);
+    const Volume before = v;
+    const Box3i box{{3, 4, 5}, {9, 7, 12}};
+    std::vector<uint8_t> density, material;
+    v.copyBox(box, density, material);
+    ASSERT_EQ(density.size(), size_t(box.count()));
+    ASSERT_EQ(material.size(), size_t(box.count()));
+    EXPECT_EQ(density[1], v.density(4, 4, 5)) << "x fastest";
+    EXPECT_EQ(density[6], v.density(3, 5, 5)) << "then y";
+    EXPECT_EQ(density.back(), v.density(8, 6, 11));
+    v.fill(box, 0, Material::Air);
+    size_t i = 0;
+    for (int z = box.lo.z; z < box.hi.z; ++z)
+        for (int y = box.lo.y; y < box.hi.y; ++y)
+            for (int x = box.lo.x; x < box.hi.x; ++x, ++i)
+                v.set(x, y, z, density[i], Material(material[i]));
+    EXPECT_TRUE(std::equal(v.densityData(), v.densityData() + 16 * 16 * 16, before.densityData()));
+    EXPECT_TRUE(
+        std::equal(v.materialData(), v.materialData() + 16 * 16 * 16, before.materialData()));
 }

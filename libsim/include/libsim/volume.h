@@ -73,6 +73,10 @@ public:
     }
     // Sets every voxel of `box` (clipped to the volume) to density and material, row by row.
     void fill(const Box3i& box, uint8_t density, Material m);
+    // The density and material bytes of every voxel of `box` (inside the volume), x fastest: what
+    // putting the box back takes (SessionServer::submitVoxels).
+    void copyBox(const Box3i& box, std::vector<uint8_t>& density,
+                 std::vector<uint8_t>& material) const;
 
     uint8_t* densityData() { return m_density.data(); }
     const uint8_t* densityData() const { return m_density.data(); }
