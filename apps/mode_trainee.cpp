@@ -168,8 +168,11 @@ std::vector<Sample> csvScript(const std::string& path) {
     while (readLine()) {
         if (!line.empty() && line.back() == '\r')
             line.pop_back();
+        // Line 1 is a header when its first cell is not a number (" 5.0" and "+5.0" are numbers:
+        // judged by the first character, they were skipped as a header and the sample lost).
+        double firstCell = 0.0;
         if (line.empty() || line[0] == '#' ||
-            (lineNo == 1 && !std::isdigit(uint8_t(line[0])) && line[0] != '-' && line[0] != '.'))
+            (lineNo == 1 && !parseNumberCell(line.substr(0, line.find(',')), firstCell)))
             continue;
         // Every cell, an empty last one too: "...,burr:5," has 11 columns, not 10.
         std::vector<std::string> cells;

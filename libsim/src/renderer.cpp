@@ -1191,7 +1191,10 @@ void Renderer::render(const Camera& camera, const PixelRect& rect, Dbi& frame,
         cache->m_inside.assign(size_t(camera.width) * size_t(camera.height), 0);
         cache->m_resumed = 0;
     }
-    PixelRect r = intersect(rect, frame.bounds());
+    // Inside the camera's window too: the hit cache is sized and strided by it, and the assert
+    // above is gone from a release build.
+    PixelRect r =
+        intersect(intersect(rect, frame.bounds()), PixelRect(0, 0, camera.width, camera.height));
     renderInto(camera, r, frame, r.x, r.y, cache);
 }
 

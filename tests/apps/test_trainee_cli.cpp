@@ -146,6 +146,23 @@ TEST(TraineeCli, AScriptCellThatIsNotWhollyANumberIsRefused) {
     EXPECT_EQ(r.err.find("script"), std::string::npos) << r.err;
 }
 
+// Line 1 is a header only when its first cell is not a number: a first sample written " 5.0" or
+// "+5.0" was skipped as a header (judged by its first character), so the script lost it and the
+// decreasing time on line 2 went unnoticed.
+TEST(TraineeCli, AFirstSampleWithASpaceOrAPlusIsASampleNotAHeader) {
+    TempDir dir;
+    for (const char* first : {" 5.0,0,0,50,1,0,0,0,0,burr:5\n", "+5.0,0,0,50,1,0,0,0,0,burr:5\n"}) {
+        SCOPED_TRACE(first);
+        CommandResult r = runScript(dir, std::string(first) + "1,0,0,50,1,0,0,0,0,burr:5\n");
+        EXPECT_EQ(r.exitCode, 1);
+        EXPECT_NE(r.err.find("line 2: times must not decrease"), std::string::npos) << r.err;
+    }
+    // A real header is still one.
+    CommandResult r =
+        runScript(dir, "time_s,x,y,z,qw,qx,qy,qz,speed,tool\n0,0,0,50,1,0,0,0,0,burr:5\n");
+    EXPECT_EQ(r.err.find("script"), std::string::npos) << r.err;
+}
+
 // A script that is a folder read as "no samples"; one with no line ends (/dev/zero, a binary
 // file) grew a single line until memory ran out.
 TEST(TraineeCli, AScriptThatIsNotATextFileIsRefused) {

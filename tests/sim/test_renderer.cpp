@@ -957,4 +957,26 @@ TEST(Renderer, AFarEyeAndTheSmallestSpacingKeepSampleIndicesInIntAndThePicture) 
                 hits, differ, worstMm, double(glm::length(farRay.position - nearRay.position)));
 }
 
+// A frame larger than the camera's window (a caller's mistake the assert names, gone from a
+// release build): only the camera's window is rendered, and its hit cache, sized by the camera,
+// is never read or written past its end (ASan: a heap overflow before).
+TEST(Renderer, AFrameLargerThanTheCameraRendersOnlyTheCamerasWindow) {
+    Volume v = makeSphere(32);
+    Renderer r(v);
+    const Camera camera = cameraPreset("top", v, {32, 32});
+#ifdef NDEBUG
+    Dbi frame(64, 64);
+    for (int y = 0; y < 64; ++y)
+        for (int x = 0; x < 64; ++x)
+            std::memset(frame.color(x, y), 7, 4);
+    HitCache cache;
+    r.render(camera, frame.bounds(), frame, &cache);
+    EXPECT_EQ(frame.color(40, 40)[0], 7) << "beyond the camera's window: untouched";
+    EXPECT_EQ(frame.color(10, 40)[0], 7);
+    EXPECT_NE(frame.color(16, 16)[0], 7) << "the window itself is rendered";
+#else
+    GTEST_SKIP() << "a debug build asserts on the mismatch";
+#endif
+}
+
 } // namespace trephine
