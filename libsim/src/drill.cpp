@@ -341,7 +341,7 @@ DrillResult Driller::drill(Volume& volume, const ToolPose& rawPose, float speed,
     const float top = m_shape.tipLengthMm + m_shape.cutLengthMm;
 
     if (perforator) {
-        const float margin = kPerforatorClutchMarginMm;
+        const float margin = perforatorClutchMarginMm(volume.spacing());
         Box3i near = voxelBox(volume, pose, glm::vec3(-r - margin, -r - margin, -margin),
                               glm::vec3(r + margin, r + margin, top + margin));
         Nearby around = scanNearby(volume, frame, near, m_shape, margin);
@@ -350,13 +350,20 @@ DrillResult Driller::drill(Volume& volume, const ToolPose& rawPose, float speed,
             m_tipInBone = false;
         }
         if (!m_clutchDisengaged) {
-            bool ahead = boneAheadOfTip(
-                volume, pose,
-                margin + std::min({volume.spacing().x, volume.spacing().y, volume.spacing().z}));
-            if (around.dura || (m_tipInBone && !ahead && around.bone))
+            const float minSpacing =
+                std::min({volume.spacing().x, volume.spacing().y, volume.spacing().z});
+            bool ahead = boneAheadOfTip(volume, pose, margin + minSpacing);
+            // How deep the apex is along the tool's axis. Rule (b) holds only at or beyond the
+            // deepest point where the tip had bone ahead: lifted back up its own hole (a peck) the
+            // tip has air ahead and bone around, and the clutch stopped it ~2 mm short for good.
+            const float depth = -glm::dot(pose.position, pose.axis());
+            const bool advancing = !m_tipInBone || depth >= m_deepestMm - 0.5f * minSpacing;
+            if (around.dura || (m_tipInBone && !ahead && around.bone && advancing))
                 m_clutchDisengaged = true;
-            else if (ahead)
+            else if (ahead) {
+                m_deepestMm = m_tipInBone ? std::max(m_deepestMm, depth) : depth;
                 m_tipInBone = true;
+            }
         }
         res.clutchDisengaged = m_clutchDisengaged;
     }

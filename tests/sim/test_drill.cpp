@@ -374,6 +374,81 @@ TEST(Drill, PerforatorStopsAtTheInnerTable) {
     EXPECT_FALSE(perf.clutchDisengaged());
 }
 
+// Dura voxels that face a voxel which was bone in `original` and is air in `v`: where the inner
+// table was cut through.
+int64_t duraBared(const Volume& original, const Volume& v) {
+    int64_t bared = 0;
+    const glm::ivec3 d = v.dims();
+    const glm::ivec3 faces[6] = {{1, 0, 0},  {-1, 0, 0}, {0, 1, 0},
+                                 {0, -1, 0}, {0, 0, 1},  {0, 0, -1}};
+    for (int z = 1; z < d.z - 1; ++z)
+        for (int y = 1; y < d.y - 1; ++y)
+            for (int x = 1; x < d.x - 1; ++x) {
+                if (v.material(x, y, z) != Material::Dura)
+                    continue;
+                for (const glm::ivec3& f : faces) {
+                    const glm::ivec3 q = glm::ivec3(x, y, z) + f;
+                    if (v.material(q.x, q.y, q.z) == Material::Air &&
+                        isBone(original.material(q.x, q.y, q.z))) {
+                        ++bared;
+                        break;
+                    }
+                }
+            }
+    return bared;
+}
+
+// On the server's default skull:128 the inner table is one 1.56 mm voxel thick: with a fixed
+// 0.5 mm look-ahead at voxel centres the perforator cut that voxel before any dura came within
+// the margin, and bared the dura. The margin is at least a voxel, so a lip remains at any size.
+TEST(Drill, PerforatorLeavesTheInnerTableOfACoarseSkull) {
+    for (int n : {64, 128}) {
+        SCOPED_TRACE(n);
+        const Volume original = makeSkull(n);
+        Volume v = original;
+        const SurfaceSite site = defaultBurrSite(v);
+        Driller perf(ToolShape::perforator());
+        bool stopped = false;
+        for (float depth = -1.0f; depth < 14.0f && !stopped; depth += 0.1f)
+            stopped =
+                perf.drill(v, ToolPose::fromAxis(site.position - depth * site.normal, site.normal),
+                           1.0f, 0.7f)
+                    .clutchDisengaged;
+        EXPECT_TRUE(stopped);
+        EXPECT_EQ(duraBared(original, v), 0);
+        EXPECT_TRUE(sameDuraAndBrain(original, v));
+    }
+}
+
+// A peck: fed into the diploe, lifted 2 mm back up its own hole and fed again. The tip then has
+// air ahead and bone around, which rule (b) took for a breakthrough: the clutch stopped ~2 mm of
+// bone short for good. It now goes on to the inner table, as without the peck.
+TEST(Drill, APerforatorPeckDoesNotStopItShortOfTheInnerTable) {
+    const Volume original = makeSkull(256);
+    auto stopDepth = [&](bool peck) {
+        Volume v = original;
+        const SurfaceSite site = defaultBurrSite(v);
+        Driller perf(ToolShape::perforator());
+        auto at = [&](float depth) {
+            return ToolPose::fromAxis(site.position - depth * site.normal, site.normal);
+        };
+        float depth = -1.0f;
+        if (peck) {
+            for (; depth <= 4.5f; depth += 0.1f)
+                EXPECT_FALSE(perf.drill(v, at(depth), 1.0f, 0.7f).clutchDisengaged) << depth;
+            depth -= 2.0f;
+        }
+        for (; depth < 14.0f; depth += 0.1f)
+            if (perf.drill(v, at(depth), 1.0f, 0.7f).clutchDisengaged)
+                break;
+        EXPECT_TRUE(sameDuraAndBrain(original, v));
+        return depth;
+    };
+    const float plain = stopDepth(false), pecked = stopDepth(true);
+    EXPECT_GT(plain, 5.0f);
+    EXPECT_NEAR(pecked, plain, 0.5f) << "stopped at the inner table, not where the peck began";
+}
+
 TEST(Drill, PerforatorDisengagesWhenItBreaksThroughABoneBlock) {
     // makeBox(48): solid from z = -12 mm to +12 mm. Perforate straight down from above.
     Volume v = makeBox(48);

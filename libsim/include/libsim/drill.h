@@ -6,6 +6,7 @@
 #include "libsim/tool.h"
 #include "libsim/volume.h"
 
+#include <algorithm>
 #include <cstdint>
 #include <vector>
 
@@ -18,13 +19,21 @@ inline constexpr double kBurrErosionRate = 1700.0;      // solid cortical (255) 
 inline constexpr double kPerforatorErosionRate = 425.0; // solid cortical in 0.6 s
 inline constexpr int kDiploeErosionFactor = 3;
 
-// Perforator clutch rule. Before each step the perforator looks kPerforatorClutchMarginMm beyond
-// its cutting surface. It disengages (cuts nothing) when
+// Perforator clutch rule. Before each step the perforator looks a margin beyond its cutting
+// surface: kPerforatorClutchMarginMm, or one voxel where voxels are larger (perforatorClutch-
+// MarginMm). It disengages (cuts nothing) when
 //   (a) dura or brain lies within that margin: the tip is through the inner table, or
-//   (b) after its tip has been in bone, the tip finds no bone ahead of it while bone is still
-//       within the margin of the cutter: it broke through into air (a bone block, a cut edge).
+//   (b) after its tip has been in bone, the tip, at or beyond the deepest point where it had
+//       bone ahead, finds no bone ahead of it while bone is still within the margin of the
+//       cutter: it broke through into air (a bone block, a cut edge).
 // It re-engages once no bone lies within the margin of the cutter: lifted clear of the hole.
 inline constexpr float kPerforatorClutchMarginMm = 0.5f;
+// The margin for voxels of `spacing`: at least the largest spacing, so that dura face to face
+// with a voxel inside the cutter is always within it (tested at voxel centres, 0.5 mm let the
+// one-voxel inner table of skull:128, 1.56 mm voxels, be cut through to the dura).
+inline float perforatorClutchMarginMm(glm::vec3 spacing) {
+    return std::max({kPerforatorClutchMarginMm, spacing.x, spacing.y, spacing.z});
+}
 
 // Density units removed from a voxel of material m per unit of cortical erosion (0: never eroded).
 int erosionFactor(Material m);
@@ -78,6 +87,7 @@ private:
     double m_carry = 0.0; // fractional cortical density units not yet removed
     bool m_clutchDisengaged = false;
     bool m_tipInBone = false; // perforator: the tip has met bone since the clutch last engaged
+    float m_deepestMm = 0.0f; // ... and the deepest apex (along the axis) with bone ahead
 };
 
 } // namespace trephine
