@@ -63,24 +63,32 @@ struct Sample {
     net::ToolState tool;
 };
 
+ToolShape shapeOf(const net::ToolState& t) {
+    return ToolKind(t.toolKind) == ToolKind::Perforator ? ToolShape::perforator(t.diameterMm)
+                                                        : ToolShape::burr(t.diameterMm);
+}
+
 // Volume sync (the baseline computes haptics locally): the force model on the client's own copy
 // of the volume, read under the shared lock the client writes it under. No force until the
 // first full volume has arrived.
 class LocalVolumeForce : public ForceSource {
 public:
-    // `shapeAt(t)`: the tool in the script at loop time t (a script may change tools on any row,
-    // as the server's drill follows every tool state).
+    // `toolAt(t)`: the tool state in the script at loop time t (a script may change tools on any
+    // row, as the server's drill follows every tool state): its shape, and its drilling speed for
+    // the drilling resistance, as the server computes it.
     LocalVolumeForce(const net::SessionClient& client, std::shared_mutex& mutex,
-                     std::function<ToolShape(double)> shapeAt)
-        : m_client(client), m_mutex(mutex), m_shapeAt(std::move(shapeAt)) {}
+                     std::function<net::ToolState(double)> toolAt)
+        : m_client(client), m_mutex(mutex), m_toolAt(std::move(toolAt)) {}
     glm::vec3 force(const ToolPose& pose, double now) override {
-        const ForceModel& model = m_models.get(m_shapeAt(now)); // the haptic thread only
+        const net::ToolState t = m_toolAt(now);
+        const ForceModel& model = m_models.get(shapeOf(t)); // the haptic thread only
+        const glm::vec3 velocity = m_velocity.update(pose.position, now);
         std::shared_lock lock(m_mutex);
         const Volume* v = m_client.localVolume();
         if (!v)
             return glm::vec3(0.0f);
         ++m_ticks;
-        return model.compute(*v, pose).force;
+        return model.compute(*v, pose, t.drilling ? t.speed : 0.0f, velocity).force;
     }
     uint64_t ticks() const { return m_ticks.load(); }
     size_t toolsUsed() const { return m_models.size(); }
@@ -88,15 +96,11 @@ public:
 private:
     const net::SessionClient& m_client;
     std::shared_mutex& m_mutex;
-    std::function<ToolShape(double)> m_shapeAt;
+    std::function<net::ToolState(double)> m_toolAt;
     ForceModelCache m_models;
+    VelocityEstimate m_velocity;
     std::atomic<uint64_t> m_ticks{0};
 };
-
-ToolShape shapeOf(const net::ToolState& t) {
-    return ToolKind(t.toolKind) == ToolKind::Perforator ? ToolShape::perforator(t.diameterMm)
-                                                        : ToolShape::burr(t.diameterMm);
-}
 
 // The built-in burr hole: a 5 mm burr starts 1 mm above the default site and feeds in along the
 // normal at 1 mm/s, tool states at 100 Hz, then lifts (drilling off).
@@ -386,8 +390,12 @@ int runTrainee(const TraineeOptions& o) {
     nextPing = start;
     end = start + uint64_t(scriptEnd * 1e6);
     if (config.sync == net::Sync::Volume) {
-        localForce = std::make_unique<LocalVolumeForce>(
-            client, volumeMutex, [&](double t) { return shapeOf(sampleAt(t).tool); });
+        localForce = std::make_unique<LocalVolumeForce>(client, volumeMutex, [&](double t) {
+            net::ToolState s = sampleAt(t).tool;
+            if (t >= scriptEnd)
+                s.speed = 0.0f, s.drilling = false; // as the tool states sent say
+            return s;
+        });
         loop.setForceSource(localForce.get());
     }
     loop.start();

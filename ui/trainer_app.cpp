@@ -166,8 +166,10 @@ public:
                                             : ToolShape::burr(t.diameterMm);
                 const ForceModel& model = m_models.get(shape);
                 const float speed = t.drilling ? t.speed : 0.0f;
-                if (m_client->withLocalVolume(
-                        [&](const Volume& v) { f = model.compute(v, pose, speed).force; })) {
+                const glm::vec3 velocity = m_velocity.update(pose.position, now);
+                if (m_client->withLocalVolume([&](const Volume& v) {
+                        f = model.compute(v, pose, speed, velocity).force;
+                    })) {
                     m_localTicks.fetch_add(1, std::memory_order_relaxed);
                     return f;
                 }
@@ -183,6 +185,7 @@ private:
     const WindowDevice& m_device;
     const net::ClientThread* m_client = nullptr;
     ModelBlender m_blender;
+    VelocityEstimate m_velocity; // the haptic thread's, for the local drilling resistance
     ForceModelCache m_models;
     NewestModel m_serverModel;
     std::atomic<bool> m_local{false};

@@ -179,6 +179,23 @@ ForceResult ForceModel::compute(const Volume& volume, const ToolPose& pose, floa
     return out;
 }
 
+glm::vec3 VelocityEstimate::update(glm::vec3 position, double timeS) {
+    if (!std::isfinite(position.x + position.y + position.z) || !std::isfinite(timeS))
+        return glm::vec3(0.0f);
+    if (m_have && !(timeS > m_lastS))
+        return glm::vec3(0.0f);
+    const bool had = m_have;
+    const glm::vec3 last = m_last;
+    const double dt = timeS - m_lastS;
+    m_have = true;
+    m_last = position;
+    m_lastS = timeS;
+    if (!had || dt > kMaxGapS)
+        return glm::vec3(0.0f);
+    const glm::vec3 v = (position - last) / float(dt);
+    return glm::length(v) <= kMaxMmPerS ? v : glm::vec3(0.0f);
+}
+
 const ForceModel& ForceModelCache::get(const ToolShape& shape) {
     for (auto it = m_models.begin(); it != m_models.end(); ++it) {
         const ToolShape& s = (*it)->shape();

@@ -96,6 +96,7 @@ struct NetPeer {
     // (kSyncSwitchIntervalUs).
     uint64_t syncPushedUs = 0;
     bool syncDeferred = false;
+    VelocityEstimate toolVelocity; // from its tool states' positions and client times
 };
 
 // A message the network thread sends whole, at most once every `intervalUs`: changes mark it and
@@ -730,12 +731,15 @@ void SessionServer::networkLoop() {
         m.clientTimeUs = t.clientTimeUs;
         m.position = t.position;
         const ForceModel& model = forceModels.get(shapeOf(t));
+        // The drilling resistance resists the tool's motion: its velocity from this peer's
+        // tool states (it was never passed, so the resistance was never felt).
+        const glm::vec3 velocity = p.toolVelocity.update(t.position, double(t.clientTimeUs) * 1e-6);
         uint64_t c0 = steadyNowUs();
         ForceResult f;
         {
             std::shared_lock lock(s.volumeRw);
             f = model.compute(s.volume, ToolPose{t.position, t.orientation},
-                              t.drilling ? t.speed : 0.0f);
+                              t.drilling ? t.speed : 0.0f, velocity);
         }
         uint64_t c1 = steadyNowUs();
         m.force = f.force;

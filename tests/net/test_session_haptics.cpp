@@ -113,6 +113,49 @@ TEST(SessionHaptics, EachToolStateIsAnsweredWithTheServersForceModel) {
     EXPECT_GE(client.stats().totalMessagesIn(Channel::Haptic), 2u);
 }
 
+// While drilling, the server's force includes the drilling resistance against the tool's motion,
+// its velocity taken from the peer's successive tool states (no caller passed one: the documented
+// resistance was never felt). The tool presses into dura, which drilling never removes, so the
+// volume the server answers on is the one here.
+TEST(SessionHaptics, ADrillingToolFeelsTheResistanceToItsMotion) {
+    Volume v = makeSphere(40);
+    v.fill(v.bounds(), 0, Material::Air);
+    v.fill(Box3i{{0, 0, 0}, {40, 40, 20}}, 255, Material::Dura); // a dura floor at z = 0
+    SessionServer server(v, testConfig());
+    server.start();
+    ClientConfig cc;
+    cc.view = topView(v);
+    SessionClient client(cc);
+    std::vector<HapticModel> got;
+    client.setHapticCallback([&](const HapticModel& m, uint64_t) { got.push_back(m); });
+    client.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return client.hasFullImage(); }));
+
+    ToolState t;
+    t.toolKind = uint8_t(ToolKind::Burr);
+    t.diameterMm = 4.0f;
+    t.orientation = glm::quat(1, 0, 0, 0); // shaft along +z
+    t.drilling = true;
+    t.speed = 1.0f;
+    t.position = {0.0f, 0.0f, 1.5f}; // the ball's bottom 0.5 mm into the floor
+    t.clientTimeUs = 1000000;
+    client.sendToolState(t);
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return got.size() == 1; }));
+    t.position.z -= 0.5f; // 0.5 mm deeper in 10 ms: 50 mm/s down
+    t.clientTimeUs += 10000;
+    client.sendToolState(t);
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return got.size() == 2; }));
+
+    const ForceModel model(ToolShape::burr(4.0f));
+    const ToolPose pose{t.position, t.orientation};
+    const glm::vec3 resisted = model.compute(v, pose, 1.0f, {0.0f, 0.0f, -50.0f}).force;
+    const glm::vec3 still = model.compute(v, pose, 1.0f).force;
+    EXPECT_TRUE(got[0].contact);
+    EXPECT_EQ(got[1].force, resisted);
+    EXPECT_GT(resisted.z, still.z + 0.05f) << "the resistance pushes back up against the feed";
+    server.stop();
+}
+
 TEST(SessionHaptics, HapticLoopOverLoopbackGetsModelsAndMeasuresTheRoundTrip) {
     Volume sphere = makeSphere(40);
     SessionServer server(sphere, testConfig());

@@ -162,6 +162,20 @@ TEST(ForceModel, CacheKeepsAtMostItsCapacityAndTheShapesInUse) {
     EXPECT_EQ(ForceModelCache().capacity(), ForceModelCache::kDefaultCapacity);
 }
 
+// The tool's velocity from its positions over time: none at first, after a long gap, for a jump,
+// or for a position not later than the last (which is not kept).
+TEST(ForceModel, VelocityEstimateFromSuccessivePositions) {
+    VelocityEstimate e;
+    EXPECT_EQ(e.update({0, 0, 10}, 1.0), glm::vec3(0.0f)) << "the first";
+    const glm::vec3 v = e.update({0, 0, 9.5f}, 1.01);
+    EXPECT_NEAR(v.z, -50.0f, 1e-3f);
+    EXPECT_EQ(e.update({0, 0, 0}, 1.005), glm::vec3(0.0f)) << "reordered: older than the last";
+    EXPECT_NEAR(e.update({0, 0, 9.0f}, 1.02).z, -50.0f, 1e-3f) << "from the last kept";
+    EXPECT_EQ(e.update({0, 0, 8.0f}, 1.5), glm::vec3(0.0f)) << "after a gap";
+    EXPECT_EQ(e.update({50, 0, 8.0f}, 1.51), glm::vec3(0.0f)) << "a jump (5 m/s)";
+    EXPECT_EQ(e.update({50, 0, NAN}, 1.52), glm::vec3(0.0f));
+}
+
 TEST(ForceModel, GradientMatchesFiniteDifferencesBurr2) {
     checkGradient(ToolShape::burr(2.0f), {}, 20);
 }

@@ -68,6 +68,22 @@ private:
     std::vector<ShellPoint> m_shell;
 };
 
+// The tool's velocity (mm/s) from its successive positions: the drilling resistance needs one and
+// no device or tool state carries it. 0 for the first position, after a gap of over kMaxGapS, and
+// for a step faster than kMaxMmPerS (a device re-centred, a tool put elsewhere); a position not
+// later than the last (a reordered tool state) gives 0 and is not kept.
+class VelocityEstimate {
+public:
+    static constexpr double kMaxGapS = 0.1;
+    static constexpr float kMaxMmPerS = 1000.0f;
+    glm::vec3 update(glm::vec3 position, double timeS);
+
+private:
+    bool m_have = false;
+    glm::vec3 m_last{0.0f};
+    double m_lastS = 0.0;
+};
+
 // One ForceModel per tool shape, built on first use: the server's network thread answers each
 // tool state with `cache.get(shape).compute(...)` without rebuilding shells. At most `capacity`
 // shapes, the least recently used dropped first: every diameter in the burr's range is valid, so
