@@ -403,6 +403,11 @@ int runAllStudies(const AllOptions& o, const std::string& command) {
     // Options of the later studies are checked before the first one runs.
     net::parseCodec(o.codec);
     const bool linkRun = o.link != "off";
+    // An empty --link parsed as no conditions: the second run was plain loopback again, written
+    // up as the emulated link.
+    if (linkRun && o.link.find_first_not_of(" ,") == std::string::npos)
+        throw Error("--link: give the link's conditions (e.g. rate=100) or off, not '" + o.link +
+                    "'");
     if (linkRun)
         net::LinkConditions::parse(o.link);
     // A volume that does not open fails here, not after the haptics study has replaced the

@@ -84,6 +84,15 @@ void checkUpdateStudy(const Volume& volume, const UpdateStudyConfig& config) {
         if (std::none_of(methods.begin(), methods.end(),
                          [&](const Method& m) { return m.name == name; }))
             throw Error("update study: unknown method '" + name + "'");
+    for (size_t i = 0; i < config.sizes.size(); ++i)
+        if (std::find(config.sizes.begin(), config.sizes.begin() + ptrdiff_t(i), config.sizes[i]) !=
+            config.sizes.begin() + ptrdiff_t(i))
+            throw Error("update study: box size " + std::to_string(config.sizes[i]) +
+                        " is given twice");
+    for (size_t i = 0; i < config.methods.size(); ++i)
+        if (std::find(config.methods.begin(), config.methods.begin() + ptrdiff_t(i),
+                      config.methods[i]) != config.methods.begin() + ptrdiff_t(i))
+            throw Error("update study: method '" + config.methods[i] + "' is given twice");
     for (int n : config.sizes) {
         const Box3i box = surfaceBox(volume, n);
         // Without bone at the top of the box the cuts would be cuts of air, measured as if they
@@ -92,6 +101,14 @@ void checkUpdateStudy(const Volume& volume, const UpdateStudyConfig& config) {
         if (box.empty() || volume.density(c.x, c.y, c.z) < kSurfaceDensity)
             throw Error("update study: the volume has no bone on its middle column, where the "
                         "study cuts (the paper camera looks down +z at it)");
+        // A box that does not fit below the bone surface is clipped by the volume: its rows
+        // would say N^3 for fewer voxels (120^3 on skull:128 is 120 x 120 x 98), and the byte
+        // targets would be judged against them.
+        if (box.count() != int64_t(n) * n * n)
+            throw Error("update study: a " + std::to_string(n) +
+                        "^3 box does not fit below "
+                        "the bone surface of the volume (" +
+                        std::to_string(box.hi.z - box.lo.z) + " voxels deep there)");
     }
 }
 

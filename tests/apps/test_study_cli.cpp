@@ -229,6 +229,34 @@ TEST(StudyCli, UpdatesOnAVolumeWithoutBoneOnItsMiddleColumnSaysSo) {
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
 }
 
+// A box that does not fit below the bone surface was clipped by the volume and still reported
+// as N^3 (120^3 on skull:128 held 120 x 120 x 98 voxels), sizes or methods given twice ran
+// twice (the targets read the first), and an empty --link ran loopback again as the "emulated
+// link": each is one line, before anything runs.
+TEST(StudyCli, ABoxBelowTheVolumeRepeatsAndAnEmptyLinkAreRefused) {
+    TempDir dir;
+    const struct {
+        const char* args;
+        const char* says;
+    } cases[] = {
+        {"study updates --sizes 10,120 --cycles 2 --rounds 1",
+         "a 120^3 box does not fit below the bone surface of the volume (98 voxels deep there)"},
+        {"study updates --sizes 10,10 --cycles 2 --rounds 1", "box size 10 is given twice"},
+        {"study updates --sizes 10 --methods dbi,dbi --cycles 2 --rounds 1",
+         "method 'dbi' is given twice"},
+        {"study all --quick --link ''", "--link: give the link's conditions"},
+    };
+    for (const auto& c : cases) {
+        SCOPED_TRACE(c.args);
+        CommandResult r = runTrephine(dir, std::string(c.args) + " --out '" + dir / "o" + "'");
+        EXPECT_NE(r.exitCode, 0);
+        EXPECT_NE(r.err.find(c.says), std::string::npos) << r.err;
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+        EXPECT_FALSE(std::filesystem::exists(dir / "o/updates.csv"));
+        EXPECT_FALSE(std::filesystem::exists(dir / "o/haptics.csv"));
+    }
+}
+
 // --cycles and --rounds given on the command line win over --quick's.
 TEST(StudyCli, UpdatesQuickKeepsTheCyclesGiven) {
     TempDir dir;
