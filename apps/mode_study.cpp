@@ -27,6 +27,7 @@
 #include <memory>
 #include <string>
 #include <thread>
+#include <unistd.h>
 #include <vector>
 
 namespace trephine::app {
@@ -228,6 +229,23 @@ std::string makeOutDir(const std::string& out) {
     return out;
 }
 
+// Staging folders of `study all` runs that ended without cleaning up (killed): their process is
+// gone. A running study's folder (another process writing to DIR) is left alone.
+void removeAbandonedStaging(const std::string& out) {
+    std::error_code ec;
+    for (const auto& entry : std::filesystem::directory_iterator(out, ec)) {
+        const std::string name = entry.path().filename().string();
+        const std::string prefix = ".study-all-";
+        if (name.rfind(prefix, 0) != 0 || !entry.is_directory(ec))
+            continue;
+        const std::string pid = name.substr(prefix.size());
+        if (pid.empty() || pid.find_first_not_of("0123456789") != std::string::npos ||
+            std::filesystem::exists("/proc/" + pid, ec))
+            continue;
+        std::filesystem::remove_all(entry.path(), ec);
+    }
+}
+
 // Through a temporary file renamed over `path` once complete: a failed write (a full disk) leaves
 // an earlier run's file whole, where it used to leave it empty.
 void writeText(const std::filesystem::path& path, const std::string& text) {
@@ -426,6 +444,22 @@ int runAllStudies(const AllOptions& o, const std::string& command) {
         net::checkUpdateStudy(studyVolume(*volume, u.camera), config);
     }
     makeOutDir(o.out);
+    // Every file is written into a staging folder inside DIR and moved into DIR only once the
+    // report is written: a run stopped or failing part way (a full disk, Ctrl-C during the
+    // display study) left new CSVs beside an earlier run's report and plots.
+    const std::filesystem::path staging =
+        std::filesystem::path(o.out) / (".study-all-" + std::to_string(getpid()));
+    removeAbandonedStaging(o.out);
+    std::filesystem::remove_all(staging);
+    makeOutDir(staging.string());
+    struct RemoveStaging {
+        std::filesystem::path path;
+        ~RemoveStaging() {
+            std::error_code ec;
+            std::filesystem::remove_all(path, ec);
+        }
+    } removeStaging{staging};
+    u.out = staging.string();
     net::StudyReportInput input;
     input.command = command;
     input.machine = net::describeMachine();
@@ -434,7 +468,7 @@ int runAllStudies(const AllOptions& o, const std::string& command) {
     const int studies = linkRun ? 4 : 3;
     std::printf("== 1/%d haptics ==\n", studies);
     HapticsOptions h;
-    h.out = o.out;
+    h.out = staging.string();
     h.quick = o.quick;
     input.haptics = runHapticsStudy(h);
 
@@ -450,15 +484,26 @@ int runAllStudies(const AllOptions& o, const std::string& command) {
 
     std::printf("\n== %d/%d display ==\n", studies, studies);
     DisplayOptions d;
-    d.out = o.out;
+    d.out = staging.string();
     d.quick = o.quick;
     input.display = runDisplayStudy(d);
 
-    const std::string report = net::writeStudyReport(input, o.out);
+    const std::string report = net::writeStudyReport(input, staging.string());
+    writeText(staging / "report.md", report);
+    // The whole set is there: into DIR, each file replacing the earlier run's.
+    for (const auto& entry : std::filesystem::directory_iterator(staging)) {
+        std::error_code ec;
+        std::filesystem::rename(entry.path(),
+                                std::filesystem::path(o.out) / entry.path().filename(), ec);
+        if (ec)
+            throw Error("cannot move " + entry.path().filename().string() + " into " + o.out +
+                        ": " + ec.message());
+    }
     const auto path = std::filesystem::path(o.out) / "report.md";
-    writeText(path, report);
-    std::printf("\nwrote %s (with updates.svg%s and bytes.svg)\n", path.string().c_str(),
-                linkRun ? ", updates-link.svg" : "");
+    std::printf("\nwrote %s (with updates.svg%s and bytes.svg; the studies' files moved there "
+                "from %s)\n",
+                path.string().c_str(), linkRun ? ", updates-link.svg" : "",
+                staging.filename().string().c_str());
     // Files of ours an earlier run left in DIR that this run did not write (--link off, or no
     // display) would sit beside a report that does not mention them, as if they were its figures.
     // They go once the new report is in place (a run that fails before leaves the old set whole).

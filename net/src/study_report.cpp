@@ -1,5 +1,7 @@
 #include "net/study_report.h"
 
+#include "libsim/replacing_file.h"
+
 #include "libsim/error.h"
 #include "libsim/svg_plot.h"
 #include "net/codec.h"
@@ -57,10 +59,10 @@ std::string bytesText(double b) {
     return formatString("%.0f B", b);
 }
 
+// Through a temporary file renamed into place: a full disk or a stopped run leaves the earlier
+// plot whole, not one cut off mid-tag.
 void writeFile(const std::string& path, const std::string& text) {
-    std::ofstream f(path);
-    f << text;
-    if (!f)
+    if (!writeReplacing(path, text))
         throw Error("cannot write " + path);
 }
 
@@ -462,8 +464,9 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
             row.push_back(d && v ? fmt(d->bytesPerUpdate / v->rawBytesPerUpdate, "%.3f") : "-");
             t8.push_back(row);
         }
-        size.series.push_back(paperDbi);
-        size.series.push_back(paperVol);
+        // The paper's references first, so the measured series are drawn over them: the volume's
+        // N^3 is the paper's N^3, and drawn after it the measured line and markers were hidden.
+        size.series.insert(size.series.begin(), {paperDbi, paperVol});
         std::vector<std::string> h8{"BB_volume"};
         for (const std::string& m : methods)
             h8.push_back(m);

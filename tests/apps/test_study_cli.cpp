@@ -7,6 +7,18 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
+
+#include <thread>
+
+#include <unistd.h>
+
+#include <sys/wait.h>
+
+#include <fcntl.h>
+
+#include <csignal>
+
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -424,4 +436,44 @@ TEST(StudyCli, AFailedWriteLeavesTheEarlierCsvWhole) {
         ++files;
     }
     EXPECT_EQ(files, 1u) << "no temporary file left behind";
+}
+
+// `study all` writes into a staging folder inside DIR and moves the set in once the report is
+// written: stopped part way (Ctrl-C after the haptics study), it leaves the earlier run's files
+// as they were (it left new CSVs beside the old report). A staging folder a killed run left is
+// removed by the next run.
+TEST(StudyCli, AllStoppedPartWayLeavesTheEarlierRunsFilesAsTheyWere) {
+    TempDir dir;
+    const std::string out = dir / "all";
+    std::filesystem::create_directories(out + "/.study-all-999999999");
+    for (const char* name : {"report.md", "haptics.csv", "updates.csv"})
+        std::ofstream(out + "/" + name) << "yesterday's run\n";
+    const pid_t pid = fork();
+    if (pid == 0) {
+        const int devnull = open("/dev/null", O_WRONLY);
+        dup2(devnull, 1);
+        dup2(devnull, 2);
+        execl(TREPHINE_BIN, TREPHINE_BIN, "study", "all", "--quick", "--link", "off", "--out",
+              out.c_str(), static_cast<char*>(nullptr));
+        _exit(127);
+    }
+    ASSERT_GT(pid, 0);
+    const std::string staged = out + "/.study-all-" + std::to_string(pid) + "/haptics.csv";
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+    while (!std::filesystem::exists(staged) && std::chrono::steady_clock::now() < deadline)
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    const bool reached = std::filesystem::exists(staged);
+    kill(pid, SIGINT);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    ASSERT_TRUE(reached) << "the haptics study never finished";
+    for (const char* name : {"report.md", "haptics.csv", "updates.csv"}) {
+        std::ifstream in(out + "/" + name);
+        std::string line;
+        std::getline(in, line);
+        EXPECT_EQ(line, "yesterday's run") << name;
+    }
+    EXPECT_FALSE(std::filesystem::exists(out + "/updates.svg"));
+    EXPECT_FALSE(std::filesystem::exists(out + "/.study-all-999999999"))
+        << "a killed run's staging folder is removed";
 }

@@ -245,3 +245,23 @@ TEST(StudyReport, TheTenthSizeTargetIsAt80EvenWithLargerBoxes) {
     EXPECT_EQ(lines[1].rfind("PASS update size 100^3", 0), 0u) << lines[1];
     EXPECT_NE(lines[1].find("(target <= 1)"), std::string::npos) << lines[1];
 }
+
+// bytes.svg draws the paper's reference lines first: the volume's measured N^3 equals the paper's
+// N^3, and drawn after it the reference hid the measured line and its markers.
+TEST(StudyReport, TheMeasuredSizesAreDrawnOverThePapersReferences) {
+    StudyReportInput in = input();
+    const std::string dir =
+        (std::filesystem::temp_directory_path() / "trephine_test_study_report_bytes").string();
+    std::filesystem::remove_all(dir);
+    writeStudyReport(in, dir);
+    std::ifstream f(dir + "/bytes.svg");
+    const std::string svg((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+    const size_t paperVolume = svg.find("<polyline fill=\"none\" stroke=\"#444444\"");
+    ASSERT_NE(paperVolume, std::string::npos) << svg.substr(0, 2000);
+    const size_t lastLine = svg.rfind("<polyline");
+    EXPECT_LT(paperVolume, lastLine) << "a measured series comes after the reference";
+    EXPECT_EQ(svg.find("stroke-dasharray", lastLine), std::string::npos)
+        << "the last line drawn is a measured one";
+    EXPECT_NE(svg.find("</svg>"), std::string::npos);
+    std::filesystem::remove_all(dir);
+}
