@@ -1,9 +1,8 @@
-// The brick grid on its own, one thread (it sits in the server's erode stage, before the render
-// of BB_screen): update() after the update study's N^3 surface cut (N = 10, 40, 80) on skull:128
-// and skull:256, and build() of a whole grid. Each iteration starts from the grid as it was
-// before the cut (copied outside the timed part). Counters: update_us / build_ms per call, and
-// the bricks whose distance the update changed.
-// Filter with --benchmark_filter=BrickGrid.
+// The brick grid on its own, one thread (the server counts it in its render stage, as grid_ms,
+// before the render of BB_screen): update() after the update study's N^3 surface cut (N = 10, 40,
+// 80) on skull:128 and skull:256, and build() of a whole grid. Each iteration starts from the grid
+// as it was before the cut (copied outside the timed part). Counters: update_us / build_ms per
+// call, and the bricks whose distance the update changed. Filter with --benchmark_filter=BrickGrid.
 #include "libsim/brick_grid.h"
 #include "libsim/skull.h"
 #include "libsim/volume.h"

@@ -260,7 +260,7 @@ BENCHMARK(BM_RenderPaperFrame128)->Unit(benchmark::kMillisecond)->UseRealTime();
 // at the paper's spacing, an N^3 box centred on the middle column with its top face at the bone
 // surface facing the camera, cut to air. The hole's BB_screen is re-rendered through the view's hit
 // cache as it was before the cut (the server's path); the brick grid's update for the cut is timed
-// on its own (the server pays it in its erode stage).
+// on its own (the server counts it in its render stage, as grid_ms).
 struct PaperHole {
     Volume volume;
     Box3i box;
@@ -388,7 +388,8 @@ void BM_RenderPaperHoleOutsideRect(benchmark::State& state) {
 }
 BENCHMARK(BM_RenderPaperHoleOutsideRect)->Arg(80)->Unit(benchmark::kMillisecond)->UseRealTime();
 
-// Keeping the brick grid in step with the cut (one thread; part of the server's erode stage).
+// Keeping the brick grid in step with the cut (one thread; part of the server's render stage, as
+// grid_ms).
 void BM_RenderPaperHoleGridUpdate(benchmark::State& state) {
     PaperHole& h = paperHole(int(state.range(0)));
     BrickGrid grid;
