@@ -1,6 +1,6 @@
-// `trephine server`: hold the skull and serve trainees and instructors over ENet until SIGINT or
-// SIGTERM, then apply every queued tool state and write --save-on-exit (the volume, and the
-// instructors' marks beside it, which a later `--volume` of that file reads back).
+// `trephine server`: hold the skull and serve trainees and instructors over ENet until SIGINT,
+// SIGTERM, SIGHUP or SIGQUIT, then apply every queued tool state and write --save-on-exit (the
+// volume, and the instructors' marks beside it, which a later `--volume` of that file reads back).
 #include "modes.h"
 
 #include "libsim/error.h"
@@ -35,17 +35,49 @@ struct ServerOptions {
     std::string report;
 };
 
+// Whether two paths name one file, existing or not (`a/../s.nrrd` and `./s.nrrd` do).
+bool samePath(const std::string& a, const std::string& b) {
+    std::error_code ec1, ec2;
+    const auto ca = std::filesystem::weakly_canonical(a, ec1);
+    const auto cb = std::filesystem::weakly_canonical(b, ec2);
+    if (ec1 || ec2)
+        return std::filesystem::path(a).lexically_normal() ==
+               std::filesystem::path(b).lexically_normal();
+    return ca == cb;
+}
+
+// The file a --volume spec opens: the whole spec when it names a file, else the part before its
+// query (`s.nrrd?spacing=2,2,2`); "" for the built-in volumes and slice folders.
+std::string volumeFileOf(const std::string& spec) {
+    std::error_code ec;
+    if (std::filesystem::is_regular_file(spec, ec))
+        return spec;
+    const size_t mark = spec.rfind('?');
+    if (mark != std::string::npos && std::filesystem::is_regular_file(spec.substr(0, mark), ec))
+        return spec.substr(0, mark);
+    return {};
+}
+
 int runServer(const ServerOptions& o) {
     // Written when the session ends: a folder that is not there would lose its statistics.
-    if (!o.report.empty())
+    if (!o.report.empty()) {
         checkOutputFolder("--report", o.report);
+        // The report is written after the save: over it, the drilled skull would become JSON.
+        if (!o.saveOnExit.empty()) {
+            for (const std::string& saved : {o.saveOnExit, net::marksPathFor(o.saveOnExit)})
+                if (samePath(o.report, saved))
+                    throw Error("--report " + o.report +
+                                " is where --save-on-exit writes the session: give it another "
+                                "name");
+        }
+    }
     Volume volume = openVolume(o.volume);
     net::ServerConfig config;
     // A session saved by --save-on-exit left its marks beside the volume: they come back too.
-    const std::string marks = net::marksPathFor(o.volume);
+    const std::string volumeFile = volumeFileOf(o.volume);
+    const std::string marks = net::marksPathFor(volumeFile);
     std::error_code ec;
-    if (std::filesystem::is_regular_file(o.volume, ec) &&
-        std::filesystem::is_regular_file(marks, ec)) {
+    if (!volumeFile.empty() && std::filesystem::is_regular_file(marks, ec)) {
         config.marks = net::readMarksFile(marks);
         std::printf("trephine server: %zu mark%s from %s\n", config.marks.size(),
                     config.marks.size() == 1 ? "" : "s", marks.c_str());
@@ -57,8 +89,12 @@ int runServer(const ServerOptions& o) {
     config.maxClients = o.maxClients;
     glm::ivec3 d = volume.dims();
     net::SessionServer server(std::move(volume), config);
-    std::signal(SIGINT, onStopSignal);
-    std::signal(SIGTERM, onStopSignal);
+    // Every way a session is ended from outside saves it: Ctrl-C, kill, Ctrl-\ (SIGQUIT), and a
+    // closed terminal or dropped ssh (SIGHUP). Output gone (a `| tee` ended first) must not kill it
+    // either: SIGPIPE is ignored and the lines are lost, not the session.
+    for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT})
+        std::signal(sig, onStopSignal);
+    std::signal(SIGPIPE, SIG_IGN);
     server.start();
     std::printf("trephine server: %s (%d x %d x %d) on port %u; Ctrl-C stops\n", o.volume.c_str(),
                 d.x, d.y, d.z, unsigned(server.port()));
@@ -92,7 +128,8 @@ void addServerMode(CLI::App& root, int& exitCode) {
         ->capture_default_str();
     sub->add_option(
            "--save-on-exit", o->saveOnExit,
-           "Write the final volume here when the server stops (.nrrd keeps materials), and "
+           "Write the final volume here when the server stops (.nrrd or .nhdr, which keep the "
+           "materials), and "
            "the instructors' marks beside it (FILE.marks, read back by --volume FILE)")
         ->check(outputFile());
     sub->add_option("--render-threads", o->renderThreads, "Render workers (0: all cores)")

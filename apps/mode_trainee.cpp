@@ -23,6 +23,7 @@
 #include <atomic>
 #include <charconv>
 #include <chrono>
+#include <csignal>
 #include <cstdio>
 #include <deque>
 #include <filesystem>
@@ -35,6 +36,15 @@
 namespace trephine::app {
 
 namespace {
+
+// [Headless] Silence after which the server counts as lost (it answers pings within ms).
+constexpr uint64_t kServerSilenceUs = 3000000;
+
+std::atomic<bool> g_traineeStop{false};
+
+extern "C" void onTraineeStopSignal(int) {
+    g_traineeStop = true;
+}
 
 struct TraineeOptions {
     std::string connect;
@@ -332,6 +342,7 @@ int runTrainee(const TraineeOptions& o) {
     std::printf("trainee: %s as client %u, view %s (%s), sync %s, codec %s, %zu script samples\n",
                 o.connect.c_str(), unsigned(client.welcome().clientId), o.camera.c_str(),
                 describe(camera).c_str(), o.sync.c_str(), o.codec.c_str(), script.size());
+    std::fflush(stdout); // shown now, not when the script ends, where stdout is a pipe or file
     // The haptic loop (its own thread, 1 kHz) reads a device that follows the script's poses,
     // extrapolates the server's force models and sends tool states at --tool-rate through its
     // throttle; this thread owns the client, so the loop's sends wait in a queue for it.
@@ -398,8 +409,19 @@ int runTrainee(const TraineeOptions& o) {
         });
         loop.setForceSource(localForce.get());
     }
+    // A server killed, crashed or cut off sends no goodbye, and ENet gives up on it only after 5
+    // to 30 s: past a short script. The pings below (every 0.1 s) are answered within
+    // milliseconds, so seconds of silence mean it is gone.
+    auto serverLost = [&] {
+        return !client.closed() && net::steadyNowUs() - client.lastHeardUs() > kServerSilenceUs;
+    };
+    // Ctrl-C (or kill, or a closed terminal) ends the script early; the figures so far are still
+    // printed and --report / --save-dbi still written.
+    g_traineeStop = false;
+    for (int sig : {SIGINT, SIGTERM, SIGHUP})
+        std::signal(sig, onTraineeStopSignal);
     loop.start();
-    while (net::steadyNowUs() < end && !client.closed()) {
+    while (net::steadyNowUs() < end && !client.closed() && !serverLost() && !g_traineeStop) {
         {
             std::lock_guard lock(sendMutex);
             batch.assign(toSend.begin(), toSend.end());
@@ -419,7 +441,7 @@ int runTrainee(const TraineeOptions& o) {
     loop.stop();
     HapticLoopStats haptics = loop.stats();
     client.setHapticCallback({}); // the loop is stopped; models still count in the stats
-    if (!client.closed()) {
+    if (!client.closed() && !serverLost()) {
         net::ToolState last = script.back().tool; // lift: drilling off
         last.speed = 0.0f;
         last.drilling = false;
@@ -430,7 +452,7 @@ int runTrainee(const TraineeOptions& o) {
     // then counted as ours).
     const uint64_t drainUntil = net::steadyNowUs() + 2000000;
     uint64_t lastCount = client.updatesApplied(), quietSince = net::steadyNowUs();
-    while (!client.closed() && net::steadyNowUs() - quietSince < 500000 &&
+    while (!client.closed() && !serverLost() && net::steadyNowUs() - quietSince < 500000 &&
            net::steadyNowUs() < drainUntil) {
         client.poll(5);
         if (client.updatesApplied() != lastCount) {
@@ -439,9 +461,12 @@ int runTrainee(const TraineeOptions& o) {
         }
     }
     double elapsed = double(net::steadyNowUs() - start) * 1e-6;
-    bool refused = client.closed();
-    std::string reason = client.closeReason();
-    client.disconnect();
+    const bool refused = client.closed();
+    const bool lost = serverLost();
+    const bool interrupted = g_traineeStop;
+    const std::string reason = client.closeReason();
+    if (!lost)
+        client.disconnect();
 
     const net::NetStats& st = client.stats();
     std::printf("trainee: %llu updates (%llu full), latency p50 %.0f us p99 %.0f us, "
@@ -504,6 +529,17 @@ int runTrainee(const TraineeOptions& o) {
         writeDbiExr(o.saveDbi, client.dbi());
     if (refused) {
         std::fprintf(stderr, "trainee: the server closed the session: %s\n", reason.c_str());
+        return 1;
+    }
+    if (lost) {
+        std::fprintf(stderr,
+                     "trainee: lost the server %s: nothing heard for %.0f s (killed, "
+                     "crashed or cut off), %.1f s into the script\n",
+                     o.connect.c_str(), double(kServerSilenceUs) * 1e-6, elapsed);
+        return 1;
+    }
+    if (interrupted) {
+        std::fprintf(stderr, "trainee: stopped by a signal %.1f s into the script\n", elapsed);
         return 1;
     }
     return 0;

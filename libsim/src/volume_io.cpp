@@ -897,6 +897,11 @@ void checkSaveTarget(const std::string& path, const SaveOptions& options) {
     FileSink probe(path); // the folder takes a new file; removed again, `path` untouched
 }
 
+bool savesMaterials(const std::string& path) {
+    const std::string lower = toLower(path);
+    return endsWith(lower, ".nrrd") || endsWith(lower, ".nhdr");
+}
+
 void saveVolume(const Volume& volume, const std::string& path, const SaveOptions& options) {
     if (volume.empty())
         fail(path, "cannot save an empty volume");

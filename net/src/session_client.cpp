@@ -25,6 +25,7 @@ SessionClient::~SessionClient() {
 
 void SessionClient::connect(const ENetAddress& address) {
     m_peer = m_host.connect(address, m_config.protocolVersion);
+    m_lastHeardUs = steadyNowUs();
     if (!m_peer)
         throw Error("cannot connect to " + formatAddress(address) + ": no free ENet peer");
 }
@@ -73,6 +74,7 @@ void SessionClient::onEvent(const ENetEvent& ev) {
     switch (ev.type) {
     case ENET_EVENT_TYPE_CONNECT: {
         m_connected = true;
+        m_lastHeardUs = steadyNowUs();
         disableThrottle(m_peer);
         Hello h;
         h.role = m_config.role;
@@ -99,6 +101,7 @@ void SessionClient::onEvent(const ENetEvent& ev) {
         m_peer = nullptr;
         return;
     case ENET_EVENT_TYPE_RECEIVE: {
+        m_lastHeardUs = steadyNowUs();
         m_stats.countIn(Channel(std::min<int>(ev.channelID, int(Channel::Count) - 1)),
                         ev.packet->dataLength);
         if (!handleMessage({ev.packet->data, ev.packet->dataLength}, steadyNowUs()))

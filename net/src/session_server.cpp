@@ -529,6 +529,12 @@ const ServerConfig& checkedConfig(const ServerConfig& config) {
     // Now, not at the end of the session: a path that cannot be written would lose it all.
     if (!config.saveOnExit.empty()) {
         checkSaveTarget(config.saveOnExit);
+        // A NIfTI file holds densities only: the session would come back with its dura and brain
+        // turned to bone, so it is refused before anyone drills.
+        if (!savesMaterials(config.saveOnExit))
+            throw Error("--save-on-exit " + config.saveOnExit +
+                        ": NIfTI keeps no materials (dura and brain would reload as bone); "
+                        "save the session as .nrrd or .nhdr");
         // The marks' file is replaced as ReplacingFile does, which writes a device or a folder in
         // place: a folder there would fail only at the end.
         const std::string marks = marksPathFor(config.saveOnExit);

@@ -38,16 +38,17 @@ using trephine::testing::shellQuote;
 
 namespace {
 
-// `trephine server ARGS` as a child process, its stdout read line by line.
+// `trephine MODE ARGS` (MODE: server unless given) as a child process, its stdout read line by
+// line.
 struct ServerProcess {
     pid_t pid = -1;
     FILE* out = nullptr;
 
-    explicit ServerProcess(std::vector<std::string> args) {
+    explicit ServerProcess(std::vector<std::string> args, const char* mode = "server") {
         int fds[2];
         if (pipe(fds) != 0)
             return;
-        args.insert(args.begin(), {TREPHINE_BIN, "server"});
+        args.insert(args.begin(), {TREPHINE_BIN, mode});
         pid = fork();
         if (pid == 0) {
             dup2(fds[1], 1);
@@ -71,9 +72,9 @@ struct ServerProcess {
         char buf[512] = {};
         return out && fgets(buf, sizeof buf, out) ? std::string(buf) : std::string();
     }
-    // SIGTERM, then its exit status (-1: it did not exit normally).
-    int stop() {
-        kill(pid, SIGTERM);
+    // `sig` (SIGTERM by default), then its exit status (-1: it did not exit normally).
+    int stop(int sig = SIGTERM) {
+        kill(pid, sig);
         int status = 0;
         const bool waited = waitpid(pid, &status, 0) == pid;
         pid = -1;
@@ -340,4 +341,120 @@ TEST(SessionCli, AServerStartedFromASavedSessionServesItsMarks) {
     EXPECT_NE(r.exitCode, 0);
     EXPECT_NE(r.err.find("session.nrrd.marks:2: coordinate"), std::string::npos) << r.err;
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+
+    // Opened with a query, the file's marks are still its own (the marks path took the query in,
+    // found none, and the save then wrote an empty marks file over the two).
+    writeMarksFile(marksPathFor(volume), {a, b});
+    ServerProcess queried({"--port", "0", "--volume", volume + "?spacing=2,2,2", "--render-threads",
+                           "1", "--save-on-exit", volume});
+    const std::string line = queried.line();
+    EXPECT_NE(line.find("2 marks from " + marksPathFor(volume)), std::string::npos) << line;
+    EXPECT_GT(portIn(queried.line()), 0);
+    EXPECT_EQ(queried.stop(), 0);
+    EXPECT_EQ(readMarksFile(marksPathFor(volume)).size(), 2u);
+}
+
+// A closed terminal or dropped ssh (SIGHUP) killed the server without its save, and so did its
+// output gone (piped into a `tee` that Ctrl-C ended: SIGPIPE on the next line): both now stop it
+// as Ctrl-C does, with the session saved and exit 0.
+TEST(SessionCli, AHangupOrAClosedOutputStillSavesTheSession) {
+    trephine::testing::TempDir dir;
+    for (int sig : {SIGHUP, SIGQUIT, SIGINT}) {
+        SCOPED_TRACE(sig);
+        const std::string path = dir / ("s" + std::to_string(sig) + ".nrrd");
+        ServerProcess server({"--port", "0", "--volume", "sphere:32", "--render-threads", "1",
+                              "--save-on-exit", path});
+        ASSERT_GT(portIn(server.line()), 0);
+        if (sig == SIGINT) { // the reader is gone: the server's next line meets a closed pipe
+            fclose(server.out);
+            server.out = nullptr;
+        }
+        EXPECT_EQ(server.stop(sig), 0);
+        EXPECT_EQ(loadVolume(path).dims(), glm::ivec3(32));
+        EXPECT_TRUE(std::filesystem::exists(marksPathFor(path)));
+    }
+}
+
+// --report over the saved session (or its marks) replaced the skull with JSON, exit 0; a NIfTI
+// session reloads with no dura or brain: each is one line at start.
+TEST(SessionCli, AReportOverTheSaveOrANiftiSaveIsRefusedAtStart) {
+    trephine::testing::TempDir dir;
+    const std::string save = dir / "s.nrrd";
+    for (const std::string& args :
+         {"--save-on-exit " + shellQuote(save) + " --report " + shellQuote(save),
+          "--save-on-exit " + shellQuote(save) + " --report " + shellQuote(save + ".marks"),
+          "--save-on-exit " + shellQuote(dir / "s.nii.gz"),
+          "--save-on-exit " + shellQuote(dir / "s.NII")}) {
+        SCOPED_TRACE(args);
+        const auto r =
+            trephine::testing::runTrephine(dir, "server --port 0 --volume sphere:16 " + args);
+        EXPECT_NE(r.exitCode, 0);
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+        EXPECT_TRUE(r.err.find("where --save-on-exit writes") != std::string::npos ||
+                    r.err.find("NIfTI keeps no materials") != std::string::npos)
+            << r.err;
+        EXPECT_FALSE(std::filesystem::exists(save));
+    }
+}
+
+// A headless trainee whose server died mid-script (killed: no goodbye) ran its script to the end
+// and exited 0, as ENet notices a silent peer only after 5 to 30 s: it now says it lost the server
+// within seconds and exits 1, with its report still written.
+TEST(SessionCli, AHeadlessTraineeWhoseServerDiesSaysSoAndFails) {
+    trephine::testing::TempDir dir;
+    ServerProcess server({"--port", "0", "--volume", "sphere:32", "--render-threads", "1"});
+    const int port = portIn(server.line());
+    ASSERT_GT(port, 0);
+    const std::string cmd = shellQuote(TREPHINE_BIN) +
+                            " trainee --connect 127.0.0.1:" + std::to_string(port) +
+                            " --headless --camera top --size 64 --duration 4 --report " +
+                            shellQuote(dir / "r.json") + " 2>&1";
+    FILE* p = popen(cmd.c_str(), "r");
+    ASSERT_NE(p, nullptr);
+    std::string text;
+    char buf[1024];
+    bool killed = false;
+    while (fgets(buf, sizeof buf, p)) {
+        text += buf;
+        if (!killed && text.find("script samples") != std::string::npos) {
+            server.stop(SIGKILL); // the script has started
+            killed = true;
+        }
+    }
+    const int status = pclose(p);
+    ASSERT_TRUE(killed) << text;
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 1) << text;
+    EXPECT_NE(text.find("trainee: lost the server 127.0.0.1:" + std::to_string(port) +
+                        ": nothing heard for 3 s"),
+              std::string::npos)
+        << text;
+    EXPECT_TRUE(std::filesystem::exists(dir / "r.json"));
+}
+
+// Ctrl-C of a headless trainee ended it at once with nothing written: the script stops early, and
+// the figures so far are printed and the report written, exit 1.
+TEST(SessionCli, CtrlCOfAHeadlessTraineeStillWritesItsReport) {
+    trephine::testing::TempDir dir;
+    Volume sphere = makeSphere(32);
+    SessionServer server(sphere, loopbackServerConfig("sphere:32"));
+    server.start();
+    ServerProcess trainee({"--connect", "127.0.0.1:" + std::to_string(server.port()), "--headless",
+                           "--camera", "top", "--size", "64", "--duration", "30", "--report",
+                           dir / "r.json"},
+                          "trainee");
+    std::string text;
+    for (std::string line = trainee.line(); !line.empty(); line = trainee.line()) {
+        text += line;
+        if (line.find("script samples") != std::string::npos)
+            break;
+    }
+    ASSERT_NE(text.find("script samples"), std::string::npos) << text;
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    EXPECT_EQ(trainee.stop(SIGINT), 1);
+    server.stop();
+    std::ifstream r(dir / "r.json");
+    const std::string json((std::istreambuf_iterator<char>(r)), std::istreambuf_iterator<char>());
+    const auto at = json.find("\"duration_s\": ");
+    ASSERT_NE(at, std::string::npos) << json;
+    EXPECT_LT(std::stod(json.substr(at + 14)), 10.0) << json; // not the 30 s script
 }

@@ -56,6 +56,9 @@ void saveVolume(const Volume& volume, const std::string& path, const SaveOptions
 // What saveVolume would refuse before writing anything: an unknown extension, a folder that takes
 // no new file, a detached data file that is not the header's own. Throws Error; writes nothing.
 void checkSaveTarget(const std::string& path, const SaveOptions& options = {});
+// Whether saveVolume(path) keeps the materials (.nrrd, .nhdr; case-insensitive); .nii and .nii.gz
+// keep density only.
+bool savesMaterials(const std::string& path);
 
 // The spec grammar, for --help texts.
 std::string volumeSpecHelp();
