@@ -174,10 +174,15 @@ void run(const RenderOptionsCli& o) {
     if (o.out.empty() && o.png.empty())
         std::printf("note: no --out or --png given; rendering for timing only\n");
     // The files' names before any work: a wrong --png used to fail after --out was written.
-    if (!o.out.empty())
+    // And their folders: a missing one failed only after the render, naming the temporary file.
+    if (!o.out.empty()) {
         checkDbiExrPath(o.out);
-    if (!o.png.empty())
+        checkOutputFolder("--out", o.out);
+    }
+    if (!o.png.empty()) {
         checkColorPngPath(o.png);
+        checkOutputFolder("--png", o.png);
+    }
 
     auto t0 = std::chrono::steady_clock::now();
     Volume volume = openVolume(o.volume);

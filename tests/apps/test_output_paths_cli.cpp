@@ -103,3 +103,21 @@ TEST(OutputPathsCli, AServerReportThatCannotBeWrittenLeavesTheEarlierOneWhole) {
         files += e.path().filename() != "log.txt";
     EXPECT_EQ(files, 1u) << "no temporary file left behind";
 }
+
+// `render --out` / `--png` into a folder that is not there failed only after the render, naming the
+// temporary file beside the target: now one line naming the option, before the volume is loaded.
+TEST(OutputPathsCli, RenderOutputsInAMissingFolderAreRefusedBeforeTheRender) {
+    TempDir dir;
+    for (const std::string& args : {"--out " + shellQuote(dir / "nosuch/a.exr"),
+                                    "--png " + shellQuote(dir / "nosuch/a.png")}) {
+        SCOPED_TRACE(args);
+        CommandResult r = runBounded(dir, "render --volume sphere:16 --size 16x16 " + args);
+        EXPECT_EQ(r.exitCode, 1);
+        EXPECT_EQ(r.err.rfind("trephine: --", 0), 0u) << r.err;
+        EXPECT_NE(r.err.find("cannot write there (no folder " + (dir / "nosuch")),
+                  std::string::npos)
+            << r.err;
+        EXPECT_EQ(r.err.find(".tmp."), std::string::npos) << r.err;
+        EXPECT_EQ(r.out, "") << "nothing rendered";
+    }
+}
