@@ -182,6 +182,10 @@ std::vector<Sample> csvScript(const std::string& path) {
     while (readLine()) {
         if (!line.empty() && line.back() == '\r')
             line.pop_back();
+        // A UTF-8 byte order mark (spreadsheets write one) is no part of the first cell: kept, it
+        // made a first sample unreadable, skipped as a header and lost.
+        if (lineNo == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0)
+            line.erase(0, 3);
         // Line 1 is a header when its first cell is not a number (" 5.0" and "+5.0" are numbers:
         // judged by the first character, they were skipped as a header and the sample lost).
         double firstCell = 0.0;

@@ -92,10 +92,15 @@ Volume loadVolumeSlices(const std::string& folder, glm::vec3 spacingMm,
         fail(folder, fs::exists(folder, ec) ? "not a folder of image slices" : "no such folder");
     const std::set<std::string> known = imageExtensions();
     std::vector<std::string> names;
-    for (const fs::directory_entry& e : fs::directory_iterator(folder, ec)) {
+    // The listing's errors apart from each entry's: a dangling link (is_regular_file sets ENOENT
+    // and leaves it set) listed last failed the whole folder as "cannot list folder".
+    fs::directory_iterator it(folder, ec);
+    for (; !ec && it != fs::directory_iterator(); it.increment(ec)) {
+        const fs::directory_entry& e = *it;
         std::string name = e.path().filename().string();
         std::string ext = lower(e.path().extension().string());
-        if (name.empty() || name[0] == '.' || !e.is_regular_file(ec) || ext.size() < 2)
+        std::error_code entryEc;
+        if (name.empty() || name[0] == '.' || !e.is_regular_file(entryEc) || ext.size() < 2)
             continue;
         if (known.count(ext.substr(1)))
             names.push_back(name);

@@ -790,6 +790,9 @@ FileFormat sniffFormat(const std::string& path) {
         return FileFormat::Nrrd;
     if (endsWith(lower, ".nii") || endsWith(lower, ".nii.gz"))
         return FileFormat::Nifti;
+    // Read as NIfTI below (all we gzip whole), it was refused as "not a NIfTI-1 file".
+    if (endsWith(lower, ".nrrd.gz") || endsWith(lower, ".nhdr.gz"))
+        fail(path, "a gzipped NRRD file: gunzip it first (NRRD's own `encoding: gzip` is read)");
     FileSource f(path, path);
     uint8_t head[8] = {};
     size_t n = f.read(head, sizeof head);

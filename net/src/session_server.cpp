@@ -457,6 +457,11 @@ struct SessionServer::Impl {
         u.sizeX = uint16_t(size.x);
         u.sizeY = uint16_t(size.y);
         u.sizeZ = uint16_t(size.z);
+        // More raw bytes than a VolumeUpdate may announce cannot go, however well they code: not
+        // built and compressed first (a 1024^3 volume took 4 GiB and seconds of the simulation
+        // thread for each volume client's join, only to be refused).
+        if (!fitsVolumeUpdate(size, u.materials))
+            return false;
         uint64_t e0 = steadyNowUs();
         EncodedVolume e = full ? encodeVolumeFull(volume, c.volumeCodec)
                                : encodeVolumeBox(volume, box, c.volumeCodec, materials);
@@ -522,6 +527,19 @@ struct SessionServer::Impl {
 
 namespace {
 
+// Throws on a volume the session cannot carry: the welcome gives at most kMaxVolumeDim voxels an
+// axis (files load up to 2^20), and a larger one went silently unwelcomed, every client told
+// "no answer (is `trephine server` running?)".
+Volume checkedVolume(Volume volume) {
+    const glm::ivec3 d = volume.dims();
+    for (int axis = 0; axis < 3; ++axis)
+        if (d[axis] > kMaxVolumeDim)
+            throw Error("server: the volume has " + std::to_string(d[axis]) + " voxels along " +
+                        "xyz"[axis] + "; a session carries at most " +
+                        std::to_string(kMaxVolumeDim) + " an axis (crop or resample it)");
+    return volume;
+}
+
 // Throws on settings the server cannot honour (before anything starts).
 const ServerConfig& checkedConfig(const ServerConfig& config) {
     if (!(config.helloTimeoutS > 0.0f))
@@ -541,6 +559,11 @@ const ServerConfig& checkedConfig(const ServerConfig& config) {
         if (!replacementTarget(marks))
             throw Error("--save-on-exit: " + marks + ", where the marks go, is not a regular file");
     }
+    // Cut to fit, it named another file, which a headless trainee then failed to open.
+    if (config.volumeName.size() > kMaxVolumeNameBytes)
+        throw Error("server: the volume's name is " + std::to_string(config.volumeName.size()) +
+                    " bytes; the session carries at most " + std::to_string(kMaxVolumeNameBytes) +
+                    " (give a shorter path)");
     checkMarks(config.marks, "server: the starting marks");
     if (config.maxViewPixels < 1 || config.maxViewPixels > kMaxServedViewPixels)
         throw Error("server: the largest view must be 1 to " +
@@ -553,7 +576,7 @@ const ServerConfig& checkedConfig(const ServerConfig& config) {
 } // namespace
 
 SessionServer::SessionServer(Volume volume, ServerConfig config)
-    : m_impl(std::make_unique<Impl>(std::move(volume), checkedConfig(config))),
+    : m_impl(std::make_unique<Impl>(checkedVolume(std::move(volume)), checkedConfig(config))),
       m_config(std::move(config)) {
     for (const AnnotationInfo& m : m_config.marks) {
         const uint32_t id = m_impl->nextAnnotationId++;
@@ -867,7 +890,7 @@ void SessionServer::networkLoop() {
                 w.volumeDims = s.volume.dims();
                 w.spacing = s.volume.spacing();
             }
-            w.volumeName = m_config.volumeName.substr(0, 256);
+            w.volumeName = m_config.volumeName; // at most kMaxVolumeNameBytes (checkedConfig)
             w.maxViewPixels = uint32_t(m_config.maxViewPixels);
             sendTo(p.peer, Channel::Control, encodeMessage(w));
             sendParticipants(true);

@@ -163,6 +163,22 @@ TEST(TraineeCli, AFirstSampleWithASpaceOrAPlusIsASampleNotAHeader) {
     EXPECT_EQ(r.err.find("script"), std::string::npos) << r.err;
 }
 
+// A script saved with a UTF-8 byte order mark (as spreadsheets write CSV) lost its first sample,
+// skipped as a header: the decreasing time on line 2 went unnoticed; a header after a mark is
+// still one.
+TEST(TraineeCli, AByteOrderMarkIsNotPartOfTheFirstSample) {
+    TempDir dir;
+    CommandResult r = runScript(dir, "\xEF\xBB\xBF"
+                                     "5.0,0,0,50,1,0,0,0,0,burr:5\r\n"
+                                     "1,0,0,50,1,0,0,0,0,burr:5\r\n");
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_NE(r.err.find("line 2: times must not decrease"), std::string::npos) << r.err;
+    r = runScript(dir, "\xEF\xBB\xBF"
+                       "time_s,x,y,z,qw,qx,qy,qz,speed,tool\n"
+                       "0,0,0,50,1,0,0,0,0,burr:5\n");
+    EXPECT_EQ(r.err.find("script"), std::string::npos) << r.err;
+}
+
 // A script that is a folder read as "no samples"; one with no line ends (/dev/zero, a binary
 // file) grew a single line until memory ran out.
 TEST(TraineeCli, AScriptThatIsNotATextFileIsRefused) {

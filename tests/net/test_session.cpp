@@ -439,6 +439,38 @@ TEST(Session, StopWritesSaveOnExitWithEveryAppliedDrilling) {
     std::filesystem::remove(marksPathFor(path));
 }
 
+// A volume wider than the welcome carries (files load up to 2^20 voxels an axis) went silently
+// unwelcomed: every client waited, then heard "is `trephine server` running?". A volume name over
+// what the welcome carries was cut, and named another file. Both are refused when the server is
+// made.
+TEST(Session, AVolumeOrNameTheSessionCannotCarryIsRefusedAtOnce) {
+    ServerConfig config = testConfig("wide");
+    try {
+        SessionServer server(Volume(glm::ivec3(kMaxVolumeDim + 1, 2, 2), glm::vec3(1.0f)), config);
+        ADD_FAILURE() << "a 4097-voxel axis was accepted";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("4097 voxels along x"), std::string::npos) << e.what();
+    }
+    EXPECT_NO_THROW(
+        SessionServer(Volume(glm::ivec3(2, 2, kMaxVolumeDim), glm::vec3(1.0f)), config));
+    config.volumeName = std::string(kMaxVolumeNameBytes + 1, 'a') + ".nrrd";
+    EXPECT_THROW(SessionServer(makeSphere(16), config), Error);
+    config.volumeName = std::string(kMaxVolumeNameBytes, 'a');
+    EXPECT_NO_THROW(SessionServer(makeSphere(16), config));
+}
+
+// A volume client of a server whose volume cannot go in one VolumeUpdate is refused before the
+// volume is built and compressed (a 1024^3 volume took 4 GiB and seconds of the simulation thread
+// per join, only to be refused): the bound is checked on the box's size.
+TEST(Session, AVolumeTooLargeForAnUpdateIsKnownBeforeItIsCoded) {
+    EXPECT_TRUE(fitsVolumeUpdate(glm::ivec3(512), true));
+    EXPECT_FALSE(fitsVolumeUpdate(glm::ivec3(513, 512, 512), true));
+    EXPECT_TRUE(fitsVolumeUpdate(glm::ivec3(1024, 512, 512), false));
+    EXPECT_FALSE(fitsVolumeUpdate(glm::ivec3(1024), false));
+    EXPECT_FALSE(fitsVolumeUpdate(glm::ivec3(4096), true)); // no 32-bit overflow
+    EXPECT_TRUE(fitsVolumeUpdate(glm::ivec3(0), true));
+}
+
 // --save-on-exit is checked when the server is made, not when the session ends; and should the
 // save fail at the end all the same (the folder gone meanwhile), the drilled volume goes to an
 // emergency copy in the temporary folder instead of being lost.

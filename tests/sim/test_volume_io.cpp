@@ -424,6 +424,11 @@ TEST(VolumeIo, WrongMagic) {
     expectError([&] { loadVolume(dir / "magic.nii"); }, dir / "magic.nii", "magic");
     writeFile(dir / "what.dat", Bytes(100, 1));
     expectError([&] { loadVolume(dir / "what.dat"); }, dir / "what.dat", "unknown volume format");
+    // A gzipped NRRD was read as NIfTI (all we gzip whole) and refused as "not a NIfTI-1 file".
+    const std::string gz = dir / "scan.NRRD.gz";
+    saveVolume(makeSphere(8), dir / "scan.nii.gz");
+    std::filesystem::rename(dir / "scan.nii.gz", gz);
+    expectError([&] { loadVolume(gz); }, gz, "a gzipped NRRD file: gunzip it first");
 }
 
 TEST(VolumeIo, BadHeaderFields) {

@@ -72,11 +72,19 @@ inline constexpr size_t kMaxSentMessageBytes = 30u * 1024u * 1024u;
 // (ServerConfig::maxViewPixels) is one whose coded image always fits.
 inline constexpr size_t kMaxImagePayloadBytes = kMaxSentMessageBytes - 64u * 1024u;
 inline constexpr int64_t kMaxServedViewPixels = int64_t(kMaxImagePayloadBytes / 21 * 4 * 250 / 251);
-inline constexpr uint16_t kMaxVolumeDim = 4096; // as the welcome's range
+inline constexpr uint16_t kMaxVolumeDim = 4096;    // as the welcome's range
+inline constexpr size_t kMaxVolumeNameBytes = 256; // the welcome's volume name
 // The largest uncompressed volume layout a VolumeUpdate may announce (density + material bytes of
 // a 512^3 volume); ENet itself refuses packets over 32 MiB, so payloads stay under
 // kMaxPayloadBytes.
 inline constexpr uint32_t kMaxVolumeRawBytes = 512u * 512u * 512u * 2u;
+// Whether a box of `size` voxels (density, and materials when `materials`) is within
+// kMaxVolumeRawBytes, so a VolumeUpdate may carry it at all, however well it codes.
+inline bool fitsVolumeUpdate(glm::ivec3 size, bool materials) {
+    return size.x >= 0 && size.y >= 0 && size.z >= 0 &&
+           uint64_t(size.x) * uint64_t(size.y) * uint64_t(size.z) * (materials ? 2u : 1u) <=
+               kMaxVolumeRawBytes;
+}
 
 enum class MessageType : uint8_t {
     Hello = 1,
@@ -228,9 +236,11 @@ struct Welcome {
 
     template <typename S>
     bool serialize(S& s) {
-        return s.integer(clientId) && s.integer(serverTimeUs) && s.ranged(volumeDims.x, 1, 4096) &&
-               s.ranged(volumeDims.y, 1, 4096) && s.ranged(volumeDims.z, 1, 4096) &&
-               serializeSpacing(s, spacing) && s.string(volumeName, 256) &&
+        return s.integer(clientId) && s.integer(serverTimeUs) &&
+               s.ranged(volumeDims.x, 1, int(kMaxVolumeDim)) &&
+               s.ranged(volumeDims.y, 1, int(kMaxVolumeDim)) &&
+               s.ranged(volumeDims.z, 1, int(kMaxVolumeDim)) && serializeSpacing(s, spacing) &&
+               s.string(volumeName, kMaxVolumeNameBytes) &&
                s.ranged(maxViewPixels, uint32_t(1), uint32_t(kMaxWindowSize) * kMaxWindowSize);
     }
 };
