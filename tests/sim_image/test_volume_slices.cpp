@@ -140,3 +140,25 @@ TEST(VolumeSlices, Errors) {
     writeImage(mixed / "s2.png", 2, 2, 1, OIIO::TypeDesc::UINT16, std::vector<uint16_t>(4, 1));
     expectError([&] { openVolume(mixed.path.string()); }, mixed / "s2.png", "pixel type");
 }
+
+// A dangling link among the slices (a moved scan's leftovers) is skipped like any non-image; listed
+// last, it failed the whole folder as "cannot list folder: No such file or directory".
+TEST(VolumeSlices, ADanglingLinkAmongTheSlicesIsSkipped) {
+    TempDir dir;
+    for (int k = 0; k < 3; ++k)
+        writeImage(dir / (std::to_string(k) + ".png"), 2, 2, 1, OIIO::TypeDesc::UINT8,
+                   std::vector<uint8_t>(4, uint8_t(50 * k)));
+    // Links named as slices, until one is listed last (the order is the file system's).
+    auto lastListedIsALink = [&] {
+        fs::path last;
+        for (const fs::directory_entry& e : fs::directory_iterator(dir.path))
+            last = e.path();
+        return fs::is_symlink(last);
+    };
+    for (int i = 0; i < 200 && !lastListedIsALink(); ++i)
+        fs::create_symlink(dir.path / "gone", dir.path / std::to_string(1000 + i).append(".png"));
+    ASSERT_TRUE(lastListedIsALink());
+    Volume v = openVolume(dir.path.string());
+    EXPECT_EQ(v.dims(), glm::ivec3(2, 2, 3));
+    EXPECT_EQ(v.density(1, 1, 2), 100);
+}
