@@ -13,6 +13,21 @@ float steppedPush(float pushMm, float steps) {
     return std::clamp(pushMm + steps * kPushStepMm, kPushMinMm, kPushMaxMm);
 }
 
+namespace {
+
+float clampOrLowest(float v, float lo, float hi) {
+    return v >= lo ? std::min(v, hi) : lo; // NaN fails v >= lo
+}
+
+} // namespace
+
+ToolControls withinRanges(ToolControls c) {
+    c.burrMm = clampOrLowest(c.burrMm, kBurrMinDiameterMm, kBurrMaxDiameterMm);
+    c.speed = clampOrLowest(c.speed, 0.0f, 1.0f);
+    c.pushMm = clampOrLowest(c.pushMm, kPushMinMm, kPushMaxMm);
+    return c;
+}
+
 glm::vec4 participantColor(int index) {
     static const glm::vec4 k[] = {{0.20f, 0.45f, 0.85f, 1}, {0.85f, 0.35f, 0.20f, 1},
                                   {0.30f, 0.70f, 0.30f, 1}, {0.75f, 0.30f, 0.75f, 1},
@@ -154,9 +169,16 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
     ImGui::RadioButton("burr [B]", &tool.kind, 0);
     ImGui::SameLine();
     ImGui::RadioButton("perforator [P]", &tool.kind, 1);
-    ImGui::SliderFloat("burr mm [ ]", &tool.burrMm, kBurrMinDiameterMm, kBurrMaxDiameterMm, "%.1f");
-    ImGui::SliderFloat("speed", &tool.speed, 0.0f, 1.0f, "%.2f");
-    ImGui::SliderFloat("depth mm [wheel]", &tool.pushMm, kPushMinMm, kPushMaxMm, "%.1f");
+    // AlwaysClamp: a value typed in (Ctrl+click) stays in the range too (the window clamps again).
+    // The sliders leave room for the longest label, which was cut off.
+    const ImGuiSliderFlags clamp = ImGuiSliderFlags_AlwaysClamp;
+    ImGui::PushItemWidth(
+        -(ImGui::CalcTextSize("depth mm [wheel]").x + ImGui::GetStyle().ItemInnerSpacing.x));
+    ImGui::SliderFloat("burr mm [ ]", &tool.burrMm, kBurrMinDiameterMm, kBurrMaxDiameterMm, "%.1f",
+                       clamp);
+    ImGui::SliderFloat("speed", &tool.speed, 0.0f, 1.0f, "%.2f", clamp);
+    ImGui::SliderFloat("depth mm [wheel]", &tool.pushMm, kPushMinMm, kPushMaxMm, "%.1f", clamp);
+    ImGui::PopItemWidth();
     const uint16_t holder = takenOverBy(snap.participants, self);
     const uint16_t held = takeOver.canTakeOver ? heldBy(snap.participants, self) : 0;
     if (held)

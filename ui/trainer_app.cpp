@@ -414,6 +414,8 @@ int runTrainerWindow(const TrainerOptions& o) {
     uint64_t updatesAtLastSecond = 0;
     bool scriptDone = o.script.empty();
     int settledFrames = 0, frames = 0, pictureFrames = 0;
+    double lastPictureFrameAt = 0.0; // [--frames] when the last frame that counted was drawn
+    bool scriptedEnd = false;        // --screenshot taken or --frames drawn (or failed, said)
     int exitCode = 0;
     const auto t0 = Clock::now();
     auto seconds = [&] { return std::chrono::duration<double>(Clock::now() - t0).count(); };
@@ -442,7 +444,8 @@ int runTrainerWindow(const TrainerOptions& o) {
         // Volume-derived scene once the welcome names the volume, and again when a reconnect's
         // welcome names another (a server restarted on another volume: the old skull's scalp,
         // drape and camera stayed around the new one).
-        if (snap->welcome && scene && !sceneFuture.valid() &&
+        // A volume that could not be opened is tried again too (its error stayed for good).
+        if (snap->welcome && (scene || !sceneError.empty()) && !sceneFuture.valid() &&
             snap->welcome->volumeName != sceneVolume) {
             scene.reset();
             sceneError.clear();
@@ -584,7 +587,9 @@ int runTrainerWindow(const TrainerOptions& o) {
         // wheel was always 0, and keys came a frame late.
         window.beginFrame();
 
-        // Tool: the script, or the mouse device on the bone under the cursor.
+        // Tool: the script, or the mouse device on the bone under the cursor; the Session panel's
+        // last values (drawn below) kept within their ranges first.
+        toolControls = withinRanges(toolControls);
         ImGuiIO& io = ImGui::GetIO();
         if (scene && havePicture && o.script == "burrhole") {
             if (scriptStart < 0)
@@ -600,6 +605,9 @@ int runTrainerWindow(const TrainerOptions& o) {
                 lastRectAt = now;
             }
         } else if (scene && havePicture && viewMatches) {
+            // M marks the bone under the pointer now: over air or off the view it marks nothing
+            // (it marked the last bone point the pointer had crossed, wherever that was).
+            bool markKey = false;
             if (!io.WantCaptureKeyboard) {
                 if (ImGui::IsKeyPressed(GLFW_KEY_B))
                     toolControls.kind = 0;
@@ -613,8 +621,7 @@ int runTrainerWindow(const TrainerOptions& o) {
                     toolControls.pushMm = steppedPush(toolControls.pushMm, 1.0f);
                 if (ImGui::IsKeyPressed(GLFW_KEY_UP))
                     toolControls.pushMm = steppedPush(toolControls.pushMm, -1.0f);
-                if (markControls.canMark && ImGui::IsKeyPressed(GLFW_KEY_M))
-                    markControls.addAtPointer = true;
+                markKey = markControls.canMark && ImGui::IsKeyPressed(GLFW_KEY_M);
             }
             const bool overView = io.MousePos.x >= 0 && io.MousePos.y >= 0 &&
                                   io.MousePos.x < float(viewSize) &&
@@ -628,6 +635,7 @@ int runTrainerWindow(const TrainerOptions& o) {
                 // point off the bone.
                 if (auto hit = pickSurface(cpuDbi, cpuDbiCamera, px, py)) {
                     pointerPick = *hit;
+                    markControls.addAtPointer = markControls.addAtPointer || markKey;
                     ToolShape shape =
                         toolControls.kind == 1
                             ? ToolShape::perforator()
@@ -768,9 +776,21 @@ int runTrainerWindow(const TrainerOptions& o) {
             fg->PopClipRect();
             drawDirtyBoxOverlay(boxState, boxHistory, now, 0.0f, viewTop, viewSize);
         }
+        // A view larger than the server serves is refused by the client (the window waited for
+        // its first image for good, the reason in one line of the Network panel).
+        const int64_t maxViewPixels = snap->welcome ? snap->welcome->maxViewPixels : 0;
+        const bool viewTooLarge = snap->state == net::LinkState::Connected && snap->welcome &&
+                                  int64_t(viewSize) * viewSize > maxViewPixels;
+        const std::string tooLargeText =
+            "The server serves views of at most " + std::to_string(maxViewPixels) +
+            " pixels; this view is " + std::to_string(viewSize) + " x " + std::to_string(viewSize) +
+            ": restart with --size " + std::to_string(int(std::sqrt(double(maxViewPixels)))) +
+            " or less";
         {
             std::string status;
-            if (snap->state == net::LinkState::Connecting)
+            if (viewTooLarge)
+                status = tooLargeText;
+            else if (snap->state == net::LinkState::Connecting)
                 status = "Connecting to " + o.address + " (attempt " +
                          std::to_string(snap->attempts) + ")...";
             else if (snap->state == net::LinkState::Retrying)
@@ -873,9 +893,18 @@ int runTrainerWindow(const TrainerOptions& o) {
 
         // Screenshot / frame budget.
         ++frames;
-        const bool settled = havePicture && viewMatches && scene && scriptDone && !switching &&
-                             nextSwitch == o.switchSyncAtS.size() && !snap->waitingForView &&
-                             now - lastRectAt > 0.5 && marksSent &&
+        if (viewTooLarge && (!o.screenshot.empty() || o.frames > 0)) {
+            std::fprintf(stderr, "trephine: %s\n", tooLargeText.c_str());
+            exitCode = 1;
+            window.endFrame(nullptr);
+            scriptedEnd = true;
+            break;
+        }
+        // Connected too: a picture kept from before a lost link is not the session's now.
+        const bool connected = snap->state == net::LinkState::Connected;
+        const bool settled = connected && havePicture && viewMatches && scene && scriptDone &&
+                             !switching && nextSwitch == o.switchSyncAtS.size() &&
+                             !snap->waitingForView && now - lastRectAt > 0.5 && marksSent &&
                              (o.takeOver.empty() || holding != 0) &&
                              snap->annotations.size() >= scriptedMarks.size();
         settledFrames = settled ? settledFrames + 1 : 0;
@@ -949,23 +978,53 @@ int runTrainerWindow(const TrainerOptions& o) {
                 std::printf("screenshot %s (%dx%d) after %d frames\n", o.screenshot.c_str(),
                             capture.width(), capture.height(), frames);
             }
+            scriptedEnd = true;
             break;
         }
         // --frames without a screenshot: that many frames showing the picture, or, with none
         // by --timeout, a failure said in one line (it used to exit 0 after N frames of
         // "connecting", which a scripted run took for success).
+        // Frames count only while connected: a lost server's last picture counted on to exit 0
+        // (and in volume mode, with the view gone, the run never ended). --timeout also bounds
+        // the time since the last counted frame.
         if (o.screenshot.empty() && o.frames > 0) {
-            pictureFrames += havePicture && viewMatches;
-            if (pictureFrames >= o.frames)
+            if (connected && havePicture && viewMatches) {
+                ++pictureFrames;
+                lastPictureFrameAt = now;
+            }
+            if (pictureFrames >= o.frames) {
+                scriptedEnd = true;
                 break;
-            if (now > o.timeoutS && pictureFrames == 0) {
+            }
+            if (pictureFrames == 0 && now > o.timeoutS) {
                 std::fprintf(stderr, "trephine: no picture from %s after %.0f s (%s)\n",
                              o.address.c_str(), now, net::linkStateName(snap->state));
                 exitCode = 1;
+                scriptedEnd = true;
+                break;
+            }
+            if (pictureFrames > 0 && now - lastPictureFrameAt > o.timeoutS) {
+                std::fprintf(stderr,
+                             "trephine: no picture from %s for %.0f s after %d of %d frames (%s: "
+                             "%s)\n",
+                             o.address.c_str(), now - lastPictureFrameAt, pictureFrames, o.frames,
+                             net::linkStateName(snap->state),
+                             snap->closeReason.empty() ? "no reason given"
+                                                       : snap->closeReason.c_str());
+                exitCode = 1;
+                scriptedEnd = true;
                 break;
             }
         }
         std::this_thread::sleep_until(frameStart + std::chrono::milliseconds(10));
+    }
+    // Closed before the screenshot or the frames it was run for: a script must not read exit 0
+    // as done (the PNG it waits for is not there).
+    if (!scriptedEnd && (!o.screenshot.empty() || o.frames > 0)) {
+        std::fprintf(stderr, "trephine: the window was closed before %s\n",
+                     o.screenshot.empty() ? "its --frames were drawn"
+                                          : ("the screenshot " + o.screenshot).c_str());
+        exitCode = 1;
     }
     haptics.stop(); // (stopThreads would; the report below reads the stopped client)
     client.stop();

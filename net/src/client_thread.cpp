@@ -209,6 +209,10 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
     s->sync = s->requestedSync = m_wantedSync.value_or(m_config.client.sync);
     s->hapticModel = m_haptic;
     s->hapticModels = m_hapticModels;
+    // Between connections, the view the next hello asks for: a default ViewSpec here jumped a
+    // volume-mode window (which draws this view) to a camera 300 mm above the skull, or to
+    // nothing at another size, for every retry.
+    s->view = m_wantedView.value_or(m_config.client.view);
     if (c) {
         if (c->welcomed())
             s->welcome = c->welcome();

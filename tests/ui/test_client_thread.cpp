@@ -162,6 +162,8 @@ TEST(ClientThread, ReconnectsToANewServerOnTheSamePort) {
         10.0));
     EXPECT_EQ(dropped->closeReason, refuseReasonText(uint32_t(RefuseReason::Shutdown)));
     EXPECT_FALSE(dropped->hasFullImage);
+    // The view stays the one asked for (a default one jumped a volume-mode window elsewhere).
+    EXPECT_TRUE(dropped->view == cc.client.view);
     ASSERT_TRUE(waitFor([&] { return client.snapshot()->attempts > attemptsBefore; }, 10.0));
     EXPECT_NE(client.snapshot()->state, LinkState::Connected);
 

@@ -24,6 +24,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <functional>
 #include <memory>
 #include <string>
@@ -276,4 +277,110 @@ TEST(ComparisonWindow, AReconnectToAnotherVolumeRebuildsTheScene) {
     EXPECT_NEAR(distance(report.camera), boxTop, 0.5f) << "the new volume's camera";
 
     server->stop();
+}
+
+namespace {
+
+// Waits for `pred` up to `seconds` (a guard against hangs, not a timing assertion).
+bool waitFor(const std::function<bool()>& pred, double seconds = 60.0) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+    while (!pred() && std::chrono::steady_clock::now() < deadline)
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    return pred();
+}
+
+} // namespace
+
+// A volume the window could not open (not on this machine) was never tried again, even once the
+// server came back on another volume: its error stayed and no picture came.
+TEST(ComparisonWindow, AVolumeThatCouldNotBeOpenedIsTriedAgainOnReconnect) {
+    TREPHINE_NEED_DISPLAY("the window");
+    const Volume sphere = makeSphere(32);
+    auto server = std::make_unique<net::SessionServer>(
+        sphere, trephine::testing::loopbackServerConfig("/nonexistent/scan.nrrd"));
+    const uint16_t port = server->port();
+    server->start();
+    TrainerReport report;
+    std::atomic<bool> quit{false};
+    TrainerOptions o;
+    o.address = "127.0.0.1:" + std::to_string(port);
+    o.camera = "top";
+    o.size = 128;
+    o.visible = false;
+    o.report = &report;
+    o.quit = &quit;
+    int rc = -1;
+    std::thread window([&] { rc = runTrainerWindow(o); });
+    const bool joined = waitFor([&] { return server->clientCount() >= 1; });
+    std::this_thread::sleep_for(std::chrono::milliseconds(500)); // the scene fails meanwhile
+    server->stop();
+    server.reset();
+    net::ServerConfig sc = trephine::testing::loopbackServerConfig("sphere:32");
+    sc.port = port;
+    server = std::make_unique<net::SessionServer>(sphere, sc);
+    server->start();
+    // The window asks for its own view once its scene is built.
+    const bool viewed = waitFor([&] { return server->rendersDone() >= 2; });
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    quit = true;
+    window.join();
+    server->stop();
+    ASSERT_TRUE(joined);
+    EXPECT_TRUE(viewed) << "no view asked of the second server: the scene was not rebuilt";
+    EXPECT_EQ(rc, 0);
+    EXPECT_EQ(report.view.width(), 128);
+}
+
+// A --frames run whose server goes away counted the last picture's frames on and exited 0 (and in
+// volume mode never ended): frames count only while connected, and --timeout without one fails.
+TEST(ComparisonWindow, AFramesRunWhoseServerGoesAwayFails) {
+    TREPHINE_NEED_DISPLAY("the window");
+    const Volume sphere = makeSphere(32);
+    auto server = std::make_unique<net::SessionServer>(
+        sphere, trephine::testing::loopbackServerConfig("sphere:32"));
+    server->start();
+    std::atomic<bool> quit{false}, done{false};
+    TrainerOptions o;
+    o.address = "127.0.0.1:" + std::to_string(server->port());
+    o.camera = "top";
+    o.size = 128;
+    o.visible = false;
+    o.frames = 1000000; // hours of frames: the run ends by failing, or not at all
+    o.timeoutS = 5.0;
+    o.quit = &quit;
+    int rc = -1;
+    std::thread window([&] {
+        rc = runTrainerWindow(o);
+        done = true;
+    });
+    const bool pictured = waitFor([&] { return server->rendersDone() >= 2; });
+    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    server->stop();
+    const bool ended = waitFor([&] { return done.load(); }, 30.0);
+    quit = true; // the guard, were it still running
+    window.join();
+    ASSERT_TRUE(pictured);
+    EXPECT_TRUE(ended) << "still counting frames 30 s after the server went";
+    EXPECT_EQ(rc, 1);
+}
+
+// Closed before its --screenshot (here: while still connecting to nothing), the window exited 0
+// with no PNG, which a script took for done.
+TEST(ComparisonWindow, AWindowClosedBeforeItsScreenshotExits1) {
+    TREPHINE_NEED_DISPLAY("the window");
+    TempDir dir;
+    std::atomic<bool> quit{false};
+    TrainerOptions o;
+    o.address = "127.0.0.1:9"; // nothing answers
+    o.size = 128;
+    o.visible = false;
+    o.screenshot = dir / "shot.png";
+    o.quit = &quit;
+    int rc = -1;
+    std::thread window([&] { rc = runTrainerWindow(o); });
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    quit = true;
+    window.join();
+    EXPECT_EQ(rc, 1);
+    EXPECT_FALSE(std::filesystem::exists(dir / "shot.png"));
 }

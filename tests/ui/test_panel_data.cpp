@@ -4,11 +4,14 @@
 #include "ui/panels.h"
 
 #include "libsim/skull.h"
+#include "libsim/tool.h"
 #include "libsim/volume.h"
 
 #include <glm/geometric.hpp>
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <limits>
 #include <map>
 
 using namespace trephine;
@@ -291,6 +294,36 @@ TEST(ToolControls, PushStepsStayInTheSlidersRange) {
         push = steppedPush(push, -1.0f);
     EXPECT_EQ(push, kPushMinMm);
     EXPECT_EQ(steppedPush(0.0f, 3.0f), 3.0f * kPushStepMm) << "three wheel notches";
+}
+
+// Values typed into the Session panel's sliders (Ctrl+click is not clamped in ImGui 1.86 without
+// AlwaysClamp) are brought back into range before the tool uses them: a typed 9 mm burr made
+// every tool state malformed and the server kicked the window.
+TEST(ToolControls, TypedValuesAreKeptWithinTheSlidersRanges) {
+    ToolControls c;
+    c.burrMm = 9.0f;
+    c.speed = 4.0f;
+    c.pushMm = 50.0f;
+    ToolControls k = withinRanges(c);
+    EXPECT_EQ(k.burrMm, kBurrMaxDiameterMm);
+    EXPECT_EQ(k.speed, 1.0f);
+    EXPECT_EQ(k.pushMm, kPushMaxMm);
+    EXPECT_NO_THROW(ToolShape::burr(k.burrMm).validate()) << "what the server checks";
+    c.burrMm = std::nanf("");
+    c.speed = -1.0f;
+    c.pushMm = -std::numeric_limits<float>::infinity();
+    k = withinRanges(c);
+    EXPECT_EQ(k.burrMm, kBurrMinDiameterMm);
+    EXPECT_EQ(k.speed, 0.0f);
+    EXPECT_EQ(k.pushMm, kPushMinMm);
+    c = ToolControls{};
+    c.burrMm = 4.5f;
+    c.speed = 0.5f;
+    c.pushMm = 2.0f;
+    k = withinRanges(c);
+    EXPECT_EQ(k.burrMm, 4.5f);
+    EXPECT_EQ(k.speed, 0.5f);
+    EXPECT_EQ(k.pushMm, 2.0f);
 }
 
 // *reset* goes back to the view the window opened with (--orbit, --tilt, its camera's distance),

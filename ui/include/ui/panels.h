@@ -48,6 +48,10 @@ constexpr float kPushMinMm = -5.0f, kPushMaxMm = 10.0f, kPushStepMm = 0.25f;
 // pushMm moved by `steps` steps (the wheel's notches, +1 for Down, -1 for Up), kept in the range:
 // held down, an arrow key's repeat drove the tip through the inner table.
 float steppedPush(float pushMm, float steps);
+// `c` with the burr size, speed and push depth within their sliders' ranges, NaN to the lowest:
+// typed into a slider (Ctrl+click) they were not clamped, and a 9 mm burr made every tool state
+// malformed to the server, which kicked the window again after each reconnect.
+ToolControls withinRanges(ToolControls c);
 // The marks on the skull (the server's Annotations): listed for everyone; an instructor also
 // labels the next one, marks the bone under the pointer, removes one or clears them. The panel
 // only records what was asked this frame; the window sends it.

@@ -50,7 +50,9 @@ struct TrainerOptions {
     // closes).
     int frames = 0;
     // With --screenshot or --frames: give up (exit 1) after this long without a settled view
-    // (screenshot) or any picture (frames).
+    // (screenshot), or without a picture (frames: from the start, or since the last frame that
+    // counted). Views settle and frames count only while connected; a window closed before the
+    // screenshot or the frames also exits 1.
     double timeoutS = 90.0;
     bool visible = true;
     // A scripted Comparison toggle: seconds after the first picture at which the toggle is
@@ -64,7 +66,8 @@ struct TrainerOptions {
     // is not settled (no screenshot) before the server lists the take-over.
     std::string takeOver;
     TrainerReport* report = nullptr; // [Tests] filled when the window closes
-    // [Tests] The window closes (exit 0) once this is set, as if its close button was clicked.
+    // [Tests] The window closes once this is set, as if its close button was clicked (exit 0,
+    // unless a screenshot or frames were asked for and not done).
     const std::atomic<bool>* quit = nullptr;
 };
 
