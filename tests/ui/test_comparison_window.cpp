@@ -384,3 +384,30 @@ TEST(ComparisonWindow, AWindowClosedBeforeItsScreenshotExits1) {
     EXPECT_EQ(rc, 1);
     EXPECT_FALSE(std::filesystem::exists(dir / "shot.png"));
 }
+
+// A window whose view is larger than the server serves waited for its first image for good,
+// "Waiting for the first image" on screen: the limit is said, and a scripted run ends with exit 1.
+TEST(ComparisonWindow, AViewLargerThanTheServerServesIsSaid) {
+    TREPHINE_NEED_DISPLAY("the window");
+    const Volume sphere = makeSphere(32);
+    net::ServerConfig sc = trephine::testing::loopbackServerConfig("sphere:32");
+    sc.maxViewPixels = 100 * 100;
+    net::SessionServer server(sphere, sc);
+    server.start();
+    TrainerOptions o;
+    o.address = "127.0.0.1:" + std::to_string(server.port());
+    o.camera = "top";
+    o.size = 128;
+    o.visible = false;
+    o.frames = 5;
+    o.timeoutS = 60.0;
+    ::testing::internal::CaptureStderr();
+    const int rc = runTrainerWindow(o);
+    const std::string err = ::testing::internal::GetCapturedStderr();
+    server.stop();
+    EXPECT_EQ(rc, 1);
+    EXPECT_NE(err.find("The server serves views of at most 10000 pixels; this view is 128 x 128: "
+                       "restart with --size 100 or less"),
+              std::string::npos)
+        << err;
+}
