@@ -35,6 +35,23 @@ bool displayAvailable(std::string* why) {
             *why = "GLFW cannot start: " + g_glfwError;
         return false;
     }
+    // A display without a usable OpenGL 3.3 core (an X server with no GLX, ssh -X to one) is no
+    // window either: found only by Window's constructor, after a demo had started its server
+    // for it, it failed there instead of running headless.
+    glfwDefaultWindowHints();
+    glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 3);
+    glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 3);
+    glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
+    glfwWindowHint(GLFW_OPENGL_FORWARD_COMPAT, GLFW_TRUE);
+    glfwWindowHint(GLFW_VISIBLE, GLFW_FALSE);
+    GLFWwindow* probe = glfwCreateWindow(1, 1, "trephine", nullptr, nullptr);
+    glfwDefaultWindowHints();
+    if (!probe) {
+        if (why)
+            *why = "no OpenGL 3.3 core context: " + g_glfwError;
+        return false;
+    }
+    glfwDestroyWindow(probe);
     return true; // glfwInit is reference-free; Window initialises again (a no-op) and terminates
 }
 

@@ -13,6 +13,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <string>
+#include <sys/wait.h>
 #include <vector>
 
 namespace {
@@ -74,4 +75,24 @@ TEST(DemoWindow, ScreenshotShowsBoneTheDrilledHoleAndPanels) {
         for (int x = 500; x < drilled.w; ++x)
             bright += drilled.at(x, y)[0] > 200 && drilled.at(x, y)[1] > 200;
     EXPECT_GT(bright, 1000) << "panel text in the right-hand column";
+}
+
+// A display whose X server has no OpenGL (no GLX: ssh -X to some servers) let the demo commit to
+// the window, start its server, say "trainee window connected", then fail with exit 1: it runs
+// the headless demo instead, saying why. Its own X server (xvfb-run -a with GLX off).
+TEST(DemoWindow, ADisplayWithoutOpenGlRunsTheHeadlessDemo) {
+    if (std::system("command -v xvfb-run > /dev/null 2>&1") != 0)
+        GTEST_SKIP() << "xvfb-run is not installed";
+    trephine::testing::TempDir dir;
+    const std::string log = dir / "demo.log";
+    const std::string cmd = "xvfb-run -a -s '-screen 0 640x480x24 -extension GLX' " +
+                            shellQuote(TREPHINE_BIN) + " demo --frames 3 > " + shellQuote(log) +
+                            " 2>&1";
+    const int rc = std::system(cmd.c_str());
+    const std::string out = trephine::testing::slurp(log);
+    ASSERT_TRUE(WIFEXITED(rc)) << out;
+    EXPECT_EQ(WEXITSTATUS(rc), 0) << out;
+    EXPECT_NE(out.find("demo: no window (no OpenGL 3.3 core context"), std::string::npos) << out;
+    EXPECT_NE(out.find("running the headless demo"), std::string::npos) << out;
+    EXPECT_EQ(out.find("trainee window connected"), std::string::npos) << out;
 }
