@@ -13,6 +13,7 @@
 #include <glm/geometric.hpp>
 #include <glm/gtc/quaternion.hpp>
 #include <glm/mat3x3.hpp>
+#include <optional>
 
 namespace trephine {
 
@@ -322,18 +323,50 @@ void erodePass(Volume& vol, const Frame& f, const Box3i& box, const Clip& clip, 
 
 // [SECTION] Driller
 
+namespace {
+
+// `raw` with a unit rotation, or nullopt for a pose that touches nothing (not finite, a zero
+// quaternion: poses come from clients). The unit rotation is used everywhere (frame, voxel boxes,
+// the clutch's axis): a quaternion off unit length rotates and scales, which squashed the voxel
+// boxes while the frame cut at full size.
+std::optional<ToolPose> usablePose(const Volume& volume, const ToolPose& raw) {
+    const glm::quat& q = raw.orientation;
+    const glm::vec3& p = raw.position;
+    const float qq = q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w;
+    if (volume.empty() || !std::isfinite(p.x + p.y + p.z) || !std::isfinite(qq) || qq < 1e-12f)
+        return std::nullopt;
+    return ToolPose{p, glm::normalize(q)};
+}
+
+// Bone and dura within the clutch's margin of the perforator at `pose`.
+Nearby perforatorNearby(const Volume& volume, const ToolPose& pose, const Frame& frame,
+                        const ToolShape& shape) {
+    const float margin = perforatorClutchMarginMm(volume.spacing());
+    const float r = 0.5f * shape.diameterMm;
+    const float top = shape.tipLengthMm + shape.cutLengthMm;
+    Box3i near = voxelBox(volume, pose, glm::vec3(-r - margin, -r - margin, -margin),
+                          glm::vec3(r + margin, r + margin, top + margin));
+    return scanNearby(volume, frame, near, shape, margin);
+}
+
+} // namespace
+
+void Driller::observe(const Volume& volume, const ToolPose& rawPose) {
+    if (m_shape.kind != ToolKind::Perforator || !m_clutchDisengaged)
+        return;
+    if (const std::optional<ToolPose> pose = usablePose(volume, rawPose)) {
+        if (!perforatorNearby(volume, *pose, makeFrame(volume, *pose), m_shape).bone)
+            m_clutchDisengaged = m_tipInBone = false; // lifted clear of bone
+    }
+}
+
 DrillResult Driller::drill(Volume& volume, const ToolPose& rawPose, float speed, float dt) {
     assert(dt >= 0.0f && "Driller::drill: dt is a duration in seconds and must not be negative");
     DrillResult res;
-    const glm::quat& q = rawPose.orientation;
-    const glm::vec3& p = rawPose.position;
-    // A pose that is not finite (or a zero quaternion) touches nothing: poses come from clients.
-    const float qq = q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w;
-    if (volume.empty() || !std::isfinite(p.x + p.y + p.z) || !std::isfinite(qq) || qq < 1e-12f)
+    const std::optional<ToolPose> usable = usablePose(volume, rawPose);
+    if (!usable)
         return res;
-    // The unit rotation everywhere (frame, voxel boxes, the clutch's axis): a quaternion off unit
-    // length rotates and scales, which squashed the voxel boxes while the frame cut at full size.
-    const ToolPose pose{p, glm::normalize(q)};
+    const ToolPose& pose = *usable;
     speed = speed > 0.0f ? std::min(speed, 1.0f) : 0.0f; // also maps NaN to 0
     const Frame frame = makeFrame(volume, pose);
     const bool perforator = m_shape.kind == ToolKind::Perforator;
@@ -342,13 +375,9 @@ DrillResult Driller::drill(Volume& volume, const ToolPose& rawPose, float speed,
 
     if (perforator) {
         const float margin = perforatorClutchMarginMm(volume.spacing());
-        Box3i near = voxelBox(volume, pose, glm::vec3(-r - margin, -r - margin, -margin),
-                              glm::vec3(r + margin, r + margin, top + margin));
-        Nearby around = scanNearby(volume, frame, near, m_shape, margin);
-        if (m_clutchDisengaged && !around.bone) {
-            m_clutchDisengaged = false; // lifted clear of bone
-            m_tipInBone = false;
-        }
+        const Nearby around = perforatorNearby(volume, pose, frame, m_shape);
+        if (m_clutchDisengaged && !around.bone)
+            m_clutchDisengaged = m_tipInBone = false; // lifted clear of bone
         if (!m_clutchDisengaged) {
             const float minSpacing =
                 std::min({volume.spacing().x, volume.spacing().y, volume.spacing().z});

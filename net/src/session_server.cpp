@@ -1382,7 +1382,13 @@ void SessionServer::simulationLoop() {
                 const bool sweep = c.lastDrilling;
                 c.lastPose = pose;
                 c.lastDrilling = t.drilling && t.speed > 0.0f;
-                if (!t.drilling || t.speed <= 0.0f || dt <= 0.0f)
+                if (!t.drilling || t.speed <= 0.0f) {
+                    // Lifted clear of bone between holes, the perforator's clutch re-engages
+                    // (this thread is the volume's only writer: reading it needs no lock).
+                    c.driller->observe(s.volume, pose);
+                    break;
+                }
+                if (dt <= 0.0f)
                     break;
                 // The cutter moved from the last drilling pose to this one during dt: it sweeps
                 // the path (a quarter voxel a sub-step, dt shared out), so a fast stroke cuts a

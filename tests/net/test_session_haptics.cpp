@@ -361,3 +361,63 @@ TEST(SessionLimits, ServerReportCountsMalformedPerPeer) {
     EXPECT_NE(report.find("\"malformed_dropped\": 3"), std::string::npos) << report;
     EXPECT_NE(report.find("\"tool\""), std::string::npos) << report;
 }
+
+// A perforator through a bone block until its clutch stops it, then released (tool states that
+// do not drill), lifted out and pressed onto the bone beside the first hole: it cut nothing there,
+// since the clutch re-engaged only while drilling, and the first drilling step at the new site
+// already found bone around the tip. Lifted without drilling, it now re-engages.
+TEST(SessionHaptics, APerforatorReleasedAndLiftedCutsTheNextHole) {
+    const Volume box = makeBox(48); // solid from -12 to +12 mm on every axis
+    ServerConfig sc = testConfig();
+    sc.volumeName = "box:48";
+    SessionServer server(box, sc);
+    server.start();
+    ClientConfig cc;
+    cc.view = topView(box);
+    SessionClient client(cc);
+    client.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return client.hasFullImage(); }));
+
+    ToolState t;
+    t.toolKind = uint8_t(ToolKind::Perforator);
+    t.diameterMm = 9.0f;
+    t.orientation = glm::quat(1, 0, 0, 0); // the axis along +z, the tip at the position
+    t.speed = 1.0f;
+    t.clientTimeUs = 1000000;
+    uint64_t sent = 0;
+    auto send = [&](glm::vec3 at, bool drilling) {
+        t.position = at;
+        t.drilling = drilling;
+        t.clientTimeUs += 50000; // each state a 50 ms step (the server's longest)
+        client.sendToolState(t);
+        ++sent;
+        client.poll(0);
+    };
+    auto settle = [&] { // every state sent has been applied
+        return pumpUntil({&client},
+                         [&] { return server.toolStatesApplied() >= sent && server.idle(); });
+    };
+    // Down through the block, 12 steps (0.6 s: solid cortical) every 0.25 mm.
+    for (float z = 12.5f; z > -14.0f; z -= 0.25f) {
+        for (int i = 0; i < 12; ++i)
+            send({0.0f, 0.0f, z}, true);
+        ASSERT_TRUE(settle());
+    }
+    const Volume through = server.volumeSnapshot();
+    ASSERT_EQ(through.material(24, 24, 24), Material::Air) << "the first hole was cut";
+    // Released, lifted clear, moved beside the hole and pressed 1 mm into the bone for 1 s.
+    for (int i = 0; i < 5; ++i)
+        send({0.0f, 0.0f, 12.0f + 4.0f * float(i)}, false);
+    send({7.0f, 7.0f, 30.0f}, false);
+    send({7.0f, 7.0f, 13.0f}, false);
+    for (int i = 0; i < 20; ++i)
+        send({7.0f, 7.0f, 11.0f}, true);
+    ASSERT_TRUE(settle());
+    EXPECT_EQ(server.toolStatesDropped(), 0u);
+    const Volume after = server.volumeSnapshot();
+    int64_t cut = 0;
+    for (size_t i = 0; i < after.voxelCount(); ++i)
+        cut += after.densityData()[i] < through.densityData()[i];
+    EXPECT_GT(cut, 0) << "the perforator cut nothing at the second site";
+    server.stop();
+}

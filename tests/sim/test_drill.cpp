@@ -473,6 +473,35 @@ TEST(Drill, PerforatorDisengagesWhenItBreaksThroughABoneBlock) {
     EXPECT_FALSE(perf.clutchDisengaged());
 }
 
+// Released, lifted and pressed onto bone elsewhere, the perforator's clutch stayed disengaged: it
+// re-engaged only inside drill(), whose first step at the new site already found bone around the
+// tip. observe() (a tool state that does not drill) re-engages it once clear of bone, as a lift
+// does while drilling; near bone it does not, and a burr ignores it.
+TEST(Drill, APerforatorLiftedWithoutDrillingReEngagesForTheNextHole) {
+    Volume v = makeBox(48); // solid from z = -12 mm to +12 mm
+    Driller perf(ToolShape::perforator(9.0f));
+    auto down = [](glm::vec2 xy, float z) {
+        ToolPose pose;
+        pose.position = glm::vec3(xy, z);
+        return pose;
+    };
+    bool stopped = false;
+    for (float z = 13.0f; z > -20.0f && !stopped; z -= 0.2f)
+        stopped = perf.drill(v, down({0.0f, 0.0f}, z), 1.0f, 1.0f).clutchDisengaged;
+    ASSERT_TRUE(stopped);
+    perf.observe(v, down({0.0f, 0.0f}, -11.0f)); // still in its hole, bone around
+    EXPECT_TRUE(perf.clutchDisengaged());
+    perf.observe(v, down({0.0f, 0.0f}, 30.0f)); // the button up, lifted out
+    EXPECT_FALSE(perf.clutchDisengaged());
+    // Pressed 1 mm into the bone 10 mm away (beside the first hole): it cuts.
+    const DrillResult cut = perf.drill(v, down({7.0f, 7.0f}, 11.0f), 1.0f, 1.0f);
+    EXPECT_FALSE(cut.clutchDisengaged);
+    EXPECT_GT(cut.voxelsChanged, 0);
+    Driller burr(ToolShape::burr(5.0f));
+    burr.observe(v, down({0.0f, 0.0f}, 30.0f));
+    EXPECT_FALSE(burr.clutchDisengaged());
+}
+
 // The perforator's clutch looks ahead of its tip too: far away its voxel coordinates are no int
 // (converting them was undefined; -fsanitize=float-cast-overflow reports it).
 TEST(Drill, PosesFromFarAwayOrNotFiniteTouchNothing) {

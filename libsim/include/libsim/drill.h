@@ -74,6 +74,12 @@ public:
     // orientation need not be unit length: it is normalised.
     DrillResult drill(Volume& volume, const ToolPose& pose, float speed, float dt);
 
+    // A pose of the tool while it does not drill (the button up, speed 0): the perforator's
+    // clutch re-engages when it is clear of bone, as when drilling. Without it, released, lifted
+    // and pressed onto bone elsewhere, the perforator's first drilling step found bone and never
+    // re-engaged: it cut nothing at the second hole. A burr ignores it.
+    void observe(const Volume& volume, const ToolPose& pose);
+
     const ToolShape& shape() const { return m_shape; }
     bool clutchDisengaged() const { return m_clutchDisengaged; }
     // The clutch re-engages when the perforator is lifted clear of bone; tests may reset it.
