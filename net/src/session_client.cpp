@@ -285,8 +285,15 @@ void SessionClient::renderLocal() {
     if (!m_renderer || !m_config.renderLocally)
         return;
     // With the same hit cache the DBI server keeps per view: after erosion each ray resumes at
-    // its previous first hit (a view change or a rise in density restarts it).
-    m_dbi = m_renderer->render(toCamera(m_view), &m_hitCache);
+    // its previous first hit (a view change or a rise in density restarts it). Into the picture
+    // it replaces, as the server renders into its view's frame: a new 500 x 500 frame each update
+    // (2 MB zeroed, then filled with background, on one thread) was counted in the baseline's
+    // client render. Every pixel is written (a miss gets the background).
+    const Camera camera = toCamera(m_view);
+    if (m_dbi.width() == camera.width && m_dbi.height() == camera.height)
+        m_renderer->render(camera, m_dbi.bounds(), m_dbi, &m_hitCache);
+    else
+        m_dbi = m_renderer->render(camera, &m_hitCache);
 }
 
 namespace {

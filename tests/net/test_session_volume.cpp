@@ -106,12 +106,16 @@ TEST(SessionVolume, VolumeClientRendersBitForBitAfterBoxCutsAndDrilling) {
     ASSERT_NE(client.localVolume(), nullptr);
     EXPECT_TRUE(*client.localVolume() == sphere) << "the full volume at join";
     Dbi before = client.dbi();
+    const uint8_t* const pixels = client.dbi().color();
 
     server.submitBoxCut(topBox());
     drill(client, {&client}, sphereTop(48), 0, 40, 40);
     ASSERT_TRUE(pumpUntil({&client}, [&] { return server.toolStatesApplied() == 40; }));
     ASSERT_TRUE(waitConverged(server, {&client}));
     EXPECT_FALSE(compare(before, client.dbi()).identical()) << "the cut and the drilling show";
+    // Re-rendered into the same picture, as the DBI server renders into its view's frame (a new
+    // frame each update was allocated, cleared and filled inside the baseline's render time).
+    EXPECT_EQ(client.dbi().color(), pixels);
     // The re-renders after erosion resumed each ray at its cached first hit, as the DBI
     // server's do, and the picture is still bit for bit the server's.
     EXPECT_GT(client.localHitCache().resumed(), 0);

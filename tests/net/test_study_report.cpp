@@ -221,6 +221,24 @@ TEST(StudyReport, AFigureJustShortOfItsTargetDoesNotPrintAsTheTarget) {
     EXPECT_NE(display[0].find("= 19.96x (target"), std::string::npos) << display[0];
 }
 
+// llvmpipe is Mesa's software rasteriser: the display paragraph called its ray casting "on the
+// GPU" on a machine without one.
+TEST(StudyReport, TheDisplayStudyDoesNotCallASoftwareRendererTheGpu) {
+    StudyReportInput in = input();
+    in.display.measured = true;
+    in.display.entries = {{"dbi composite", 998, 1, 1, 990}, {"volume 128^3", 40, 25, 25, 57}};
+    in.display.glRenderer = "llvmpipe (LLVM 15.0.6, 256 bits)";
+    std::string md = report(in);
+    EXPECT_EQ(md.find("on the GPU"), std::string::npos);
+    EXPECT_NE(md.find("through OpenGL (llvmpipe (LLVM 15.0.6, 256 bits): software rendering on the "
+                      "CPU, no GPU)"),
+              std::string::npos)
+        << md;
+    in.display.glRenderer = "NVIDIA H100 PCIe/PCIe/SSE2";
+    md = report(in);
+    EXPECT_NE(md.find("through OpenGL (NVIDIA H100 PCIe/PCIe/SSE2)."), std::string::npos) << md;
+}
+
 // Figure 7's dbi / volume column prints the ratio as the target line does: 4.96 reads 4.96x, not
 // 5.0x beside the line's MISS.
 TEST(StudyReport, FigureSevensRatioAgreesWithTheTargetLine) {
