@@ -157,11 +157,19 @@ ForceResult ForceModel::compute(const Volume& volume, const ToolPose& pose, floa
     if (!out.contact)
         return out;
 
+    // The cutter resists being fed into the bone, not being withdrawn: only an axial motion
+    // against the contact force is resisted. Resisting a withdrawal too pulled the tool towards
+    // the bone, past the contact force near separation, and that reversed the direction the
+    // client's one-way extrapolation protects (a fast pull-out was dragged in by 1-2 N).
     if (speed > 0.0f && m_config.drillDampingNsPerMm > 0.0f) {
         const glm::dvec3 axis = glm::dvec3(pose.axis());
-        const double frac = double(out.contactPoints) / double(m_shell.size());
-        const double c = double(m_config.drillDampingNsPerMm) * std::min(1.0, double(speed)) * frac;
-        f -= c * glm::dot(glm::dvec3(velocityMmPerS), axis) * axis;
+        const double axial = glm::dot(glm::dvec3(velocityMmPerS), axis);
+        if (axial * glm::dot(f, axis) < 0.0) {
+            const double frac = double(out.contactPoints) / double(m_shell.size());
+            const double c =
+                double(m_config.drillDampingNsPerMm) * std::min(1.0, double(speed)) * frac;
+            f -= c * axial * axis;
+        }
     }
 
     const double mag = glm::length(f), fmax = m_config.maxForceN;

@@ -1,6 +1,7 @@
 // The haptic force model: contact only in bone, direction out of the bone, clamping, and the
 // analytic gradient against finite differences at random contact poses.
 #include "libsim/force_model.h"
+#include "libsim/haptics.h"
 
 #include "libsim/error.h"
 #include "libsim/skull.h"
@@ -120,6 +121,39 @@ TEST(ForceModel, DrillingResistsMotionAlongTheShaft) {
     glm::vec3 drilling = model.compute(sphere, pose, 1.0f, glm::vec3(0, 0, -10.0f)).force;
     EXPECT_GT(drilling.z, still.z); // moving in along -z while drilling: more push back
     EXPECT_EQ(model.compute(sphere, pose, 0.0f, glm::vec3(0, 0, -10.0f)).force, still);
+}
+
+// A fast pull-out in light contact: the resistance pointed into the bone, larger than the contact
+// force, so the model's force (the direction the client's one-way extrapolation protects) pulled
+// the tool in: here -0.03 N at the model, and the blender's extrapolation -0.13 N at +0.5 mm and
+// -0.24 N at +1 mm, where the true force is 0 (-0.6 and -1.2 N on a flat plate). Only a feed into
+// the bone is resisted now.
+TEST(ForceModel, AFastPullOutIsNotDraggedIntoTheBone) {
+    Volume sphere = makeSphere(48);
+    ForceModel model(ToolShape::burr(2.0f));
+    const glm::vec3 n(0, 0, 1);
+    // The ball's bottom 0.05 mm into the top of the sphere.
+    const ToolPose pose = ToolPose::fromAxis(n * (sphereRadiusMm(48) + 1.0f - 0.05f), n);
+    const ForceResult still = model.compute(sphere, pose, 1.0f);
+    ASSERT_TRUE(still.contact);
+    const ForceResult out = model.compute(sphere, pose, 1.0f, 200.0f * n); // pulled out
+    EXPECT_EQ(out.force, still.force) << "a withdrawal is not resisted";
+    EXPECT_GE(glm::dot(out.force, n), 0.0f);
+    const ForceResult in = model.compute(sphere, pose, 1.0f, -200.0f * n); // fed in
+    EXPECT_GT(glm::dot(in.force, n), glm::dot(still.force, n));
+
+    // The client's blend of that model, felt 0.5 and 1 mm further out: not into the bone (a few
+    // micronewtons at most: the one-way cut is partial for so weak a push).
+    HapticModelData m;
+    m.position = pose.position;
+    m.force = out.force;
+    m.gradient = out.gradient;
+    m.contact = true;
+    ModelBlender blender;
+    blender.resetTo(m, 0.0);
+    for (float lift : {0.5f, 1.0f})
+        EXPECT_GT(glm::dot(blender.update(pose.position + lift * n, 0.001 * lift), n), -1e-3f)
+            << lift << " mm out";
 }
 
 TEST(ForceModel, ShellSizeDoesNotGrowWithTheBurr) {

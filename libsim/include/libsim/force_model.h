@@ -23,7 +23,9 @@ struct ForceModelConfig {
     float stiffnessNPerMm = kDefaultStiffnessNPerMm;
     float maxForceN = kDefaultMaxForceN; // the device maximum; |force| is clamped to it
     // Viscous resistance along the shaft while drilling (N per mm/s at full speed), scaled by the
-    // fraction of shell points in contact. Not part of the gradient (it depends on velocity).
+    // fraction of shell points in contact, against feeding into the bone only (an axial motion
+    // against the contact force; a withdrawal is free). Not part of the gradient (it depends on
+    // velocity).
     float drillDampingNsPerMm = 0.01f;
     // Shell point spacing (mm); 0 picks one from the cutter size (about 450 points per burr, 900
     // for the 14 mm perforator), so the cost does not grow with the burr.
