@@ -66,4 +66,26 @@ ScriptPose burrholePose(const SurfaceSite& site, double t) {
     return {rest, leaning, false, t > 4.9};
 }
 
+DeviceState WindowDevice::read(double) {
+    std::lock_guard lock(m_mutex);
+    return m_state;
+}
+
+void WindowDevice::set(const DeviceState& s, const Tool& t, double frameTimeS) {
+    std::lock_guard lock(m_mutex);
+    m_state = s;
+    m_tool = t;
+    m_velocity = s.valid ? m_estimate.update(s.pose.position, frameTimeS) : glm::vec3(0.0f);
+}
+
+WindowDevice::Tool WindowDevice::tool() const {
+    std::lock_guard lock(m_mutex);
+    return m_tool;
+}
+
+glm::vec3 WindowDevice::velocity() const {
+    std::lock_guard lock(m_mutex);
+    return m_velocity;
+}
+
 } // namespace trephine::ui

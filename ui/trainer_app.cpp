@@ -102,38 +102,6 @@ struct ToolMeshCache {
 
 // [SECTION] haptics
 
-// The window's tool as the haptic loop's device: the UI thread sets the pose each frame, the
-// 1 kHz loop reads it, extrapolates the force there and sends tool states at 100 Hz.
-class WindowDevice : public Device {
-public:
-    struct Tool {
-        ToolKind kind = ToolKind::Burr;
-        float diameterMm = 5.0f;
-        float speed = 0.0f;
-        bool drilling = false;
-    };
-    std::string name() const override { return "window mouse"; }
-    DeviceState read(double) override {
-        std::lock_guard lock(m_mutex);
-        return m_state;
-    }
-    void setForce(glm::vec3) override {} // a mouse pushes nothing back
-    void set(const DeviceState& s, const Tool& t) {
-        std::lock_guard lock(m_mutex);
-        m_state = s;
-        m_tool = t;
-    }
-    Tool tool() const {
-        std::lock_guard lock(m_mutex);
-        return m_tool;
-    }
-
-private:
-    mutable std::mutex m_mutex;
-    DeviceState m_state;
-    Tool m_tool;
-};
-
 // The haptic loop's force in either design, chosen per tick. DBI: the server's force models,
 // extrapolated and blended as HapticLoop does without a source (the multi-rate scheme). Volume:
 // the ForceModel on the client's own copy of the volume, read under ClientThread::withLocalVolume's
@@ -166,7 +134,9 @@ public:
                                             : ToolShape::burr(t.diameterMm);
                 const ForceModel& model = m_models.get(shape);
                 const float speed = t.drilling ? t.speed : 0.0f;
-                const glm::vec3 velocity = m_velocity.update(pose.position, now);
+                // The poses change once a frame, so the velocity is the frame's (per tick it was
+                // 0 for ~15 ticks, then 16 times the true speed for one: a spiking drag).
+                const glm::vec3 velocity = m_device.velocity();
                 if (m_client->withLocalVolume([&](const Volume& v) {
                         f = model.compute(v, pose, speed, velocity).force;
                     })) {
@@ -185,7 +155,6 @@ private:
     const WindowDevice& m_device;
     const net::ClientThread* m_client = nullptr;
     ModelBlender m_blender;
-    VelocityEstimate m_velocity; // the haptic thread's, for the local drilling resistance
     ForceModelCache m_models;
     NewestModel m_serverModel;
     std::atomic<bool> m_local{false};
@@ -311,6 +280,9 @@ int runTrainerWindow(const TrainerOptions& o) {
         ts.orientation = s.pose.orientation;
         ts.speed = t.drilling ? t.speed : 0.0f;
         ts.drilling = t.drilling;
+        // The device sample: the server's step and velocity follow the loop's sampling, not when
+        // the client thread got round to sending it (and the force round trip starts here).
+        ts.clientTimeUs = net::steadyNowUs();
         clientPtr->sendToolState(ts);
     });
     const auto loopT0 = Clock::now();
@@ -659,7 +631,7 @@ int runTrainerWindow(const TrainerOptions& o) {
             ds.pose.orientation = toolRot;
             ds.buttons = toolControls.drilling ? 1u : 0u;
             ds.valid = toolValid && snap->state == net::LinkState::Connected;
-            device.set(ds, {kind, diameter, toolControls.speed, toolControls.drilling});
+            device.set(ds, {kind, diameter, toolControls.speed, toolControls.drilling}, now);
         }
 
         // Forces: the server's samples, and the force extrapolated at the tool each frame.

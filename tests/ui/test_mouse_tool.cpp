@@ -95,3 +95,33 @@ TEST(BurrholeScript, MovesContinuouslyAndEndsAtRestBesideTheHole) {
     EXPECT_GT(glm::length(lateral), 12.0f);
     EXPECT_FALSE(prev.drilling);
 }
+
+// The window's pose changes once a frame: the local drilling resistance took its velocity from the
+// haptic loop's 1 kHz ticks, 0 for ~15 ticks and 16 times the true speed on the one after a frame.
+// The device gives the frame's velocity, the same at every tick between frames.
+TEST(WindowDevice, VelocityIsTheFramesNotTheTicks) {
+    WindowDevice device;
+    DeviceState s;
+    s.valid = true;
+    const double frame = 1.0 / 60.0;
+    for (int i = 0; i < 30; ++i) {
+        s.pose.position = glm::vec3(0.0f, 0.0f, -0.2f * float(i)); // 12 mm/s down
+        device.set(s, {}, 5.0 + i * frame);
+        if (i == 0) {
+            EXPECT_EQ(device.velocity(), glm::vec3(0.0f)) << "no earlier frame";
+            continue;
+        }
+        for (int tick = 0; tick < 16; ++tick) { // what the loop reads between frames
+            EXPECT_NEAR(device.velocity().z, -12.0f, 0.01f) << "frame " << i << " tick " << tick;
+            EXPECT_EQ(device.read(0.0).pose.position, s.pose.position);
+        }
+    }
+    // The mouse left the bone (no pose): no velocity; back on after a pause: none from the jump.
+    s.valid = false;
+    device.set(s, {}, 5.6);
+    EXPECT_EQ(device.velocity(), glm::vec3(0.0f));
+    s.valid = true;
+    s.pose.position = glm::vec3(30.0f, 0.0f, 0.0f);
+    device.set(s, {}, 6.0);
+    EXPECT_EQ(device.velocity(), glm::vec3(0.0f));
+}

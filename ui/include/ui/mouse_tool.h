@@ -5,9 +5,12 @@
 
 #include "libsim/camera.h"
 #include "libsim/dbi.h"
+#include "libsim/device.h"
+#include "libsim/force_model.h"
 #include "libsim/skull.h"
 #include "libsim/tool.h"
 
+#include <mutex>
 #include <optional>
 
 namespace trephine::ui {
@@ -32,5 +35,35 @@ struct ScriptPose {
     bool done;
 };
 ScriptPose burrholePose(const SurfaceSite& site, double t);
+
+// The window's tool as the haptic loop's device: the UI thread sets the pose each frame, the
+// 1 kHz loop reads it, extrapolates the force there and sends tool states at 100 Hz.
+class WindowDevice : public Device {
+public:
+    struct Tool {
+        ToolKind kind = ToolKind::Burr;
+        float diameterMm = 5.0f;
+        float speed = 0.0f;
+        bool drilling = false;
+    };
+    std::string name() const override { return "window mouse"; }
+    DeviceState read(double) override;
+    void setForce(glm::vec3) override {} // a mouse pushes nothing back
+    // The frame's pose and tool, set at `frameTimeS` (seconds, any clock that only moves forward).
+    void set(const DeviceState& s, const Tool& t, double frameTimeS);
+    Tool tool() const;
+    // The tool's velocity (mm/s) from the last two frames' poses and their frame times
+    // (VelocityEstimate: 0 after a gap or a jump). The pose changes once a frame, so one taken
+    // from the haptic loop's ticks was 0 for most ticks and many times the true speed on the one
+    // after a frame.
+    glm::vec3 velocity() const;
+
+private:
+    mutable std::mutex m_mutex;
+    DeviceState m_state;
+    Tool m_tool;
+    VelocityEstimate m_estimate;
+    glm::vec3 m_velocity{0.0f};
+};
 
 } // namespace trephine::ui
