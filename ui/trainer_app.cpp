@@ -35,7 +35,6 @@
 #include <future>
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtx/quaternion.hpp>
-#include <glm/gtx/rotate_vector.hpp>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -393,13 +392,8 @@ int runTrainerWindow(const TrainerOptions& o) {
     auto seconds = [&] { return std::chrono::duration<double>(Clock::now() - t0).count(); };
 
     auto makeCamera = [&]() {
-        glm::vec3 dir = glm::normalize(baseCamera.eye - baseCamera.target);
-        glm::vec3 right = glm::normalize(glm::cross(baseCamera.up, dir));
-        glm::vec3 upv = glm::cross(dir, right);
-        dir = glm::rotate(dir, glm::radians(viewControls.yawDeg), upv);
-        dir = glm::rotate(dir, glm::radians(viewControls.pitchDeg), right);
-        return cameraLookingAt(baseCamera.target, dir, viewControls.distanceMm, baseCamera.fovYDeg,
-                               {viewSize, viewSize}, scene->volume);
+        return orbitCamera(baseCamera, viewControls.yawDeg, viewControls.pitchDeg,
+                           viewControls.distanceMm, {viewSize, viewSize}, scene->volume);
     };
 
     while (!window.shouldClose() && !(o.quit && o.quit->load())) {

@@ -113,6 +113,24 @@ Camera cameraLookingAt(glm::vec3 site, glm::vec3 normal, float distanceMm, float
     return c;
 }
 
+Camera orbitCamera(const Camera& base, float yawDeg, float pitchDeg, float distanceMm,
+                   glm::ivec2 size, const Volume& volume) {
+    const glm::vec3 dir = glm::normalize(base.eye - base.target);
+    const glm::vec3 right = glm::normalize(glm::cross(base.up, dir));
+    const glm::vec3 up = glm::cross(dir, right);
+    const glm::mat4 yaw = glm::rotate(glm::mat4(1.0f), glm::radians(yawDeg), up);
+    const glm::vec3 yawedRight = glm::vec3(yaw * glm::vec4(right, 0.0f));
+    const glm::mat3 turn =
+        glm::mat3(glm::rotate(glm::mat4(1.0f), glm::radians(pitchDeg), yawedRight) * yaw);
+    Camera c = base;
+    c.eye = base.target + glm::normalize(turn * dir) * distanceMm;
+    c.up = glm::normalize(turn * up);
+    c.width = size.x;
+    c.height = size.y;
+    fitNearFar(c, glm::vec3(0.0f), boundingRadius(volume));
+    return c;
+}
+
 Camera cameraPreset(std::string_view name, const Volume& volume, glm::ivec2 size) {
     if (size.x <= 0 || size.y <= 0)
         throw Error("camera: window size must be positive");

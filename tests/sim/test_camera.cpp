@@ -5,6 +5,9 @@
 #include "libsim/skull.h"
 #include "libsim/volume.h"
 
+#include <algorithm>
+#include <cmath>
+#include <glm/geometric.hpp>
 #include <glm/gtc/matrix_transform.hpp>
 #include <gtest/gtest.h>
 #include <type_traits>
@@ -149,6 +152,40 @@ TEST(Camera, FitNearFarKeepsNearAtLeastTenMillimetres) {
     fitNearFar(c, glm::vec3(0.0f), 100.0f);
     EXPECT_EQ(c.nearMm, 250.0f);
     EXPECT_EQ(c.farMm, 550.0f);
+}
+
+// The View panel's orbit and tilt: the up vector turns with the view, so one slider step never
+// rolls the picture (cameraLookingAt's up, picked afresh from the direction, jumped 124 degrees
+// between tilts -11.5 and -12 of the working view), and a tilt at orbit 90 still tilts (it turned
+// about the unturned right vector, which the orbit had made the view direction).
+TEST(Camera, OrbitingNeverRollsThePictureAndTiltWorksAtEveryOrbit) {
+    const Volume skull = makeSkull(64);
+    for (const char* preset : {"working", "top", "front"}) {
+        SCOPED_TRACE(preset);
+        const Camera base = cameraPreset(preset, skull, {256, 256});
+        const float distance = glm::length(base.eye - base.target);
+        const Camera same = orbitCamera(base, 0.0f, 0.0f, distance, {256, 256}, skull);
+        EXPECT_LT(glm::length(same.eye - base.eye), 1e-3f);
+        EXPECT_LT(glm::length(same.up - base.up), 1e-5f);
+        for (float yaw : {-135.0f, -90.0f, -30.0f, 0.0f, 45.0f, 90.0f, 180.0f}) {
+            Camera last = orbitCamera(base, yaw, -60.0f, distance, {256, 256}, skull);
+            for (float pitch = -59.5f; pitch <= 60.0f; pitch += 0.5f) {
+                const Camera c = orbitCamera(base, yaw, pitch, distance, {256, 256}, skull);
+                const float turned =
+                    glm::degrees(std::acos(std::clamp(glm::dot(c.up, last.up), -1.0f, 1.0f)));
+                ASSERT_LT(turned, 1.0f) << "yaw " << yaw << " pitch " << pitch;
+                EXPECT_NEAR(glm::dot(c.up, glm::normalize(c.eye - c.target)), 0.0f, 1e-4f);
+                EXPECT_NEAR(glm::length(c.eye - c.target), distance, 1e-2f);
+                last = c;
+            }
+            const glm::vec3 flat = glm::normalize(
+                orbitCamera(base, yaw, 0.0f, distance, {256, 256}, skull).eye - base.target);
+            const glm::vec3 tilted = glm::normalize(
+                orbitCamera(base, yaw, 30.0f, distance, {256, 256}, skull).eye - base.target);
+            EXPECT_NEAR(glm::degrees(std::acos(glm::dot(flat, tilted))), 30.0f, 0.1f)
+                << "yaw " << yaw << ": a 30 degree tilt turns the view by 30 degrees";
+        }
+    }
 }
 
 } // namespace
