@@ -597,7 +597,9 @@ uint16_t SessionServer::port() const {
 }
 
 void SessionServer::start() {
-    if (m_started.exchange(true))
+    // Once stopped, a server stays stopped: threads started then would end at once, unjoined,
+    // and the destructor's join-less threads would terminate the program.
+    if (m_stop.load() || m_started.exchange(true))
         return;
     m_netThread = std::thread([this] { networkLoop(); });
     m_simThread = std::thread([this] { simulationLoop(); });
@@ -1241,6 +1243,10 @@ void SessionServer::networkLoop() {
                 auto id = uint16_t(reinterpret_cast<uintptr_t>(ev.peer->data));
                 if (id && s.peers.erase(id))
                     s.push(makeEvent(SimEvent::Kind::Leave, id));
+            } else if (ev.type == ENET_EVENT_TYPE_CONNECT) {
+                // Arrived while the server says goodbye: told why at once (it waited, unwelcomed,
+                // for ENet's timeout and then read "the connection was lost").
+                enet_peer_disconnect(ev.peer, uint32_t(RefuseReason::Shutdown));
             }
         });
     m_clientCount = 0;

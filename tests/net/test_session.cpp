@@ -557,6 +557,36 @@ TEST(Session, TheServerSweepsTheCutterBetweenDrillingToolStates) {
 
 // A server stopped with clients still connected says goodbye to them, and its report lists them
 // as gone: they were left "connected": true and counted per mode beside "clients": 0.
+// A client that connects while the server says goodbye (up to 200 ms while other goodbyes are
+// unacknowledged) was left connected, unwelcomed, until ENet's timeout, then read "the connection
+// was lost"; it is told the server is shutting down. A server started after its stop stays
+// stopped (its threads ended at once, unjoined, and the destructor terminated the program).
+TEST(Session, AClientArrivingDuringTheGoodbyesIsToldTheServerIsShuttingDown) {
+    Volume sphere = makeSphere(24);
+    auto server = std::make_unique<SessionServer>(
+        sphere, trephine::testing::loopbackServerConfig("sphere:24"));
+    server->start();
+    ClientConfig cc;
+    cc.view = toViewSpec(cameraPreset("top", sphere, {32, 32}));
+    SessionClient early(cc);
+    early.connect(loopback(server->port()));
+    ASSERT_TRUE(pumpUntil({&early}, [&] { return early.hasFullImage(); }));
+    // `early` is not serviced from here: its goodbye stays unacknowledged for the whole 200 ms.
+    std::thread stopper([&] { server->stop(); });
+    std::this_thread::sleep_for(std::chrono::milliseconds(40));
+    SessionClient late(cc);
+    late.connect(loopback(server->port()));
+    const bool closed = pumpUntil(
+        {&late}, [&] { return late.closed(); }, 3.0);
+    stopper.join();
+    ASSERT_TRUE(closed) << "still waiting for a welcome";
+    EXPECT_EQ(late.closeReason(), refuseReasonText(uint32_t(RefuseReason::Shutdown)));
+
+    server->start(); // after stop: nothing starts
+    EXPECT_TRUE(server->idle());
+    server.reset();
+}
+
 TEST(Session, TheReportAfterAStopListsNoClientAsConnected) {
     Volume sphere = makeSphere(24);
     SessionServer server(sphere, trephine::testing::loopbackServerConfig("sphere:24"));
