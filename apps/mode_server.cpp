@@ -92,8 +92,12 @@ int runServer(const ServerOptions& o) {
     // Every way a session is ended from outside saves it: Ctrl-C, kill, Ctrl-\ (SIGQUIT), and a
     // closed terminal or dropped ssh (SIGHUP). Output gone (a `| tee` ended first) must not kill it
     // either: SIGPIPE is ignored and the lines are lost, not the session.
-    for (int sig : {SIGINT, SIGTERM, SIGHUP, SIGQUIT})
+    // Under nohup a hang-up is ignored, and stays so: a server started with `nohup ... &` over
+    // ssh must outlive the logout (handling SIGHUP regardless stopped it).
+    for (int sig : {SIGINT, SIGTERM, SIGQUIT})
         std::signal(sig, onStopSignal);
+    if (std::signal(SIGHUP, SIG_IGN) != SIG_IGN)
+        std::signal(SIGHUP, onStopSignal);
     std::signal(SIGPIPE, SIG_IGN);
     server.start();
     std::printf("trephine server: %s (%d x %d x %d) on port %u; Ctrl-C stops\n", o.volume.c_str(),

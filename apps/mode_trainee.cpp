@@ -275,6 +275,7 @@ int runTrainee(const TraineeOptions& o) {
         w.name = o.name;
         w.codec = o.codec;
         w.size = o.size;
+        w.sizeOption = "--size";
         w.sync = o.sync;
         w.volumeCodec = o.volumeCodec;
         w.screenshot = o.screenshot;
@@ -416,14 +417,20 @@ int runTrainee(const TraineeOptions& o) {
     // A server killed, crashed or cut off sends no goodbye, and ENet gives up on it only after 5
     // to 30 s: past a short script. The pings below (every 0.1 s) are answered within
     // milliseconds, so seconds of silence mean it is gone.
+    // Counted from the script's start at the earliest: the first image's handling (a whole volume
+    // decoded and rendered) is not silence.
     auto serverLost = [&] {
-        return !client.closed() && net::steadyNowUs() - client.lastHeardUs() > kServerSilenceUs;
+        return !client.closed() &&
+               net::steadyNowUs() - std::max(client.lastHeardUs(), start) > kServerSilenceUs;
     };
     // Ctrl-C (or kill, or a closed terminal) ends the script early; the figures so far are still
     // printed and --report / --save-dbi still written.
     g_traineeStop = false;
-    for (int sig : {SIGINT, SIGTERM, SIGHUP})
+    for (int sig : {SIGINT, SIGTERM})
         std::signal(sig, onTraineeStopSignal);
+    // Under nohup a hang-up is ignored, and stays so (it stopped the run).
+    if (std::signal(SIGHUP, SIG_IGN) != SIG_IGN)
+        std::signal(SIGHUP, onTraineeStopSignal);
     loop.start();
     while (net::steadyNowUs() < end && !client.closed() && !serverLost() && !g_traineeStop) {
         {

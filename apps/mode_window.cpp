@@ -37,6 +37,7 @@ int runWindowedClient(const WindowedOptions& o) {
     t.camera = o.camera;
     t.codec = o.codec;
     t.size = o.size;
+    t.sizeOption = o.sizeOption;
     t.script = o.script;
     t.screenshot = o.screenshot;
     t.frames = o.frames;

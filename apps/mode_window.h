@@ -15,7 +15,8 @@ struct WindowedOptions {
     std::string camera = "site";
     std::string codec = "lz4";
     int size = 500;
-    std::string script; // "" or "burrhole"
+    std::string sizeOption = "--window-size"; // the option that set `size` (the trainee's: --size)
+    std::string script;                       // "" or "burrhole"
     std::string screenshot;
     int frames = 0;
     double timeoutS = 90.0;

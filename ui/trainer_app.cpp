@@ -750,8 +750,8 @@ int runTrainerWindow(const TrainerOptions& o) {
         const std::string tooLargeText =
             "The server serves views of at most " + std::to_string(maxViewPixels) +
             " pixels; this view is " + std::to_string(viewSize) + " x " + std::to_string(viewSize) +
-            ": restart with --size " + std::to_string(int(std::sqrt(double(maxViewPixels)))) +
-            " or less";
+            ": restart with " + o.sizeOption + " " +
+            std::to_string(int(std::sqrt(double(maxViewPixels)))) + " or less";
         {
             std::string status;
             if (viewTooLarge)

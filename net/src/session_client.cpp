@@ -46,6 +46,12 @@ bool SessionClient::sendRaw(Channel channel, std::span<const uint8_t> bytes) {
 int SessionClient::poll(uint32_t timeoutMs) {
     int n = m_host.service(timeoutMs, [this](const ENetEvent& ev) { onEvent(ev); });
     if (m_peer && m_connected) {
+        // Any datagram counts as heard, a fragment of a large update too: ENet stamps the peer
+        // whenever it receives (a whole message may take seconds on a slow link).
+        if (m_peer->lastReceiveTime != m_lastReceiveTime) {
+            m_lastReceiveTime = m_peer->lastReceiveTime;
+            m_lastHeardUs = steadyNowUs();
+        }
         // ENet's own estimate, refreshed about every ENET_PEER_PACKET_LOSS_INTERVAL (10 s).
         m_stats.packetLoss = double(m_peer->packetLoss) / double(ENET_PEER_PACKET_LOSS_SCALE);
         m_stats.packetsLost = m_peer->packetsLost;
@@ -106,6 +112,9 @@ void SessionClient::onEvent(const ENetEvent& ev) {
                         ev.packet->dataLength);
         if (!handleMessage({ev.packet->data, ev.packet->dataLength}, steadyNowUs()))
             m_stats.countMalformed();
+        // And once handled: applying a large update (a whole volume, its first render) takes
+        // long, and that is no silence of the server's.
+        m_lastHeardUs = steadyNowUs();
         return;
     }
     default:

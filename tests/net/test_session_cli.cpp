@@ -44,13 +44,17 @@ struct ServerProcess {
     pid_t pid = -1;
     FILE* out = nullptr;
 
-    explicit ServerProcess(std::vector<std::string> args, const char* mode = "server") {
+    // ignoreHangup: started as `nohup` starts it (SIGHUP ignored, inherited across exec).
+    explicit ServerProcess(std::vector<std::string> args, const char* mode = "server",
+                           bool ignoreHangup = false) {
         int fds[2];
         if (pipe(fds) != 0)
             return;
         args.insert(args.begin(), {TREPHINE_BIN, mode});
         pid = fork();
         if (pid == 0) {
+            if (ignoreHangup)
+                signal(SIGHUP, SIG_IGN);
             dup2(fds[1], 1);
             close(fds[0]);
             std::vector<char*> argv;
@@ -373,6 +377,23 @@ TEST(SessionCli, AHangupOrAClosedOutputStillSavesTheSession) {
         EXPECT_EQ(loadVolume(path).dims(), glm::ivec3(32));
         EXPECT_TRUE(std::filesystem::exists(marksPathFor(path)));
     }
+}
+
+// Under nohup (SIGHUP ignored) a hang-up leaves the server running, as before the handler for
+// SIGHUP was added (it stopped a `nohup trephine server &` at the ssh logout).
+TEST(SessionCli, UnderNohupAHangupLeavesTheServerRunning) {
+    trephine::testing::TempDir dir;
+    const std::string path = dir / "s.nrrd";
+    ServerProcess server(
+        {"--port", "0", "--volume", "sphere:16", "--render-threads", "1", "--save-on-exit", path},
+        "server", true);
+    ASSERT_GT(portIn(server.line()), 0);
+    kill(server.pid, SIGHUP);
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    int status = 0;
+    EXPECT_EQ(waitpid(server.pid, &status, WNOHANG), 0) << "the hang-up stopped it";
+    EXPECT_EQ(server.stop(), 0);
+    EXPECT_TRUE(std::filesystem::exists(path));
 }
 
 // --report over the saved session (or its marks) replaced the skull with JSON, exit 0; a NIfTI

@@ -254,3 +254,23 @@ TEST(InstructorWindow, AMarkOutsideTheViewIsNotDrawnOverThePanels) {
     EXPECT_LT(countHue(img, out.x, out.y, 10, ui::markColor()), 5)
         << "no mark ring in the panel under the view";
 }
+
+// An instructor whose view is larger than the server serves is told the option it has: the
+// message said "--size", the trainee's; the instructor's (and the demo's) is --window-size.
+TEST(InstructorWindow, AViewTooLargeNamesTheInstructorsOwnOption) {
+    TREPHINE_NEED_DISPLAY("the instructor window");
+    const Volume sphere = makeSphere(32);
+    net::ServerConfig sc = trephine::testing::loopbackServerConfig("sphere:32");
+    sc.maxViewPixels = 100 * 100;
+    net::SessionServer server(sphere, sc);
+    server.start();
+    trephine::testing::TempDir dir;
+    const trephine::testing::CommandResult r = trephine::testing::runTrephine(
+        dir, "instructor --connect 127.0.0.1:" + std::to_string(server.port()) +
+                 " --window-size 128 --frames 5 --timeout 60");
+    server.stop();
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_NE(r.err.find("this view is 128 x 128: restart with --window-size 100 or less"),
+              std::string::npos)
+        << r.err;
+}

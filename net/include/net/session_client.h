@@ -69,9 +69,10 @@ public:
     // Why the server closed the connection (refuseReasonText), empty while connected.
     const std::string& closeReason() const { return m_closeReason; }
     const Welcome& welcome() const { return *m_welcome; }
-    // steadyNowUs() of the last thing heard from the server (its connect, any message); connect()
-    // starts it. A server that died without a word is noticed by ENet only after 5 to 30 s; one
-    // answering sendPing() every 0.1 s but silent for seconds is gone.
+    // steadyNowUs() of the last thing heard from the server (its connect, any datagram, a
+    // fragment included, and the end of handling each message); connect() starts it. A server that
+    // died without a word is noticed by ENet only after 5 to 30 s; one answering sendPing() every
+    // 0.1 s but silent for seconds is gone.
     uint64_t lastHeardUs() const { return m_lastHeardUs; }
 
     // The DBI of the current view (background until the first full update arrives). In volume
@@ -206,6 +207,7 @@ private:
     bool m_connected = false;
     bool m_closed = false;
     uint64_t m_lastHeardUs = 0;
+    uint32_t m_lastReceiveTime = 0; // ENet's stamp of the peer's last datagram (ms, its clock)
     std::string m_closeReason;
     std::optional<Welcome> m_welcome;
 

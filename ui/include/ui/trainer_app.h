@@ -43,8 +43,9 @@ struct TrainerOptions {
     float distanceMm = 170.0f;       // eye to site for "site"
     float orbitDeg = 0.0f; // initial orbit and tilt of the view (the View panel's sliders)
     float tiltDeg = 0.0f;
-    int size = 500;         // DBI and view size in pixels (1:1 with the window)
-    std::string script;     // "" (mouse) or "burrhole": a scripted drilling
+    int size = 500;                    // DBI and view size in pixels (1:1 with the window)
+    std::string sizeOption = "--size"; // the command-line option of `size`, for messages
+    std::string script;                // "" (mouse) or "burrhole": a scripted drilling
     std::string screenshot; // write the window here after `frames` settled frames, then exit
     // Without a screenshot: frames showing the picture to run, then exit (0: until the window
     // closes).
