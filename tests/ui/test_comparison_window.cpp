@@ -49,6 +49,59 @@ int maxChannelDiff(const uint8_t* a, const uint8_t* b) {
     return std::max({std::abs(a[0] - b[0]), std::abs(a[1] - b[1]), std::abs(a[2] - b[2])});
 }
 
+// Waits for `pred` up to `seconds` (a guard against hangs, not a timing assertion).
+bool waitFor(const std::function<bool()>& pred, double seconds = 60.0) {
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+    while (!pred() && std::chrono::steady_clock::now() < deadline)
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
+    return pred();
+}
+
+// A started server of `volume` named `name`, on `port` (0: any free one).
+std::unique_ptr<net::SessionServer> startedServer(const Volume& volume, const std::string& name,
+                                                  uint16_t port = 0) {
+    net::ServerConfig sc = trephine::testing::loopbackServerConfig(name);
+    sc.port = port;
+    auto server = std::make_unique<net::SessionServer>(volume, sc);
+    server->start();
+    return server;
+}
+
+// A hidden 128-pixel window of the top view on 127.0.0.1:`port`.
+TrainerOptions hiddenTopWindow(uint16_t port) {
+    TrainerOptions o;
+    o.address = "127.0.0.1:" + std::to_string(port);
+    o.camera = "top";
+    o.size = 128;
+    o.visible = false;
+    return o;
+}
+
+// runTrainerWindow(options) on a thread of its own, with its report; close() quits it as its
+// close button would (if it is still open) and gives its exit code.
+struct WindowThread {
+    TrainerReport report;
+    std::atomic<bool> quit{false}, done{false};
+    int rc = -1;
+    std::thread thread;
+
+    explicit WindowThread(TrainerOptions o) {
+        o.report = &report;
+        o.quit = &quit;
+        thread = std::thread([this, o] {
+            rc = runTrainerWindow(o);
+            done = true;
+        });
+    }
+    int close() {
+        quit = true;
+        if (thread.joinable())
+            thread.join();
+        return rc;
+    }
+    ~WindowThread() { close(); }
+};
+
 // The window's options for a scripted burr hole on an in-process server.
 TrainerOptions windowOptions(uint16_t port, const std::string& sync, const std::string& shot,
                              TrainerReport* report) {
@@ -232,41 +285,19 @@ TEST(ComparisonWindow, AnUnwritableScreenshotEndsTheWindowWithItsError) {
 TEST(ComparisonWindow, AReconnectToAnotherVolumeRebuildsTheScene) {
     TREPHINE_NEED_DISPLAY("the window");
     const Volume first = makeSphere(32), second = makeBox(48);
-    auto server = std::make_unique<net::SessionServer>(
-        first, trephine::testing::loopbackServerConfig("sphere:32"));
+    auto server = startedServer(first, "sphere:32");
     const uint16_t port = server->port();
-    server->start();
-    TrainerReport report;
-    std::atomic<bool> quit{false};
-    TrainerOptions o;
-    o.address = "127.0.0.1:" + std::to_string(port);
-    o.camera = "top";
-    o.size = 128;
-    o.visible = false;
-    o.report = &report;
-    o.quit = &quit;
-    int rc = -1;
-    std::thread window([&] { rc = runTrainerWindow(o); });
-    auto waitUntil = [](const std::function<bool()>& pred) {
-        const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
-        while (!pred() && std::chrono::steady_clock::now() < deadline)
-            std::this_thread::sleep_for(std::chrono::milliseconds(20));
-        return pred();
-    };
+    WindowThread window(hiddenTopWindow(port));
     // The window has joined and asked for its view of the sphere; then the server goes, and a
     // new one serves the box on the same port.
-    const bool joined = waitUntil([&] { return server->rendersDone() >= 2; });
+    const bool joined = waitFor([&] { return server->rendersDone() >= 2; });
     server->stop();
     server.reset();
-    net::ServerConfig sc = trephine::testing::loopbackServerConfig("box:48");
-    sc.port = port;
-    server = std::make_unique<net::SessionServer>(second, sc);
-    server->start();
+    server = startedServer(second, "box:48", port);
     // Rejoined, and asked for a view of its own again (the scene rebuilt for the box).
-    const bool rejoined = waitUntil([&] { return server->rendersDone() >= 2; });
+    const bool rejoined = waitFor([&] { return server->rendersDone() >= 2; });
     std::this_thread::sleep_for(std::chrono::milliseconds(500));
-    quit = true;
-    window.join();
+    const int rc = window.close();
     ASSERT_TRUE(joined);
     ASSERT_TRUE(rejoined);
     ASSERT_EQ(rc, 0);
@@ -274,61 +305,33 @@ TEST(ComparisonWindow, AReconnectToAnotherVolumeRebuildsTheScene) {
     const float boxTop = distance(cameraPreset("top", second, {128, 128}));
     const float sphereTop = distance(cameraPreset("top", first, {128, 128}));
     ASSERT_GT(std::abs(boxTop - sphereTop), 5.0f) << "the two volumes' views differ";
-    EXPECT_NEAR(distance(report.camera), boxTop, 0.5f) << "the new volume's camera";
+    EXPECT_NEAR(distance(window.report.camera), boxTop, 0.5f) << "the new volume's camera";
 
     server->stop();
 }
-
-namespace {
-
-// Waits for `pred` up to `seconds` (a guard against hangs, not a timing assertion).
-bool waitFor(const std::function<bool()>& pred, double seconds = 60.0) {
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-    while (!pred() && std::chrono::steady_clock::now() < deadline)
-        std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    return pred();
-}
-
-} // namespace
 
 // A volume the window could not open (not on this machine) was never tried again, even once the
 // server came back on another volume: its error stayed and no picture came.
 TEST(ComparisonWindow, AVolumeThatCouldNotBeOpenedIsTriedAgainOnReconnect) {
     TREPHINE_NEED_DISPLAY("the window");
     const Volume sphere = makeSphere(32);
-    auto server = std::make_unique<net::SessionServer>(
-        sphere, trephine::testing::loopbackServerConfig("/nonexistent/scan.nrrd"));
+    auto server = startedServer(sphere, "/nonexistent/scan.nrrd");
     const uint16_t port = server->port();
-    server->start();
-    TrainerReport report;
-    std::atomic<bool> quit{false};
-    TrainerOptions o;
-    o.address = "127.0.0.1:" + std::to_string(port);
-    o.camera = "top";
-    o.size = 128;
-    o.visible = false;
-    o.report = &report;
-    o.quit = &quit;
-    int rc = -1;
-    std::thread window([&] { rc = runTrainerWindow(o); });
+    WindowThread window(hiddenTopWindow(port));
     const bool joined = waitFor([&] { return server->clientCount() >= 1; });
     std::this_thread::sleep_for(std::chrono::milliseconds(500)); // the scene fails meanwhile
     server->stop();
     server.reset();
-    net::ServerConfig sc = trephine::testing::loopbackServerConfig("sphere:32");
-    sc.port = port;
-    server = std::make_unique<net::SessionServer>(sphere, sc);
-    server->start();
+    server = startedServer(sphere, "sphere:32", port);
     // The window asks for its own view once its scene is built.
     const bool viewed = waitFor([&] { return server->rendersDone() >= 2; });
     std::this_thread::sleep_for(std::chrono::milliseconds(500));
-    quit = true;
-    window.join();
+    const int rc = window.close();
     server->stop();
     ASSERT_TRUE(joined);
     EXPECT_TRUE(viewed) << "no view asked of the second server: the scene was not rebuilt";
     EXPECT_EQ(rc, 0);
-    EXPECT_EQ(report.view.width(), 128);
+    EXPECT_EQ(window.report.view.width(), 128);
 }
 
 // A --frames run whose server goes away counted the last picture's frames on and exited 0 (and in
@@ -336,29 +339,16 @@ TEST(ComparisonWindow, AVolumeThatCouldNotBeOpenedIsTriedAgainOnReconnect) {
 TEST(ComparisonWindow, AFramesRunWhoseServerGoesAwayFails) {
     TREPHINE_NEED_DISPLAY("the window");
     const Volume sphere = makeSphere(32);
-    auto server = std::make_unique<net::SessionServer>(
-        sphere, trephine::testing::loopbackServerConfig("sphere:32"));
-    server->start();
-    std::atomic<bool> quit{false}, done{false};
-    TrainerOptions o;
-    o.address = "127.0.0.1:" + std::to_string(server->port());
-    o.camera = "top";
-    o.size = 128;
-    o.visible = false;
+    auto server = startedServer(sphere, "sphere:32");
+    TrainerOptions o = hiddenTopWindow(server->port());
     o.frames = 1000000; // hours of frames: the run ends by failing, or not at all
     o.timeoutS = 5.0;
-    o.quit = &quit;
-    int rc = -1;
-    std::thread window([&] {
-        rc = runTrainerWindow(o);
-        done = true;
-    });
+    WindowThread window(o);
     const bool pictured = waitFor([&] { return server->rendersDone() >= 2; });
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
     server->stop();
-    const bool ended = waitFor([&] { return done.load(); }, 30.0);
-    quit = true; // the guard, were it still running
-    window.join();
+    const bool ended = waitFor([&] { return window.done.load(); }, 30.0);
+    const int rc = window.close(); // the guard, were it still running
     ASSERT_TRUE(pictured);
     EXPECT_TRUE(ended) << "still counting frames 30 s after the server went";
     EXPECT_EQ(rc, 1);
@@ -369,19 +359,11 @@ TEST(ComparisonWindow, AFramesRunWhoseServerGoesAwayFails) {
 TEST(ComparisonWindow, AWindowClosedBeforeItsScreenshotExits1) {
     TREPHINE_NEED_DISPLAY("the window");
     TempDir dir;
-    std::atomic<bool> quit{false};
-    TrainerOptions o;
-    o.address = "127.0.0.1:9"; // nothing answers
-    o.size = 128;
-    o.visible = false;
+    TrainerOptions o = hiddenTopWindow(9); // port 9: nothing answers
     o.screenshot = dir / "shot.png";
-    o.quit = &quit;
-    int rc = -1;
-    std::thread window([&] { rc = runTrainerWindow(o); });
+    WindowThread window(o);
     std::this_thread::sleep_for(std::chrono::milliseconds(500));
-    quit = true;
-    window.join();
-    EXPECT_EQ(rc, 1);
+    EXPECT_EQ(window.close(), 1);
     EXPECT_FALSE(std::filesystem::exists(dir / "shot.png"));
 }
 
@@ -394,11 +376,7 @@ TEST(ComparisonWindow, AViewLargerThanTheServerServesIsSaid) {
     sc.maxViewPixels = 100 * 100;
     net::SessionServer server(sphere, sc);
     server.start();
-    TrainerOptions o;
-    o.address = "127.0.0.1:" + std::to_string(server.port());
-    o.camera = "top";
-    o.size = 128;
-    o.visible = false;
+    TrainerOptions o = hiddenTopWindow(server.port());
     o.frames = 5;
     o.timeoutS = 60.0;
     ::testing::internal::CaptureStderr();
