@@ -44,6 +44,7 @@ struct SimEvent {
     Box3i box;                              // Cut, Voxels
     std::vector<uint8_t> density, material; // Voxels
     uint64_t arrivedUs = 0;
+    Host::InFlight inFlight; // Join: the peer's bytes in flight (read by the simulation thread)
 };
 
 // An image update for one client, waiting for the network thread. While it waits, newer
@@ -150,6 +151,18 @@ struct SimClient {
     bool hasTool = false;
     uint32_t lastSequence = 0;
     uint64_t lastClientUs = 0;
+    // The peer's bytes in flight (the network thread's count): over ServerConfig::maxInFlightBytes
+    // its updates wait in the outbox.
+    Host::InFlight inFlight;
+    // [Volume mode] Changes noted while the client is held back with an update already waiting:
+    // posted (coded) once, when it can go, instead of re-coding the waiting one at every batch.
+    struct DeferredVolume {
+        Box3i box;
+        bool full = false, materials = false;
+        uint64_t causeUs = 0;
+        uint32_t erodeUs = 0;
+    };
+    std::optional<DeferredVolume> deferredVolume;
 };
 
 // One render per distinct view; clients that share a camera share its frame.
@@ -899,6 +912,7 @@ void SessionServer::networkLoop() {
             if (!s.annotations.empty())
                 sendTo(p.peer, Channel::Control, annotationList());
             SimEvent ev = makeEvent(SimEvent::Kind::Join, id);
+            ev.inFlight = p.inFlight;
             ev.camera = toCamera(h.view);
             ev.codec = h.codec;
             ev.sync = h.sync;
@@ -1258,6 +1272,39 @@ void SessionServer::simulationLoop() {
     nameThread("trephine-sim");
     Impl& s = *m_impl;
     std::vector<SimEvent> batch;
+    // [Volume mode] A client with more than maxInFlightBytes unacknowledged keeps its update in
+    // the outbox; a newer change merged into it was coded again at every batch (a held whole
+    // volume: a whole volume's encode per drilling batch, for as long as a slow link stayed
+    // behind, everyone's updates waiting). While held with one waiting, a change is only noted
+    // (merged into deferredVolume) and coded once the waiting one has gone. Volume lock held.
+    using Deferred = SimClient::DeferredVolume;
+    auto postOrDefer = [&](uint16_t id, SimClient& c, std::optional<Deferred> d) {
+        if (c.deferredVolume) {
+            if (d) {
+                d->box.merge(c.deferredVolume->box);
+                d->full = d->full || c.deferredVolume->full;
+                d->materials = d->materials || c.deferredVolume->materials;
+                d->causeUs = std::min(d->causeUs, c.deferredVolume->causeUs);
+            } else {
+                d = c.deferredVolume;
+            }
+        }
+        if (!d)
+            return;
+        const bool held =
+            c.inFlight && c.inFlight->load(std::memory_order_relaxed) > m_config.maxInFlightBytes;
+        bool waiting = false;
+        if (held) {
+            std::lock_guard lock(s.outMutex);
+            waiting = s.volumeOutbox.count(id) > 0;
+        }
+        if (held && waiting) {
+            c.deferredVolume = d;
+            return;
+        }
+        c.deferredVolume.reset();
+        s.postVolumeOrRefuse(id, c, d->box, d->full, d->materials, d->causeUs, d->erodeUs);
+    };
     for (;;) {
         {
             std::unique_lock lock(s.inMutex);
@@ -1270,8 +1317,17 @@ void SessionServer::simulationLoop() {
             s.inboxTools = 0;
             s.busy = !batch.empty();
         }
-        if (batch.empty())
+        if (batch.empty()) {
+            // Updates noted for clients that were held back go once they can.
+            if (std::any_of(s.simClients.begin(), s.simClients.end(),
+                            [](const auto& kv) { return kv.second.deferredVolume.has_value(); })) {
+                std::lock_guard volumeLock(s.volumeMutex);
+                for (auto& [id, c] : s.simClients)
+                    if (c.sync == Sync::Volume)
+                        postOrDefer(id, c, std::nullopt);
+            }
             continue;
+        }
 
         std::lock_guard volumeLock(s.volumeMutex);
         Box3i changed;
@@ -1288,6 +1344,8 @@ void SessionServer::simulationLoop() {
                 c.camera = ev.camera;
                 c.viewId = ev.viewId;
                 if (ev.kind == SimEvent::Kind::Join) {
+                    c.inFlight = ev.inFlight;
+                    c.deferredVolume.reset();
                     c.codec = ev.codec;
                     c.sync = ev.sync;
                     c.volumeCodec = ev.volumeCodec;
@@ -1320,6 +1378,7 @@ void SessionServer::simulationLoop() {
                     needVolume.erase(ev.client);
                     needFull[ev.client] = steadyNowUs();
                     s.dropPending(ev.client, Sync::Volume);
+                    c.deferredVolume.reset();
                 }
                 break;
             }
@@ -1429,15 +1488,17 @@ void SessionServer::simulationLoop() {
         // Volume clients: the changed voxels themselves, or the whole volume after a join or a
         // switch (which already holds this batch's change). Posted first: they need none of the
         // rendering below, so in a mixed session they never wait for the DBI clients' renders.
-        for (const auto& [id, c] : s.simClients) {
+        for (auto& [id, c] : s.simClients) {
             if (c.sync != Sync::Volume)
                 continue;
             auto full = needVolume.find(id);
             if (full != needVolume.end())
-                s.postVolumeOrRefuse(id, c, s.volume.bounds(), true, true, full->second, 0);
+                postOrDefer(id, c, Deferred{s.volume.bounds(), true, true, full->second, 0});
             else if (!changed.empty())
-                s.postVolumeOrRefuse(id, c, changed, false, changedMaterials, causeUs,
-                                     uint32_t(erodeUs));
+                postOrDefer(id, c,
+                            Deferred{changed, false, changedMaterials, causeUs, uint32_t(erodeUs)});
+            else
+                postOrDefer(id, c, std::nullopt);
         }
         // Erosion only lowers densities, so the views' hit caches stay valid; voxels written
         // wholesale may raise them, which invalidates every cache (the next render restarts it).
