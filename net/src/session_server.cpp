@@ -287,6 +287,9 @@ struct SessionServer::Impl {
     size_t inboxTools = 0; // Tool events in the inbox (ServerConfig::maxQueuedToolStates)
     // Peers whose mode switch waits for kSyncSwitchIntervalUs (NetPeer::syncDeferred): not idle.
     std::atomic<int> syncsDeferred{0};
+    // Volume clients with changes noted but not yet coded (SimClient::deferredVolume), counted by
+    // the simulation thread after each pass: not idle while there are any.
+    std::atomic<int> volumesDeferred{0};
     bool busy = false; // the simulation thread is working on a batch (under inMutex)
     std::atomic<bool> stopSim{false};
 
@@ -714,7 +717,7 @@ Volume SessionServer::volumeSnapshot() {
 }
 
 bool SessionServer::idle() {
-    if (m_impl->syncsDeferred.load() > 0)
+    if (m_impl->syncsDeferred.load() > 0 || m_impl->volumesDeferred.load() > 0)
         return false;
     {
         std::lock_guard lock(m_impl->inMutex);
@@ -1285,6 +1288,7 @@ void SessionServer::simulationLoop() {
                 d->full = d->full || c.deferredVolume->full;
                 d->materials = d->materials || c.deferredVolume->materials;
                 d->causeUs = std::min(d->causeUs, c.deferredVolume->causeUs);
+                d->erodeUs += c.deferredVolume->erodeUs; // every batch's erosion it carries
             } else {
                 d = c.deferredVolume;
             }
@@ -1304,6 +1308,12 @@ void SessionServer::simulationLoop() {
         }
         c.deferredVolume.reset();
         s.postVolumeOrRefuse(id, c, d->box, d->full, d->materials, d->causeUs, d->erodeUs);
+    };
+    // After the posts (a change posted is in the outbox before it stops counting here).
+    auto countDeferred = [&] {
+        s.volumesDeferred =
+            int(std::count_if(s.simClients.begin(), s.simClients.end(),
+                              [](const auto& kv) { return kv.second.deferredVolume.has_value(); }));
     };
     for (;;) {
         {
@@ -1325,6 +1335,7 @@ void SessionServer::simulationLoop() {
                 for (auto& [id, c] : s.simClients)
                     if (c.sync == Sync::Volume)
                         postOrDefer(id, c, std::nullopt);
+                countDeferred();
             }
             continue;
         }
@@ -1500,6 +1511,7 @@ void SessionServer::simulationLoop() {
             else
                 postOrDefer(id, c, std::nullopt);
         }
+        countDeferred();
         // Erosion only lowers densities, so the views' hit caches stay valid; voxels written
         // wholesale may raise them, which invalidates every cache (the next render restarts it).
         // With no DBI client the grid waits (syncGrid): nothing here renders.

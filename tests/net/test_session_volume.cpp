@@ -578,10 +578,12 @@ TEST(SessionVolume, AHeldBackVolumeClientsChangesAreCodedOnceNotAtEveryBatch) {
     }
     std::this_thread::sleep_for(std::chrono::milliseconds(300)); // batches every 10 ms meanwhile
     EXPECT_EQ(volumeEncodes(), 3) << "the join, the first cut, the second: the rest wait uncoded";
+    EXPECT_FALSE(server.idle()) << "changes noted and not yet sent";
     // Serviced again: the waiting update goes, then the noted changes in one, and the client's
     // copy is the server's.
     ASSERT_TRUE(
         pumpUntil({&client}, [&] { return *client.localVolume() == server.volumeSnapshot(); }));
     EXPECT_EQ(volumeEncodes(), 4);
+    EXPECT_TRUE(pumpUntil({&client}, [&] { return server.idle(); }));
     server.stop();
 }
