@@ -346,6 +346,7 @@ int runTrainerWindow(const TrainerOptions& o) {
     SyncDesign picture = designOf(cc.client.sync);
     uint64_t pictureSinceUs = 0;
     SyncDesign wanted = picture; // the toggle (the design asked for)
+    int volumeRefusalsSeen = 0;  // ClientSnapshot::volumeRefusals handled
     ComparisonHistory comparison;
     std::array<std::vector<double>, kSyncDesignCount> frameMs; // this second's frames per design
     // This second's updates on screen per design (full ones excluded: a join or a switch): bytes,
@@ -400,6 +401,14 @@ int runTrainerWindow(const TrainerOptions& o) {
         const auto frameStart = Clock::now();
         const double now = seconds();
         auto snap = client.snapshot();
+        // The server refused the volume design (its whole volume does not fit a message): the
+        // client thread goes on in DBI, and so does the toggle.
+        if (snap->volumeRefusals != volumeRefusalsSeen) {
+            volumeRefusalsSeen = snap->volumeRefusals;
+            std::fprintf(stderr, "window: %s; staying with %s\n", snap->closeReason.c_str(),
+                         syncDesignName(SyncDesign::Dbi));
+            wanted = SyncDesign::Dbi;
+        }
         // Taking over (the server's roster): a held trainee's drill is paused, and an instructor
         // drills only while it holds a trainee.
         const uint16_t selfId = snap->welcome ? snap->welcome->clientId : 0;

@@ -104,6 +104,7 @@ void SessionClient::onEvent(const ENetEvent& ev) {
         m_connected = false;
         m_closed = true;
         m_closeReason = refuseReasonText(ev.data);
+        m_closeCode = ev.data;
         m_peer = nullptr;
         return;
     case ENET_EVENT_TYPE_RECEIVE: {

@@ -13,8 +13,11 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <chrono>
 #include <memory>
+#include <random>
+#include <stdexcept>
 #include <thread>
 
 using namespace trephine;
@@ -432,4 +435,85 @@ TEST(ClientThread, AWholeListOfMarksFitsTheCommandQueueInOneFrame) {
         refused += !thread.annotate(a);
     }
     EXPECT_EQ(refused, 0);
+}
+
+// A volume the server cannot send whole (noise that does not compress into a message): the
+// volume design is refused with VolumeTooLarge. The thread asked for it again at every reconnect,
+// for good (each refusal a whole volume's encode for the server, and no picture ever); it now
+// goes on in DBI and says how many refusals there were.
+TEST(ClientThread, AVolumeDesignTheServerRefusesIsNotAskedForAgain) {
+    Volume noise({330, 330, 330}, glm::vec3(0.5f));
+    std::mt19937 rng(7);
+    for (size_t i = 0; i < noise.voxelCount(); ++i) {
+        const uint32_t r = rng();
+        const uint8_t d = uint8_t(r);
+        noise.densityData()[i] = d;
+        noise.materialData()[i] = d ? uint8_t(1 + (r >> 8) % 4) : uint8_t(Material::Air);
+    }
+    SessionServer server(noise, loopbackServerConfig("noise", 2));
+    server.start();
+    ClientThreadConfig cc = reconnectingClient(noise, server.port());
+    cc.client.sync = Sync::Volume;
+    cc.client.volumeCodec = Codec::Zstd;
+    cc.client.renderLocally = false;
+    cc.retryS = 0.1;
+    ClientThread client(cc);
+    client.start();
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->volumeRefusals == 1; }, 60.0));
+    ASSERT_TRUE(waitFor(
+        [&] {
+            auto s = client.snapshot();
+            return s->state == LinkState::Connected && s->hasFullImage;
+        },
+        30.0))
+        << "a DBI picture after the refusal";
+    std::this_thread::sleep_for(std::chrono::seconds(1));
+    auto s = client.snapshot();
+    EXPECT_EQ(s->volumeRefusals, 1);
+    EXPECT_EQ(s->attempts, 2);
+    EXPECT_EQ(s->state, LinkState::Connected);
+    EXPECT_EQ(s->sync, Sync::Dbi);
+    EXPECT_EQ(s->requestedSync, Sync::Dbi);
+    client.stop();
+    server.stop();
+}
+
+// An exception on the client thread (here from the haptic callback; in the field memory for a
+// whole volume, or a render pool that cannot start its threads) escaped the thread's body and
+// terminated the window without a word: it now ends that connection with its reason, and the
+// thread reconnects.
+TEST(ClientThread, AnExceptionOnTheClientThreadEndsTheConnectionNotTheProgram) {
+    Volume skull = makeSkull(64);
+    SessionServer server(skull, loopbackServerConfig("skull:64"));
+    server.start();
+    ClientThreadConfig cc = reconnectingClient(skull, server.port());
+    std::atomic<int> thrown{0};
+    cc.onHapticModel = [&](const HapticModel&) {
+        if (thrown++ == 0)
+            throw std::runtime_error("out of something");
+    };
+    ClientThread client(cc);
+    client.start();
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->hasFullImage; }, 20.0));
+    const SurfaceSite site = defaultBurrSite(skull);
+    ToolState t;
+    t.toolKind = uint8_t(ToolKind::Burr);
+    t.diameterMm = 4.0f;
+    t.position = site.position;
+    ASSERT_TRUE(client.sendToolState(t));
+    ASSERT_TRUE(waitFor(
+        [&] {
+            return client.snapshot()->closeReason.find("out of something") != std::string::npos;
+        },
+        20.0));
+    EXPECT_NE(client.snapshot()->closeReason.find("the connection failed"), std::string::npos);
+    // Reconnected, with a picture again.
+    EXPECT_TRUE(waitFor(
+        [&] {
+            auto s = client.snapshot();
+            return s->state == LinkState::Connected && s->hasFullImage && s->attempts >= 2;
+        },
+        20.0));
+    client.stop();
+    server.stop();
 }

@@ -74,6 +74,10 @@ struct ClientSnapshot {
     LinkState state = LinkState::Connecting;
     std::string closeReason; // why the last connection ended, empty if none did
     int attempts = 0;        // connection attempts so far
+    // Times the server refused the volume design (its whole volume does not fit a message,
+    // RefuseReason::VolumeTooLarge): the thread then asks for DBI on the next connection instead
+    // of reconnecting into the same refusal for good.
+    int volumeRefusals = 0;
     uint64_t publishedUs = 0;
     std::optional<Welcome> welcome;
     ViewSpec view;
@@ -206,6 +210,7 @@ private:
     LinkState m_state = LinkState::Connecting;
     std::string m_closeReason;
     int m_attempts = 0;
+    int m_volumeRefusals = 0;
     uint32_t m_toolSequence = 0; // carried from one connection to the next (run() only)
     std::optional<ViewSpec> m_wantedView;
     std::optional<Sync> m_wantedSync;

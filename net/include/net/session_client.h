@@ -68,6 +68,8 @@ public:
     bool closed() const { return m_closed; }
     // Why the server closed the connection (refuseReasonText), empty while connected.
     const std::string& closeReason() const { return m_closeReason; }
+    // The disconnect's data (a RefuseReason when the server closed the connection), 0 while open.
+    uint32_t closeCode() const { return m_closeCode; }
     const Welcome& welcome() const { return *m_welcome; }
     // steadyNowUs() of the last thing heard from the server (its connect, any datagram, a
     // fragment included, and the end of handling each message); connect() starts it. A server that
@@ -206,6 +208,7 @@ private:
     ENetPeer* m_peer = nullptr;
     bool m_connected = false;
     bool m_closed = false;
+    uint32_t m_closeCode = 0;
     uint64_t m_lastHeardUs = 0;
     uint32_t m_lastReceiveTime = 0; // ENet's stamp of the peer's last datagram (ms, its clock)
     std::string m_closeReason;
