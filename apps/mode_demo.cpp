@@ -106,6 +106,13 @@ int runHeadlessDemo(const DemoOptions& o) {
     std::printf("timing   %d drilling steps of %.1f ms simulated; wall time per step p50 %.1f us, "
                 "p99 %.1f us\n",
                 step + 1, o.dtMs, stepUs.percentile(50), stepUs.percentile(99));
+    // A failure is said on stderr too, where scripts look (stdout has the whole summary).
+    if (clutchDepth < 0)
+        std::fprintf(stderr, "trephine: demo: the perforator did not break through in %.1f s\n",
+                     o.maxSeconds);
+    if (duraContacts > 0)
+        std::fprintf(stderr, "trephine: demo: the perforator touched the dura in %lld steps\n",
+                     (long long)duraContacts);
     return clutchDepth >= 0 && duraContacts == 0 ? 0 : 1;
 }
 

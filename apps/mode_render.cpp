@@ -9,6 +9,7 @@
 #include "libsim/error.h"
 #include "libsim/renderer.h"
 #include "libsim/thread_pool.h"
+#include "libsim/tool.h"
 #include "libsim/volume_io.h"
 #include "libsim_image/dbi_io.h"
 #include "libsim_image/volume_slices.h"
@@ -102,8 +103,10 @@ DrillAt parseDrill(const std::string& text) {
               float(v[3]), text};
     if (d.depthMm < 0.0f || d.depthMm > 100.0f)
         throw Error("--drill-at " + text + ": depth must be 0 to 100 mm");
-    if (d.diameterMm <= 0.0f || d.diameterMm > 20.0f)
-        throw Error("--drill-at " + text + ": burr diameter must be above 0 and at most 20 mm");
+    if (!(d.diameterMm >= kBurrMinDiameterMm && d.diameterMm <= kBurrMaxDiameterMm))
+        throw Error("--drill-at " + text + ": the burr diameter must be " +
+                    std::to_string(int(kBurrMinDiameterMm)) + " to " +
+                    std::to_string(int(kBurrMaxDiameterMm)) + " mm");
     return d;
 }
 

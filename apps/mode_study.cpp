@@ -20,8 +20,11 @@
 #include "ui/display_study.h"
 #endif
 
+#include <cerrno>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
+#include <fcntl.h>
 #include <filesystem>
 #include <fstream>
 #include <memory>
@@ -33,6 +36,17 @@
 namespace trephine::app {
 
 namespace {
+
+std::string makeOutDir(const std::string& out);
+
+// --link's conditions for a study: the emulator passes nothing at a loss of 100 %, and the study
+// then waited a minute per method for updates that never came.
+net::LinkConditions studyLink(const std::string& text) {
+    const net::LinkConditions c = net::LinkConditions::parse(text);
+    if (!(c.lossPercent < 100.0))
+        throw Error("--link " + text + ": a loss of 100 % lets no update through; give under 100");
+    return c;
+}
 
 struct HapticsOptions {
     std::vector<double> updateRates{20, 50, 100, 1000};
@@ -95,8 +109,7 @@ net::HapticsFigures runHapticsStudy(const HapticsOptions& o) {
         if (!(l >= 0.0 && l <= 10000.0))
             throw Error("--latencies: " + std::to_string(l) + " ms is not in [0, 10000]");
 
-    std::error_code ec;
-    std::filesystem::create_directories(o.out, ec);
+    makeOutDir(o.out);
     const std::string csvPath = (std::filesystem::path(o.out) / "haptics.csv").string();
     // The rows go to a file beside haptics.csv, put in its place once complete: a run that fails
     // or is interrupted leaves an earlier haptics.csv whole.
@@ -224,11 +237,25 @@ struct UpdatesOptions {
     std::shared_ptr<const Volume> opened;
 };
 
+// Made (with its parents) and checked writable before the study runs: an empty --out wrote into
+// the working folder (haptics) or failed unclearly (updates), and a folder that takes no files
+// was found only once the study had run.
 std::string makeOutDir(const std::string& out) {
+    if (out.empty())
+        throw Error("--out: an empty path (give the folder to write into)");
     std::error_code ec;
     std::filesystem::create_directories(out, ec);
     if (ec || !std::filesystem::is_directory(out))
-        throw Error("cannot create --out folder " + out + ": " + ec.message());
+        throw Error("cannot create --out folder " + out + ": " +
+                    (ec ? ec.message() : std::string("a file is there")));
+    // A file made and removed: the folder's permissions do not tell for root, or for /sys.
+    const std::string probe =
+        (std::filesystem::path(out) / (".trephine-probe-" + std::to_string(::getpid()))).string();
+    const int fd = ::open(probe.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0600);
+    if (fd < 0)
+        throw Error("--out " + out + ": cannot write into it (" + std::strerror(errno) + ")");
+    ::close(fd);
+    ::unlink(probe.c_str());
     return out;
 }
 
@@ -276,7 +303,7 @@ void configureUpdatesStudy(const UpdatesOptions& o, net::UpdateStudyConfig& conf
     config.cycles = o.cycles;
     config.rounds = o.roundsGiven ? o.rounds : std::min(o.rounds, std::max(o.cycles, 1));
     if (!o.link.empty())
-        config.link = net::LinkConditions::parse(o.link);
+        config.link = studyLink(o.link);
     config.methods = o.methods;
     if (o.quick) {
         if (!o.sizesGiven)
@@ -430,7 +457,7 @@ int runAllStudies(const AllOptions& o, const std::string& command) {
         throw Error("--link: give the link's conditions (e.g. rate=100) or off, not '" + o.link +
                     "'");
     if (linkRun)
-        net::LinkConditions::parse(o.link);
+        studyLink(o.link);
     // A volume that does not open fails here, not after the haptics study has replaced the
     // folder's haptics.csv.
     auto volume = std::make_shared<const Volume>(openVolume(o.volume));
@@ -610,6 +637,8 @@ void addStudyMode(CLI::App& root, int& exitCode) {
     display->add_flag("--quick", d->quick, "Fewer frames: a few seconds");
     display->callback([d, &exitCode] {
         net::DisplayFigures f = runDisplayStudy(*d);
+        if (!f.measured) // said where a script looks for a failure (stdout has it too)
+            std::fprintf(stderr, "trephine: the display study did not run: %s\n", f.why.c_str());
         exitCode = f.measured ? 0 : 1;
     });
 

@@ -293,6 +293,13 @@ int runTrainee(const TraineeOptions& o) {
     if (!o.saveDbi.empty()) {
         checkDbiExrPath(o.saveDbi);
         checkOutputFolder("--save-dbi", o.saveDbi);
+        // Both are written at the end, the picture last: the report would be lost under it.
+        std::error_code ec1, ec2;
+        if (!o.report.empty() && std::filesystem::weakly_canonical(o.report, ec1) ==
+                                     std::filesystem::weakly_canonical(o.saveDbi, ec2))
+            throw Error("--report " + o.report +
+                        " is where --save-dbi writes the picture: give "
+                        "it another name");
     }
     // A CSV script is read first, so a bad file fails before anything connects.
     std::vector<Sample> script;

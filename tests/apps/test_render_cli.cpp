@@ -103,6 +103,10 @@ TEST(RenderCli, BadFlagsAreOneLineErrors) {
     expectOneLineError(render(dir, std::string(kView) + " --drill-at 0,0,2,3"), "no bone");
     expectOneLineError(render(dir, std::string(kView) + " --drill-at 1,2,3"), "--drill-at");
     expectOneLineError(render(dir, std::string(kView) + " --drill-at 500,2,3,3"), "outside");
+    // A burr the simulation has no such size of: named at the flag (it passed up to 20 mm, then
+    // failed after the volume and the renderer were made, without naming --drill-at).
+    expectOneLineError(render(dir, std::string(kView) + " --drill-at 32,32,3,10"),
+                       "--drill-at 32,32,3,10: the burr diameter must be 1 to 6 mm");
     expectOneLineError(render(dir, "--volume sphere:16 --size 12by3"), "--size");
     expectOneLineError(render(dir, std::string(kView) + " --rect 100,80,40,40"), "--rect");
     expectOneLineError(render(dir, "--volume sphere:16 --camera sideways"), "sideways");

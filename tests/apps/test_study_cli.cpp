@@ -327,6 +327,42 @@ TEST(StudyCli, BadFlagsGiveOneLine) {
     }
 }
 
+// Found before any study ran, in one line: a loss of 100 % or more (the emulator caps it at 100,
+// and the study waited a minute per method for updates that never came); an empty --out (haptics
+// wrote into the working folder, updates said "Invalid argument"); a folder that takes no file
+// (found only once the study had run). And a display study that cannot run says why on stderr.
+TEST(StudyCli, ImpossibleLinksAndOutputFoldersAreRefusedBeforeTheStudy) {
+    TempDir dir;
+    struct Case {
+        std::string args;
+        const char* says;
+    } cases[] = {
+        {"study updates --quick --link loss=100 --out '" + dir / "o" + "'",
+         "--link loss=100: a loss of 100 % lets no update through"},
+        {"study all --quick --link loss=250 --out '" + dir / "o" + "'",
+         "--link loss=250: a loss of 100 %"},
+        {"study haptics --quick --out ''", "--out: an empty path"},
+        {"study updates --quick --out ''", "--out: an empty path"},
+        {"study updates --quick --out /proc", "--out /proc: cannot write into it"},
+        {"study haptics --quick --out /proc", "--out /proc: cannot write into it"},
+    };
+    for (const Case& c : cases) {
+        CommandResult r = runTrephine(dir, c.args);
+        EXPECT_EQ(r.exitCode, 1) << c.args;
+        EXPECT_NE(r.err.find(c.says), std::string::npos) << c.args << ": " << r.err;
+        EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << c.args << ": " << r.err;
+        EXPECT_EQ(r.out.find("cycles"), std::string::npos) << "no study ran: " << r.out;
+    }
+    EXPECT_FALSE(std::filesystem::exists(dir / "haptics.csv"));
+    const std::string err = dir / "display.err";
+    const int status = std::system(("env -u DISPLAY -u WAYLAND_DISPLAY " +
+                                    shellQuote(TREPHINE_BIN) + " study display --quick --out " +
+                                    shellQuote(dir / "d") + " >/dev/null 2>" + shellQuote(err))
+                                       .c_str());
+    EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 1);
+    EXPECT_EQ(slurp(err).rfind("trephine: the display study did not run: ", 0), 0u) << slurp(err);
+}
+
 // A misspelt mode or study, or none, is named in one line with the choices (CLI11 alone said "A
 // subcommand is required", whatever the word).
 TEST(StudyCli, AMisspeltOrMissingModeIsNamedWithTheChoices) {

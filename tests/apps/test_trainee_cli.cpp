@@ -197,3 +197,25 @@ TEST(TraineeCli, AScriptThatIsNotATextFileIsRefused) {
                          "CSV trajectory\n");
     }
 }
+
+// --report and --save-dbi naming one file: the picture, written last, replaced the report, and
+// the run exited 0. Refused before connecting, as the server refuses --report over its save.
+TEST(TraineeCli, AReportWhereTheDbiIsSavedIsRefused) {
+    TempDir dir;
+    const std::string same = dir / "sd.exr";
+    CommandResult r = runTrephine(dir, "trainee --headless --connect 127.0.0.1:9 --duration 1 "
+                                       "--report '" +
+                                           same + "' --save-dbi '" + same + "'");
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_NE(r.err.find("is where --save-dbi writes the picture"), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+}
+
+// A headless demo that fails (here: stopped before the perforator broke through) said so only on
+// stdout, with exit 1 and nothing on stderr.
+TEST(TraineeCli, AFailedHeadlessDemoSaysWhyOnStderr) {
+    TempDir dir;
+    CommandResult r = runTrephine(dir, "demo --headless --max-seconds 0.1");
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_EQ(r.err, "trephine: demo: the perforator did not break through in 0.1 s\n");
+}
