@@ -474,6 +474,18 @@ int runAllStudies(const AllOptions& o, const std::string& command) {
         net::checkUpdateStudy(studyVolume(*volume, u.camera), config);
     }
     makeOutDir(o.out);
+    // Each file moves over its name in DIR at the end: a folder (or anything but a file) there
+    // failed that move after the whole run, with some files replaced and the new report lost.
+    for (const char* name : {"haptics.csv", "updates.csv", "updates.svg", "bytes.svg",
+                             "updates-link.csv", "updates-link.svg", "display.csv", "report.md"}) {
+        const std::filesystem::path there = std::filesystem::path(o.out) / name;
+        std::error_code ec;
+        const auto st = std::filesystem::symlink_status(there, ec);
+        if (!ec && std::filesystem::exists(st) && !std::filesystem::is_regular_file(st) &&
+            !std::filesystem::is_symlink(st))
+            throw Error("--out " + o.out + ": " + name + " there is not a file, and the study's " +
+                        name + " cannot replace it (move it away)");
+    }
     // Every file is written into a staging folder inside DIR and moved into DIR only once the
     // report is written: a run stopped or failing part way (a full disk, Ctrl-C during the
     // display study) left new CSVs beside an earlier run's report and plots.
@@ -525,9 +537,11 @@ int runAllStudies(const AllOptions& o, const std::string& command) {
         std::error_code ec;
         std::filesystem::rename(entry.path(),
                                 std::filesystem::path(o.out) / entry.path().filename(), ec);
-        if (ec)
+        if (ec) { // the new set stays whole where it is, and is said
+            removeStaging.path.clear();
             throw Error("cannot move " + entry.path().filename().string() + " into " + o.out +
-                        ": " + ec.message());
+                        ": " + ec.message() + "; this run's files are in " + staging.string());
+        }
     }
     const auto path = std::filesystem::path(o.out) / "report.md";
     std::printf("\nwrote %s (with updates.svg%s and bytes.svg; the studies' files moved there "

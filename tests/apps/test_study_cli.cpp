@@ -363,6 +363,20 @@ TEST(StudyCli, ImpossibleLinksAndOutputFoldersAreRefusedBeforeTheStudy) {
     EXPECT_EQ(slurp(err).rfind("trephine: the display study did not run: ", 0), 0u) << slurp(err);
 }
 
+// A folder in DIR where `study all` writes a file (here report.md) failed the last move after the
+// whole run, with the CSVs already replaced and the new report deleted: refused at the start,
+// nothing of DIR touched.
+TEST(StudyCli, AllRefusesAFolderWhereItWritesAFile) {
+    TempDir dir;
+    std::filesystem::create_directories(dir / "out/report.md");
+    std::ofstream(dir / "out/updates.csv") << "an earlier run\n";
+    CommandResult r = runTrephine(dir, "study all --quick --link off --out '" + dir / "out" + "'");
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_NE(r.err.find("report.md there is not a file"), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_EQ(slurp(dir / "out/updates.csv"), "an earlier run\n");
+}
+
 // A misspelt mode or study, or none, is named in one line with the choices (CLI11 alone said "A
 // subcommand is required", whatever the word).
 TEST(StudyCli, AMisspeltOrMissingModeIsNamedWithTheChoices) {
