@@ -9,6 +9,8 @@
 // [SECTION] loadVolume / saveVolume / help
 #include "libsim/volume_io.h"
 
+#include "libsim/replacing_file.h"
+
 #include "libsim/skull.h"
 #include "volume_io_detail.h"
 
@@ -232,6 +234,7 @@ FileSink::FileSink(const std::string& path)
     std::error_code ec;
     if (fs::is_directory(path, ec))
         fail(path, "cannot write: it is a folder");
+    removeAbandonedTemps(path); // a killed save's leftovers
     m_file = std::fopen(m_temp.c_str(), "wb");
     if (!m_file)
         fail(path, "cannot write: " + systemError());

@@ -2,6 +2,9 @@
 // complete: reports, study CSVs, marks files. A failed run leaves an earlier file whole.
 #pragma once
 
+#include <cerrno>
+#include <csignal>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <functional>
@@ -27,6 +30,35 @@ inline std::optional<std::filesystem::path> replacementTarget(const std::string&
     return target;
 }
 
+// Temporary files a killed run left beside `target` (NAME.trephine-PID.tmp, and replaceVia's
+// STEM.trephine-PID.tmp.EXT) whose process is gone: removed, so that Ctrl-C'd writes do not pile
+// up (a signal ends a run before the writer's destructor can). A live process's are left alone.
+inline void removeAbandonedTemps(const std::filesystem::path& target) {
+    namespace fs = std::filesystem;
+    std::error_code ec;
+    const fs::path folder = target.has_parent_path() ? target.parent_path() : fs::path(".");
+    const std::string prefixes[] = {target.filename().string() + ".trephine-",
+                                    target.stem().string() + ".trephine-"};
+    fs::directory_iterator it(folder, ec);
+    for (; !ec && it != fs::directory_iterator(); it.increment(ec)) {
+        const std::string name = it->path().filename().string();
+        for (const std::string& prefix : prefixes) {
+            if (name.rfind(prefix, 0) != 0)
+                continue;
+            const std::string rest = name.substr(prefix.size());
+            const size_t digits = rest.find_first_not_of("0123456789");
+            if (digits == 0 || digits == std::string::npos || rest.compare(digits, 4, ".tmp") != 0)
+                continue;
+            const long pid = std::strtol(rest.substr(0, digits).c_str(), nullptr, 10);
+            if (pid > 0 && pid != ::getpid() && ::kill(pid_t(pid), 0) != 0 && errno == ESRCH) {
+                std::error_code ignored;
+                fs::remove(it->path(), ignored);
+            }
+            break;
+        }
+    }
+}
+
 // An output file written through a temporary file beside it, renamed over it only by commit():
 // a run that fails before (a full disk, an error, Ctrl-C) leaves an earlier file of that name
 // whole, where opening it had already emptied it. A symbolic link is followed (the link stays);
@@ -40,6 +72,7 @@ public:
             return;
         }
         m_target = target->string();
+        removeAbandonedTemps(*target);
         m_temp = m_target + ".trephine-" + std::to_string(::getpid()) + ".tmp";
         m_stream.open(m_temp, std::ios::binary);
     }
@@ -97,6 +130,7 @@ inline void replaceVia(const std::string& path,
         return;
     }
     const fs::path target = *resolved;
+    removeAbandonedTemps(target);
     std::error_code ec;
     fs::path temp = target;
     temp.replace_filename(target.stem().string() + ".trephine-" + std::to_string(::getpid()) +
