@@ -267,14 +267,7 @@ TEST(SessionVolume, AnUpdateTooLargeForOneMessageGoesAsTheWholeVolume) {
 // over the 30 MiB ENet can deliver: kMaxSentMessageBytes) cannot be sent: the client is told so,
 // not left waiting (ENet would have resent fragments until the connection timed out).
 TEST(SessionVolume, AWholeVolumeTooLargeForAMessageRefusesVolumeSyncWithAReason) {
-    Volume noise({330, 330, 330}, glm::vec3(0.5f));
-    std::mt19937 rng(7);
-    for (size_t i = 0; i < noise.voxelCount(); ++i) {
-        const uint32_t r = rng();
-        const uint8_t d = uint8_t(r);
-        noise.densityData()[i] = d;
-        noise.materialData()[i] = d ? uint8_t(1 + (r >> 8) % 4) : uint8_t(Material::Air);
-    }
+    const Volume noise = trephine::testing::incompressibleVolume();
     SessionServer server(noise, loopbackServerConfig("noise", 2));
     server.start();
     SessionClient vol(clientConfig(presetView(noise, "top"), Sync::Volume, Codec::Zstd));

@@ -14,6 +14,8 @@
 #include <glm/gtx/quaternion.hpp>
 #include <gtest/gtest.h>
 
+#include <random>
+
 #include <chrono>
 #include <functional>
 #include <memory>
@@ -59,6 +61,21 @@ inline bool pumpUntil(const std::vector<net::SessionClient*>& clients,
             return true;
     }
     return false;
+}
+
+// A whole volume too large for one message even compressed: noise, 330^3 voxels of 0.5 mm
+// (~45 MB in zstd, over the 30 MiB ENet delivers). A volume client of it is refused
+// (RefuseReason::VolumeTooLarge).
+inline Volume incompressibleVolume() {
+    Volume noise({330, 330, 330}, glm::vec3(0.5f));
+    std::mt19937 rng(7);
+    for (size_t i = 0; i < noise.voxelCount(); ++i) {
+        const uint32_t r = rng();
+        const uint8_t d = uint8_t(r);
+        noise.densityData()[i] = d;
+        noise.materialData()[i] = d ? uint8_t(1 + (r >> 8) % 4) : uint8_t(Material::Air);
+    }
+    return noise;
 }
 
 // A raw ENet host standing in for a server, so a test can send a client hand-made messages.

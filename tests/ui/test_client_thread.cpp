@@ -442,14 +442,7 @@ TEST(ClientThread, AWholeListOfMarksFitsTheCommandQueueInOneFrame) {
 // for good (each refusal a whole volume's encode for the server, and no picture ever); it now
 // goes on in DBI and says how many refusals there were.
 TEST(ClientThread, AVolumeDesignTheServerRefusesIsNotAskedForAgain) {
-    Volume noise({330, 330, 330}, glm::vec3(0.5f));
-    std::mt19937 rng(7);
-    for (size_t i = 0; i < noise.voxelCount(); ++i) {
-        const uint32_t r = rng();
-        const uint8_t d = uint8_t(r);
-        noise.densityData()[i] = d;
-        noise.materialData()[i] = d ? uint8_t(1 + (r >> 8) % 4) : uint8_t(Material::Air);
-    }
+    const Volume noise = trephine::testing::incompressibleVolume();
     SessionServer server(noise, loopbackServerConfig("noise", 2));
     server.start();
     ClientThreadConfig cc = reconnectingClient(noise, server.port());
