@@ -35,17 +35,6 @@ struct ServerOptions {
     std::string report;
 };
 
-// Whether two paths name one file, existing or not (`a/../s.nrrd` and `./s.nrrd` do).
-bool samePath(const std::string& a, const std::string& b) {
-    std::error_code ec1, ec2;
-    const auto ca = std::filesystem::weakly_canonical(a, ec1);
-    const auto cb = std::filesystem::weakly_canonical(b, ec2);
-    if (ec1 || ec2)
-        return std::filesystem::path(a).lexically_normal() ==
-               std::filesystem::path(b).lexically_normal();
-    return ca == cb;
-}
-
 // The file a --volume spec opens: the whole spec when it names a file, else the part before its
 // query (`s.nrrd?spacing=2,2,2`); "" for the built-in volumes and slice folders.
 std::string volumeFileOf(const std::string& spec) {
@@ -89,15 +78,9 @@ int runServer(const ServerOptions& o) {
     config.maxClients = o.maxClients;
     glm::ivec3 d = volume.dims();
     net::SessionServer server(std::move(volume), config);
-    // Every way a session is ended from outside saves it: Ctrl-C, kill, Ctrl-\ (SIGQUIT), and a
-    // closed terminal or dropped ssh (SIGHUP). Output gone (a `| tee` ended first) must not kill it
-    // either: SIGPIPE is ignored and the lines are lost, not the session.
-    // Under nohup a hang-up is ignored, and stays so: a server started with `nohup ... &` over
-    // ssh must outlive the logout (handling SIGHUP regardless stopped it).
-    for (int sig : {SIGINT, SIGTERM, SIGQUIT})
-        std::signal(sig, onStopSignal);
-    if (std::signal(SIGHUP, SIG_IGN) != SIG_IGN)
-        std::signal(SIGHUP, onStopSignal);
+    // Every way a session is ended from outside saves it. Output gone (a `| tee` ended first) must
+    // not kill it either: SIGPIPE is ignored and the lines are lost, not the session.
+    handleStopSignals(onStopSignal);
     std::signal(SIGPIPE, SIG_IGN);
     server.start();
     std::printf("trephine server: %s (%d x %d x %d) on port %u; Ctrl-C stops\n", o.volume.c_str(),

@@ -294,9 +294,7 @@ int runTrainee(const TraineeOptions& o) {
         checkDbiExrPath(o.saveDbi);
         checkOutputFolder("--save-dbi", o.saveDbi);
         // Both are written at the end, the picture last: the report would be lost under it.
-        std::error_code ec1, ec2;
-        if (!o.report.empty() && std::filesystem::weakly_canonical(o.report, ec1) ==
-                                     std::filesystem::weakly_canonical(o.saveDbi, ec2))
+        if (!o.report.empty() && samePath(o.report, o.saveDbi))
             throw Error("--report " + o.report +
                         " is where --save-dbi writes the picture: give "
                         "it another name");
@@ -433,11 +431,7 @@ int runTrainee(const TraineeOptions& o) {
     // Ctrl-C (or kill, or a closed terminal) ends the script early; the figures so far are still
     // printed and --report / --save-dbi still written.
     g_traineeStop = false;
-    for (int sig : {SIGINT, SIGTERM})
-        std::signal(sig, onTraineeStopSignal);
-    // Under nohup a hang-up is ignored, and stays so (it stopped the run).
-    if (std::signal(SIGHUP, SIG_IGN) != SIG_IGN)
-        std::signal(SIGHUP, onTraineeStopSignal);
+    handleStopSignals(onTraineeStopSignal);
     loop.start();
     while (net::steadyNowUs() < end && !client.closed() && !serverLost() && !g_traineeStop) {
         {

@@ -9,6 +9,7 @@
 #include "net/protocol.h"
 
 #include <cmath>
+#include <csignal>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -92,6 +93,28 @@ inline void checkOutputFolder(const std::string& flag, const std::string& path) 
     if (!std::filesystem::is_directory(folder, ec) || ::access(folder.c_str(), W_OK) != 0)
         throw Error(flag + " " + path + ": cannot write there (no folder " + folder.string() +
                     " we may write to)");
+}
+
+// Whether two paths name one file, existing or not (`a/../s.nrrd` and `./s.nrrd` do): two outputs
+// of one run that would overwrite each other.
+inline bool samePath(const std::string& a, const std::string& b) {
+    std::error_code ec1, ec2;
+    const auto ca = std::filesystem::weakly_canonical(a, ec1);
+    const auto cb = std::filesystem::weakly_canonical(b, ec2);
+    if (ec1 || ec2)
+        return std::filesystem::path(a).lexically_normal() ==
+               std::filesystem::path(b).lexically_normal();
+    return ca == cb;
+}
+
+// `handler` for every way a run is ended from outside: Ctrl-C, kill, Ctrl-\ (SIGQUIT) and a closed
+// terminal or dropped ssh (SIGHUP), so the run can stop and keep what it made. Under nohup a
+// hang-up is ignored, and stays so: a run started with `nohup ... &` over ssh outlives the logout.
+inline void handleStopSignals(void (*handler)(int)) {
+    for (int sig : {SIGINT, SIGTERM, SIGQUIT})
+        std::signal(sig, handler);
+    if (std::signal(SIGHUP, SIG_IGN) != SIG_IGN)
+        std::signal(SIGHUP, handler);
 }
 
 // For --name: the server refuses a hello whose name is longer than the protocol carries, which a

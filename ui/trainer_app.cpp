@@ -756,15 +756,16 @@ int runTrainerWindow(const TrainerOptions& o) {
         const int64_t maxViewPixels = snap->welcome ? snap->welcome->maxViewPixels : 0;
         const bool viewTooLarge = snap->state == net::LinkState::Connected && snap->welcome &&
                                   int64_t(viewSize) * viewSize > maxViewPixels;
-        const std::string tooLargeText =
-            "The server serves views of at most " + std::to_string(maxViewPixels) +
-            " pixels; this view is " + std::to_string(viewSize) + " x " + std::to_string(viewSize) +
-            ": restart with " + o.sizeOption + " " +
-            std::to_string(int(std::sqrt(double(maxViewPixels)))) + " or less";
+        auto tooLargeText = [&] {
+            return "The server serves views of at most " + std::to_string(maxViewPixels) +
+                   " pixels; this view is " + std::to_string(viewSize) + " x " +
+                   std::to_string(viewSize) + ": restart with " + o.sizeOption + " " +
+                   std::to_string(int(std::sqrt(double(maxViewPixels)))) + " or less";
+        };
         {
             std::string status;
             if (viewTooLarge)
-                status = tooLargeText;
+                status = tooLargeText();
             else if (snap->state == net::LinkState::Connecting)
                 status = "Connecting to " + o.address + " (attempt " +
                          std::to_string(snap->attempts) + ")...";
@@ -869,7 +870,7 @@ int runTrainerWindow(const TrainerOptions& o) {
         // Screenshot / frame budget.
         ++frames;
         if (viewTooLarge && (!o.screenshot.empty() || o.frames > 0)) {
-            std::fprintf(stderr, "trephine: %s\n", tooLargeText.c_str());
+            std::fprintf(stderr, "trephine: %s\n", tooLargeText().c_str());
             exitCode = 1;
             window.endFrame(nullptr);
             scriptedEnd = true;

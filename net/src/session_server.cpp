@@ -1329,8 +1329,7 @@ void SessionServer::simulationLoop() {
         }
         if (batch.empty()) {
             // Updates noted for clients that were held back go once they can.
-            if (std::any_of(s.simClients.begin(), s.simClients.end(),
-                            [](const auto& kv) { return kv.second.deferredVolume.has_value(); })) {
+            if (s.volumesDeferred.load() > 0) {
                 std::lock_guard volumeLock(s.volumeMutex);
                 for (auto& [id, c] : s.simClients)
                     if (c.sync == Sync::Volume)
