@@ -12,7 +12,8 @@
 #include "libsim/brick_grid.h"
 #include "libsim/error.h"
 #include "libsim/renderer.h"
-#include "libsim/svg_plot.h" // formatString
+
+#include <fmt/format.h>
 
 #include <algorithm>
 #include <chrono>
@@ -289,8 +290,8 @@ void VolumeView::upload(const Volume& volume) {
     // rather than draw a blank or flat-shaded volume.
     if (const GLenum e = glGetError(); e != GL_NO_ERROR) {
         m_dims = glm::ivec3(0);
-        throw Error(formatString("ui: OpenGL refused the volume's textures (error 0x%04x%s)",
-                                 unsigned(e), e == GL_OUT_OF_MEMORY ? ": out of memory" : ""));
+        throw Error(fmt::format("ui: OpenGL refused the volume's textures (error 0x{:04x}{})",
+                                unsigned(e), e == GL_OUT_OF_MEMORY ? ": out of memory" : ""));
     }
 }
 

@@ -15,8 +15,8 @@
 #include "net/force_round_trip.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
-#include "net/update_study.h"
 #include "net/view.h"
+#include "study/update_study.h"
 
 #include <benchmark/benchmark.h>
 #include <glm/gtx/quaternion.hpp>
@@ -29,6 +29,7 @@
 
 using namespace trephine;
 using namespace trephine::net;
+using namespace trephine::study;
 
 namespace {
 
@@ -143,7 +144,7 @@ const Volume& paperSkull() {
     return v;
 }
 
-// The update study's dbi method (net/update_study.h): each cycle cuts fresh bone (the box's
+// The update study's dbi method (study/update_study.h): each cycle cuts fresh bone (the box's
 // voxels are put back between cycles, unmeasured), cause -> rectangle applied at the client.
 void boxSweep(benchmark::State& state, Codec codec) {
     const int n = int(state.range(0));

@@ -3,7 +3,7 @@
 // [SECTION] Hash noise      — small deterministic PRNG and value noise (no <random>)
 // [SECTION] Skull model     — vault shape, layers, sutures, porosity; one voxel at a time
 // [SECTION] Volumes         — makeSkull (threaded over z slabs), makeSphere, makeBox
-// [SECTION] Burr site       — defaultBurrSite: march a ray into the actual volume
+// [SECTION] Burr site       — defaultBurrSite: march a ray into the actual volume; boxTopSite
 #include "libsim/skull.h"
 
 #include "libsim/error.h"
@@ -433,6 +433,14 @@ SurfaceSite defaultBurrSite(const Volume& skull) {
     }
     throw Error("cannot find a burr-hole site: no surface at density " +
                 std::to_string(int(kSurfaceDensity)) + " under the top of the volume");
+}
+
+SurfaceSite boxTopSite(const Volume& box) {
+    // makeBox fills voxels [n/4, 3n/4); the trilinear iso-surface lies halfway between the last
+    // solid voxel centre and the first air one.
+    const int top = 3 * box.dims().z / 4;
+    const float z = 0.5f * (box.voxelCenter({0, 0, top - 1}).z + box.voxelCenter({0, 0, top}).z);
+    return {glm::vec3(0.0f, 0.0f, z), glm::vec3(0.0f, 0.0f, 1.0f)};
 }
 
 } // namespace trephine

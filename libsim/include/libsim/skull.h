@@ -59,5 +59,7 @@ float sphereRadiusMm(int n);
 // Solid cortical axis-aligned box filling the middle half of an n^3 volume (1 mm spacing): voxels
 // with index in [n/4, 3n/4) on every axis, density 255; air elsewhere. n from 4 to 512.
 Volume makeBox(int n);
+// The middle of a makeBox volume's top face (+z), on its iso-surface, and its outward normal.
+SurfaceSite boxTopSite(const Volume& box);
 
 } // namespace trephine

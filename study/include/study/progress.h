@@ -5,7 +5,7 @@
 #include <cstdio>
 #include <string>
 
-namespace trephine {
+namespace trephine::study {
 
 class ProgressBar {
 public:
@@ -34,4 +34,4 @@ private:
     double m_startS;
 };
 
-} // namespace trephine
+} // namespace trephine::study

@@ -1,10 +1,12 @@
-#include "net/study_report.h"
-
-#include "libsim/replacing_file.h"
+#include "study/report.h"
 
 #include "libsim/error.h"
-#include "libsim/svg_plot.h"
+#include "libsim/replacing_file.h"
 #include "net/codec.h"
+#include "study/svg_plot.h"
+
+#include <fmt/chrono.h>
+#include <fmt/format.h>
 
 #include <sys/utsname.h>
 #include <unistd.h>
@@ -20,7 +22,9 @@
 #include <sstream>
 #include <thread>
 
-namespace trephine::net {
+namespace trephine::study {
+
+using net::codecName;
 
 namespace {
 
@@ -47,16 +51,12 @@ std::vector<std::string> methodsOf(const std::vector<UpdateStudyRow>& rows) {
     return m;
 }
 
-std::string fmt(double v, const char* f = "%.2f") {
-    return formatString(f, v);
-}
-
 std::string bytesText(double b) {
     if (b >= 1e6)
-        return formatString("%.2f MB", b / 1e6);
+        return fmt::format("{:.2f} MB", b / 1e6);
     if (b >= 1e4)
-        return formatString("%.1f kB", b / 1e3);
-    return formatString("%.0f B", b);
+        return fmt::format("{:.1f} kB", b / 1e3);
+    return fmt::format("{:.0f} B", b);
 }
 
 // Through a temporary file renamed into place: a full disk or a stopped run leaves the earlier
@@ -67,10 +67,7 @@ void writeFile(const std::string& path, const std::string& text) {
 }
 
 std::string utcNow() {
-    std::time_t t = std::time(nullptr);
-    char buf[64];
-    std::strftime(buf, sizeof buf, "%Y-%m-%d %H:%M UTC", std::gmtime(&t));
-    return buf;
+    return fmt::format("{:%Y-%m-%d %H:%M} UTC", fmt::gmtime(std::time(nullptr)));
 }
 
 // The paper's stage shares at 80^3 (section 4.1), percent.
@@ -97,9 +94,9 @@ double rateRatio(const std::vector<UpdateStudyRow>& rows, int n) {
 // figure would contradict its PASS/MISS (4.96 against 5 reads "4.96", not "5.0").
 std::string figureAgainst(double v, double target, bool passAbove, int decimals) {
     auto passes = [&](double x) { return passAbove ? x >= target : x <= target; };
-    std::string s = formatString("%.*f", decimals, v);
+    std::string s = fmt::format("{:.{}f}", v, decimals);
     for (int d = decimals + 1; d <= 6 && passes(std::stod(s)) != passes(v); ++d)
-        s = formatString("%.*f", d, v);
+        s = fmt::format("{:.{}f}", v, d);
     return s;
 }
 
@@ -116,10 +113,10 @@ std::string describeMachine() {
     long pages = sysconf(_SC_PHYS_PAGES), pageSize = sysconf(_SC_PAGE_SIZE);
     utsname u{};
     uname(&u);
-    return formatString("%s, %u hardware threads, %.0f GiB memory, %s %s %s", model.c_str(),
-                        std::thread::hardware_concurrency(),
-                        double(pages) * double(pageSize) / (1024.0 * 1024.0 * 1024.0), u.sysname,
-                        u.release, u.machine);
+    return fmt::format("{}, {} hardware threads, {:.0f} GiB memory, {} {} {}", model.c_str(),
+                       std::thread::hardware_concurrency(),
+                       double(pages) * double(pageSize) / (1024.0 * 1024.0 * 1024.0), u.sysname,
+                       u.release, u.machine);
 }
 
 int paperBbScreen(int n) {
@@ -157,7 +154,7 @@ std::vector<std::string> rateMissNotes(const std::vector<UpdateStudyRow>& rows, 
         missed = true;
         const double ceiling = rateRatioWithoutRayCasting(rows, n);
         if (ceiling > 0)
-            ceilings += formatString("%s%.1fx at %d^3", ceilings.empty() ? "" : ", ", ceiling, n);
+            ceilings += fmt::format("{}{:.1f}x at {}^3", ceilings.empty() ? "" : ", ", ceiling, n);
     }
     if (!missed)
         return notes;
@@ -172,9 +169,9 @@ std::vector<std::string> rateMissNotes(const std::vector<UpdateStudyRow>& rows, 
                         "its view), the other stages' medians would still cap dbi / volume at "
                         "about " +
                         ceilings +
-                        formatString(": where that is under %.0fx, no renderer reaches the "
-                                     "target on this machine and network.",
-                                     kRateTarget));
+                        fmt::format(": where that is under {:.0f}x, no renderer reaches the "
+                                    "target on this machine and network.",
+                                    kRateTarget));
     return notes;
 }
 
@@ -185,11 +182,11 @@ std::vector<std::string> rateTargetLines(const std::vector<UpdateStudyRow>& rows
         if (ratio < 0)
             continue;
         lines.push_back(
-            formatString("%s update rate %d^3: dbi %.1f/s vs volume %.1f/s = %sx "
-                         "(target >= %.0fx; paper 1.5-2.0x)",
-                         ratio >= kRateTarget ? "PASS" : "MISS", n,
-                         find(rows, "dbi", n)->updatesPerS, find(rows, "volume", n)->updatesPerS,
-                         figureAgainst(ratio, kRateTarget, true, 1).c_str(), kRateTarget));
+            fmt::format("{} update rate {}^3: dbi {:.1f}/s vs volume {:.1f}/s = {}x "
+                        "(target >= {:.0f}x; paper 1.5-2.0x)",
+                        ratio >= kRateTarget ? "PASS" : "MISS", n,
+                        find(rows, "dbi", n)->updatesPerS, find(rows, "volume", n)->updatesPerS,
+                        figureAgainst(ratio, kRateTarget, true, 1).c_str(), kRateTarget));
     }
     return lines;
 }
@@ -204,8 +201,8 @@ std::vector<std::string> sizeTargetLines(const std::vector<UpdateStudyRow>& rows
         // The 1/10 is at 80^3 only; larger boxes (--sizes) keep the every-size target.
         const bool at80 = n == 80;
         const double limit = at80 ? v->rawBytesPerUpdate / 10.0 : v->rawBytesPerUpdate;
-        lines.push_back(formatString(
-            "%s update size %d^3: dbi %.0f B vs volume raw %.0f B = %s (target <= %s)",
+        lines.push_back(fmt::format(
+            "{} update size {}^3: dbi {:.0f} B vs volume raw {:.0f} B = {} (target <= {})",
             d->bytesPerUpdate <= limit ? "PASS" : "MISS", n, d->bytesPerUpdate,
             v->rawBytesPerUpdate,
             figureAgainst(d->bytesPerUpdate / v->rawBytesPerUpdate, at80 ? 0.1 : 1.0, false, 3)
@@ -232,12 +229,12 @@ std::vector<std::string> displayTargetLines(const DisplayFigures& d) {
         if (e.fps <= 0)
             continue;
         const double ratio = dbi.fps / e.fps;
-        lines.push_back(formatString("%s display rate: %s %.0f FPS vs %s %.1f FPS = %sx (target "
-                                     ">= 20x; paper %.0f vs %.0f FPS = %.1fx)",
-                                     ratio >= 20.0 ? "PASS" : "MISS", dbi.name.c_str(), dbi.fps,
-                                     e.name.c_str(), e.fps,
-                                     figureAgainst(ratio, 20.0, true, 1).c_str(), dbi.paperFps,
-                                     e.paperFps, e.paperFps > 0 ? dbi.paperFps / e.paperFps : 0.0));
+        lines.push_back(fmt::format("{} display rate: {} {:.0f} FPS vs {} {:.1f} FPS = {}x (target "
+                                    ">= 20x; paper {:.0f} vs {:.0f} FPS = {:.1f}x)",
+                                    ratio >= 20.0 ? "PASS" : "MISS", dbi.name.c_str(), dbi.fps,
+                                    e.name.c_str(), e.fps,
+                                    figureAgainst(ratio, 20.0, true, 1).c_str(), dbi.paperFps,
+                                    e.paperFps, e.paperFps > 0 ? dbi.paperFps / e.paperFps : 0.0));
     }
     return lines;
 }
@@ -272,10 +269,10 @@ void writeFigure7(std::ostringstream& md, const std::vector<UpdateStudyRow>& row
         rate.series.push_back(s);
     }
     for (int n : boxes) {
-        std::vector<std::string> row{formatString("%d^3", n)};
+        std::vector<std::string> row{fmt::format("{}^3", n)};
         for (const std::string& m : methods) {
             const UpdateStudyRow* r = find(rows, m, n);
-            row.push_back(r ? fmt(r->updatesPerS, "%.1f") : "-");
+            row.push_back(r ? fmt::format("{:.1f}", r->updatesPerS) : "-");
         }
         const UpdateStudyRow* d = find(rows, "dbi", n);
         const UpdateStudyRow* f = find(rows, "dbi-fullrender", n);
@@ -285,7 +282,7 @@ void writeFigure7(std::ostringstream& md, const std::vector<UpdateStudyRow>& row
                           ? figureAgainst(d->updatesPerS / v->updatesPerS, kRateTarget, true, 1) +
                                 "x"
                           : "-");
-        row.push_back(f && v ? fmt(f->updatesPerS / v->updatesPerS, "%.1fx") : "-");
+        row.push_back(f && v ? fmt::format("{:.1f}x", f->updatesPerS / v->updatesPerS) : "-");
         t7.push_back(row);
     }
     md << markdownTable(h7, t7);
@@ -293,10 +290,11 @@ void writeFigure7(std::ostringstream& md, const std::vector<UpdateStudyRow>& row
     md << "\n![" << title << "](" << svgName << ")\n\n" << note << "\n\n";
     std::vector<std::vector<std::string>> tl;
     for (int n : boxes) {
-        std::vector<std::string> row{formatString("%d^3", n)};
+        std::vector<std::string> row{fmt::format("{}^3", n)};
         for (const std::string& m : methods) {
             const UpdateStudyRow* r = find(rows, m, n);
-            row.push_back(r ? formatString("%.2f / %.2f", r->latencyP50Ms, r->latencyP99Ms) : "-");
+            row.push_back(r ? fmt::format("{:.2f} / {:.2f}", r->latencyP50Ms, r->latencyP99Ms)
+                            : "-");
         }
         tl.push_back(row);
     }
@@ -316,10 +314,10 @@ void writeStageBreakdown(std::ostringstream& md, const std::vector<UpdateStudyRo
                 continue;
             const StageBreakdown& s = r->stages;
             const double sum = std::max(s.sum(), 1e-9);
-            auto pct = [&](double v) { return fmt(100.0 * v / sum, "%.1f%%"); };
-            ts.push_back({formatString("%d^3", n), pct(s.erode), pct(s.render), pct(s.encode),
+            auto pct = [&](double v) { return fmt::format("{:.1f}%", 100.0 * v / sum); };
+            ts.push_back({fmt::format("{}^3", n), pct(s.erode), pct(s.render), pct(s.encode),
                           pct(s.transmit), pct(s.clientApply), pct(s.clientRender),
-                          fmt(s.sum(), "%.3f"), fmt(s.grid, "%.3f")});
+                          fmt::format("{:.3f}", s.sum()), fmt::format("{:.3f}", s.grid)});
         }
         md << "**" << m << "**";
         if (*paperStages(m))
@@ -396,9 +394,8 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
         for (int n : boxes) {
             const UpdateStudyRow* r = find(rows, methods.front(), n);
             const int p = paperBbScreen(n);
-            t1.push_back({formatString("%d^3", n),
-                          formatString("%dx%d", r->bbScreenW, r->bbScreenH),
-                          p ? formatString("%d^2", p) : "-"});
+            t1.push_back({fmt::format("{}^3", n), fmt::format("{}x{}", r->bbScreenW, r->bbScreenH),
+                          p ? fmt::format("{}^2", p) : "-"});
         }
         md << markdownTable({"BB_volume (voxels)", "BB_screen, ours (pixels)", "paper"}, t1);
         md << "\nOurs is the projection of the box grown by the renderer's 2-voxel shading stencil "
@@ -453,7 +450,7 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
             }
             paperVol.x.push_back(n);
             paperVol.y.push_back(double(n) * n * n);
-            std::vector<std::string> row{formatString("%d^3", n)};
+            std::vector<std::string> row{fmt::format("{}^3", n)};
             for (const std::string& m : methods) {
                 const UpdateStudyRow* r = find(rows, m, n);
                 row.push_back(r ? bytesText(r->bytesPerUpdate) : "-");
@@ -461,7 +458,8 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
             row.push_back(d ? bytesText(d->rawBytesPerUpdate) : "-");
             row.push_back(p ? bytesText(4.0 * p * p) : "-");
             row.push_back(bytesText(double(n) * n * n));
-            row.push_back(d && v ? fmt(d->bytesPerUpdate / v->rawBytesPerUpdate, "%.3f") : "-");
+            row.push_back(d && v ? fmt::format("{:.3f}", d->bytesPerUpdate / v->rawBytesPerUpdate)
+                                 : "-");
             t8.push_back(row);
         }
         // The paper's references first, so the measured series are drawn over them: the volume's
@@ -504,9 +502,9 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
     if (in.display.measured) {
         std::vector<std::vector<std::string>> td;
         for (const DisplayFigures::Entry& e : in.display.entries)
-            td.push_back({e.name, fmt(e.fps, "%.1f"), fmt(e.frameP50Ms, "%.3f"),
-                          fmt(e.frameP99Ms, "%.3f"),
-                          e.paperFps > 0 ? fmt(e.paperFps, "%.0f") : "-"});
+            td.push_back({e.name, fmt::format("{:.1f}", e.fps), fmt::format("{:.3f}", e.frameP50Ms),
+                          fmt::format("{:.3f}", e.frameP99Ms),
+                          e.paperFps > 0 ? fmt::format("{:.0f}", e.paperFps) : "-"});
         md << markdownTable(
             {"client draws", "FPS", "frame p50 (ms)", "frame p99 (ms)", "paper FPS"}, td);
         // llvmpipe (Mesa's software rasteriser, the renderer of a machine without a GPU) runs
@@ -536,30 +534,32 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
             const double paperLocal = t.paperClientMs > 0 ? 1000.0 / t.paperClientMs : 0.0;
             const double paperRemote =
                 t.paperServerMs > 0 ? 1000.0 / (t.paperServerMs + 0.82) : 0.0;
-            th.push_back({t.tool, fmt(t.p50Ms, "%.4f"), fmt(t.p99Ms, "%.4f"), fmt(localHz, "%.0f"),
-                          fmt(remoteHz, "%.0f"),
-                          formatString("%.2f / %.2f", t.paperServerMs, t.paperClientMs),
-                          formatString("%.0f -> %.0f (%+.0f%%)", paperLocal, paperRemote,
-                                       100.0 * (paperRemote / paperLocal - 1.0))});
+            th.push_back({t.tool, fmt::format("{:.4f}", t.p50Ms), fmt::format("{:.4f}", t.p99Ms),
+                          fmt::format("{:.0f}", localHz), fmt::format("{:.0f}", remoteHz),
+                          fmt::format("{:.2f} / {:.2f}", t.paperServerMs, t.paperClientMs),
+                          fmt::format("{:.0f} -> {:.0f} ({:+.0f}%)", paperLocal, paperRemote,
+                                      100.0 * (paperRemote / paperLocal - 1.0))});
         }
         md << markdownTable({"tool", "force model p50 (ms)", "p99 (ms)",
                              "model rate computed locally (Hz)",
                              "model rate from the server over loopback (Hz)",
                              "paper server / client (ms)", "paper rate local -> server"},
                             th);
-        md << formatString(
-            "\nForce round trip over loopback through a session server: p50 %.3f ms, p99 %.3f ms "
-            "(server share %.3f ms; paper 0.82 ms on its LAN). The 1 kHz haptic loop ran at "
-            "%.0f Hz. Here server and client are the same machine, so computing forces on the "
-            "server cannot raise the model rate the way the paper's faster server did (+27 %% "
-            "drill, +142 %% perforator); the table gives both rates so the trade is visible.\n\n",
+        md << fmt::format(
+            "\nForce round trip over loopback through a session server: p50 {:.3f} ms, p99 {:.3f} "
+            "ms "
+            "(server share {:.3f} ms; paper 0.82 ms on its LAN). The 1 kHz haptic loop ran at "
+            "{:.0f} Hz. Here server and client are the same machine, so computing forces on the "
+            "server cannot raise the model rate the way the paper's faster server did (+27 % "
+            "drill, +142 % perforator); the table gives both rates so the trade is visible.\n\n",
             in.haptics.roundTripP50Ms, in.haptics.roundTripP99Ms, in.haptics.roundTripServerMs,
             in.haptics.loopRateHz);
         std::vector<std::vector<std::string>> tc;
         for (const HapticsCaseResult& r : in.haptics.cases)
-            tc.push_back({hapticMethodName(r.c.method), fmt(r.c.updateHz, "%.0f"),
-                          fmt(r.c.latencyMs, "%.0f"), fmt(r.forceRmsErrorN, "%.4f"),
-                          fmt(r.energyInjectedJ * 1e3, "%.3f"), r.stable ? "yes" : "NO"});
+            tc.push_back({hapticMethodName(r.c.method), fmt::format("{:.0f}", r.c.updateHz),
+                          fmt::format("{:.0f}", r.c.latencyMs),
+                          fmt::format("{:.4f}", r.forceRmsErrorN),
+                          fmt::format("{:.3f}", r.energyInjectedJ * 1e3), r.stable ? "yes" : "NO"});
         md << markdownTable({"method", "model rate (Hz)", "latency (ms)", "rms force error (N)",
                              "energy injected (mJ)", "stable"},
                             tc);
@@ -571,4 +571,4 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
     return md.str();
 }
 
-} // namespace trephine::net
+} // namespace trephine::study

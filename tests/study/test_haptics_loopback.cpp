@@ -6,9 +6,9 @@
 #include "net/session_client.h"
 #include "net/session_server.h"
 
-#include "libsim/haptics_study.h"
 #include "libsim/skull.h"
 #include "net/view.h"
+#include "study/haptics_study.h"
 
 #include "loopback.h"
 
@@ -21,6 +21,7 @@
 
 using namespace trephine;
 using namespace trephine::net;
+using namespace trephine::study;
 
 namespace {
 

@@ -1,11 +1,12 @@
-#include "libsim/progress.h"
+#include "study/progress.h"
 
+#include <fmt/format.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <chrono>
 
-namespace trephine {
+namespace trephine::study {
 
 namespace {
 
@@ -29,10 +30,8 @@ std::string ProgressBar::line() const {
     const int filled = m_done * kWidth / m_total;
     std::string bar(size_t(filled), '#');
     bar.append(size_t(kWidth - filled), '.');
-    char head[96];
-    std::snprintf(head, sizeof head, "[%s] %3d%% %5.0fs ", bar.c_str(), m_done * 100 / m_total,
-                  nowS() - m_startS);
-    std::string s = head + m_label;
+    std::string s = fmt::format("[{}] {:3}% {:5.0f}s {}", bar, m_done * 100 / m_total,
+                                nowS() - m_startS, m_label);
     if (s.size() > 100)
         s.resize(100);
     return s;
@@ -44,7 +43,7 @@ void ProgressBar::set(int done, const std::string& label) {
     if (!m_enabled || m_finished)
         return;
     // \033[K clears what a longer previous label left on the line.
-    std::fprintf(m_out, "\r%s\033[K", line().c_str());
+    fmt::print(m_out, "\r{}\033[K", line());
     std::fflush(m_out);
 }
 
@@ -53,9 +52,9 @@ void ProgressBar::finish() {
         return;
     m_finished = true;
     if (m_enabled) {
-        std::fprintf(m_out, "\r\033[K");
+        fmt::print(m_out, "\r\033[K");
         std::fflush(m_out);
     }
 }
 
-} // namespace trephine
+} // namespace trephine::study

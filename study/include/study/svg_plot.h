@@ -5,7 +5,7 @@
 #include <string>
 #include <vector>
 
-namespace trephine {
+namespace trephine::study {
 
 struct PlotSeries {
     std::string name;
@@ -33,7 +33,4 @@ std::vector<double> niceTicks(double lo, double hi, int count);
 std::string markdownTable(const std::vector<std::string>& header,
                           const std::vector<std::vector<std::string>>& rows);
 
-// printf into a std::string.
-std::string formatString(const char* fmt, ...) __attribute__((format(printf, 1, 2)));
-
-} // namespace trephine
+} // namespace trephine::study

@@ -1,5 +1,5 @@
-#include "libsim/progress.h"
-#include "libsim/svg_plot.h"
+#include "study/progress.h"
+#include "study/svg_plot.h"
 
 #include <gtest/gtest.h>
 
@@ -7,7 +7,7 @@
 #include <regex>
 #include <string>
 
-using namespace trephine;
+using namespace trephine::study;
 
 namespace {
 

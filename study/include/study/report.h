@@ -3,13 +3,13 @@
 // formatting of results measured elsewhere (update study, display study, haptics study).
 #pragma once
 
-#include "libsim/haptics_study.h"
-#include "net/update_study.h"
+#include "study/haptics_study.h"
+#include "study/update_study.h"
 
 #include <string>
 #include <vector>
 
-namespace trephine::net {
+namespace trephine::study {
 
 // The display study (ui::measureDisplayRates), as plain figures.
 struct DisplayFigures {
@@ -81,4 +81,4 @@ double rateRatioWithoutRayCasting(const std::vector<UpdateStudyRow>& rows, int n
 // otherwise. In report.md under the targets, and printed by `study updates`.
 std::vector<std::string> rateMissNotes(const std::vector<UpdateStudyRow>& rows, bool emulatedLink);
 
-} // namespace trephine::net
+} // namespace trephine::study

@@ -1,22 +1,25 @@
-#include "net/update_study.h"
+#include "study/update_study.h"
 
 #include "libsim/camera.h"
 #include "libsim/dirty_rect.h"
 #include "libsim/error.h"
 #include "libsim/skull.h"
 #include "libsim/stats.h"
-#include "libsim/svg_plot.h"
 #include "net/codec.h"
 #include "net/link_emulator.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
 #include "net/view.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <memory>
 #include <optional>
 
-namespace trephine::net {
+namespace trephine::study {
+
+using namespace trephine::net;
 
 namespace {
 
@@ -281,12 +284,12 @@ std::string updatesCsvHeader() {
 }
 
 std::string updatesCsvRow(const UpdateStudyRow& r) {
-    return formatString(
-        "%s,%d,%d,%d,%.1f,%.0f,%.2f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%.4f,%d,%.4f",
-        r.method.c_str(), r.box, r.bbScreenW, r.bbScreenH, r.bytesPerUpdate, r.rawBytesPerUpdate,
-        r.updatesPerS, r.latencyP50Ms, r.latencyP99Ms, r.stages.erode, r.stages.render,
-        r.stages.encode, r.stages.transmit, r.stages.clientApply, r.stages.clientRender, r.cycles,
-        r.stages.grid);
+    return fmt::format("{},{},{},{},{:.1f},{:.0f},{:.2f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},{:.4f},"
+                       "{:.4f},{:.4f},{},{:.4f}",
+                       r.method.c_str(), r.box, r.bbScreenW, r.bbScreenH, r.bytesPerUpdate,
+                       r.rawBytesPerUpdate, r.updatesPerS, r.latencyP50Ms, r.latencyP99Ms,
+                       r.stages.erode, r.stages.render, r.stages.encode, r.stages.transmit,
+                       r.stages.clientApply, r.stages.clientRender, r.cycles, r.stages.grid);
 }
 
-} // namespace trephine::net
+} // namespace trephine::study

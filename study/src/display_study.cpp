@@ -1,4 +1,4 @@
-#include "ui/display_study.h"
+#include "study/display_study.h"
 
 #include "libsim/camera.h"
 #include "libsim/error.h"
@@ -17,7 +17,9 @@
 #include <memory>
 #include <numeric>
 
-namespace trephine::ui {
+namespace trephine::study {
+
+using namespace trephine::ui;
 
 namespace {
 
@@ -145,4 +147,4 @@ DisplayStudyResult measureDisplayRates(const DisplayStudyConfig& config) {
     return result;
 }
 
-} // namespace trephine::ui
+} // namespace trephine::study

@@ -12,7 +12,7 @@
 #include <string>
 #include <vector>
 
-namespace trephine {
+namespace trephine::study {
 
 enum class HapticMethod { Multirate, ZeroOrderHold };
 const char* hapticMethodName(HapticMethod m); // "multirate", "zoh"
@@ -88,7 +88,4 @@ HapticsCaseResult runHapticsCase(const Volume& volume, const SurfaceSite& site,
 std::string hapticsCsvHeader();
 std::string hapticsCsvRow(const HapticsCaseResult& r);
 
-// A flat bone block for the study and tests: makeBox(n) and the middle of its top face.
-SurfaceSite boxTopSite(const Volume& box);
-
-} // namespace trephine
+} // namespace trephine::study

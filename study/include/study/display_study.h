@@ -6,7 +6,7 @@
 #include <string>
 #include <vector>
 
-namespace trephine::ui {
+namespace trephine::study {
 
 struct DisplayStudyConfig {
     std::string camera = "paper";           // libsim camera preset
@@ -44,4 +44,4 @@ struct DisplayStudyResult {
 // under xvfb-run) or when the configuration is unusable.
 DisplayStudyResult measureDisplayRates(const DisplayStudyConfig& config);
 
-} // namespace trephine::ui
+} // namespace trephine::study

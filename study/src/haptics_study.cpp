@@ -1,12 +1,13 @@
-#include "libsim/haptics_study.h"
+#include "study/haptics_study.h"
+
+#include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>
-#include <cstdio>
 #include <deque>
 #include <numbers>
 
-namespace trephine {
+namespace trephine::study {
 
 const char* hapticMethodName(HapticMethod m) {
     return m == HapticMethod::Multirate ? "multirate" : "zoh";
@@ -18,20 +19,10 @@ std::string hapticsCsvHeader() {
 }
 
 std::string hapticsCsvRow(const HapticsCaseResult& r) {
-    char buf[256];
-    std::snprintf(buf, sizeof buf, "%s,%g,%g,%.6f,%.6f,%.9f,%d,%.4f,%.4f,%.4f,%d",
-                  hapticMethodName(r.c.method), r.c.updateHz, r.c.latencyMs, r.forceRmsErrorN,
-                  r.forcePeakErrorN, r.energyInjectedJ, r.stable ? 1 : 0, r.maxPenetrationMm,
-                  r.finalOscillationMm, r.meanForceN, r.modelsDelivered);
-    return buf;
-}
-
-SurfaceSite boxTopSite(const Volume& box) {
-    // makeBox fills voxels [n/4, 3n/4); the trilinear iso-surface lies halfway between the last
-    // solid voxel centre and the first air one.
-    const int top = 3 * box.dims().z / 4;
-    const float z = 0.5f * (box.voxelCenter({0, 0, top - 1}).z + box.voxelCenter({0, 0, top}).z);
-    return {glm::vec3(0.0f, 0.0f, z), glm::vec3(0.0f, 0.0f, 1.0f)};
+    return fmt::format("{},{:g},{:g},{:.6f},{:.6f},{:.9f},{},{:.4f},{:.4f},{:.4f},{}",
+                       hapticMethodName(r.c.method), r.c.updateHz, r.c.latencyMs, r.forceRmsErrorN,
+                       r.forcePeakErrorN, r.energyInjectedJ, r.stable ? 1 : 0, r.maxPenetrationMm,
+                       r.finalOscillationMm, r.meanForceN, r.modelsDelivered);
 }
 
 namespace {
@@ -184,4 +175,4 @@ HapticsCaseResult runHapticsCase(const Volume& volume, const SurfaceSite& site,
     return out;
 }
 
-} // namespace trephine
+} // namespace trephine::study

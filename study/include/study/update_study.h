@@ -22,16 +22,16 @@
 #include <string>
 #include <vector>
 
-namespace trephine::net {
+namespace trephine::study {
 
 struct UpdateStudyConfig {
     std::vector<int> sizes{10, 20, 30, 40, 50, 60, 70, 80};
     std::string volumeName = "skull:128";
     std::string camera = "paper";
-    int window = 500;         // square window, pixels
-    Codec codec = Codec::Lz4; // image updates, and the compressed volume variant
-    int cycles = 100;         // measured cycles per method and size
-    int warmup = 3;           // cycles run first and discarded, per round
+    int window = 500;                   // square window, pixels
+    net::Codec codec = net::Codec::Lz4; // image updates, and the compressed volume variant
+    int cycles = 100;                   // measured cycles per method and size
+    int warmup = 3;                     // cycles run first and discarded, per round
     // The sweep (every method, every size) runs this many times, each with its share of the
     // cycles and a fresh client per method; each (method, size) pools its samples over the
     // rounds, so its medians draw on several stretches of the run and a burst of other work on
@@ -39,7 +39,7 @@ struct UpdateStudyConfig {
     int rounds = 4;
     // A link to put between the clients and the server (net/link_emulator.h), e.g. the paper's
     // 100 Mbit/s LAN; none: plain loopback.
-    std::optional<LinkConditions> link;
+    std::optional<net::LinkConditions> link;
     double cycleTimeoutS = 10;        // one cycle that takes longer fails the study (an Error)
     std::vector<std::string> methods; // a subset of updateStudyMethods(codec); empty: all
     // Called before each (method, size) with a label and the steps done/total.
@@ -69,7 +69,7 @@ struct UpdateStudyRow {
 };
 
 // The study's methods, in order, for a codec ("dbi", "dbi-fullrender", "volume", "volume-lz4").
-std::vector<std::string> updateStudyMethods(Codec codec);
+std::vector<std::string> updateStudyMethods(net::Codec codec);
 
 // Throws the one-line trephine::Error that runUpdateStudy would for this volume and config (a box
 // size that does not fit, rounds out of range, an unknown method, no bone where the study cuts)
@@ -85,4 +85,4 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
 std::string updatesCsvHeader();
 std::string updatesCsvRow(const UpdateStudyRow& row);
 
-} // namespace trephine::net
+} // namespace trephine::study

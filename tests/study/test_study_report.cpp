@@ -1,7 +1,7 @@
 // The study report's targets: PASS and MISS lines from the figures, and the note that explains a
 // missed rate on loopback (and points at the paper's LAN, and says how far a free ray caster
 // would go), which an emulated link leaves out.
-#include "net/study_report.h"
+#include "study/report.h"
 
 #include <gtest/gtest.h>
 
@@ -11,7 +11,8 @@
 #include <string>
 
 using namespace trephine;
-using namespace trephine::net;
+using namespace trephine::study;
+using trephine::net::LinkConditions;
 
 namespace {
 

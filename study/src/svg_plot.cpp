@@ -1,12 +1,12 @@
-#include "libsim/svg_plot.h"
+#include "study/svg_plot.h"
+
+#include <fmt/format.h>
 
 #include <algorithm>
 #include <cmath>
-#include <cstdarg>
-#include <cstdio>
 #include <limits>
 
-namespace trephine {
+namespace trephine::study {
 
 namespace {
 
@@ -42,12 +42,12 @@ std::string tickLabel(double v) {
         return "0";
     const double a = std::fabs(v);
     if (a >= 1e6)
-        return formatString("%gM", v / 1e6);
+        return fmt::format("{:g}M", v / 1e6);
     if (a >= 1e4)
-        return formatString("%gk", v / 1e3);
+        return fmt::format("{:g}k", v / 1e3);
     if (a < 1e-3)
-        return formatString("%.0e", v);
-    return formatString("%g", v);
+        return fmt::format("{:.0e}", v);
+    return fmt::format("{:g}", v);
 }
 
 bool usable(double x, double y, bool logY) {
@@ -55,20 +55,6 @@ bool usable(double x, double y, bool logY) {
 }
 
 } // namespace
-
-std::string formatString(const char* fmt, ...) {
-    va_list args;
-    va_start(args, fmt);
-    va_list copy;
-    va_copy(copy, args);
-    const int n = std::vsnprintf(nullptr, 0, fmt, copy);
-    va_end(copy);
-    std::string out(size_t(std::max(n, 0)), '\0');
-    if (n > 0)
-        std::vsnprintf(out.data(), size_t(n) + 1, fmt, args);
-    va_end(args);
-    return out;
-}
 
 std::vector<double> niceTicks(double lo, double hi, int count) {
     std::vector<double> ticks;
@@ -131,21 +117,21 @@ std::string svgLinePlot(const PlotSpec& spec) {
     auto py = [&](double y) { return top + ph - (y - ymin) / (ymax - ymin) * ph; };
 
     std::string svg =
-        formatString("<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"%.0f\" height=\"%.0f\" "
-                     "viewBox=\"0 0 %.0f %.0f\" font-family=\"sans-serif\" font-size=\"12\">\n"
-                     "<rect width=\"100%%\" height=\"100%%\" fill=\"white\"/>\n",
-                     W, H, W, H);
-    svg += formatString("<text x=\"%.1f\" y=\"22\" text-anchor=\"middle\" font-size=\"14\" "
-                        "font-weight=\"bold\">%s</text>\n",
-                        left + pw / 2, escapeXml(spec.title).c_str());
+        fmt::format("<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{:.0f}\" height=\"{:.0f}\" "
+                    "viewBox=\"0 0 {:.0f} {:.0f}\" font-family=\"sans-serif\" font-size=\"12\">\n"
+                    "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n",
+                    W, H, W, H);
+    svg += fmt::format("<text x=\"{:.1f}\" y=\"22\" text-anchor=\"middle\" font-size=\"14\" "
+                       "font-weight=\"bold\">{}</text>\n",
+                       left + pw / 2, escapeXml(spec.title).c_str());
 
     // Grid and ticks.
     for (double t : niceTicks(xmin, xmax, 8)) {
         const double x = px(t);
-        svg += formatString("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" "
-                            "stroke=\"#ddd\"/>\n<text x=\"%.1f\" y=\"%.1f\" "
-                            "text-anchor=\"middle\">%s</text>\n",
-                            x, top, x, top + ph, x, top + ph + 16, tickLabel(t).c_str());
+        svg += fmt::format("<line x1=\"{:.1f}\" y1=\"{:.1f}\" x2=\"{:.1f}\" y2=\"{:.1f}\" "
+                           "stroke=\"#ddd\"/>\n<text x=\"{:.1f}\" y=\"{:.1f}\" "
+                           "text-anchor=\"middle\">{}</text>\n",
+                           x, top, x, top + ph, x, top + ph + 16, tickLabel(t).c_str());
     }
     std::vector<double> yticks;
     if (spec.logY)
@@ -156,20 +142,20 @@ std::string svgLinePlot(const PlotSpec& spec) {
     for (double t : yticks) {
         const double y = py(t);
         const std::string label = tickLabel(spec.logY ? std::pow(10.0, t) : t);
-        svg += formatString("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" "
-                            "stroke=\"#ddd\"/>\n<text x=\"%.1f\" y=\"%.1f\" "
-                            "text-anchor=\"end\">%s</text>\n",
-                            left, y, left + pw, y, left - 6, y + 4, label.c_str());
+        svg += fmt::format("<line x1=\"{:.1f}\" y1=\"{:.1f}\" x2=\"{:.1f}\" y2=\"{:.1f}\" "
+                           "stroke=\"#ddd\"/>\n<text x=\"{:.1f}\" y=\"{:.1f}\" "
+                           "text-anchor=\"end\">{}</text>\n",
+                           left, y, left + pw, y, left - 6, y + 4, label.c_str());
     }
-    svg += formatString("<rect x=\"%.1f\" y=\"%.1f\" width=\"%.1f\" height=\"%.1f\" "
-                        "fill=\"none\" stroke=\"#333\"/>\n",
-                        left, top, pw, ph);
-    svg += formatString("<text x=\"%.1f\" y=\"%.1f\" text-anchor=\"middle\">%s</text>\n",
-                        left + pw / 2, H - 12, escapeXml(spec.xLabel).c_str());
-    svg += formatString("<text x=\"16\" y=\"%.1f\" text-anchor=\"middle\" "
-                        "transform=\"rotate(-90 16 %.1f)\">%s%s</text>\n",
-                        top + ph / 2, top + ph / 2, escapeXml(spec.yLabel).c_str(),
-                        spec.logY ? " (log)" : "");
+    svg += fmt::format("<rect x=\"{:.1f}\" y=\"{:.1f}\" width=\"{:.1f}\" height=\"{:.1f}\" "
+                       "fill=\"none\" stroke=\"#333\"/>\n",
+                       left, top, pw, ph);
+    svg += fmt::format("<text x=\"{:.1f}\" y=\"{:.1f}\" text-anchor=\"middle\">{}</text>\n",
+                       left + pw / 2, H - 12, escapeXml(spec.xLabel).c_str());
+    svg += fmt::format("<text x=\"16\" y=\"{:.1f}\" text-anchor=\"middle\" "
+                       "transform=\"rotate(-90 16 {:.1f})\">{}{}</text>\n",
+                       top + ph / 2, top + ph / 2, escapeXml(spec.yLabel).c_str(),
+                       spec.logY ? " (log)" : "");
 
     // Series and legend.
     size_t paletteIndex = 0;
@@ -183,21 +169,22 @@ std::string svgLinePlot(const PlotSpec& spec) {
             if (!usable(s.x[i], s.y[i], spec.logY))
                 continue;
             const double x = px(s.x[i]), y = py(spec.logY ? std::log10(s.y[i]) : s.y[i]);
-            points += formatString("%.1f,%.1f ", x, y);
-            markers += formatString("<circle cx=\"%.1f\" cy=\"%.1f\" r=\"3\" fill=\"%s\"/>\n", x, y,
-                                    color.c_str());
+            points += fmt::format("{:.1f},{:.1f} ", x, y);
+            markers += fmt::format("<circle cx=\"{:.1f}\" cy=\"{:.1f}\" r=\"3\" fill=\"{}\"/>\n", x,
+                                   y, color.c_str());
         }
-        svg += formatString("<polyline fill=\"none\" stroke=\"%s\" stroke-width=\"2\"%s "
-                            "points=\"%s\"/>\n",
-                            color.c_str(), s.dashed ? " stroke-dasharray=\"6 4\"" : "",
-                            points.c_str());
+        svg +=
+            fmt::format("<polyline fill=\"none\" stroke=\"{}\" stroke-width=\"2\"{} "
+                        "points=\"{}\"/>\n",
+                        color.c_str(), s.dashed ? " stroke-dasharray=\"6 4\"" : "", points.c_str());
         svg += markers;
         const double ly = top + 10 + 20 * double(si);
-        svg += formatString("<line x1=\"%.1f\" y1=\"%.1f\" x2=\"%.1f\" y2=\"%.1f\" stroke=\"%s\" "
-                            "stroke-width=\"2\"%s/>\n<text x=\"%.1f\" y=\"%.1f\">%s</text>\n",
-                            left + pw + 12, ly, left + pw + 36, ly, color.c_str(),
-                            s.dashed ? " stroke-dasharray=\"6 4\"" : "", left + pw + 42, ly + 4,
-                            escapeXml(s.name).c_str());
+        svg += fmt::format(
+            "<line x1=\"{:.1f}\" y1=\"{:.1f}\" x2=\"{:.1f}\" y2=\"{:.1f}\" stroke=\"{}\" "
+            "stroke-width=\"2\"{}/>\n<text x=\"{:.1f}\" y=\"{:.1f}\">{}</text>\n",
+            left + pw + 12, ly, left + pw + 36, ly, color.c_str(),
+            s.dashed ? " stroke-dasharray=\"6 4\"" : "", left + pw + 42, ly + 4,
+            escapeXml(s.name).c_str());
     }
     svg += "</svg>\n";
     return svg;
@@ -228,4 +215,4 @@ std::string markdownTable(const std::vector<std::string>& header,
     return md;
 }
 
-} // namespace trephine
+} // namespace trephine::study
