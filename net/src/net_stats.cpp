@@ -1,9 +1,18 @@
 #include "net/net_stats.h"
 
+#include <fmt/format.h>
+#include <nlohmann/json.hpp>
+
 #include <chrono>
-#include <cstdio>
 
 namespace trephine::net {
+
+namespace {
+
+// Names and scripts come from peers and users: a byte that is not UTF-8 is replaced, not thrown.
+constexpr auto kReplaceInvalidUtf8 = nlohmann::json::error_handler_t::replace;
+
+} // namespace
 
 uint64_t steadyNowUs() {
     using namespace std::chrono;
@@ -77,108 +86,118 @@ void ModeStats::add(const UpdateRecord& r) {
     put(encodeUs, r.encodeUs);
 }
 
-std::string jsonModeStats(const ModeStats& m) {
-    return "{\"updates\": " + std::to_string(m.updates) +
-           ", \"full_updates\": " + std::to_string(m.fullUpdates) +
-           ", \"bytes\": " + jsonWindow(m.bytes) + ", \"raw_bytes\": " + jsonWindow(m.rawBytes) +
-           ", \"latency_us\": " + jsonWindow(m.latencyUs) +
-           ", \"erode_us\": " + jsonWindow(m.erodeUs) +
-           ", \"server_render_us\": " + jsonWindow(m.serverRenderUs) +
-           ", \"encode_us\": " + jsonWindow(m.encodeUs) +
-           ", \"transmit_us\": " + jsonWindow(m.transmitUs) +
-           ", \"client_apply_us\": " + jsonWindow(m.applyUs) +
-           ", \"client_render_us\": " + jsonWindow(m.clientRenderUs) + "}";
+nlohmann::ordered_json windowJson(const SampleWindow& w) {
+    return {{"count", w.totalCount()}, {"mean", w.mean()},        {"min", w.min()},
+            {"p50", w.percentile(50)}, {"p99", w.percentile(99)}, {"max", w.max()}};
 }
 
-std::string jsonString(const std::string& s) {
-    std::string out = "\"";
-    for (char ch : s) {
-        if (ch == '"' || ch == '\\') {
-            out += '\\';
-            out += ch;
-        } else if (uint8_t(ch) < 0x20) {
-            char buf[8];
-            std::snprintf(buf, sizeof buf, "\\u%04x", unsigned(uint8_t(ch)));
-            out += buf;
-        } else {
-            out += ch;
-        }
+nlohmann::ordered_json modeStatsJson(const ModeStats& m) {
+    return {{"updates", m.updates},
+            {"full_updates", m.fullUpdates},
+            {"bytes", windowJson(m.bytes)},
+            {"raw_bytes", windowJson(m.rawBytes)},
+            {"latency_us", windowJson(m.latencyUs)},
+            {"erode_us", windowJson(m.erodeUs)},
+            {"server_render_us", windowJson(m.serverRenderUs)},
+            {"encode_us", windowJson(m.encodeUs)},
+            {"transmit_us", windowJson(m.transmitUs)},
+            {"client_apply_us", windowJson(m.applyUs)},
+            {"client_render_us", windowJson(m.clientRenderUs)}};
+}
+
+nlohmann::ordered_json channelsJson(const NetStats& stats) {
+    nlohmann::ordered_json j = nlohmann::ordered_json::object();
+    for (size_t c = 0; c < size_t(Channel::Count); ++c) {
+        const Channel ch = Channel(c);
+        const ChannelRates r = stats.averageRates(ch);
+        j[channelName(ch)] = {{"bytes_in", stats.totalBytesIn(ch)},
+                              {"bytes_out", stats.totalBytesOut(ch)},
+                              {"messages_in", stats.totalMessagesIn(ch)},
+                              {"messages_out", stats.totalMessagesOut(ch)},
+                              {"bytes_in_per_s", r.bytesInPerS},
+                              {"bytes_out_per_s", r.bytesOutPerS},
+                              {"messages_in_per_s", r.messagesInPerS},
+                              {"messages_out_per_s", r.messagesOutPerS}};
     }
-    return out + "\"";
+    return j;
 }
 
-std::string jsonNumber(double v) {
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "%.6g", v);
-    return buf;
-}
-
-std::string jsonWindow(const SampleWindow& w) {
-    return "{\"count\": " + std::to_string(w.totalCount()) + ", \"mean\": " + jsonNumber(w.mean()) +
-           ", \"min\": " + jsonNumber(w.min()) + ", \"p50\": " + jsonNumber(w.percentile(50)) +
-           ", \"p99\": " + jsonNumber(w.percentile(99)) + ", \"max\": " + jsonNumber(w.max()) + "}";
+nlohmann::ordered_json reportJsonValue(const ReportInfo& info, const NetStats& stats) {
+    nlohmann::ordered_json j = {{"server", info.server},
+                                {"codec", info.codec},
+                                {"sync", info.sync},
+                                {"view", info.view},
+                                {"camera", info.camera},
+                                {"script", info.script},
+                                {"duration_s", info.durationS},
+                                {"updates_applied", info.updatesApplied},
+                                {"full_updates", info.fullUpdates},
+                                {"tool_states_sent", info.toolStatesSent},
+                                {"relays_received", info.relaysReceived},
+                                {"malformed_dropped", stats.malformed()},
+                                {"updates_rejected", info.updatesRejected},
+                                {"clock_offset_us", stats.clockOffsetUs},
+                                {"packet_loss", stats.packetLoss},
+                                {"packets_lost", stats.packetsLost},
+                                {"rtt_us", windowJson(stats.rttUs)},
+                                {"update_bytes", windowJson(stats.updateBytes)},
+                                {"update_raw_bytes", windowJson(stats.updateRawBytes)},
+                                {"update_latency_us", windowJson(stats.updateLatencyUs)},
+                                {"apply_us", windowJson(stats.applyUs)},
+                                {"haptic_round_trip_us", windowJson(stats.hapticRoundTripUs)},
+                                {"modes",
+                                 {{"dbi", modeStatsJson(stats.modes[size_t(Sync::Dbi)])},
+                                  {"volume", modeStatsJson(stats.modes[size_t(Sync::Volume)])}}}};
+    if (info.hapticLoop)
+        j["haptics"] = {{"tool_rate_hz", info.toolRateHz},
+                        {"rate_hz", info.hapticRateHz},
+                        {"achieved_rate_hz", info.achievedRateHz},
+                        {"lateness_p50_ms", info.latenessP50Ms},
+                        {"lateness_p99_ms", info.latenessP99Ms},
+                        {"ticks", info.hapticTicks},
+                        {"models_received", info.hapticModels},
+                        {"models_applied", info.modelsApplied},
+                        {"models_dropped", info.modelsDropped},
+                        {"force_round_trip_p50_us", stats.hapticRoundTripUs.percentile(50)},
+                        {"force_round_trip_p99_us", stats.hapticRoundTripUs.percentile(99)}};
+    j["channels"] = channelsJson(stats);
+    return j;
 }
 
 std::string reportJson(const ReportInfo& info, const NetStats& stats) {
-    std::string j = "{\n";
-    j += "  \"server\": " + jsonString(info.server) + ",\n";
-    j += "  \"codec\": " + jsonString(info.codec) + ",\n";
-    j += "  \"sync\": " + jsonString(info.sync) + ",\n";
-    j += "  \"view\": " + jsonString(info.view) + ",\n";
-    j += "  \"camera\": " + jsonString(info.camera) + ",\n";
-    j += "  \"script\": " + jsonString(info.script) + ",\n";
-    j += "  \"duration_s\": " + jsonNumber(info.durationS) + ",\n";
-    j += "  \"updates_applied\": " + std::to_string(info.updatesApplied) + ",\n";
-    j += "  \"full_updates\": " + std::to_string(info.fullUpdates) + ",\n";
-    j += "  \"tool_states_sent\": " + std::to_string(info.toolStatesSent) + ",\n";
-    j += "  \"relays_received\": " + std::to_string(info.relaysReceived) + ",\n";
-    j += "  \"malformed_dropped\": " + std::to_string(stats.malformed()) + ",\n";
-    j += "  \"updates_rejected\": " + std::to_string(info.updatesRejected) + ",\n";
-    j += "  \"clock_offset_us\": " + std::to_string(stats.clockOffsetUs) + ",\n";
-    j += "  \"packet_loss\": " + jsonNumber(stats.packetLoss) + ",\n";
-    j += "  \"packets_lost\": " + std::to_string(stats.packetsLost) + ",\n";
-    j += "  \"rtt_us\": " + jsonWindow(stats.rttUs) + ",\n";
-    j += "  \"update_bytes\": " + jsonWindow(stats.updateBytes) + ",\n";
-    j += "  \"update_raw_bytes\": " + jsonWindow(stats.updateRawBytes) + ",\n";
-    j += "  \"update_latency_us\": " + jsonWindow(stats.updateLatencyUs) + ",\n";
-    j += "  \"apply_us\": " + jsonWindow(stats.applyUs) + ",\n";
-    j += "  \"haptic_round_trip_us\": " + jsonWindow(stats.hapticRoundTripUs) + ",\n";
-    j += "  \"modes\": {\"dbi\": " + jsonModeStats(stats.modes[size_t(Sync::Dbi)]) +
-         ",\n            \"volume\": " + jsonModeStats(stats.modes[size_t(Sync::Volume)]) + "},\n";
-    if (info.hapticLoop) {
-        j +=
-            "  \"haptics\": {\"tool_rate_hz\": " + jsonNumber(info.toolRateHz) +
-            ", \"rate_hz\": " + jsonNumber(info.hapticRateHz) +
-            ", \"achieved_rate_hz\": " + jsonNumber(info.achievedRateHz) +
-            ", \"lateness_p50_ms\": " + jsonNumber(info.latenessP50Ms) +
-            ", \"lateness_p99_ms\": " + jsonNumber(info.latenessP99Ms) +
-            ", \"ticks\": " + std::to_string(info.hapticTicks) +
-            ", \"models_received\": " + std::to_string(info.hapticModels) +
-            ", \"models_applied\": " + std::to_string(info.modelsApplied) +
-            ", \"models_dropped\": " + std::to_string(info.modelsDropped) +
-            ", \"force_round_trip_p50_us\": " + jsonNumber(stats.hapticRoundTripUs.percentile(50)) +
-            ", \"force_round_trip_p99_us\": " + jsonNumber(stats.hapticRoundTripUs.percentile(99)) +
-            "},\n";
-    }
-    j += "  \"channels\": " + jsonChannels(stats);
-    j += "\n}\n";
-    return j;
+    return reportJsonValue(info, stats).dump(2, ' ', false, kReplaceInvalidUtf8) + "\n";
+}
+
+// The text forms below keep the layout of the server's report, which is still built as text.
+
+std::string jsonString(const std::string& s) {
+    return nlohmann::json(s).dump(-1, ' ', false, kReplaceInvalidUtf8);
+}
+
+std::string jsonNumber(double v) {
+    return fmt::format("{:.6g}", v);
+}
+
+std::string jsonWindow(const SampleWindow& w) {
+    return fmt::format(R"({{"count": {}, "mean": {}, "min": {}, "p50": {}, "p99": {}, "max": {}}})",
+                       w.totalCount(), jsonNumber(w.mean()), jsonNumber(w.min()),
+                       jsonNumber(w.percentile(50)), jsonNumber(w.percentile(99)),
+                       jsonNumber(w.max()));
 }
 
 std::string jsonChannels(const NetStats& stats) {
     std::string j = "{";
     for (size_t c = 0; c < size_t(Channel::Count); ++c) {
-        Channel ch = Channel(c);
-        ChannelRates r = stats.averageRates(ch);
-        j += std::string(c ? "," : "") + "\n    " + jsonString(channelName(ch)) + ": {" +
-             "\"bytes_in\": " + std::to_string(stats.totalBytesIn(ch)) +
-             ", \"bytes_out\": " + std::to_string(stats.totalBytesOut(ch)) +
-             ", \"messages_in\": " + std::to_string(stats.totalMessagesIn(ch)) +
-             ", \"messages_out\": " + std::to_string(stats.totalMessagesOut(ch)) +
-             ", \"bytes_in_per_s\": " + jsonNumber(r.bytesInPerS) +
-             ", \"bytes_out_per_s\": " + jsonNumber(r.bytesOutPerS) +
-             ", \"messages_in_per_s\": " + jsonNumber(r.messagesInPerS) +
-             ", \"messages_out_per_s\": " + jsonNumber(r.messagesOutPerS) + "}";
+        const Channel ch = Channel(c);
+        const ChannelRates r = stats.averageRates(ch);
+        j += fmt::format("{}\n    {}: {{\"bytes_in\": {}, \"bytes_out\": {}, \"messages_in\": {}, "
+                         "\"messages_out\": {}, \"bytes_in_per_s\": {}, \"bytes_out_per_s\": {}, "
+                         "\"messages_in_per_s\": {}, \"messages_out_per_s\": {}}}",
+                         c ? "," : "", jsonString(channelName(ch)), stats.totalBytesIn(ch),
+                         stats.totalBytesOut(ch), stats.totalMessagesIn(ch),
+                         stats.totalMessagesOut(ch), jsonNumber(r.bytesInPerS),
+                         jsonNumber(r.bytesOutPerS), jsonNumber(r.messagesInPerS),
+                         jsonNumber(r.messagesOutPerS));
     }
     return j + "\n  }";
 }

@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <deque>
 #include <glm/vec3.hpp>
+#include <nlohmann/json_fwd.hpp>
 #include <string>
 
 namespace trephine::net {
@@ -137,17 +138,23 @@ struct ReportInfo {
     uint64_t modelsDropped = 0; // reordered, dropped by the loop
     std::string sync = "dbi";   // the sync mode at the end: dbi | volume
 };
+// The report as a JSON value (keys in the order docs/session.md lists them), and as text.
+nlohmann::ordered_json reportJsonValue(const ReportInfo& info, const NetStats& stats);
 std::string reportJson(const ReportInfo& info, const NetStats& stats);
 
-// JSON pieces shared by the client's and the server's reports.
+// Pieces of the reports, for a report that embeds them.
+// {"count", "mean", "min", "p50", "p99", "max"} of a sample window.
+nlohmann::ordered_json windowJson(const SampleWindow& w);
+// {"updates", "full_updates", "bytes", "raw_bytes", "latency_us", and each stage's window}.
+nlohmann::ordered_json modeStatsJson(const ModeStats& m);
+// {"control": {bytes_in, bytes_out, messages_in, messages_out and their *_per_s}, ...}.
+nlohmann::ordered_json channelsJson(const NetStats& stats);
+
+// The same pieces as text, for a report still written as text (the server's).
 std::string jsonString(const std::string& s); // quoted and escaped
 std::string jsonNumber(double v);             // %.6g
-// {"count", "mean", "min", "p50", "p99", "max"} of a sample window.
 std::string jsonWindow(const SampleWindow& w);
-// {"updates", "full_updates", "bytes", "raw_bytes", "latency_us", and each stage's window}.
-std::string jsonModeStats(const ModeStats& m);
-// {"control": {bytes_in, bytes_out, messages_in, messages_out and their *_per_s}, ...}: every
-// channel's totals and averages, one channel a line indented by four spaces.
+// Every channel, one a line indented by four spaces.
 std::string jsonChannels(const NetStats& stats);
 
 } // namespace trephine::net
