@@ -1,7 +1,9 @@
-// Client-side review fixes, over loopback with the server in this process: a resync during a view
+// How a client recovers, over loopback with the server in this process: a resync during a view
 // change keeps the view asked for and asks only once; (ClientThread) each applied rectangle
 // carries its own update's latency, and the statistics tick restarts after a stall instead of
-// catching up. Deadlines only guard against hangs; nothing asserts wall time.
+// catching up; a view larger than the server serves is refused without breaking a later switch or
+// connection; a reconnected client's tool sequence carries on. Deadlines only guard against
+// hangs; nothing asserts wall time.
 #include "net/client_thread.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
@@ -75,7 +77,7 @@ struct PredictedSession : trephine::testing::PaperZstdSession {
 // A predicted update of the view shown fails its base check while a view change is pending: the
 // resync waits for the pending view's full image (it asks for nothing: not the shown view, which
 // would bring the old view back, nor the pending one again), so the view asked for is shown.
-TEST(ClientReview, AResyncDuringAViewChangeEndsOnTheViewAskedFor) {
+TEST(SessionClientRecovery, AResyncDuringAViewChangeEndsOnTheViewAskedFor) {
     PredictedSession s;
     ASSERT_FALSE(s.paper == s.top);
     const Box3i box = surfaceBox(s.volume, 6);
@@ -97,7 +99,7 @@ TEST(ClientReview, AResyncDuringAViewChangeEndsOnTheViewAskedFor) {
 
 // Every predicted update coded against the same stale copy fails its check until the full image
 // comes; only the first asks for one.
-TEST(ClientReview, AResyncAsksOnceUntilItsFullImageArrives) {
+TEST(SessionClientRecovery, AResyncAsksOnceUntilItsFullImageArrives) {
     PredictedSession s;
     s.damageWhereCutShows(surfaceBox(s.volume, 6));
     const uint64_t requestsBefore = s.client->stats().totalMessagesOut(Channel::Control);
@@ -118,7 +120,7 @@ TEST(ClientReview, AResyncAsksOnceUntilItsFullImageArrives) {
 // Volume updates add their latencies to the client's latency window too: the full image that ends
 // a volume period must not carry their mean (it was caused by the switch, not by drilling), and
 // each drilled rectangle carries a latency of its own.
-TEST(ClientReview, TheFullImageAfterVolumeModeCarriesNoLatency) {
+TEST(SessionClientRecovery, TheFullImageAfterVolumeModeCarriesNoLatency) {
     Volume skull = makeSkull(64);
     const SurfaceSite site = defaultBurrSite(skull);
     SessionServer server(skull, loopbackServerConfig("skull:64"));
@@ -173,7 +175,7 @@ TEST(ClientReview, TheFullImageAfterVolumeModeCarriesNoLatency) {
 // volume applied): its 1 s statistics tick must start afresh, not catch up one tick a poll with
 // ~1 ms intervals. The client pings every 0.25 s, so every tick of at least a second has sent
 // some control messages, and none a thousand a second.
-TEST(ClientReview, TheStatisticsTickRestartsAfterAStall) {
+TEST(SessionClientRecovery, TheStatisticsTickRestartsAfterAStall) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, loopbackServerConfig("sphere:32"));
     server.start();
@@ -217,9 +219,9 @@ TEST(ClientReview, TheStatisticsTickRestartsAfterAStall) {
 }
 
 // A view larger than the server serves (the welcome says how large) is refused by the client
-// itself: before, a volume client adopted it locally, the server dropped it, and a later switch
-// to DBI never completed (its full image named a view the client had left).
-TEST(ClientReview, AViewLargerThanTheServerServesIsRefusedAndASwitchToDbiStillCompletes) {
+// itself, so a volume client never adopts locally a view the server dropped, and a later switch
+// to DBI completes (its full image names the view the client shows).
+TEST(SessionClientRecovery, AViewLargerThanTheServerServesIsRefusedAndASwitchToDbiStillCompletes) {
     Volume sphere = makeSphere(32);
     ServerConfig sc = loopbackServerConfig("sphere:32");
     sc.maxViewPixels = 64 * 64;
@@ -258,7 +260,7 @@ TEST(ClientReview, AViewLargerThanTheServerServesIsRefusedAndASwitchToDbiStillCo
 // A view asked for before the welcome cannot be checked against the server's limit then: once
 // the welcome says the limit, the client drops it (the server drops it too) instead of waiting
 // for its image for good, and the hello's view is the picture.
-TEST(ClientReview, ATooLargeViewAskedBeforeTheWelcomeIsDroppedThen) {
+TEST(SessionClientRecovery, ATooLargeViewAskedBeforeTheWelcomeIsDroppedThen) {
     Volume sphere = makeSphere(32);
     ServerConfig sc = loopbackServerConfig("sphere:32");
     sc.maxViewPixels = 100 * 100;
@@ -284,8 +286,8 @@ TEST(ClientReview, ATooLargeViewAskedBeforeTheWelcomeIsDroppedThen) {
 }
 
 // A view the client refused (larger than the server serves) is not the one the next connection's
-// hello asks for: it had every reconnect refused as a bad hello, for good.
-TEST(ClientReview, ARefusedViewDoesNotBreakTheNextConnection) {
+// hello asks for, which the server would refuse as a bad hello on every reconnect.
+TEST(SessionClientRecovery, ARefusedViewDoesNotBreakTheNextConnection) {
     Volume sphere = makeSphere(32);
     ServerConfig sc = loopbackServerConfig("sphere:32");
     sc.maxViewPixels = 100 * 100;
@@ -320,8 +322,8 @@ TEST(ClientReview, ARefusedViewDoesNotBreakTheNextConnection) {
 // The server goes away and comes back on the same port: the client reconnects and its tool
 // sequence carries on from the first connection's, so whatever keeps the newest force model by
 // tool sequence (HapticLoop, the window's force source) takes the new connection's answers as
-// new (they restarted at 1 and were dropped as old until the count passed the old one).
-TEST(ClientReview, AReconnectedClientCarriesItsToolSequenceOn) {
+// new, not as older than the first connection's.
+TEST(SessionClientRecovery, AReconnectedClientCarriesItsToolSequenceOn) {
     Volume sphere = makeSphere(32);
     auto server = std::make_unique<SessionServer>(sphere, loopbackServerConfig("sphere:32"));
     const uint16_t port = server->port();
