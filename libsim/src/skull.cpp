@@ -7,6 +7,7 @@
 #include "libsim/skull.h"
 
 #include "libsim/error.h"
+#include "libsim/thread_pool.h"
 
 #include <algorithm>
 #include <cmath>
@@ -264,13 +265,8 @@ void forEachSlab(int nz, int64_t voxels, Fn fn) {
         fn(0, nz);
         return;
     }
-    std::vector<std::thread> pool;
-    for (int t = 0; t < threads; ++t) {
-        int z0 = nz * t / threads, z1 = nz * (t + 1) / threads;
-        pool.emplace_back([=] { fn(z0, z1); });
-    }
-    for (auto& th : pool)
-        th.join();
+    ThreadPool pool(threads, "skull");
+    pool.parallelFor(threads, [&](int t) { fn(nz * t / threads, nz * (t + 1) / threads); });
 }
 
 // Trilinear density at a continuous voxel coordinate (voxel centres at integers); 0 outside.

@@ -1,14 +1,25 @@
 #include "libsim/thread_pool.h"
 
+#include <fmt/format.h>
+#include <pthread.h>
+
 #include <algorithm>
 
 namespace trephine {
 
-ThreadPool::ThreadPool(int threads) {
+ThreadPool::ThreadPool(int threads, const std::string& name) {
     if (threads <= 0)
         threads = int(std::max(1u, std::thread::hardware_concurrency()));
-    for (int i = 1; i < threads; ++i)
-        m_workers.emplace_back([this] { workerLoop(); });
+    for (int i = 1; i < threads; ++i) {
+        // Linux takes 15 bytes and a NUL; the number is kept, the name cut.
+        const std::string number = fmt::format("-{}", i);
+        const std::string threadName =
+            fmt::format("{}{}", name.substr(0, 15 - number.size()), number);
+        m_workers.emplace_back([this, threadName] {
+            pthread_setname_np(pthread_self(), threadName.c_str());
+            workerLoop();
+        });
+    }
 }
 
 ThreadPool::~ThreadPool() {

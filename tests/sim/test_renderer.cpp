@@ -15,7 +15,12 @@
 #include <glm/gtc/quaternion.hpp>
 #include <glm/gtx/quaternion.hpp>
 #include <gtest/gtest.h>
+#include <latch>
+#include <mutex>
+#include <pthread.h>
 #include <random>
+#include <set>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -200,6 +205,32 @@ TEST(ThreadPool, RunsEveryItemOnceAndWaitsForAll) {
             ASSERT_EQ(hits[size_t(count)].load(), 0);
         }
     }
+}
+
+// The workers are named after their pool ("render-1", ...; cut to Linux's 15 bytes), the caller
+// keeps its own name. Every item waits until all have started, so each thread runs exactly one.
+TEST(ThreadPool, NamesItsWorkersAfterThePool) {
+    auto namesOf = [](ThreadPool& pool) {
+        std::latch started(pool.size());
+        std::mutex mutex;
+        std::multiset<std::string> names;
+        pool.parallelFor(pool.size(), [&](int) {
+            char name[16] = {};
+            pthread_getname_np(pthread_self(), name, sizeof name);
+            {
+                std::lock_guard lock(mutex);
+                names.insert(name);
+            }
+            started.arrive_and_wait();
+        });
+        return names;
+    };
+    char caller[16] = {};
+    pthread_getname_np(pthread_self(), caller, sizeof caller);
+    ThreadPool render(3, "render");
+    EXPECT_EQ(namesOf(render), (std::multiset<std::string>{caller, "render-1", "render-2"}));
+    ThreadPool longName(2, "a-very-long-pool-name");
+    EXPECT_EQ(namesOf(longName), (std::multiset<std::string>{caller, "a-very-long-p-1"}));
 }
 
 // Tiles of any size over a pool of any size give the same image (items are claimed dynamically).

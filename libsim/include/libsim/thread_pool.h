@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <functional>
 #include <mutex>
+#include <string>
 #include <thread>
 #include <vector>
 
@@ -21,8 +22,9 @@ namespace trephine {
 class ThreadPool {
 public:
     // threads counts the calling thread: 0 means std::thread::hardware_concurrency(); 1 runs
-    // everything on the caller.
-    explicit ThreadPool(int threads = 0);
+    // everything on the caller. The workers are named "<name>-1", "<name>-2", ... (15 bytes at
+    // most), so a profiler or top -H tells whose they are.
+    explicit ThreadPool(int threads = 0, const std::string& name = "pool");
     ~ThreadPool();
     ThreadPool(const ThreadPool&) = delete;
     ThreadPool& operator=(const ThreadPool&) = delete;
