@@ -19,6 +19,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <fmt/format.h>
 #include <glm/gtx/quaternion.hpp>
 #include <memory>
 #include <string>
@@ -117,10 +118,7 @@ double msSince(std::chrono::steady_clock::time_point t0) {
 std::string describeBox(const Box3i& b) {
     if (b.empty())
         return "empty";
-    char buf[128];
-    std::snprintf(buf, sizeof buf, "%d %d %d %d %d %d", b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y,
-                  b.hi.z);
-    return buf;
+    return fmt::format("{} {} {} {} {} {}", b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z);
 }
 
 // Drills a burr hole whose deepest point is depthMm below the surface point `hit`, along the
@@ -176,8 +174,8 @@ void run(const RenderOptionsCli& o) {
     }
     if (o.out.empty() && o.png.empty())
         std::printf("note: no --out or --png given; rendering for timing only\n");
-    // The files' names before any work: a wrong --png used to fail after --out was written.
-    // And their folders: a missing one failed only after the render, naming the temporary file.
+    // The files' names and folders are checked before any work, so a wrong --png or a missing
+    // folder fails before the render and before --out is written.
     if (!o.out.empty()) {
         checkDbiExrPath(o.out);
         checkOutputFolder("--out", o.out);

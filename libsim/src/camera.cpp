@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <fmt/format.h>
 #include <glm/geometric.hpp>
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/trigonometric.hpp>
@@ -168,13 +169,10 @@ Camera cameraPreset(std::string_view name, const Volume& volume, glm::ivec2 size
 }
 
 std::string describe(const Camera& c) {
-    char buf[256];
-    std::snprintf(buf, sizeof buf,
-                  "eye (%.1f, %.1f, %.1f) target (%.1f, %.1f, %.1f) up (%.2f, %.2f, %.2f) fov %g "
-                  "near %.1f far %.1f %dx%d",
-                  c.eye.x, c.eye.y, c.eye.z, c.target.x, c.target.y, c.target.z, c.up.x, c.up.y,
-                  c.up.z, c.fovYDeg, c.nearMm, c.farMm, c.width, c.height);
-    return buf;
+    return fmt::format("eye ({:.1f}, {:.1f}, {:.1f}) target ({:.1f}, {:.1f}, {:.1f}) up ({:.2f}, "
+                       "{:.2f}, {:.2f}) fov {:g} near {:.1f} far {:.1f} {}x{}",
+                       c.eye.x, c.eye.y, c.eye.z, c.target.x, c.target.y, c.target.z, c.up.x,
+                       c.up.y, c.up.z, double(c.fovYDeg), c.nearMm, c.farMm, c.width, c.height);
 }
 
 } // namespace trephine

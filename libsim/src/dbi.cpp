@@ -5,6 +5,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstring>
+#include <fmt/format.h>
 
 namespace trephine {
 
@@ -27,9 +28,7 @@ PixelRect unite(const PixelRect& a, const PixelRect& b) {
 }
 
 std::string describe(const PixelRect& r) {
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "%d %d %d %d", r.x, r.y, r.w, r.h);
-    return buf;
+    return fmt::format("{} {} {} {}", r.x, r.y, r.w, r.h);
 }
 
 Dbi::Dbi(int width, int height) : m_width(width), m_height(height) {
@@ -107,12 +106,9 @@ DbiDiff compare(const Dbi& a, const Dbi& b) {
 std::string DbiDiff::describe() const {
     if (!sameSize)
         return "images differ in size";
-    char buf[160];
-    std::snprintf(buf, sizeof buf,
-                  "%lld differing pixels in rect %s, max depth error %g, max colour error %d",
-                  (long long)differingPixels, trephine::describe(bounds).c_str(),
-                  double(maxDepthError), maxColorError);
-    return buf;
+    return fmt::format("{} differing pixels in rect {}, max depth error {:g}, max colour error {}",
+                       differingPixels, trephine::describe(bounds), double(maxDepthError),
+                       maxColorError);
 }
 
 } // namespace trephine

@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <fmt/format.h>
 #include <glm/geometric.hpp>
 #include <glm/gtx/quaternion.hpp>
 
@@ -13,9 +14,7 @@ namespace trephine {
 namespace {
 
 std::string formatMm(float v) {
-    char buf[32];
-    std::snprintf(buf, sizeof buf, "%g", double(v));
-    return buf;
+    return fmt::format("{:g}", double(v));
 }
 
 // Distance from p to the segment [a, b] in the (rho, z) half-plane.

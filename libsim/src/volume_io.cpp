@@ -21,6 +21,7 @@
 #include <cmath>
 #include <cstring>
 #include <filesystem>
+#include <fmt/format.h>
 #include <type_traits>
 #include <unistd.h>
 #include <zlib.h>
@@ -56,9 +57,7 @@ void fail(const std::string& name, const std::string& problem) {
 }
 
 std::string formatFloat(double v) {
-    char buf[64];
-    std::snprintf(buf, sizeof buf, "%.9g", v);
-    return buf;
+    return fmt::format("{:.9g}", v);
 }
 
 bool endsWith(const std::string& s, const std::string& suffix) {
