@@ -16,10 +16,9 @@ namespace trephine::app {
 
 using namespace trephine::study;
 
-void addStudyMode(CLI::App& root, int& exitCode) {
-    CLI::App* study = root.add_subcommand("study", "Run the reproducible studies");
-    study->require_subcommand(1);
+namespace {
 
+void addHapticsCommand(CLI::App* study, int& exitCode) {
     auto o = std::make_shared<HapticsOptions>();
     CLI::App* haptics = study->add_subcommand(
         "haptics", "Multi-rate haptics vs zero-order hold across update rates and latencies");
@@ -42,7 +41,9 @@ void addStudyMode(CLI::App& root, int& exitCode) {
         runHapticsStudy(*o);
         exitCode = 0;
     });
+}
 
+void addUpdatesCommand(CLI::App* study, int& exitCode) {
     auto u = std::make_shared<UpdatesOptions>();
     CLI::App* updates = study->add_subcommand(
         "updates", "DBI vs replicated-volume update cycles per box size (Table 1, Figures 7, 8)");
@@ -84,7 +85,9 @@ void addStudyMode(CLI::App& root, int& exitCode) {
         runUpdatesStudy(*u, config);
         exitCode = 0;
     });
+}
 
+void addDisplayCommand(CLI::App* study, int& exitCode) {
     auto d = std::make_shared<DisplayOptions>();
     CLI::App* display = study->add_subcommand(
         "display", "Display rate: DBI composite vs local volume rendering at 128^3 and 256^3");
@@ -96,7 +99,9 @@ void addStudyMode(CLI::App& root, int& exitCode) {
             fmt::print(stderr, "trephine: the display study did not run: {}\n", f.why);
         exitCode = f.measured ? 0 : 1;
     });
+}
 
+void addAllCommand(CLI::App* study, int& exitCode) {
     auto a = std::make_shared<AllOptions>();
     CLI::App* all = study->add_subcommand(
         "all", "Every study, then DIR/report.md with the paper's figures beside ours");
@@ -117,6 +122,17 @@ void addStudyMode(CLI::App& root, int& exitCode) {
         runAllStudies(*a, command);
         exitCode = 0;
     });
+}
+
+} // namespace
+
+void addStudyMode(CLI::App& root, int& exitCode) {
+    CLI::App* study = root.add_subcommand("study", "Run the reproducible studies");
+    study->require_subcommand(1);
+    addHapticsCommand(study, exitCode);
+    addUpdatesCommand(study, exitCode);
+    addDisplayCommand(study, exitCode);
+    addAllCommand(study, exitCode);
 }
 
 } // namespace trephine::app

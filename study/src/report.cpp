@@ -337,17 +337,10 @@ std::string networkOf(const UpdateStudyConfig& config) {
                        : std::string("loopback");
 }
 
-} // namespace
-
-std::string writeStudyReport(const StudyReportInput& in, const std::string& dir) {
-    std::filesystem::create_directories(dir);
-    const std::vector<UpdateStudyRow>& rows = in.updates;
-    const std::vector<int> boxes = boxesOf(rows);
-    const std::vector<std::string> methods = methodsOf(rows);
+// The run: command, date, machine and each study's setup, beside the paper's.
+void writeHeader(std::ostringstream& md, const StudyReportInput& in) {
     const std::string network = networkOf(in.updateConfig);
     const bool linkRun = !in.linkUpdates.empty();
-    std::ostringstream md;
-
     md << "# Trephine study report\n\n";
     md << "Run `" << in.command << "` on " << utcNow()
        << (in.quick ? " (**--quick**: a reduced run)" : "") << ".\n\n";
@@ -365,9 +358,14 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
        << ", server and clients in one process\n";
     md << "- The paper: server (system 1) updating a client (system 2) over a 100 Mbit/s LAN, "
           "128^3 volume, camera 13\" away, 60 degrees, 500x500 window.\n\n";
+}
 
-    // Targets first: what a reader wants to know. The sizes are payloads, the same on any
-    // network; the rates are per network.
+// Targets first: what a reader wants to know. The sizes are payloads, the same on any network;
+// the rates are per network.
+void writeTargets(std::ostringstream& md, const StudyReportInput& in) {
+    const std::vector<UpdateStudyRow>& rows = in.updates;
+    const std::string network = networkOf(in.updateConfig);
+    const bool linkRun = !in.linkUpdates.empty();
     md << "## Targets\n\n";
     if (linkRun)
         md << "Over " << network << ":\n\n";
@@ -386,122 +384,114 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
     if (!in.display.measured)
         md << "- display study not run: " << in.display.why << "\n";
     md << "\n";
+}
 
-    if (!rows.empty()) {
-        // Table 1.
-        md << "## Table 1: BB_screen per BB_volume\n\n";
-        std::vector<std::vector<std::string>> t1;
-        for (int n : boxes) {
-            const UpdateStudyRow* r = find(rows, methods.front(), n);
-            const int p = paperBbScreen(n);
-            t1.push_back({fmt::format("{}^3", n), fmt::format("{}x{}", r->bbScreenW, r->bbScreenH),
-                          p ? fmt::format("{}^2", p) : "-"});
-        }
-        md << markdownTable({"BB_volume (voxels)", "BB_screen, ours (pixels)", "paper"}, t1);
-        md << "\nOurs is the projection of the box grown by the renderer's 2-voxel shading stencil "
-              "(docs/architecture.md), so every pixel the cut can change is inside it.\n\n";
-
-        // Figure 7.
-        md << "## Figure 7: update rates" << (linkRun ? " over loopback" : "") << "\n\n";
-        writeFigure7(
-            md, rows, dir, "updates.svg", "Update rate (Figure 7)",
-            "Paper: the DBI method updated the client 1.5-2.0x faster than the volume method at "
-            "every size, over its 100 Mbit/s LAN; both re-rendered the whole 128^3 view. Target: "
-            "dbi >= 5x volume.\nAn update rate is 1000 / the median full cycle in ms (server "
-            "erosion -> change on the client's screen; cycles run back to back, one at a time).");
-        if (linkRun) {
-            md << "## Figure 7 over the emulated link\n\n";
-            writeFigure7(md, in.linkUpdates, dir, "updates-link.svg",
-                         "Update rate over the emulated link (Figure 7)",
-                         "The same study and cuts, every client's traffic through " +
-                             networkOf(in.linkUpdateConfig) +
-                             " (updates-link.csv). `rate=100` is the paper's 100 Mbit/s LAN: "
-                             "there a volume update's N^3 bytes cost what they cost the paper.");
-        }
-
-        // Figure 8.
-        md << "## Figure 8: update sizes\n\n";
-        PlotSpec size;
-        size.title = "Bytes per update (Figure 8)";
-        size.xLabel = "BB_volume edge N (voxels)";
-        size.yLabel = "bytes";
-        size.logY = true;
-        std::vector<std::vector<std::string>> t8;
-        PlotSeries paperDbi{"paper DBI 4M^2", {}, {}, "#999999", true};
-        PlotSeries paperVol{"paper volume N^3", {}, {}, "#444444", true};
-        for (const std::string& m : methods) {
-            if (m == "dbi-fullrender")
-                continue; // the same coding as dbi: the same bytes
-            PlotSeries s{m, {}, {}, "", false};
-            for (int n : boxes)
-                if (const UpdateStudyRow* r = find(rows, m, n)) {
-                    s.x.push_back(n);
-                    s.y.push_back(r->bytesPerUpdate);
-                }
-            size.series.push_back(s);
-        }
-        for (int n : boxes) {
-            const UpdateStudyRow* d = find(rows, "dbi", n);
-            const UpdateStudyRow* v = find(rows, "volume", n);
-            const int p = paperBbScreen(n);
-            if (p) {
-                paperDbi.x.push_back(n);
-                paperDbi.y.push_back(4.0 * p * p);
-            }
-            paperVol.x.push_back(n);
-            paperVol.y.push_back(double(n) * n * n);
-            std::vector<std::string> row{fmt::format("{}^3", n)};
-            for (const std::string& m : methods) {
-                const UpdateStudyRow* r = find(rows, m, n);
-                row.push_back(r ? bytesText(r->bytesPerUpdate) : "-");
-            }
-            row.push_back(d ? bytesText(d->rawBytesPerUpdate) : "-");
-            row.push_back(p ? bytesText(4.0 * p * p) : "-");
-            row.push_back(bytesText(double(n) * n * n));
-            row.push_back(d && v ? fmt::format("{:.3f}", d->bytesPerUpdate / v->rawBytesPerUpdate)
-                                 : "-");
-            t8.push_back(row);
-        }
-        // The paper's references first, so the measured series are drawn over them: the volume's
-        // N^3 is the paper's N^3, and drawn after it the measured line and markers were hidden.
-        size.series.insert(size.series.begin(), {paperDbi, paperVol});
-        std::vector<std::string> h8{"BB_volume"};
-        for (const std::string& m : methods)
-            h8.push_back(m);
-        h8.insert(h8.end(), {"dbi uncompressed (5 B/px)", "paper DBI (4M^2)", "paper volume (N^3)",
-                             "dbi / volume raw"});
-        md << markdownTable(h8, t8);
-        writeFile((std::filesystem::path(dir) / "bytes.svg").string(), svgLinePlot(size));
-        md << "\n![Update sizes](bytes.svg)\n\n";
-        md << "Paper: DBI updates (4 bytes a pixel) were larger than the volume's N^3 up to 30^3. "
-              "Target: dbi <= volume raw at every size, <= 1/10 at 80^3. Bytes are payloads on "
-              "the wire (means); `dbi` is coded against the pixels the client already holds "
-              "(docs/protocol.md, predicted image updates); `dbi-fullrender` sends the same "
-              "coding. A cut box is all air, so the compressed volume variant shrinks to a "
-              "few bytes; drilling leaves partial densities that compress far less.\n\n";
-
-        // Stage breakdown.
-        md << "## Stage breakdown\n\n";
-        md << "Median stage times as a share of their sum (and the sum in ms). Erode, render and "
-              "encode run on the server; transmit is server sent -> client received; client "
-              "apply is decode + write for DBI, voxels + rendering data for volume; client render "
-              "is the volume client's re-render of its view. The last column is the brick-grid "
-              "update (the renderer's empty-space data), in ms: part of render for DBI, of client "
-              "apply for volume.\n\n";
-        if (linkRun)
-            md << "Over " << network << ":\n\n";
-        writeStageBreakdown(md, rows);
-        if (linkRun) {
-            md << "Over the emulated link (the paper's shares were measured on its LAN):\n\n";
-            writeStageBreakdown(md, in.linkUpdates);
-        }
+// Table 1: BB_screen per box, ours beside the paper's.
+void writeTable1(std::ostringstream& md, const std::vector<UpdateStudyRow>& rows) {
+    const std::vector<int> boxes = boxesOf(rows);
+    const std::vector<std::string> methods = methodsOf(rows);
+    md << "## Table 1: BB_screen per BB_volume\n\n";
+    std::vector<std::vector<std::string>> t1;
+    for (int n : boxes) {
+        const UpdateStudyRow* r = find(rows, methods.front(), n);
+        const int p = paperBbScreen(n);
+        t1.push_back({fmt::format("{}^3", n), fmt::format("{}x{}", r->bbScreenW, r->bbScreenH),
+                      p ? fmt::format("{}^2", p) : "-"});
     }
+    md << markdownTable({"BB_volume (voxels)", "BB_screen, ours (pixels)", "paper"}, t1);
+    md << "\nOurs is the projection of the box grown by the renderer's 2-voxel shading stencil "
+          "(docs/architecture.md), so every pixel the cut can change is inside it.\n\n";
+}
 
-    // Display.
+// Figure 8 (bytes per update, ours beside the paper's) as a table and DIR/bytes.svg.
+void writeFigure8(std::ostringstream& md, const std::vector<UpdateStudyRow>& rows,
+                  const std::string& dir) {
+    const std::vector<int> boxes = boxesOf(rows);
+    const std::vector<std::string> methods = methodsOf(rows);
+    md << "## Figure 8: update sizes\n\n";
+    PlotSpec size;
+    size.title = "Bytes per update (Figure 8)";
+    size.xLabel = "BB_volume edge N (voxels)";
+    size.yLabel = "bytes";
+    size.logY = true;
+    std::vector<std::vector<std::string>> t8;
+    PlotSeries paperDbi{"paper DBI 4M^2", {}, {}, "#999999", true};
+    PlotSeries paperVol{"paper volume N^3", {}, {}, "#444444", true};
+    for (const std::string& m : methods) {
+        if (m == "dbi-fullrender")
+            continue; // the same coding as dbi: the same bytes
+        PlotSeries s{m, {}, {}, "", false};
+        for (int n : boxes)
+            if (const UpdateStudyRow* r = find(rows, m, n)) {
+                s.x.push_back(n);
+                s.y.push_back(r->bytesPerUpdate);
+            }
+        size.series.push_back(s);
+    }
+    for (int n : boxes) {
+        const UpdateStudyRow* d = find(rows, "dbi", n);
+        const UpdateStudyRow* v = find(rows, "volume", n);
+        const int p = paperBbScreen(n);
+        if (p) {
+            paperDbi.x.push_back(n);
+            paperDbi.y.push_back(4.0 * p * p);
+        }
+        paperVol.x.push_back(n);
+        paperVol.y.push_back(double(n) * n * n);
+        std::vector<std::string> row{fmt::format("{}^3", n)};
+        for (const std::string& m : methods) {
+            const UpdateStudyRow* r = find(rows, m, n);
+            row.push_back(r ? bytesText(r->bytesPerUpdate) : "-");
+        }
+        row.push_back(d ? bytesText(d->rawBytesPerUpdate) : "-");
+        row.push_back(p ? bytesText(4.0 * p * p) : "-");
+        row.push_back(bytesText(double(n) * n * n));
+        row.push_back(d && v ? fmt::format("{:.3f}", d->bytesPerUpdate / v->rawBytesPerUpdate)
+                             : "-");
+        t8.push_back(row);
+    }
+    // The paper's references first, so the measured series are drawn over them: the volume's
+    // N^3 is the paper's N^3, and drawn after it would hide the measured line and markers.
+    size.series.insert(size.series.begin(), {paperDbi, paperVol});
+    std::vector<std::string> h8{"BB_volume"};
+    for (const std::string& m : methods)
+        h8.push_back(m);
+    h8.insert(h8.end(), {"dbi uncompressed (5 B/px)", "paper DBI (4M^2)", "paper volume (N^3)",
+                         "dbi / volume raw"});
+    md << markdownTable(h8, t8);
+    writeFile((std::filesystem::path(dir) / "bytes.svg").string(), svgLinePlot(size));
+    md << "\n![Update sizes](bytes.svg)\n\n";
+    md << "Paper: DBI updates (4 bytes a pixel) were larger than the volume's N^3 up to 30^3. "
+          "Target: dbi <= volume raw at every size, <= 1/10 at 80^3. Bytes are payloads on "
+          "the wire (means); `dbi` is coded against the pixels the client already holds "
+          "(docs/protocol.md, predicted image updates); `dbi-fullrender` sends the same "
+          "coding. A cut box is all air, so the compressed volume variant shrinks to a "
+          "few bytes; drilling leaves partial densities that compress far less.\n\n";
+}
+
+void writeStages(std::ostringstream& md, const StudyReportInput& in) {
+    const bool linkRun = !in.linkUpdates.empty();
+    md << "## Stage breakdown\n\n";
+    md << "Median stage times as a share of their sum (and the sum in ms). Erode, render and "
+          "encode run on the server; transmit is server sent -> client received; client "
+          "apply is decode + write for DBI, voxels + rendering data for volume; client render "
+          "is the volume client's re-render of its view. The last column is the brick-grid "
+          "update (the renderer's empty-space data), in ms: part of render for DBI, of client "
+          "apply for volume.\n\n";
+    if (linkRun)
+        md << "Over " << networkOf(in.updateConfig) << ":\n\n";
+    writeStageBreakdown(md, in.updates);
+    if (linkRun) {
+        md << "Over the emulated link (the paper's shares were measured on its LAN):\n\n";
+        writeStageBreakdown(md, in.linkUpdates);
+    }
+}
+
+void writeDisplay(std::ostringstream& md, const DisplayFigures& display) {
     md << "## Display rate\n\n";
-    if (in.display.measured) {
+    if (display.measured) {
         std::vector<std::vector<std::string>> td;
-        for (const DisplayFigures::Entry& e : in.display.entries)
+        for (const DisplayFigures::Entry& e : display.entries)
             td.push_back({e.name, fmt::format("{:.1f}", e.fps), fmt::format("{:.3f}", e.frameP50Ms),
                           fmt::format("{:.3f}", e.frameP99Ms),
                           e.paperFps > 0 ? fmt::format("{:.0f}", e.paperFps) : "-"});
@@ -509,7 +499,7 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
             {"client draws", "FPS", "frame p50 (ms)", "frame p99 (ms)", "paper FPS"}, td);
         // llvmpipe (Mesa's software rasteriser, the renderer of a machine without a GPU) runs
         // the "GPU" ray caster on the CPU: said so, not called the GPU.
-        const std::string& gl = in.display.glRenderer;
+        const std::string& gl = display.glRenderer;
         const bool software = gl.find("llvmpipe") != std::string::npos ||
                               gl.find("softpipe") != std::string::npos ||
                               gl.find("swrast") != std::string::npos;
@@ -519,17 +509,18 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
            << gl << (software ? ": software rendering on the CPU, no GPU" : "")
            << "). Paper: 990 vs 57 FPS (128^3) and 26 FPS (256^3).\n\n";
     } else {
-        md << "Not measured: " << in.display.why << "\n\n";
+        md << "Not measured: " << display.why << "\n\n";
     }
+}
 
-    // Haptics.
+// Our force-model timings and haptics cases beside the paper's.
+void writeHaptics(std::ostringstream& md, const HapticsFigures& haptics) {
     md << "## Haptics\n\n";
-    if (in.haptics.measured) {
+    if (haptics.measured) {
         std::vector<std::vector<std::string>> th;
-        for (const ForceTiming& t : in.haptics.timings) {
+        for (const ForceTiming& t : haptics.timings) {
             const double localHz = t.p50Ms > 0 ? 1000.0 / t.p50Ms : 0.0;
-            const double remoteMs =
-                in.haptics.roundTripP50Ms - in.haptics.roundTripServerMs + t.p50Ms;
+            const double remoteMs = haptics.roundTripP50Ms - haptics.roundTripServerMs + t.p50Ms;
             const double remoteHz = remoteMs > 0 ? 1000.0 / remoteMs : 0.0;
             const double paperLocal = t.paperClientMs > 0 ? 1000.0 / t.paperClientMs : 0.0;
             const double paperRemote =
@@ -552,10 +543,10 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
             "{:.0f} Hz. Here server and client are the same machine, so computing forces on the "
             "server cannot raise the model rate the way the paper's faster server did (+27 % "
             "drill, +142 % perforator); the table gives both rates so the trade is visible.\n\n",
-            in.haptics.roundTripP50Ms, in.haptics.roundTripP99Ms, in.haptics.roundTripServerMs,
-            in.haptics.loopRateHz);
+            haptics.roundTripP50Ms, haptics.roundTripP99Ms, haptics.roundTripServerMs,
+            haptics.loopRateHz);
         std::vector<std::vector<std::string>> tc;
-        for (const HapticsCaseResult& r : in.haptics.cases)
+        for (const HapticsCaseResult& r : haptics.cases)
             tc.push_back({hapticMethodName(r.c.method), fmt::format("{:.0f}", r.c.updateHz),
                           fmt::format("{:.0f}", r.c.latencyMs),
                           fmt::format("{:.4f}", r.forceRmsErrorN),
@@ -568,6 +559,40 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
     } else {
         md << "Not run.\n";
     }
+}
+
+} // namespace
+
+std::string writeStudyReport(const StudyReportInput& in, const std::string& dir) {
+    std::filesystem::create_directories(dir);
+    const bool linkRun = !in.linkUpdates.empty();
+    std::ostringstream md;
+    writeHeader(md, in);
+    writeTargets(md, in);
+    if (!in.updates.empty()) {
+        writeTable1(md, in.updates);
+        // Figure 7.
+        md << "## Figure 7: update rates" << (linkRun ? " over loopback" : "") << "\n\n";
+        writeFigure7(
+            md, in.updates, dir, "updates.svg", "Update rate (Figure 7)",
+            "Paper: the DBI method updated the client 1.5-2.0x faster than the volume method at "
+            "every size, over its 100 Mbit/s LAN; both re-rendered the whole 128^3 view. Target: "
+            "dbi >= 5x volume.\nAn update rate is 1000 / the median full cycle in ms (server "
+            "erosion -> change on the client's screen; cycles run back to back, one at a time).");
+        if (linkRun) {
+            md << "## Figure 7 over the emulated link\n\n";
+            writeFigure7(md, in.linkUpdates, dir, "updates-link.svg",
+                         "Update rate over the emulated link (Figure 7)",
+                         "The same study and cuts, every client's traffic through " +
+                             networkOf(in.linkUpdateConfig) +
+                             " (updates-link.csv). `rate=100` is the paper's 100 Mbit/s LAN: "
+                             "there a volume update's N^3 bytes cost what they cost the paper.");
+        }
+        writeFigure8(md, in.updates, dir);
+        writeStages(md, in);
+    }
+    writeDisplay(md, in.display);
+    writeHaptics(md, in.haptics);
     return md.str();
 }
 

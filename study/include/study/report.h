@@ -68,13 +68,10 @@ std::vector<std::string> rateTargetLines(const std::vector<UpdateStudyRow>& rows
 std::vector<std::string> sizeTargetLines(const std::vector<UpdateStudyRow>& rows);
 std::vector<std::string> displayTargetLines(const DisplayFigures& d);
 
-// The DBI / volume rate ratio at box n were BB_screen's rays free to cast: the DBI cycle less its
-// render stage's ray casting (render minus the brick-grid update), and the volume cycle less as
-// much of its client's re-render (which casts the same rays, through the same renderer and hit
-// cache, as part of its whole view; at most all of that stage), from the medians. Every other
-// stage of both stays (the DBI's erosion, grid update, encoding, transmission, decoding; the
-// volume's transmission, voxels and the rest of its view), so no renderer could lift the ratio
-// above this on the machine and network measured. 0 when the rows lack the figures.
+// The DBI / volume rate ratio at box n were BB_screen's rays free to cast: both cycles' medians
+// less that ray casting (the DBI render stage less its grid update; as much of the volume
+// client's re-render, at most all of it). No renderer could lift the ratio above this on the
+// machine and network measured. 0 when the rows lack the figures.
 double rateRatioWithoutRayCasting(const std::vector<UpdateStudyRow>& rows, int n);
 // When some DBI/volume rate target missed on plain loopback (no emulated link): why, where the
 // paper's network is, and the ratio each missed size would reach with free ray casting. Empty

@@ -1,15 +1,7 @@
-// The update study (issue 7, the paper's Table 1 and Figures 7 and 8): a real SessionServer and
-// real headless SessionClients over loopback ENet in one process. For each box size N an N^3 box
-// of bone at the surface facing the camera is cut, and each method's full update cycle is timed
-// from the server's erosion to the change being on the client's screen:
-//   dbi               the server renders only BB_screen and sends it (our design),
-//   dbi-fullrender    the server re-renders the whole view, then captures BB_screen (the paper's),
-//   volume            the server sends the box's voxels, 1 byte each; the client applies them,
-//                     updates its rendering data and re-renders its whole view (the baseline),
-//   volume-<codec>    the same with the voxel bytes compressed (reported separately).
-// Between measured cycles the box's original voxels are put back (not measured), so every cycle
-// removes the same bone. The sweep runs in rounds (UpdateStudyConfig::rounds) whose samples are
-// pooled. docs/study.md gives the method and the columns.
+// The update study (the paper's Table 1 and Figures 7 and 8): a real SessionServer and real
+// headless SessionClients over loopback ENet in one process cut an N^3 box of bone per size and
+// time each method's full update cycle, server erosion to the client's screen (dbi,
+// dbi-fullrender, volume, volume-<codec>). docs/study.md gives the method and the columns.
 #pragma once
 
 #include "libsim/box.h"
