@@ -110,8 +110,7 @@ void addVolumeMode(CLI::App& root, int& exitCode) {
     convert->footer(volumeSpecHelp());
     convert->callback([convertOptions, &exitCode] {
         const VolumeOptions& o = *convertOptions;
-        // Before the volume is read: "slices:" alone failed after it as ": cannot create folder:
-        // Invalid argument", naming nothing.
+        // Before the volume is read, and naming the mistake ("slices:" alone names no folder).
         if (o.out == "slices:")
             throw Error("OUT slices:: name the folder for the slices, e.g. slices:out/");
         // And "slices:FILE" said "the folder is not empty" of a file.

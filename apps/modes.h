@@ -19,8 +19,8 @@
 namespace trephine::app {
 
 // CLI::Range compares, and NaN compares false with everything, so it lets `nan` through any
-// range (`--feed nan` ran 30 simulated seconds of NaN). For floating-point options: a finite
-// number within [lo, hi], and one that stays finite as a float.
+// range. For floating-point options: a finite number within [lo, hi], and one that stays finite
+// as a float.
 inline CLI::Validator finiteRange(double lo, double hi) {
     const std::string range =
         "[" + CLI::detail::to_string(lo) + " - " + CLI::detail::to_string(hi) + "]";
@@ -42,9 +42,9 @@ inline CLI::Validator finiteRange(double lo, double hi) {
         "FLOAT in " + range);
 }
 
-// For options naming a file to write: an empty value (`--save-on-exit "$UNSET"`) read as "not
-// given" and silently wrote nothing, the drilled skull included; a folder failed only when the
-// run was over. Both are refused as the command line is read.
+// For options naming a file to write: an empty value (`--save-on-exit "$UNSET"`) is not "not
+// given", and a folder would fail only when the run is over. Both are refused as the command
+// line is read.
 inline CLI::Validator outputFile() {
     return CLI::Validator(
         [](std::string& path) -> std::string {
@@ -60,8 +60,8 @@ inline CLI::Validator outputFile() {
 }
 
 // For --connect: HOST:PORT (or HOST, :PORT or PORT; 127.0.0.1 and 7777 by default) with a port a
-// server can listen on. Port 0 was taken and then waited 10 s for "no answer"; a port over 65535
-// was said only when the window tried to connect. The host is resolved when connecting.
+// server can listen on (not 0, not over 65535), refused as the command line is read. The host is
+// resolved when connecting.
 inline CLI::Validator serverAddress() {
     return CLI::Validator(
         [](std::string& text) -> std::string {
@@ -117,8 +117,8 @@ inline void handleStopSignals(void (*handler)(int)) {
         std::signal(SIGHUP, handler);
 }
 
-// For --name: the server refuses a hello whose name is longer than the protocol carries, which a
-// client heard only as "the server did not understand our hello".
+// For --name: the server refuses a hello whose name is longer than the protocol carries, and the
+// client would hear only "the server did not understand our hello".
 inline CLI::Validator participantName() {
     return CLI::Validator(
         [](std::string& name) -> std::string {

@@ -138,7 +138,7 @@ std::string exrHeaderProblem(const std::string& path) {
 }
 
 // Writes `pixels` (spec's size and channels, as `type`) to `file` and reads it back: OpenImageIO
-// does not report every failed write (a PNG or EXR that may not grow past a limit closed "fine",
+// does not report every failed write (a PNG or EXR that may not grow past a limit closes "fine",
 // truncated), so a file that does not read back whole is a failure too.
 void writeImageWhole(const std::string& file, const OIIO::ImageSpec& spec, OIIO::TypeDesc type,
                      const void* pixels, const std::function<void(const std::string&)>& fail) {

@@ -93,7 +93,7 @@ Volume loadVolumeSlices(const std::string& folder, glm::vec3 spacingMm,
     const std::set<std::string> known = imageExtensions();
     std::vector<std::string> names;
     // The listing's errors apart from each entry's: a dangling link (is_regular_file sets ENOENT
-    // and leaves it set) listed last failed the whole folder as "cannot list folder".
+    // and leaves it set) listed last must not fail the whole folder as "cannot list folder".
     fs::directory_iterator it(folder, ec);
     for (; !ec && it != fs::directory_iterator(); it.increment(ec)) {
         const fs::directory_entry& e = *it;
@@ -113,8 +113,7 @@ Volume loadVolumeSlices(const std::string& folder, glm::vec3 spacingMm,
 
     // The voxels grow slice by slice as slices are read, by doubling capped at the volume, and
     // become the Volume without a copy: a folder whose first slice is honest and the rest are not
-    // costs what was read (the whole volume was allocated first: 2 GiB for a 1024^2 slice and 1023
-    // broken files).
+    // costs what was read, not the whole volume (2 GiB for a 1024^2 slice and 1023 broken files).
     std::vector<uint8_t> densities, materials;
     size_t total = 0;
     int width = 0, height = 0;
@@ -128,8 +127,8 @@ Volume loadVolumeSlices(const std::string& folder, glm::vec3 spacingMm,
         if (!in)
             fail(path, "cannot read image: " + firstLine(OIIO::geterror()));
         const OIIO::ImageSpec& spec = in->spec();
-        // Before anything is allocated for it (by us or by OpenImageIO): a 109-byte PNG claiming
-        // 32768 x 32768 pixels cost 2.2 GB and an RGBA16 one 4.3 GB before the read failed.
+        // Before anything is allocated for it (by us or by OpenImageIO): a 109-byte PNG may claim
+        // 32768 x 32768 pixels, 2.2 GB (4.3 GB as RGBA16) before the read would fail.
         std::error_code sizeError;
         const uint64_t fileBytes = fs::file_size(path, sizeError);
         const uint64_t claimed = spec.image_bytes(true);

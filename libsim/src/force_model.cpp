@@ -158,9 +158,9 @@ ForceResult ForceModel::compute(const Volume& volume, const ToolPose& pose, floa
         return out;
 
     // The cutter resists being fed into the bone, not being withdrawn: only an axial motion
-    // against the contact force is resisted. Resisting a withdrawal too pulled the tool towards
-    // the bone, past the contact force near separation, and that reversed the direction the
-    // client's one-way extrapolation protects (a fast pull-out was dragged in by 1-2 N).
+    // against the contact force is resisted. Resisting a withdrawal too would pull the tool
+    // towards the bone, past the contact force near separation, reversing the direction the
+    // client's one-way extrapolation protects (1-2 N inwards on a fast pull-out).
     if (speed > 0.0f && m_config.drillDampingNsPerMm > 0.0f) {
         const glm::dvec3 axis = glm::dvec3(pose.axis());
         const double axial = glm::dot(glm::dvec3(velocityMmPerS), axis);

@@ -137,8 +137,8 @@ glm::vec3 ModelBlender::update(glm::vec3 p, double now) {
     };
     if (m_alpha < 1.0 && dt > 0.0) {
         // The step the blend time allows, shortened until the output (as the device feels it,
-        // clamped) moves at most maxStepN. Bounding by the unclamped fields instead stalled a
-        // blend away from a huge field for good: its step was maxStepN / 1e37.
+        // clamped) moves at most maxStepN. Bounded by the unclamped fields, a blend away from a
+        // huge field would stall (its step would be maxStepN / 1e37).
         double step = m_blendTime > 0.0 ? dt / m_blendTime : 1.0;
         const glm::dvec3 now0 = outAt(m_alpha);
         for (int i = 0; i < 60; ++i) {
@@ -187,8 +187,8 @@ HapticLoop::~HapticLoop() {
 }
 
 void HapticLoop::setSendRate(double hz) {
-    // std::clamp lets NaN through, and one NaN period made the next send time NaN for good: no
-    // tool state was sent again, whatever rate came later.
+    // std::clamp lets NaN through, and one NaN period would make every later send time NaN, so
+    // no tool state would be sent again.
     m_sendRateHz = std::isnan(hz) ? 20.0 : std::clamp(hz, 20.0, 1000.0);
 }
 

@@ -526,8 +526,7 @@ Volume decodeVoxels(ByteSource& src, glm::ivec3 dims, glm::vec3 spacing, const D
     }
     if (exactEnd) {
         // Counted only so far: a small gzip stream that inflates to gigabytes past the voxels is
-        // refused after this much, not after inflating all of it (1 GiB of zeros behind a
-        // one-voxel header took 3.3 s).
+        // refused after this much, not after inflating all of it (seconds per GiB).
         const uint64_t limit = std::max(need, kMaxTrailingCount);
         uint64_t extra = src.skip(limit + 1);
         if (extra > limit)
@@ -792,7 +791,7 @@ FileFormat sniffFormat(const std::string& path) {
         return FileFormat::Nrrd;
     if (endsWith(lower, ".nii") || endsWith(lower, ".nii.gz"))
         return FileFormat::Nifti;
-    // Read as NIfTI below (all we gzip whole), it was refused as "not a NIfTI-1 file".
+    // Said here: below, every gzipped file is read as NIfTI and would be "not a NIfTI-1 file".
     if (endsWith(lower, ".nrrd.gz") || endsWith(lower, ".nhdr.gz"))
         fail(path, "a gzipped NRRD file: gunzip it first (NRRD's own `encoding: gzip` is read)");
     FileSource f(path, path);
@@ -869,8 +868,8 @@ std::string detachedDataPath(const std::string& path, bool compress) {
 namespace {
 
 // A detached data file is replaced only when it is this header's own (an earlier save of the same
-// .nhdr): OUT.raw beside a new OUT.nhdr may be someone's scan (`volume convert
-// 'raw:scan.raw?...' scan.nhdr` used to overwrite the scan it read).
+// .nhdr): OUT.raw beside a new OUT.nhdr may be someone's scan, even the one being converted
+// (`volume convert 'raw:scan.raw?...' scan.nhdr`).
 void checkDetachedData(const std::string& path, bool compress) {
     const std::string dataPath = detachedDataPath(path, compress);
     std::error_code ec;

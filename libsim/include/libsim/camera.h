@@ -100,8 +100,7 @@ Camera cameraLookingAt(glm::vec3 site, glm::vec3 normal, float distanceMm, float
 // `base` orbited about its target: turned `yawDeg` about its up vector, then tilted `pitchDeg`
 // about its right vector as the yaw left it, at `distanceMm` from the target; the up vector turns
 // with the view, so the picture never rolls (cameraLookingAt's up, chosen afresh from the view
-// direction, rolled it by up to 124 degrees between two slider steps, and a tilt about the
-// unturned right vector did nothing at yaw 90). Near/far from fitNearFar over the volume.
+// direction, would roll it). Near/far from fitNearFar over the volume.
 Camera orbitCamera(const Camera& base, float yawDeg, float pitchDeg, float distanceMm,
                    glm::ivec2 size, const Volume& volume);
 

@@ -61,7 +61,7 @@ inline void removeAbandonedTemps(const std::filesystem::path& target) {
 
 // An output file written through a temporary file beside it, renamed over it only by commit():
 // a run that fails before (a full disk, an error, Ctrl-C) leaves an earlier file of that name
-// whole, where opening it had already emptied it. A symbolic link is followed (the link stays);
+// whole. A symbolic link is followed (the link stays);
 // a path that is no regular file (a device such as /dev/full) is written directly.
 class ReplacingFile {
 public:
