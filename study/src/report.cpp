@@ -1,5 +1,7 @@
 #include "study/report.h"
 
+#include "report_rows.h"
+
 #include "libsim/error.h"
 #include "libsim/replacing_file.h"
 #include "net/codec.h"
@@ -8,48 +10,16 @@
 #include <fmt/chrono.h>
 #include <fmt/format.h>
 
-#include <sys/utsname.h>
-#include <unistd.h>
-
 #include <algorithm>
-#include <chrono>
-#include <cmath>
 #include <ctime>
 #include <filesystem>
-#include <fstream>
-#include <map>
-#include <set>
 #include <sstream>
-#include <thread>
 
 namespace trephine::study {
 
 using net::codecName;
 
 namespace {
-
-const UpdateStudyRow* find(const std::vector<UpdateStudyRow>& rows, const std::string& method,
-                           int box) {
-    for (const UpdateStudyRow& r : rows)
-        if (r.method == method && r.box == box)
-            return &r;
-    return nullptr;
-}
-
-std::vector<int> boxesOf(const std::vector<UpdateStudyRow>& rows) {
-    std::set<int> s;
-    for (const UpdateStudyRow& r : rows)
-        s.insert(r.box);
-    return {s.begin(), s.end()};
-}
-
-std::vector<std::string> methodsOf(const std::vector<UpdateStudyRow>& rows) {
-    std::vector<std::string> m;
-    for (const UpdateStudyRow& r : rows)
-        if (std::find(m.begin(), m.end(), r.method) == m.end())
-            m.push_back(r.method);
-    return m;
-}
 
 std::string bytesText(double b) {
     if (b >= 1e6)
@@ -80,167 +50,6 @@ const char* paperStages(const std::string& method) {
     return "";
 }
 
-// The update-rate target: DBI at least this many times the volume method's rate.
-constexpr double kRateTarget = 5.0;
-
-// DBI / volume update rate at box n; -1 when either row is missing or the volume has no rate.
-double rateRatio(const std::vector<UpdateStudyRow>& rows, int n) {
-    const UpdateStudyRow* d = find(rows, "dbi", n);
-    const UpdateStudyRow* v = find(rows, "volume", n);
-    return d && v && v->updatesPerS > 0 ? d->updatesPerS / v->updatesPerS : -1.0;
-}
-
-// `v` with `decimals` decimals, or more where rounding would carry it across `target` and the
-// figure would contradict its PASS/MISS (4.96 against 5 reads "4.96", not "5.0").
-std::string figureAgainst(double v, double target, bool passAbove, int decimals) {
-    auto passes = [&](double x) { return passAbove ? x >= target : x <= target; };
-    std::string s = fmt::format("{:.{}f}", v, decimals);
-    for (int d = decimals + 1; d <= 6 && passes(std::stod(s)) != passes(v); ++d)
-        s = fmt::format("{:.{}f}", v, d);
-    return s;
-}
-
-} // namespace
-
-std::string describeMachine() {
-    std::string model = "unknown CPU";
-    std::ifstream cpu("/proc/cpuinfo");
-    for (std::string line; std::getline(cpu, line);)
-        if (line.rfind("model name", 0) == 0) {
-            model = line.substr(line.find(':') + 2);
-            break;
-        }
-    long pages = sysconf(_SC_PHYS_PAGES), pageSize = sysconf(_SC_PAGE_SIZE);
-    utsname u{};
-    uname(&u);
-    return fmt::format("{}, {} hardware threads, {:.0f} GiB memory, {} {} {}", model.c_str(),
-                       std::thread::hardware_concurrency(),
-                       double(pages) * double(pageSize) / (1024.0 * 1024.0 * 1024.0), u.sysname,
-                       u.release, u.machine);
-}
-
-int paperBbScreen(int n) {
-    static const std::map<int, int> table{{10, 36},  {20, 63},  {30, 87},  {40, 109},
-                                          {50, 130}, {60, 148}, {70, 170}, {80, 193}};
-    auto it = table.find(n);
-    return it == table.end() ? 0 : it->second;
-}
-
-double rateRatioWithoutRayCasting(const std::vector<UpdateStudyRow>& rows, int n) {
-    const UpdateStudyRow* d = find(rows, "dbi", n);
-    const UpdateStudyRow* v = find(rows, "volume", n);
-    if (!d || !v || d->stages.render <= 0)
-        return 0.0;
-    const double casting = d->stages.render - std::min(d->stages.grid, d->stages.render);
-    // The volume client casts the same rays (BB_screen is part of its view, and its renderer and
-    // hit cache are the server's): they leave its cycle too, as far as its render stage goes.
-    const double volumeCasting = std::min(casting, std::max(v->stages.clientRender, 0.0));
-    const double rest = d->latencyP50Ms - casting;
-    const double volumeRest = v->latencyP50Ms - volumeCasting;
-    return rest > 0 && volumeRest > 0 ? volumeRest / rest : 0.0;
-}
-
-std::vector<std::string> rateMissNotes(const std::vector<UpdateStudyRow>& rows, bool emulatedLink) {
-    std::vector<std::string> notes;
-    if (emulatedLink)
-        return notes;
-    // The sizes whose rate target missed, with the ratio a free ray caster would reach there.
-    std::string ceilings;
-    bool missed = false;
-    for (int n : boxesOf(rows)) {
-        const double ratio = rateRatio(rows, n);
-        if (ratio < 0 || ratio >= kRateTarget)
-            continue;
-        missed = true;
-        const double ceiling = rateRatioWithoutRayCasting(rows, n);
-        if (ceiling > 0)
-            ceilings += fmt::format("{}{:.1f}x at {}^3", ceilings.empty() ? "" : ", ", ceiling, n);
-    }
-    if (!missed)
-        return notes;
-    notes.push_back("On loopback the volume method's bytes cost almost nothing, so its cycle is "
-                    "mostly its client's re-render of the view, with the same renderer and cores "
-                    "as the DBI server's. `--link rate=100` runs the paper's 100 Mbit/s LAN "
-                    "instead, as `study all` does by default after loopback (docs/study.md).");
-    if (!ceilings.empty())
-        notes.push_back("Were BB_screen's rays free to cast (the DBI server's render stage "
-                        "less the brick-grid update, and as much of the volume client's "
-                        "re-render, which casts the same rays with the same renderer as part of "
-                        "its view), the other stages' medians would still cap dbi / volume at "
-                        "about " +
-                        ceilings +
-                        fmt::format(": where that is under {:.0f}x, no renderer reaches the "
-                                    "target on this machine and network.",
-                                    kRateTarget));
-    return notes;
-}
-
-std::vector<std::string> rateTargetLines(const std::vector<UpdateStudyRow>& rows) {
-    std::vector<std::string> lines;
-    for (int n : boxesOf(rows)) {
-        const double ratio = rateRatio(rows, n);
-        if (ratio < 0)
-            continue;
-        lines.push_back(
-            fmt::format("{} update rate {}^3: dbi {:.1f}/s vs volume {:.1f}/s = {}x "
-                        "(target >= {:.0f}x; paper 1.5-2.0x)",
-                        ratio >= kRateTarget ? "PASS" : "MISS", n,
-                        find(rows, "dbi", n)->updatesPerS, find(rows, "volume", n)->updatesPerS,
-                        figureAgainst(ratio, kRateTarget, true, 1).c_str(), kRateTarget));
-    }
-    return lines;
-}
-
-std::vector<std::string> sizeTargetLines(const std::vector<UpdateStudyRow>& rows) {
-    std::vector<std::string> lines;
-    for (int n : boxesOf(rows)) {
-        const UpdateStudyRow* d = find(rows, "dbi", n);
-        const UpdateStudyRow* v = find(rows, "volume", n);
-        if (!d || !v)
-            continue;
-        // The 1/10 is at 80^3 only; larger boxes (--sizes) keep the every-size target.
-        const bool at80 = n == 80;
-        const double limit = at80 ? v->rawBytesPerUpdate / 10.0 : v->rawBytesPerUpdate;
-        lines.push_back(fmt::format(
-            "{} update size {}^3: dbi {:.0f} B vs volume raw {:.0f} B = {} (target <= {})",
-            d->bytesPerUpdate <= limit ? "PASS" : "MISS", n, d->bytesPerUpdate,
-            v->rawBytesPerUpdate,
-            figureAgainst(d->bytesPerUpdate / v->rawBytesPerUpdate, at80 ? 0.1 : 1.0, false, 3)
-                .c_str(),
-            at80 ? "0.1 at 80^3" : "1"));
-    }
-    return lines;
-}
-
-std::vector<std::string> updateTargetLines(const std::vector<UpdateStudyRow>& rows) {
-    std::vector<std::string> lines = rateTargetLines(rows);
-    for (std::string& l : sizeTargetLines(rows))
-        lines.push_back(std::move(l));
-    return lines;
-}
-
-std::vector<std::string> displayTargetLines(const DisplayFigures& d) {
-    std::vector<std::string> lines;
-    if (!d.measured || d.entries.empty())
-        return lines;
-    const DisplayFigures::Entry& dbi = d.entries.front();
-    for (size_t i = 1; i < d.entries.size(); ++i) {
-        const DisplayFigures::Entry& e = d.entries[i];
-        if (e.fps <= 0)
-            continue;
-        const double ratio = dbi.fps / e.fps;
-        lines.push_back(fmt::format("{} display rate: {} {:.0f} FPS vs {} {:.1f} FPS = {}x (target "
-                                    ">= 20x; paper {:.0f} vs {:.0f} FPS = {:.1f}x)",
-                                    ratio >= 20.0 ? "PASS" : "MISS", dbi.name.c_str(), dbi.fps,
-                                    e.name.c_str(), e.fps,
-                                    figureAgainst(ratio, 20.0, true, 1).c_str(), dbi.paperFps,
-                                    e.paperFps, e.paperFps > 0 ? dbi.paperFps / e.paperFps : 0.0));
-    }
-    return lines;
-}
-
-namespace {
-
 // Figure 7 of one run of the update study: a table of the rates per method and size with
 // dbi / volume and dbi-fullrender / volume, the plot (DIR/svgName), `note`, then the latencies.
 void writeFigure7(std::ostringstream& md, const std::vector<UpdateStudyRow>& rows,
@@ -262,7 +71,7 @@ void writeFigure7(std::ostringstream& md, const std::vector<UpdateStudyRow>& row
     for (const std::string& m : methods) {
         PlotSeries s{m, {}, {}, "", false};
         for (int n : boxes)
-            if (const UpdateStudyRow* r = find(rows, m, n)) {
+            if (const UpdateStudyRow* r = findRow(rows, m, n)) {
                 s.x.push_back(n);
                 s.y.push_back(r->updatesPerS);
             }
@@ -271,12 +80,12 @@ void writeFigure7(std::ostringstream& md, const std::vector<UpdateStudyRow>& row
     for (int n : boxes) {
         std::vector<std::string> row{fmt::format("{}^3", n)};
         for (const std::string& m : methods) {
-            const UpdateStudyRow* r = find(rows, m, n);
+            const UpdateStudyRow* r = findRow(rows, m, n);
             row.push_back(r ? fmt::format("{:.1f}", r->updatesPerS) : "-");
         }
-        const UpdateStudyRow* d = find(rows, "dbi", n);
-        const UpdateStudyRow* f = find(rows, "dbi-fullrender", n);
-        const UpdateStudyRow* v = find(rows, "volume", n);
+        const UpdateStudyRow* d = findRow(rows, "dbi", n);
+        const UpdateStudyRow* f = findRow(rows, "dbi-fullrender", n);
+        const UpdateStudyRow* v = findRow(rows, "volume", n);
         // The same figure as the target line's (4.96 reads 4.96x, not 5.0x, beside a MISS).
         row.push_back(d && v && v->updatesPerS > 0
                           ? figureAgainst(d->updatesPerS / v->updatesPerS, kRateTarget, true, 1) +
@@ -292,7 +101,7 @@ void writeFigure7(std::ostringstream& md, const std::vector<UpdateStudyRow>& row
     for (int n : boxes) {
         std::vector<std::string> row{fmt::format("{}^3", n)};
         for (const std::string& m : methods) {
-            const UpdateStudyRow* r = find(rows, m, n);
+            const UpdateStudyRow* r = findRow(rows, m, n);
             row.push_back(r ? fmt::format("{:.2f} / {:.2f}", r->latencyP50Ms, r->latencyP99Ms)
                             : "-");
         }
@@ -309,7 +118,7 @@ void writeStageBreakdown(std::ostringstream& md, const std::vector<UpdateStudyRo
     for (const std::string& m : methodsOf(rows)) {
         std::vector<std::vector<std::string>> ts;
         for (int n : boxesOf(rows)) {
-            const UpdateStudyRow* r = find(rows, m, n);
+            const UpdateStudyRow* r = findRow(rows, m, n);
             if (!r)
                 continue;
             const StageBreakdown& s = r->stages;
@@ -393,7 +202,7 @@ void writeTable1(std::ostringstream& md, const std::vector<UpdateStudyRow>& rows
     md << "## Table 1: BB_screen per BB_volume\n\n";
     std::vector<std::vector<std::string>> t1;
     for (int n : boxes) {
-        const UpdateStudyRow* r = find(rows, methods.front(), n);
+        const UpdateStudyRow* r = findRow(rows, methods.front(), n);
         const int p = paperBbScreen(n);
         t1.push_back({fmt::format("{}^3", n), fmt::format("{}x{}", r->bbScreenW, r->bbScreenH),
                       p ? fmt::format("{}^2", p) : "-"});
@@ -422,15 +231,15 @@ void writeFigure8(std::ostringstream& md, const std::vector<UpdateStudyRow>& row
             continue; // the same coding as dbi: the same bytes
         PlotSeries s{m, {}, {}, "", false};
         for (int n : boxes)
-            if (const UpdateStudyRow* r = find(rows, m, n)) {
+            if (const UpdateStudyRow* r = findRow(rows, m, n)) {
                 s.x.push_back(n);
                 s.y.push_back(r->bytesPerUpdate);
             }
         size.series.push_back(s);
     }
     for (int n : boxes) {
-        const UpdateStudyRow* d = find(rows, "dbi", n);
-        const UpdateStudyRow* v = find(rows, "volume", n);
+        const UpdateStudyRow* d = findRow(rows, "dbi", n);
+        const UpdateStudyRow* v = findRow(rows, "volume", n);
         const int p = paperBbScreen(n);
         if (p) {
             paperDbi.x.push_back(n);
@@ -440,7 +249,7 @@ void writeFigure8(std::ostringstream& md, const std::vector<UpdateStudyRow>& row
         paperVol.y.push_back(double(n) * n * n);
         std::vector<std::string> row{fmt::format("{}^3", n)};
         for (const std::string& m : methods) {
-            const UpdateStudyRow* r = find(rows, m, n);
+            const UpdateStudyRow* r = findRow(rows, m, n);
             row.push_back(r ? bytesText(r->bytesPerUpdate) : "-");
         }
         row.push_back(d ? bytesText(d->rawBytesPerUpdate) : "-");
