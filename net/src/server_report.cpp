@@ -102,4 +102,8 @@ nlohmann::ordered_json toJson(const ServerReport& r, const NetStats& stats) {
     return j;
 }
 
+std::string toJsonText(const ServerReport& report, const NetStats& stats) {
+    return toJson(report, stats).dump(2, ' ', false, Json::error_handler_t::replace) + "\n";
+}
+
 } // namespace trephine::net

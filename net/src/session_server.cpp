@@ -343,13 +343,7 @@ ModeTotals SessionServer::modeTotals(Sync mode) const {
 }
 
 std::string SessionServer::reportJson() const {
-    return m_impl->book.read([&](const ServerReport& r) {
-        // Names come from the wire and paths from the user: bytes that are not UTF-8 are
-        // replaced rather than refused.
-        return toJson(r, m_impl->stats)
-                   .dump(2, ' ', false, nlohmann::ordered_json::error_handler_t::replace) +
-               "\n";
-    });
+    return m_impl->book.read([&](const ServerReport& r) { return toJsonText(r, m_impl->stats); });
 }
 
 // [SECTION] network thread

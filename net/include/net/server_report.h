@@ -76,6 +76,9 @@ struct ServerReport {
 // The report as JSON, in the order docs/session.md lists the fields; `stats` gives the channel
 // totals and the malformed count.
 nlohmann::ordered_json toJson(const ServerReport& report, const NetStats& stats);
+// toJson as text, two spaces an indent. Peer names come from the wire and the volume's name from
+// the user: bytes that are not UTF-8 are replaced, never a reason to lose the report.
+std::string toJsonText(const ServerReport& report, const NetStats& stats);
 
 // A ServerReport behind a mutex: the network and simulation threads record, anyone reads.
 class ReportBook {
