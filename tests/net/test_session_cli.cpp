@@ -148,10 +148,13 @@ TEST(SessionCli, SigtermWritesSaveOnExitWithTheDrilling) {
     std::filesystem::remove(marksPathFor(path));
     // --report: per-channel and per-peer statistics, written when the server stopped.
     std::ifstream r(report);
-    std::string json((std::istreambuf_iterator<char>(r)), std::istreambuf_iterator<char>());
-    EXPECT_NE(json.find("\"peers\""), std::string::npos) << json;
-    EXPECT_NE(json.find("\"haptic_models_sent\": "), std::string::npos) << json;
-    EXPECT_NE(json.find("\"malformed_dropped\": 0"), std::string::npos) << json;
+    nlohmann::json json = nlohmann::json::parse(r, nullptr, false);
+    ASSERT_FALSE(json.is_discarded()) << "the server report is JSON";
+    ASSERT_TRUE(json["peers"].is_array()) << json.dump(2);
+    EXPECT_EQ(json["peers"].size(), 1u) << json.dump(2);
+    EXPECT_TRUE(json["haptic_models_sent"].is_number_unsigned()) << json.dump(2);
+    EXPECT_EQ(json["haptic_models_sent"], json["peers"][0]["haptic_models"]) << json.dump(2);
+    EXPECT_EQ(json["malformed_dropped"], 0) << json.dump(2);
     std::filesystem::remove(report);
 }
 

@@ -13,6 +13,7 @@
 #include "loopback.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <chrono>
 #include <functional>
@@ -355,11 +356,12 @@ TEST(SessionLimits, ServerReportCountsMalformedPerPeer) {
     for (int i = 0; i < 3; ++i)
         client.sendRaw(Channel::ToolState, junk);
     ASSERT_TRUE(pumpUntil({&client}, [&] { return server.malformedTotal() == 3; }));
-    std::string report = server.reportJson();
-    EXPECT_NE(report.find("\"name\": \"noisy\""), std::string::npos) << report;
-    EXPECT_NE(report.find("\"malformed\": 3"), std::string::npos) << report;
-    EXPECT_NE(report.find("\"malformed_dropped\": 3"), std::string::npos) << report;
-    EXPECT_NE(report.find("\"tool\""), std::string::npos) << report;
+    nlohmann::json report = nlohmann::json::parse(server.reportJson());
+    ASSERT_EQ(report["peers"].size(), 1u) << report.dump(2);
+    EXPECT_EQ(report["peers"][0]["name"], "noisy") << report.dump(2);
+    EXPECT_EQ(report["peers"][0]["malformed"], 3) << report.dump(2);
+    EXPECT_EQ(report["malformed_dropped"], 3) << report.dump(2);
+    EXPECT_EQ(report["channels"]["tool"]["messages_in"], 3) << report.dump(2);
 }
 
 // A perforator through a bone block until its clutch stops it, then released (tool states that

@@ -11,6 +11,7 @@
 #include "loopback.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <chrono>
 #include <functional>
@@ -104,7 +105,10 @@ TEST(SessionRelay, InstructorReceivesTheTraineesForceModels) {
     EXPECT_EQ(trainee.hapticRelaysReceived(), 0u);
     EXPECT_EQ(other.hapticRelaysReceived(), 0u);
     EXPECT_EQ(server.hapticRelaysSent(), uint64_t(kStates));
-    EXPECT_NE(server.reportJson().find("\"haptic_relays_sent\": 10"), std::string::npos);
+    nlohmann::json report = nlohmann::json::parse(server.reportJson());
+    EXPECT_EQ(report["haptic_relays_sent"], 10) << report.dump(2);
+    for (nlohmann::json peer : report["peers"])
+        EXPECT_EQ(peer["haptic_relays"], peer["name"] == "instructor" ? 10 : 0) << peer.dump();
 
     for (SessionClient* c : all)
         c->disconnect();

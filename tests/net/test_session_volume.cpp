@@ -12,14 +12,13 @@
 #include "loopback.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <glm/gtx/quaternion.hpp>
 
 #include <chrono>
-#include <cstring>
 #include <functional>
 #include <random>
-#include <thread>
 
 using namespace trephine;
 using namespace trephine::net;
@@ -537,46 +536,4 @@ TEST(VolumeCodec, BoxDensitiesDeriveMaterialsAsErosionLeavesThem) {
     EXPECT_TRUE(back == target);
     EXPECT_FALSE(
         decodeVolumeFull(f.payload, f.rawBytes, f.codec, {32, 32, 31}, target.spacing(), back));
-}
-
-// A volume client held back by its unacknowledged bytes keeps its update waiting in the outbox;
-// each newer change was merged into it and coded again at every batch (with a held whole volume, a
-// whole volume's encode per drilling batch on a slow link). While it waits, changes are only
-// noted, and coded once when it can go; nothing is lost.
-TEST(SessionVolume, AHeldBackVolumeClientsChangesAreCodedOnceNotAtEveryBatch) {
-    Volume sphere = makeSphere(48);
-    ServerConfig sc = loopbackServerConfig("sphere:48", 2);
-    sc.maxInFlightBytes = 1; // anything unacknowledged holds the client back
-    SessionServer server(sphere, sc);
-    server.start();
-    SessionClient client(clientConfig(presetView(sphere, "top"), Sync::Volume));
-    client.connect(loopback(server.port()));
-    ASSERT_TRUE(connectAll({&client}));
-    auto volumeEncodes = [&] {
-        const std::string j = server.reportJson();
-        const size_t mode = j.find("\"volume\": {\"clients\"");
-        const size_t at = j.find("\"encode_us\": {\"count\": ", mode);
-        return at == std::string::npos || mode == std::string::npos
-                   ? -1
-                   : std::stoi(j.substr(at + std::strlen("\"encode_us\": {\"count\": ")));
-    };
-    ASSERT_EQ(volumeEncodes(), 1) << "the whole volume at the join";
-    // From here the client is not serviced: nothing sent to it is acknowledged. The first cut is
-    // coded and sent, the second coded and held; the next eight only noted.
-    server.submitBoxCut(topBox(10));
-    ASSERT_TRUE(pumpUntil({}, [&] { return server.modeTotals(Sync::Volume).updates == 2; }));
-    for (int i = 0; i < 9; ++i) {
-        server.submitBoxCut(topBox(12 + 2 * i));
-        std::this_thread::sleep_for(std::chrono::milliseconds(30));
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(300)); // batches every 10 ms meanwhile
-    EXPECT_EQ(volumeEncodes(), 3) << "the join, the first cut, the second: the rest wait uncoded";
-    EXPECT_FALSE(server.idle()) << "changes noted and not yet sent";
-    // Serviced again: the waiting update goes, then the noted changes in one, and the client's
-    // copy is the server's.
-    ASSERT_TRUE(
-        pumpUntil({&client}, [&] { return *client.localVolume() == server.volumeSnapshot(); }));
-    EXPECT_EQ(volumeEncodes(), 4);
-    EXPECT_TRUE(pumpUntil({&client}, [&] { return server.idle(); }));
-    server.stop();
 }

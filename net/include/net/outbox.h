@@ -1,0 +1,148 @@
+// The session server's outbox, between the simulation step (which posts) and the network thread
+// (which takes): per client at most one image and one volume update wait, and a newer change
+// merges into the waiting one, so a region is never queued twice and the newest pixels or voxels
+// win. It keeps each zstd client's copy of its DBI (the shadow predicted updates are coded
+// against) and holds a client back while ENet still holds more than maxInFlightBytes of its
+// updates. Posting and taking may run on two threads; everything else is the posting thread's.
+// No ENet here: tests post and take in one thread, with a clock passed in.
+#pragma once
+
+#include "libsim/box.h"
+#include "libsim/camera.h"
+#include "libsim/dbi.h"
+#include "libsim/dirty_rect.h"
+#include "libsim/volume.h"
+#include "net/enet_host.h"
+#include "net/protocol.h"
+#include "net/server_report.h"
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <mutex>
+#include <optional>
+#include <vector>
+
+namespace trephine::net {
+
+// Microseconds on the server's clock (steadyNowUs in the server; tests pass their own).
+using ServerClock = std::function<uint64_t()>;
+
+// The stage times an image update carries (microseconds).
+struct ImageTiming {
+    uint32_t erodeUs = 0, renderUs = 0, gridUs = 0;
+};
+
+// A change of voxels for a volume client: a box (or the whole volume) and the oldest cause.
+struct VolumeChange {
+    Box3i box;
+    bool full = false, materials = false;
+    uint64_t causeUs = 0;
+    uint32_t erodeUs = 0; // every batch's erosion it carries
+};
+
+class Outbox {
+public:
+    // An update ready for the network: its message and what the report counts of it.
+    struct Ready {
+        uint16_t client = 0;
+        Sync mode = Sync::Dbi; // Dbi: an ImageUpdate (Channel::Image); Volume: a VolumeUpdate
+        bool full = false;
+        uint32_t payloadBytes = 0, rawBytes = 0;
+        std::vector<uint8_t> message;
+    };
+    struct Taken {
+        std::vector<Ready> updates; // images first, each kind by client id
+        // Volume clients whose whole volume fits no message in their codec: to be sent away
+        // (RefuseReason::VolumeTooLarge).
+        std::vector<uint16_t> refused;
+    };
+
+    // `wake` is called after each post (the server wakes its network thread with it).
+    Outbox(int64_t maxInFlightBytes, ReportBook& book, ServerClock clock,
+           std::function<void()> wake = {});
+
+    // [Posting thread] A client joins with the counter of its bytes ENet holds (Host::send),
+    // its image codec and its volume codec; its view id starts at 0.
+    void join(uint16_t id, Host::InFlight inFlight, Codec codec, Codec volumeCodec);
+    void leave(uint16_t id);
+    // The client's view changed: its waiting image belongs to the view it left and is dropped.
+    void viewChanged(uint16_t id, uint32_t viewId);
+    // The client's sync mode (or volume codec) changed: nothing it waits for in the other mode
+    // is wanted, and its next DBI is a full one.
+    void modeChanged(uint16_t id, Sync mode, Codec volumeCodec);
+
+    // Queues `rect` of `frame` (the view seen by `camera`) for client `id`, merged with its
+    // waiting image of the same view: the union is taken from the frame now. A waiting rectangle
+    // outside the frame is never merged: the client gets the whole frame.
+    void postImage(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect, bool full,
+                   uint64_t causeUs, ImageTiming timing);
+    // A volume client's change (or none, to retry one noted earlier). Posted, merged with its
+    // waiting update, unless the client is held back with one waiting: then it is only noted and
+    // coded once, when the waiting one has gone. A box too large for a message goes as the whole
+    // volume; a whole volume too large is a refusal (Taken::refused).
+    void offerVolume(uint16_t id, const Volume& volume, std::optional<VolumeChange> change);
+    // Offers again every change noted for a held-back client.
+    void offerNoted(const Volume& volume);
+
+    // [Network thread] Takes every waiting update except those of live clients held back (over
+    // maxInFlightBytes in ENet's hands); those of clients not `live` (gone, or being sent away)
+    // are dropped.
+    Taken take(const std::function<bool(uint16_t)>& live);
+
+    // [Any thread] Nothing waits and no change is noted.
+    bool empty() const;
+    // [Posting thread] What client `id` holds once its posted images arrive (empty unless zstd).
+    const Dbi* shadow(uint16_t id) const;
+
+private:
+    // An image waiting for the network. `undo` holds the shadow's pixels of `rect` from before
+    // it, put back if it is merged into a newer one before it leaves (the client never saw it).
+    struct PendingImage {
+        uint32_t viewId = 0;
+        PixelRect rect;
+        bool full = false;
+        uint64_t causeUs = 0; // the oldest cause merged in: latency is never under-reported
+        uint32_t rawBytes = 0, payloadBytes = 0;
+        std::vector<uint8_t> message;
+        Dbi undo; // empty when full
+        Host::InFlight inFlight;
+    };
+    struct PendingVolume {
+        VolumeChange change;
+        uint32_t rawBytes = 0, payloadBytes = 0;
+        std::vector<uint8_t> message;
+        Host::InFlight inFlight;
+    };
+    // A client as the outbox sees it (posting thread only).
+    struct Client {
+        Host::InFlight inFlight;
+        Codec codec = Codec::Raw;
+        Codec volumeCodec = Codec::Raw;
+        uint32_t viewId = 0;
+        Dbi shadow;
+        std::optional<VolumeChange> noted;
+    };
+
+    bool heldBack(const Host::InFlight& inFlight) const;
+    bool postVolume(uint16_t id, const Client& c, const Volume& volume, VolumeChange change);
+    void postVolumeOrRefuse(uint16_t id, const Client& c, const Volume& volume,
+                            const VolumeChange& change);
+    void countNoted();
+
+    int64_t m_maxInFlightBytes;
+    ReportBook& m_book;
+    ServerClock m_clock;
+    std::function<void()> m_wake;
+    std::map<uint16_t, Client> m_clients;
+    uint32_t m_sequence = 0; // image and volume updates share one sequence
+    std::atomic<int> m_noted{0};
+
+    mutable std::mutex m_mutex; // the waiting updates, between the two threads
+    std::map<uint16_t, PendingImage> m_images;
+    std::map<uint16_t, PendingVolume> m_volumes;
+    std::vector<uint16_t> m_refused;
+};
+
+} // namespace trephine::net

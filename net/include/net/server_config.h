@@ -1,0 +1,63 @@
+// What a session server is made with (ServerConfig) and the intervals its session policy paces
+// broadcasts and mode switches by. Shared by the server and its parts (net/session_policy.h,
+// net/outbox.h, net/sim_step.h).
+#pragma once
+
+#include "net/protocol.h"
+
+#include <cstddef>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace trephine::net {
+
+struct ServerConfig {
+    uint16_t port = 7777; // 0: any free port (tests); see SessionServer::port()
+    // Participants at once; one more is refused with RefuseReason::ServerFull (ENet keeps a few
+    // spare peer slots so the refusal can be said).
+    size_t maxClients = 16;
+    // The largest view (width x height pixels) served: a larger hello is refused (BadHello), a
+    // larger view request is dropped and counted (viewsRefused()).
+    int64_t maxViewPixels = 2048 * 2048;
+    // Answer each tool state with a HapticModel (Channel::Haptic), relayed to every instructor as
+    // a HapticRelay.
+    bool hapticModels = true;
+    std::string volumeName; // sent in the welcome
+    // When set, stop() writes the final volume here (saveVolume) and the instructors' marks
+    // beside it (marksPathFor(saveOnExit), net/marks_file.h), so a later server can start from
+    // both.
+    std::string saveOnExit;
+    // The marks the session starts with (a saved session's, readMarksFile): ids 1..n, author 0.
+    std::vector<AnnotationInfo> marks;
+    int malformedLimit = 50; // a peer that sends more malformed packets is disconnected
+    int renderThreads = 0;   // 0: hardware concurrency
+    float maxStepS = 0.05f;  // longest drilling step taken from one tool state to the next
+    // Between two drilling tool states the cutter sweeps the path in sub-steps of at most a
+    // quarter voxel (sweepPoses); a move longer than this is a jump, drilled at its end only.
+    float maxSweepMm = 10.0f;
+    // Tool states waiting for the simulation, at most; more are dropped and counted
+    // (toolStatesDropped) until it catches up, as a lossy link would (tool states travel
+    // unreliable, newest wins). A client sending them faster than the simulation can drill would
+    // otherwise grow the queue without bound.
+    size_t maxQueuedToolStates = 4096;
+    // A client whose image and volume updates ENet still holds (queued, or not acknowledged) come
+    // to more than this many bytes gets no more for now: its next update waits in the server's
+    // outbox, where newer changes merge into it, so a slow link's backlog stays bounded (about
+    // this plus one update) and the client catches up with one merged update.
+    int64_t maxInFlightBytes = 4 << 20;
+    // A connection that has not said hello after this many seconds is closed (BadHello): it
+    // would otherwise hold one of the maxClients slots for good.
+    float helloTimeoutS = 5.0f;
+};
+
+// The marks (Annotations) go to every participant at most this often, the whole list once.
+inline constexpr uint64_t kAnnotationsIntervalUs = 50000;
+// The roster (Participants) likewise after a design switch or a take-over (joins and leaves go
+// out at once).
+inline constexpr uint64_t kRosterIntervalUs = 50000;
+// A client's sync mode switches reach the simulation at most this often; one that comes sooner
+// waits, and the latest mode is applied then (each switch to volume encodes the whole volume).
+inline constexpr uint64_t kSyncSwitchIntervalUs = 250000;
+
+} // namespace trephine::net

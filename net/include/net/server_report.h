@@ -1,0 +1,113 @@
+// The session server's figures as plain data (ServerReport: counters, per-peer and per-mode
+// figures, timing windows) and the one place they are turned into JSON (toJson). The server's
+// parts record into a ReportBook, a mutex around one ServerReport, so the accessors and the
+// report read consistent figures from any thread.
+#pragma once
+
+#include "libsim/stats.h"
+#include "net/net_stats.h"
+#include "net/protocol.h"
+
+#include <nlohmann/json.hpp>
+
+#include <array>
+#include <cstdint>
+#include <map>
+#include <mutex>
+#include <string>
+
+namespace trephine::net {
+
+// What the server sent in one sync mode, and how many connected clients use it now.
+struct ModeTotals {
+    uint64_t clients = 0;
+    uint64_t updates = 0, fullUpdates = 0; // messages sent (image or volume updates)
+    uint64_t bytes = 0, rawBytes = 0;      // payload bytes on the wire / before compression
+};
+
+// Session-wide counts (SessionServer's accessors of the same names read them).
+struct ServerCounters {
+    uint64_t clients = 0; // connections now, with or without a hello
+    uint64_t malformedKicks = 0;
+    uint64_t toolStatesApplied = 0, toolStatesDropped = 0;
+    uint64_t renders = 0;
+    uint64_t hapticModelsSent = 0, hapticRelaysSent = 0;
+    uint64_t refusedFull = 0, helloTimeouts = 0, viewsRefused = 0;
+    uint64_t annotationsRefused = 0, takeOversRefused = 0, drillingPaused = 0;
+    int64_t peakInFlightBytes = 0; // the most one client's updates held by ENet at once
+};
+
+// One peer's figures, kept after it leaves.
+struct PeerReport {
+    std::string name;
+    Role role = Role::Trainee;
+    bool hello = false;
+    uint64_t bytesIn = 0, bytesOut = 0, messagesIn = 0, messagesOut = 0;
+    uint64_t malformed = 0, hapticModels = 0, hapticRelays = 0, toolStates = 0, viewsRefused = 0;
+    uint64_t connectedUs = 0, disconnectedUs = 0; // disconnectedUs 0: still connected
+    bool kicked = false;
+    Sync sync = Sync::Dbi;
+    uint64_t syncSwitches = 0;
+
+    // Said hello, was not sent away and has not left.
+    bool participating() const { return hello && !kicked && disconnectedUs == 0; }
+};
+
+// One sync mode's updates: what went out, and the server's stage times.
+struct ModeReport {
+    ModeTotals sent; // `clients` is counted from the peers (ServerReport::modeTotals)
+    SampleWindow erodeUs{65536}, renderUs{65536}, encodeUs{65536};
+};
+
+struct ServerReport {
+    uint16_t port = 0;
+    std::string volume;
+    size_t maxClients = 0;
+    ServerCounters counters;
+    std::map<uint16_t, PeerReport> peers; // every peer that ever connected, by id
+    std::array<ModeReport, 2> modes;      // by Sync
+    SampleWindow forceComputeUs{65536};
+    SampleWindow hapticServiceUs{65536}; // tool state received -> its HapticModel ready
+
+    // The totals of `mode` with the participants using it now.
+    ModeTotals modeTotals(Sync mode) const;
+};
+
+// The report as JSON, in the order docs/session.md lists the fields; `stats` gives the channel
+// totals and the malformed count.
+nlohmann::ordered_json toJson(const ServerReport& report, const NetStats& stats);
+// toJson as text, two spaces an indent. Peer names come from the wire and the volume's name from
+// the user: bytes that are not UTF-8 are replaced, never a reason to lose the report.
+std::string toJsonText(const ServerReport& report, const NetStats& stats);
+
+// A ServerReport behind a mutex: the network and simulation threads record, anyone reads.
+class ReportBook {
+public:
+    template <typename F>
+    void record(F&& f) {
+        std::lock_guard lock(m_mutex);
+        f(m_report);
+    }
+    template <typename F>
+    auto read(F&& f) const {
+        std::lock_guard lock(m_mutex);
+        return f(static_cast<const ServerReport&>(m_report));
+    }
+    void count(uint64_t ServerCounters::*counter, uint64_t n = 1) {
+        record([&](ServerReport& r) { r.counters.*counter += n; });
+    }
+    uint64_t counter(uint64_t ServerCounters::*counter) const {
+        return read([&](const ServerReport& r) { return r.counters.*counter; });
+    }
+    // Records into peer `id`'s figures (made when first named).
+    template <typename F>
+    void peer(uint16_t id, F&& f) {
+        record([&](ServerReport& r) { f(r.peers[id]); });
+    }
+
+private:
+    mutable std::mutex m_mutex;
+    ServerReport m_report;
+};
+
+} // namespace trephine::net

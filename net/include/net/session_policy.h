@@ -1,0 +1,165 @@
+// The session server's policy: who is in the session and what they may do. Hello and welcome,
+// roles, the roster, the instructors' marks, take-overs, the haptic answer and its relays, the
+// malformed-input rule, and pacing. It owns no socket and reads no clock: the server's network
+// thread drives it with connect / receive / disconnect / update and the time, and it answers
+// with what to send, whom to send away and what the simulation must do (PolicyOutput). Tests
+// drive it the same way, in one thread.
+#pragma once
+
+#include "libsim/force_model.h"
+#include "libsim/volume.h"
+#include "net/enet_host.h"
+#include "net/protocol.h"
+#include "net/server_config.h"
+#include "net/server_report.h"
+#include "net/sim_step.h"
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <span>
+#include <vector>
+
+namespace trephine::net {
+
+// The one pacing rule: something that changes as fast as a peer can send goes out at most once
+// every `intervalUs`, as its latest state; an urgent change goes at the next pass. It paces the
+// roster, the marks and each peer's mode switches.
+class Pacer {
+public:
+    explicit Pacer(uint64_t intervalUs) : m_intervalUs(intervalUs) {}
+    void mark(bool urgent = false) {
+        m_pending = true;
+        m_urgent = m_urgent || urgent;
+    }
+    // True (and counted as gone) when it should go at time `now`.
+    bool due(uint64_t now) {
+        if (!m_pending || (!m_urgent && m_sent && now - m_sentUs < m_intervalUs))
+            return false;
+        m_pending = m_urgent = false;
+        m_sent = true;
+        m_sentUs = now;
+        return true;
+    }
+    bool pending() const { return m_pending; }
+    void cancel() { m_pending = m_urgent = false; }
+
+private:
+    uint64_t m_intervalUs;
+    bool m_pending = false, m_urgent = false, m_sent = false;
+    uint64_t m_sentUs = 0;
+};
+
+// What the policy asks of the server after one call, in order.
+struct PolicyOutput {
+    struct Message {
+        std::vector<uint16_t> to;
+        Channel channel = Channel::Control;
+        std::vector<uint8_t> bytes;
+    };
+    struct Disconnect {
+        uint16_t client = 0;
+        uint32_t data = 0; // the RefuseReason (with the protocol version for Version)
+    };
+    std::vector<Message> messages;
+    std::vector<Disconnect> disconnects;
+    std::vector<SimEvent> events; // for the simulation, in order
+    bool flush = false;           // send at once (a haptic answer), not at the next service
+    bool malformed = false;       // the message received was malformed (counted by the server)
+};
+
+class SessionPolicy {
+public:
+    // The force at a tool state's pose, as the server computes it (on the volume, under its
+    // voxel lock), with when it was done and how long it took.
+    struct ForceAnswer {
+        ForceResult force;
+        uint64_t doneUs = 0;
+        uint64_t computeUs = 0;
+    };
+    using ForceFn = std::function<ForceAnswer(const ToolState&, glm::vec3 velocity)>;
+
+    // `dims` and `spacing` are the volume's, for the welcome.
+    SessionPolicy(const ServerConfig& config, glm::ivec3 dims, glm::vec3 spacing, ReportBook& book,
+                  ForceFn force);
+
+    // A new connection with ENet's connect data: its id, or 0 when refused (the output then says
+    // why in a disconnect of client 0).
+    uint16_t connect(uint32_t connectData, uint64_t now, PolicyOutput& out);
+    // A message from client `id` (one that has connected and was not sent away).
+    PolicyOutput receive(uint16_t id, std::span<const uint8_t> message, uint64_t now);
+    void disconnect(uint16_t id, uint64_t now, PolicyOutput& out);
+    // Time passes: hello timeouts, and whatever paced message is due.
+    void update(uint64_t now, PolicyOutput& out);
+    // A volume client whose whole volume fits no message: sent away, saying why.
+    void refuseVolume(uint16_t id, PolicyOutput& out);
+    // The server stops: everyone is told so and counts as gone from `now`.
+    void goodbye(uint64_t now, PolicyOutput& out);
+
+    // Connected and not sent away: its updates are still wanted.
+    bool live(uint16_t id) const;
+    size_t peerCount() const { return m_peers.size(); }
+    // Bytes of client `id`'s updates that ENet still holds (Host::send counts into it).
+    Host::InFlight inFlight(uint16_t id) const;
+    // [Any thread] A mode switch waits for its interval: the simulation has work to come.
+    bool switchWaiting() const { return m_switchesWaiting.load() > 0; }
+    const std::map<uint32_t, AnnotationInfo>& marks() const { return m_marks; }
+
+private:
+    struct Peer {
+        bool hello = false;
+        Hello helloMsg;
+        Sync sync = Sync::Dbi;          // the hello's, then the latest SyncMode
+        Codec volumeCodec = Codec::Lz4; // likewise
+        Host::InFlight inFlight = std::make_shared<std::atomic<int64_t>>(0);
+        int malformed = 0;
+        bool kicked = false;
+        uint64_t connectedUs = 0;
+        Pacer modeSwitch{kSyncSwitchIntervalUs}; // each switch to volume encodes the volume
+        VelocityEstimate toolVelocity;           // from its tool states' positions and times
+    };
+
+    bool handle(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
+                PolicyOutput& out);
+    bool hello(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
+               PolicyOutput& out);
+    // The welcome point: what a newcomer is sent once its hello is accepted.
+    void welcome(uint16_t id, uint64_t now, PolicyOutput& out);
+    bool toolState(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
+                   PolicyOutput& out);
+    void answerHaptic(uint16_t id, Peer& p, const ToolState& t, uint64_t now, PolicyOutput& out);
+    bool syncMode(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
+                  PolicyOutput& out);
+    bool annotate(uint16_t id, const Peer& p, std::span<const uint8_t> data);
+    bool takeOver(uint16_t id, const Peer& p, std::span<const uint8_t> data);
+    void kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& out);
+    void pushSwitch(uint16_t id, Peer& p, uint64_t now, PolicyOutput& out);
+
+    // Participants (said hello, not sent away) other than `except`, with `role` when given.
+    std::vector<uint16_t> participants(uint16_t except = 0, const Role* role = nullptr) const;
+    std::vector<uint8_t> rosterMessage() const;
+    std::vector<uint8_t> marksMessage() const;
+    bool mayCut(uint16_t id, Role role) const;
+    bool releaseTakeOvers(uint16_t id);
+    bool viewTooLarge(const ViewSpec& v) const;
+    void countSwitches();
+
+    ServerConfig m_config;
+    glm::ivec3 m_dims;
+    glm::vec3 m_spacing;
+    ReportBook& m_book;
+    ForceFn m_force;
+    std::map<uint16_t, Peer> m_peers; // increasing ids, as the roster wants
+    uint16_t m_nextId = 1;
+    std::map<uint32_t, AnnotationInfo> m_marks; // by id
+    uint32_t m_nextMarkId = 1;
+    std::map<uint16_t, uint16_t> m_takenOver; // trainee -> the instructor holding it
+    // Joins and leaves go out at once: the others keep a newcomer's relayed tool only once a
+    // roster lists it. Design switches and take-overs are paced.
+    Pacer m_roster{kRosterIntervalUs};
+    Pacer m_marksOut{kAnnotationsIntervalUs};
+    std::atomic<int> m_switchesWaiting{0}; // read by SessionServer::idle() on any thread
+};
+
+} // namespace trephine::net

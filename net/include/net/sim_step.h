@@ -1,0 +1,140 @@
+// The session server's simulation step: it owns the volume, the renderer and one frame per
+// distinct view, and turns a batch of events (joins, views, mode switches, tool states, cuts) into
+// changed voxels and rendered BB_screen rectangles, which it posts to the outbox. Time is passed
+// in; the server's simulation thread pumps it, and tests call step() directly, with no ENet.
+#pragma once
+
+#include "libsim/box.h"
+#include "libsim/camera.h"
+#include "libsim/dbi.h"
+#include "libsim/drill.h"
+#include "libsim/renderer.h"
+#include "libsim/thread_pool.h"
+#include "libsim/tool.h"
+#include "libsim/volume.h"
+#include "net/enet_host.h"
+#include "net/outbox.h"
+#include "net/protocol.h"
+#include "net/server_report.h"
+
+#include <atomic>
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <shared_mutex>
+#include <vector>
+
+namespace trephine::net {
+
+// What the network side hands the simulation, in arrival order.
+struct SimEvent {
+    enum class Kind { Join, View, Tool, Leave, Cut, Sync, Voxels } kind = Kind::Tool;
+    uint16_t client = 0;
+    Camera camera;                  // Join, View
+    uint32_t viewId = 0;            // View
+    Codec codec = Codec::Raw;       // Join
+    Sync sync = Sync::Dbi;          // Join, Sync
+    Codec volumeCodec = Codec::Raw; // Join, Sync
+    ToolState tool;
+    Box3i box;                              // Cut, Voxels
+    std::vector<uint8_t> density, material; // Voxels
+    uint64_t arrivedUs = 0;                 // Tool, Cut, Voxels: the cause time of what they change
+    Host::InFlight inFlight; // Join: the peer's bytes held by ENet (the outbox holds it back)
+
+    static SimEvent of(Kind kind, uint16_t client) {
+        SimEvent ev;
+        ev.kind = kind;
+        ev.client = client;
+        return ev;
+    }
+};
+
+// The cutter a tool state names (its kind and diameter).
+ToolShape shapeOf(const ToolState& t);
+
+struct StepConfig {
+    float maxStepS = 0.05f;   // ServerConfig::maxStepS
+    float maxSweepMm = 10.0f; // ServerConfig::maxSweepMm
+    int renderThreads = 0;    // 0: hardware concurrency
+};
+
+class SimulationStep {
+public:
+    // Labels every density-0 voxel Air (see normaliseAir in the source).
+    SimulationStep(Volume volume, const StepConfig& config, Outbox& outbox, ReportBook& book,
+                   ServerClock clock);
+
+    // Applies `batch` in arrival order at server time `now` (the cause time of the full updates a
+    // join or a switch needs), then posts: the changed voxels (or the whole volume) to volume
+    // clients first, then BB_screen, rendered once per distinct view, to DBI clients.
+    void step(const std::vector<SimEvent>& batch, uint64_t now);
+    // With nothing to apply: held-back volume clients' noted changes go once they can.
+    void offerNoted() { m_outbox.offerNoted(m_volume); }
+
+    // A fresh full render of the current volume (what a converged client holds).
+    Dbi render(const Camera& camera);
+    // The voxels: written only by step(), under voxelMutex() held exclusively around each write,
+    // so another thread may read them under a shared lock (the haptic answer).
+    const Volume& volume() const { return m_volume; }
+    std::shared_mutex& voxelMutex() { return m_voxelMutex; }
+    // Re-render every view whole on each change (the paper's way) instead of BB_screen only.
+    void setFullRender(bool on) { m_fullRender = on; }
+    size_t viewCount() const { return m_views.size(); }
+
+private:
+    // A participant as the simulation sees it: its view and its tool.
+    struct Client {
+        Camera camera;
+        Sync sync = Sync::Dbi;
+        std::optional<Driller> driller;
+        ToolPose lastPose;         // of the newest applied tool state
+        bool lastDrilling = false; // it drilled (with the driller there is now)
+        bool hasTool = false;
+        uint32_t lastSequence = 0;
+        uint64_t lastClientUs = 0;
+    };
+    // One render per distinct view; clients that share a camera share its frame.
+    struct ViewFrame {
+        Camera camera;
+        Dbi frame;
+        HitCache cache; // where each pixel's ray met bone: dirty re-renders resume there
+    };
+    // What one batch changed and who needs a full update.
+    struct Batch {
+        Box3i changed;
+        uint64_t causeUs = 0;                    // the oldest cause of a change
+        uint64_t erodeUs = 0;                    // erosion and cuts
+        bool materials = false;                  // voxels written wholesale
+        std::map<uint16_t, uint64_t> needFull;   // DBI client -> cause time of a full DBI
+        std::map<uint16_t, uint64_t> needVolume; // volume client -> cause time of a full volume
+        void changedBy(const Box3i& box, uint64_t arrivedUs);
+    };
+
+    void applyClientEvent(const SimEvent& ev, Batch& b, uint64_t now);
+    void applyCut(const SimEvent& ev, Batch& b);
+    void applyVoxels(const SimEvent& ev, Batch& b);
+    void applyTool(const SimEvent& ev, Batch& b);
+    void postVolumes(const Batch& b);
+    uint32_t updateGrid(const Batch& b);
+    void renderViews(const Batch& b, uint32_t gridUs);
+    void syncGrid();
+
+    StepConfig m_config;
+    Outbox& m_outbox;
+    ReportBook& m_book;
+    ServerClock m_clock;
+    std::shared_mutex m_voxelMutex;
+    Volume m_volume;
+    ThreadPool m_pool;
+    Renderer m_renderer;
+    std::map<uint16_t, Client> m_clients;
+    std::vector<ViewFrame> m_views;
+    // Changes the renderer's brick grid has not taken yet. It is rendering data for DBI views,
+    // kept in step only while some client is in DBI mode (a volume-only session pays nothing for
+    // it), and brought up to date before the next render.
+    Box3i m_gridPending;
+    bool m_gridRebuildPending = false;
+    std::atomic<bool> m_fullRender{false};
+};
+
+} // namespace trephine::net

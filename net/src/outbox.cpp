@@ -1,0 +1,334 @@
+#include "net/outbox.h"
+
+#include "net/codec.h"
+#include "net/image_delta.h"
+
+#include <algorithm>
+
+namespace trephine::net {
+
+Outbox::Outbox(int64_t maxInFlightBytes, ReportBook& book, ServerClock clock,
+               std::function<void()> wake)
+    : m_maxInFlightBytes(maxInFlightBytes), m_book(book), m_clock(std::move(clock)),
+      m_wake(std::move(wake)) {}
+
+// [SECTION] clients
+
+void Outbox::join(uint16_t id, Host::InFlight inFlight, Codec codec, Codec volumeCodec) {
+    Client& c = m_clients[id];
+    c = Client{};
+    c.inFlight = std::move(inFlight);
+    c.codec = codec;
+    c.volumeCodec = volumeCodec;
+    countNoted();
+}
+
+void Outbox::leave(uint16_t id) {
+    m_clients.erase(id);
+    countNoted();
+    std::lock_guard lock(m_mutex);
+    m_images.erase(id);
+    m_volumes.erase(id);
+}
+
+void Outbox::viewChanged(uint16_t id, uint32_t viewId) {
+    m_clients[id].viewId = viewId;
+    std::lock_guard lock(m_mutex);
+    m_images.erase(id);
+}
+
+void Outbox::modeChanged(uint16_t id, Sync mode, Codec volumeCodec) {
+    Client& c = m_clients[id];
+    c.volumeCodec = volumeCodec;
+    if (mode == Sync::Volume) {
+        c.shadow = Dbi(); // the next DBI it gets is a full one
+    } else {
+        c.noted.reset();
+        countNoted();
+    }
+    std::lock_guard lock(m_mutex);
+    if (mode == Sync::Volume)
+        m_images.erase(id);
+    else
+        m_volumes.erase(id);
+}
+
+const Dbi* Outbox::shadow(uint16_t id) const {
+    auto it = m_clients.find(id);
+    return it == m_clients.end() ? nullptr : &it->second.shadow;
+}
+
+bool Outbox::heldBack(const Host::InFlight& inFlight) const {
+    return inFlight && inFlight->load(std::memory_order_relaxed) > m_maxInFlightBytes;
+}
+
+bool Outbox::empty() const {
+    if (m_noted.load() > 0)
+        return false;
+    std::lock_guard lock(m_mutex);
+    return m_images.empty() && m_volumes.empty();
+}
+
+void Outbox::countNoted() {
+    m_noted = int(std::count_if(m_clients.begin(), m_clients.end(),
+                                [](const auto& kv) { return kv.second.noted.has_value(); }));
+}
+
+// [SECTION] images
+
+void Outbox::postImage(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect,
+                       bool full, uint64_t causeUs, ImageTiming timing) {
+    Client& c = m_clients[id];
+    std::optional<PendingImage> old;
+    {
+        std::lock_guard lock(m_mutex);
+        auto it = m_images.find(id);
+        if (it != m_images.end()) {
+            if (it->second.viewId == c.viewId)
+                old = std::move(it->second);
+            m_images.erase(it);
+        }
+    }
+    // Not of this frame (a view change drops waiting images; this is the safety net): the
+    // client's pixels are unknown, so it gets the whole frame.
+    const bool merge = old && frame.bounds().contains(old->rect);
+    if (old && !merge)
+        full = true;
+    if (merge) {
+        // It never left: the client does not have its pixels.
+        if (!old->full && !old->undo.empty() && !c.shadow.empty())
+            c.shadow.apply(old->undo, old->rect.x, old->rect.y);
+        rect = unite(rect, old->rect);
+        full = full || old->full;
+        causeUs = std::min(causeUs, old->causeUs);
+    }
+    rect = full ? frame.bounds() : intersect(rect, frame.bounds());
+    if (rect.empty())
+        return;
+    ImageUpdate u;
+    u.sequence = ++m_sequence;
+    u.viewId = c.viewId;
+    u.causeServerUs = causeUs;
+    u.full = full;
+    u.x = uint16_t(rect.x);
+    u.y = uint16_t(rect.y);
+    u.width = uint16_t(rect.w);
+    u.height = uint16_t(rect.h);
+    // A raw rectangle too large for one message goes lz4-coded (see kMaxImagePayloadBytes).
+    u.codec = c.codec == Codec::Raw && uint64_t(rect.area()) * 8 > kMaxImagePayloadBytes
+                  ? Codec::Lz4
+                  : c.codec;
+    const uint64_t e0 = m_clock();
+    const Dbi pixels = frame.extract(rect);
+    Dbi undo;
+    // Predicted updates trade ~4 ns a pixel more coding at each end than the planar form for
+    // about half its bytes (benchmark_net 'predicted|planar'): worth it with zstd (the codec
+    // chosen for bytes), not with lz4 (chosen for latency).
+    if (!full && c.codec == Codec::Zstd && c.shadow.width() == frame.width() &&
+        c.shadow.height() == frame.height()) {
+        undo = c.shadow.extract(rect);
+        PredictedImage p = encodePredicted(pixels, undo, c.codec, DepthQuantizer(camera));
+        u.predicted = true;
+        u.baseHash = p.baseHash;
+        u.rawBytes = p.rawBytes;
+        u.payload = std::move(p.payload);
+    } else {
+        EncodedImage e = encodeImage(pixels, u.codec, camera);
+        u.rawBytes = e.rawBytes;
+        u.payload = std::move(e.payload);
+    }
+    // Only zstd clients get predicted updates, so only they need the copy (a whole frame:
+    // 33.5 MB for 2048 x 2048).
+    if (c.codec != Codec::Zstd)
+        c.shadow = Dbi();
+    else if (full)
+        c.shadow = frame;
+    else if (!c.shadow.empty())
+        c.shadow.apply(pixels, rect.x, rect.y);
+    u.sentServerUs = m_clock();
+    u.erodeUs = timing.erodeUs;
+    u.renderUs = timing.renderUs;
+    u.gridUs = std::min(timing.gridUs, timing.renderUs);
+    u.encodeUs = uint32_t(u.sentServerUs - e0);
+    m_book.record([&](ServerReport& r) {
+        ModeReport& m = r.modes[size_t(Sync::Dbi)];
+        m.encodeUs.add(double(u.encodeUs));
+        if (!full) {
+            m.erodeUs.add(double(timing.erodeUs));
+            m.renderUs.add(double(timing.renderUs));
+        }
+    });
+    PendingImage p{c.viewId,
+                   rect,
+                   full,
+                   causeUs,
+                   u.rawBytes,
+                   uint32_t(u.payload.size()),
+                   encodeMessage(u),
+                   std::move(undo),
+                   c.inFlight};
+    {
+        std::lock_guard lock(m_mutex);
+        m_images[id] = std::move(p);
+    }
+    if (m_wake)
+        m_wake();
+}
+
+// [SECTION] volumes
+
+// Codes `change` merged with the client's waiting volume update: the union box, taken from the
+// volume now. False when the update does not fit a message (nothing is posted then).
+bool Outbox::postVolume(uint16_t id, const Client& c, const Volume& volume, VolumeChange change) {
+    std::optional<PendingVolume> old;
+    {
+        std::lock_guard lock(m_mutex);
+        auto it = m_volumes.find(id);
+        if (it != m_volumes.end()) {
+            old = std::move(it->second);
+            m_volumes.erase(it);
+        }
+    }
+    if (old) {
+        change.box.merge(old->change.box);
+        change.full = change.full || old->change.full;
+        change.materials = change.materials || old->change.materials;
+        change.causeUs = std::min(change.causeUs, old->change.causeUs);
+    }
+    Box3i box = change.full ? volume.bounds() : change.box.intersect(volume.bounds());
+    if (box.empty())
+        return true;
+    change.box = box;
+    VolumeUpdate u;
+    u.sequence = ++m_sequence;
+    u.causeServerUs = change.causeUs;
+    u.full = change.full;
+    u.materials = change.full || change.materials;
+    u.x = uint16_t(box.lo.x);
+    u.y = uint16_t(box.lo.y);
+    u.z = uint16_t(box.lo.z);
+    const glm::ivec3 size = box.size();
+    u.sizeX = uint16_t(size.x);
+    u.sizeY = uint16_t(size.y);
+    u.sizeZ = uint16_t(size.z);
+    // More raw bytes than a VolumeUpdate may announce cannot go, however well they code: refused
+    // before anything is built and compressed.
+    if (!fitsVolumeUpdate(size, u.materials))
+        return false;
+    const uint64_t e0 = m_clock();
+    EncodedVolume e = change.full ? encodeVolumeFull(volume, c.volumeCodec)
+                                  : encodeVolumeBox(volume, box, c.volumeCodec, change.materials);
+    u.codec = e.codec;
+    u.rawBytes = e.rawBytes;
+    u.payload = std::move(e.payload);
+    u.sentServerUs = m_clock();
+    u.erodeUs = change.erodeUs;
+    u.encodeUs = uint32_t(u.sentServerUs - e0);
+    m_book.record([&](ServerReport& r) {
+        ModeReport& m = r.modes[size_t(Sync::Volume)];
+        m.encodeUs.add(double(u.encodeUs));
+        if (!change.full)
+            m.erodeUs.add(double(change.erodeUs));
+    });
+    std::vector<uint8_t> message = encodeMessage(u);
+    if (message.empty() || message.size() > kMaxSentMessageBytes)
+        return false; // too large once coded to go through ENet
+    PendingVolume p{change, u.rawBytes, uint32_t(u.payload.size()), std::move(message), c.inFlight};
+    {
+        std::lock_guard lock(m_mutex);
+        m_volumes[id] = std::move(p);
+    }
+    if (m_wake)
+        m_wake();
+    return true;
+}
+
+void Outbox::postVolumeOrRefuse(uint16_t id, const Client& c, const Volume& volume,
+                                const VolumeChange& change) {
+    if (postVolume(id, c, volume, change))
+        return;
+    if (!change.full &&
+        postVolume(id, c, volume, VolumeChange{volume.bounds(), true, true, change.causeUs, 0}))
+        return;
+    {
+        std::lock_guard lock(m_mutex);
+        m_volumes.erase(id);
+        m_refused.push_back(id);
+    }
+    if (m_wake)
+        m_wake();
+}
+
+void Outbox::offerVolume(uint16_t id, const Volume& volume, std::optional<VolumeChange> change) {
+    Client& c = m_clients[id];
+    if (c.noted) {
+        if (change) {
+            change->box.merge(c.noted->box);
+            change->full = change->full || c.noted->full;
+            change->materials = change->materials || c.noted->materials;
+            change->causeUs = std::min(change->causeUs, c.noted->causeUs);
+            change->erodeUs += c.noted->erodeUs;
+        } else {
+            change = c.noted;
+        }
+    }
+    if (!change)
+        return;
+    // Re-coding a waiting update at every batch would cost a slow link's client a whole
+    // volume's encode per batch: while it is held back with one waiting, changes are noted.
+    bool waiting = false;
+    if (heldBack(c.inFlight)) {
+        std::lock_guard lock(m_mutex);
+        waiting = m_volumes.count(id) > 0;
+    }
+    if (waiting) {
+        c.noted = change;
+    } else {
+        c.noted.reset();
+        postVolumeOrRefuse(id, c, volume, *change);
+    }
+    countNoted();
+}
+
+void Outbox::offerNoted(const Volume& volume) {
+    if (m_noted.load() == 0)
+        return;
+    for (auto& [id, c] : m_clients)
+        if (c.noted)
+            offerVolume(id, volume, std::nullopt);
+}
+
+// [SECTION] network side
+
+Outbox::Taken Outbox::take(const std::function<bool(uint16_t)>& live) {
+    Taken taken;
+    std::lock_guard lock(m_mutex);
+    taken.refused.swap(m_refused);
+    // A live client with too much still in ENet's hands gets nothing now: its update stays here,
+    // where the next changes merge into it.
+    auto drain = [&](auto& waiting, Sync mode) {
+        for (auto it = waiting.begin(); it != waiting.end();) {
+            const bool isLive = live(it->first);
+            if (isLive && heldBack(it->second.inFlight)) {
+                ++it;
+                continue;
+            }
+            if (isLive) {
+                auto& p = it->second;
+                bool full = false;
+                if constexpr (std::is_same_v<std::decay_t<decltype(p)>, PendingImage>)
+                    full = p.full;
+                else
+                    full = p.change.full;
+                taken.updates.push_back(
+                    {it->first, mode, full, p.payloadBytes, p.rawBytes, std::move(p.message)});
+            }
+            it = waiting.erase(it);
+        }
+    };
+    drain(m_images, Sync::Dbi);
+    drain(m_volumes, Sync::Volume);
+    return taken;
+}
+
+} // namespace trephine::net

@@ -1,0 +1,453 @@
+#include "net/session_policy.h"
+
+#include "libsim/error.h"
+#include "net/view.h"
+
+#include <algorithm>
+
+namespace trephine::net {
+
+SessionPolicy::SessionPolicy(const ServerConfig& config, glm::ivec3 dims, glm::vec3 spacing,
+                             ReportBook& book, ForceFn force)
+    : m_config(config), m_dims(dims), m_spacing(spacing), m_book(book), m_force(std::move(force)) {
+    for (const AnnotationInfo& m : m_config.marks) {
+        const uint32_t id = m_nextMarkId++;
+        m_marks[id] = {id, 0, m.position, m.label};
+    }
+}
+
+// [SECTION] connections
+
+uint16_t SessionPolicy::connect(uint32_t connectData, uint64_t now, PolicyOutput& out) {
+    if (connectData != kProtocolVersion) {
+        out.disconnects.push_back({0, uint32_t(RefuseReason::Version) | (kProtocolVersion << 8)});
+        return 0;
+    }
+    if (m_peers.size() >= m_config.maxClients) {
+        m_book.count(&ServerCounters::refusedFull);
+        out.disconnects.push_back({0, uint32_t(RefuseReason::ServerFull)});
+        return 0;
+    }
+    // After 65535 joins the ids wrap: skip any still held (peers <= maxClients, so one is free
+    // within maxClients + 1 tries).
+    uint16_t id = 0;
+    do {
+        id = m_nextId++;
+        if (m_nextId == 0)
+            m_nextId = 1;
+    } while (m_peers.count(id));
+    m_peers[id].connectedUs = now;
+    m_book.record([&](ServerReport& r) {
+        // A fresh report: after the ids wrap, one may still hold a left peer's figures.
+        r.peers[id] = PeerReport{};
+        r.peers[id].connectedUs = now;
+        r.counters.clients = m_peers.size();
+    });
+    return id;
+}
+
+void SessionPolicy::disconnect(uint16_t id, uint64_t now, PolicyOutput& out) {
+    auto gone = m_peers.find(id);
+    if (gone == m_peers.end())
+        return;
+    const bool listed = gone->second.hello && !gone->second.kicked;
+    m_peers.erase(gone);
+    countSwitches(); // it left: nothing to switch
+    releaseTakeOvers(id);
+    out.events.push_back(SimEvent::of(SimEvent::Kind::Leave, id));
+    m_book.record([&](ServerReport& r) {
+        PeerReport& p = r.peers[id];
+        if (p.disconnectedUs == 0)
+            p.disconnectedUs = now;
+        r.counters.clients = m_peers.size();
+    });
+    if (listed)
+        m_roster.mark(true);
+}
+
+void SessionPolicy::goodbye(uint64_t now, PolicyOutput& out) {
+    for (const auto& [id, p] : m_peers)
+        out.disconnects.push_back({id, uint32_t(RefuseReason::Shutdown)});
+    // Gone from here on, whether or not the goodbye is acknowledged in time.
+    m_book.record([&](ServerReport& r) {
+        for (const auto& [id, p] : m_peers)
+            if (r.peers[id].disconnectedUs == 0)
+                r.peers[id].disconnectedUs = now;
+    });
+}
+
+void SessionPolicy::kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& out) {
+    p.kicked = true;
+    m_book.peer(id, [](PeerReport& r) { r.kicked = true; });
+    out.disconnects.push_back({id, uint32_t(why)});
+    releaseTakeOvers(id);
+    if (p.hello)
+        m_roster.mark(true);
+}
+
+void SessionPolicy::refuseVolume(uint16_t id, PolicyOutput& out) {
+    auto it = m_peers.find(id);
+    if (it != m_peers.end() && !it->second.kicked)
+        kick(id, it->second, RefuseReason::VolumeTooLarge, out);
+}
+
+bool SessionPolicy::live(uint16_t id) const {
+    auto it = m_peers.find(id);
+    return it != m_peers.end() && !it->second.kicked;
+}
+
+Host::InFlight SessionPolicy::inFlight(uint16_t id) const {
+    auto it = m_peers.find(id);
+    return it == m_peers.end() ? Host::InFlight{} : it->second.inFlight;
+}
+
+// [SECTION] time
+
+void SessionPolicy::update(uint64_t now, PolicyOutput& out) {
+    // A connection that never says hello would hold a client slot for good.
+    const uint64_t helloTimeoutUs = uint64_t(double(m_config.helloTimeoutS) * 1e6);
+    for (auto& [id, p] : m_peers)
+        if (!p.hello && !p.kicked && now - p.connectedUs > helloTimeoutUs) {
+            m_book.count(&ServerCounters::helloTimeouts);
+            kick(id, p, RefuseReason::BadHello, out);
+        }
+    // The whole list, paced: a peer editing fast (any hello may claim the instructor's role)
+    // cannot make the server queue a list per edit for every participant.
+    if (m_marksOut.due(now))
+        out.messages.push_back({participants(), Channel::Control, marksMessage()});
+    if (m_roster.due(now))
+        out.messages.push_back({participants(), Channel::Control, rosterMessage()});
+    for (auto& [id, p] : m_peers)
+        if (!p.kicked && p.modeSwitch.pending() && p.modeSwitch.due(now))
+            pushSwitch(id, p, now, out);
+    countSwitches();
+}
+
+// [SECTION] messages
+
+PolicyOutput SessionPolicy::receive(uint16_t id, std::span<const uint8_t> message, uint64_t now) {
+    PolicyOutput out;
+    auto it = m_peers.find(id);
+    if (it == m_peers.end() || it->second.kicked)
+        return out;
+    Peer& p = it->second;
+    if (handle(id, p, message, now, out))
+        return out;
+    out.malformed = true;
+    m_book.peer(id, [](PeerReport& r) { ++r.malformed; });
+    if (++p.malformed > m_config.malformedLimit && !p.kicked) {
+        m_book.count(&ServerCounters::malformedKicks);
+        kick(id, p, RefuseReason::Malformed, out);
+    }
+    return out;
+}
+
+// False for a malformed message.
+bool SessionPolicy::handle(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
+                           PolicyOutput& out) {
+    const uint8_t type = peekMessageType(data);
+    if (!p.hello)
+        return hello(id, p, data, now, out);
+    switch (MessageType(type)) {
+    case MessageType::ViewRequest: {
+        ViewRequest r;
+        if (!decodeMessage(data, r))
+            return false;
+        if (viewTooLarge(r.view)) { // well-formed, but more than we serve: dropped and counted
+            m_book.record([&](ServerReport& rep) {
+                ++rep.counters.viewsRefused;
+                ++rep.peers[id].viewsRefused;
+            });
+            return true;
+        }
+        SimEvent ev = SimEvent::of(SimEvent::Kind::View, id);
+        ev.camera = toCamera(r.view);
+        ev.viewId = r.requestId;
+        out.events.push_back(std::move(ev));
+        return true;
+    }
+    case MessageType::ToolState:
+        return toolState(id, p, data, now, out);
+    case MessageType::SyncMode:
+        return syncMode(id, p, data, now, out);
+    case MessageType::Annotate:
+        return annotate(id, p, data);
+    case MessageType::TakeOver:
+        return takeOver(id, p, data);
+    case MessageType::Ping: {
+        Ping ping;
+        if (!decodeMessage(data, ping))
+            return false;
+        Pong pong{ping.clientTimeUs, now};
+        out.messages.push_back({{id}, Channel::Control, encodeMessage(pong)});
+        return true;
+    }
+    default:
+        return false; // unknown, or a message only the server sends
+    }
+}
+
+bool SessionPolicy::hello(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
+                          PolicyOutput& out) {
+    Hello h;
+    if (peekMessageType(data) != uint8_t(MessageType::Hello) || !decodeMessage(data, h))
+        return false;
+    p.hello = true;
+    p.helloMsg = h;
+    p.sync = h.sync;
+    p.volumeCodec = h.volumeCodec;
+    m_book.peer(id, [&](PeerReport& r) {
+        r.hello = true;
+        r.name = h.name;
+        r.role = h.role;
+        r.sync = h.sync;
+    });
+    if (viewTooLarge(h.view)) {
+        // Refused before it is listed: nobody else hears of it.
+        p.kicked = true;
+        m_book.peer(id, [](PeerReport& r) { r.kicked = true; });
+        out.disconnects.push_back({id, uint32_t(RefuseReason::BadHello)});
+        return true;
+    }
+    welcome(id, now, out);
+    SimEvent ev = SimEvent::of(SimEvent::Kind::Join, id);
+    ev.inFlight = p.inFlight;
+    ev.camera = toCamera(h.view);
+    ev.codec = h.codec;
+    ev.sync = h.sync;
+    ev.volumeCodec = h.volumeCodec;
+    out.events.push_back(std::move(ev));
+    return true;
+}
+
+// What a newcomer is told after its hello: the welcome, then the marks; everyone gets the roster.
+void SessionPolicy::welcome(uint16_t id, uint64_t now, PolicyOutput& out) {
+    Welcome w;
+    w.clientId = id;
+    w.serverTimeUs = now;
+    w.volumeDims = m_dims;
+    w.spacing = m_spacing;
+    w.volumeName = m_config.volumeName; // at most kMaxVolumeNameBytes (checked at start)
+    w.maxViewPixels = uint32_t(m_config.maxViewPixels);
+    out.messages.push_back({{id}, Channel::Control, encodeMessage(w)});
+    m_roster.mark(true);
+    if (!m_marks.empty())
+        out.messages.push_back({{id}, Channel::Control, marksMessage()});
+}
+
+bool SessionPolicy::toolState(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
+                              PolicyOutput& out) {
+    ToolState t;
+    if (!decodeMessage(data, t))
+        return false;
+    // Forces and cutting both take the unit rotation (the message only bounds its norm).
+    t.orientation = glm::normalize(t.orientation);
+    try {
+        shapeOf(t).validate();
+    } catch (const Error&) {
+        return false; // a diameter the tool cannot have
+    }
+    m_book.peer(id, [](PeerReport& r) { ++r.toolStates; });
+    // A paused drill (taken over, or an instructor holding nobody) still touches the bone, as a
+    // burr that does not spin: forces, relays, no cutting.
+    if (t.drilling && !mayCut(id, p.helloMsg.role)) {
+        t.drilling = false;
+        m_book.count(&ServerCounters::drillingPaused);
+    }
+    if (m_config.hapticModels)
+        answerHaptic(id, p, t, now, out);
+    SimEvent ev = SimEvent::of(SimEvent::Kind::Tool, id);
+    ev.tool = t;
+    ev.arrivedUs = now;
+    out.events.push_back(std::move(ev));
+    const std::vector<uint16_t> others = participants(id);
+    if (!others.empty()) {
+        ToolRelay relay{id, t};
+        out.messages.push_back({others, Channel::ToolState, encodeMessage(relay)});
+    }
+    return true;
+}
+
+// The force at the tool's pose, answered at once (before and independent of drilling), and
+// relayed to every instructor but the tool's own client.
+void SessionPolicy::answerHaptic(uint16_t id, Peer& p, const ToolState& t, uint64_t now,
+                                 PolicyOutput& out) {
+    HapticModel m;
+    m.toolSequence = t.sequence;
+    m.serverReceivedUs = now;
+    m.clientTimeUs = t.clientTimeUs;
+    m.position = t.position;
+    // The drilling resistance resists the tool's motion: its velocity from this peer's states.
+    const glm::vec3 velocity = p.toolVelocity.update(t.position, double(t.clientTimeUs) * 1e-6);
+    const ForceAnswer f = m_force(t, velocity);
+    m.force = f.force.force;
+    m.gradient = f.force.gradient;
+    m.contact = f.force.contact;
+    m.serverSentUs = f.doneUs;
+    const Role instructor = Role::Instructor;
+    const std::vector<uint16_t> instructors = participants(id, &instructor);
+    // Counted before it is sent: readers never see fewer than were received.
+    m_book.record([&](ServerReport& r) {
+        r.forceComputeUs.add(double(f.computeUs));
+        r.hapticServiceUs.add(double(f.doneUs - now));
+        ++r.counters.hapticModelsSent;
+        r.counters.hapticRelaysSent += instructors.size();
+    });
+    out.messages.push_back({{id}, Channel::Haptic, encodeMessage(m)});
+    if (!instructors.empty()) {
+        HapticRelay relay{id, m};
+        out.messages.push_back({instructors, Channel::Haptic, encodeMessage(relay)});
+    }
+    out.flush = true;
+}
+
+bool SessionPolicy::syncMode(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
+                             PolicyOutput& out) {
+    SyncMode m;
+    if (!decodeMessage(data, m))
+        return false;
+    const bool changed = p.sync != m.sync;
+    // The mode and codec the client already has: nothing to do (a switch to volume encodes the
+    // whole volume; a client repeating it would slow every other one).
+    if (!changed && m.volumeCodec == p.volumeCodec)
+        return true;
+    p.sync = m.sync;
+    p.volumeCodec = m.volumeCodec;
+    // Paced: what reaches the simulation when it is due is the latest mode. Counted as waiting
+    // before the report shows the switch, so a reader of both never sees an idle server.
+    p.modeSwitch.mark();
+    if (p.modeSwitch.due(now))
+        pushSwitch(id, p, now, out);
+    countSwitches();
+    m_book.peer(id, [&](PeerReport& r) {
+        r.sync = m.sync;
+        ++r.syncSwitches;
+    });
+    if (changed)
+        m_roster.mark();
+    return true;
+}
+
+void SessionPolicy::pushSwitch(uint16_t id, Peer& p, uint64_t now, PolicyOutput& out) {
+    SimEvent ev = SimEvent::of(SimEvent::Kind::Sync, id);
+    ev.sync = p.sync;
+    ev.volumeCodec = p.volumeCodec;
+    ev.arrivedUs = now;
+    out.events.push_back(std::move(ev));
+}
+
+// Well-formed but not allowed: counted, not applied (and not malformed).
+bool SessionPolicy::annotate(uint16_t id, const Peer& p, std::span<const uint8_t> data) {
+    Annotate a;
+    if (!decodeMessage(data, a))
+        return false;
+    auto refuse = [&] {
+        m_book.count(&ServerCounters::annotationsRefused);
+        return true;
+    };
+    if (p.helloMsg.role != Role::Instructor)
+        return refuse();
+    switch (a.op) {
+    case Annotate::Op::Add:
+        if (m_marks.size() >= kMaxAnnotations || m_nextMarkId == 0)
+            return refuse();
+        m_marks[m_nextMarkId] = {m_nextMarkId, id, a.position, a.label};
+        ++m_nextMarkId;
+        break;
+    case Annotate::Op::Remove:
+        if (!m_marks.erase(a.id))
+            return true; // already gone (another instructor removed it): nothing to do
+        break;
+    case Annotate::Op::Clear:
+        if (m_marks.empty())
+            return true;
+        m_marks.clear();
+        break;
+    }
+    m_marksOut.mark();
+    return true;
+}
+
+bool SessionPolicy::takeOver(uint16_t id, const Peer& p, std::span<const uint8_t> data) {
+    TakeOver m;
+    if (!decodeMessage(data, m))
+        return false;
+    auto refuse = [&] {
+        m_book.count(&ServerCounters::takeOversRefused);
+        return true;
+    };
+    if (p.helloMsg.role != Role::Instructor)
+        return refuse();
+    if (m.trainee == 0) {
+        if (releaseTakeOvers(id))
+            m_roster.mark();
+        return true;
+    }
+    auto target = m_peers.find(m.trainee);
+    if (target == m_peers.end() || !target->second.hello || target->second.kicked ||
+        target->second.helloMsg.role != Role::Trainee)
+        return refuse();
+    auto held = m_takenOver.find(m.trainee);
+    if (held != m_takenOver.end())
+        return held->second == id ? true : refuse(); // another instructor's: handed back first
+    releaseTakeOvers(id);                            // one trainee at a time
+    m_takenOver[m.trainee] = id;
+    m_roster.mark();
+    return true;
+}
+
+// [SECTION] helpers
+
+std::vector<uint16_t> SessionPolicy::participants(uint16_t except, const Role* role) const {
+    std::vector<uint16_t> ids;
+    for (const auto& [id, p] : m_peers)
+        if (id != except && p.hello && !p.kicked && (!role || p.helloMsg.role == *role))
+            ids.push_back(id);
+    return ids;
+}
+
+std::vector<uint8_t> SessionPolicy::rosterMessage() const {
+    Participants roster;
+    for (const auto& [id, p] : m_peers) {
+        if (!p.hello || p.kicked)
+            continue;
+        auto held = m_takenOver.find(id);
+        roster.list.push_back({id, p.helloMsg.role, p.sync, p.helloMsg.name,
+                               held == m_takenOver.end() ? uint16_t(0) : held->second});
+    }
+    return encodeMessage(roster);
+}
+
+std::vector<uint8_t> SessionPolicy::marksMessage() const {
+    Annotations marks;
+    for (const auto& [id, a] : m_marks)
+        marks.list.push_back(a);
+    return encodeMessage(marks);
+}
+
+// A trainee nobody holds, or an instructor holding a trainee, may cut.
+bool SessionPolicy::mayCut(uint16_t id, Role role) const {
+    if (role == Role::Trainee)
+        return !m_takenOver.count(id);
+    return std::any_of(m_takenOver.begin(), m_takenOver.end(),
+                       [&](const auto& held) { return held.second == id; });
+}
+
+// Hands back whatever `id` holds or is held by; true when that changed anything.
+bool SessionPolicy::releaseTakeOvers(uint16_t id) {
+    return std::erase_if(m_takenOver, [&](const auto& held) {
+               return held.first == id || held.second == id;
+           }) > 0;
+}
+
+bool SessionPolicy::viewTooLarge(const ViewSpec& v) const {
+    return int64_t(v.width) * int64_t(v.height) > m_config.maxViewPixels;
+}
+
+void SessionPolicy::countSwitches() {
+    m_switchesWaiting = int(std::count_if(m_peers.begin(), m_peers.end(), [](const auto& kv) {
+        return kv.second.modeSwitch.pending();
+    }));
+}
+
+} // namespace trephine::net

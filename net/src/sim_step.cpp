@@ -1,0 +1,308 @@
+#include "net/sim_step.h"
+
+#include "libsim/dirty_rect.h"
+#include "libsim/tool.h"
+
+#include <algorithm>
+
+namespace trephine::net {
+
+ToolShape shapeOf(const ToolState& t) {
+    return ToolKind(t.toolKind) == ToolKind::Perforator ? ToolShape::perforator(t.diameterMm)
+                                                        : ToolShape::burr(t.diameterMm);
+}
+
+namespace {
+
+// Air has no material: a voxel of density 0 is labelled Air, as erosion and box cuts leave it.
+// With that invariant a volume client derives materials exactly from box densities.
+Volume normaliseAir(Volume v) {
+    uint8_t* den = v.densityData();
+    uint8_t* mat = v.materialData();
+    for (size_t i = 0; i < v.voxelCount(); ++i)
+        if (den[i] == 0)
+            mat[i] = uint8_t(Material::Air);
+    return v;
+}
+
+} // namespace
+
+SimulationStep::SimulationStep(Volume volume, const StepConfig& config, Outbox& outbox,
+                               ReportBook& book, ServerClock clock)
+    : m_config(config), m_outbox(outbox), m_book(book), m_clock(std::move(clock)),
+      m_volume(normaliseAir(std::move(volume))), m_pool(config.renderThreads),
+      m_renderer(m_volume, &m_pool) {}
+
+void SimulationStep::Batch::changedBy(const Box3i& box, uint64_t arrivedUs) {
+    changed.merge(box);
+    causeUs = causeUs ? std::min(causeUs, arrivedUs) : arrivedUs;
+}
+
+void SimulationStep::step(const std::vector<SimEvent>& batch, uint64_t now) {
+    Batch b;
+    for (const SimEvent& ev : batch) {
+        switch (ev.kind) {
+        case SimEvent::Kind::Join:
+        case SimEvent::Kind::View:
+        case SimEvent::Kind::Sync:
+        case SimEvent::Kind::Leave:
+            applyClientEvent(ev, b, now);
+            break;
+        case SimEvent::Kind::Cut:
+            applyCut(ev, b);
+            break;
+        case SimEvent::Kind::Voxels:
+            applyVoxels(ev, b);
+            break;
+        case SimEvent::Kind::Tool:
+            applyTool(ev, b);
+            break;
+        }
+    }
+    // Volume clients need none of the rendering below: in a mixed session they never wait for
+    // the DBI clients' renders.
+    postVolumes(b);
+    renderViews(b, updateGrid(b));
+}
+
+// [SECTION] events
+
+void SimulationStep::applyClientEvent(const SimEvent& ev, Batch& b, uint64_t now) {
+    switch (ev.kind) {
+    case SimEvent::Kind::Join:
+    case SimEvent::Kind::View: {
+        Client& c = m_clients[ev.client];
+        c.camera = ev.camera;
+        if (ev.kind == SimEvent::Kind::Join) {
+            c.sync = ev.sync;
+            m_outbox.join(ev.client, ev.inFlight, ev.codec, ev.volumeCodec);
+            if (c.sync == Sync::Volume)
+                b.needVolume[ev.client] = now;
+        } else {
+            m_outbox.viewChanged(ev.client, ev.viewId);
+        }
+        // A volume client renders its views itself; the server only keeps the camera for a
+        // later switch to DBI. A DBI client's waiting image belonged to the view it left (maybe
+        // another size, even under the same id): the full image of the new view replaces it.
+        if (c.sync == Sync::Dbi)
+            b.needFull[ev.client] = now;
+        break;
+    }
+    case SimEvent::Kind::Sync: {
+        auto it = m_clients.find(ev.client);
+        if (it == m_clients.end())
+            break;
+        it->second.sync = ev.sync;
+        m_outbox.modeChanged(ev.client, ev.sync, ev.volumeCodec);
+        if (ev.sync == Sync::Volume) {
+            b.needFull.erase(ev.client);
+            b.needVolume[ev.client] = now;
+        } else {
+            b.needVolume.erase(ev.client);
+            b.needFull[ev.client] = now;
+        }
+        break;
+    }
+    case SimEvent::Kind::Leave:
+        m_clients.erase(ev.client);
+        m_outbox.leave(ev.client);
+        b.needFull.erase(ev.client);
+        b.needVolume.erase(ev.client);
+        break;
+    default:
+        break;
+    }
+}
+
+void SimulationStep::applyCut(const SimEvent& ev, Batch& b) {
+    const Box3i box = ev.box.intersect(m_volume.bounds());
+    if (box.empty())
+        return;
+    const uint64_t e0 = m_clock();
+    {
+        std::unique_lock write(m_voxelMutex);
+        m_volume.fill(box, 0, Material::Air);
+    }
+    b.erodeUs += m_clock() - e0;
+    b.changedBy(box, ev.arrivedUs);
+}
+
+void SimulationStep::applyVoxels(const SimEvent& ev, Batch& b) {
+    const Box3i& box = ev.box; // checked by SessionServer::submitVoxels
+    const uint64_t e0 = m_clock();
+    {
+        std::unique_lock write(m_voxelMutex);
+        size_t i = 0;
+        for (int z = box.lo.z; z < box.hi.z; ++z)
+            for (int y = box.lo.y; y < box.hi.y; ++y)
+                for (int x = box.lo.x; x < box.hi.x; ++x, ++i)
+                    m_volume.set(x, y, z, ev.density[i], Material(ev.material[i]));
+    }
+    b.erodeUs += m_clock() - e0;
+    b.changedBy(box, ev.arrivedUs);
+    b.materials = true;
+}
+
+void SimulationStep::applyTool(const SimEvent& ev, Batch& b) {
+    auto it = m_clients.find(ev.client);
+    if (it == m_clients.end())
+        return;
+    Client& c = it->second;
+    const ToolState& t = ev.tool;
+    // Unsequenced: an older state that arrives late is dropped (newest wins).
+    if (c.hasTool && int32_t(t.sequence - c.lastSequence) <= 0)
+        return;
+    const ToolShape shape = shapeOf(t);
+    if (!c.driller || c.driller->shape().kind != shape.kind ||
+        c.driller->shape().diameterMm != shape.diameterMm) {
+        c.driller.emplace(shape);
+        c.lastDrilling = false; // another tool: nothing to sweep from
+    }
+    // The step is the time between the client's own timestamps (time passed in).
+    float dt = 0.0f;
+    if (c.hasTool && t.clientTimeUs > c.lastClientUs)
+        dt = std::min(float(double(t.clientTimeUs - c.lastClientUs) * 1e-6), m_config.maxStepS);
+    c.hasTool = true;
+    c.lastSequence = t.sequence;
+    c.lastClientUs = t.clientTimeUs;
+    m_book.count(&ServerCounters::toolStatesApplied);
+    const ToolPose pose{t.position, t.orientation};
+    const ToolPose from = c.lastPose;
+    const bool sweep = c.lastDrilling;
+    c.lastPose = pose;
+    c.lastDrilling = t.drilling && t.speed > 0.0f;
+    if (!t.drilling || t.speed <= 0.0f) {
+        // Lifted clear of bone between holes, the perforator's clutch re-engages (this is the
+        // volume's only writer: reading it needs no lock).
+        c.driller->observe(m_volume, pose);
+        return;
+    }
+    if (dt <= 0.0f)
+        return;
+    // The cutter moved from the last drilling pose to this one during dt: it sweeps the path (a
+    // quarter voxel a sub-step, dt shared out), so a fast stroke cuts a groove rather than dents
+    // at the sampled poses. The lock is taken per sub-step so that a haptic answer never waits
+    // for more than one.
+    const glm::vec3 spacing = m_volume.spacing();
+    const float quarterVoxel = 0.25f * std::min({spacing.x, spacing.y, spacing.z});
+    const std::vector<ToolPose> path =
+        sweep ? sweepPoses(from, pose, quarterVoxel, m_config.maxSweepMm)
+              : std::vector<ToolPose>{pose};
+    const float stepDt = dt / float(path.size());
+    const uint64_t e0 = m_clock();
+    Box3i changed;
+    for (const ToolPose& p : path) {
+        DrillResult r;
+        {
+            std::unique_lock write(m_voxelMutex);
+            r = c.driller->drill(m_volume, p, t.speed, stepDt);
+        }
+        changed.merge(r.changed);
+    }
+    b.erodeUs += m_clock() - e0;
+    if (!changed.empty())
+        b.changedBy(changed, ev.arrivedUs);
+}
+
+// [SECTION] posting
+
+void SimulationStep::postVolumes(const Batch& b) {
+    // The changed voxels themselves, or the whole volume after a join or a switch (which already
+    // holds this batch's change).
+    for (auto& [id, c] : m_clients) {
+        if (c.sync != Sync::Volume)
+            continue;
+        auto full = b.needVolume.find(id);
+        if (full != b.needVolume.end())
+            m_outbox.offerVolume(id, m_volume,
+                                 VolumeChange{m_volume.bounds(), true, true, full->second, 0});
+        else if (!b.changed.empty())
+            m_outbox.offerVolume(
+                id, m_volume,
+                VolumeChange{b.changed, false, b.materials, b.causeUs, uint32_t(b.erodeUs)});
+        else
+            m_outbox.offerVolume(id, m_volume, std::nullopt);
+    }
+}
+
+void SimulationStep::syncGrid() {
+    if (m_gridRebuildPending)
+        m_renderer.rebuild(); // voxels written wholesale may have raised densities
+    else if (!m_gridPending.empty())
+        m_renderer.volumeChanged(m_gridPending); // erosion only: the hit caches stay valid
+    m_gridRebuildPending = false;
+    m_gridPending = {};
+}
+
+// Returns the microseconds the brick grid took (rendering data: it counts in the render stage).
+uint32_t SimulationStep::updateGrid(const Batch& b) {
+    // Erosion only lowers densities, so the views' hit caches stay valid; voxels written
+    // wholesale may raise them, which invalidates every cache (the next render restarts it).
+    // With no DBI client the grid waits: nothing here renders.
+    if (b.materials)
+        m_gridRebuildPending = true;
+    else
+        m_gridPending.merge(b.changed);
+    if (std::none_of(m_clients.begin(), m_clients.end(),
+                     [](const auto& c) { return c.second.sync == Sync::Dbi; }))
+        return 0;
+    const uint64_t g0 = m_clock();
+    syncGrid();
+    return uint32_t(m_clock() - g0);
+}
+
+void SimulationStep::renderViews(const Batch& b, uint32_t gridUs) {
+    auto dbiView = [](const Client& c, const Camera& cam) {
+        return c.sync == Sync::Dbi && c.camera == cam;
+    };
+    // Frames of views no DBI client holds any more are dropped; new views are rendered whole.
+    std::erase_if(m_views, [&](const ViewFrame& v) {
+        return std::none_of(m_clients.begin(), m_clients.end(),
+                            [&](const auto& c) { return dbiView(c.second, v.camera); });
+    });
+    for (const auto& [id, c] : m_clients) {
+        if (c.sync != Sync::Dbi || std::any_of(m_views.begin(), m_views.end(),
+                                               [&](const auto& v) { return v.camera == c.camera; }))
+            continue;
+        ViewFrame& v = m_views.emplace_back();
+        v.camera = c.camera;
+        v.frame = m_renderer.render(c.camera, &v.cache);
+        m_book.count(&ServerCounters::renders);
+    }
+    for (ViewFrame& v : m_views) {
+        // The frame first takes the change, so a full refresh sent now holds it too.
+        PixelRect rect;
+        uint32_t renderUs = gridUs;
+        if (!b.changed.empty()) {
+            rect = dirtyScreenRect(v.camera, m_volume, b.changed);
+            if (!rect.empty()) {
+                const uint64_t r0 = m_clock();
+                // The paper's way re-renders the whole view, through the view's hit cache as the
+                // volume client's re-render does, so the study compares like with like.
+                m_renderer.render(v.camera, m_fullRender.load() ? v.frame.bounds() : rect, v.frame,
+                                  &v.cache);
+                renderUs += uint32_t(m_clock() - r0);
+                m_book.count(&ServerCounters::renders);
+            }
+        }
+        for (const auto& [id, c] : m_clients) {
+            if (!dbiView(c, v.camera))
+                continue;
+            auto full = b.needFull.find(id);
+            if (full != b.needFull.end())
+                m_outbox.postImage(id, v.camera, v.frame, v.frame.bounds(), true, full->second, {});
+            else if (!rect.empty())
+                m_outbox.postImage(id, v.camera, v.frame, rect, false, b.causeUs,
+                                   {uint32_t(b.erodeUs), renderUs, gridUs});
+        }
+    }
+}
+
+// [SECTION] inspection
+
+Dbi SimulationStep::render(const Camera& camera) {
+    syncGrid();
+    return m_renderer.render(camera);
+}
+
+} // namespace trephine::net

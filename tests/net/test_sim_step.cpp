@@ -1,0 +1,183 @@
+// The server's simulation step on its own: no ENet, no threads, no sleeps. A test hands it
+// batches of events with the time, takes what it posted from the outbox and applies it as a
+// client would, then compares with a fresh render of the step's volume.
+#include "net/sim_step.h"
+
+#include "libsim/skull.h"
+#include "libsim/tool.h"
+#include "net/codec.h"
+#include "net/view.h"
+
+#include <gtest/gtest.h>
+
+using namespace trephine;
+using namespace trephine::net;
+
+namespace {
+
+bool live(uint16_t) {
+    return true;
+}
+
+struct StepRig {
+    ReportBook book;
+    Outbox outbox{1 << 30, book, steadyNowUs};
+    Volume original;
+    SimulationStep step;
+    uint64_t now = 1'000'000;
+
+    explicit StepRig(Volume v)
+        : original(v), step(std::move(v), StepConfig{0.05f, 10.0f, 1}, outbox, book, steadyNowUs) {}
+
+    void run(std::vector<SimEvent> batch) {
+        now += 10000;
+        step.step(batch, now);
+    }
+    SimEvent join(uint16_t id, const Camera& camera, Codec codec, Sync sync = Sync::Dbi) {
+        SimEvent ev = SimEvent::of(SimEvent::Kind::Join, id);
+        ev.camera = camera;
+        ev.codec = codec;
+        ev.sync = sync;
+        ev.volumeCodec = Codec::Lz4;
+        ev.inFlight = std::make_shared<std::atomic<int64_t>>(0);
+        return ev;
+    }
+    SimEvent cut(const Box3i& box) {
+        SimEvent ev = SimEvent::of(SimEvent::Kind::Cut, 0);
+        ev.box = box;
+        ev.arrivedUs = now;
+        return ev;
+    }
+    uint64_t applied() const {
+        return book.read([](const ServerReport& r) { return r.counters.toolStatesApplied; });
+    }
+};
+
+// Applies an image update to `dbi` as SessionClient does (raw codec: bit for bit).
+void applyImage(const Outbox::Ready& r, const Camera& camera, Dbi& dbi) {
+    ImageUpdate u;
+    ASSERT_TRUE(decodeMessage(r.message, u));
+    Dbi patch;
+    ASSERT_TRUE(decodeImage(u.payload, u.rawBytes, u.codec, u.width, u.height, camera, patch));
+    if (u.full)
+        dbi = patch;
+    else
+        dbi.apply(patch, u.x, u.y);
+}
+
+void applyVolume(const Outbox::Ready& r, Volume& copy, const Volume& like) {
+    VolumeUpdate u;
+    ASSERT_TRUE(decodeMessage(r.message, u));
+    if (u.full) {
+        ASSERT_TRUE(
+            decodeVolumeFull(u.payload, u.rawBytes, u.codec, like.dims(), like.spacing(), copy));
+        return;
+    }
+    std::vector<uint8_t> bytes;
+    ASSERT_TRUE(decompressBytes(u.payload, u.codec, u.rawBytes, bytes));
+    const Box3i box{{u.x, u.y, u.z}, {u.x + u.sizeX, u.y + u.sizeY, u.z + u.sizeZ}};
+    ASSERT_TRUE(applyVolumeBox(copy, box, bytes));
+}
+
+} // namespace
+
+// A DBI client joining gets its whole view; a cut gets it BB_screen only, and its copy is then a
+// fresh render bit for bit. A volume client beside it gets the whole volume, then the box.
+TEST(SimulationStep, JoinsGetTheWholeViewOrVolumeAndCutsOnlyWhatChanged) {
+    StepRig rig(makeSphere(32));
+    const Camera cam = cameraPreset("top", rig.original, {48, 48});
+    rig.run({rig.join(1, cam, Codec::Raw), rig.join(2, cam, Codec::Raw, Sync::Volume)});
+    Outbox::Taken t = rig.outbox.take(live);
+    ASSERT_EQ(t.updates.size(), 2u);
+    Dbi dbi;
+    Volume copy;
+    EXPECT_EQ(t.updates[0].mode, Sync::Dbi);
+    EXPECT_TRUE(t.updates[0].full);
+    applyImage(t.updates[0], cam, dbi);
+    applyVolume(t.updates[1], copy, rig.original);
+    EXPECT_TRUE(copy == rig.step.volume());
+    EXPECT_EQ(rig.step.viewCount(), 1u);
+
+    rig.run({rig.cut(surfaceBox(rig.original, 6))});
+    t = rig.outbox.take(live);
+    ASSERT_EQ(t.updates.size(), 2u);
+    ImageUpdate u;
+    ASSERT_TRUE(decodeMessage(t.updates[0].message, u));
+    EXPECT_FALSE(u.full);
+    EXPECT_LT(int(u.width) * u.height, 48 * 48) << "BB_screen, not the whole view";
+    EXPECT_EQ(u.causeServerUs, rig.now - 10000) << "the cut's arrival";
+    applyImage(t.updates[0], cam, dbi);
+    applyVolume(t.updates[1], copy, rig.original);
+    EXPECT_TRUE(compare(dbi, rig.step.render(cam)).identical());
+    EXPECT_TRUE(copy == rig.step.volume());
+    EXPECT_FALSE(rig.step.volume() == rig.original);
+
+    // A switch to DBI: the volume client now gets the whole view, sharing the frame.
+    SimEvent sw = SimEvent::of(SimEvent::Kind::Sync, 2);
+    sw.sync = Sync::Dbi;
+    rig.run({sw});
+    t = rig.outbox.take(live);
+    ASSERT_EQ(t.updates.size(), 1u);
+    EXPECT_EQ(t.updates[0].client, 2);
+    EXPECT_TRUE(t.updates[0].full);
+    EXPECT_EQ(rig.step.viewCount(), 1u);
+    // A view change to a smaller window: the full image of the new view, and nothing outside it.
+    SimEvent view = SimEvent::of(SimEvent::Kind::View, 1);
+    view.viewId = 3;
+    view.camera = cameraPreset("top", rig.original, {24, 16});
+    rig.run({view});
+    t = rig.outbox.take(live);
+    ASSERT_EQ(t.updates.size(), 1u);
+    ASSERT_TRUE(decodeMessage(t.updates[0].message, u));
+    EXPECT_TRUE(u.full);
+    EXPECT_EQ(u.viewId, 3u);
+    EXPECT_EQ(u.width, 24);
+    EXPECT_EQ(u.height, 16);
+    EXPECT_EQ(rig.step.viewCount(), 2u) << "client 2 keeps the first view";
+    // A leave: nothing more for it.
+    rig.run({SimEvent::of(SimEvent::Kind::Leave, 2), rig.cut(surfaceBox(rig.original, 8))});
+    t = rig.outbox.take(live);
+    ASSERT_EQ(t.updates.size(), 1u);
+    EXPECT_EQ(t.updates[0].client, 1);
+    EXPECT_EQ(rig.step.viewCount(), 1u) << "the frame nobody holds is dropped";
+}
+
+// Two drilling tool states 6 mm apart: the step sweeps the burr along the path between them, so
+// the bone half-way is cut although neither sampled pose reaches it; after a pause in drilling the
+// next state is drilled where it is. A state older than the last applied is dropped.
+TEST(SimulationStep, TheCutterSweepsBetweenDrillingToolStates) {
+    StepRig rig(makeSphere(48));
+    const Volume& sphere = rig.original;
+    rig.run({rig.join(1, cameraPreset("top", sphere, {32, 32}), Codec::Raw)});
+    const float top = sphereRadiusMm(48);
+    auto state = [&](uint32_t seq, float x, float y, bool drilling) {
+        SimEvent ev = SimEvent::of(SimEvent::Kind::Tool, 1);
+        ev.tool.sequence = seq;
+        ev.tool.clientTimeUs = 1000000 + uint64_t(seq) * 20000;
+        ev.tool.toolKind = uint8_t(ToolKind::Burr);
+        ev.tool.diameterMm = 4.0f;
+        ev.tool.position = {x, y, top - 1.0f};
+        ev.tool.speed = 1.0f;
+        ev.tool.drilling = drilling;
+        ev.arrivedUs = rig.now;
+        return ev;
+    };
+    auto cutAt = [&](float x, float y) {
+        const glm::ivec3 v = glm::ivec3(glm::round(sphere.toVoxel({x, y, top - 1.0f})));
+        return rig.step.volume().density(v.x, v.y, v.z) < sphere.density(v.x, v.y, v.z);
+    };
+    // A swept stroke along x at y = -5, then the drill lifted off, moved, and restarted at y = +5.
+    rig.run({state(1, -3.0f, -5.0f, true), state(2, 3.0f, -5.0f, true)});
+    rig.run({state(3, -3.0f, 5.0f, false)});
+    rig.run({state(4, 3.0f, 5.0f, true)});
+    EXPECT_EQ(rig.applied(), 4u);
+    EXPECT_TRUE(cutAt(0.0f, -5.0f)) << "swept: the groove is continuous";
+    EXPECT_TRUE(cutAt(3.0f, 5.0f)) << "drilled where it restarted";
+    EXPECT_FALSE(cutAt(0.0f, 5.0f)) << "no sweep across a pause in drilling";
+    EXPECT_FALSE(cutAt(-3.0f, 5.0f)) << "nor where the drill was off";
+
+    const Volume before = rig.step.volume();
+    rig.run({state(2, 0.0f, 0.0f, true)});
+    EXPECT_EQ(rig.applied(), 4u) << "late: newest wins";
+    EXPECT_TRUE(rig.step.volume() == before);
+}
