@@ -594,6 +594,12 @@ const ServerConfig& checkedConfig(const ServerConfig& config) {
 SessionServer::SessionServer(Volume volume, ServerConfig config)
     : m_impl(std::make_unique<Impl>(checkedVolume(std::move(volume)), checkedConfig(config))),
       m_config(std::move(config)) {
+    if (!m_config.scene)
+        m_config.scene = std::make_shared<const Scene>(buildScene(m_impl->volume));
+    Scene scene = *m_config.scene;
+    m_sceneMessage = encodeMessage(scene);
+    if (m_sceneMessage.empty() || scene.dims != m_impl->volume.dims())
+        throw Error("server: the scene given is not one of this volume");
     for (const AnnotationInfo& m : m_config.marks) {
         const uint32_t id = m_impl->nextAnnotationId++;
         m_impl->annotations[id] = {id, 0, m.position, m.label};
@@ -641,12 +647,14 @@ void SessionServer::stop() {
             saveVolume(m_impl->volume, path);
             try {
                 writeMarksFile(marksPathFor(path), marks);
+                writeSceneFile(scenePathFor(path), *m_config.scene);
             } catch (...) {
                 // The new volume is in place: an older marks file left beside it would come back
                 // with it (marks this session removed, none of those it placed).
                 std::error_code ec;
-                if (std::filesystem::is_regular_file(marksPathFor(path), ec))
-                    std::filesystem::remove(marksPathFor(path), ec);
+                for (const std::string& beside : {marksPathFor(path), scenePathFor(path)})
+                    if (std::filesystem::is_regular_file(beside, ec))
+                        std::filesystem::remove(beside, ec);
                 throw;
             }
         };
@@ -911,6 +919,7 @@ void SessionServer::networkLoop() {
             w.volumeName = m_config.volumeName; // at most kMaxVolumeNameBytes (checkedConfig)
             w.maxViewPixels = uint32_t(m_config.maxViewPixels);
             sendTo(p.peer, Channel::Control, encodeMessage(w));
+            sendTo(p.peer, Channel::Control, m_sceneMessage); // the scene: net/scene.h
             sendParticipants(true);
             if (!s.annotations.empty())
                 sendTo(p.peer, Channel::Control, annotationList());

@@ -14,6 +14,7 @@
 #include "net/enet_host.h"
 #include "net/net_stats.h"
 #include "net/protocol.h"
+#include "net/scene.h"
 
 #include <atomic>
 #include <condition_variable>
@@ -38,7 +39,10 @@ struct ServerConfig {
     // Answer each tool state with a HapticModel (Channel::Haptic), relayed to every instructor as
     // a HapticRelay.
     bool hapticModels = true;
-    std::string volumeName; // sent in the welcome
+    std::string volumeName; // sent in the welcome, as a label
+    // The scene every client gets right after its welcome (net/scene.h), and that saveOnExit
+    // writes beside the volume (scenePathFor). Null: built from the volume at construction.
+    std::shared_ptr<const Scene> scene;
     // When set, stop() writes the final volume here (saveVolume) and the instructors' marks
     // beside it (marksPathFor(saveOnExit), net/marks_file.h), so a later server can start from
     // both.
@@ -176,6 +180,7 @@ private:
     std::atomic<uint64_t> m_hapticSent{0};
     std::atomic<uint64_t> m_hapticRelayed{0};
     std::string m_savedTo, m_saveError;
+    std::vector<uint8_t> m_sceneMessage; // m_config.scene, encoded once
     std::atomic<uint64_t> m_refusedFull{0};
     std::atomic<uint64_t> m_helloTimeouts{0};
     std::atomic<uint64_t> m_viewsRefused{0};
