@@ -13,6 +13,7 @@
 #include "libsim/volume_io.h"
 #include "libsim_image/dbi_io.h"
 #include "libsim_image/volume_slices.h"
+#include "net/scene.h"
 
 #include <algorithm>
 #include <charconv>
@@ -200,6 +201,19 @@ void run(const RenderOptionsCli& o) {
                     kPaperFovYDeg);
     }
     Camera camera = cameraPreset(o.camera, volume, size);
+    // A saved session's scene beside the volume: its presets, as the server computed them before
+    // the save (the drilled skull's site has moved; the view a preset names has not). Not `paper`,
+    // which sets its own spacing.
+    const std::string volumeFile = volumeFileOf(o.volume);
+    std::error_code ec;
+    if (o.camera != "paper" && !volumeFile.empty() &&
+        std::filesystem::is_regular_file(net::scenePathFor(volumeFile), ec))
+        if (const auto saved =
+                net::presetCamera(net::sceneForVolume(volume, volumeFile), o.camera, size)) {
+            camera = *saved;
+            std::printf("camera %s: from the saved scene %s\n", o.camera.c_str(),
+                        net::scenePathFor(volumeFile).c_str());
+        }
     bool custom = false;
     if (!o.eye.empty())
         camera.eye = parseVec3("--eye", o.eye), custom = true;

@@ -1,11 +1,13 @@
 // `trephine server`: hold the skull and serve trainees and instructors over ENet until SIGINT,
 // SIGTERM, SIGHUP or SIGQUIT, then apply every queued tool state and write --save-on-exit (the
-// volume, and the instructors' marks beside it, which a later `--volume` of that file reads back).
+// volume, and the instructors' marks and the scene beside it, which a later `--volume` of that
+// file reads back).
 #include "modes.h"
 
 #include "libsim/error.h"
 #include "libsim_image/volume_slices.h"
 #include "net/marks_file.h"
+#include "net/scene.h"
 #include "net/session_server.h"
 
 #include <atomic>
@@ -35,25 +37,14 @@ struct ServerOptions {
     std::string report;
 };
 
-// The file a --volume spec opens: the whole spec when it names a file, else the part before its
-// query (`s.nrrd?spacing=2,2,2`); "" for the built-in volumes and slice folders.
-std::string volumeFileOf(const std::string& spec) {
-    std::error_code ec;
-    if (std::filesystem::is_regular_file(spec, ec))
-        return spec;
-    const size_t mark = spec.rfind('?');
-    if (mark != std::string::npos && std::filesystem::is_regular_file(spec.substr(0, mark), ec))
-        return spec.substr(0, mark);
-    return {};
-}
-
 int runServer(const ServerOptions& o) {
     // Written when the session ends: a folder that is not there would lose its statistics.
     if (!o.report.empty()) {
         checkOutputFolder("--report", o.report);
         // The report is written after the save: over it, the drilled skull would become JSON.
         if (!o.saveOnExit.empty()) {
-            for (const std::string& saved : {o.saveOnExit, net::marksPathFor(o.saveOnExit)})
+            for (const std::string& saved :
+                 {o.saveOnExit, net::marksPathFor(o.saveOnExit), net::scenePathFor(o.saveOnExit)})
                 if (samePath(o.report, saved))
                     throw Error("--report " + o.report +
                                 " is where --save-on-exit writes the session: give it another "
@@ -71,6 +62,11 @@ int runServer(const ServerOptions& o) {
         std::printf("trephine server: %zu mark%s from %s\n", config.marks.size(),
                     config.marks.size() == 1 ? "" : "s", marks.c_str());
     }
+    // And its scene (presets, sites, the surgical field), so every preset names the view it named
+    // before the save, however the skull was drilled since; otherwise built from the volume.
+    config.scene = std::make_shared<const net::Scene>(net::sceneForVolume(volume, volumeFile));
+    if (!volumeFile.empty() && std::filesystem::is_regular_file(net::scenePathFor(volumeFile), ec))
+        std::printf("trephine server: the scene from %s\n", net::scenePathFor(volumeFile).c_str());
     config.port = o.port;
     config.volumeName = o.volume;
     config.saveOnExit = o.saveOnExit;
@@ -94,8 +90,9 @@ int runServer(const ServerOptions& o) {
     server.stop();
     // A failed --save-on-exit was said by stop(), with the emergency copy it made instead.
     if (!o.saveOnExit.empty() && server.saveError().empty())
-        std::printf("trephine server: wrote %s and %s\n", o.saveOnExit.c_str(),
-                    net::marksPathFor(o.saveOnExit).c_str());
+        std::printf("trephine server: wrote %s, %s and %s\n", o.saveOnExit.c_str(),
+                    net::marksPathFor(o.saveOnExit).c_str(),
+                    net::scenePathFor(o.saveOnExit).c_str());
     if (!o.report.empty()) {
         if (!writeReplacing(o.report, server.reportJson()))
             throw Error("--report " + o.report + ": cannot write it");
@@ -117,7 +114,8 @@ void addServerMode(CLI::App& root, int& exitCode) {
            "--save-on-exit", o->saveOnExit,
            "Write the final volume here when the server stops (.nrrd or .nhdr, which keep the "
            "materials), and "
-           "the instructors' marks beside it (FILE.marks, read back by --volume FILE)")
+           "the instructors' marks and the scene beside it (FILE.marks, FILE.scene, read back by "
+           "--volume FILE)")
         ->check(outputFile());
     sub->add_option("--render-threads", o->renderThreads, "Render workers (0: all cores)")
         ->check(CLI::Range(0, 256));

@@ -12,8 +12,8 @@
 #include "libsim/tool.h"
 #include "libsim_devices/devices.h"
 #include "libsim_image/dbi_io.h"
-#include "libsim_image/volume_slices.h"
 #include "net/codec.h"
+#include "net/scene.h"
 #include "net/session_client.h"
 #include "net/view.h"
 
@@ -112,10 +112,9 @@ private:
     std::atomic<uint64_t> m_ticks{0};
 };
 
-// The built-in burr hole: a 5 mm burr starts 1 mm above the default site and feeds in along the
-// normal at 1 mm/s, tool states at 100 Hz, then lifts (drilling off).
-std::vector<Sample> burrholeScript(const Volume& volume, double durationS) {
-    SurfaceSite site = defaultBurrSite(volume);
+// The built-in burr hole: a 5 mm burr starts 1 mm above the server's burr site (its scene's) and
+// feeds in along the normal at 1 mm/s, tool states at 100 Hz, then lifts (drilling off).
+std::vector<Sample> burrholeScript(const net::SceneSite& site, double durationS) {
     std::vector<Sample> out;
     int n = int(durationS * 100.0);
     for (int i = 0; i <= n; ++i) {
@@ -308,7 +307,7 @@ int runTrainee(const TraineeOptions& o) {
     config.codec = net::parseCodec(o.codec);
     config.sync = o.sync == "volume" ? net::Sync::Volume : net::Sync::Dbi;
     config.volumeCodec = net::parseCodec(o.volumeCodec);
-    // A 1x1 placeholder view: the preset needs the volume, which the welcome names.
+    // A 1x1 placeholder view: the preset comes in the server's scene, after the welcome.
     config.view.width = config.view.height = 1;
     net::SessionClient client(config);
     std::shared_mutex volumeMutex; // the haptic thread reads the local volume under it
@@ -328,15 +327,17 @@ int runTrainee(const TraineeOptions& o) {
             throw Error("trainee: " + o.connect + " refused us: " + client.closeReason());
         throw Error("trainee: no answer from " + o.connect + " (is `trephine server` running?)");
     }
-    const std::string volumeName = client.welcome().volumeName;
-    Volume volume;
-    try {
-        volume = openVolume(volumeName);
-    } catch (const Error& e) {
-        throw Error("trainee: --camera presets and scripts need the server's volume '" +
-                    volumeName + "' here too: " + e.what());
-    }
-    Camera camera = cameraPreset(o.camera, volume, {o.size, o.size});
+    // The scene follows the welcome on the same reliable channel: presets and the burr site come
+    // from the server, so the trainee needs its address only (it never opens a volume).
+    if (!pumpUntil(10.0, [&] { return client.scene() != nullptr; }))
+        throw Error("trainee: " + o.connect + " sent no scene after its welcome" +
+                    (client.closed() ? ": " + client.closeReason() : std::string()));
+    const std::shared_ptr<const net::ReceivedScene> scene = client.scene();
+    const std::optional<Camera> preset =
+        net::presetCamera(scene->scene, o.camera, {o.size, o.size});
+    if (!preset)
+        throw Error("trainee: the server's scene has no camera preset '" + o.camera + "'");
+    const Camera camera = *preset;
     // Refused (larger than the server serves, or not a view the wire carries): it would run on
     // and report the 1x1 placeholder as its picture.
     if (client.requestView(net::toViewSpec(camera)) == 0)
@@ -347,8 +348,12 @@ int runTrainee(const TraineeOptions& o) {
     if (!pumpUntil(30.0, [&] { return client.hasFullImage(); }))
         throw Error("trainee: no image from " + o.connect + ": " + client.closeReason());
 
-    if (o.script == "burrhole")
-        script = burrholeScript(volume, o.durationS > 0 ? o.durationS : 4.0);
+    if (o.script == "burrhole") {
+        const net::SceneSite* site = net::findSite(scene->scene, net::kDefaultSiteName);
+        if (!site)
+            throw Error("trainee: the server's scene has no burr site for the burrhole script");
+        script = burrholeScript(*site, o.durationS > 0 ? o.durationS : 4.0);
+    }
     std::printf("trainee: %s as client %u, view %s (%s), sync %s, codec %s, %zu script samples\n",
                 o.connect.c_str(), unsigned(client.welcome().clientId), o.camera.c_str(),
                 describe(camera).c_str(), o.sync.c_str(), o.codec.c_str(), script.size());

@@ -18,6 +18,18 @@
 
 namespace trephine::app {
 
+// The file a --volume spec opens: the whole spec when it names a file, else the part before its
+// query (`s.nrrd?spacing=2,2,2`); "" for the built-in volumes and slice folders.
+inline std::string volumeFileOf(const std::string& spec) {
+    std::error_code ec;
+    if (std::filesystem::is_regular_file(spec, ec))
+        return spec;
+    const size_t mark = spec.rfind('?');
+    if (mark != std::string::npos && std::filesystem::is_regular_file(spec.substr(0, mark), ec))
+        return spec.substr(0, mark);
+    return {};
+}
+
 // CLI::Range compares, and NaN compares false with everything, so it lets `nan` through any
 // range. For floating-point options: a finite number within [lo, hi], and one that stays finite
 // as a float.

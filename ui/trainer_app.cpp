@@ -1,5 +1,5 @@
 // The trainer window. Sections:
-// [SECTION] scene: volume-derived data (site, surgical field) built off the main thread
+// [SECTION] scene: what the server's scene gives the window (site, presets, surgical field)
 // [SECTION] haptics: the window's device and the force in either design
 // [SECTION] frame loop: snapshot -> rectangles / voxel boxes -> tool -> composite -> overlays ->
 //           panels -> comparison figures
@@ -13,9 +13,9 @@
 #include "libsim/skull.h"
 #include "libsim/stats.h"
 #include "libsim/volume.h"
-#include "libsim_image/volume_slices.h"
 #include "net/client_thread.h"
 #include "net/codec.h"
+#include "net/scene.h"
 #include "net/view.h"
 #include "ui/compositor.h"
 #include "ui/mouse_tool.h"
@@ -32,7 +32,6 @@
 #include <cstdio>
 #include <cstring>
 #include <deque>
-#include <future>
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtx/quaternion.hpp>
 #include <map>
@@ -56,23 +55,22 @@ constexpr ImU32 kTakeOverBand = IM_COL32(112, 40, 150, 255);
 
 // [SECTION] scene
 
+// What the window takes from the server's scene (net/scene.h): it never opens or generates a
+// volume, so a trainee needs the server's address only.
 struct Scene {
-    Volume volume;
+    std::shared_ptr<const net::ReceivedScene> received;
     SurfaceSite site{};
-    MeshData field;
+    float boundingRadiusMm = 0.0f;
 };
 
-Scene buildScene(const std::string& volumeName) {
+Scene sceneFrom(std::shared_ptr<const net::ReceivedScene> received) {
     Scene s;
-    s.volume = openVolume(volumeName);
-    try {
-        s.site = defaultBurrSite(s.volume);
-        s.field = makeSurgicalField(s.volume, s.site);
-    } catch (const Error&) {
-        // Not a skull: look at the top of the volume, no drape.
-        s.site.position = glm::vec3(0, 0, s.volume.extentMm().z * 0.5f);
-        s.site.normal = glm::vec3(0, 0, 1);
-    }
+    s.boundingRadiusMm = net::sceneBoundingRadius(received->scene);
+    if (const net::SceneSite* site = net::findSite(received->scene, net::kDefaultSiteName))
+        s.site = {site->position, site->normal};
+    else // a scene without a burr site: look at the top of the volume
+        s.site = {glm::vec3(0, 0, received->scene.extentMm.z * 0.5f), glm::vec3(0, 0, 1)};
+    s.received = std::move(received);
     return s;
 }
 
@@ -262,7 +260,7 @@ int runTrainerWindow(const TrainerOptions& o) {
     // client thread then hands over voxel boxes instead of re-rendering on the CPU. In DBI mode
     // the flag changes nothing, so one setting serves both designs and every switch.
     cc.client.renderLocally = false;
-    cc.client.view.width = cc.client.view.height = 1; // the real view needs the volume's name
+    cc.client.view.width = cc.client.view.height = 1; // the real view needs the server's scene
     // The haptic loop sends the tool states; the client thread hands it each force model.
     WindowDevice device;
     net::ClientThread* clientPtr = nullptr;
@@ -313,11 +311,10 @@ int runTrainerWindow(const TrainerOptions& o) {
         }
     } stopThreads{haptics, client};
 
-    std::future<Scene> sceneFuture;
     std::optional<Scene> scene;
-    std::string sceneVolume; // the volume name the scene was (or is being) built for
-    std::string sceneError;
-    Camera baseCamera; // the view before orbiting
+    std::optional<uint64_t> sceneSeen; // the id of the last scene taken (or refused)
+    std::string sceneError;            // the scene lacks what the options ask for (a preset)
+    Camera baseCamera;                 // the view before orbiting
     ViewControls viewControls;
     viewControls.distanceMm = o.distanceMm;
     viewControls.yawDeg = o.orbitDeg;
@@ -394,7 +391,7 @@ int runTrainerWindow(const TrainerOptions& o) {
 
     auto makeCamera = [&]() {
         return orbitCamera(baseCamera, viewControls.yawDeg, viewControls.pitchDeg,
-                           viewControls.distanceMm, {viewSize, viewSize}, scene->volume);
+                           viewControls.distanceMm, {viewSize, viewSize}, scene->boundingRadiusMm);
     };
 
     while (!window.shouldClose() && !(o.quit && o.quit->load())) {
@@ -416,37 +413,30 @@ int runTrainerWindow(const TrainerOptions& o) {
         const uint16_t holding = o.instructor ? heldBy(snap->participants, selfId) : 0;
         toolControls.canDrill = o.instructor ? holding != 0 : heldByOther == 0;
 
-        // Volume-derived scene once the welcome names the volume, and again when a reconnect's
-        // welcome names another (a server restarted on another volume: the old skull's scalp,
-        // drape and camera stayed around the new one).
-        // A volume that could not be opened is tried again too (its error stayed for good).
-        if (snap->welcome && (scene || !sceneError.empty()) && !sceneFuture.valid() &&
-            snap->welcome->volumeName != sceneVolume) {
-            scene.reset();
+        // The scene the server sent after its welcome, and again when a reconnect's scene is
+        // another (a server restarted on another volume: the old skull's scalp, drape and camera
+        // stayed around the new one); the same scene again keeps the view as it is.
+        if (snap->scene && snap->scene->scene.sceneId != sceneSeen) {
+            sceneSeen = snap->scene->scene.sceneId;
+            scene = sceneFrom(snap->scene);
             sceneError.clear();
-        }
-        if (snap->welcome && !scene && !sceneFuture.valid() && sceneError.empty()) {
-            sceneVolume = snap->welcome->volumeName;
-            sceneFuture = std::async(std::launch::async, buildScene, sceneVolume);
-        }
-        if (sceneFuture.valid() &&
-            sceneFuture.wait_for(std::chrono::seconds(0)) == std::future_status::ready) {
-            try {
-                scene = sceneFuture.get();
-                comp.destroy(fieldMesh); // the previous volume's, if any
-                fieldMesh = comp.upload(scene->field);
-                if (o.camera == "site")
-                    baseCamera =
-                        cameraLookingAt(scene->site.position, scene->site.normal, o.distanceMm,
-                                        45.0f, {viewSize, viewSize}, scene->volume);
-                else
-                    baseCamera = cameraPreset(o.camera, scene->volume, {viewSize, viewSize});
+            comp.destroy(fieldMesh); // the previous scene's, if any
+            fieldMesh = comp.upload(scene->received->field);
+            std::optional<Camera> preset;
+            if (o.camera == "site")
+                preset = cameraLookingAt(scene->site.position, scene->site.normal, o.distanceMm,
+                                         45.0f, {viewSize, viewSize}, scene->boundingRadiusMm);
+            else
+                preset = net::presetCamera(scene->received->scene, o.camera, {viewSize, viewSize});
+            if (preset) {
+                baseCamera = *preset;
                 viewControls.distanceMm = glm::length(baseCamera.eye - baseCamera.target);
                 viewControls.setHome(); // --orbit, --tilt and this distance
                 wantedCamera = makeCamera();
                 client.requestView(net::toViewSpec(wantedCamera));
-            } catch (const std::exception& e) {
-                sceneError = e.what();
+            } else {
+                sceneError = "the server's scene has no camera preset '" + o.camera + "'";
+                scene.reset();
             }
         }
         if (scene && viewControls.dirty) {
@@ -772,7 +762,7 @@ int runTrainerWindow(const TrainerOptions& o) {
             else if (snap->state == net::LinkState::Retrying)
                 status = "Not connected: " + snap->closeReason + "\nRetrying...";
             else if (!sceneError.empty())
-                status = "Cannot open the session's volume: " + sceneError;
+                status = "Cannot show the session: " + sceneError;
             else if (!havePicture)
                 status = "Waiting for the first image of the skull...";
             else if (snap->waitingForView)

@@ -101,6 +101,11 @@ Camera overview(glm::vec3 direction, glm::vec3 up, glm::ivec2 size, const Volume
 
 Camera cameraLookingAt(glm::vec3 site, glm::vec3 normal, float distanceMm, float fovYDeg,
                        glm::ivec2 size, const Volume& volume) {
+    return cameraLookingAt(site, normal, distanceMm, fovYDeg, size, boundingRadius(volume));
+}
+
+Camera cameraLookingAt(glm::vec3 site, glm::vec3 normal, float distanceMm, float fovYDeg,
+                       glm::ivec2 size, float boundingRadiusMm) {
     Camera c;
     glm::vec3 n = glm::normalize(normal);
     c.eye = site + n * distanceMm;
@@ -110,12 +115,17 @@ Camera cameraLookingAt(glm::vec3 site, glm::vec3 normal, float distanceMm, float
     c.fovYDeg = fovYDeg;
     c.width = size.x;
     c.height = size.y;
-    fitNearFar(c, glm::vec3(0.0f), boundingRadius(volume));
+    fitNearFar(c, glm::vec3(0.0f), boundingRadiusMm);
     return c;
 }
 
 Camera orbitCamera(const Camera& base, float yawDeg, float pitchDeg, float distanceMm,
                    glm::ivec2 size, const Volume& volume) {
+    return orbitCamera(base, yawDeg, pitchDeg, distanceMm, size, boundingRadius(volume));
+}
+
+Camera orbitCamera(const Camera& base, float yawDeg, float pitchDeg, float distanceMm,
+                   glm::ivec2 size, float boundingRadiusMm) {
     const glm::vec3 dir = glm::normalize(base.eye - base.target);
     const glm::vec3 right = glm::normalize(glm::cross(base.up, dir));
     const glm::vec3 up = glm::cross(dir, right);
@@ -128,7 +138,7 @@ Camera orbitCamera(const Camera& base, float yawDeg, float pitchDeg, float dista
     c.up = glm::normalize(turn * up);
     c.width = size.x;
     c.height = size.y;
-    fitNearFar(c, glm::vec3(0.0f), boundingRadius(volume));
+    fitNearFar(c, glm::vec3(0.0f), boundingRadiusMm);
     return c;
 }
 

@@ -13,6 +13,7 @@
 #include <cmath>
 #include <glm/geometric.hpp>
 #include <glm/vec2.hpp>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -378,55 +379,61 @@ Box3i surfaceBox(const Volume& v, int n, int shift) {
     return Box3i::fromMinMax(lo, lo + glm::ivec3(n)).intersect(v.bounds());
 }
 
+std::optional<SurfaceSite> surfaceSiteBelow(const Volume& skull, glm::vec2 col) {
+    if (skull.empty())
+        return std::nullopt;
+    const glm::vec3 ext = skull.extentMm();
+    const float hMin = std::min({skull.spacing().x, skull.spacing().y, skull.spacing().z});
+    // March down a vertical ray from the top face in quarter-voxel steps; the first crossing
+    // of kSurfaceDensity is refined by bisection.
+    const float step = 0.25f * hMin;
+    glm::vec3 prev(col.x, col.y, 0.5f * ext.z);
+    float prevD = sampleDensity(skull, skull.toVoxel(prev));
+    // Counted steps (z from the step count, not accumulated): a float z -= step stops moving
+    // where step falls under half z's ulp.
+    const int steps = int(std::min(double(ext.z) / double(step), 1e8));
+    for (int k = 1; k < steps; ++k) {
+        const float z = 0.5f * ext.z - float(k) * step;
+        glm::vec3 p(col.x, col.y, z);
+        float d = sampleDensity(skull, skull.toVoxel(p));
+        if (d >= float(kSurfaceDensity) && prevD < float(kSurfaceDensity)) {
+            glm::vec3 lo = prev, hi = p; // lo outside, hi inside
+            for (int it = 0; it < 24; ++it) {
+                glm::vec3 mid = 0.5f * (lo + hi);
+                if (sampleDensity(skull, skull.toVoxel(mid)) >= float(kSurfaceDensity))
+                    hi = mid;
+                else
+                    lo = mid;
+            }
+            glm::vec3 s = 0.5f * (lo + hi);
+            // Outward normal: minus the density gradient, by central differences one voxel
+            // apart (smooths the byte quantisation).
+            glm::vec3 c = skull.toVoxel(s);
+            glm::vec3 g((sampleDensity(skull, c + glm::vec3(1, 0, 0)) -
+                         sampleDensity(skull, c - glm::vec3(1, 0, 0))) /
+                            skull.spacing().x,
+                        (sampleDensity(skull, c + glm::vec3(0, 1, 0)) -
+                         sampleDensity(skull, c - glm::vec3(0, 1, 0))) /
+                            skull.spacing().y,
+                        (sampleDensity(skull, c + glm::vec3(0, 0, 1)) -
+                         sampleDensity(skull, c - glm::vec3(0, 0, 1))) /
+                            skull.spacing().z);
+            glm::vec3 nrm = glm::length(g) > 0.0f ? -glm::normalize(g) : glm::vec3(0, 0, 1);
+            return SurfaceSite{s, nrm};
+        }
+        prev = p;
+        prevD = d;
+    }
+    return std::nullopt;
+}
+
 SurfaceSite defaultBurrSite(const Volume& skull) {
     if (skull.empty())
         throw Error("cannot find a burr-hole site: the volume is empty");
-    const glm::vec3 ext = skull.extentMm();
-    const float hMin = std::min({skull.spacing().x, skull.spacing().y, skull.spacing().z});
     // Kocher's point, then the vertex, for volumes whose proportions differ from ours.
-    const glm::vec2 columns[] = {{kKocherPointXMm, kKocherPointYMm}, {0.0f, 0.0f}};
-    for (glm::vec2 col : columns) {
-        // March down a vertical ray from the top face in quarter-voxel steps; the first crossing
-        // of kSurfaceDensity is refined by bisection.
-        const float step = 0.25f * hMin;
-        glm::vec3 prev(col.x, col.y, 0.5f * ext.z);
-        float prevD = sampleDensity(skull, skull.toVoxel(prev));
-        // Counted steps (z from the step count, not accumulated): a float z -= step stops moving
-        // where step falls under half z's ulp.
-        const int steps = int(std::min(double(ext.z) / double(step), 1e8));
-        for (int k = 1; k < steps; ++k) {
-            const float z = 0.5f * ext.z - float(k) * step;
-            glm::vec3 p(col.x, col.y, z);
-            float d = sampleDensity(skull, skull.toVoxel(p));
-            if (d >= float(kSurfaceDensity) && prevD < float(kSurfaceDensity)) {
-                glm::vec3 lo = prev, hi = p; // lo outside, hi inside
-                for (int it = 0; it < 24; ++it) {
-                    glm::vec3 mid = 0.5f * (lo + hi);
-                    if (sampleDensity(skull, skull.toVoxel(mid)) >= float(kSurfaceDensity))
-                        hi = mid;
-                    else
-                        lo = mid;
-                }
-                glm::vec3 s = 0.5f * (lo + hi);
-                // Outward normal: minus the density gradient, by central differences one voxel
-                // apart (smooths the byte quantisation).
-                glm::vec3 c = skull.toVoxel(s);
-                glm::vec3 g((sampleDensity(skull, c + glm::vec3(1, 0, 0)) -
-                             sampleDensity(skull, c - glm::vec3(1, 0, 0))) /
-                                skull.spacing().x,
-                            (sampleDensity(skull, c + glm::vec3(0, 1, 0)) -
-                             sampleDensity(skull, c - glm::vec3(0, 1, 0))) /
-                                skull.spacing().y,
-                            (sampleDensity(skull, c + glm::vec3(0, 0, 1)) -
-                             sampleDensity(skull, c - glm::vec3(0, 0, 1))) /
-                                skull.spacing().z);
-                glm::vec3 nrm = glm::length(g) > 0.0f ? -glm::normalize(g) : glm::vec3(0, 0, 1);
-                return {s, nrm};
-            }
-            prev = p;
-            prevD = d;
-        }
-    }
+    for (glm::vec2 col : {glm::vec2(kKocherPointXMm, kKocherPointYMm), glm::vec2(0.0f, 0.0f)})
+        if (const std::optional<SurfaceSite> site = surfaceSiteBelow(skull, col))
+            return *site;
     throw Error("cannot find a burr-hole site: no surface at density " +
                 std::to_string(int(kSurfaceDensity)) + " under the top of the volume");
 }

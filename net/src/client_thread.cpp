@@ -217,6 +217,7 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
     if (c) {
         if (c->welcomed())
             s->welcome = c->welcome();
+        s->scene = c->scene();
         s->view = c->view();
         s->viewId = c->viewId();
         s->hasFullImage = c->hasFullImage();

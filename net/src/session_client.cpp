@@ -152,6 +152,18 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         m_earlyVolumeBytes = 0;
         return true;
     }
+    case MessageType::Scene: {
+        auto received = std::make_shared<ReceivedScene>();
+        if (!decodeScene(data, received->scene, &received->field))
+            return false;
+        // The scene of the welcome's volume, or none: another's dims would misplace everything.
+        if (!m_welcome || received->scene.dims != m_welcome->volumeDims ||
+            received->scene.spacing != m_welcome->spacing)
+            return false;
+        m_scene = std::move(received);
+        ++m_scenes;
+        return true;
+    }
     case MessageType::Participants: {
         Participants roster;
         if (!decodeMessage(data, roster))

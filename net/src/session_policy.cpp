@@ -10,6 +10,12 @@ namespace trephine::net {
 SessionPolicy::SessionPolicy(const ServerConfig& config, glm::ivec3 dims, glm::vec3 spacing,
                              ReportBook& book, ForceFn force)
     : m_config(config), m_dims(dims), m_spacing(spacing), m_book(book), m_force(std::move(force)) {
+    if (!m_config.scene || m_config.scene->dims != dims)
+        throw Error("server: the scene given is not one of this volume");
+    Scene scene = *m_config.scene; // serialize is one function for write and read: not const
+    m_sceneMessage = encodeMessage(scene);
+    if (m_sceneMessage.empty())
+        throw Error("server: the scene does not fit one message");
     for (const AnnotationInfo& m : m_config.marks) {
         const uint32_t id = m_nextMarkId++;
         m_marks[id] = {id, 0, m.position, m.label};
@@ -220,7 +226,8 @@ bool SessionPolicy::hello(uint16_t id, Peer& p, std::span<const uint8_t> data, u
     return true;
 }
 
-// What a newcomer is told after its hello: the welcome, then the marks; everyone gets the roster.
+// What a newcomer is told after its hello: the welcome, the scene, then the marks; everyone gets
+// the roster.
 void SessionPolicy::welcome(uint16_t id, uint64_t now, PolicyOutput& out) {
     Welcome w;
     w.clientId = id;
@@ -230,6 +237,7 @@ void SessionPolicy::welcome(uint16_t id, uint64_t now, PolicyOutput& out) {
     w.volumeName = m_config.volumeName; // at most kMaxVolumeNameBytes (checked at start)
     w.maxViewPixels = uint32_t(m_config.maxViewPixels);
     out.messages.push_back({{id}, Channel::Control, encodeMessage(w)});
+    out.messages.push_back({{id}, Channel::Control, m_sceneMessage}); // net/scene.h
     m_roster.mark(true);
     if (!m_marks.empty())
         out.messages.push_back({{id}, Channel::Control, marksMessage()});

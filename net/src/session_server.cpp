@@ -26,6 +26,17 @@ namespace trephine::net {
 
 // [SECTION] the host, the queues and the parts
 
+namespace {
+
+// The config with its scene: the one given (a saved session's), or one built from the volume.
+ServerConfig withScene(ServerConfig c, const Volume& volume) {
+    if (!c.scene)
+        c.scene = std::make_shared<const Scene>(buildScene(volume));
+    return c;
+}
+
+} // namespace
+
 struct SessionServer::Impl {
     Impl(Volume v, const ServerConfig& c)
         : host(Host::listen(c.port, c.maxClients + kSparePeers)),
@@ -33,7 +44,7 @@ struct SessionServer::Impl {
           outbox(c.maxInFlightBytes, book, steadyNowUs, [this] { wakeNetwork(); }),
           step(std::move(v), StepConfig{c.maxStepS, c.maxSweepMm, c.renderThreads}, outbox, book,
                steadyNowUs),
-          policy(c, step.volume().dims(), step.volume().spacing(), book,
+          policy(withScene(c, step.volume()), step.volume().dims(), step.volume().spacing(), book,
                  [this](const ToolState& t, glm::vec3 velocity) { return force(t, velocity); }),
           maxQueuedToolStates(c.maxQueuedToolStates) {
         book.record([&](ServerReport& r) {
@@ -189,7 +200,9 @@ const ServerConfig& checkedConfig(const ServerConfig& config) {
 
 SessionServer::SessionServer(Volume volume, ServerConfig config)
     : m_impl(std::make_unique<Impl>(checkedVolume(std::move(volume)), checkedConfig(config))),
-      m_config(std::move(config)) {}
+      m_config(std::move(config)) {
+    m_config.scene = m_impl->policy.scene();
+}
 
 SessionServer::~SessionServer() {
     try {
@@ -240,11 +253,13 @@ void SessionServer::saveSession() {
         saveVolume(m_impl->step.volume(), path);
         try {
             writeMarksFile(marksPathFor(path), marks);
+            writeSceneFile(scenePathFor(path), *m_config.scene);
         } catch (...) {
-            // The new volume is in place: an older marks file beside it would come back with it.
+            // The new volume is in place: older files beside it would come back with it.
             std::error_code ec;
-            if (std::filesystem::is_regular_file(marksPathFor(path), ec))
-                std::filesystem::remove(marksPathFor(path), ec);
+            for (const std::string& beside : {marksPathFor(path), scenePathFor(path)})
+                if (std::filesystem::is_regular_file(beside, ec))
+                    std::filesystem::remove(beside, ec);
             throw;
         }
     };

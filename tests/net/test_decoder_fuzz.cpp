@@ -8,6 +8,7 @@
 #include "net/codec.h"
 #include "net/image_delta.h"
 #include "net/protocol.h"
+#include "net/scene.h"
 #include "net/view.h"
 
 #include "libsim/camera.h"
@@ -102,6 +103,8 @@ bool decodeAny(std::span<const uint8_t> p) {
         return decodesCanonically<Annotations>(p);
     case MessageType::TakeOver:
         return decodesCanonically<TakeOver>(p);
+    case MessageType::Scene:
+        return decodesCanonically<Scene>(p);
     }
     return false;
 }
@@ -218,6 +221,23 @@ std::vector<std::vector<uint8_t>> sampleMessages() {
     marks.list = {{1, 2, {0, 0, 0}, "one"}, {5, 2, {-1, 4, 9}, "five"}};
     all.push_back(encoded(marks));
     all.push_back(encoded(TakeOver{2}));
+    // A small scene (a triangle for a field), so that every byte's mutations stay quick.
+    Scene scene;
+    scene.dims = {9, 7, 5};
+    scene.spacing = {0.5f, 0.5f, 0.75f};
+    scene.extentMm = glm::vec3(scene.dims) * scene.spacing;
+    const ViewSpec v = sampleView(1, 1);
+    scene.presets = {{"top", v.eye, v.target, v.up, v.fovYDeg, v.nearMm, v.farMm}};
+    scene.sites = {{"burr", {1, 2, 3}, {0, 0, 1}}};
+    scene.landmarks = {{"a", {0, 0, 1}}, {"b", {0, 1, 0}}};
+    MeshData tri;
+    tri.vertices = {{{0, 0, 0}, {0, 0, 1}, {1, 0, 0, 1}},
+                    {{1, 0, 0}, {0, 0, 1}, {0, 1, 0, 1}},
+                    {{0, 1, 0}, {0, 0, 1}, {0, 0, 1, 1}}};
+    tri.indices = {0, 1, 2};
+    setSceneMesh(scene, tri);
+    stampScene(scene);
+    all.push_back(encoded(scene));
     return all;
 }
 

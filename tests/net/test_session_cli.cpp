@@ -1,6 +1,7 @@
 // `trephine server` as a process: SIGTERM stops it cleanly, --save-on-exit holds every drilling
 // step it applied and --report is written; `trephine trainee --headless` runs its haptic loop.
 #include "net/marks_file.h"
+#include "net/scene.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
 #include "net/view.h"
@@ -146,6 +147,7 @@ TEST(SessionCli, SigtermWritesSaveOnExitWithTheDrilling) {
     EXPECT_TRUE(readMarksFile(marksPathFor(path)).empty()) << "no marks, and a file saying so";
     std::filesystem::remove(path);
     std::filesystem::remove(marksPathFor(path));
+    std::filesystem::remove(scenePathFor(path));
     // --report: per-channel and per-peer statistics, written when the server stopped.
     std::ifstream r(report);
     nlohmann::json json = nlohmann::json::parse(r, nullptr, false);

@@ -3,6 +3,7 @@
 // (messages, disconnects, events for the simulation) and what it records in the report.
 #include "net/session_policy.h"
 
+#include "libsim/skull.h"
 #include "libsim/tool.h"
 #include "net/view.h"
 
@@ -49,7 +50,7 @@ ViewSpec smallView() {
     return v;
 }
 
-// A policy over a 32^3 volume whose force at a tool state is its position (so a test can tell
+// A policy over a 32^3 sphere whose force at a tool state is its position (so a test can tell
 // which state a model answers) and is done 7 us after it arrived.
 struct PolicyRig {
     ServerConfig config;
@@ -60,7 +61,9 @@ struct PolicyRig {
 
     explicit PolicyRig(ServerConfig c = {}) : config(std::move(c)) {
         config.volumeName = "sphere:32";
-        policy.emplace(config, glm::ivec3(32), glm::vec3(0.5f), book,
+        const Volume sphere = makeSphere(32);
+        config.scene = std::make_shared<const Scene>(buildScene(sphere));
+        policy.emplace(config, sphere.dims(), sphere.spacing(), book,
                        [this](const ToolState& t, glm::vec3) {
                            ++forces;
                            SessionPolicy::ForceAnswer a;
@@ -129,6 +132,9 @@ TEST(SessionPolicy, AHelloIsWelcomedListedAndJoinsTheSimulation) {
     EXPECT_EQ(welcome[0].serverTimeUs, rig.now);
     EXPECT_EQ(welcome[0].volumeDims, glm::ivec3(32));
     EXPECT_EQ(welcome[0].volumeName, "sphere:32");
+    const auto scene = sentTo<Scene>(hello, ada);
+    ASSERT_EQ(scene.size(), 1u) << "the scene follows the welcome";
+    EXPECT_EQ(scene[0], *rig.config.scene);
     ASSERT_EQ(eventsOf(hello, SimEvent::Kind::Join), 1u);
     EXPECT_EQ(hello.events[0].inFlight, rig.p().inFlight(ada)) << "the outbox counts its bytes";
     EXPECT_TRUE(sentTo<Annotations>(hello, ada).empty()) << "no marks, no list";

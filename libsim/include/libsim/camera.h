@@ -96,6 +96,10 @@ Camera cameraPreset(std::string_view name, const Volume& volume, glm::ivec2 size
 // perpendicular to the normal (+y when the normal is nearly vertical).
 Camera cameraLookingAt(glm::vec3 site, glm::vec3 normal, float distanceMm, float fovYDeg,
                        glm::ivec2 size, const Volume& volume);
+// As above for a volume whose bounding sphere (at the origin) has this radius: a DBI client knows
+// the volume's extent from the scene, never its voxels.
+Camera cameraLookingAt(glm::vec3 site, glm::vec3 normal, float distanceMm, float fovYDeg,
+                       glm::ivec2 size, float boundingRadiusMm);
 
 // `base` orbited about its target: turned `yawDeg` about its up vector, then tilted `pitchDeg`
 // about its right vector as the yaw left it, at `distanceMm` from the target; the up vector turns
@@ -103,6 +107,8 @@ Camera cameraLookingAt(glm::vec3 site, glm::vec3 normal, float distanceMm, float
 // direction, would roll it). Near/far from fitNearFar over the volume.
 Camera orbitCamera(const Camera& base, float yawDeg, float pitchDeg, float distanceMm,
                    glm::ivec2 size, const Volume& volume);
+Camera orbitCamera(const Camera& base, float yawDeg, float pitchDeg, float distanceMm,
+                   glm::ivec2 size, float boundingRadiusMm);
 
 // One line for logs: "eye (x, y, z) target (...) up (...) fov 60 near 110.1 far 550.3 500x500".
 std::string describe(const Camera& camera);

@@ -5,7 +5,9 @@
 #include "libsim/volume.h"
 
 #include <cstdint>
+#include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
+#include <optional>
 
 namespace trephine {
 
@@ -43,6 +45,9 @@ struct SurfaceSite {
     glm::vec3 normal;
 };
 SurfaceSite defaultBurrSite(const Volume& skull);
+// The first trilinear crossing of kSurfaceDensity on the vertical ray down through `column` (x, y
+// in mm) from the top of the volume, with its outward normal; nothing when the ray meets none.
+std::optional<SurfaceSite> surfaceSiteBelow(const Volume& volume, glm::vec2 column);
 
 // The study's cut (the paper's experiment): an n^3 box centred on the volume's middle column
 // (shifted `shift` voxels along x) whose top face lies one voxel above the topmost bone voxel of

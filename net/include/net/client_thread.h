@@ -80,6 +80,9 @@ struct ClientSnapshot {
     int volumeRefusals = 0;
     uint64_t publishedUs = 0;
     std::optional<Welcome> welcome;
+    // The server's scene (presets, sites, the surgical field), null until it arrives and between
+    // connections; a window keeps what it built until a scene with another id comes.
+    std::shared_ptr<const ReceivedScene> scene;
     ViewSpec view;
     uint32_t viewId = 0;
     bool hasFullImage = false;

@@ -26,8 +26,10 @@ namespace trephine::net {
 // Annotate and Annotations (an instructor's marks on the skull). 4: the predicted image form's
 // base hash is four 64-bit FNV-1a lanes, a word a pixel (image_delta.cpp); TakeOver, and who
 // holds a trainee in Participants. 5: the predicted form's mask of exactly predicted pixels.
-// 6: ImageUpdate's grid time. 7: the largest view the server serves, in the welcome.
-inline constexpr uint32_t kProtocolVersion = 7;
+// 6: ImageUpdate's grid time. 7: the largest view the server serves, in the welcome. 8: Scene
+// after the welcome (extent, camera presets, sites, landmarks, the surgical field's mesh:
+// net/scene.h); the welcome's volume name is a label a client never opens.
+inline constexpr uint32_t kProtocolVersion = 8;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
 enum class RefuseReason : uint32_t {
@@ -103,8 +105,9 @@ enum class MessageType : uint8_t {
     Annotate = 14,
     Annotations = 15,
     TakeOver = 16,
+    Scene = 17, // net/scene.h
 };
-inline constexpr uint8_t kMessageTypeCount = 17; // one past the largest type
+inline constexpr uint8_t kMessageTypeCount = 18; // one past the largest type
 
 enum class Role : uint8_t { Trainee = 0, Instructor = 1 };
 enum class Codec : uint8_t { Raw = 0, Lz4 = 1, Zstd = 2 };
@@ -229,6 +232,8 @@ struct Welcome {
     uint64_t serverTimeUs = 0;
     glm::ivec3 volumeDims{0};
     glm::vec3 spacing{1.0f};
+    // A label for people (the Session panel): a client never opens it as a file or a volume spec;
+    // what it needs of the volume comes in the Scene that follows.
     std::string volumeName;
     // The largest view (width x height pixels) the server serves: a larger ViewRequest would be
     // dropped, so the client refuses it itself (SessionClient::requestView).

@@ -4,9 +4,11 @@
 #pragma once
 
 #include "net/protocol.h"
+#include "net/scene.h"
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -23,7 +25,10 @@ struct ServerConfig {
     // Answer each tool state with a HapticModel (Channel::Haptic), relayed to every instructor as
     // a HapticRelay.
     bool hapticModels = true;
-    std::string volumeName; // sent in the welcome
+    std::string volumeName; // sent in the welcome, as a label
+    // The scene every client gets right after its welcome (net/scene.h), and that saveOnExit
+    // writes beside the volume (scenePathFor). Null: built from the volume at construction.
+    std::shared_ptr<const Scene> scene;
     // When set, stop() writes the final volume here (saveVolume) and the instructors' marks
     // beside it (marksPathFor(saveOnExit), net/marks_file.h), so a later server can start from
     // both.

@@ -14,6 +14,7 @@
 #include "net/enet_host.h"
 #include "net/net_stats.h"
 #include "net/protocol.h"
+#include "net/scene.h"
 
 #include <cstdint>
 #include <deque>
@@ -71,6 +72,13 @@ public:
     // The disconnect's data (a RefuseReason when the server closed the connection), 0 while open.
     uint32_t closeCode() const { return m_closeCode; }
     const Welcome& welcome() const { return *m_welcome; }
+    // The server's scene (net/scene.h: extent, camera presets, sites, landmarks, the surgical
+    // field), null until it arrives right after the welcome. Immutable: a reconnect's new client
+    // gets its own, so a holder may keep the pointer. A DBI client needs nothing else of the
+    // volume; no client opens a file the server names.
+    std::shared_ptr<const ReceivedScene> scene() const { return m_scene; }
+    // Scene messages received and kept (a malformed one counts as malformed instead).
+    uint64_t scenesReceived() const { return m_scenes; }
     // steadyNowUs() of the last thing heard from the server (its connect, any datagram, a
     // fragment included, and the end of handling each message); connect() starts it. A server that
     // died without a word is noticed by ENet only after 5 to 30 s; one answering sendPing() every
@@ -213,6 +221,8 @@ private:
     uint32_t m_lastReceiveTime = 0; // ENet's stamp of the peer's last datagram (ms, its clock)
     std::string m_closeReason;
     std::optional<Welcome> m_welcome;
+    std::shared_ptr<const ReceivedScene> m_scene;
+    uint64_t m_scenes = 0;
 
     ViewSpec m_view; // the view the DBI holds
     uint32_t m_viewId = 0;

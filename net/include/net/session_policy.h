@@ -105,6 +105,7 @@ public:
     // [Any thread] A mode switch waits for its interval: the simulation has work to come.
     bool switchWaiting() const { return m_switchesWaiting.load() > 0; }
     const std::map<uint32_t, AnnotationInfo>& marks() const { return m_marks; }
+    const std::shared_ptr<const Scene>& scene() const { return m_config.scene; }
 
 private:
     struct Peer {
@@ -148,6 +149,7 @@ private:
     ServerConfig m_config;
     glm::ivec3 m_dims;
     glm::vec3 m_spacing;
+    std::vector<uint8_t> m_sceneMessage; // m_config.scene, encoded once
     ReportBook& m_book;
     ForceFn m_force;
     std::map<uint16_t, Peer> m_peers; // increasing ids, as the roster wants

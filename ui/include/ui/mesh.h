@@ -1,47 +1,20 @@
-// Meshes the client draws over the DBI in pass 2, generated in code (no GL here, so tests check
-// them headless): the drill handpiece with shaft and spherical burr, the perforator, and the
-// non-bone anatomy of the surgical field (scalp rim and drape around the craniotomy site).
+// The tool meshes a client draws over the DBI in pass 2, generated in code (no GL here, so tests
+// check them headless): the drill handpiece with shaft and spherical burr, and the perforator.
+// The surgical field's mesh comes from the server's scene (libsim/mesh.h builds it there).
 #pragma once
 
+#include "libsim/mesh.h"
 #include "libsim/tool.h"
-
-#include <cstdint>
-#include <glm/vec3.hpp>
-#include <glm/vec4.hpp>
-#include <vector>
-
-namespace trephine {
-class Volume;
-struct SurfaceSite;
-} // namespace trephine
 
 namespace trephine::ui {
 
-struct MeshVertex {
-    glm::vec3 position;
-    glm::vec3 normal;
-    glm::vec4 color; // alpha 0: take the owner's colour (a uniform) instead
-};
-
-struct MeshData {
-    std::vector<MeshVertex> vertices;
-    std::vector<uint32_t> indices; // triangles
-
-    // A solid of revolution about +z through the profile (radius, z) points, bottom to top; a
-    // radius of 0 closes the end.
-    void addLathe(const std::vector<glm::vec2>& profile, glm::vec4 color, int segments = 32);
-    void addSphere(glm::vec3 centre, float radius, glm::vec4 color, int segments = 24);
-    size_t triangleCount() const { return indices.size() / 3; }
-};
+// The meshes are libsim's (the server builds the surgical field); the names stay usable here.
+using trephine::makeSurgicalField;
+using trephine::MeshData;
+using trephine::MeshVertex;
 
 // Tool-local frame as libsim's ToolShape: origin at the burr centre (perforator: the tip's apex),
 // shaft along +z. The handpiece body uses the owner's colour.
 MeshData makeToolMesh(const ToolShape& shape);
-
-// Scalp (skin-coloured, `scalpGapMm` above the bone, retracted `openingMm` from the site) and a
-// surgical drape beyond `drapeMm` from the site, following the outer surface of `volume` found by
-// casting rays from its centre. Empty when the volume holds no bone.
-MeshData makeSurgicalField(const Volume& volume, const SurfaceSite& site, float openingMm = 32.0f,
-                           float drapeMm = 52.0f, float scalpGapMm = 4.0f);
 
 } // namespace trephine::ui
