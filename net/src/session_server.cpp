@@ -11,6 +11,7 @@
 #include "net/codec.h"
 #include "net/image_delta.h"
 #include "net/marks_file.h"
+#include "net/tool_model.h"
 #include "net/view.h"
 
 #include <poll.h>
@@ -181,11 +182,6 @@ SimEvent makeEvent(SimEvent::Kind kind, uint16_t client) {
 
 void nameThread(const char* name) {
     pthread_setname_np(pthread_self(), name);
-}
-
-ToolShape shapeOf(const ToolState& t) {
-    return ToolKind(t.toolKind) == ToolKind::Perforator ? ToolShape::perforator(t.diameterMm)
-                                                        : ToolShape::burr(t.diameterMm);
 }
 
 } // namespace
