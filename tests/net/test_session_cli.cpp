@@ -12,6 +12,7 @@
 #include "test_support.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <glm/gtx/quaternion.hpp>
 
@@ -37,6 +38,14 @@ using trephine::testing::loopbackServerConfig;
 using trephine::testing::shellQuote;
 
 namespace {
+
+// A trainee's --report, parsed (an unreadable or malformed one is an empty object, which fails
+// the assertions on its fields).
+nlohmann::json readJson(const std::string& path) {
+    std::ifstream in(path);
+    nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+    return j.is_discarded() ? nlohmann::json::object() : j;
+}
 
 // `trephine MODE ARGS` (MODE: server unless given) as a child process, its stdout read line by
 // line.
@@ -171,19 +180,15 @@ TEST(SessionCli, HeadlessTraineeRunsTheHapticLoopAndReportsIt) {
                       shellQuote(report) + " > /dev/null 2>&1";
     ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
     server.stop();
-    std::ifstream r(report);
-    std::string json((std::istreambuf_iterator<char>(r)), std::istreambuf_iterator<char>());
-    auto number = [&](const std::string& key) {
-        auto at = json.find("\"" + key + "\": ");
-        return at == std::string::npos ? -1.0 : std::stod(json.substr(at + key.size() + 4));
-    };
-    EXPECT_EQ(number("tool_rate_hz"), 50.0) << json;
-    double sent = number("tool_states_sent");
+    const nlohmann::json json = readJson(report);
+    const nlohmann::json& haptics = json.at("haptics");
+    EXPECT_EQ(haptics.at("tool_rate_hz").get<double>(), 50.0) << json;
+    const double sent = json.at("tool_states_sent").get<double>();
     EXPECT_GT(sent, 10.0) << json; // about 50 in the second, plus the final lift
-    EXPECT_GT(number("models_received"), 0.0) << json;
-    EXPECT_LE(number("models_received"), sent) << json;
-    EXPECT_GT(number("ticks"), 0.0) << json;
-    EXPECT_GT(number("force_round_trip_p50_us"), 0.0) << json;
+    EXPECT_GT(haptics.at("models_received").get<double>(), 0.0) << json;
+    EXPECT_LE(haptics.at("models_received").get<double>(), sent) << json;
+    EXPECT_GT(haptics.at("ticks").get<double>(), 0.0) << json;
+    EXPECT_GT(haptics.at("force_round_trip_p50_us").get<double>(), 0.0) << json;
     EXPECT_GT(server.hapticModelsSent(), 0u);
     EXPECT_LE(double(server.hapticModelsSent()), sent); // unsequenced: loss is allowed
     std::filesystem::remove(report);
@@ -221,12 +226,10 @@ TEST(SessionCli, AHeadlessTraineeDoesNotWaitForOthersToStopDrilling) {
     other.join();
     server.stop();
     ASSERT_EQ(status, 0) << cmd;
-    std::ifstream r(report);
-    const std::string json((std::istreambuf_iterator<char>(r)), std::istreambuf_iterator<char>());
-    const auto at = json.find("\"duration_s\": ");
-    ASSERT_NE(at, std::string::npos) << json;
+    const nlohmann::json json = readJson(report);
+    ASSERT_TRUE(json.contains("duration_s")) << json;
     // The second of script, then at most 2 s for the last updates (not the others' 20 s).
-    EXPECT_LT(std::stod(json.substr(at + 14)), 8.0) << json;
+    EXPECT_LT(json.at("duration_s").get<double>(), 8.0) << json;
     std::filesystem::remove(report);
 }
 
@@ -300,13 +303,14 @@ TEST(SessionCli, HeadlessVolumeTraineeComputesForcesOnItsOwnVolume) {
                       shellQuote(report) + " > " + shellQuote(out) + " 2>&1";
     ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
     server.stop();
-    std::ifstream o(out), r(report);
+    std::ifstream o(out);
     std::string text((std::istreambuf_iterator<char>(o)), std::istreambuf_iterator<char>());
-    std::string json((std::istreambuf_iterator<char>(r)), std::istreambuf_iterator<char>());
+    const nlohmann::json json = readJson(report);
     const auto at = text.find("forces computed locally on the replicated volume in ");
     ASSERT_NE(at, std::string::npos) << text;
     EXPECT_GT(std::stoll(text.substr(at + 52)), 0) << text;
-    EXPECT_NE(json.find("\"sync\": \"volume\""), std::string::npos) << json;
+    EXPECT_EQ(json.at("sync"), "volume") << json;
+    EXPECT_GT(json.at("haptics").at("local_force_ticks").get<double>(), 0.0) << json;
     std::filesystem::remove(report);
     std::filesystem::remove(out);
 }
@@ -473,9 +477,7 @@ TEST(SessionCli, CtrlCOfAHeadlessTraineeStillWritesItsReport) {
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
     EXPECT_EQ(trainee.stop(SIGINT), 1);
     server.stop();
-    std::ifstream r(dir / "r.json");
-    const std::string json((std::istreambuf_iterator<char>(r)), std::istreambuf_iterator<char>());
-    const auto at = json.find("\"duration_s\": ");
-    ASSERT_NE(at, std::string::npos) << json;
-    EXPECT_LT(std::stod(json.substr(at + 14)), 10.0) << json; // not the 30 s script
+    const nlohmann::json json = readJson(dir / "r.json");
+    ASSERT_TRUE(json.contains("duration_s")) << json;
+    EXPECT_LT(json.at("duration_s").get<double>(), 10.0) << json; // not the 30 s script
 }
