@@ -1,6 +1,7 @@
 // The trainer window. Sections:
 // [SECTION] scene: volume-derived data (site, surgical field) built off the main thread
-// [SECTION] haptics: the window's device and the force in either design
+// [SECTION] haptics: the window's tool as the trainee core's tool source
+// [SECTION] drawing: the view's labels, messages and the panels' layout
 // [SECTION] frame loop: snapshot -> rectangles / voxel boxes -> tool -> composite -> overlays ->
 //           panels -> comparison figures
 #include "ui/trainer_app.h"
@@ -148,6 +149,8 @@ glm::mat4 toolMatrix(glm::vec3 position, glm::quat orientation) {
     return glm::translate(glm::mat4(1.0f), position) * glm::mat4_cast(orientation);
 }
 
+// [SECTION] drawing
+
 // The view's labels (every tool's owner, ours last) and the instructors' marks, cut at the view's
 // edge; `own` null: no tool of ours is shown.
 void drawViewLabels(const net::ClientSnapshot& snap, const Camera& camera, const Dbi& cpuDbi,
@@ -232,6 +235,35 @@ void drawHeldBand(const std::string& held, int viewSize) {
                           kTakeOverBand, 6.0f);
         fg->AddText(at, IM_COL32(255, 255, 255, 255), held.c_str());
     }
+}
+
+// Where each panel opens (they stay movable): Session, View and Network in the middle column
+// (kPanelWidth), Comparison over Dirty boxes on the right (kSideWidth), Forces under the view.
+struct PanelLayout {
+    struct Box {
+        float x, y, w, h;
+    };
+    Box session, view, network, comparison, dirtyBoxes, forces;
+};
+
+PanelLayout panelLayout(int viewSize, float height) {
+    const float right = float(viewSize), colW = float(kPanelWidth);
+    const float side = right + colW, sideW = float(kSideWidth);
+    const float sessionH = std::floor(height * 0.31f), viewPanelH = 165.0f;
+    const float networkY = sessionH + viewPanelH, comparisonH = std::floor(height * 0.535f);
+    PanelLayout l;
+    l.session = {right, 0, colW, sessionH};
+    l.view = {right, sessionH, colW, viewPanelH};
+    l.network = {right, networkY, colW, height - networkY};
+    l.comparison = {side, 0, sideW, comparisonH};
+    l.dirtyBoxes = {side, comparisonH, sideW, height - comparisonH};
+    l.forces = {0, float(viewSize), right, height - float(viewSize)};
+    return l;
+}
+
+void placeNextPanel(const PanelLayout::Box& b) {
+    ImGui::SetNextWindowPos(ImVec2(b.x, b.y), ImGuiCond_FirstUseEver);
+    ImGui::SetNextWindowSize(ImVec2(b.w, b.h), ImGuiCond_FirstUseEver);
 }
 
 } // namespace
@@ -672,14 +704,9 @@ int runTrainerWindow(const TrainerOptions& o) {
             drawHeldBand(held, viewSize);
         }
 
-        // Panels: Forces under the view, and two columns right of it (kPanelWidth, above).
-        const float right = float(viewSize), colW = float(kPanelWidth);
-        const float side = right + colW, sideW = float(kSideWidth);
-        const float H = float(window.height());
-        const float sessionH = std::floor(H * 0.31f), viewPanelH = 165.0f;
-        const float networkY = sessionH + viewPanelH, comparisonH = std::floor(H * 0.535f);
-        ImGui::SetNextWindowPos(ImVec2(right, 0), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(colW, sessionH), ImGuiCond_FirstUseEver);
+        // Panels: Forces under the view, and two columns right of it.
+        const PanelLayout layout = panelLayout(viewSize, float(window.height()));
+        placeNextPanel(layout.session);
         drawSessionPanel(*snap, toolControls, markControls, takeOverControls,
                          o.instructor ? "instructor" : "trainee", o.address, o.name);
         // Marks asked for (the panel, the M key, --mark once joined); the server lists them back.
@@ -690,16 +717,13 @@ int runTrainerWindow(const TrainerOptions& o) {
         if (takeOverControls.asked)
             client.takeOver(*takeOverControls.asked);
         takeOverControls.asked.reset();
-        ImGui::SetNextWindowPos(ImVec2(right, sessionH), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(colW, viewPanelH), ImGuiCond_FirstUseEver);
+        placeNextPanel(layout.view);
         drawViewPanel(viewControls, snap->waitingForView || !havePicture,
                       picture == SyncDesign::Volume ? "local render" : "DBI",
                       havePicture ? &dbiCamera : nullptr);
-        ImGui::SetNextWindowPos(ImVec2(right, networkY), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(colW, H - networkY), ImGuiCond_FirstUseEver);
+        placeNextPanel(layout.network);
         drawNetworkPanel(*snap, model.network, now);
-        ImGui::SetNextWindowPos(ImVec2(side, 0), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(sideW, comparisonH), ImGuiCond_FirstUseEver);
+        placeNextPanel(layout.comparison);
         SyncDesign shown = wanted;
         if (drawComparisonPanel(shown, picture, model.comparison, now) && shown != wanted)
             requestDesign(shown);
@@ -716,12 +740,10 @@ int runTrainerWindow(const TrainerOptions& o) {
                                 (unsigned long long)core.serverForceTicks());
         }
         ImGui::End();
-        ImGui::SetNextWindowPos(ImVec2(0, float(viewSize)), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(right, H - float(viewSize)), ImGuiCond_FirstUseEver);
+        placeNextPanel(layout.forces);
         drawForcesPanel(model.forces, hstats.achievedRateHz, now,
                         o.instructor ? &model.participants : nullptr, &snap->participants);
-        ImGui::SetNextWindowPos(ImVec2(side, comparisonH), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(sideW, H - comparisonH), ImGuiCond_FirstUseEver);
+        placeNextPanel(layout.dirtyBoxes);
         drawDirtyBoxPanel(boxState, model.boxes, now);
 
         // The scripted run's rules: a view too large ends it, a settled view is captured.
