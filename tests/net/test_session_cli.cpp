@@ -481,3 +481,38 @@ TEST(SessionCli, CtrlCOfAHeadlessTraineeStillWritesItsReport) {
     ASSERT_TRUE(json.contains("duration_s")) << json;
     EXPECT_LT(json.at("duration_s").get<double>(), 10.0) << json; // not the 30 s script
 }
+
+// A headless trainee that cannot join stops in one line saying why: a full server's refusal, and
+// an address where no server answers (the client thread does not retry for a headless run).
+TEST(SessionCli, AHeadlessTraineeThatCannotJoinSaysWhyInOneLine) {
+    Volume sphere = makeSphere(32);
+    ServerConfig sc = loopbackServerConfig("sphere:32");
+    sc.maxClients = 1;
+    SessionServer server(sphere, sc);
+    server.start();
+    SessionClient first(ClientConfig{});
+    first.connect(trephine::testing::loopback(server.port()));
+    ASSERT_TRUE(trephine::testing::pumpUntil({&first}, [&] { return first.welcomed(); }));
+    std::atomic<bool> done{false};
+    std::thread pump([&] {
+        while (!done)
+            first.poll(5);
+    });
+    trephine::testing::TempDir dir;
+    const std::string address = "127.0.0.1:" + std::to_string(server.port());
+    auto r = trephine::testing::runTrephine(dir, "trainee --headless --connect " + address +
+                                                     " --camera top --size 64 --duration 1");
+    done = true;
+    pump.join();
+    first.disconnect();
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_EQ(r.err, "trephine: trainee: " + address + " refused us: the server is full\n");
+
+    // Nobody at this port now (the server stopped: its port is free).
+    server.stop();
+    r = trephine::testing::runTrephine(dir, "trainee --headless --connect " + address +
+                                                " --camera top --size 64 --duration 1");
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_EQ(r.err, "trephine: trainee: no answer from " + address +
+                         " (is `trephine server` running?)\n");
+}
