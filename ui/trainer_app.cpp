@@ -145,6 +145,48 @@ void writeBox(Volume& v, const net::AppliedVolumeBox& b) {
         }
 }
 
+// [Replicated volume] the window's copy of the volume, mirrored in a VolumeView's textures, and
+// the GPU side of the volume client's apply stage (timed: the Comparison panel shows it).
+struct LocalVolume {
+    VolumeView view; // needs the window's GL context
+    Volume volume;
+    bool have = false;  // `view` holds a whole volume
+    bool dirty = false; // the ray cast changed since the picking picture was read back
+    Camera camera;      // the camera the picking picture was read back with
+    SampleWindow uploadMs{256}, boxMs{1024};
+    uint64_t uploads = 0, boxUpdates = 0;
+
+    // A whole volume: replaces the copy and its textures.
+    void replace(const net::AppliedVolumeBox& b) {
+        const auto start = std::chrono::steady_clock::now();
+        volume = Volume(b.dims, b.spacing);
+        writeBox(volume, b);
+        view.upload(volume);
+        uploadMs.add(msSince(start));
+        ++uploads;
+        have = true;
+    }
+    // A box of the copy: its voxels and the gradients around them re-uploaded; false (nothing
+    // done) when it does not fit the volume held.
+    bool update(const net::AppliedVolumeBox& b) {
+        const auto start = std::chrono::steady_clock::now();
+        if (!have || b.dims != volume.dims() || b.box.empty() ||
+            !glm::all(glm::greaterThanEqual(b.box.lo, glm::ivec3(0))) ||
+            !glm::all(glm::lessThanEqual(b.box.hi, b.dims)) ||
+            b.density.size() != size_t(b.box.count()) || b.material.size() != size_t(b.box.count()))
+            return false;
+        writeBox(volume, b);
+        view.updateBox(volume, b.box);
+        boxMs.add(msSince(start));
+        ++boxUpdates;
+        return true;
+    }
+    static double msSince(std::chrono::steady_clock::time_point t) {
+        return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t)
+            .count();
+    }
+};
+
 glm::mat4 toolMatrix(glm::vec3 position, glm::quat orientation) {
     return glm::translate(glm::mat4(1.0f), position) * glm::mat4_cast(orientation);
 }
@@ -295,7 +337,7 @@ int runTrainerWindow(const TrainerOptions& o) {
         ImGui::GetIO().ConfigFlags |= ImGuiConfigFlags_NoMouse;
     Compositor comp;
     comp.resize(viewSize, viewSize);
-    VolumeView volumeView; // the replicated-volume design's picture
+    LocalVolume local; // the replicated-volume design's picture
     ToolMeshCache tools{&comp, {}};
     GpuMesh fieldMesh;
 
@@ -349,11 +391,6 @@ int runTrainerWindow(const TrainerOptions& o) {
     bool haveImage = false;   // the textures hold a full image of the current view
     uint32_t imageViewId = 0; // viewId of the image in the textures
     net::ViewSpec imageView;  // and its view: the camera it was rendered with
-    // [Replicated volume] the window's copy of the volume, mirrored in volumeView's textures.
-    Volume gpuVolume;
-    bool haveVolume = false;  // volumeView holds a whole volume
-    bool volumeDirty = false; // the ray cast changed since cpuDbi was read back
-    Camera volumeCamera;      // the camera cpuDbi was read back with
     // Which design feeds the picture: the one whose full update (whole DBI or whole volume)
     // arrived last. Until the new design's first full update the old picture stays.
     SyncDesign picture = designOf(cc.client.sync);
@@ -371,8 +408,6 @@ int runTrainerWindow(const TrainerOptions& o) {
     };
     std::vector<DrawnUpdate> drawnThisFrame;
     std::array<uint64_t, kSyncDesignCount> framesPerDesign{};
-    SampleWindow volumeUploadMs(256), volumeBoxMs(1024); // the volume client's GPU apply stage
-    uint64_t volumeUploads = 0, volumeBoxUpdates = 0;
     double firstPictureAt = -1.0;
     int switchesRequested = 0, switchesCompleted = 0;
     auto requestDesign = [&](SyncDesign d) {
@@ -457,7 +492,7 @@ int runTrainerWindow(const TrainerOptions& o) {
             if (r.full) {
                 if (r.pixels.width() != viewSize || r.pixels.height() != viewSize)
                     continue; // the placeholder view before ours
-                if (haveVolume && r.appliedUs < pictureSinceUs)
+                if (local.have && r.appliedUs < pictureSinceUs)
                     continue; // older than the volume that replaced the DBI
                 comp.uploadFull(r.pixels);
                 haveImage = true;
@@ -485,47 +520,31 @@ int runTrainerWindow(const TrainerOptions& o) {
         // only its voxels and the gradients around them. Both are timed: the volume client's
         // apply stage on the GPU side.
         for (net::AppliedVolumeBox& b : client.drainVolumeBoxes()) {
-            const auto applyStart = Clock::now();
             if (b.full) {
                 if (haveImage && b.appliedUs < pictureSinceUs && picture == SyncDesign::Dbi)
                     continue; // older than the DBI that replaced the volume
-                gpuVolume = Volume(b.dims, b.spacing);
-                writeBox(gpuVolume, b);
-                volumeView.upload(gpuVolume);
-                volumeUploadMs.add(
-                    std::chrono::duration<double, std::milli>(Clock::now() - applyStart).count());
-                ++volumeUploads;
-                haveVolume = true;
+                local.replace(b);
                 if (picture != SyncDesign::Volume)
                     ++switchesCompleted;
                 picture = SyncDesign::Volume;
                 pictureSinceUs = b.appliedUs;
-            } else if (haveVolume && b.dims == gpuVolume.dims() && !b.box.empty() &&
-                       glm::all(glm::greaterThanEqual(b.box.lo, glm::ivec3(0))) &&
-                       glm::all(glm::lessThanEqual(b.box.hi, b.dims)) &&
-                       b.density.size() == size_t(b.box.count()) &&
-                       b.material.size() == size_t(b.box.count())) {
-                writeBox(gpuVolume, b);
-                volumeView.updateBox(gpuVolume, b.box);
-                volumeBoxMs.add(
-                    std::chrono::duration<double, std::milli>(Clock::now() - applyStart).count());
-                ++volumeBoxUpdates;
+            } else if (local.update(b)) {
                 drawnThisFrame.push_back(
                     {SyncDesign::Volume, b.latencyUs, b.appliedUs, b.bytes, b.rawBytes});
             } else {
                 continue;
             }
-            volumeDirty = true;
+            local.dirty = true;
             lastRectAt = now;
             PixelRect screen;
             if (!b.full && snap->view.width > 1)
-                screen = dirtyScreenRect(net::toCamera(snap->view), gpuVolume, b.box);
+                screen = dirtyScreenRect(net::toCamera(snap->view), local.volume, b.box);
             model.addVolumeBox(b, screen, now);
         }
         // Forces on the local copy only while it is the picture and no switch away is under way:
         // the server stops sending voxels at the request, so the copy would go stale.
         core.setLocalForces(picture == SyncDesign::Volume && wanted == SyncDesign::Volume);
-        const bool havePicture = picture == SyncDesign::Volume ? haveVolume : haveImage;
+        const bool havePicture = picture == SyncDesign::Volume ? local.have : haveImage;
         if (havePicture && firstPictureAt < 0)
             firstPictureAt = now;
         const bool switching = wanted != picture;
@@ -537,8 +556,8 @@ int runTrainerWindow(const TrainerOptions& o) {
             picture == SyncDesign::Dbi && haveImage ? imageView : snap->view;
         const bool viewMatches = shownView.width == viewSize && shownView.height == viewSize;
         const Camera dbiCamera = net::toCamera(shownView);
-        if (picture == SyncDesign::Volume && !(volumeCamera == dbiCamera)) {
-            volumeDirty = true; // a new view: the picture for picking must be read back again
+        if (picture == SyncDesign::Volume && !(local.camera == dbiCamera)) {
+            local.dirty = true; // a new view: the picture for picking must be read back again
             model.boxes.boxes.clear(); // the old view's rectangles (a DBI's go with its full image)
         }
 
@@ -633,14 +652,14 @@ int runTrainerWindow(const TrainerOptions& o) {
         if (havePicture && viewMatches) {
             if (picture == SyncDesign::Volume) {
                 comp.beginEmpty(dbiCamera);
-                volumeView.draw(dbiCamera);
-                if (volumeDirty) {
+                local.view.draw(dbiCamera);
+                if (local.dirty) {
                     // The picture's depth before the tools, for the cursor's depth lookups and
                     // the marks' occlusion: read back only when the volume or the view changed,
                     // and only the depth (the colour once, for the report, after the loop).
                     comp.readBackDepth(cpuDbi);
-                    volumeCamera = cpuDbiCamera = dbiCamera;
-                    volumeDirty = false;
+                    local.camera = cpuDbiCamera = dbiCamera;
+                    local.dirty = false;
                 }
             } else {
                 comp.begin(dbiCamera);
@@ -731,10 +750,10 @@ int runTrainerWindow(const TrainerOptions& o) {
             // Short lines: the 400-pixel panel cut the longer ones off.
             ImGui::TextDisabled("frame ms: start to swap + glFinish, median of 1 s");
             ImGui::TextDisabled("volume GPU: full %.1f ms (%llu), box p50 %.2f ms (%llu)",
-                                volumeUploadMs.size() ? volumeUploadMs.percentile(50) : 0.0,
-                                (unsigned long long)volumeUploads,
-                                volumeBoxMs.size() ? volumeBoxMs.percentile(50) : 0.0,
-                                (unsigned long long)volumeBoxUpdates);
+                                local.uploadMs.size() ? local.uploadMs.percentile(50) : 0.0,
+                                (unsigned long long)local.uploads,
+                                local.boxMs.size() ? local.boxMs.percentile(50) : 0.0,
+                                (unsigned long long)local.boxUpdates);
             ImGui::TextDisabled("haptic ticks: %llu local volume, %llu server models",
                                 (unsigned long long)core.localForceTicks(),
                                 (unsigned long long)core.serverForceTicks());
@@ -797,11 +816,11 @@ int runTrainerWindow(const TrainerOptions& o) {
                     syncDesignName(d), f.updatesPerS, f.bytesPerUpdate, f.rawBytesPerUpdate,
                     f.latencyP50Ms, f.latencyP99Ms, f.frameMs, f.hapticHz);
     }
-    if (o.report && picture == SyncDesign::Volume && haveVolume &&
-        cpuDbi.width() == volumeCamera.width && cpuDbi.height() == volumeCamera.height) {
+    if (o.report && picture == SyncDesign::Volume && local.have &&
+        cpuDbi.width() == local.camera.width && cpuDbi.height() == local.camera.height) {
         // The local volume's picture in colour, as last shown (the loop read back its depth).
-        comp.beginEmpty(volumeCamera);
-        volumeView.draw(volumeCamera);
+        comp.beginEmpty(local.camera);
+        local.view.draw(local.camera);
         cpuDbi = comp.readBack();
     }
     if (o.report) {
@@ -811,11 +830,11 @@ int runTrainerWindow(const TrainerOptions& o) {
         r.view = cpuDbi;
         // The camera `view` was made with (the snapshot's view is the placeholder once the
         // client has stopped, or another while a new view's image is on its way).
-        r.camera = picture == SyncDesign::Volume ? volumeCamera : cpuDbiCamera;
+        r.camera = picture == SyncDesign::Volume ? local.camera : cpuDbiCamera;
         r.switchesRequested = switchesRequested;
         r.switchesCompleted = switchesCompleted;
-        r.volumeUploads = volumeUploads;
-        r.volumeBoxUpdates = volumeBoxUpdates;
+        r.volumeUploads = local.uploads;
+        r.volumeBoxUpdates = local.boxUpdates;
         r.localForceTicks = core.localForceTicks();
         r.serverForceTicks = core.serverForceTicks();
         r.frames = framesPerDesign;
