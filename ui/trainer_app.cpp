@@ -187,6 +187,30 @@ struct LocalVolume {
     }
 };
 
+// Which design feeds the picture, and which the Comparison toggle asks for. A design becomes the
+// picture when its full update (a whole DBI or a whole volume) arrives; until then the old
+// picture stays, and the view is switching.
+struct DesignSwitch {
+    SyncDesign picture = SyncDesign::Dbi;
+    SyncDesign wanted = SyncDesign::Dbi;
+    uint64_t pictureSinceUs = 0; // when the picture's full update was applied
+    int refusalsSeen = 0;        // ClientSnapshot::volumeRefusals handled
+    int requested = 0, completed = 0;
+
+    bool switching() const { return wanted != picture; }
+    void request(SyncDesign d, net::ClientThread& client) {
+        wanted = d;
+        client.requestSync(syncOf(d));
+        ++requested;
+    }
+    void arrived(SyncDesign d, uint64_t appliedUs) {
+        if (picture != d)
+            ++completed;
+        picture = d;
+        pictureSinceUs = appliedUs;
+    }
+};
+
 glm::mat4 toolMatrix(glm::vec3 position, glm::quat orientation) {
     return glm::translate(glm::mat4(1.0f), position) * glm::mat4_cast(orientation);
 }
@@ -391,12 +415,8 @@ int runTrainerWindow(const TrainerOptions& o) {
     bool haveImage = false;   // the textures hold a full image of the current view
     uint32_t imageViewId = 0; // viewId of the image in the textures
     net::ViewSpec imageView;  // and its view: the camera it was rendered with
-    // Which design feeds the picture: the one whose full update (whole DBI or whole volume)
-    // arrived last. Until the new design's first full update the old picture stays.
-    SyncDesign picture = designOf(cc.client.sync);
-    uint64_t pictureSinceUs = 0;
-    SyncDesign wanted = picture; // the toggle (the design asked for)
-    int volumeRefusalsSeen = 0;  // ClientSnapshot::volumeRefusals handled
+    DesignSwitch designs;
+    designs.picture = designs.wanted = designOf(cc.client.sync);
     // This frame's incremental updates, counted as on screen at the end of the frame that first
     // drew them, so both designs' latencies include their own drawing (the volume's GPU upload and
     // ray cast, the DBI's texture upload and restore).
@@ -409,12 +429,6 @@ int runTrainerWindow(const TrainerOptions& o) {
     std::vector<DrawnUpdate> drawnThisFrame;
     std::array<uint64_t, kSyncDesignCount> framesPerDesign{};
     double firstPictureAt = -1.0;
-    int switchesRequested = 0, switchesCompleted = 0;
-    auto requestDesign = [&](SyncDesign d) {
-        wanted = d;
-        client.requestSync(syncOf(d));
-        ++switchesRequested;
-    };
     glm::vec3 toolPos(0.0f);
     glm::quat toolRot(1, 0, 0, 0);
     bool toolValid = false;
@@ -434,11 +448,11 @@ int runTrainerWindow(const TrainerOptions& o) {
         model.addSnapshot(snap, now);
         // The server refused the volume design (its whole volume does not fit a message): the
         // client thread goes on in DBI, and so does the toggle.
-        if (snap->volumeRefusals != volumeRefusalsSeen) {
-            volumeRefusalsSeen = snap->volumeRefusals;
+        if (snap->volumeRefusals != designs.refusalsSeen) {
+            designs.refusalsSeen = snap->volumeRefusals;
             std::fprintf(stderr, "window: %s; staying with %s\n", snap->closeReason.c_str(),
                          syncDesignName(SyncDesign::Dbi));
-            wanted = SyncDesign::Dbi;
+            designs.wanted = SyncDesign::Dbi;
         }
         // Taking over (the server's roster): a held trainee's drill is paused, and an instructor
         // drills only while it holds a trainee.
@@ -492,21 +506,18 @@ int runTrainerWindow(const TrainerOptions& o) {
             if (r.full) {
                 if (r.pixels.width() != viewSize || r.pixels.height() != viewSize)
                     continue; // the placeholder view before ours
-                if (local.have && r.appliedUs < pictureSinceUs)
+                if (local.have && r.appliedUs < designs.pictureSinceUs)
                     continue; // older than the volume that replaced the DBI
                 comp.uploadFull(r.pixels);
                 haveImage = true;
                 imageViewId = r.viewId;
                 imageView = r.view;
-                if (picture != SyncDesign::Dbi)
-                    ++switchesCompleted;
-                picture = SyncDesign::Dbi;
-                pictureSinceUs = r.appliedUs;
+                designs.arrived(SyncDesign::Dbi, r.appliedUs);
                 cpuDbi = std::move(r.pixels);
                 cpuDbiCamera = net::toCamera(r.view);
             } else if (haveImage && r.viewId == imageViewId) {
                 comp.uploadRect(r.rect, r.pixels);
-                if (picture == SyncDesign::Dbi && cpuDbi.bounds().contains(r.rect))
+                if (designs.picture == SyncDesign::Dbi && cpuDbi.bounds().contains(r.rect))
                     cpuDbi.apply(r.pixels, r.rect.x, r.rect.y);
                 drawnThisFrame.push_back(
                     {SyncDesign::Dbi, r.latencyUs, r.appliedUs, r.bytes, r.rawBytes});
@@ -521,13 +532,11 @@ int runTrainerWindow(const TrainerOptions& o) {
         // apply stage on the GPU side.
         for (net::AppliedVolumeBox& b : client.drainVolumeBoxes()) {
             if (b.full) {
-                if (haveImage && b.appliedUs < pictureSinceUs && picture == SyncDesign::Dbi)
+                if (haveImage && b.appliedUs < designs.pictureSinceUs &&
+                    designs.picture == SyncDesign::Dbi)
                     continue; // older than the DBI that replaced the volume
                 local.replace(b);
-                if (picture != SyncDesign::Volume)
-                    ++switchesCompleted;
-                picture = SyncDesign::Volume;
-                pictureSinceUs = b.appliedUs;
+                designs.arrived(SyncDesign::Volume, b.appliedUs);
             } else if (local.update(b)) {
                 drawnThisFrame.push_back(
                     {SyncDesign::Volume, b.latencyUs, b.appliedUs, b.bytes, b.rawBytes});
@@ -541,13 +550,14 @@ int runTrainerWindow(const TrainerOptions& o) {
                 screen = dirtyScreenRect(net::toCamera(snap->view), local.volume, b.box);
             model.addVolumeBox(b, screen, now);
         }
+        const SyncDesign picture = designs.picture; // for the rest of the frame
         // Forces on the local copy only while it is the picture and no switch away is under way:
         // the server stops sending voxels at the request, so the copy would go stale.
-        core.setLocalForces(picture == SyncDesign::Volume && wanted == SyncDesign::Volume);
+        core.setLocalForces(picture == SyncDesign::Volume && designs.wanted == SyncDesign::Volume);
         const bool havePicture = picture == SyncDesign::Volume ? local.have : haveImage;
         if (havePicture && firstPictureAt < 0)
             firstPictureAt = now;
-        const bool switching = wanted != picture;
+        const bool switching = designs.switching();
         // The DBI is drawn, and picked, with the camera it was rendered with: a new view's full
         // image can reach the textures before a snapshot names the view (tools drawn with the old
         // matrices over the new picture for a frame, a jitter while orbiting). The local volume is
@@ -562,8 +572,8 @@ int runTrainerWindow(const TrainerOptions& o) {
         }
 
         // The scripted toggle: flip at the next time, once the switch before it has completed.
-        if (const auto due = script.switchDue(now, firstPictureAt, switching, wanted))
-            requestDesign(*due);
+        if (const auto due = script.switchDue(now, firstPictureAt, switching, designs.wanted))
+            designs.request(*due, client);
 
         // The frame begins (events polled, ImGui's new frame) before the tool reads the input:
         // ImGui 1.86 zeroes io.MouseWheel at the end of each frame, so read before NewFrame the
@@ -709,7 +719,7 @@ int runTrainerWindow(const TrainerOptions& o) {
             else if (snap->waitingForView)
                 status = "Waiting for the new view...";
             else if (switching)
-                status = std::string("Switching to ") + syncDesignName(wanted) +
+                status = std::string("Switching to ") + syncDesignName(designs.wanted) +
                          ": waiting for its first full update...";
             drawViewMessage(status, havePicture, viewSize);
             // Taken over, or holding a trainee: said at the foot of the view, on a solid band.
@@ -743,9 +753,9 @@ int runTrainerWindow(const TrainerOptions& o) {
         placeNextPanel(layout.network);
         drawNetworkPanel(*snap, model.network, now);
         placeNextPanel(layout.comparison);
-        SyncDesign shown = wanted;
-        if (drawComparisonPanel(shown, picture, model.comparison, now) && shown != wanted)
-            requestDesign(shown);
+        SyncDesign shown = designs.wanted;
+        if (drawComparisonPanel(shown, picture, model.comparison, now) && shown != designs.wanted)
+            designs.request(shown, client);
         if (ImGui::Begin("Comparison")) { // appends to the panel: what only the window knows
             // Short lines: the 400-pixel panel cut the longer ones off.
             ImGui::TextDisabled("frame ms: start to swap + glFinish, median of 1 s");
@@ -816,7 +826,7 @@ int runTrainerWindow(const TrainerOptions& o) {
                     syncDesignName(d), f.updatesPerS, f.bytesPerUpdate, f.rawBytesPerUpdate,
                     f.latencyP50Ms, f.latencyP99Ms, f.frameMs, f.hapticHz);
     }
-    if (o.report && picture == SyncDesign::Volume && local.have &&
+    if (o.report && designs.picture == SyncDesign::Volume && local.have &&
         cpuDbi.width() == local.camera.width && cpuDbi.height() == local.camera.height) {
         // The local volume's picture in colour, as last shown (the loop read back its depth).
         comp.beginEmpty(local.camera);
@@ -826,13 +836,13 @@ int runTrainerWindow(const TrainerOptions& o) {
     if (o.report) {
         TrainerReport& r = *o.report;
         r.comparison = model.comparison;
-        r.picture = picture;
+        r.picture = designs.picture;
         r.view = cpuDbi;
         // The camera `view` was made with (the snapshot's view is the placeholder once the
         // client has stopped, or another while a new view's image is on its way).
-        r.camera = picture == SyncDesign::Volume ? local.camera : cpuDbiCamera;
-        r.switchesRequested = switchesRequested;
-        r.switchesCompleted = switchesCompleted;
+        r.camera = designs.picture == SyncDesign::Volume ? local.camera : cpuDbiCamera;
+        r.switchesRequested = designs.requested;
+        r.switchesCompleted = designs.completed;
         r.volumeUploads = local.uploads;
         r.volumeBoxUpdates = local.boxUpdates;
         r.localForceTicks = core.localForceTicks();
@@ -843,7 +853,7 @@ int runTrainerWindow(const TrainerOptions& o) {
         extras.session = {{"server", o.address},
                           {"codec", o.codec},
                           {"name", o.name},
-                          {"sync", picture == SyncDesign::Volume ? "volume" : "dbi"}};
+                          {"sync", designs.picture == SyncDesign::Volume ? "volume" : "dbi"}};
         r.session = model.report(extras);
     }
     comp.destroy(fieldMesh);
