@@ -332,6 +332,50 @@ void placeNextPanel(const PanelLayout::Box& b) {
     ImGui::SetNextWindowSize(ImVec2(b.w, b.h), ImGuiCond_FirstUseEver);
 }
 
+// The window's trainee core: the client asks for a 1x1 placeholder view until the scene is
+// known, and hands voxel boxes over for the GPU rather than rendering them itself.
+net::TraineeCoreConfig coreConfigFor(const TrainerOptions& o) {
+    net::TraineeCoreConfig coreConfig;
+    net::ClientThreadConfig& cc = coreConfig.client;
+    cc.address = o.address;
+    cc.client.name = o.name;
+    cc.client.role = o.instructor ? net::Role::Instructor : net::Role::Trainee;
+    cc.client.codec = net::parseCodec(o.codec);
+    cc.client.sync = o.sync == "volume" ? net::Sync::Volume : net::Sync::Dbi;
+    cc.client.volumeCodec = net::parseCodec(o.volumeCodec);
+    // The window ray casts the volume itself (VolumeView), in whichever design it starts: the
+    // client thread then hands over voxel boxes instead of re-rendering on the CPU. In DBI mode
+    // the flag changes nothing, so one setting serves both designs and every switch.
+    cc.client.renderLocally = false;
+    cc.client.view.width = cc.client.view.height = 1; // the real view needs the volume's name
+    coreConfig.haptics.rateHz = 1000.0;
+    coreConfig.haptics.sendRateHz = 100.0;
+    return coreConfig;
+}
+
+WindowConfig windowConfigFor(const TrainerOptions& o) {
+    WindowConfig wc;
+    wc.width = o.size + kPanelWidth + kSideWidth;
+    wc.height = std::max(o.size + kBottomHeight, kMinHeight);
+    wc.title =
+        std::string("Trephine - ") + (o.instructor ? "instructor" : "trainee") + " - " + o.address;
+    wc.visible = o.visible;
+    return wc;
+}
+
+// The Comparison panel's last figures of each design measured, on stdout when the window ends.
+void printComparison(const ComparisonHistory& comparison) {
+    for (SyncDesign d : {SyncDesign::Dbi, SyncDesign::Volume}) {
+        if (!comparison.measured(d))
+            continue;
+        const ComparisonFigures& f = comparison.series(d).last;
+        std::printf("window: %s: %.1f updates/s, %.0f bytes/update (raw %.0f), latency p50 %.2f "
+                    "ms p99 %.2f ms, frame %.2f ms, haptics %.0f Hz\n",
+                    syncDesignName(d), f.updatesPerS, f.bytesPerUpdate, f.rawBytesPerUpdate,
+                    f.latencyP50Ms, f.latencyP99Ms, f.frameMs, f.hapticHz);
+    }
+}
+
 } // namespace
 
 // [SECTION] frame loop
@@ -348,13 +392,7 @@ int runTrainerWindow(const TrainerOptions& o) {
     takeOverControls.canTakeOver = o.instructor;
     std::optional<glm::vec3> pointerPick; // the bone under the pointer, last seen over the view
     const int viewSize = o.size;
-    WindowConfig wc;
-    wc.width = viewSize + kPanelWidth + kSideWidth;
-    wc.height = std::max(viewSize + kBottomHeight, kMinHeight);
-    wc.title =
-        std::string("Trephine - ") + (o.instructor ? "instructor" : "trainee") + " - " + o.address;
-    wc.visible = o.visible;
-    Window window(wc);
+    Window window(windowConfigFor(o));
     // A scripted screenshot is the same whatever the pointer of the display happens to hover (no
     // tooltip or highlighted panel from it).
     if (script.ignoresPointer())
@@ -365,21 +403,8 @@ int runTrainerWindow(const TrainerOptions& o) {
     ToolMeshCache tools{&comp, {}};
     GpuMesh fieldMesh;
 
-    net::TraineeCoreConfig coreConfig;
-    net::ClientThreadConfig& cc = coreConfig.client;
-    cc.address = o.address;
-    cc.client.name = o.name;
-    cc.client.role = o.instructor ? net::Role::Instructor : net::Role::Trainee;
-    cc.client.codec = net::parseCodec(o.codec);
-    cc.client.sync = o.sync == "volume" ? net::Sync::Volume : net::Sync::Dbi;
-    cc.client.volumeCodec = net::parseCodec(o.volumeCodec);
-    // The window ray casts the volume itself (VolumeView), in whichever design it starts: the
-    // client thread then hands over voxel boxes instead of re-rendering on the CPU. In DBI mode
-    // the flag changes nothing, so one setting serves both designs and every switch.
-    cc.client.renderLocally = false;
-    cc.client.view.width = cc.client.view.height = 1; // the real view needs the volume's name
-    coreConfig.haptics.rateHz = 1000.0;
-    coreConfig.haptics.sendRateHz = 100.0;
+    const net::TraineeCoreConfig coreConfig = coreConfigFor(o);
+    const net::ClientThreadConfig& cc = coreConfig.client;
     // The trainee core: the client thread, and the haptic loop that sends the tool states the
     // frames set on the device and feels the force in either design.
     WindowDevice device;
@@ -817,15 +842,7 @@ int runTrainerWindow(const TrainerOptions& o) {
     }
     script.closed(); // before its screenshot or frames: exit 1
     core.stop();     // (stopCore would; the report below reads the stopped client)
-    for (SyncDesign d : {SyncDesign::Dbi, SyncDesign::Volume}) {
-        if (!model.comparison.measured(d))
-            continue;
-        const ComparisonFigures& f = model.comparison.series(d).last;
-        std::printf("window: %s: %.1f updates/s, %.0f bytes/update (raw %.0f), latency p50 %.2f "
-                    "ms p99 %.2f ms, frame %.2f ms, haptics %.0f Hz\n",
-                    syncDesignName(d), f.updatesPerS, f.bytesPerUpdate, f.rawBytesPerUpdate,
-                    f.latencyP50Ms, f.latencyP99Ms, f.frameMs, f.hapticHz);
-    }
+    printComparison(model.comparison);
     if (o.report && designs.picture == SyncDesign::Volume && local.have &&
         cpuDbi.width() == local.camera.width && cpuDbi.height() == local.camera.height) {
         // The local volume's picture in colour, as last shown (the loop read back its depth).
