@@ -12,9 +12,10 @@
 #include "libsim/tool.h"
 #include "libsim_devices/devices.h"
 #include "libsim_image/dbi_io.h"
+#include "net/client_model.h"
 #include "net/codec.h"
 #include "net/scene.h"
-#include "net/session_client.h"
+#include "net/trainee_core.h"
 #include "net/view.h"
 
 #include <glm/gtx/quaternion.hpp>
@@ -25,12 +26,9 @@
 #include <chrono>
 #include <csignal>
 #include <cstdio>
-#include <deque>
 #include <filesystem>
 #include <fstream>
 #include <memory>
-#include <mutex>
-#include <shared_mutex>
 #include <thread>
 
 namespace trephine::app {
@@ -68,49 +66,7 @@ struct TraineeOptions {
     std::string headlessOnly;
 };
 
-struct Sample {
-    double t = 0;
-    net::ToolState tool;
-};
-
-ToolShape shapeOf(const net::ToolState& t) {
-    return ToolKind(t.toolKind) == ToolKind::Perforator ? ToolShape::perforator(t.diameterMm)
-                                                        : ToolShape::burr(t.diameterMm);
-}
-
-// Volume sync (the baseline computes haptics locally): the force model on the client's own copy
-// of the volume, read under the shared lock the client writes it under. No force until the
-// first full volume has arrived.
-class LocalVolumeForce : public ForceSource {
-public:
-    // `toolAt(t)`: the tool state in the script at loop time t (a script may change tools on any
-    // row, as the server's drill follows every tool state): its shape, and its drilling speed for
-    // the drilling resistance, as the server computes it.
-    LocalVolumeForce(const net::SessionClient& client, std::shared_mutex& mutex,
-                     std::function<net::ToolState(double)> toolAt)
-        : m_client(client), m_mutex(mutex), m_toolAt(std::move(toolAt)) {}
-    glm::vec3 force(const ToolPose& pose, double now) override {
-        const net::ToolState t = m_toolAt(now);
-        const ForceModel& model = m_models.get(shapeOf(t)); // the haptic thread only
-        const glm::vec3 velocity = m_velocity.update(pose.position, now);
-        std::shared_lock lock(m_mutex);
-        const Volume* v = m_client.localVolume();
-        if (!v)
-            return glm::vec3(0.0f);
-        ++m_ticks;
-        return model.compute(*v, pose, t.drilling ? t.speed : 0.0f, velocity).force;
-    }
-    uint64_t ticks() const { return m_ticks.load(); }
-    size_t toolsUsed() const { return m_models.size(); }
-
-private:
-    const net::SessionClient& m_client;
-    std::shared_mutex& m_mutex;
-    std::function<net::ToolState(double)> m_toolAt;
-    ForceModelCache m_models;
-    VelocityEstimate m_velocity;
-    std::atomic<uint64_t> m_ticks{0};
-};
+using Sample = net::ScriptSample;
 
 // The built-in burr hole: a 5 mm burr starts 1 mm above the server's burr site (its scene's) and
 // feeds in along the normal at 1 mm/s, tool states at 100 Hz, then lifts (drilling off).
@@ -264,6 +220,194 @@ std::vector<Sample> csvScript(const std::string& path) {
     return out;
 }
 
+// The figures of the session so far, on stdout (the report has them all).
+void printFigures(const net::ClientModel& model, const net::TraineeCore& core, bool volume) {
+    const net::ClientSnapshot none;
+    const net::ClientSnapshot& s = model.session() ? *model.session() : none;
+    std::printf("trainee: %llu updates (%llu full), latency p50 %.0f us p99 %.0f us, "
+                "%.0f bytes/update (raw %.0f), rtt p50 %.0f us, %llu malformed dropped\n",
+                (unsigned long long)s.updatesApplied, (unsigned long long)s.fullUpdates,
+                s.latencyP50Us, s.latencyP99Us, s.meanBytes, s.meanRawBytes, s.rttP50Us,
+                (unsigned long long)s.malformed);
+    for (net::Sync mode : {net::Sync::Dbi, net::Sync::Volume}) {
+        const net::ModeFigures& m = s.modes[size_t(mode)];
+        if (m.updatesApplied == 0)
+            continue;
+        std::printf("trainee: %s updates %llu, stage p50 us: erode %.0f, server render %.0f, "
+                    "encode %.0f, transmit %.0f, client apply %.0f, client render %.0f\n",
+                    mode == net::Sync::Dbi ? "dbi" : "volume", (unsigned long long)m.updatesApplied,
+                    m.erodeP50Us, m.serverRenderP50Us, m.encodeP50Us, m.transmitP50Us, m.applyP50Us,
+                    m.clientRenderP50Us);
+    }
+    const HapticLoopStats h = core.hapticStats();
+    std::printf("trainee: haptic loop %.0f Hz achieved (lateness p50 %.3f ms p99 %.3f ms), "
+                "%llu tool states at %.0f Hz, %llu force models, force round trip p50 %.0f us "
+                "p99 %.0f us\n",
+                h.achievedRateHz, h.latenessP50Ms, h.latenessP99Ms,
+                (unsigned long long)s.toolStatesSent, core.hapticConfig().sendRateHz,
+                (unsigned long long)s.hapticModels, s.hapticRoundTripP50Us, s.hapticRoundTripP99Us);
+    if (volume)
+        std::printf("trainee: forces computed locally on the replicated volume in %llu of %llu "
+                    "haptic ticks (the rest: before the volume arrived), with %zu tool%s\n",
+                    (unsigned long long)core.localForceTicks(), (unsigned long long)h.ticks,
+                    core.localForceTools(), core.localForceTools() == 1 ? "" : "s");
+}
+
+// [Headless] The trainee core with a script as its tool: join, open the view, drill, drain, then
+// the figures, the report and the picture.
+int runHeadlessTrainee(const TraineeOptions& o, std::vector<Sample> script) {
+    net::TraineeCoreConfig coreConfig;
+    net::ClientConfig& config = coreConfig.client.client;
+    config.name = o.name;
+    config.codec = net::parseCodec(o.codec);
+    config.sync = o.sync == "volume" ? net::Sync::Volume : net::Sync::Dbi;
+    config.volumeCodec = net::parseCodec(o.volumeCodec);
+    // A 1x1 placeholder view: the preset comes in the server's scene, after the welcome.
+    config.view.width = config.view.height = 1;
+    coreConfig.client.address = o.connect;
+    coreConfig.client.connectTimeoutS = 10.0;
+    coreConfig.client.retryS = 3600.0; // a headless run does not reconnect: a lost link ends it
+    coreConfig.haptics.sendRateHz = o.toolRateHz;
+    // The script's device and tool source outlive the core, whose haptic loop reads them.
+    std::unique_ptr<ScriptedDevice> device;
+    std::unique_ptr<net::ScriptToolSource> tools;
+    net::TraineeCore core(coreConfig);
+    net::ClientThread& client = core.client();
+    net::HeadlessView view(o.size);
+    core.connect();
+    if (!view.waitFor(client, 15.0, [&] { return view.connected(); })) {
+        const std::string& reason = view.snap()->closeReason;
+        if (reason.rfind("no answer", 0) == 0 || reason.empty())
+            throw Error("trainee: no answer from " + o.connect +
+                        " (is `trephine server` running?)");
+        throw Error("trainee: " + o.connect + " refused us: " + reason);
+    }
+    const net::Welcome welcome = *view.snap()->welcome;
+    // The scene follows the welcome on the same reliable channel: presets and the burr site come
+    // from the server, so the trainee needs its address only (it never opens a volume).
+    if (!view.waitFor(client, 10.0, [&] { return view.snap()->scene != nullptr; }))
+        throw Error(
+            "trainee: " + o.connect + " sent no scene after its welcome" +
+            (view.snap()->closeReason.empty() ? std::string() : ": " + view.snap()->closeReason));
+    const std::shared_ptr<const net::ReceivedScene> scene = view.snap()->scene;
+    const std::optional<Camera> preset =
+        net::presetCamera(scene->scene, o.camera, {o.size, o.size});
+    if (!preset)
+        throw Error("trainee: the server's scene has no camera preset '" + o.camera + "'");
+    const Camera camera = *preset;
+    // Refused (larger than the server serves): it would run on and report the 1x1 placeholder as
+    // its picture.
+    if (int64_t(o.size) * o.size > welcome.maxViewPixels)
+        throw Error("trainee: the server serves views of at most " +
+                    std::to_string(welcome.maxViewPixels) + " pixels; --size " +
+                    std::to_string(o.size) + " asks for " +
+                    std::to_string(int64_t(o.size) * o.size) + ": give a smaller --size");
+    client.requestView(net::toViewSpec(camera));
+    if (!view.waitFor(client, 30.0, [&] { return view.hasPicture(); }))
+        throw Error("trainee: no image from " + o.connect + ": " + view.snap()->closeReason);
+
+    if (o.script == "burrhole") {
+        const net::SceneSite* site = net::findSite(scene->scene, net::kDefaultSiteName);
+        if (!site)
+            throw Error("trainee: the server's scene has no burr site for the burrhole script");
+        script = burrholeScript(*site, o.durationS > 0 ? o.durationS : 4.0);
+    }
+    std::printf("trainee: %s as client %u, view %s (%s), sync %s, codec %s, %zu script samples\n",
+                o.connect.c_str(), unsigned(welcome.clientId), o.camera.c_str(),
+                describe(camera).c_str(), o.sync.c_str(), o.codec.c_str(), script.size());
+    std::fflush(stdout); // shown now, not when the script ends, where stdout is a pipe or file
+    // The core's haptic loop (its own thread, 1 kHz) reads a device that follows the script's
+    // poses, feels the server's force models (or, in the volume design, the local volume) and
+    // sends tool states at --tool-rate through the client thread.
+    std::vector<Waypoint> waypoints;
+    for (const Sample& s : script)
+        waypoints.push_back({s.t, ToolPose{s.tool.position, s.tool.orientation}, 0});
+    device = std::make_unique<ScriptedDevice>(std::move(waypoints));
+    double scriptEnd = script.back().t;
+    if (o.durationS > 0)
+        scriptEnd = std::min(scriptEnd, o.durationS);
+    tools = std::make_unique<net::ScriptToolSource>(*device, script, scriptEnd);
+    // Ctrl-C (or kill, or a closed terminal) ends the script early; the figures so far are still
+    // printed and --report / --save-dbi still written.
+    g_traineeStop = false;
+    handleStopSignals(onTraineeStopSignal);
+    core.startHaptics(*tools);
+    const uint64_t start = net::steadyNowUs();
+    const uint64_t end = start + uint64_t(scriptEnd * 1e6);
+    // A server killed, crashed or cut off sends no goodbye, and ENet gives up on it only after 5
+    // to 30 s: past a short script. The client thread's pings are answered within milliseconds,
+    // so seconds of silence mean it is gone. Counted from the script's start at the earliest.
+    auto serverLost = [&] {
+        return view.connected() &&
+               net::steadyNowUs() - std::max(view.snap()->lastHeardUs, start) > kServerSilenceUs;
+    };
+    auto closed = [&] { return !view.connected(); };
+    while (net::steadyNowUs() < end && !closed() && !serverLost() && !g_traineeStop) {
+        view.take(client, core.hapticStats().ticks);
+        std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    core.stopHaptics();
+    if (!closed() && !serverLost()) {
+        net::ToolState last = script.back().tool; // lift: drilling off
+        last.speed = 0.0f;
+        last.drilling = false;
+        client.sendToolState(last);
+    }
+    // Let the last updates arrive: stop after 0.5 s without one, and 2 s after the script at the
+    // latest (others drilling on kept it waiting for as long as they drilled).
+    const uint64_t drainUntil = net::steadyNowUs() + 2000000;
+    uint64_t lastCount = view.snap()->updatesApplied, quietSince = net::steadyNowUs();
+    while (!closed() && !serverLost() && net::steadyNowUs() - quietSince < 500000 &&
+           net::steadyNowUs() < drainUntil) {
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        view.take(client, core.hapticStats().ticks);
+        if (view.snap()->updatesApplied != lastCount) {
+            lastCount = view.snap()->updatesApplied;
+            quietSince = net::steadyNowUs();
+        }
+    }
+    const double elapsed = double(net::steadyNowUs() - start) * 1e-6;
+    const bool refused = closed();
+    const bool lost = serverLost();
+    const bool interrupted = g_traineeStop;
+    const std::string reason = view.snap()->closeReason;
+    core.stop();
+
+    printFigures(view.model, core, config.sync == net::Sync::Volume);
+    if (!o.report.empty()) {
+        net::ClientReportExtras x = core.reportExtras();
+        x.durationS = elapsed;
+        const bool volumeAtEnd =
+            view.model.session() && view.model.session()->sync == net::Sync::Volume;
+        x.session = {{"server", o.connect}, {"name", o.name},
+                     {"codec", o.codec},    {"sync", volumeAtEnd ? "volume" : "dbi"},
+                     {"view", o.camera},    {"camera", describe(camera)},
+                     {"script", o.script}};
+        if (!writeReplacing(o.report, view.model.report(x).dump(
+                                          2, ' ', false, nlohmann::json::error_handler_t::replace) +
+                                          "\n"))
+            throw Error("--report " + o.report + ": cannot write it");
+    }
+    if (!o.saveDbi.empty())
+        writeDbiExr(o.saveDbi, view.dbi());
+    if (refused) {
+        std::fprintf(stderr, "trainee: the server closed the session: %s\n", reason.c_str());
+        return 1;
+    }
+    if (lost) {
+        std::fprintf(stderr,
+                     "trainee: lost the server %s: nothing heard for %.0f s (killed, "
+                     "crashed or cut off), %.1f s into the script\n",
+                     o.connect.c_str(), double(kServerSilenceUs) * 1e-6, elapsed);
+        return 1;
+    }
+    if (interrupted) {
+        std::fprintf(stderr, "trainee: stopped by a signal %.1f s into the script\n", elapsed);
+        return 1;
+    }
+    return 0;
+}
+
 int runTrainee(const TraineeOptions& o) {
     if (!o.headless && !o.headlessOnly.empty())
         throw Error(o.headlessOnly + ": only a --headless trainee uses it; the trainee window has "
@@ -285,7 +429,7 @@ int runTrainee(const TraineeOptions& o) {
     if (!o.screenshot.empty())
         throw Error("--screenshot: the window's; a --headless trainee has none (--save-dbi writes "
                     "its picture)");
-    ENetAddress address = net::parseAddress(o.connect);
+    net::parseAddress(o.connect); // a bad address is refused before anything else
     // The outputs are checked first too: a typo found after the session would waste it.
     if (!o.report.empty())
         checkOutputFolder("--report", o.report);
@@ -302,264 +446,7 @@ int runTrainee(const TraineeOptions& o) {
     std::vector<Sample> script;
     if (o.script != "burrhole")
         script = csvScript(o.script);
-    net::ClientConfig config;
-    config.name = o.name;
-    config.codec = net::parseCodec(o.codec);
-    config.sync = o.sync == "volume" ? net::Sync::Volume : net::Sync::Dbi;
-    config.volumeCodec = net::parseCodec(o.volumeCodec);
-    // A 1x1 placeholder view: the preset comes in the server's scene, after the welcome.
-    config.view.width = config.view.height = 1;
-    net::SessionClient client(config);
-    std::shared_mutex volumeMutex; // the haptic thread reads the local volume under it
-    client.setVolumeMutex(&volumeMutex);
-    client.connect(address);
-    auto pumpUntil = [&](double seconds, const std::function<bool()>& pred) {
-        uint64_t deadline = net::steadyNowUs() + uint64_t(seconds * 1e6);
-        while (net::steadyNowUs() < deadline && !client.closed()) {
-            client.poll(1);
-            if (pred())
-                return true;
-        }
-        return pred();
-    };
-    if (!pumpUntil(10.0, [&] { return client.welcomed(); })) {
-        if (client.closed())
-            throw Error("trainee: " + o.connect + " refused us: " + client.closeReason());
-        throw Error("trainee: no answer from " + o.connect + " (is `trephine server` running?)");
-    }
-    // The scene follows the welcome on the same reliable channel: presets and the burr site come
-    // from the server, so the trainee needs its address only (it never opens a volume).
-    if (!pumpUntil(10.0, [&] { return client.scene() != nullptr; }))
-        throw Error("trainee: " + o.connect + " sent no scene after its welcome" +
-                    (client.closed() ? ": " + client.closeReason() : std::string()));
-    const std::shared_ptr<const net::ReceivedScene> scene = client.scene();
-    const std::optional<Camera> preset =
-        net::presetCamera(scene->scene, o.camera, {o.size, o.size});
-    if (!preset)
-        throw Error("trainee: the server's scene has no camera preset '" + o.camera + "'");
-    const Camera camera = *preset;
-    // Refused (larger than the server serves, or not a view the wire carries): it would run on
-    // and report the 1x1 placeholder as its picture.
-    if (client.requestView(net::toViewSpec(camera)) == 0)
-        throw Error("trainee: the server serves views of at most " +
-                    std::to_string(client.welcome().maxViewPixels) + " pixels; --size " +
-                    std::to_string(o.size) + " asks for " +
-                    std::to_string(int64_t(o.size) * o.size) + ": give a smaller --size");
-    if (!pumpUntil(30.0, [&] { return client.hasFullImage(); }))
-        throw Error("trainee: no image from " + o.connect + ": " + client.closeReason());
-
-    if (o.script == "burrhole") {
-        const net::SceneSite* site = net::findSite(scene->scene, net::kDefaultSiteName);
-        if (!site)
-            throw Error("trainee: the server's scene has no burr site for the burrhole script");
-        script = burrholeScript(*site, o.durationS > 0 ? o.durationS : 4.0);
-    }
-    std::printf("trainee: %s as client %u, view %s (%s), sync %s, codec %s, %zu script samples\n",
-                o.connect.c_str(), unsigned(client.welcome().clientId), o.camera.c_str(),
-                describe(camera).c_str(), o.sync.c_str(), o.codec.c_str(), script.size());
-    std::fflush(stdout); // shown now, not when the script ends, where stdout is a pipe or file
-    // The haptic loop (its own thread, 1 kHz) reads a device that follows the script's poses,
-    // extrapolates the server's force models and sends tool states at --tool-rate through its
-    // throttle; this thread owns the client, so the loop's sends wait in a queue for it.
-    std::vector<Waypoint> waypoints;
-    for (const Sample& s : script)
-        waypoints.push_back({s.t, ToolPose{s.tool.position, s.tool.orientation}, 0});
-    ScriptedDevice device(std::move(waypoints));
-    double scriptEnd = script.back().t;
-    if (o.durationS > 0)
-        scriptEnd = std::min(scriptEnd, o.durationS);
-    // The script sample in force at time t (speed, drilling and tool hold until the next).
-    auto sampleAt = [&](double t) -> const Sample& {
-        auto it = std::upper_bound(script.begin(), script.end(), t,
-                                   [](double v, const Sample& s) { return v < s.t; });
-        return it == script.begin() ? script.front() : *std::prev(it);
-    };
-    std::mutex sendMutex;
-    std::deque<net::ToolState> toSend;
-    uint64_t start = net::steadyNowUs();
-    HapticLoopConfig loopConfig;
-    loopConfig.sendRateHz = o.toolRateHz;
-    // Declared before the loop, so the loop (and its thread) ends before the force it calls.
-    std::unique_ptr<LocalVolumeForce> localForce;
-    HapticLoop loop(device, loopConfig, [&](const DeviceState& state, double now) {
-        net::ToolState t = sampleAt(now).tool;
-        if (now >= scriptEnd) {
-            t.speed = 0.0f; // the script is over: no more drilling
-            t.drilling = false;
-        }
-        t.position = state.pose.position;
-        t.orientation = state.pose.orientation;
-        t.clientTimeUs = net::steadyNowUs(); // the device sample: the round trip starts here
-        std::lock_guard lock(sendMutex);
-        toSend.push_back(t);
-    });
-    // The callback below reaches `loop`: however this function ends (an exception included),
-    // it is cleared before `loop` goes, since the client's destructor still polls.
-    struct ClearHapticCallback {
-        net::SessionClient& client;
-        ~ClearHapticCallback() { client.setHapticCallback({}); }
-    } clearHapticCallback{client};
-    client.setHapticCallback([&](const net::HapticModel& m, uint64_t arrivalUs) {
-        HapticModelData d;
-        d.position = m.position;
-        d.force = m.force;
-        d.gradient = m.gradient;
-        d.contact = m.contact;
-        d.toolSequence = m.toolSequence;
-        // The loop's clock counts from its start (within microseconds of `start`).
-        loop.setModel(d, double(int64_t(arrivalUs) - int64_t(start)) * 1e-6);
-    });
-    uint64_t nextPing = start;
-    uint64_t end = start;
-    std::vector<net::ToolState> batch;
-    start = net::steadyNowUs();
-    nextPing = start;
-    end = start + uint64_t(scriptEnd * 1e6);
-    if (config.sync == net::Sync::Volume) {
-        localForce = std::make_unique<LocalVolumeForce>(client, volumeMutex, [&](double t) {
-            net::ToolState s = sampleAt(t).tool;
-            if (t >= scriptEnd)
-                s.speed = 0.0f, s.drilling = false; // as the tool states sent say
-            return s;
-        });
-        loop.setForceSource(localForce.get());
-    }
-    // A server killed, crashed or cut off sends no goodbye, and ENet gives up on it only after 5
-    // to 30 s: past a short script. The pings below (every 0.1 s) are answered within
-    // milliseconds, so seconds of silence mean it is gone.
-    // Counted from the script's start at the earliest: the first image's handling (a whole volume
-    // decoded and rendered) is not silence.
-    auto serverLost = [&] {
-        return !client.closed() &&
-               net::steadyNowUs() - std::max(client.lastHeardUs(), start) > kServerSilenceUs;
-    };
-    // Ctrl-C (or kill, or a closed terminal) ends the script early; the figures so far are still
-    // printed and --report / --save-dbi still written.
-    g_traineeStop = false;
-    handleStopSignals(onTraineeStopSignal);
-    loop.start();
-    while (net::steadyNowUs() < end && !client.closed() && !serverLost() && !g_traineeStop) {
-        {
-            std::lock_guard lock(sendMutex);
-            batch.assign(toSend.begin(), toSend.end());
-            toSend.clear();
-        }
-        for (const net::ToolState& t : batch)
-            client.sendToolState(t);
-        // Short waits, not poll(1): a tool state queued by the haptic thread goes out within
-        // ~0.2 ms instead of waiting for ENet's 1 ms timeout (it counts in the force round trip).
-        if (client.poll(0) == 0 && batch.empty())
-            std::this_thread::sleep_for(std::chrono::microseconds(200));
-        if (net::steadyNowUs() >= nextPing) {
-            client.sendPing();
-            nextPing += 100000;
-        }
-    }
-    loop.stop();
-    HapticLoopStats haptics = loop.stats();
-    client.setHapticCallback({}); // the loop is stopped; models still count in the stats
-    if (!client.closed() && !serverLost()) {
-        net::ToolState last = script.back().tool; // lift: drilling off
-        last.speed = 0.0f;
-        last.drilling = false;
-        client.sendToolState(last);
-    }
-    // Let the last updates arrive: stop after 0.5 s without one, and 2 s after the script at the
-    // latest (others drilling on kept it waiting for as long as they drilled, and their updates
-    // then counted as ours).
-    const uint64_t drainUntil = net::steadyNowUs() + 2000000;
-    uint64_t lastCount = client.updatesApplied(), quietSince = net::steadyNowUs();
-    while (!client.closed() && !serverLost() && net::steadyNowUs() - quietSince < 500000 &&
-           net::steadyNowUs() < drainUntil) {
-        client.poll(5);
-        if (client.updatesApplied() != lastCount) {
-            lastCount = client.updatesApplied();
-            quietSince = net::steadyNowUs();
-        }
-    }
-    double elapsed = double(net::steadyNowUs() - start) * 1e-6;
-    const bool refused = client.closed();
-    const bool lost = serverLost();
-    const bool interrupted = g_traineeStop;
-    const std::string reason = client.closeReason();
-    if (!lost)
-        client.disconnect();
-
-    const net::NetStats& st = client.stats();
-    std::printf("trainee: %llu updates (%llu full), latency p50 %.0f us p99 %.0f us, "
-                "%.0f bytes/update (raw %.0f), rtt p50 %.0f us, %llu malformed dropped\n",
-                (unsigned long long)client.updatesApplied(),
-                (unsigned long long)client.fullUpdates(), st.updateLatencyUs.percentile(50),
-                st.updateLatencyUs.percentile(99), st.updateBytes.mean(), st.updateRawBytes.mean(),
-                st.rttUs.percentile(50), (unsigned long long)st.malformed());
-    for (net::Sync mode : {net::Sync::Dbi, net::Sync::Volume}) {
-        const net::ModeStats& m = st.modes[size_t(mode)];
-        if (m.updates == 0)
-            continue;
-        std::printf("trainee: %s updates %llu, stage p50 us: erode %.0f, server render %.0f, "
-                    "encode %.0f, transmit %.0f, client apply %.0f, client render %.0f\n",
-                    mode == net::Sync::Dbi ? "dbi" : "volume", (unsigned long long)m.updates,
-                    m.erodeUs.percentile(50), m.serverRenderUs.percentile(50),
-                    m.encodeUs.percentile(50), m.transmitUs.percentile(50),
-                    m.applyUs.percentile(50), m.clientRenderUs.percentile(50));
-    }
-    std::printf("trainee: haptic loop %.0f Hz achieved (lateness p50 %.3f ms p99 %.3f ms), "
-                "%llu tool states at %.0f Hz, %llu force models, force round trip p50 %.0f us "
-                "p99 %.0f us\n",
-                haptics.achievedRateHz, haptics.latenessP50Ms, haptics.latenessP99Ms,
-                (unsigned long long)client.toolStatesSent(), o.toolRateHz,
-                (unsigned long long)client.hapticModelsReceived(),
-                st.hapticRoundTripUs.percentile(50), st.hapticRoundTripUs.percentile(99));
-    if (localForce)
-        std::printf("trainee: forces computed locally on the replicated volume in %llu of %llu "
-                    "haptic ticks (the rest: before the volume arrived), with %zu tool%s\n",
-                    (unsigned long long)localForce->ticks(), (unsigned long long)haptics.ticks,
-                    localForce->toolsUsed(), localForce->toolsUsed() == 1 ? "" : "s");
-    if (!o.report.empty()) {
-        net::ReportInfo info;
-        info.server = o.connect;
-        info.codec = o.codec;
-        info.sync = client.sync() == net::Sync::Volume ? "volume" : "dbi";
-        info.view = o.camera;
-        info.camera = describe(camera);
-        info.script = o.script;
-        info.durationS = elapsed;
-        info.updatesApplied = client.updatesApplied();
-        info.fullUpdates = client.fullUpdates();
-        info.toolStatesSent = client.toolStatesSent();
-        info.relaysReceived = client.relaysReceived();
-        info.updatesRejected = client.updatesRejected();
-        info.hapticLoop = true;
-        info.toolRateHz = o.toolRateHz;
-        info.hapticRateHz = loopConfig.rateHz;
-        info.achievedRateHz = haptics.achievedRateHz;
-        info.latenessP50Ms = haptics.latenessP50Ms;
-        info.latenessP99Ms = haptics.latenessP99Ms;
-        info.hapticTicks = haptics.ticks;
-        info.hapticModels = client.hapticModelsReceived();
-        info.modelsApplied = haptics.models;
-        info.modelsDropped = haptics.modelsDropped;
-        if (!writeReplacing(o.report, net::reportJson(info, st)))
-            throw Error("--report " + o.report + ": cannot write it");
-    }
-    if (!o.saveDbi.empty())
-        writeDbiExr(o.saveDbi, client.dbi());
-    if (refused) {
-        std::fprintf(stderr, "trainee: the server closed the session: %s\n", reason.c_str());
-        return 1;
-    }
-    if (lost) {
-        std::fprintf(stderr,
-                     "trainee: lost the server %s: nothing heard for %.0f s (killed, "
-                     "crashed or cut off), %.1f s into the script\n",
-                     o.connect.c_str(), double(kServerSilenceUs) * 1e-6, elapsed);
-        return 1;
-    }
-    if (interrupted) {
-        std::fprintf(stderr, "trainee: stopped by a signal %.1f s into the script\n", elapsed);
-        return 1;
-    }
-    return 0;
+    return runHeadlessTrainee(o, std::move(script));
 }
 
 } // namespace

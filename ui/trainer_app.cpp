@@ -1,6 +1,7 @@
 // The trainer window. Sections:
-// [SECTION] scene: what the server's scene gives the window (site, presets, surgical field)
-// [SECTION] haptics: the window's device and the force in either design
+// [SECTION] scene: volume-derived data (site, surgical field) built off the main thread
+// [SECTION] haptics: the window's tool as the trainee core's tool source
+// [SECTION] drawing: the view's labels, messages and the panels' layout
 // [SECTION] frame loop: snapshot -> rectangles / voxel boxes -> tool -> composite -> overlays ->
 //           panels -> comparison figures
 #include "ui/trainer_app.h"
@@ -13,13 +14,17 @@
 #include "libsim/skull.h"
 #include "libsim/stats.h"
 #include "libsim/volume.h"
+#include "net/client_model.h"
 #include "net/client_thread.h"
 #include "net/codec.h"
 #include "net/scene.h"
+#include "net/tool_model.h"
+#include "net/trainee_core.h"
 #include "net/view.h"
 #include "ui/compositor.h"
 #include "ui/mouse_tool.h"
 #include "ui/panels.h"
+#include "ui/scripted_driver.h"
 #include "ui/volume_view.h"
 #include "ui/window.h"
 
@@ -84,8 +89,7 @@ struct ToolMeshCache {
             return it->second;
         ToolShape shape;
         try {
-            shape = kind == ToolKind::Perforator ? ToolShape::perforator(diameterMm)
-                                                 : ToolShape::burr(diameterMm);
+            shape = net::toolShape(kind, diameterMm);
         } catch (const Error&) {
             shape = ToolShape::burr(4.0f);
         }
@@ -99,71 +103,32 @@ struct ToolMeshCache {
 
 // [SECTION] haptics
 
-// The haptic loop's force in either design, chosen per tick. DBI: the server's force models,
-// extrapolated and blended as HapticLoop does without a source (the multi-rate scheme). Volume:
-// the ForceModel on the client's own copy of the volume, read under ClientThread::withLocalVolume's
-// shared lock, so the 1 kHz loop no longer depends on the server's models (it falls back to them
-// while no local volume is held). The blender keeps running in volume mode so that a switch back
-// to DBI blends from where it is. force() runs on the haptic thread only.
-class WindowForceSource : public ForceSource {
+// The window's tool for the trainee core: the pose and tool the frame set on the WindowDevice,
+// and the velocity of the frames' poses (per 1 kHz tick it was 0 for ~15 ticks, then 16 times the
+// true speed for one: a spiking drag).
+class WindowTools : public net::ToolSource {
 public:
-    WindowForceSource(const WindowDevice& device, BlendConfig blend)
-        : m_device(device), m_blender(blend) {}
-    void setClient(const net::ClientThread* client) { m_client = client; } // before the loop runs
-    // Any thread: the newest server model (blended in on the next tick; one answering an older
-    // tool state than the newest seen is dropped, as HapticLoop drops it).
-    void setModel(const HapticModelData& m) { m_serverModel.offer(m, 0.0); }
-    // Any thread: compute forces locally (the picture comes from the local volume).
-    void setLocal(bool local) { m_local = local; }
-    uint64_t localTicks() const { return m_localTicks.load(); }
-    uint64_t serverTicks() const { return m_serverTicks.load(); }
-
-    glm::vec3 force(const ToolPose& pose, double now) override {
-        if (const NewestModel::Taken taken = m_serverModel.take(); taken.model)
-            m_blender.setModel(taken.model->first, now);
-        const glm::vec3 extrapolated = m_blender.update(pose.position, now);
-        if (m_local.load(std::memory_order_relaxed) && m_client) {
-            const WindowDevice::Tool t = m_device.tool();
-            glm::vec3 f(0.0f);
-            try {
-                const ToolShape shape = t.kind == ToolKind::Perforator
-                                            ? ToolShape::perforator(t.diameterMm)
-                                            : ToolShape::burr(t.diameterMm);
-                const ForceModel& model = m_models.get(shape);
-                const float speed = t.drilling ? t.speed : 0.0f;
-                // The poses change once a frame, so the velocity is the frame's (per tick it was
-                // 0 for ~15 ticks, then 16 times the true speed for one: a spiking drag).
-                const glm::vec3 velocity = m_device.velocity();
-                if (m_client->withLocalVolume([&](const Volume& v) {
-                        f = model.compute(v, pose, speed, velocity).force;
-                    })) {
-                    m_localTicks.fetch_add(1, std::memory_order_relaxed);
-                    return f;
-                }
-            } catch (const Error&) {
-                // A shape the factories refuse: no local model; the server's is all there is.
-            }
-        }
-        m_serverTicks.fetch_add(1, std::memory_order_relaxed);
-        return extrapolated;
+    explicit WindowTools(WindowDevice& device) : m_device(device) {}
+    Device& device() override { return m_device; }
+    net::ToolState toolAt(const ToolPose& pose, double) override {
+        const WindowDevice::Tool t = m_device.tool();
+        net::ToolState ts;
+        ts.toolKind = uint8_t(t.kind);
+        ts.diameterMm = t.diameterMm;
+        ts.position = pose.position;
+        ts.orientation = pose.orientation;
+        ts.speed = t.drilling ? t.speed : 0.0f;
+        ts.drilling = t.drilling;
+        return ts;
     }
+    glm::vec3 velocity(const ToolPose&, double) override { return m_device.velocity(); }
 
 private:
-    const WindowDevice& m_device;
-    const net::ClientThread* m_client = nullptr;
-    ModelBlender m_blender;
-    ForceModelCache m_models;
-    NewestModel m_serverModel;
-    std::atomic<bool> m_local{false};
-    std::atomic<uint64_t> m_localTicks{0}, m_serverTicks{0};
+    WindowDevice& m_device;
 };
 
-SyncDesign designOf(net::Sync s) {
-    return s == net::Sync::Volume ? SyncDesign::Volume : SyncDesign::Dbi;
-}
-net::Sync syncOf(SyncDesign d) {
-    return d == SyncDesign::Volume ? net::Sync::Volume : net::Sync::Dbi;
-}
+using net::designOf;
+using net::syncOf;
 
 // The window's copy of the volume for the GPU, rebuilt from the client thread's applied boxes.
 void writeBox(Volume& v, const net::AppliedVolumeBox& b) {
@@ -178,78 +143,198 @@ void writeBox(Volume& v, const net::AppliedVolumeBox& b) {
         }
 }
 
+// [Replicated volume] the window's copy of the volume, mirrored in a VolumeView's textures, and
+// the GPU side of the volume client's apply stage (timed: the Comparison panel shows it).
+struct LocalVolume {
+    VolumeView view; // needs the window's GL context
+    Volume volume;
+    bool have = false;  // `view` holds a whole volume
+    bool dirty = false; // the ray cast changed since the picking picture was read back
+    Camera camera;      // the camera the picking picture was read back with
+    SampleWindow uploadMs{256}, boxMs{1024};
+    uint64_t uploads = 0, boxUpdates = 0;
+
+    // A whole volume: replaces the copy and its textures.
+    void replace(const net::AppliedVolumeBox& b) {
+        const auto start = std::chrono::steady_clock::now();
+        volume = Volume(b.dims, b.spacing);
+        writeBox(volume, b);
+        view.upload(volume);
+        uploadMs.add(msSince(start));
+        ++uploads;
+        have = true;
+    }
+    // A box of the copy: its voxels and the gradients around them re-uploaded; false (nothing
+    // done) when it does not fit the volume held.
+    bool update(const net::AppliedVolumeBox& b) {
+        const auto start = std::chrono::steady_clock::now();
+        if (!have || b.dims != volume.dims() || b.box.empty() ||
+            !glm::all(glm::greaterThanEqual(b.box.lo, glm::ivec3(0))) ||
+            !glm::all(glm::lessThanEqual(b.box.hi, b.dims)) ||
+            b.density.size() != size_t(b.box.count()) || b.material.size() != size_t(b.box.count()))
+            return false;
+        writeBox(volume, b);
+        view.updateBox(volume, b.box);
+        boxMs.add(msSince(start));
+        ++boxUpdates;
+        return true;
+    }
+    static double msSince(std::chrono::steady_clock::time_point t) {
+        return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t)
+            .count();
+    }
+};
+
+// Which design feeds the picture, and which the Comparison toggle asks for. A design becomes the
+// picture when its full update (a whole DBI or a whole volume) arrives; until then the old
+// picture stays, and the view is switching.
+struct DesignSwitch {
+    SyncDesign picture = SyncDesign::Dbi;
+    SyncDesign wanted = SyncDesign::Dbi;
+    uint64_t pictureSinceUs = 0; // when the picture's full update was applied
+    int refusalsSeen = 0;        // ClientSnapshot::volumeRefusals handled
+    int requested = 0, completed = 0;
+
+    bool switching() const { return wanted != picture; }
+    void request(SyncDesign d, net::ClientThread& client) {
+        wanted = d;
+        client.requestSync(syncOf(d));
+        ++requested;
+    }
+    void arrived(SyncDesign d, uint64_t appliedUs) {
+        if (picture != d)
+            ++completed;
+        picture = d;
+        pictureSinceUs = appliedUs;
+    }
+};
+
 glm::mat4 toolMatrix(glm::vec3 position, glm::quat orientation) {
     return glm::translate(glm::mat4(1.0f), position) * glm::mat4_cast(orientation);
 }
 
-// "X,Y,Z[:LABEL]" (mm) as an Annotate add; a malformed one is a one-line error naming it.
-net::Annotate parseMark(const std::string& text) {
-    const std::string where = "--mark '" + text + "'";
-    const size_t colon = text.find(':');
-    const std::string coords = text.substr(0, colon);
-    net::Annotate a;
-    a.op = net::Annotate::Op::Add;
-    a.label = colon == std::string::npos ? std::string() : text.substr(colon + 1);
-    if (a.label.size() > net::kMaxNameLength)
-        throw Error(where + ": the label is longer than " + std::to_string(net::kMaxNameLength) +
-                    " bytes");
-    float v[3];
-    const char* p = coords.c_str();
-    for (int i = 0; i < 3; ++i) {
-        char* end = nullptr;
-        v[i] = std::strtof(p, &end);
-        const char want = i < 2 ? ',' : '\0';
-        if (end == p || *end != want || !std::isfinite(v[i]) ||
-            std::abs(v[i]) > net::kMaxAnnotationDistanceMm)
-            throw Error(where + ": expected X,Y,Z[:LABEL] with X, Y, Z in mm");
-        p = end + (i < 2 ? 1 : 0);
+// [SECTION] drawing
+
+// The view's labels (every tool's owner, ours last) and the instructors' marks, cut at the view's
+// edge; `own` null: no tool of ours is shown.
+void drawViewLabels(const net::ClientSnapshot& snap, const Camera& camera, const Dbi& cpuDbi,
+                    int viewSize, const ToolPose* own, const std::string& ownLabel) {
+    ImDrawList* fg = ImGui::GetForegroundDrawList();
+    const float viewTop = 0.0f;
+    // Labels and marks belong to the view: one that projects outside it (orbited or
+    // zoomed away) is cut at its edge, not drawn over the panels beside and under it.
+    fg->PushClipRect(ImVec2(0.0f, viewTop), ImVec2(float(viewSize), viewTop + viewSize));
+    glm::dmat4 vp = viewProjection(camera);
+    auto label = [&](glm::vec3 p, glm::vec3 axis, glm::vec4 c, const std::string& text) {
+        WindowPoint w = projectToWindow(vp, camera, glm::dvec3(p + axis * 40.0f));
+        if (w.w <= 0)
+            return;
+        ImVec2 at(float(w.window.x) + 8.0f, viewTop + float(viewSize - w.window.y));
+        fg->AddRectFilled(
+            ImVec2(at.x - 3, at.y - 2),
+            ImVec2(at.x + ImGui::CalcTextSize(text.c_str()).x + 3, at.y + ImGui::GetFontSize() + 2),
+            IM_COL32(0, 0, 0, 140), 3.0f);
+        fg->AddText(at, ImGui::GetColorU32(ImVec4(c.r, c.g, c.b, 1.0f)), text.c_str());
+    };
+    for (const auto& [id, t] : snap.others)
+        label(t.position, t.orientation * glm::vec3(0, 0, 1), participantColor(int(id)),
+              participantName(snap.participants, id) + (t.drilling ? " (drilling)" : ""));
+    if (own)
+        label(own->position, own->orientation * glm::vec3(0, 0, 1), participantColor(0), ownLabel);
+    // The instructors' marks: a ring on the bone and its label beside it; faint where the
+    // bone in this view lies more than 2 mm in front of the mark (it is behind it).
+    const glm::vec4 mc = markColor();
+    for (const net::AnnotationInfo& a : snap.annotations) {
+        WindowPoint w = projectToWindow(vp, camera, glm::dvec3(a.position));
+        if (w.w <= 0)
+            continue;
+        const int px = int(w.window.x), py = int(w.window.y);
+        bool hidden = false;
+        if (cpuDbi.bounds().contains(PixelRect{px, py, 1, 1}) && cpuDbi.width() == camera.width &&
+            cpuDbi.height() == camera.height) {
+            const double bone = eyeZFromWindowDepth(camera, cpuDbi.depth(px, py));
+            const double mark = eyeZFromWindowDepth(camera, w.window.z);
+            hidden = bone - mark > 2.0; // eye z is negative in front of the eye
+        }
+        const ImU32 markCol = ImGui::GetColorU32(ImVec4(mc.r, mc.g, mc.b, hidden ? 0.35f : 1.0f));
+        const ImVec2 c(float(w.window.x), viewTop + float(viewSize - w.window.y));
+        fg->AddCircle(c, 8.0f, IM_COL32(0, 0, 0, 160), 0, 4.5f);
+        fg->AddCircle(c, 8.0f, markCol, 0, 2.5f);
+        fg->AddCircleFilled(c, 2.5f, markCol);
+        if (!a.label.empty()) {
+            const ImVec2 at(c.x + 12.0f, c.y - ImGui::GetFontSize() * 0.5f);
+            fg->AddRectFilled(ImVec2(at.x - 3, at.y - 2),
+                              ImVec2(at.x + ImGui::CalcTextSize(a.label.c_str()).x + 3,
+                                     at.y + ImGui::GetFontSize() + 2),
+                              IM_COL32(0, 0, 0, 140), 3.0f);
+            fg->AddText(at, markCol, a.label.c_str());
+        }
     }
-    a.position = {v[0], v[1], v[2]};
-    return a;
+    fg->PopClipRect();
 }
 
-} // namespace
+// A line about the link or the picture over the view (centred when no picture is shown).
+void drawViewMessage(const std::string& status, bool havePicture, int viewSize) {
+    ImDrawList* fg = ImGui::GetForegroundDrawList();
+    const float viewTop = 0.0f;
+    if (!status.empty()) {
+        ImVec2 sz = ImGui::CalcTextSize(status.c_str(), nullptr, false, viewSize - 40.0f);
+        ImVec2 at((float(viewSize) - sz.x) * 0.5f,
+                  havePicture ? 12.0f : viewTop + (float(viewSize) - sz.y) * 0.5f);
+        fg->AddRectFilled(ImVec2(at.x - 10, at.y - 8), ImVec2(at.x + sz.x + 10, at.y + sz.y + 8),
+                          IM_COL32(20, 20, 24, 210), 6.0f);
+        fg->AddText(nullptr, 0.0f, at, IM_COL32(255, 200, 90, 255), status.c_str(), nullptr,
+                    viewSize - 40.0f);
+    }
+}
 
-// [SECTION] frame loop
+// Taken over, or holding a trainee: said at the foot of the view, on a solid band.
+void drawHeldBand(const std::string& held, int viewSize) {
+    ImDrawList* fg = ImGui::GetForegroundDrawList();
+    const float viewTop = 0.0f;
+    if (!held.empty()) {
+        const ImVec2 sz = ImGui::CalcTextSize(held.c_str());
+        const ImVec2 at((float(viewSize) - sz.x) * 0.5f, viewTop + float(viewSize) - sz.y - 18.0f);
+        fg->AddRectFilled(ImVec2(at.x - 12, at.y - 8), ImVec2(at.x + sz.x + 12, at.y + sz.y + 8),
+                          kTakeOverBand, 6.0f);
+        fg->AddText(at, IM_COL32(255, 255, 255, 255), held.c_str());
+    }
+}
 
-int runTrainerWindow(const TrainerOptions& o) {
-    using Clock = std::chrono::steady_clock;
-    if (o.sync != "dbi" && o.sync != "volume")
-        throw Error("window: --sync must be dbi or volume, not '" + o.sync + "'");
-    if (!o.marks.empty() && !o.instructor)
-        throw Error("window: --mark: only an instructor places marks");
-    std::vector<net::Annotate> scriptedMarks;
-    for (const std::string& m : o.marks)
-        scriptedMarks.push_back(parseMark(m));
-    bool marksSent = scriptedMarks.empty();
-    MarkControls markControls;
-    MarkUndo markUndo; // the last removal of marks, for the Session panel's undo
-    markControls.canMark = o.instructor;
-    if (!o.takeOver.empty() && !o.instructor)
-        throw Error("window: --take-over: only an instructor takes over a trainee");
-    TakeOverControls takeOverControls;
-    takeOverControls.canTakeOver = o.instructor;
-    ScriptedTakeOver scriptedTakeOver{o.takeOver};
-    std::optional<glm::vec3> pointerPick; // the bone under the pointer, last seen over the view
-    const int viewSize = o.size;
-    WindowConfig wc;
-    wc.width = viewSize + kPanelWidth + kSideWidth;
-    wc.height = std::max(viewSize + kBottomHeight, kMinHeight);
-    wc.title =
-        std::string("Trephine - ") + (o.instructor ? "instructor" : "trainee") + " - " + o.address;
-    wc.visible = o.visible;
-    Window window(wc);
-    // A scripted screenshot is the same whatever the pointer of the display happens to hover (no
-    // tooltip or highlighted panel from it).
-    if (!o.screenshot.empty() && !o.script.empty())
-        ImGui::GetIO().ConfigFlags |= ImGuiConfigFlags_NoMouse;
-    Compositor comp;
-    comp.resize(viewSize, viewSize);
-    VolumeView volumeView; // the replicated-volume design's picture
-    ToolMeshCache tools{&comp, {}};
-    GpuMesh fieldMesh;
+// Where each panel opens (they stay movable): Session, View and Network in the middle column
+// (kPanelWidth), Comparison over Dirty boxes on the right (kSideWidth), Forces under the view.
+struct PanelLayout {
+    struct Box {
+        float x, y, w, h;
+    };
+    Box session, view, network, comparison, dirtyBoxes, forces;
+};
 
-    net::ClientThreadConfig cc;
+PanelLayout panelLayout(int viewSize, float height) {
+    const float right = float(viewSize), colW = float(kPanelWidth);
+    const float side = right + colW, sideW = float(kSideWidth);
+    const float sessionH = std::floor(height * 0.31f), viewPanelH = 165.0f;
+    const float networkY = sessionH + viewPanelH, comparisonH = std::floor(height * 0.535f);
+    PanelLayout l;
+    l.session = {right, 0, colW, sessionH};
+    l.view = {right, sessionH, colW, viewPanelH};
+    l.network = {right, networkY, colW, height - networkY};
+    l.comparison = {side, 0, sideW, comparisonH};
+    l.dirtyBoxes = {side, comparisonH, sideW, height - comparisonH};
+    l.forces = {0, float(viewSize), right, height - float(viewSize)};
+    return l;
+}
+
+void placeNextPanel(const PanelLayout::Box& b) {
+    ImGui::SetNextWindowPos(ImVec2(b.x, b.y), ImGuiCond_FirstUseEver);
+    ImGui::SetNextWindowSize(ImVec2(b.w, b.h), ImGuiCond_FirstUseEver);
+}
+
+// The window's trainee core: the client asks for a 1x1 placeholder view until the scene is
+// known, and hands voxel boxes over for the GPU rather than rendering them itself.
+net::TraineeCoreConfig coreConfigFor(const TrainerOptions& o) {
+    net::TraineeCoreConfig coreConfig;
+    net::ClientThreadConfig& cc = coreConfig.client;
     cc.address = o.address;
     cc.client.name = o.name;
     cc.client.role = o.instructor ? net::Role::Instructor : net::Role::Trainee;
@@ -261,55 +346,77 @@ int runTrainerWindow(const TrainerOptions& o) {
     // the flag changes nothing, so one setting serves both designs and every switch.
     cc.client.renderLocally = false;
     cc.client.view.width = cc.client.view.height = 1; // the real view needs the server's scene
-    // The haptic loop sends the tool states; the client thread hands it each force model.
+    coreConfig.haptics.rateHz = 1000.0;
+    coreConfig.haptics.sendRateHz = 100.0;
+    return coreConfig;
+}
+
+WindowConfig windowConfigFor(const TrainerOptions& o) {
+    WindowConfig wc;
+    wc.width = o.size + kPanelWidth + kSideWidth;
+    wc.height = std::max(o.size + kBottomHeight, kMinHeight);
+    wc.title =
+        std::string("Trephine - ") + (o.instructor ? "instructor" : "trainee") + " - " + o.address;
+    wc.visible = o.visible;
+    return wc;
+}
+
+// The Comparison panel's last figures of each design measured, on stdout when the window ends.
+void printComparison(const ComparisonHistory& comparison) {
+    for (SyncDesign d : {SyncDesign::Dbi, SyncDesign::Volume}) {
+        if (!comparison.measured(d))
+            continue;
+        const ComparisonFigures& f = comparison.series(d).last;
+        std::printf("window: %s: %.1f updates/s, %.0f bytes/update (raw %.0f), latency p50 %.2f "
+                    "ms p99 %.2f ms, frame %.2f ms, haptics %.0f Hz\n",
+                    syncDesignName(d), f.updatesPerS, f.bytesPerUpdate, f.rawBytesPerUpdate,
+                    f.latencyP50Ms, f.latencyP99Ms, f.frameMs, f.hapticHz);
+    }
+}
+
+} // namespace
+
+// [SECTION] frame loop
+
+int runTrainerWindow(const TrainerOptions& o) {
+    using Clock = std::chrono::steady_clock;
+    if (o.sync != "dbi" && o.sync != "volume")
+        throw Error("window: --sync must be dbi or volume, not '" + o.sync + "'");
+    ScriptedDriver script(o); // --script, --mark, --take-over, --screenshot, --frames, ...
+    MarkControls markControls;
+    MarkUndo markUndo; // the last removal of marks, for the Session panel's undo
+    markControls.canMark = o.instructor;
+    TakeOverControls takeOverControls;
+    takeOverControls.canTakeOver = o.instructor;
+    std::optional<glm::vec3> pointerPick; // the bone under the pointer, last seen over the view
+    const int viewSize = o.size;
+    Window window(windowConfigFor(o));
+    // A scripted screenshot is the same whatever the pointer of the display happens to hover (no
+    // tooltip or highlighted panel from it).
+    if (script.ignoresPointer())
+        ImGui::GetIO().ConfigFlags |= ImGuiConfigFlags_NoMouse;
+    Compositor comp;
+    comp.resize(viewSize, viewSize);
+    LocalVolume local; // the replicated-volume design's picture
+    ToolMeshCache tools{&comp, {}};
+    GpuMesh fieldMesh;
+
+    const net::TraineeCoreConfig coreConfig = coreConfigFor(o);
+    const net::ClientThreadConfig& cc = coreConfig.client;
+    // The trainee core: the client thread, and the haptic loop that sends the tool states the
+    // frames set on the device and feels the force in either design.
     WindowDevice device;
-    net::ClientThread* clientPtr = nullptr;
-    HapticLoopConfig hc;
-    hc.rateHz = 1000.0;
-    hc.sendRateHz = 100.0;
-    WindowForceSource forces(device, hc.blend);
-    HapticLoop haptics(device, hc, [&](const DeviceState& s, double) {
-        WindowDevice::Tool t = device.tool();
-        net::ToolState ts;
-        ts.toolKind = uint8_t(t.kind);
-        ts.diameterMm = t.diameterMm;
-        ts.position = s.pose.position;
-        ts.orientation = s.pose.orientation;
-        ts.speed = t.drilling ? t.speed : 0.0f;
-        ts.drilling = t.drilling;
-        // The device sample: the server's step and velocity follow the loop's sampling, not when
-        // the client thread got round to sending it (and the force round trip starts here).
-        ts.clientTimeUs = net::steadyNowUs();
-        clientPtr->sendToolState(ts);
-    });
-    const auto loopT0 = Clock::now();
-    cc.onHapticModel = [&](const net::HapticModel& m) {
-        HapticModelData d;
-        d.position = m.position;
-        d.force = m.force;
-        d.gradient = m.gradient;
-        d.contact = m.contact;
-        d.toolSequence = m.toolSequence;
-        haptics.setModel(d, std::chrono::duration<double>(Clock::now() - loopT0).count());
-        forces.setModel(d);
-    };
-    net::ClientThread client(cc);
-    clientPtr = &client;
-    forces.setClient(&client);
-    forces.setLocal(cc.client.sync == net::Sync::Volume);
-    haptics.setForceSource(&forces);
-    client.start();
-    haptics.start();
+    WindowTools windowTools(device);
+    net::TraineeCore core(coreConfig);
+    net::ClientThread& client = core.client();
+    core.connect();
+    core.startHaptics(windowTools);
     // However the window ends (an exception from a GL upload or a screenshot included), the
-    // haptic thread stops before the client it sends to is destroyed, then the client.
-    struct StopThreads {
-        HapticLoop& haptics;
-        net::ClientThread& client;
-        ~StopThreads() {
-            haptics.stop();
-            client.stop();
-        }
-    } stopThreads{haptics, client};
+    // haptic thread stops before the client it sends to, then the client (the core's order).
+    struct StopCore {
+        net::TraineeCore& core;
+        ~StopCore() { core.stop(); }
+    } stopCore{core};
 
     std::optional<Scene> scene;
     std::optional<uint64_t> sceneSeen; // the id of the last scene taken (or refused)
@@ -323,32 +430,17 @@ int runTrainerWindow(const TrainerOptions& o) {
     ToolControls toolControls;
     toolControls.canDrill = !o.instructor;
     DirtyBoxPanelState boxState;
-    NetworkHistory netHistory;
-    ForceHistory forceHistory;
-    ParticipantForces participantForces; // instructor: every other participant's force
-    DirtyBoxHistory boxHistory;
+    net::ClientModel model; // the panels' histories and the report's figures
 
     Dbi cpuDbi;               // pass 1's picture on the CPU, for the cursor's depth lookups
     Camera cpuDbiCamera;      // the camera cpuDbi was rendered (or read back) with
     bool haveImage = false;   // the textures hold a full image of the current view
     uint32_t imageViewId = 0; // viewId of the image in the textures
     net::ViewSpec imageView;  // and its view: the camera it was rendered with
-    // [Replicated volume] the window's copy of the volume, mirrored in volumeView's textures.
-    Volume gpuVolume;
-    bool haveVolume = false;  // volumeView holds a whole volume
-    bool volumeDirty = false; // the ray cast changed since cpuDbi was read back
-    Camera volumeCamera;      // the camera cpuDbi was read back with
-    // Which design feeds the picture: the one whose full update (whole DBI or whole volume)
-    // arrived last. Until the new design's first full update the old picture stays.
-    SyncDesign picture = designOf(cc.client.sync);
-    uint64_t pictureSinceUs = 0;
-    SyncDesign wanted = picture; // the toggle (the design asked for)
-    int volumeRefusalsSeen = 0;  // ClientSnapshot::volumeRefusals handled
-    ComparisonHistory comparison;
-    std::array<std::vector<double>, kSyncDesignCount> frameMs; // this second's frames per design
-    // This second's updates on screen per design (full ones excluded: a join or a switch): bytes,
-    // raw bytes and latency from the cause at the server to the end of the frame that first drew
-    // them, so both designs' latencies include their own drawing (the volume's GPU upload and
+    DesignSwitch designs;
+    designs.picture = designs.wanted = designOf(cc.client.sync);
+    // This frame's incremental updates, counted as on screen at the end of the frame that first
+    // drew them, so both designs' latencies include their own drawing (the volume's GPU upload and
     // ray cast, the DBI's texture upload and restore).
     struct DrawnUpdate {
         SyncDesign design;
@@ -357,35 +449,12 @@ int runTrainerWindow(const TrainerOptions& o) {
         uint32_t bytes, rawBytes;
     };
     std::vector<DrawnUpdate> drawnThisFrame;
-    struct LiveSecond {
-        std::vector<double> latencyMs;
-        double bytes = 0, rawBytes = 0;
-        int updates = 0;
-    };
-    std::array<LiveSecond, kSyncDesignCount> liveSecond;
     std::array<uint64_t, kSyncDesignCount> framesPerDesign{};
-    SampleWindow volumeUploadMs(256), volumeBoxMs(1024); // the volume client's GPU apply stage
-    uint64_t volumeUploads = 0, volumeBoxUpdates = 0;
-    uint64_t ticksAtLastSecond = 0;
-    double lastSecondAt = 0.0, firstPictureAt = -1.0;
-    size_t nextSwitch = 0;
-    int switchesRequested = 0, switchesCompleted = 0;
-    auto requestDesign = [&](SyncDesign d) {
-        wanted = d;
-        client.requestSync(syncOf(d));
-        ++switchesRequested;
-    };
-    uint64_t hapticSeen = 0;
+    double firstPictureAt = -1.0;
     glm::vec3 toolPos(0.0f);
     glm::quat toolRot(1, 0, 0, 0);
     bool toolValid = false;
-    double nextSecond = 1.0, lastRectAt = 0.0, scriptStart = -1;
-    uint64_t updatesAtLastSecond = 0;
-    bool scriptDone = o.script.empty();
-    int settledFrames = 0, frames = 0, pictureFrames = 0;
-    double lastPictureFrameAt = 0.0; // [--frames] when the last frame that counted was drawn
-    bool scriptedEnd = false;        // --screenshot taken or --frames drawn (or failed, said)
-    int exitCode = 0;
+    double lastRectAt = 0.0;
     const auto t0 = Clock::now();
     auto seconds = [&] { return std::chrono::duration<double>(Clock::now() - t0).count(); };
 
@@ -398,13 +467,14 @@ int runTrainerWindow(const TrainerOptions& o) {
         const auto frameStart = Clock::now();
         const double now = seconds();
         auto snap = client.snapshot();
+        model.addSnapshot(snap, now);
         // The server refused the volume design (its whole volume does not fit a message): the
         // client thread goes on in DBI, and so does the toggle.
-        if (snap->volumeRefusals != volumeRefusalsSeen) {
-            volumeRefusalsSeen = snap->volumeRefusals;
+        if (snap->volumeRefusals != designs.refusalsSeen) {
+            designs.refusalsSeen = snap->volumeRefusals;
             std::fprintf(stderr, "window: %s; staying with %s\n", snap->closeReason.c_str(),
                          syncDesignName(SyncDesign::Dbi));
-            wanted = SyncDesign::Dbi;
+            designs.wanted = SyncDesign::Dbi;
         }
         // Taking over (the server's roster): a held trainee's drill is paused, and an instructor
         // drills only while it holds a trainee.
@@ -415,7 +485,7 @@ int runTrainerWindow(const TrainerOptions& o) {
 
         // The scene the server sent after its welcome, and again when a reconnect's scene is
         // another (a server restarted on another volume: the old skull's scalp, drape and camera
-        // stayed around the new one); the same scene again keeps the view as it is.
+        // would stay around the new one); the same scene again keeps the view as it is.
         if (snap->scene && snap->scene->scene.sceneId != sceneSeen) {
             sceneSeen = snap->scene->scene.sceneId;
             scene = sceneFrom(snap->scene);
@@ -451,21 +521,18 @@ int runTrainerWindow(const TrainerOptions& o) {
             if (r.full) {
                 if (r.pixels.width() != viewSize || r.pixels.height() != viewSize)
                     continue; // the placeholder view before ours
-                if (haveVolume && r.appliedUs < pictureSinceUs)
+                if (local.have && r.appliedUs < designs.pictureSinceUs)
                     continue; // older than the volume that replaced the DBI
                 comp.uploadFull(r.pixels);
                 haveImage = true;
                 imageViewId = r.viewId;
                 imageView = r.view;
-                if (picture != SyncDesign::Dbi)
-                    ++switchesCompleted;
-                picture = SyncDesign::Dbi;
-                pictureSinceUs = r.appliedUs;
+                designs.arrived(SyncDesign::Dbi, r.appliedUs);
                 cpuDbi = std::move(r.pixels);
                 cpuDbiCamera = net::toCamera(r.view);
             } else if (haveImage && r.viewId == imageViewId) {
                 comp.uploadRect(r.rect, r.pixels);
-                if (picture == SyncDesign::Dbi && cpuDbi.bounds().contains(r.rect))
+                if (designs.picture == SyncDesign::Dbi && cpuDbi.bounds().contains(r.rect))
                     cpuDbi.apply(r.pixels, r.rect.x, r.rect.y);
                 drawnThisFrame.push_back(
                     {SyncDesign::Dbi, r.latencyUs, r.appliedUs, r.bytes, r.rawBytes});
@@ -473,60 +540,39 @@ int runTrainerWindow(const TrainerOptions& o) {
                 continue;
             }
             lastRectAt = now;
-            netHistory.addUpdate({now, r.latencyUs, r.bytes, r.rawBytes, r.full});
-            boxHistory.add({now, r.rect, r.sequence, r.bytes, r.latencyUs, r.full});
+            model.addRect(r, now);
         }
         // Applied voxel boxes (volume design): the whole volume is uploaded, a box re-uploads
         // only its voxels and the gradients around them. Both are timed: the volume client's
         // apply stage on the GPU side.
         for (net::AppliedVolumeBox& b : client.drainVolumeBoxes()) {
-            const auto applyStart = Clock::now();
             if (b.full) {
-                if (haveImage && b.appliedUs < pictureSinceUs && picture == SyncDesign::Dbi)
+                if (haveImage && b.appliedUs < designs.pictureSinceUs &&
+                    designs.picture == SyncDesign::Dbi)
                     continue; // older than the DBI that replaced the volume
-                gpuVolume = Volume(b.dims, b.spacing);
-                writeBox(gpuVolume, b);
-                volumeView.upload(gpuVolume);
-                volumeUploadMs.add(
-                    std::chrono::duration<double, std::milli>(Clock::now() - applyStart).count());
-                ++volumeUploads;
-                haveVolume = true;
-                if (picture != SyncDesign::Volume)
-                    ++switchesCompleted;
-                picture = SyncDesign::Volume;
-                pictureSinceUs = b.appliedUs;
-            } else if (haveVolume && b.dims == gpuVolume.dims() && !b.box.empty() &&
-                       glm::all(glm::greaterThanEqual(b.box.lo, glm::ivec3(0))) &&
-                       glm::all(glm::lessThanEqual(b.box.hi, b.dims)) &&
-                       b.density.size() == size_t(b.box.count()) &&
-                       b.material.size() == size_t(b.box.count())) {
-                writeBox(gpuVolume, b);
-                volumeView.updateBox(gpuVolume, b.box);
-                volumeBoxMs.add(
-                    std::chrono::duration<double, std::milli>(Clock::now() - applyStart).count());
-                ++volumeBoxUpdates;
+                local.replace(b);
+                designs.arrived(SyncDesign::Volume, b.appliedUs);
+            } else if (local.update(b)) {
                 drawnThisFrame.push_back(
                     {SyncDesign::Volume, b.latencyUs, b.appliedUs, b.bytes, b.rawBytes});
             } else {
                 continue;
             }
-            volumeDirty = true;
+            local.dirty = true;
             lastRectAt = now;
             PixelRect screen;
             if (!b.full && snap->view.width > 1)
-                screen = dirtyScreenRect(net::toCamera(snap->view), gpuVolume, b.box);
-            netHistory.addUpdate({now, b.latencyUs, b.bytes, b.rawBytes, b.full});
-            if (!screen.empty())
-                boxHistory.add({now, screen, b.sequence, b.bytes, b.latencyUs, b.full});
+                screen = dirtyScreenRect(net::toCamera(snap->view), local.volume, b.box);
+            model.addVolumeBox(b, screen, now);
         }
-        netHistory.expire(now);
+        const SyncDesign picture = designs.picture; // for the rest of the frame
         // Forces on the local copy only while it is the picture and no switch away is under way:
         // the server stops sending voxels at the request, so the copy would go stale.
-        forces.setLocal(picture == SyncDesign::Volume && wanted == SyncDesign::Volume);
-        const bool havePicture = picture == SyncDesign::Volume ? haveVolume : haveImage;
+        core.setLocalForces(picture == SyncDesign::Volume && designs.wanted == SyncDesign::Volume);
+        const bool havePicture = picture == SyncDesign::Volume ? local.have : haveImage;
         if (havePicture && firstPictureAt < 0)
             firstPictureAt = now;
-        const bool switching = wanted != picture;
+        const bool switching = designs.switching();
         // The DBI is drawn, and picked, with the camera it was rendered with: a new view's full
         // image can reach the textures before a snapshot names the view (tools drawn with the old
         // matrices over the new picture for a frame, a jitter while orbiting). The local volume is
@@ -535,17 +581,14 @@ int runTrainerWindow(const TrainerOptions& o) {
             picture == SyncDesign::Dbi && haveImage ? imageView : snap->view;
         const bool viewMatches = shownView.width == viewSize && shownView.height == viewSize;
         const Camera dbiCamera = net::toCamera(shownView);
-        if (picture == SyncDesign::Volume && !(volumeCamera == dbiCamera)) {
-            volumeDirty = true;       // a new view: the picture for picking must be read back again
-            boxHistory.boxes.clear(); // the old view's rectangles (a DBI's go with its full image)
+        if (picture == SyncDesign::Volume && !(local.camera == dbiCamera)) {
+            local.dirty = true; // a new view: the picture for picking must be read back again
+            model.boxes.boxes.clear(); // the old view's rectangles (a DBI's go with its full image)
         }
 
         // The scripted toggle: flip at the next time, once the switch before it has completed.
-        if (nextSwitch < o.switchSyncAtS.size() && firstPictureAt >= 0 && !switching &&
-            now - firstPictureAt >= o.switchSyncAtS[nextSwitch]) {
-            ++nextSwitch;
-            requestDesign(wanted == SyncDesign::Dbi ? SyncDesign::Volume : SyncDesign::Dbi);
-        }
+        if (const auto due = script.switchDue(now, firstPictureAt, switching, designs.wanted))
+            designs.request(*due, client);
 
         // The frame begins (events polled, ImGui's new frame) before the tool reads the input:
         // ImGui 1.86 zeroes io.MouseWheel at the end of each frame, so read before NewFrame the
@@ -556,19 +599,15 @@ int runTrainerWindow(const TrainerOptions& o) {
         // last values (drawn below) kept within their ranges first.
         toolControls = withinRanges(toolControls);
         ImGuiIO& io = ImGui::GetIO();
-        if (scene && havePicture && o.script == "burrhole") {
-            if (scriptStart < 0)
-                scriptStart = now;
-            ScriptPose p = burrholePose(scene->site, now - scriptStart);
+        if (scene && havePicture && script.drivesTool()) {
+            const ScriptPose p = script.tool(scene->site, now);
             toolControls.kind = 0;
             toolPos = p.position;
             toolRot = glm::rotation(glm::vec3(0, 0, 1), p.axis);
             toolControls.drilling = p.drilling;
             toolValid = true;
-            if (p.done && !scriptDone) {
-                scriptDone = true;
-                lastRectAt = now;
-            }
+            if (script.toolJustDone())
+                lastRectAt = now; // the view settles from the script's end
         } else if (scene && havePicture && viewMatches) {
             // M marks the bone under the pointer now: over air or off the view it marks nothing
             // (it marked the last bone point the pointer had crossed, wherever that was).
@@ -627,33 +666,10 @@ int runTrainerWindow(const TrainerOptions& o) {
             device.set(ds, {kind, diameter, toolControls.speed, toolControls.drilling}, now);
         }
 
-        // Forces: the server's samples, and the force extrapolated at the tool each frame.
-        if (snap->hapticModel && snap->hapticModels != hapticSeen) {
-            hapticSeen = snap->hapticModels;
-            forceHistory.addServer(now, snap->hapticModel->force);
-        }
-        forceHistory.expire(now);
-        if (o.instructor)
-            participantForces.update(now, snap->relayedModels);
-        // The 1 kHz extrapolated force, straight from the haptic loop's recorder.
-        // The loop keeps its own clock: its newest tick is now on the window's, so the two
-        // series share one time axis in the Forces panel.
-        forceHistory.extrapolated.clear();
-        const std::vector<HapticSample> ticks = haptics.samples();
-        const double tickShift = ticks.empty() ? 0.0 : now - ticks.back().time;
-        for (const HapticSample& h : ticks)
-            forceHistory.extrapolated.push_back({h.time + tickShift, h.force});
-        const HapticLoopStats hstats = haptics.stats();
-        if (now >= nextSecond) {
-            const auto& rt = snap->rates;
-            uint64_t u = snap->updatesApplied;
-            netHistory.addSecond(rt[size_t(net::Channel::Image)].bytesInPerS,
-                                 rt[size_t(net::Channel::ToolState)].bytesOutPerS,
-                                 rt[size_t(net::Channel::Haptic)].bytesInPerS,
-                                 double(u - updatesAtLastSecond), snap->rttUs);
-            updatesAtLastSecond = u;
-            nextSecond += 1.0;
-        }
+        // The 1 kHz extrapolated force, straight from the haptic loop's recorder, on the
+        // window's clock (the model folded the server's samples with the snapshot).
+        model.setHapticTicks(core.hapticSamples(), now);
+        const HapticLoopStats hstats = core.hapticStats();
 
         // Composite: pass 1 the DBI (or the ray cast of the local volume), pass 2 the anatomy
         // and the tools with the same matrices and depth test, blitted top-left.
@@ -661,14 +677,14 @@ int runTrainerWindow(const TrainerOptions& o) {
         if (havePicture && viewMatches) {
             if (picture == SyncDesign::Volume) {
                 comp.beginEmpty(dbiCamera);
-                volumeView.draw(dbiCamera);
-                if (volumeDirty) {
+                local.view.draw(dbiCamera);
+                if (local.dirty) {
                     // The picture's depth before the tools, for the cursor's depth lookups and
                     // the marks' occlusion: read back only when the volume or the view changed,
                     // and only the depth (the colour once, for the report, after the loop).
                     comp.readBackDepth(cpuDbi);
-                    volumeCamera = cpuDbiCamera = dbiCamera;
-                    volumeDirty = false;
+                    local.camera = cpuDbiCamera = dbiCamera;
+                    local.dirty = false;
                 }
             } else {
                 comp.begin(dbiCamera);
@@ -685,61 +701,11 @@ int runTrainerWindow(const TrainerOptions& o) {
         }
 
         // Overlays in the view: labels, dirty boxes, connection state.
-        ImDrawList* fg = ImGui::GetForegroundDrawList();
+        const ToolPose ownTool{toolPos, toolRot};
         if (havePicture && viewMatches) {
-            // Labels and marks belong to the view: one that projects outside it (orbited or
-            // zoomed away) is cut at its edge, not drawn over the panels beside and under it.
-            fg->PushClipRect(ImVec2(0.0f, viewTop), ImVec2(float(viewSize), viewTop + viewSize));
-            glm::dmat4 vp = viewProjection(dbiCamera);
-            auto label = [&](glm::vec3 p, glm::vec3 axis, glm::vec4 c, const std::string& text) {
-                WindowPoint w = projectToWindow(vp, dbiCamera, glm::dvec3(p + axis * 40.0f));
-                if (w.w <= 0)
-                    return;
-                ImVec2 at(float(w.window.x) + 8.0f, viewTop + float(viewSize - w.window.y));
-                fg->AddRectFilled(ImVec2(at.x - 3, at.y - 2),
-                                  ImVec2(at.x + ImGui::CalcTextSize(text.c_str()).x + 3,
-                                         at.y + ImGui::GetFontSize() + 2),
-                                  IM_COL32(0, 0, 0, 140), 3.0f);
-                fg->AddText(at, ImGui::GetColorU32(ImVec4(c.r, c.g, c.b, 1.0f)), text.c_str());
-            };
-            for (const auto& [id, t] : snap->others)
-                label(t.position, t.orientation * glm::vec3(0, 0, 1), participantColor(int(id)),
-                      participantName(snap->participants, id) + (t.drilling ? " (drilling)" : ""));
-            if (toolValid)
-                label(toolPos, toolRot * glm::vec3(0, 0, 1), participantColor(0),
-                      o.name + (toolControls.drilling ? " (drilling)" : ""));
-            // The instructors' marks: a ring on the bone and its label beside it; faint where the
-            // bone in this view lies more than 2 mm in front of the mark (it is behind it).
-            const glm::vec4 mc = markColor();
-            for (const net::AnnotationInfo& a : snap->annotations) {
-                WindowPoint w = projectToWindow(vp, dbiCamera, glm::dvec3(a.position));
-                if (w.w <= 0)
-                    continue;
-                const int px = int(w.window.x), py = int(w.window.y);
-                bool hidden = false;
-                if (cpuDbi.bounds().contains(PixelRect{px, py, 1, 1}) &&
-                    cpuDbi.width() == dbiCamera.width && cpuDbi.height() == dbiCamera.height) {
-                    const double bone = eyeZFromWindowDepth(dbiCamera, cpuDbi.depth(px, py));
-                    const double mark = eyeZFromWindowDepth(dbiCamera, w.window.z);
-                    hidden = bone - mark > 2.0; // eye z is negative in front of the eye
-                }
-                const ImU32 markCol =
-                    ImGui::GetColorU32(ImVec4(mc.r, mc.g, mc.b, hidden ? 0.35f : 1.0f));
-                const ImVec2 c(float(w.window.x), viewTop + float(viewSize - w.window.y));
-                fg->AddCircle(c, 8.0f, IM_COL32(0, 0, 0, 160), 0, 4.5f);
-                fg->AddCircle(c, 8.0f, markCol, 0, 2.5f);
-                fg->AddCircleFilled(c, 2.5f, markCol);
-                if (!a.label.empty()) {
-                    const ImVec2 at(c.x + 12.0f, c.y - ImGui::GetFontSize() * 0.5f);
-                    fg->AddRectFilled(ImVec2(at.x - 3, at.y - 2),
-                                      ImVec2(at.x + ImGui::CalcTextSize(a.label.c_str()).x + 3,
-                                             at.y + ImGui::GetFontSize() + 2),
-                                      IM_COL32(0, 0, 0, 140), 3.0f);
-                    fg->AddText(at, markCol, a.label.c_str());
-                }
-            }
-            fg->PopClipRect();
-            drawDirtyBoxOverlay(boxState, boxHistory, now, 0.0f, viewTop, viewSize);
+            drawViewLabels(*snap, dbiCamera, cpuDbi, viewSize, toolValid ? &ownTool : nullptr,
+                           o.name + (toolControls.drilling ? " (drilling)" : ""));
+            drawDirtyBoxOverlay(boxState, model.boxes, now, 0.0f, viewTop, viewSize);
         }
         // A view larger than the server serves is refused by the client (the window waited for
         // its first image for good, the reason in one line of the Network panel).
@@ -768,18 +734,9 @@ int runTrainerWindow(const TrainerOptions& o) {
             else if (snap->waitingForView)
                 status = "Waiting for the new view...";
             else if (switching)
-                status = std::string("Switching to ") + syncDesignName(wanted) +
+                status = std::string("Switching to ") + syncDesignName(designs.wanted) +
                          ": waiting for its first full update...";
-            if (!status.empty()) {
-                ImVec2 sz = ImGui::CalcTextSize(status.c_str(), nullptr, false, viewSize - 40.0f);
-                ImVec2 at((float(viewSize) - sz.x) * 0.5f,
-                          havePicture ? 12.0f : viewTop + (float(viewSize) - sz.y) * 0.5f);
-                fg->AddRectFilled(ImVec2(at.x - 10, at.y - 8),
-                                  ImVec2(at.x + sz.x + 10, at.y + sz.y + 8),
-                                  IM_COL32(20, 20, 24, 210), 6.0f);
-                fg->AddText(nullptr, 0.0f, at, IM_COL32(255, 200, 90, 255), status.c_str(), nullptr,
-                            viewSize - 40.0f);
-            }
+            drawViewMessage(status, havePicture, viewSize);
             // Taken over, or holding a trainee: said at the foot of the view, on a solid band.
             std::string held;
             if (heldByOther)
@@ -788,246 +745,126 @@ int runTrainerWindow(const TrainerOptions& o) {
             else if (holding)
                 held = "You hold " + participantName(snap->participants, holding) +
                        ": your drill cuts, theirs is paused";
-            if (!held.empty()) {
-                const ImVec2 sz = ImGui::CalcTextSize(held.c_str());
-                const ImVec2 at((float(viewSize) - sz.x) * 0.5f,
-                                viewTop + float(viewSize) - sz.y - 18.0f);
-                fg->AddRectFilled(ImVec2(at.x - 12, at.y - 8),
-                                  ImVec2(at.x + sz.x + 12, at.y + sz.y + 8), kTakeOverBand, 6.0f);
-                fg->AddText(at, IM_COL32(255, 255, 255, 255), held.c_str());
-            }
+            drawHeldBand(held, viewSize);
         }
 
-        // Panels: Forces under the view, and two columns right of it (kPanelWidth, above).
-        const float right = float(viewSize), colW = float(kPanelWidth);
-        const float side = right + colW, sideW = float(kSideWidth);
-        const float H = float(window.height());
-        const float sessionH = std::floor(H * 0.31f), viewPanelH = 165.0f;
-        const float networkY = sessionH + viewPanelH, comparisonH = std::floor(H * 0.535f);
-        ImGui::SetNextWindowPos(ImVec2(right, 0), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(colW, sessionH), ImGuiCond_FirstUseEver);
+        // Panels: Forces under the view, and two columns right of it.
+        const PanelLayout layout = panelLayout(viewSize, float(window.height()));
+        placeNextPanel(layout.session);
         drawSessionPanel(*snap, toolControls, markControls, takeOverControls,
                          o.instructor ? "instructor" : "trainee", o.address, o.name);
         // Marks asked for (the panel, the M key, --mark once joined); the server lists them back.
-        if (!marksSent && snap->welcome && snap->state == net::LinkState::Connected) {
-            for (const net::Annotate& a : scriptedMarks)
-                client.annotate(a);
-            marksSent = true;
-        }
+        script.sendDue(*snap, client);
         for (const net::Annotate& a : markRequests(markControls, markUndo, *snap, pointerPick))
             client.annotate(a);
         // Take over (the panel's buttons, --take-over once the trainee is listed) or hand back.
-        if (snap->welcome && snap->state == net::LinkState::Connected)
-            if (const auto id = scriptedTakeOver.due(snap->attempts, snap->participants))
-                client.takeOver(*id);
         if (takeOverControls.asked)
             client.takeOver(*takeOverControls.asked);
         takeOverControls.asked.reset();
-        ImGui::SetNextWindowPos(ImVec2(right, sessionH), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(colW, viewPanelH), ImGuiCond_FirstUseEver);
+        placeNextPanel(layout.view);
         drawViewPanel(viewControls, snap->waitingForView || !havePicture,
                       picture == SyncDesign::Volume ? "local render" : "DBI",
                       havePicture ? &dbiCamera : nullptr);
-        ImGui::SetNextWindowPos(ImVec2(right, networkY), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(colW, H - networkY), ImGuiCond_FirstUseEver);
-        drawNetworkPanel(*snap, netHistory, now);
-        ImGui::SetNextWindowPos(ImVec2(side, 0), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(sideW, comparisonH), ImGuiCond_FirstUseEver);
-        SyncDesign shown = wanted;
-        if (drawComparisonPanel(shown, picture, comparison, now) && shown != wanted)
-            requestDesign(shown);
+        placeNextPanel(layout.network);
+        drawNetworkPanel(*snap, model.network, now);
+        placeNextPanel(layout.comparison);
+        SyncDesign shown = designs.wanted;
+        if (drawComparisonPanel(shown, picture, model.comparison, now) && shown != designs.wanted)
+            designs.request(shown, client);
         if (ImGui::Begin("Comparison")) { // appends to the panel: what only the window knows
             // Short lines: the 400-pixel panel cut the longer ones off.
             ImGui::TextDisabled("frame ms: start to swap + glFinish, median of 1 s");
             ImGui::TextDisabled("volume GPU: full %.1f ms (%llu), box p50 %.2f ms (%llu)",
-                                volumeUploadMs.size() ? volumeUploadMs.percentile(50) : 0.0,
-                                (unsigned long long)volumeUploads,
-                                volumeBoxMs.size() ? volumeBoxMs.percentile(50) : 0.0,
-                                (unsigned long long)volumeBoxUpdates);
+                                local.uploadMs.size() ? local.uploadMs.percentile(50) : 0.0,
+                                (unsigned long long)local.uploads,
+                                local.boxMs.size() ? local.boxMs.percentile(50) : 0.0,
+                                (unsigned long long)local.boxUpdates);
             ImGui::TextDisabled("haptic ticks: %llu local volume, %llu server models",
-                                (unsigned long long)forces.localTicks(),
-                                (unsigned long long)forces.serverTicks());
+                                (unsigned long long)core.localForceTicks(),
+                                (unsigned long long)core.serverForceTicks());
         }
         ImGui::End();
-        ImGui::SetNextWindowPos(ImVec2(0, float(viewSize)), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(right, H - float(viewSize)), ImGuiCond_FirstUseEver);
-        drawForcesPanel(forceHistory, hstats.achievedRateHz, now,
-                        o.instructor ? &participantForces : nullptr, &snap->participants);
-        ImGui::SetNextWindowPos(ImVec2(side, comparisonH), ImGuiCond_FirstUseEver);
-        ImGui::SetNextWindowSize(ImVec2(sideW, H - comparisonH), ImGuiCond_FirstUseEver);
-        drawDirtyBoxPanel(boxState, boxHistory, now);
+        placeNextPanel(layout.forces);
+        drawForcesPanel(model.forces, hstats.achievedRateHz, now,
+                        o.instructor ? &model.participants : nullptr, &snap->participants);
+        placeNextPanel(layout.dirtyBoxes);
+        drawDirtyBoxPanel(boxState, model.boxes, now);
 
-        // Screenshot / frame budget.
-        ++frames;
-        if (viewTooLarge && (!o.screenshot.empty() || o.frames > 0)) {
-            std::fprintf(stderr, "trephine: %s\n", tooLargeText().c_str());
-            exitCode = 1;
+        // The scripted run's rules: a view too large ends it, a settled view is captured.
+        ScriptedDriver::Frame scripted;
+        scripted.snap = snap.get();
+        scripted.havePicture = havePicture;
+        scripted.viewMatches = viewMatches;
+        scripted.haveScene = scene.has_value();
+        scripted.switching = switching;
+        scripted.sinceLastUpdateS = now - lastRectAt;
+        scripted.holding = holding;
+        if (viewTooLarge)
+            scripted.viewTooLarge = tooLargeText();
+        if (script.abortsBeforeEnd(scripted)) {
             window.endFrame(nullptr);
-            scriptedEnd = true;
             break;
         }
-        // Connected too: a picture kept from before a lost link is not the session's now.
-        const bool connected = snap->state == net::LinkState::Connected;
-        const bool settled = connected && havePicture && viewMatches && scene && scriptDone &&
-                             !switching && nextSwitch == o.switchSyncAtS.size() &&
-                             !snap->waitingForView && now - lastRectAt > 0.5 && marksSent &&
-                             (o.takeOver.empty() || holding != 0) &&
-                             snap->annotations.size() >= scriptedMarks.size();
-        settledFrames = settled ? settledFrames + 1 : 0;
         Dbi capture;
-        bool shoot = !o.screenshot.empty() && settledFrames >= std::max(o.frames, 1);
-        const bool timedOut = !o.screenshot.empty() && now > o.timeoutS;
-        window.endFrame(shoot || timedOut ? &capture : nullptr);
+        window.endFrame(script.wantsCapture(scripted, now) ? &capture : nullptr);
         if (havePicture && viewMatches) {
             // The frame's time in the design it drew: from its start to the swap, waiting for
             // the GPU work (llvmpipe renders on glFinish); the pacing sleep is not included.
             glFinish();
-            frameMs[int(picture)].push_back(
+            model.addFrame(
+                picture,
                 std::chrono::duration<double, std::milli>(Clock::now() - frameStart).count());
             ++framesPerDesign[int(picture)];
             const uint64_t drawnUs = net::steadyNowUs();
-            for (const DrawnUpdate& u : drawnThisFrame) {
-                if (u.design != picture)
-                    continue; // in the textures, not on screen (the other design's picture)
-                LiveSecond& l = liveSecond[int(u.design)];
-                ++l.updates;
-                l.bytes += u.bytes;
-                l.rawBytes += u.rawBytes;
-                if (u.latencyUs >= 0 && drawnUs >= u.appliedUs)
-                    l.latencyMs.push_back((u.latencyUs + double(drawnUs - u.appliedUs)) * 1e-3);
-            }
+            for (const DrawnUpdate& u : drawnThisFrame)
+                if (u.design == picture) // else in the textures, not on screen
+                    model.addDrawn(u.design, u.latencyUs, u.appliedUs, drawnUs, u.bytes,
+                                   u.rawBytes);
         }
         drawnThisFrame.clear();
-        // The Comparison panel's point for this second, for the design that fed the picture;
-        // the other keeps its last figures.
-        if (now - lastSecondAt >= 1.0) {
-            const uint64_t ticks = hstats.ticks;
-            const double hz = double(ticks - ticksAtLastSecond) / (now - lastSecondAt);
-            std::vector<double>& fm = frameMs[int(picture)];
-            // No point while a switch is under way: the server has stopped the old design's
-            // updates, so the second measures the wait, and it would stay as the old design's
-            // greyed figures once the switch completes.
-            if (havePicture && !fm.empty() && !switching) {
-                const net::ModeFigures& m = snap->modes[size_t(syncOf(picture))];
-                const LiveSecond& l = liveSecond[int(picture)];
-                ComparisonFigures f;
-                f.updatesPerS = m.updateRatePerS;
-                f.bytesPerUpdate = l.updates ? l.bytes / l.updates : -1.0;
-                f.rawBytesPerUpdate = l.updates ? l.rawBytes / l.updates : -1.0;
-                f.latencyP50Ms = l.latencyMs.empty() ? -1.0 : percentile(l.latencyMs, 50.0);
-                f.latencyP99Ms = l.latencyMs.empty() ? -1.0 : percentile(l.latencyMs, 99.0);
-                f.frameMs = percentile(fm, 50.0);
-                f.hapticHz = hz;
-                comparison.record(picture, now, f);
-            }
-            for (auto& v : frameMs)
-                v.clear();
-            liveSecond = {};
-            ticksAtLastSecond = ticks;
-            lastSecondAt = now;
-        }
-        if (shoot || timedOut) {
-            writeScreenshot(o.screenshot, capture);
-            if (timedOut) {
-                // What the view was still waiting for, where the script asked for something.
-                std::string waiting = net::linkStateName(snap->state);
-                if (!o.takeOver.empty() && holding == 0)
-                    waiting += "; --take-over: no trainee '" + o.takeOver + "' taken over";
-                if (!marksSent || snap->annotations.size() < scriptedMarks.size())
-                    waiting += "; --mark: the marks not listed yet";
-                std::fprintf(stderr,
-                             "trephine: screenshot %s taken after %.0f s without a settled view "
-                             "(%s)\n",
-                             o.screenshot.c_str(), now, waiting.c_str());
-                exitCode = 1;
-            } else {
-                std::printf("screenshot %s (%dx%d) after %d frames\n", o.screenshot.c_str(),
-                            capture.width(), capture.height(), frames);
-            }
-            scriptedEnd = true;
+        // The Comparison panel's point for this second, for the design that fed the picture; the
+        // other keeps its last figures. None while a switch is under way: the server has stopped
+        // the old design's updates, so the second measures the wait.
+        model.tickComparison(now, picture, havePicture && !switching, hstats.ticks);
+        if (script.afterFrame(scripted, now, capture))
             break;
-        }
-        // --frames without a screenshot: that many frames showing the picture, or, with none
-        // by --timeout, a failure said in one line (it used to exit 0 after N frames of
-        // "connecting", which a scripted run took for success).
-        // Frames count only while connected: a lost server's last picture counted on to exit 0
-        // (and in volume mode, with the view gone, the run never ended). --timeout also bounds
-        // the time since the last counted frame.
-        if (o.screenshot.empty() && o.frames > 0) {
-            if (connected && havePicture && viewMatches) {
-                ++pictureFrames;
-                lastPictureFrameAt = now;
-            }
-            if (pictureFrames >= o.frames) {
-                scriptedEnd = true;
-                break;
-            }
-            if (pictureFrames == 0 && now > o.timeoutS) {
-                std::fprintf(stderr, "trephine: no picture from %s after %.0f s (%s)\n",
-                             o.address.c_str(), now, net::linkStateName(snap->state));
-                exitCode = 1;
-                scriptedEnd = true;
-                break;
-            }
-            if (pictureFrames > 0 && now - lastPictureFrameAt > o.timeoutS) {
-                std::fprintf(stderr,
-                             "trephine: no picture from %s for %.0f s after %d of %d frames (%s: "
-                             "%s)\n",
-                             o.address.c_str(), now - lastPictureFrameAt, pictureFrames, o.frames,
-                             net::linkStateName(snap->state),
-                             snap->closeReason.empty() ? "no reason given"
-                                                       : snap->closeReason.c_str());
-                exitCode = 1;
-                scriptedEnd = true;
-                break;
-            }
-        }
         std::this_thread::sleep_until(frameStart + std::chrono::milliseconds(10));
     }
-    // Closed before the screenshot or the frames it was run for: a script must not read exit 0
-    // as done (the PNG it waits for is not there).
-    if (!scriptedEnd && (!o.screenshot.empty() || o.frames > 0)) {
-        std::fprintf(stderr, "trephine: the window was closed before %s\n",
-                     o.screenshot.empty() ? "its --frames were drawn"
-                                          : ("the screenshot " + o.screenshot).c_str());
-        exitCode = 1;
-    }
-    haptics.stop(); // (stopThreads would; the report below reads the stopped client)
-    client.stop();
-    for (SyncDesign d : {SyncDesign::Dbi, SyncDesign::Volume}) {
-        if (!comparison.measured(d))
-            continue;
-        const ComparisonFigures& f = comparison.series(d).last;
-        std::printf("window: %s: %.1f updates/s, %.0f bytes/update (raw %.0f), latency p50 %.2f "
-                    "ms p99 %.2f ms, frame %.2f ms, haptics %.0f Hz\n",
-                    syncDesignName(d), f.updatesPerS, f.bytesPerUpdate, f.rawBytesPerUpdate,
-                    f.latencyP50Ms, f.latencyP99Ms, f.frameMs, f.hapticHz);
-    }
-    if (o.report && picture == SyncDesign::Volume && haveVolume &&
-        cpuDbi.width() == volumeCamera.width && cpuDbi.height() == volumeCamera.height) {
+    script.closed(); // before its screenshot or frames: exit 1
+    core.stop();     // (stopCore would; the report below reads the stopped client)
+    printComparison(model.comparison);
+    if (o.report && designs.picture == SyncDesign::Volume && local.have &&
+        cpuDbi.width() == local.camera.width && cpuDbi.height() == local.camera.height) {
         // The local volume's picture in colour, as last shown (the loop read back its depth).
-        comp.beginEmpty(volumeCamera);
-        volumeView.draw(volumeCamera);
+        comp.beginEmpty(local.camera);
+        local.view.draw(local.camera);
         cpuDbi = comp.readBack();
     }
     if (o.report) {
         TrainerReport& r = *o.report;
-        r.comparison = comparison;
-        r.picture = picture;
+        r.comparison = model.comparison;
+        r.picture = designs.picture;
         r.view = cpuDbi;
         // The camera `view` was made with (the snapshot's view is the placeholder once the
         // client has stopped, or another while a new view's image is on its way).
-        r.camera = picture == SyncDesign::Volume ? volumeCamera : cpuDbiCamera;
-        r.switchesRequested = switchesRequested;
-        r.switchesCompleted = switchesCompleted;
-        r.volumeUploads = volumeUploads;
-        r.volumeBoxUpdates = volumeBoxUpdates;
-        r.localForceTicks = forces.localTicks();
-        r.serverForceTicks = forces.serverTicks();
+        r.camera = designs.picture == SyncDesign::Volume ? local.camera : cpuDbiCamera;
+        r.switchesRequested = designs.requested;
+        r.switchesCompleted = designs.completed;
+        r.volumeUploads = local.uploads;
+        r.volumeBoxUpdates = local.boxUpdates;
+        r.localForceTicks = core.localForceTicks();
+        r.serverForceTicks = core.serverForceTicks();
         r.frames = framesPerDesign;
+        net::ClientReportExtras extras = core.reportExtras();
+        extras.durationS = seconds();
+        extras.session = {{"server", o.address},
+                          {"codec", o.codec},
+                          {"name", o.name},
+                          {"sync", designs.picture == SyncDesign::Volume ? "volume" : "dbi"}};
+        r.session = model.report(extras);
     }
     comp.destroy(fieldMesh);
-    return exitCode;
+    return script.exitCode();
 }
 
 } // namespace trephine::ui

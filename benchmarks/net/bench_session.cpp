@@ -15,6 +15,7 @@
 #include "net/force_round_trip.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
+#include "net/tool_model.h"
 #include "net/view.h"
 #include "study/update_study.h"
 
@@ -225,8 +226,7 @@ void hapticLoopWhileStreaming(benchmark::State& state) {
     });
     uint64_t loopStart = 0;
     s.client->setHapticCallback([&](const HapticModel& m, uint64_t arrivalUs) {
-        HapticModelData d{m.position, m.force, m.gradient, m.contact, m.toolSequence};
-        loop.setModel(d, double(int64_t(arrivalUs) - int64_t(loopStart)) * 1e-6);
+        loop.setModel(net::toModelData(m), double(int64_t(arrivalUs) - int64_t(loopStart)) * 1e-6);
     });
     HapticLoopStats st;
     uint64_t updates = 0;

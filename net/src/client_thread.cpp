@@ -86,6 +86,10 @@ ModeFigures figures(const ModeStats& m, double ratePerS) {
     f.latencyP99Us = m.latencyUs.size() ? m.latencyUs.percentile(99) : -1;
     f.applyP50Us = m.applyUs.size() ? m.applyUs.percentile(50) : -1;
     f.clientRenderP50Us = m.clientRenderUs.size() ? m.clientRenderUs.percentile(50) : -1;
+    f.erodeP50Us = m.erodeUs.size() ? m.erodeUs.percentile(50) : -1;
+    f.serverRenderP50Us = m.serverRenderUs.size() ? m.serverRenderUs.percentile(50) : -1;
+    f.encodeP50Us = m.encodeUs.size() ? m.encodeUs.percentile(50) : -1;
+    f.transmitP50Us = m.transmitUs.size() ? m.transmitUs.percentile(50) : -1;
     return f;
 }
 
@@ -239,6 +243,11 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
         s->malformed = st.malformed();
         s->rttUs = m_lastRttUs;
         s->rttP50Us = st.rttUs.size() ? st.rttUs.percentile(50) : -1;
+        s->hapticRoundTripP50Us =
+            st.hapticRoundTripUs.size() ? st.hapticRoundTripUs.percentile(50) : -1;
+        s->hapticRoundTripP99Us =
+            st.hapticRoundTripUs.size() ? st.hapticRoundTripUs.percentile(99) : -1;
+        s->lastHeardUs = c->lastHeardUs();
         s->latencyP50Us = st.updateLatencyUs.size() ? st.updateLatencyUs.percentile(50) : -1;
         s->latencyP99Us = st.updateLatencyUs.size() ? st.updateLatencyUs.percentile(99) : -1;
         s->meanBytes = st.updateBytes.size() ? st.updateBytes.mean() : 0;
@@ -299,6 +308,24 @@ void ClientThread::run() {
                             b.appliedUs = steadyNowUs();
                             b.latencyUs = latencyOf(*cp, meta.sequence, full);
                             pushBox(std::move(b));
+                        });
+                else
+                    cp->setVolumeCallback(
+                        [this, cp](const VolumeUpdate& meta, const Box3i&, bool full) {
+                            if (cp->dbi().width() == 0)
+                                return;
+                            AppliedRect r;
+                            r.full = full;
+                            r.rect = cp->dbi().bounds();
+                            r.pixels = cp->dbi();
+                            r.sequence = meta.sequence;
+                            r.viewId = cp->viewId();
+                            r.view = cp->view();
+                            r.bytes = uint32_t(meta.payload.size());
+                            r.rawBytes = meta.rawBytes;
+                            r.appliedUs = steadyNowUs();
+                            r.latencyUs = latencyOf(*cp, meta.sequence, full);
+                            pushRect(std::move(r));
                         });
                 NewSamples newRtt;
                 // Runs inside poll(), right after the update is applied to the client's DBI. Its
@@ -365,8 +392,13 @@ void ClientThread::run() {
                             // is up and makes it then (with the hello, or right after it). A view
                             // it refused (larger than the server serves) is not wanted again: in
                             // the next hello it had every reconnect refused.
-                            if (cp->requestView(v->view) != 0)
+                            if (cp->requestView(v->view) != 0) {
                                 m_wantedView = v->view;
+                                // Rendered here at once (volume design, renderLocally): the new
+                                // view's picture is published whole, as a DBI's full image is.
+                                if (cc.renderLocally && cp->sync() == Sync::Volume)
+                                    m_needFull = true;
+                            }
                         } else if (auto* y = std::get_if<SyncCmd>(&c)) {
                             m_wantedSync = y->sync;
                             cp->requestSync(y->sync);

@@ -1,6 +1,7 @@
 #include "net/session_policy.h"
 
 #include "libsim/error.h"
+#include "net/tool_model.h"
 #include "net/view.h"
 
 #include <algorithm>

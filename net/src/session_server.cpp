@@ -8,6 +8,7 @@
 #include "net/outbox.h"
 #include "net/session_policy.h"
 #include "net/sim_step.h"
+#include "net/tool_model.h"
 #include "net/view.h"
 
 #include <poll.h>

@@ -2,15 +2,11 @@
 
 #include "libsim/dirty_rect.h"
 #include "libsim/tool.h"
+#include "net/tool_model.h"
 
 #include <algorithm>
 
 namespace trephine::net {
-
-ToolShape shapeOf(const ToolState& t) {
-    return ToolKind(t.toolKind) == ToolKind::Perforator ? ToolShape::perforator(t.diameterMm)
-                                                        : ToolShape::burr(t.diameterMm);
-}
 
 namespace {
 

@@ -60,8 +60,8 @@ TEST(TraineeCli, AScriptWithValuesTheTraineeCannotUseIsRefusedWithItsLine) {
 TEST(TraineeCli, NanAndInfiniteOptionValuesAreRefused) {
     TempDir dir;
     for (const char* args :
-         {"demo --headless --feed nan", "demo --headless --dt inf", "demo --headless --feed 1e39",
-          "trainee --headless --connect 127.0.0.1:9 --tool-rate nan",
+         {"demo --headless --feed nan", "demo --headless --max-seconds inf",
+          "demo --headless --feed 1e39", "trainee --headless --connect 127.0.0.1:9 --tool-rate nan",
           "trainee --headless --connect 127.0.0.1:9 --duration -inf"}) {
         SCOPED_TRACE(args);
         CommandResult r = runTrephine(dir, args);

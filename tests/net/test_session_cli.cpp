@@ -40,6 +40,14 @@ using trephine::testing::shellQuote;
 
 namespace {
 
+// A trainee's --report, parsed (an unreadable or malformed one is an empty object, which fails
+// the assertions on its fields).
+nlohmann::json readJson(const std::string& path) {
+    std::ifstream in(path);
+    nlohmann::json j = nlohmann::json::parse(in, nullptr, false);
+    return j.is_discarded() ? nlohmann::json::object() : j;
+}
+
 // `trephine MODE ARGS` (MODE: server unless given) as a child process, its stdout read line by
 // line.
 struct ServerProcess {
@@ -177,18 +185,15 @@ TEST(SessionCli, HeadlessTraineeRunsTheHapticLoopAndReportsIt) {
                       shellQuote(report) + " > /dev/null 2>&1";
     ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
     server.stop();
-    std::ifstream r(report);
-    nlohmann::json json;
-    ASSERT_NO_THROW(json = nlohmann::json::parse(r)) << report;
-    ASSERT_TRUE(json.contains("haptics")) << json;
+    const nlohmann::json json = readJson(report);
     const nlohmann::json& haptics = json.at("haptics");
-    EXPECT_EQ(haptics.at("tool_rate_hz"), 50.0) << json;
-    const double sent = json.at("tool_states_sent");
+    EXPECT_EQ(haptics.at("tool_rate_hz").get<double>(), 50.0) << json;
+    const double sent = json.at("tool_states_sent").get<double>();
     EXPECT_GT(sent, 10.0) << json; // about 50 in the second, plus the final lift
-    EXPECT_GT(haptics.at("models_received"), 0) << json;
-    EXPECT_LE(haptics.at("models_received"), sent) << json;
-    EXPECT_GT(haptics.at("ticks"), 0) << json;
-    EXPECT_GT(haptics.at("force_round_trip_p50_us"), 0.0) << json;
+    EXPECT_GT(haptics.at("models_received").get<double>(), 0.0) << json;
+    EXPECT_LE(haptics.at("models_received").get<double>(), sent) << json;
+    EXPECT_GT(haptics.at("ticks").get<double>(), 0.0) << json;
+    EXPECT_GT(haptics.at("force_round_trip_p50_us").get<double>(), 0.0) << json;
     EXPECT_GT(server.hapticModelsSent(), 0u);
     EXPECT_LE(double(server.hapticModelsSent()), sent); // unsequenced: loss is allowed
     std::filesystem::remove(report);
@@ -226,12 +231,10 @@ TEST(SessionCli, AHeadlessTraineeDoesNotWaitForOthersToStopDrilling) {
     other.join();
     server.stop();
     ASSERT_EQ(status, 0) << cmd;
-    std::ifstream r(report);
-    const std::string json((std::istreambuf_iterator<char>(r)), std::istreambuf_iterator<char>());
-    const auto at = json.find("\"duration_s\": ");
-    ASSERT_NE(at, std::string::npos) << json;
+    const nlohmann::json json = readJson(report);
+    ASSERT_TRUE(json.contains("duration_s")) << json;
     // The second of script, then at most 2 s for the last updates (not the others' 20 s).
-    EXPECT_LT(std::stod(json.substr(at + 14)), 8.0) << json;
+    EXPECT_LT(json.at("duration_s").get<double>(), 8.0) << json;
     std::filesystem::remove(report);
 }
 
@@ -305,13 +308,14 @@ TEST(SessionCli, HeadlessVolumeTraineeComputesForcesOnItsOwnVolume) {
                       shellQuote(report) + " > " + shellQuote(out) + " 2>&1";
     ASSERT_EQ(std::system(cmd.c_str()), 0) << cmd;
     server.stop();
-    std::ifstream o(out), r(report);
+    std::ifstream o(out);
     std::string text((std::istreambuf_iterator<char>(o)), std::istreambuf_iterator<char>());
-    std::string json((std::istreambuf_iterator<char>(r)), std::istreambuf_iterator<char>());
+    const nlohmann::json json = readJson(report);
     const auto at = text.find("forces computed locally on the replicated volume in ");
     ASSERT_NE(at, std::string::npos) << text;
     EXPECT_GT(std::stoll(text.substr(at + 52)), 0) << text;
-    EXPECT_NE(json.find("\"sync\": \"volume\""), std::string::npos) << json;
+    EXPECT_EQ(json.at("sync"), "volume") << json;
+    EXPECT_GT(json.at("haptics").at("local_force_ticks").get<double>(), 0.0) << json;
     std::filesystem::remove(report);
     std::filesystem::remove(out);
 }
@@ -478,9 +482,42 @@ TEST(SessionCli, CtrlCOfAHeadlessTraineeStillWritesItsReport) {
     std::this_thread::sleep_for(std::chrono::milliseconds(300));
     EXPECT_EQ(trainee.stop(SIGINT), 1);
     server.stop();
-    std::ifstream r(dir / "r.json");
-    const std::string json((std::istreambuf_iterator<char>(r)), std::istreambuf_iterator<char>());
-    const auto at = json.find("\"duration_s\": ");
-    ASSERT_NE(at, std::string::npos) << json;
-    EXPECT_LT(std::stod(json.substr(at + 14)), 10.0) << json; // not the 30 s script
+    const nlohmann::json json = readJson(dir / "r.json");
+    ASSERT_TRUE(json.contains("duration_s")) << json;
+    EXPECT_LT(json.at("duration_s").get<double>(), 10.0) << json; // not the 30 s script
+}
+
+// A headless trainee that cannot join stops in one line saying why: a full server's refusal, and
+// an address where no server answers (the client thread does not retry for a headless run).
+TEST(SessionCli, AHeadlessTraineeThatCannotJoinSaysWhyInOneLine) {
+    Volume sphere = makeSphere(32);
+    ServerConfig sc = loopbackServerConfig("sphere:32");
+    sc.maxClients = 1;
+    SessionServer server(sphere, sc);
+    server.start();
+    SessionClient first(ClientConfig{});
+    first.connect(trephine::testing::loopback(server.port()));
+    ASSERT_TRUE(trephine::testing::pumpUntil({&first}, [&] { return first.welcomed(); }));
+    std::atomic<bool> done{false};
+    std::thread pump([&] {
+        while (!done)
+            first.poll(5);
+    });
+    trephine::testing::TempDir dir;
+    const std::string address = "127.0.0.1:" + std::to_string(server.port());
+    auto r = trephine::testing::runTrephine(dir, "trainee --headless --connect " + address +
+                                                     " --camera top --size 64 --duration 1");
+    done = true;
+    pump.join();
+    first.disconnect();
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_EQ(r.err, "trephine: trainee: " + address + " refused us: the server is full\n");
+
+    // Nobody at this port now (the server stopped: its port is free).
+    server.stop();
+    r = trephine::testing::runTrephine(dir, "trainee --headless --connect " + address +
+                                                " --camera top --size 64 --duration 1");
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_EQ(r.err, "trephine: trainee: no answer from " + address +
+                         " (is `trephine server` running?)\n");
 }

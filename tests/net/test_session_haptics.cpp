@@ -4,6 +4,7 @@
 #include "net/force_round_trip.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
+#include "net/tool_model.h"
 
 #include "libsim/force_model.h"
 #include "libsim/haptics.h"
@@ -180,15 +181,8 @@ TEST(SessionHaptics, HapticLoopOverLoopbackGetsModelsAndMeasuresTheRoundTrip) {
         toSend.push_back(t);
     });
     double now = 0.0;
-    client.setHapticCallback([&](const HapticModel& m, uint64_t) {
-        HapticModelData d;
-        d.position = m.position;
-        d.force = m.force;
-        d.gradient = m.gradient;
-        d.contact = m.contact;
-        d.toolSequence = m.toolSequence;
-        loop.setModel(d, now);
-    });
+    client.setHapticCallback(
+        [&](const HapticModel& m, uint64_t) { loop.setModel(toModelData(m), now); });
     for (int tick = 0; tick < 200; ++tick) {
         now = tick * 1e-3;
         loop.step(now);

@@ -12,6 +12,7 @@
 #include "libsim/renderer.h"
 #include "libsim/skull.h"
 #include "net/session_server.h"
+#include "net/trainee_core.h"
 #include "net/view.h"
 
 #include "loopback.h"
@@ -388,4 +389,68 @@ TEST(ComparisonWindow, AViewLargerThanTheServerServesIsSaid) {
                        "restart with --size 100 or less"),
               std::string::npos)
         << err;
+}
+
+// The window and the headless trainee run one client core and fold one client model, so one
+// session gives both the same figures: here both watch the top of the sphere while the server cuts
+// it box by box (each cut one update to each), and their reports agree on every count they share.
+TEST(ComparisonWindow, TheWindowAndTheHeadlessTraineeReportTheSameFigures) {
+    TREPHINE_NEED_DISPLAY("the window");
+    const Volume sphere = makeSphere(32);
+    auto server = startedServer(sphere, "sphere:32");
+    TrainerOptions wo = hiddenTopWindow(server->port());
+    wo.codec = "raw"; // bytes follow the rectangles alone
+    WindowThread window(wo);
+
+    // The headless trainee's way (apps/mode_trainee.cpp): a placeholder view, then its preset.
+    net::TraineeCoreConfig cc;
+    cc.client.address = "127.0.0.1:" + std::to_string(server->port());
+    cc.client.client.codec = net::Codec::Raw;
+    cc.client.client.view.width = cc.client.client.view.height = 1;
+    net::TraineeCore core(cc);
+    net::HeadlessView headless(wo.size);
+    core.connect();
+    ASSERT_TRUE(headless.waitFor(core.client(), 30.0, [&] { return headless.connected(); }));
+    core.client().requestView(net::toViewSpec(cameraPreset("top", sphere, {wo.size, wo.size})));
+    ASSERT_TRUE(headless.waitFor(core.client(), 30.0, [&] { return headless.hasPicture(); }));
+    // Both hold their picture (the window asked for its view: a render each) before the cuts.
+    ASSERT_TRUE(waitFor([&] { return server->rendersDone() >= 3 && server->idle(); }));
+    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    constexpr int kCuts = 4;
+    for (int i = 0; i < kCuts; ++i) {
+        server->submitBoxCut(Box3i{{12 + i, 12, 26}, {14 + i, 16, 32}});
+        ASSERT_TRUE(waitFor([&] { return server->idle(); }));
+        std::this_thread::sleep_for(std::chrono::milliseconds(100));
+    }
+    ASSERT_TRUE(headless.waitFor(core.client(), 10.0, [&] {
+        return headless.snap()->updatesApplied - headless.snap()->fullUpdates >= kCuts;
+    }));
+    std::this_thread::sleep_for(std::chrono::milliseconds(500)); // the window's last frames
+    headless.take(core.client(), 0);
+    core.stop();
+    ASSERT_EQ(window.close(), 0);
+    server->stop();
+
+    const nlohmann::ordered_json& w = window.report.session;
+    net::ClientReportExtras extras = core.reportExtras();
+    extras.session = {{"server", wo.address}, {"codec", "raw"}, {"name", wo.name}, {"sync", "dbi"}};
+    const nlohmann::ordered_json h = headless.model.report(extras);
+    ASSERT_FALSE(w.empty());
+    // One schema: every field of one report is in the other.
+    for (const auto& [key, value] : h.items())
+        EXPECT_TRUE(w.contains(key)) << key;
+    for (const auto& [key, value] : w.items())
+        EXPECT_TRUE(h.contains(key)) << key;
+    for (const char* key : {"updates_applied", "full_updates", "updates_rejected",
+                            "malformed_dropped", "updates_shown"})
+        EXPECT_EQ(w.at(key), h.at(key))
+            << key << "\nwindow " << w.dump() << "\nheadless " << h.dump();
+    EXPECT_EQ(w.at("update_bytes").at("count"), kCuts);
+    EXPECT_EQ(h.at("update_bytes").at("count"), kCuts);
+    EXPECT_EQ(w.at("update_latency_us").at("count"), h.at("update_latency_us").at("count"));
+    // The same view (the window's home view is its preset): the same rectangles, byte for byte.
+    if (window.report.camera == net::toCamera(headless.snap()->view)) {
+        EXPECT_EQ(w.at("update_raw_bytes"), h.at("update_raw_bytes"));
+        EXPECT_EQ(w.at("update_bytes").at("mean"), h.at("update_bytes").at("mean"));
+    }
 }

@@ -96,3 +96,39 @@ TEST(DemoWindow, ADisplayWithoutOpenGlRunsTheHeadlessDemo) {
     EXPECT_NE(out.find("running the headless demo"), std::string::npos) << out;
     EXPECT_EQ(out.find("trainee window connected"), std::string::npos) << out;
 }
+
+// Headless, the demo shows the product: an embedded server and the headless trainee core over
+// loopback drill the burr hole; it prints the session's figures and writes the trainee's final
+// picture, which shows the hole's dura where the burr site is (the view looks at the site).
+TEST(DemoWindow, TheHeadlessDemoRunsASessionOverLoopbackAndWritesItsPicture) {
+    trephine::testing::TempDir dir;
+    const std::string png = dir / "demo.png";
+    const auto r =
+        trephine::testing::runTrephine(dir, "demo --headless --picture " + shellQuote(png));
+    ASSERT_EQ(r.exitCode, 0) << r.out << r.err;
+    for (const char* line :
+         {"session  server on 127.0.0.1:", "trainee joined as client", "image updates",
+          "latency p50", "KB/s of image updates", "tool states sent", "haptics  ",
+          "force round trip", "forces   peak |F| felt", "result   the drill stopped cutting",
+          "picture  "})
+        EXPECT_NE(r.out.find(line), std::string::npos) << line << "\n" << r.out;
+    const auto at = r.out.find("\nupdates  ");
+    ASSERT_NE(at, std::string::npos) << r.out;
+    EXPECT_GT(std::stoll(r.out.substr(at + 10)), 10) << r.out; // drilling sent many updates
+    const auto hz = r.out.find("\nhaptics  ");
+    ASSERT_NE(hz, std::string::npos) << r.out;
+    EXPECT_GT(std::stod(r.out.substr(hz + 10)), 500.0) << r.out; // the 1 kHz loop ran
+    const trephine::testing::Image img = trephine::testing::readPng(png);
+    ASSERT_EQ(img.w, 400);
+    ASSERT_EQ(img.h, 400);
+    // Dura is red, bone is cream: red pixels in the middle of the picture, few at its edge.
+    auto reddish = [&](int x0, int y0, int n) {
+        int count = 0;
+        for (int y = y0; y < y0 + n; ++y)
+            for (int x = x0; x < x0 + n; ++x)
+                count += int(img.at(x, y)[0]) - int(img.at(x, y)[1]) > 40;
+        return count;
+    };
+    EXPECT_GT(reddish(160, 160, 80), 400) << "the hole at the site";
+    EXPECT_LT(reddish(0, 0, 80), 40) << "no hole in the corner";
+}

@@ -32,7 +32,9 @@ namespace trephine::net {
 enum class LinkState : uint8_t { Connecting, Connected, Retrying, Stopped };
 const char* linkStateName(LinkState s);
 
-// One image update as the window needs it: where, the pixels, and the figures for the panels.
+// One image update as the window needs it: where, the pixels, and the figures for the panels. In
+// the volume design with renderLocally on, each voxel update re-renders the client's view, and the
+// whole view is published as the update's rectangle.
 struct AppliedRect {
     PixelRect rect;    // DBI pixels, row 0 at the bottom
     Dbi pixels;        // rect.w x rect.h patch taken from the client's DBI after applying
@@ -67,6 +69,8 @@ struct ModeFigures {
     double meanBytes = 0, meanRawBytes = 0; // per update
     double latencyP50Us = -1, latencyP99Us = -1;
     double applyP50Us = -1, clientRenderP50Us = -1;
+    // The server's stages and the transmission (p50, us; -1: none measured).
+    double erodeP50Us = -1, serverRenderP50Us = -1, encodeP50Us = -1, transmitP50Us = -1;
 };
 
 // What the UI reads each frame. Immutable once published.
@@ -106,6 +110,8 @@ struct ClientSnapshot {
              relaysReceived = 0, malformed = 0;
     uint64_t viewsRefused = 0; // views asked for that the server does not serve (too large)
     double rttUs = -1, rttP50Us = -1;
+    double hapticRoundTripP50Us = -1, hapticRoundTripP99Us = -1; // tool state -> its force model
+    uint64_t lastHeardUs = 0; // steadyNowUs() of the last datagram from the server (0: none yet)
     double latencyP50Us = -1, latencyP99Us = -1;
     double meanBytes = 0, meanRawBytes = 0; // per update
     std::string codec;                      // image updates (DBI mode)

@@ -13,7 +13,6 @@
 #include <cstdint>
 #include <deque>
 #include <glm/vec3.hpp>
-#include <nlohmann/json_fwd.hpp>
 #include <string>
 
 namespace trephine::net {
@@ -111,50 +110,5 @@ private:
     std::atomic<uint64_t> m_firstTickUs{0}, m_lastTickUs{0};
     std::deque<std::array<ChannelRates, size_t(Channel::Count)>> m_history;
 };
-
-// Everything a headless client reports, as JSON (docs/session.md lists the fields).
-struct ReportInfo {
-    std::string server; // HOST:PORT
-    std::string codec;  // raw | lz4 | zstd
-    std::string view;   // the camera preset's name
-    std::string camera; // describe(camera)
-    std::string script;
-    double durationS = 0;
-    uint64_t updatesApplied = 0;
-    uint64_t fullUpdates = 0;
-    uint64_t toolStatesSent = 0;
-    uint64_t relaysReceived = 0;
-    uint64_t updatesRejected = 0; // malformed / out-of-window image updates
-    // The haptic loop (absent from the JSON when hapticLoop is false).
-    bool hapticLoop = false;
-    double toolRateHz = 0;     // tool states per second requested (--tool-rate)
-    double hapticRateHz = 0;   // the loop's nominal rate
-    double achievedRateHz = 0; // ticks per second achieved
-    double latenessP50Ms = 0;  // tick start after its schedule
-    double latenessP99Ms = 0;
-    uint64_t hapticTicks = 0;
-    uint64_t hapticModels = 0;  // HapticModel messages received
-    uint64_t modelsApplied = 0; // taken by the loop (in order)
-    uint64_t modelsDropped = 0; // reordered, dropped by the loop
-    std::string sync = "dbi";   // the sync mode at the end: dbi | volume
-};
-// The report as a JSON value (keys in the order docs/session.md lists them), and as text.
-nlohmann::ordered_json reportJsonValue(const ReportInfo& info, const NetStats& stats);
-std::string reportJson(const ReportInfo& info, const NetStats& stats);
-
-// Pieces of the reports, for a report that embeds them.
-// {"count", "mean", "min", "p50", "p99", "max"} of a sample window.
-nlohmann::ordered_json windowJson(const SampleWindow& w);
-// {"updates", "full_updates", "bytes", "raw_bytes", "latency_us", and each stage's window}.
-nlohmann::ordered_json modeStatsJson(const ModeStats& m);
-// {"control": {bytes_in, bytes_out, messages_in, messages_out and their *_per_s}, ...}.
-nlohmann::ordered_json channelsJson(const NetStats& stats);
-
-// The same pieces as text, for a report still written as text (the server's).
-std::string jsonString(const std::string& s); // quoted and escaped
-std::string jsonNumber(double v);             // %.6g
-std::string jsonWindow(const SampleWindow& w);
-// Every channel, one a line indented by four spaces.
-std::string jsonChannels(const NetStats& stats);
 
 } // namespace trephine::net

@@ -49,9 +49,6 @@ struct SimEvent {
     }
 };
 
-// The cutter a tool state names (its kind and diameter).
-ToolShape shapeOf(const ToolState& t);
-
 struct StepConfig {
     float maxStepS = 0.05f;   // ServerConfig::maxStepS
     float maxSweepMm = 10.0f; // ServerConfig::maxSweepMm

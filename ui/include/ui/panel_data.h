@@ -1,9 +1,9 @@
-// The panels' data as plain structs (Tracy's way: statistics are model data). The window feeds
-// them each frame from ClientThread's snapshot and applied rectangles; panels only plot them, and
-// tests check them without GL. Times are seconds on the caller's clock.
+// The window's own panel state as plain structs (take-over script, marks and their undo); the
+// histories the panels plot live in the client model (net/client_model.h). Tested without GL.
 #pragma once
 
 #include "libsim/dbi.h"
+#include "net/client_model.h"
 #include "net/protocol.h"
 
 #include <cstdint>
@@ -16,144 +16,17 @@
 
 namespace trephine::ui {
 
-// Image updates over the last seconds: latency, bytes, compression, rate.
-struct NetworkHistory {
-    struct Update {
-        double t = 0;
-        double latencyUs = -1;
-        uint32_t bytes = 0, rawBytes = 0;
-        bool full = false;
-    };
-    double windowS = 10.0;
-    std::deque<Update> updates;
-    // Per-second series for the plots (oldest first), kept to `seriesLength` points.
-    size_t seriesLength = 60;
-    std::vector<float> imageKbitPerS, toolKbitPerS, hapticKbitPerS, updatesPerS, rttMs;
-
-    void addUpdate(const Update& u);
-    // Appends one point per series from the 1 s rates (bytes/s) and the latest round trip (us).
-    void addSecond(double imageBytesPerS, double toolBytesPerS, double hapticBytesPerS,
-                   double updatesInS, double rttUs);
-    // Drops updates older than windowS before `now`.
-    void expire(double now);
-    double updateRate(double now) const; // updates per second over the last second
-    double compressionRatio() const;     // raw / wire bytes over the window (1 when none)
-    // Counts of latencies in `buckets` equal bins over [0, maxUs); larger ones go in the last.
-    std::vector<float> latencyHistogram(int buckets, double maxUs) const;
-    double latencyPercentile(double p) const; // -1 when none
-    // The latency histogram's caption: p50 and p99 in ms, "-" before any latency was measured.
-    std::string latencyCaption(double maxUs) const;
-};
-
-// Forces over the last seconds: the server's samples (f at P_N) and the extrapolated force the
-// client computes between them.
-struct ForceHistory {
-    struct Sample {
-        double t = 0;
-        glm::vec3 f{0.0f};
-    };
-    double windowS = 5.0;
-    std::deque<Sample> server, extrapolated;
-
-    void addServer(double t, glm::vec3 f);
-    void addExtrapolated(double t, glm::vec3 f);
-    void expire(double now);
-    double serverRate() const; // samples per second over the window held
-    // One component (0..2 x, y, z; 3 magnitude) of a series, oldest first.
-    static std::vector<float> series(const std::deque<Sample>& s, int component);
-    // The same over time: n points evenly spaced in [t0, t1], each the newest sample at or before
-    // its time (held; before the first sample, the first). Series at different rates (the
-    // server's f at tens a second, the loop's F at 1 kHz) then share one time axis: by sample
-    // index, 5 s of f and 4096 ticks of F drew the same event at different places. Empty when
-    // the series is.
-    static std::vector<float> resample(const std::deque<Sample>& s, int component, double t0,
-                                       double t1, int n);
-    // One scale for every plot of this history: the largest |f| and |F| held, rounded up to 1, 2
-    // or 5 times a power of ten, at least 0.5 N. Plots that each scaled themselves drew 1.5 N and
-    // 2 N the same height, with no scale to read.
-    float scaleN() const;
-};
-
-// [Instructor] one force history per other participant, from the newest relayed model of each
-// (ClientSnapshot::relayedModels). A participant with no new model for windowS is dropped, and one
-// whose model is no longer listed (it left) at once.
-struct ParticipantForces {
-    double windowS = 5.0;
-    std::map<uint16_t, ForceHistory> byClient;
-    std::map<uint16_t, uint32_t> lastSequence; // tool sequence of the last model taken
-
-    // Adds a server sample at `now` for each participant whose model is new (by tool sequence);
-    // returns how many were added.
-    int update(double now, const std::map<uint16_t, net::HapticModel>& models);
-    void expire(double now);
-};
-
-// BB_screen of each update, fading out, and the recent ones as a list.
-struct DirtyBoxHistory {
-    struct Box {
-        double t = 0;
-        PixelRect rect;
-        uint32_t sequence = 0, bytes = 0;
-        double latencyUs = -1;
-        bool full = false;
-    };
-    double fadeS = 1.5;
-    size_t keep = 64;
-    std::deque<Box> boxes; // newest last
-
-    // A full update first forgets the boxes before it (they belong to the picture it replaces).
-    void add(const Box& b);
-    // 1 when new, falling linearly to 0 at fadeS.
-    float alpha(const Box& b, double now) const;
-    // Boxes still visible at `now`.
-    std::vector<Box> visible(double now) const;
-    // The overlay's boxes: the newest `n` visible rectangles (full updates left out), newest
-    // last. Drilling adds dozens a second at one place: all of them, each filled, stacked into a
-    // solid block that hid the burr and the hole.
-    std::vector<Box> overlay(double now, size_t n = 8) const;
-};
-
-// [Comparison] the figures the study reports, measured live for both designs (DBI and replicated
-// volume), kept per design: while one design runs, the other keeps its last measured figures.
-// The window records one point a second for the design that is active; the panel only plots.
-enum class SyncDesign : uint8_t { Dbi = 0, Volume = 1 };
-inline constexpr int kSyncDesignCount = 2;
-const char* syncDesignName(SyncDesign d); // "DBI (server renders)", "Volume (local copy)"
-
-// Bytes and latencies are of the second's incremental updates (full ones, sent at a join, a
-// switch or a view change, left out); -1: none that second (plotted as 0; the table keeps the
-// last second that had some, "-" until one has).
-struct ComparisonFigures {
-    double updatesPerS = 0;        // image or volume updates applied per second
-    double bytesPerUpdate = -1;    // on the wire, mean over the last second
-    double rawBytesPerUpdate = -1; // before compression
-    double latencyP50Ms = -1;      // cause at the server -> on the client's screen
-    double latencyP99Ms = -1;
-    double frameMs = 0;  // the client's frame time (display)
-    double hapticHz = 0; // the haptic loop's achieved rate
-};
-
-struct ComparisonHistory {
-    struct Series {
-        std::vector<float> updatesPerS, bytesPerUpdate, rawBytesPerUpdate, latencyP50Ms,
-            latencyP99Ms, frameMs, hapticHz; // oldest first, at most seriesLength points
-        ComparisonFigures last;              // the newest figures recorded (see above)
-        double lastT = -1;                   // when they were recorded (-1: never)
-        size_t points = 0;                   // points ever recorded
-    };
-    size_t seriesLength = 120;
-    SyncDesign active = SyncDesign::Dbi; // the design of the newest record
-    Series designs[kSyncDesignCount];
-
-    // Appends one point to `design`'s series (capped), makes it the active design.
-    void record(SyncDesign design, double now, const ComparisonFigures& figures);
-    const Series& series(SyncDesign d) const { return designs[int(d)]; }
-    bool measured(SyncDesign d) const { return series(d).lastT >= 0; }
-    // Seconds since `d` was last recorded (-1: never).
-    double ageS(SyncDesign d, double now) const;
-    // DBI over volume for a figure both designs have measured (e.g. updatesPerS), 0 otherwise.
-    double ratio(double ComparisonFigures::*figure) const;
-};
+// The histories the panels plot are the client model's (net/client_model.h): the window and the
+// headless trainee fold them from the same snapshots with the same code.
+using net::ComparisonFigures;
+using net::ComparisonHistory;
+using net::DirtyBoxHistory;
+using net::ForceHistory;
+using net::kSyncDesignCount;
+using net::NetworkHistory;
+using net::ParticipantForces;
+using net::SyncDesign;
+using net::syncDesignName;
 
 // `--take-over NAME|ID`: the trainee to take over now, once per connection. A reconnect (a new
 // connection attempt) asks again: the server hands a trainee back when its instructor leaves.

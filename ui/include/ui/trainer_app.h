@@ -30,6 +30,8 @@ struct TrainerReport {
     uint64_t localForceTicks = 0;  // haptic ticks whose force came from the local volume
     uint64_t serverForceTicks = 0; // ... from the server's models (multi-rate)
     std::array<uint64_t, kSyncDesignCount> frames{}; // frames drawn per design
+    // The client model's report (net::ClientModel::report), as the headless trainee writes it.
+    nlohmann::ordered_json session;
 };
 
 struct TrainerOptions {

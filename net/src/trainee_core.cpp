@@ -1,0 +1,187 @@
+#include "net/trainee_core.h"
+
+#include "libsim/error.h"
+#include "net/net_stats.h"
+#include "net/tool_model.h"
+
+#include <algorithm>
+#include <cassert>
+#include <thread>
+
+namespace trephine::net {
+
+// [SECTION] script
+
+ScriptToolSource::ScriptToolSource(Device& device, std::vector<ScriptSample> script, double endS)
+    : m_device(device), m_script(std::move(script)), m_endS(endS) {
+    assert(!m_script.empty() && "ScriptToolSource: a script needs at least one row");
+}
+
+const ScriptSample& ScriptToolSource::sampleAt(double t) const {
+    auto it = std::upper_bound(m_script.begin(), m_script.end(), t,
+                               [](double v, const ScriptSample& s) { return v < s.t; });
+    return it == m_script.begin() ? m_script.front() : *std::prev(it);
+}
+
+ToolState ScriptToolSource::toolAt(const ToolPose& pose, double now) {
+    ToolState t = sampleAt(now).tool;
+    if (now >= m_endS) {
+        t.speed = 0.0f; // the script is over: no more drilling
+        t.drilling = false;
+    }
+    t.position = pose.position;
+    t.orientation = pose.orientation;
+    return t;
+}
+
+glm::vec3 ScriptToolSource::velocity(const ToolPose& pose, double now) {
+    return m_velocity.update(pose.position, now);
+}
+
+// [SECTION] force
+
+glm::vec3 TraineeForce::force(const ToolPose& pose, double now) {
+    if (const NewestModel::Taken taken = m_serverModel.take(); taken.model)
+        m_blender.setModel(taken.model->first, now);
+    const glm::vec3 extrapolated = m_blender.update(pose.position, now);
+    if (m_local.load(std::memory_order_relaxed) && m_client) {
+        const ToolState t = m_tools.toolAt(pose, now);
+        glm::vec3 f(0.0f);
+        try {
+            const ForceModel& model = m_models.get(shapeOf(t));
+            m_toolsUsed.store(m_models.size(), std::memory_order_relaxed);
+            const float speed = t.drilling ? t.speed : 0.0f;
+            const glm::vec3 velocity = m_tools.velocity(pose, now);
+            if (m_client->withLocalVolume(
+                    [&](const Volume& v) { f = model.compute(v, pose, speed, velocity).force; })) {
+                m_localTicks.fetch_add(1, std::memory_order_relaxed);
+                return f;
+            }
+        } catch (const Error&) {
+            // A shape the factories refuse: no local model; the server's is all there is.
+        }
+    }
+    m_serverTicks.fetch_add(1, std::memory_order_relaxed);
+    return extrapolated;
+}
+
+// [SECTION] core
+
+TraineeCore::TraineeCore(TraineeCoreConfig config) : m_config(std::move(config)) {
+    m_config.client.onHapticModel = [this](const HapticModel& m) { onModel(m); };
+    m_client = std::make_unique<ClientThread>(m_config.client);
+}
+
+TraineeCore::~TraineeCore() {
+    stop();
+}
+
+void TraineeCore::connect() {
+    m_client->start();
+}
+
+void TraineeCore::startHaptics(ToolSource& tools) {
+    assert(!m_loop && "TraineeCore::startHaptics: the loop runs once");
+    m_force = std::make_unique<TraineeForce>(tools, m_config.haptics.blend);
+    m_force->setClient(m_client.get());
+    m_force->setLocal(m_config.client.client.sync == Sync::Volume);
+    m_loop = std::make_unique<HapticLoop>(tools.device(), m_config.haptics,
+                                          [this, &tools](const DeviceState& s, double now) {
+                                              ToolState t = tools.toolAt(s.pose, now);
+                                              // The device sample: the server's step and velocity
+                                              // follow the loop's sampling, and the force round
+                                              // trip starts here, not when the client thread sends
+                                              // it.
+                                              t.clientTimeUs = steadyNowUs();
+                                              m_client->sendToolState(t);
+                                          });
+    m_loop->setForceSource(m_force.get());
+    m_loopStartUs = steadyNowUs();
+    m_loop->start();
+    m_hapticsLive.store(true, std::memory_order_release);
+}
+
+void TraineeCore::onModel(const HapticModel& m) {
+    if (!m_hapticsLive.load(std::memory_order_acquire))
+        return;
+    const HapticModelData d = toModelData(m);
+    // The loop's clock counts from its start (within microseconds of m_loopStartUs).
+    m_loop->setModel(d, double(int64_t(steadyNowUs()) - int64_t(m_loopStartUs)) * 1e-6);
+    m_force->setModel(d);
+}
+
+void TraineeCore::stopHaptics() {
+    if (m_loop)
+        m_loop->stop();
+}
+
+void TraineeCore::stop() {
+    stopHaptics();
+    m_client->stop();
+}
+
+void TraineeCore::setLocalForces(bool local) {
+    if (m_force)
+        m_force->setLocal(local);
+}
+
+HapticLoopStats TraineeCore::hapticStats() const {
+    return m_loop ? m_loop->stats() : HapticLoopStats{};
+}
+
+std::vector<HapticSample> TraineeCore::hapticSamples() const {
+    return m_loop ? m_loop->samples() : std::vector<HapticSample>{};
+}
+
+ClientReportExtras TraineeCore::reportExtras() const {
+    ClientReportExtras x;
+    x.toolRateHz = m_config.haptics.sendRateHz;
+    x.hapticRateHz = m_config.haptics.rateHz;
+    x.haptics = hapticStats();
+    x.localForceTicks = localForceTicks();
+    x.serverForceTicks = serverForceTicks();
+    return x;
+}
+
+// [SECTION] headless view
+
+void HeadlessView::take(ClientThread& client, uint64_t hapticTicks) {
+    const double now =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - m_t0).count();
+    m_snap = client.snapshot();
+    model.addSnapshot(m_snap, now);
+    for (AppliedRect& r : client.drainRects()) {
+        // A whole picture of our view (a full image, or a volume client's own render), or a
+        // rectangle of the one held; anything else is the placeholder view's.
+        if (r.rect.w == m_size && r.rect.h == m_size && r.pixels.width() == m_size &&
+            r.pixels.height() == m_size) {
+            m_dbi = r.pixels;
+            m_viewId = r.viewId;
+        } else if (hasPicture() && r.viewId == m_viewId && m_dbi.bounds().contains(r.rect)) {
+            m_dbi.apply(r.pixels, r.rect.x, r.rect.y);
+        } else {
+            continue;
+        }
+        model.addRect(r, now);
+        if (!r.full) // no display: on screen when applied
+            model.addDrawn(designOf(m_snap->sync), r.latencyUs, r.appliedUs, r.appliedUs, r.bytes,
+                           r.rawBytes);
+    }
+    model.tickComparison(now, designOf(m_snap->sync), hasPicture(), hapticTicks);
+}
+
+bool HeadlessView::waitFor(ClientThread& client, double seconds,
+                           const std::function<bool()>& pred) {
+    const uint64_t deadline = steadyNowUs() + uint64_t(seconds * 1e6);
+    while (steadyNowUs() < deadline) {
+        take(client, 0);
+        if (pred())
+            return true;
+        if (m_snap->state == LinkState::Retrying)
+            return false;
+        std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    return pred();
+}
+
+} // namespace trephine::net
