@@ -7,7 +7,6 @@
 #include "net/codec.h"
 #include "study/svg_plot.h"
 
-#include <fmt/chrono.h>
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -37,7 +36,11 @@ void writeFile(const std::string& path, const std::string& text) {
 }
 
 std::string utcNow() {
-    return fmt::format("{:%Y-%m-%d %H:%M} UTC", fmt::gmtime(std::time(nullptr)));
+    const std::time_t t = std::time(nullptr);
+    std::tm utc{};
+    gmtime_r(&t, &utc);
+    return fmt::format("{:04}-{:02}-{:02} {:02}:{:02} UTC", utc.tm_year + 1900, utc.tm_mon + 1,
+                       utc.tm_mday, utc.tm_hour, utc.tm_min);
 }
 
 // The paper's stage shares at 80^3 (section 4.1), percent.

@@ -1,25 +1,19 @@
 // `trephine study display`'s measurement on llvmpipe (needs a display: xvfb-run), with a small
 // window and few frames: both designs measured, positive rates, the GL renderer named. Speeds are
-// the benchmark's business (benchmark_ui), never asserted here. Without the GUI the study is
-// absent and says so.
-#include "study/commands.h"
+// the benchmark's business (benchmark_ui), never asserted here. A suite of its own (built with
+// the GUI only), so that test_study starts without GL and OpenImageIO.
+#include "study/display_study.h"
 
+#include "gl_window_test.h"
 #include "libsim/error.h"
 
 #include <gtest/gtest.h>
 
 #include <cstdlib>
-#include <filesystem>
 #include <string>
-#include <unistd.h>
 
 using namespace trephine;
 using namespace trephine::study;
-
-#ifdef TREPHINE_HAVE_GUI
-
-#include "gl_window_test.h"
-#include "study/display_study.h"
 
 TEST(DisplayStudy, MeasuresBothDesignsInOneRun) {
     TREPHINE_NEED_DISPLAY("OpenGL");
@@ -79,21 +73,3 @@ TEST(DisplayStudy, WithoutADisplayItSaysToUseXvfb) {
     EXPECT_NE(message.find("xvfb-run"), std::string::npos) << message;
     EXPECT_EQ(message.find('\n'), std::string::npos);
 }
-
-#else
-
-TEST(DisplayStudy, WithoutTheGuiItSaysWhyAndWritesNoCsv) {
-    const auto dir =
-        std::filesystem::temp_directory_path() / ("trephine_display_" + std::to_string(getpid()));
-    DisplayOptions o;
-    o.out = dir.string();
-    o.quick = true;
-    const DisplayFigures f = runDisplayStudy(o);
-    EXPECT_FALSE(f.measured);
-    EXPECT_NE(f.why.find("TREPHINE_BUILD_GUI=OFF"), std::string::npos) << f.why;
-    EXPECT_TRUE(f.entries.empty());
-    EXPECT_FALSE(std::filesystem::exists(dir / "display.csv"));
-    std::filesystem::remove_all(dir);
-}
-
-#endif
