@@ -53,6 +53,16 @@ void Outbox::modeChanged(uint16_t id, Sync mode, Codec volumeCodec) {
         m_volumes.erase(id);
 }
 
+void Outbox::clear() {
+    for (auto& [id, c] : m_clients)
+        c.noted.reset();
+    countNoted();
+    std::lock_guard lock(m_mutex);
+    m_images.clear();
+    m_volumes.clear();
+    m_refused.clear();
+}
+
 const Dbi* Outbox::shadow(uint16_t id) const {
     auto it = m_clients.find(id);
     return it == m_clients.end() ? nullptr : &it->second.shadow;

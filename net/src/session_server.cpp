@@ -237,6 +237,9 @@ void SessionServer::stop() {
     m_impl->inCv.notify_all();
     if (m_simThread.joinable())
         m_simThread.join();
+    // What the simulation posted after the network thread's last pass will never be sent: a
+    // stopped server is idle.
+    m_impl->outbox.clear();
     if (!m_config.saveOnExit.empty())
         saveSession();
 }

@@ -175,6 +175,12 @@ TEST(Outbox, AHeldBackClientGetsOneMergedUpdateWhenItCatchesUp) {
     rig.outbox.postImage(1, cam, frame, {0, 0, 4, 4}, false, 200, {});
     EXPECT_TRUE(rig.outbox.take([](uint16_t id) { return id != 1; }).updates.empty());
     EXPECT_TRUE(rig.outbox.empty()) << "a client sent away keeps nothing waiting";
+
+    rig.outbox.postImage(2, cam, frame, {0, 0, 4, 4}, false, 300, {});
+    EXPECT_FALSE(rig.outbox.empty());
+    rig.outbox.clear(); // the server stopped: nobody will take it
+    EXPECT_TRUE(rig.outbox.empty());
+    EXPECT_TRUE(rig.outbox.take(live).updates.empty());
 }
 
 // A client asks for a smaller window under the id of the view it has while an update of the old

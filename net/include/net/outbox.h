@@ -91,6 +91,10 @@ public:
     // are dropped.
     Taken take(const std::function<bool(uint16_t)>& live);
 
+    // [Either thread, once the other has stopped] Forgets every waiting update and noted change:
+    // nobody will take them (the server has stopped).
+    void clear();
+
     // [Any thread] Nothing waits and no change is noted.
     bool empty() const;
     // [Posting thread] What client `id` holds once its posted images arrive (empty unless zstd).
