@@ -230,6 +230,11 @@ int runTrainerWindow(const TrainerOptions& o) {
     TakeOverControls takeOverControls;
     takeOverControls.canTakeOver = o.instructor;
     ScriptedTakeOver scriptedTakeOver{o.takeOver};
+    if (!o.viewAs.empty() && !o.instructor)
+        throw Error("window: --view-as: only an instructor views as another participant");
+    ViewAsControls viewAsControls;
+    viewAsControls.canViewAs = o.instructor;
+    viewAsControls.scripted = o.viewAs;
     std::optional<glm::vec3> pointerPick; // the bone under the pointer, last seen over the view
     const int viewSize = o.size;
     WindowConfig wc;
@@ -441,6 +446,8 @@ int runTrainerWindow(const TrainerOptions& o) {
         }
         if (scene && viewControls.dirty) {
             viewControls.dirty = false;
+            if (snap->viewingAs != 0) // the View panel moved: our own camera again
+                client.viewAs(0);
             wantedCamera = makeCamera();
             client.requestView(net::toViewSpec(wantedCamera));
         }
@@ -806,7 +813,7 @@ int runTrainerWindow(const TrainerOptions& o) {
         const float networkY = sessionH + viewPanelH, comparisonH = std::floor(H * 0.535f);
         ImGui::SetNextWindowPos(ImVec2(right, 0), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(colW, sessionH), ImGuiCond_FirstUseEver);
-        drawSessionPanel(*snap, toolControls, markControls, takeOverControls,
+        drawSessionPanel(*snap, toolControls, markControls, takeOverControls, viewAsControls,
                          o.instructor ? "instructor" : "trainee", o.address, o.name);
         // Marks asked for (the panel, the M key, --mark once joined); the server lists them back.
         if (!marksSent && snap->welcome && snap->state == net::LinkState::Connected) {
@@ -823,6 +830,14 @@ int runTrainerWindow(const TrainerOptions& o) {
         if (takeOverControls.asked)
             client.takeOver(*takeOverControls.asked);
         takeOverControls.asked.reset();
+        // View as (the panel, --view-as once the participant is listed).
+        if (scene && snap->welcome && snap->state == net::LinkState::Connected)
+            if (const auto id =
+                    viewAsControls.due(snap->attempts, snap->welcome->clientId, snap->participants))
+                client.viewAs(*id);
+        if (viewAsControls.asked)
+            client.viewAs(*viewAsControls.asked);
+        viewAsControls.asked.reset();
         ImGui::SetNextWindowPos(ImVec2(right, sessionH), ImGuiCond_FirstUseEver);
         ImGui::SetNextWindowSize(ImVec2(colW, viewPanelH), ImGuiCond_FirstUseEver);
         drawViewPanel(viewControls, snap->waitingForView || !havePicture,
@@ -872,6 +887,7 @@ int runTrainerWindow(const TrainerOptions& o) {
                              !switching && nextSwitch == o.switchSyncAtS.size() &&
                              !snap->waitingForView && now - lastRectAt > 0.5 && marksSent &&
                              (o.takeOver.empty() || holding != 0) &&
+                             (o.viewAs.empty() || snap->viewingAs != 0) &&
                              snap->annotations.size() >= scriptedMarks.size();
         settledFrames = settled ? settledFrames + 1 : 0;
         Dbi capture;

@@ -12,6 +12,7 @@
 #include "net/image_delta.h"
 #include "net/marks_file.h"
 #include "net/view.h"
+#include "net/view_follow.h"
 
 #include <poll.h>
 #include <pthread.h>
@@ -263,6 +264,7 @@ struct SessionServer::Impl {
     uint32_t nextAnnotationId = 1;
     // Trainees taken over: trainee id -> the instructor holding it (network thread only).
     std::map<uint16_t, uint16_t> takenOver;
+    ViewFollowers follow; // every participant's view, and the instructors viewing as one
     uint16_t nextId = 1;
 
     // Whether client `id` (of `role`) may cut now: a trainee nobody holds, or an instructor
@@ -920,6 +922,7 @@ void SessionServer::networkLoop() {
             w.maxViewPixels = uint32_t(m_config.maxViewPixels);
             sendTo(p.peer, Channel::Control, encodeMessage(w));
             sendTo(p.peer, Channel::Control, m_sceneMessage); // the scene: net/scene.h
+            s.follow.setView(id, h.view);
             sendParticipants(true);
             if (!s.annotations.empty())
                 sendTo(p.peer, Channel::Control, annotationList());
@@ -946,6 +949,21 @@ void SessionServer::networkLoop() {
             ev.camera = toCamera(r.view);
             ev.viewId = r.requestId;
             s.push(std::move(ev));
+            ParticipantView seen{id, r.view};
+            for (uint16_t f : s.follow.setView(id, r.view)) // instructors viewing as this one
+                if (auto fp = s.peers.find(f); fp != s.peers.end())
+                    sendTo(fp->second.peer, Channel::Control, encodeMessage(seen));
+            return true;
+        }
+        case MessageType::ViewAs: { // net/view_follow.h
+            ViewAs m;
+            if (!decodeMessage(data, m))
+                return false;
+            if (p.helloMsg.role == Role::Instructor)
+                if (const auto view = s.follow.follow(id, m.clientId)) {
+                    ParticipantView seen{m.clientId, *view};
+                    sendTo(p.peer, Channel::Control, encodeMessage(seen));
+                }
             return true;
         }
         case MessageType::ToolState: {
@@ -1131,6 +1149,7 @@ void SessionServer::networkLoop() {
                     --s.syncsDeferred; // it left: nothing to switch
                 s.peers.erase(gone);
                 s.releaseTakeOvers(id);
+                s.follow.leave(id);
                 s.push(makeEvent(SimEvent::Kind::Leave, id));
                 m_clientCount = s.peers.size();
                 if (listed)
