@@ -49,6 +49,7 @@ int runWindowedClient(const WindowedOptions& o) {
     t.switchSyncAtS = o.switchSyncAtS;
     t.marks = o.marks;
     t.takeOver = o.takeOver;
+    t.viewAs = o.viewAs;
     return ui::runTrainerWindow(t);
 #else
     (void)o;
@@ -125,6 +126,10 @@ void addInstructorMode(CLI::App& root, int& exitCode) {
     sub->add_option("--take-over", o->takeOver,
                     "Take over this trainee (its --name, or its client id) once it is in the "
                     "session: its drill pauses and yours cuts (the Session panel hands back)");
+    sub->add_option(
+        "--view-as", o->viewAs,
+        "Watch through this participant's camera (its --name, or its client id) once it "
+        "is in the session (the Session panel's *view as* / *own view* switch)");
     addWindowOptions(sub, *o);
     sub->callback([o, &exitCode] { exitCode = runWindowedClient(*o); });
 }

@@ -27,6 +27,7 @@ struct WindowedOptions {
     std::vector<double> switchSyncAtS; // scripted Comparison toggles (s after the first picture)
     std::vector<std::string> marks;    // instructor: "X,Y,Z[:LABEL]" marks placed on joining
     std::string takeOver; // [Instructor] the trainee (name or client id) to take over once joined
+    std::string viewAs;   // [Instructor] the participant (name or client id) to view as once joined
 };
 
 // True when this build has the GUI and a window can open here; `why` says why not.

@@ -62,8 +62,21 @@ glm::vec4 markColor() {
     return {1.0f, 0.84f, 0.0f, 1.0f};
 }
 
+std::optional<uint16_t>
+ViewAsControls::due(int attempt, uint16_t self,
+                    const std::map<uint16_t, net::ParticipantInfo>& participants) {
+    if (scripted.empty() || scriptedOnAttempt == attempt)
+        return std::nullopt;
+    for (const auto& [id, p] : participants)
+        if (id != self && (p.name == scripted || std::to_string(id) == scripted)) {
+            scriptedOnAttempt = attempt;
+            return id;
+        }
+    return std::nullopt;
+}
+
 void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkControls& marks,
-                      TakeOverControls& takeOver, const std::string& role,
+                      TakeOverControls& takeOver, ViewAsControls& viewAs, const std::string& role,
                       const std::string& address, const std::string& name) {
     if (!ImGui::Begin("Session")) {
         ImGui::End();
@@ -89,6 +102,18 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
         if (id == self)
             continue;
         glm::vec4 c = participantColor(int(id));
+        // View as (instructors): the participant's camera in this window, or back to our own.
+        if (viewAs.canViewAs) {
+            ImGui::PushID(int(id) + 0x10000);
+            if (snap.viewingAs == id) {
+                if (ImGui::SmallButton("own view"))
+                    viewAs.asked = uint16_t(0);
+            } else if (ImGui::SmallButton("view as")) {
+                viewAs.asked = id;
+            }
+            ImGui::SameLine();
+            ImGui::PopID();
+        }
         // A trainee's take-over control leads its row: after the name and tool it was pushed off
         // a 380-pixel panel ("take o").
         if (p.role == net::Role::Trainee) {
@@ -179,6 +204,9 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
     ImGui::SliderFloat("speed", &tool.speed, 0.0f, 1.0f, "%.2f", clamp);
     ImGui::SliderFloat("depth mm [wheel]", &tool.pushMm, kPushMinMm, kPushMaxMm, "%.1f", clamp);
     ImGui::PopItemWidth();
+    if (snap.viewingAs)
+        ImGui::TextColored(ImVec4(0.5f, 0.8f, 1, 1), "viewing as %s",
+                           participantName(snap.participants, snap.viewingAs).c_str());
     const uint16_t holder = takenOverBy(snap.participants, self);
     const uint16_t held = takeOver.canTakeOver ? heldBy(snap.participants, self) : 0;
     if (held)

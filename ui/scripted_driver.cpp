@@ -39,8 +39,9 @@ net::Annotate parseMark(const std::string& text) {
 
 ScriptedDriver::ScriptedDriver(const TrainerOptions& o)
     : m_address(o.address), m_screenshot(o.screenshot), m_takeOverName(o.takeOver),
-      m_frames(o.frames), m_timeoutS(o.timeoutS), m_burrhole(o.script == "burrhole"),
-      m_scriptDone(o.script.empty()), m_switchAtS(o.switchSyncAtS), m_takeOver{o.takeOver} {
+      m_viewAsName(o.viewAs), m_frames(o.frames), m_timeoutS(o.timeoutS),
+      m_burrhole(o.script == "burrhole"), m_scriptDone(o.script.empty()),
+      m_switchAtS(o.switchSyncAtS), m_takeOver{o.takeOver} {
     if (!o.marks.empty() && !o.instructor)
         throw Error("window: --mark: only an instructor places marks");
     for (const std::string& m : o.marks)
@@ -99,6 +100,7 @@ bool ScriptedDriver::settled(const Frame& f) const {
            f.haveScene && m_scriptDone && !f.switching && m_nextSwitch == m_switchAtS.size() &&
            !f.snap->waitingForView && f.sinceLastUpdateS > 0.5 && m_marksSent &&
            (m_takeOverName.empty() || f.holding != 0) &&
+           (m_viewAsName.empty() || f.snap->viewingAs != 0) &&
            f.snap->annotations.size() >= m_marks.size();
 }
 

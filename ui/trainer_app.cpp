@@ -388,6 +388,11 @@ int runTrainerWindow(const TrainerOptions& o) {
     markControls.canMark = o.instructor;
     TakeOverControls takeOverControls;
     takeOverControls.canTakeOver = o.instructor;
+    if (!o.viewAs.empty() && !o.instructor)
+        throw Error("window: --view-as: only an instructor views as another participant");
+    ViewAsControls viewAsControls;
+    viewAsControls.canViewAs = o.instructor;
+    viewAsControls.scripted = o.viewAs;
     std::optional<glm::vec3> pointerPick; // the bone under the pointer, last seen over the view
     const int viewSize = o.size;
     Window window(windowConfigFor(o));
@@ -511,6 +516,8 @@ int runTrainerWindow(const TrainerOptions& o) {
         }
         if (scene && viewControls.dirty) {
             viewControls.dirty = false;
+            if (snap->viewingAs != 0) // the View panel moved: our own camera again
+                client.viewAs(0);
             wantedCamera = makeCamera();
             client.requestView(net::toViewSpec(wantedCamera));
         }
@@ -751,7 +758,7 @@ int runTrainerWindow(const TrainerOptions& o) {
         // Panels: Forces under the view, and two columns right of it.
         const PanelLayout layout = panelLayout(viewSize, float(window.height()));
         placeNextPanel(layout.session);
-        drawSessionPanel(*snap, toolControls, markControls, takeOverControls,
+        drawSessionPanel(*snap, toolControls, markControls, takeOverControls, viewAsControls,
                          o.instructor ? "instructor" : "trainee", o.address, o.name);
         // Marks asked for (the panel, the M key, --mark once joined); the server lists them back.
         script.sendDue(*snap, client);
@@ -761,6 +768,14 @@ int runTrainerWindow(const TrainerOptions& o) {
         if (takeOverControls.asked)
             client.takeOver(*takeOverControls.asked);
         takeOverControls.asked.reset();
+        // View as (the panel, --view-as once the participant is listed).
+        if (scene && snap->welcome && snap->state == net::LinkState::Connected)
+            if (const auto id =
+                    viewAsControls.due(snap->attempts, snap->welcome->clientId, snap->participants))
+                client.viewAs(*id);
+        if (viewAsControls.asked)
+            client.viewAs(*viewAsControls.asked);
+        viewAsControls.asked.reset();
         placeNextPanel(layout.view);
         drawViewPanel(viewControls, snap->waitingForView || !havePicture,
                       picture == SyncDesign::Volume ? "local render" : "DBI",

@@ -147,6 +147,9 @@ bool ClientThread::annotate(const Annotate& a) {
 bool ClientThread::takeOver(uint16_t trainee) {
     return push(TakeOver{trainee});
 }
+bool ClientThread::viewAs(uint16_t id) {
+    return push(ViewAs{id});
+}
 
 std::vector<AppliedVolumeBox> ClientThread::drainVolumeBoxes() {
     std::vector<AppliedVolumeBox> out;
@@ -222,6 +225,7 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
         if (c->welcomed())
             s->welcome = c->welcome();
         s->scene = c->scene();
+        s->viewingAs = c->viewingAs();
         s->view = c->view();
         s->viewId = c->viewId();
         s->hasFullImage = c->hasFullImage();
@@ -408,6 +412,9 @@ void ClientThread::run() {
                         } else if (auto* k = std::get_if<TakeOver>(&c)) {
                             if (cp->welcomed())
                                 cp->takeOver(k->trainee);
+                        } else if (auto* as = std::get_if<ViewAs>(&c)) {
+                            if (cp->welcomed())
+                                cp->viewAs(as->clientId);
                         } else if (cp->welcomed()) {
                             cp->sendPing();
                         }

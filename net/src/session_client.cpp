@@ -164,6 +164,21 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         ++m_scenes;
         return true;
     }
+    case MessageType::ParticipantView: {
+        ParticipantView pv;
+        if (!decodeMessage(data, pv))
+            return false;
+        ++m_participantViews;
+        if (pv.clientId != m_viewAs)
+            return true; // one we no longer view as
+        // The participant's camera in our own window: the newest size we asked for.
+        const ViewSpec& mine = m_requested.empty() ? m_view : m_requested.rbegin()->second;
+        ViewSpec v = pv.view;
+        v.width = mine.width;
+        v.height = mine.height;
+        requestView(v);
+        return true;
+    }
     case MessageType::Participants: {
         Participants roster;
         if (!decodeMessage(data, roster))
@@ -623,6 +638,12 @@ void SessionClient::annotate(Annotate a) {
         a.label.resize(n);
     }
     send(Channel::Control, encodeMessage(a));
+}
+
+void SessionClient::viewAs(uint16_t id) {
+    m_viewAs = id;
+    ViewAs m{id};
+    send(Channel::Control, encodeMessage(m));
 }
 
 void SessionClient::takeOver(uint16_t trainee) {

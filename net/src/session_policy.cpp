@@ -61,6 +61,7 @@ void SessionPolicy::disconnect(uint16_t id, uint64_t now, PolicyOutput& out) {
     m_peers.erase(gone);
     countSwitches(); // it left: nothing to switch
     releaseTakeOvers(id);
+    m_follow.leave(id);
     out.events.push_back(SimEvent::of(SimEvent::Kind::Leave, id));
     m_book.record([&](ServerReport& r) {
         PeerReport& p = r.peers[id];
@@ -171,6 +172,21 @@ bool SessionPolicy::handle(uint16_t id, Peer& p, std::span<const uint8_t> data, 
         ev.camera = toCamera(r.view);
         ev.viewId = r.requestId;
         out.events.push_back(std::move(ev));
+        ParticipantView seen{id, r.view};
+        const std::vector<uint16_t> followers = m_follow.setView(id, r.view);
+        if (!followers.empty()) // instructors viewing as this one
+            out.messages.push_back({followers, Channel::Control, encodeMessage(seen)});
+        return true;
+    }
+    case MessageType::ViewAs: { // net/view_follow.h
+        ViewAs m;
+        if (!decodeMessage(data, m))
+            return false;
+        if (p.helloMsg.role == Role::Instructor)
+            if (const auto view = m_follow.follow(id, m.clientId)) {
+                ParticipantView seen{m.clientId, *view};
+                out.messages.push_back({{id}, Channel::Control, encodeMessage(seen)});
+            }
         return true;
     }
     case MessageType::ToolState:
@@ -217,6 +233,7 @@ bool SessionPolicy::hello(uint16_t id, Peer& p, std::span<const uint8_t> data, u
         return true;
     }
     welcome(id, now, out);
+    m_follow.setView(id, h.view);
     SimEvent ev = SimEvent::of(SimEvent::Kind::Join, id);
     ev.inFlight = p.inFlight;
     ev.camera = toCamera(h.view);

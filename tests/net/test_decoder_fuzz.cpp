@@ -105,6 +105,10 @@ bool decodeAny(std::span<const uint8_t> p) {
         return decodesCanonically<TakeOver>(p);
     case MessageType::Scene:
         return decodesCanonically<Scene>(p);
+    case MessageType::ViewAs:
+        return decodesCanonically<ViewAs>(p);
+    case MessageType::ParticipantView:
+        return decodesCanonically<ParticipantView>(p);
     }
     return false;
 }
@@ -238,6 +242,8 @@ std::vector<std::vector<uint8_t>> sampleMessages() {
     setSceneMesh(scene, tri);
     stampScene(scene);
     all.push_back(encoded(scene));
+    all.push_back(encoded(ViewAs{3}));
+    all.push_back(encoded(ParticipantView{3, sampleView(64, 48)}));
     return all;
 }
 

@@ -26,8 +26,10 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <atomic>
 #include <filesystem>
 #include <string>
+#include <thread>
 
 using namespace trephine;
 using namespace trephine::ui;
@@ -107,12 +109,14 @@ Agreement agree(const Dbi& client, const Dbi& server, const Camera& camera, floa
     return a;
 }
 
+// `minHit`: the fraction of the view that shows bone at least (an overview frames the whole
+// volume's bounding sphere: the skull covers a tenth of it).
 void expectSamePicture(const Dbi& client, const Dbi& server, const Camera& camera, float voxelMm,
-                       const std::string& who) {
+                       const std::string& who, double minHit = 1.0 / 8.0) {
     ASSERT_EQ(client.width(), server.width()) << who;
     ASSERT_EQ(client.height(), server.height()) << who;
     const Agreement a = agree(client, server, camera, voxelMm);
-    EXPECT_GT(a.bothHit, int64_t(server.width()) * server.height() / 8) << who;
+    EXPECT_GT(double(a.bothHit), minHit * server.width() * server.height()) << who;
     EXPECT_LE(a.maskMismatch, a.bothHit / 100) << who << ": hit/miss differs only on silhouettes";
     EXPECT_LE(a.off, a.bothHit / 100) << who << ": colours and depths agree";
 }
@@ -215,5 +219,49 @@ TEST(ThinClients, PickingOnTheDbiFindsTheVolumesSurfaceWithinAVoxel) {
                 << "pixel " << x << "," << y;
         }
     EXPECT_GT(picked, 100);
+    server.stop();
+}
+
+// `trephine instructor --view-as alex`: the instructor's window shows the server's picture of the
+// trainee's camera, at the window's own size.
+TEST(ThinClients, AnInstructorViewsAsATraineeThroughItsCamera) {
+    TREPHINE_NEED_DISPLAY("the instructor window");
+    const Volume skull = makeSkull(64);
+    net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64", 2));
+    server.start();
+    net::ClientConfig tc =
+        trephine::testing::namedClientConfig(skull, "alex", net::Role::Trainee, 80);
+    tc.view = net::toViewSpec(cameraPreset("left", skull, {80, 80}));
+    net::SessionClient trainee(tc);
+    trainee.connect(trephine::testing::loopback(server.port()));
+    ASSERT_TRUE(trephine::testing::pumpUntil({&trainee}, [&] { return trainee.hasFullImage(); }));
+    std::atomic<bool> stop{false};
+    std::thread pump([&] {
+        while (!stop)
+            trainee.poll(1);
+    });
+    TempDir dir;
+    TrainerReport report;
+    TrainerOptions o;
+    o.address = "127.0.0.1:" + std::to_string(server.port());
+    o.instructor = true;
+    o.name = "ines";
+    o.viewAs = "alex";
+    o.camera = "top";
+    o.size = kView;
+    o.screenshot = dir / "as.png";
+    o.frames = 2;
+    o.timeoutS = 100.0;
+    o.visible = false;
+    o.report = &report;
+    const int rc = runTrainerWindow(o);
+    stop = true;
+    pump.join();
+    ASSERT_EQ(rc, 0);
+    net::ViewSpec want = tc.view;
+    want.width = want.height = kView;
+    EXPECT_EQ(net::toViewSpec(report.camera), want);
+    expectSamePicture(report.view, server.renderView(want), report.camera, skull.spacing().x,
+                      "viewing as alex", 1.0 / 20.0);
     server.stop();
 }

@@ -87,6 +87,7 @@ struct ClientSnapshot {
     // The server's scene (presets, sites, the surgical field), null until it arrives and between
     // connections; a window keeps what it built until a scene with another id comes.
     std::shared_ptr<const ReceivedScene> scene;
+    uint16_t viewingAs = 0; // [Instructor] whose camera the view follows (0: its own)
     ViewSpec view;
     uint32_t viewId = 0;
     bool hasFullImage = false;
@@ -159,6 +160,8 @@ public:
     bool annotate(const Annotate& a);
     // [Instructor] Takes over a trainee or hands back (0) (SessionClient::takeOver).
     bool takeOver(uint16_t trainee);
+    // [Instructor] Watches through a participant's camera (0: its own) (SessionClient::viewAs).
+    bool viewAs(uint16_t id);
 
     // The latest snapshot (never null after construction).
     std::shared_ptr<const ClientSnapshot> snapshot() const;
@@ -183,7 +186,7 @@ private:
     struct SyncCmd {
         Sync sync;
     };
-    using Command = std::variant<ToolState, ViewCmd, PingCmd, SyncCmd, Annotate, TakeOver>;
+    using Command = std::variant<ToolState, ViewCmd, PingCmd, SyncCmd, Annotate, TakeOver, ViewAs>;
 
     void run();
     bool push(Command c);

@@ -28,7 +28,8 @@ namespace trephine::net {
 // holds a trainee in Participants. 5: the predicted form's mask of exactly predicted pixels.
 // 6: ImageUpdate's grid time. 7: the largest view the server serves, in the welcome. 8: Scene
 // after the welcome (extent, camera presets, sites, landmarks, the surgical field's mesh:
-// net/scene.h); the welcome's volume name is a label a client never opens.
+// net/scene.h); the welcome's volume name is a label a client never opens; ViewAs and
+// ParticipantView (an instructor watches through a participant's camera).
 inline constexpr uint32_t kProtocolVersion = 8;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
@@ -106,8 +107,10 @@ enum class MessageType : uint8_t {
     Annotations = 15,
     TakeOver = 16,
     Scene = 17, // net/scene.h
+    ViewAs = 18,
+    ParticipantView = 19,
 };
-inline constexpr uint8_t kMessageTypeCount = 18; // one past the largest type
+inline constexpr uint8_t kMessageTypeCount = 20; // one past the largest type
 
 enum class Role : uint8_t { Trainee = 0, Instructor = 1 };
 enum class Codec : uint8_t { Raw = 0, Lz4 = 1, Zstd = 2 };
@@ -528,6 +531,34 @@ struct TakeOver {
     template <typename S>
     bool serialize(S& s) {
         return s.integer(trainee);
+    }
+};
+
+// Client -> server (Channel::Control, reliable): an instructor watches through a participant's
+// camera (its client id) or through its own again (0). The server answers with that
+// participant's view (ParticipantView) at once and again whenever it changes; the instructor asks
+// for the view like any other, so the server renders nothing new. Only an instructor's are
+// applied (a trainee's is ignored).
+struct ViewAs {
+    static constexpr MessageType kType = MessageType::ViewAs;
+    uint16_t clientId = 0;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.integer(clientId);
+    }
+};
+
+// Server -> instructor (Channel::Control, reliable): the current view (its hello's, then its
+// newest ViewRequest's) of the participant the instructor watches through (ViewAs).
+struct ParticipantView {
+    static constexpr MessageType kType = MessageType::ParticipantView;
+    uint16_t clientId = 0;
+    ViewSpec view;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.ranged(clientId, uint16_t(1), uint16_t(UINT16_MAX)) && view.serialize(s);
     }
 };
 

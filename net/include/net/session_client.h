@@ -133,6 +133,13 @@ public:
     // [Instructor] Takes over a trainee (its client id) or hands back (0): see TakeOver. The
     // roster (participants()) says when it took effect; a trainee's are refused by the server.
     void takeOver(uint16_t trainee);
+    // [Instructor] Watches through participant `id`'s camera (0: its own again): the server sends
+    // that participant's view whenever it changes, and each is asked for (requestView) at this
+    // client's own window size. A trainee's are ignored by the server.
+    void viewAs(uint16_t id);
+    uint16_t viewingAs() const { return m_viewAs; }
+    // ParticipantView messages received (of the participant viewed as, or a stale one).
+    uint64_t participantViewsReceived() const { return m_participantViews; }
 
     // The latest relayed tool of every other participant, by client id.
     const std::map<uint16_t, ToolState>& others() const { return m_others; }
@@ -273,6 +280,8 @@ private:
     std::optional<uint32_t> m_resyncRequestId;
     uint64_t m_relays = 0, m_updatesApplied = 0, m_fullUpdates = 0, m_rejected = 0, m_toolSent = 0;
     uint64_t m_viewsRefused = 0;
+    uint16_t m_viewAs = 0;
+    uint64_t m_participantViews = 0;
     NetStats m_stats;
 };
 

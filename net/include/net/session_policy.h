@@ -13,6 +13,7 @@
 #include "net/server_config.h"
 #include "net/server_report.h"
 #include "net/sim_step.h"
+#include "net/view_follow.h"
 
 #include <atomic>
 #include <cstdint>
@@ -150,6 +151,7 @@ private:
     glm::ivec3 m_dims;
     glm::vec3 m_spacing;
     std::vector<uint8_t> m_sceneMessage; // m_config.scene, encoded once
+    ViewFollowers m_follow; // every participant's view, and the instructors viewing as one
     ReportBook& m_book;
     ForceFn m_force;
     std::map<uint16_t, Peer> m_peers; // increasing ids, as the roster wants

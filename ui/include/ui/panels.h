@@ -81,8 +81,21 @@ struct TakeOverControls {
 // Who holds trainee `id` in `roster` (0: nobody, or not listed), and whom `instructor` holds.
 uint16_t takenOverBy(const std::map<uint16_t, net::ParticipantInfo>& roster, uint16_t id);
 uint16_t heldBy(const std::map<uint16_t, net::ParticipantInfo>& roster, uint16_t instructor);
+// [Instructor] View as: watch through a participant's camera (ViewAs); the server knows every
+// client's view, so it is a view request, no new rendering.
+struct ViewAsControls {
+    bool canViewAs = false;        // instructors
+    std::optional<uint16_t> asked; // a participant's client id, or 0 for its own view again
+    // --view-as: a participant's name or client id to view as once listed (per connection).
+    std::string scripted;
+    int scriptedOnAttempt = -1;
+    // The participant to view as on connection `attempt` for --view-as, if one other than `self`
+    // is listed and none was asked for on this connection yet (marks it asked).
+    std::optional<uint16_t> due(int attempt, uint16_t self,
+                                const std::map<uint16_t, net::ParticipantInfo>& participants);
+};
 void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkControls& marks,
-                      TakeOverControls& takeOver, const std::string& role,
+                      TakeOverControls& takeOver, ViewAsControls& viewAs, const std::string& role,
                       const std::string& address, const std::string& name);
 // The colour marks are drawn in (both in the view and in the list).
 glm::vec4 markColor();

@@ -47,8 +47,8 @@ public:
         const net::ClientSnapshot* snap = nullptr;
         bool havePicture = false, viewMatches = false, haveScene = false, switching = false;
         double sinceLastUpdateS = 0;
-        uint16_t holding = 0;       // [instructor] the trainee held
-        std::string viewTooLarge;   // the message when the view is larger than served
+        uint16_t holding = 0;     // [instructor] the trainee held
+        std::string viewTooLarge; // the message when the view is larger than served
     };
     // Before the frame ends: true when it ends the run at once, unframed (a view too large).
     bool abortsBeforeEnd(const Frame& f);
@@ -64,7 +64,7 @@ public:
 private:
     bool settled(const Frame& f) const;
 
-    std::string m_address, m_screenshot, m_takeOverName;
+    std::string m_address, m_screenshot, m_takeOverName, m_viewAsName;
     int m_frames = 0;
     double m_timeoutS = 0;
     bool m_burrhole = false, m_scriptDone = true, m_justDone = false;

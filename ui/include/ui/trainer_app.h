@@ -68,6 +68,9 @@ struct TrainerOptions {
     // [Instructor] A trainee to take over once it is listed: its name, or its client id. The view
     // is not settled (no screenshot) before the server lists the take-over.
     std::string takeOver;
+    // [Instructor] A participant to view as once it is listed (its name or client id): the view
+    // follows that participant's camera. The view is not settled before the server says it.
+    std::string viewAs;
     TrainerReport* report = nullptr; // [Tests] filled when the window closes
     // [Tests] The window closes once this is set, as if its close button was clicked (exit 0,
     // unless a screenshot or frames were asked for and not done).
