@@ -1,7 +1,6 @@
 #include "ui/window.h"
 
 #include "libsim/error.h"
-#include "libsim_image/dbi_io.h"
 #include "ui/gl.h"
 
 #define GLFW_INCLUDE_NONE
@@ -139,10 +138,6 @@ Dbi Window::readFramebuffer() const {
     glPixelStorei(GL_PACK_ALIGNMENT, 1);
     glReadPixels(0, 0, m_width, m_height, GL_RGBA, GL_UNSIGNED_BYTE, out.color());
     return out;
-}
-
-void writeScreenshot(const std::string& path, const Dbi& framebuffer) {
-    writeColorPng(path, framebuffer); // flips to top-down
 }
 
 } // namespace trephine::ui
