@@ -105,7 +105,7 @@ void Compositor::uploadRect(const PixelRect& rect, const Dbi& patch) {
         patch.width() != rect.w || patch.height() != rect.h)
         return;
     // The colour goes up opaque: the DBI's background carries alpha 0, the composite wants 1
-    // everywhere (what a restore has always given), and a blit copies alpha as it is.
+    // everywhere, and a blit copies alpha as it is.
     const size_t bytes = size_t(rect.w) * size_t(rect.h) * 4;
     m_opaque.assign(patch.color(), patch.color() + bytes);
     for (size_t i = 3; i < bytes; i += 4)
@@ -185,8 +185,8 @@ void Compositor::beginEmpty(const Camera& camera) {
 
 void Compositor::begin(const Camera& camera) {
     // The restore is a copy, colour and depth at once, of the same size and formats: no fragment
-    // shader writing gl_FragDepth for every pixel. On llvmpipe the shader pass was most of a
-    // composite frame (docs/ui.md has the figures).
+    // shader writing gl_FragDepth for every pixel, which on llvmpipe is most of a composite frame
+    // (docs/ui.md has the figures).
     glBindFramebuffer(GL_READ_FRAMEBUFFER, m_dbiFbo);
     glBindFramebuffer(GL_DRAW_FRAMEBUFFER, m_fbo);
     glDisable(GL_SCISSOR_TEST);

@@ -49,8 +49,8 @@ ScriptPose burrholePose(const SurfaceSite& site, double t) {
                 false};
     }
     // Out of the hole along its axis, then over to rest beside it, leaning away so the hole stays
-    // in view. A hand lifts the burr out: the jump straight to the rest pose put the tool 18 mm
-    // through the wall within one tick, and the force extrapolated there spiked at the limit.
+    // in view. A hand lifts the burr out: a jump straight to the rest pose would cross the wall
+    // within one tick and spike the extrapolated force.
     const glm::vec3 bottom = site.position - n * depth + e1 * 6.0f; // where the spiral ends
     const glm::vec3 above = site.position + e1 * 6.0f + n * 4.0f;
     const glm::vec3 rest = site.position + e1 * 16.0f + n * 4.0f;

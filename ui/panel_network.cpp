@@ -70,8 +70,8 @@ void drawNetworkPanel(const net::ClientSnapshot& snap, const NetworkHistory& his
     const double maxUs = 20000.0;
     auto hist = history.latencyHistogram(20, maxUs);
     const std::string overlay = history.latencyCaption(maxUs);
-    // ImGui 1.86's plots take a size literally (only 0 means the default): the panel's width is
-    // asked for, as -1 for "to the right edge" (other widgets' convention) drew a sliver.
+    // ImGui 1.86's plots take a size literally (only 0 means the default), so -1 (other widgets'
+    // "to the right edge") would draw a sliver: ask for the panel's width.
     ImGui::PlotHistogram("##latency", hist.data(), int(hist.size()), 0, overlay.c_str(), 0.0f,
                          FLT_MAX, ImVec2(ImGui::GetContentRegionAvail().x, 60));
     ImGui::End();

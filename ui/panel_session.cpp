@@ -114,8 +114,8 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
             ImGui::SameLine();
             ImGui::PopID();
         }
-        // A trainee's take-over control leads its row: after the name and tool it was pushed off
-        // a 380-pixel panel ("take o").
+        // A trainee's take-over control leads its row, so a narrow (380-pixel) panel shows it
+        // whole.
         if (p.role == net::Role::Trainee) {
             ImGui::PushID(int(id));
             if (p.takenOverBy == self && self != 0) {
@@ -195,7 +195,7 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
     ImGui::SameLine();
     ImGui::RadioButton("perforator [P]", &tool.kind, 1);
     // AlwaysClamp: a value typed in (Ctrl+click) stays in the range too (the window clamps again).
-    // The sliders leave room for the longest label, which was cut off.
+    // The sliders leave room for the longest label, so no label is cut off.
     const ImGuiSliderFlags clamp = ImGuiSliderFlags_AlwaysClamp;
     ImGui::PushItemWidth(
         -(ImGui::CalcTextSize("depth mm [wheel]").x + ImGui::GetStyle().ItemInnerSpacing.x));

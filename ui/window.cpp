@@ -35,8 +35,7 @@ bool displayAvailable(std::string* why) {
         return false;
     }
     // A display without a usable OpenGL 3.3 core (an X server with no GLX, ssh -X to one) is no
-    // window either: found only by Window's constructor, after a demo had started its server
-    // for it, it failed there instead of running headless.
+    // window either: a demo asks here, before starting its server, so it can run headless.
     glfwDefaultWindowHints();
     glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 3);
     glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 3);

@@ -122,8 +122,8 @@ size_t zstdCompress(void* dst, size_t capacity, const void* src, size_t size) {
 
 // Whether `payload` can decompress to `rawBytes` at all: LZ4 writes fewer than 255 bytes per input
 // byte (a match grows by at most 255 a length byte) and zstd at most a 128 KiB block per 4 bytes
-// (a block header and an RLE byte). A larger claim is refused at once. This alone still let 8 KiB
-// claim 256 MiB: decompressInto keeps the allocation to what the payload really holds.
+// (a block header and an RLE byte). A larger claim is refused at once; a smaller one can still be
+// hundreds of MiB, so decompressInto allocates only what the payload proves it holds.
 bool canHold(std::span<const uint8_t> payload, Codec codec, size_t rawBytes) {
     const uint64_t most = codec == Codec::Lz4 ? 255 : 32768;
     return uint64_t(payload.size()) * most >= uint64_t(rawBytes);

@@ -58,7 +58,7 @@ size_t countBits(const uint8_t* bytes, size_t n) {
 
 // The pixels' hash: four FNV-1a lanes of 64 bits, column x in lane x % 4, carried from row to row
 // in raster order; a pixel is one word, R | G << 8 | B << 16 | depth code << 24. Four lanes keep
-// four multiplications in flight where one chain waited on each (two a pixel before protocol 4).
+// four multiplications in flight where one chain would wait on each.
 // The lanes, after the width and height, go through one more FNV-1a pass, folded to 32 bits.
 class PixelHash {
 public:

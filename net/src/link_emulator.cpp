@@ -32,7 +32,7 @@ LinkConditions LinkConditions::parse(const std::string& text) {
                 throw std::invalid_argument("no value");
             value = std::stod(item.substr(eq + 1), &used);
             // Finite and at most 1e6: an hour of delay or a terabit link is no link to emulate,
-            // and larger values overflow the clock's durations (NaN passed `value < 0`).
+            // and larger values overflow the clock's durations. Written so that NaN fails too.
             if (used != item.size() - eq - 1 || !(value >= 0 && value <= 1e6))
                 throw std::invalid_argument("bad value");
         } catch (const std::exception&) {
@@ -212,8 +212,8 @@ void LinkEmulator::run() {
         }
 
         // Wait until a datagram arrives or the next queued one is due, at most 1 ms (to see
-        // m_stop). ppoll takes nanoseconds: select's whole milliseconds made a relay with
-        // datagrams queued spin a core until they were due, taking it from the peers it serves.
+        // m_stop). ppoll, not select: whole milliseconds would make a relay with datagrams queued
+        // spin a core until they are due, taking it from the peers it serves.
         fds.assign(1, pollfd{m_front, POLLIN, 0});
         Clock::time_point wake = Clock::now() + std::chrono::milliseconds(1);
         for (auto& [key, cl] : clients) {

@@ -70,15 +70,12 @@ struct ForceHistory {
     // One component (0..2 x, y, z; 3 magnitude) of a series, oldest first.
     static std::vector<float> series(const std::deque<Sample>& s, int component);
     // The same over time: n points evenly spaced in [t0, t1], each the newest sample at or before
-    // its time (held; before the first sample, the first). Series at different rates (the
-    // server's f at tens a second, the loop's F at 1 kHz) then share one time axis: by sample
-    // index, 5 s of f and 4096 ticks of F drew the same event at different places. Empty when
-    // the series is.
+    // its time (held; before the first sample, the first), so that series at different rates
+    // (f at tens a second, F at 1 kHz) share one time axis. Empty when the series is.
     static std::vector<float> resample(const std::deque<Sample>& s, int component, double t0,
                                        double t1, int n);
     // One scale for every plot of this history: the largest |f| and |F| held, rounded up to 1, 2
-    // or 5 times a power of ten, at least 0.5 N. Plots that each scaled themselves drew 1.5 N and
-    // 2 N the same height, with no scale to read.
+    // or 5 times a power of ten, at least 0.5 N, so that plots side by side compare.
     float scaleN() const;
 };
 
@@ -116,8 +113,7 @@ struct DirtyBoxHistory {
     // Boxes still visible at `now`.
     std::vector<Box> visible(double now) const;
     // The overlay's boxes: the newest `n` visible rectangles (full updates left out), newest
-    // last. Drilling adds dozens a second at one place: all of them, each filled, stacked into a
-    // solid block that hid the burr and the hole.
+    // last: drilling adds dozens a second at one place, and all of them would hide the burr.
     std::vector<Box> overlay(double now, size_t n = 8) const;
 };
 

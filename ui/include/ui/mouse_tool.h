@@ -53,9 +53,8 @@ public:
     void set(const DeviceState& s, const Tool& t, double frameTimeS);
     Tool tool() const;
     // The tool's velocity (mm/s) from the last two frames' poses and their frame times
-    // (VelocityEstimate: 0 after a gap or a jump). The pose changes once a frame, so one taken
-    // from the haptic loop's ticks was 0 for most ticks and many times the true speed on the one
-    // after a frame.
+    // (VelocityEstimate: 0 after a gap or a jump), not from the haptic loop's ticks: the pose
+    // changes only once a frame.
     glm::vec3 velocity() const;
 
 private:

@@ -45,12 +45,11 @@ struct ToolControls {
 };
 // The range of ToolControls::pushMm (the slider's), and one step of the wheel or an arrow key.
 constexpr float kPushMinMm = -5.0f, kPushMaxMm = 10.0f, kPushStepMm = 0.25f;
-// pushMm moved by `steps` steps (the wheel's notches, +1 for Down, -1 for Up), kept in the range:
-// held down, an arrow key's repeat drove the tip through the inner table.
+// pushMm moved by `steps` steps (the wheel's notches, +1 for Down, -1 for Up), kept in the range
+// so that a held arrow key cannot drive the tip through the inner table.
 float steppedPush(float pushMm, float steps);
 // `c` with the burr size, speed and push depth within their sliders' ranges, NaN to the lowest:
-// typed into a slider (Ctrl+click) they were not clamped, and a 9 mm burr made every tool state
-// malformed to the server, which kicked the window again after each reconnect.
+// the server counts an out-of-range tool state as malformed and disconnects a client sending many.
 ToolControls withinRanges(ToolControls c);
 // The marks on the skull (the server's Annotations): listed for everyone; an instructor also
 // labels the next one, marks the bone under the pointer, removes one or clears them. The panel
@@ -67,8 +66,8 @@ struct MarkControls {
 // What the marks asked for this frame (`controls`, then reset) comes to, as Annotates to send: an
 // Add at the pointer, a Clear or a Remove (remembered in `undo` first) and the undo's Adds. Only
 // while the link is up and welcomed (the client drops an Annotate otherwise): a removal asked
-// without one is not remembered (undoing it re-added marks still on the skull), and an undo
-// asked without one stays pending (it was forgotten, its marks lost).
+// without one is not remembered (its undo would re-add marks still on the skull), and an undo
+// asked without one stays pending, so its marks are not lost.
 std::vector<net::Annotate> markRequests(MarkControls& controls, MarkUndo& undo,
                                         const net::ClientSnapshot& snap,
                                         const std::optional<glm::vec3>& pointerPick);
@@ -115,8 +114,8 @@ struct ViewControls {
 };
 // True when the user changed the view this frame. `picture` names what shows the view ("DBI",
 // or "local render" in volume mode); `camera`, the view it was made with (none yet: no picture):
-// its eye and target on one line, the whole camera in a tooltip (three wrapped lines made the
-// panel scroll in the default window).
+// its eye and target on one line, the whole camera in a tooltip, so the panel does not scroll in
+// the default window.
 bool drawViewPanel(ViewControls& view, bool waitingForImage, const char* picture,
                    const Camera* camera);
 
