@@ -280,226 +280,8 @@ void ClientThread::run() {
             cc.view = *m_wantedView;
         if (m_wantedSync)
             cc.sync = *m_wantedSync;
-        std::unique_ptr<SessionClient> client;
-        try {
-            client = std::make_unique<SessionClient>(cc);
-            client->continueToolSequence(m_toolSequence);
-            client->connect(parseAddress(m_config.address));
-        } catch (const std::exception& e) {
-            m_closeReason = e.what();
-            client.reset();
-        }
-        if (client) {
-            SessionClient* cp = client.get();
-            cp->setVolumeMutex(&m_volumeRw);
-            {
-                std::unique_lock lock(m_volumeRw);
-                m_localClient = cp;
-            }
-            // Whatever this connection throws (memory for a whole volume, a thread the render pool
-            // cannot start) ends the connection with its reason and a retry: escaping the thread's
-            // body it terminated the window without a word.
-            try {
-                if (!cc.renderLocally)
-                    cp->setVolumeCallback(
-                        [this, cp](const VolumeUpdate& meta, const Box3i& box, bool full) {
-                            if (!cp->localVolume())
-                                return;
-                            AppliedVolumeBox b = copyBox(*cp->localVolume(), box, full);
-                            b.sequence = meta.sequence;
-                            b.bytes = uint32_t(meta.payload.size());
-                            b.rawBytes = meta.rawBytes;
-                            b.appliedUs = steadyNowUs();
-                            b.latencyUs = latencyOf(*cp, meta.sequence, full);
-                            pushBox(std::move(b));
-                        });
-                else
-                    cp->setVolumeCallback(
-                        [this, cp](const VolumeUpdate& meta, const Box3i&, bool full) {
-                            if (cp->dbi().width() == 0)
-                                return;
-                            AppliedRect r;
-                            r.full = full;
-                            r.rect = cp->dbi().bounds();
-                            r.pixels = cp->dbi();
-                            r.sequence = meta.sequence;
-                            r.viewId = cp->viewId();
-                            r.view = cp->view();
-                            r.bytes = uint32_t(meta.payload.size());
-                            r.rawBytes = meta.rawBytes;
-                            r.appliedUs = steadyNowUs();
-                            r.latencyUs = latencyOf(*cp, meta.sequence, full);
-                            pushRect(std::move(r));
-                        });
-                NewSamples newRtt;
-                // Runs inside poll(), right after the update is applied to the client's DBI. Its
-                // latency is its own record's, not the stats' latency window, which volume updates
-                // feed too.
-                cp->setUpdateCallback(
-                    [this, cp](const ImageUpdate& meta, const PixelRect& rect, bool full) {
-                        AppliedRect r;
-                        r.full = full;
-                        r.rect = full ? cp->dbi().bounds() : rect;
-                        r.pixels = full ? cp->dbi() : cp->dbi().extract(rect);
-                        r.sequence = meta.sequence;
-                        r.viewId = meta.viewId;
-                        r.view = cp->view();
-                        r.bytes = uint32_t(meta.payload.size());
-                        r.rawBytes = meta.rawBytes;
-                        r.appliedUs = steadyNowUs();
-                        r.latencyUs = latencyOf(*cp, meta.sequence, full);
-                        pushRect(std::move(r));
-                    });
-                cp->setHapticCallback([this](const HapticModel& m, uint64_t) {
-                    m_haptic = m;
-                    ++m_hapticModels;
-                    if (m_config.onHapticModel)
-                        m_config.onHapticModel(m);
-                });
-                const uint64_t start = steadyNowUs();
-                uint64_t nextPing = start, nextTick = start + 1000000, nextPublish = start;
-                uint64_t lastTickUs = start;
-                std::array<std::array<uint64_t, 4>, size_t(Channel::Count)> lastTotals{};
-                std::array<uint64_t, 2> lastModeUpdates{};
-                m_modeRates = {};
-                m_rateHistory.clear();
-                while (!m_stop && !cp->closed()) {
-                    cp->poll(1);
-                    uint64_t now = steadyNowUs();
-                    if (!cp->welcomed()) {
-                        if (now - start > uint64_t(m_config.connectTimeoutS * 1e6)) {
-                            m_closeReason = "no answer from " + m_config.address +
-                                            " (is `trephine server` running?)";
-                            break;
-                        }
-                    } else if (m_state != LinkState::Connected) {
-                        m_state = LinkState::Connected;
-                        m_closeReason.clear();
-                        // A view asked for while connecting, which the welcome shows too large (the
-                        // client dropped it): not for the next hello either.
-                        if (m_wantedView && int64_t(m_wantedView->width) * m_wantedView->height >
-                                                cp->welcome().maxViewPixels)
-                            m_wantedView.reset();
-                        nextPublish = now;
-                    }
-                    std::deque<Command> cmds;
-                    {
-                        std::lock_guard lock(m_cmdMutex);
-                        cmds.swap(m_commands);
-                    }
-                    for (auto& c : cmds) {
-                        if (auto* t = std::get_if<ToolState>(&c)) {
-                            if (cp->welcomed())
-                                cp->sendToolState(*t);
-                        } else if (auto* v = std::get_if<ViewCmd>(&c)) {
-                            // SessionClient holds a view or switch asked for before its connection
-                            // is up and makes it then (with the hello, or right after it). A view
-                            // it refused (larger than the server serves) is not wanted again: in
-                            // the next hello it had every reconnect refused.
-                            if (cp->requestView(v->view) != 0) {
-                                m_wantedView = v->view;
-                                // Rendered here at once (volume design, renderLocally): the new
-                                // view's picture is published whole, as a DBI's full image is.
-                                if (cc.renderLocally && cp->sync() == Sync::Volume)
-                                    m_needFull = true;
-                            }
-                        } else if (auto* y = std::get_if<SyncCmd>(&c)) {
-                            m_wantedSync = y->sync;
-                            cp->requestSync(y->sync);
-                        } else if (auto* a = std::get_if<Annotate>(&c)) {
-                            if (cp->welcomed())
-                                cp->annotate(*a);
-                        } else if (auto* k = std::get_if<TakeOver>(&c)) {
-                            if (cp->welcomed())
-                                cp->takeOver(k->trainee);
-                        } else if (auto* as = std::get_if<ViewAs>(&c)) {
-                            if (cp->welcomed())
-                                cp->viewAs(as->clientId);
-                        } else if (cp->welcomed()) {
-                            cp->sendPing();
-                        }
-                    }
-                    if (m_needFullVolume.exchange(false) && cp->localVolume()) {
-                        AppliedVolumeBox b = copyBox(*cp->localVolume(), {}, true);
-                        b.sequence = cp->lastUpdateSequence();
-                        b.appliedUs = now;
-                        pushBox(std::move(b));
-                    }
-                    if (m_needFull.exchange(false) && cp->hasFullImage()) {
-                        AppliedRect r;
-                        r.full = true;
-                        r.rect = cp->dbi().bounds();
-                        r.pixels = cp->dbi();
-                        r.viewId = cp->viewId();
-                        r.view = cp->view();
-                        r.sequence = cp->lastUpdateSequence();
-                        r.appliedUs = now;
-                        pushRect(std::move(r));
-                    }
-                    if (cp->welcomed() && now >= nextPing) {
-                        cp->sendPing();
-                        nextPing = now + 250000;
-                    }
-                    if (now >= nextTick) {
-                        // Our own 1 s rates from the totals: the client ticks its history per poll.
-                        std::array<ChannelRates, size_t(Channel::Count)> rates{};
-                        const double dt = double(now - lastTickUs) * 1e-6;
-                        for (size_t ch = 0; ch < size_t(Channel::Count); ++ch) {
-                            const NetStats& st = cp->stats();
-                            std::array<uint64_t, 4> t = {
-                                st.totalBytesIn(Channel(ch)), st.totalBytesOut(Channel(ch)),
-                                st.totalMessagesIn(Channel(ch)), st.totalMessagesOut(Channel(ch))};
-                            rates[ch] = {double(t[0] - lastTotals[ch][0]) / dt,
-                                         double(t[1] - lastTotals[ch][1]) / dt,
-                                         double(t[2] - lastTotals[ch][2]) / dt,
-                                         double(t[3] - lastTotals[ch][3]) / dt};
-                            lastTotals[ch] = t;
-                        }
-                        for (size_t m = 0; m < 2; ++m) {
-                            uint64_t n = cp->stats().modes[m].updates;
-                            m_modeRates[m] = double(n - lastModeUpdates[m]) / dt;
-                            lastModeUpdates[m] = n;
-                        }
-                        m_rateHistory.push_back(rates);
-                        if (m_rateHistory.size() > 120)
-                            m_rateHistory.pop_front();
-                        lastTickUs = now;
-                        // Behind by more than a tick (a stall: a large full volume applied, the
-                        // thread not scheduled), start afresh from now: catching up would tick once
-                        // a poll, each over ~1 ms, and publish rates of 0 or ~1000 a second.
-                        nextTick += 1000000;
-                        if (nextTick <= now)
-                            nextTick = now + 1000000;
-                    }
-                    if (now >= nextPublish) {
-                        if (double rtt = newRtt.take(cp->stats().rttUs); rtt >= 0)
-                            m_lastRttUs = rtt;
-                        publish(cp, now);
-                        nextPublish = now + 10000; // 100 Hz is plenty for a 60 Hz window
-                    }
-                }
-                if (cp->closed())
-                    m_closeReason =
-                        cp->closeReason().empty() ? "the connection was lost" : cp->closeReason();
-                else if (m_stop)
-                    cp->disconnect();
-                // The server cannot send its whole volume: the next connection asks for DBI (it
-                // asked for the volume again at every reconnect, each refusal costing the server a
-                // whole volume's encode, and the window never got a picture).
-                if (cp->closed() && cp->closeCode() == uint32_t(RefuseReason::VolumeTooLarge)) {
-                    m_wantedSync = Sync::Dbi;
-                    ++m_volumeRefusals;
-                }
-            } catch (const std::exception& e) {
-                m_closeReason = std::string("the connection failed: ") + e.what();
-            }
-            {
-                std::unique_lock lock(m_volumeRw);
-                m_localClient = nullptr;
-            }
-            m_toolSequence = cp->toolSequence();
-            client.reset();
-        }
+        if (std::unique_ptr<SessionClient> client = connectClient(cc))
+            runConnection(*client, cc);
         if (m_stop)
             break;
         m_state = LinkState::Retrying;
@@ -510,6 +292,248 @@ void ClientThread::run() {
     }
     m_state = LinkState::Stopped;
     publish(nullptr, steadyNowUs());
+}
+
+std::unique_ptr<SessionClient> ClientThread::connectClient(const ClientConfig& cc) {
+    try {
+        auto client = std::make_unique<SessionClient>(cc);
+        client->continueToolSequence(m_toolSequence);
+        client->connect(parseAddress(m_config.address));
+        return client;
+    } catch (const std::exception& e) {
+        m_closeReason = e.what();
+        return nullptr;
+    }
+}
+
+void ClientThread::runConnection(SessionClient& client, const ClientConfig& cc) {
+    SessionClient* cp = &client;
+    cp->setVolumeMutex(&m_volumeRw);
+    {
+        std::unique_lock lock(m_volumeRw);
+        m_localClient = cp;
+    }
+    // Whatever this connection throws (memory for a whole volume, a thread the render pool
+    // cannot start) ends the connection with its reason and a retry: escaping the thread's
+    // body it terminated the window without a word.
+    try {
+        installCallbacks(*cp, cc.renderLocally);
+        pollUntilClosed(*cp, cc);
+        if (cp->closed())
+            m_closeReason =
+                cp->closeReason().empty() ? "the connection was lost" : cp->closeReason();
+        else if (m_stop)
+            cp->disconnect();
+        // The server cannot send its whole volume: the next connection asks for DBI (it
+        // asked for the volume again at every reconnect, each refusal costing the server a
+        // whole volume's encode, and the window never got a picture).
+        if (cp->closed() && cp->closeCode() == uint32_t(RefuseReason::VolumeTooLarge)) {
+            m_wantedSync = Sync::Dbi;
+            ++m_volumeRefusals;
+        }
+    } catch (const std::exception& e) {
+        m_closeReason = std::string("the connection failed: ") + e.what();
+    }
+    {
+        std::unique_lock lock(m_volumeRw);
+        m_localClient = nullptr;
+    }
+    m_toolSequence = cp->toolSequence();
+}
+
+void ClientThread::installCallbacks(SessionClient& client, bool renderLocally) {
+    SessionClient* cp = &client;
+    if (!renderLocally)
+        cp->setVolumeCallback([this, cp](const VolumeUpdate& meta, const Box3i& box, bool full) {
+            if (!cp->localVolume())
+                return;
+            AppliedVolumeBox b = copyBox(*cp->localVolume(), box, full);
+            b.sequence = meta.sequence;
+            b.bytes = uint32_t(meta.payload.size());
+            b.rawBytes = meta.rawBytes;
+            b.appliedUs = steadyNowUs();
+            b.latencyUs = latencyOf(*cp, meta.sequence, full);
+            pushBox(std::move(b));
+        });
+    else
+        cp->setVolumeCallback([this, cp](const VolumeUpdate& meta, const Box3i&, bool full) {
+            if (cp->dbi().width() == 0)
+                return;
+            AppliedRect r;
+            r.full = full;
+            r.rect = cp->dbi().bounds();
+            r.pixels = cp->dbi();
+            r.sequence = meta.sequence;
+            r.viewId = cp->viewId();
+            r.view = cp->view();
+            r.bytes = uint32_t(meta.payload.size());
+            r.rawBytes = meta.rawBytes;
+            r.appliedUs = steadyNowUs();
+            r.latencyUs = latencyOf(*cp, meta.sequence, full);
+            pushRect(std::move(r));
+        });
+    // Runs inside poll(), right after the update is applied to the client's DBI. Its
+    // latency is its own record's, not the stats' latency window, which volume updates
+    // feed too.
+    cp->setUpdateCallback([this, cp](const ImageUpdate& meta, const PixelRect& rect, bool full) {
+        AppliedRect r;
+        r.full = full;
+        r.rect = full ? cp->dbi().bounds() : rect;
+        r.pixels = full ? cp->dbi() : cp->dbi().extract(rect);
+        r.sequence = meta.sequence;
+        r.viewId = meta.viewId;
+        r.view = cp->view();
+        r.bytes = uint32_t(meta.payload.size());
+        r.rawBytes = meta.rawBytes;
+        r.appliedUs = steadyNowUs();
+        r.latencyUs = latencyOf(*cp, meta.sequence, full);
+        pushRect(std::move(r));
+    });
+    cp->setHapticCallback([this](const HapticModel& m, uint64_t) {
+        m_haptic = m;
+        ++m_hapticModels;
+        if (m_config.onHapticModel)
+            m_config.onHapticModel(m);
+    });
+}
+
+void ClientThread::pollUntilClosed(SessionClient& client, const ClientConfig& cc) {
+    SessionClient* cp = &client;
+    NewSamples newRtt;
+    const uint64_t start = steadyNowUs();
+    uint64_t nextPing = start, nextPublish = start;
+    RateClock clock;
+    clock.lastTickUs = start;
+    clock.nextTickUs = start + 1000000;
+    m_modeRates = {};
+    m_rateHistory.clear();
+    while (!m_stop && !cp->closed()) {
+        cp->poll(1);
+        uint64_t now = steadyNowUs();
+        if (!cp->welcomed()) {
+            if (now - start > uint64_t(m_config.connectTimeoutS * 1e6)) {
+                m_closeReason =
+                    "no answer from " + m_config.address + " (is `trephine server` running?)";
+                break;
+            }
+        } else if (m_state != LinkState::Connected) {
+            m_state = LinkState::Connected;
+            m_closeReason.clear();
+            // A view asked for while connecting, which the welcome shows too large (the
+            // client dropped it): not for the next hello either.
+            if (m_wantedView &&
+                int64_t(m_wantedView->width) * m_wantedView->height > cp->welcome().maxViewPixels)
+                m_wantedView.reset();
+            nextPublish = now;
+        }
+        runCommands(*cp, cc.renderLocally);
+        publishFullCopies(*cp, now);
+        if (cp->welcomed() && now >= nextPing) {
+            cp->sendPing();
+            nextPing = now + 250000;
+        }
+        if (now >= clock.nextTickUs)
+            tickRates(*cp, now, clock);
+        if (now >= nextPublish) {
+            if (double rtt = newRtt.take(cp->stats().rttUs); rtt >= 0)
+                m_lastRttUs = rtt;
+            publish(cp, now);
+            nextPublish = now + 10000; // 100 Hz is plenty for a 60 Hz window
+        }
+    }
+}
+
+void ClientThread::runCommands(SessionClient& client, bool renderLocally) {
+    SessionClient* cp = &client;
+    std::deque<Command> cmds;
+    {
+        std::lock_guard lock(m_cmdMutex);
+        cmds.swap(m_commands);
+    }
+    for (auto& c : cmds) {
+        if (auto* t = std::get_if<ToolState>(&c)) {
+            if (cp->welcomed())
+                cp->sendToolState(*t);
+        } else if (auto* v = std::get_if<ViewCmd>(&c)) {
+            // SessionClient holds a view or switch asked for before its connection
+            // is up and makes it then (with the hello, or right after it). A view
+            // it refused (larger than the server serves) is not wanted again: in
+            // the next hello it had every reconnect refused.
+            if (cp->requestView(v->view) != 0) {
+                m_wantedView = v->view;
+                // Rendered here at once (volume design, renderLocally): the new
+                // view's picture is published whole, as a DBI's full image is.
+                if (renderLocally && cp->sync() == Sync::Volume)
+                    m_needFull = true;
+            }
+        } else if (auto* y = std::get_if<SyncCmd>(&c)) {
+            m_wantedSync = y->sync;
+            cp->requestSync(y->sync);
+        } else if (auto* a = std::get_if<Annotate>(&c)) {
+            if (cp->welcomed())
+                cp->annotate(*a);
+        } else if (auto* k = std::get_if<TakeOver>(&c)) {
+            if (cp->welcomed())
+                cp->takeOver(k->trainee);
+        } else if (auto* as = std::get_if<ViewAs>(&c)) {
+            if (cp->welcomed())
+                cp->viewAs(as->clientId);
+        } else if (cp->welcomed()) {
+            cp->sendPing();
+        }
+    }
+}
+
+void ClientThread::publishFullCopies(const SessionClient& c, uint64_t nowUs) {
+    if (m_needFullVolume.exchange(false) && c.localVolume()) {
+        AppliedVolumeBox b = copyBox(*c.localVolume(), {}, true);
+        b.sequence = c.lastUpdateSequence();
+        b.appliedUs = nowUs;
+        pushBox(std::move(b));
+    }
+    if (m_needFull.exchange(false) && c.hasFullImage()) {
+        AppliedRect r;
+        r.full = true;
+        r.rect = c.dbi().bounds();
+        r.pixels = c.dbi();
+        r.viewId = c.viewId();
+        r.view = c.view();
+        r.sequence = c.lastUpdateSequence();
+        r.appliedUs = nowUs;
+        pushRect(std::move(r));
+    }
+}
+
+void ClientThread::tickRates(const SessionClient& c, uint64_t nowUs, RateClock& clock) {
+    // Our own 1 s rates from the totals: the client ticks its history per poll.
+    std::array<ChannelRates, size_t(Channel::Count)> rates{};
+    const double dt = double(nowUs - clock.lastTickUs) * 1e-6;
+    const NetStats& st = c.stats();
+    for (size_t ch = 0; ch < size_t(Channel::Count); ++ch) {
+        std::array<uint64_t, 4> t = {st.totalBytesIn(Channel(ch)), st.totalBytesOut(Channel(ch)),
+                                     st.totalMessagesIn(Channel(ch)),
+                                     st.totalMessagesOut(Channel(ch))};
+        rates[ch] = {double(t[0] - clock.lastTotals[ch][0]) / dt,
+                     double(t[1] - clock.lastTotals[ch][1]) / dt,
+                     double(t[2] - clock.lastTotals[ch][2]) / dt,
+                     double(t[3] - clock.lastTotals[ch][3]) / dt};
+        clock.lastTotals[ch] = t;
+    }
+    for (size_t m = 0; m < 2; ++m) {
+        uint64_t n = st.modes[m].updates;
+        m_modeRates[m] = double(n - clock.lastModeUpdates[m]) / dt;
+        clock.lastModeUpdates[m] = n;
+    }
+    m_rateHistory.push_back(rates);
+    if (m_rateHistory.size() > 120)
+        m_rateHistory.pop_front();
+    clock.lastTickUs = nowUs;
+    // Behind by more than a tick (a stall: a large full volume applied, the
+    // thread not scheduled), start afresh from now: catching up would tick once
+    // a poll, each over ~1 ms, and publish rates of 0 or ~1000 a second.
+    clock.nextTickUs += 1000000;
+    if (clock.nextTickUs <= nowUs)
+        clock.nextTickUs = nowUs + 1000000;
 }
 
 } // namespace trephine::net

@@ -125,173 +125,204 @@ void SessionClient::onEvent(const ENetEvent& ev) {
 
 bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs) {
     switch (MessageType(peekMessageType(data))) {
-    case MessageType::Welcome: {
-        Welcome w;
-        if (!decodeMessage(data, w))
-            return false;
-        m_welcome = w;
-        // Views asked for before the welcome could not be checked against the server's limit:
-        // the server drops one too large, and we would wait for its image for good (every later
-        // resync waits on the newest request too).
-        for (auto it = m_requested.begin(); it != m_requested.end();) {
-            if (int64_t(it->second.width) * int64_t(it->second.height) > w.maxViewPixels) {
-                ++m_viewsRefused;
-                it = m_requested.erase(it);
-            } else {
-                ++it;
-            }
-        }
-        if (m_requestedViewId != m_viewId && !m_requested.contains(m_requestedViewId))
-            m_requestedViewId = m_requested.empty() ? m_viewId : m_requested.rbegin()->first;
-        // Voxels that overtook the welcome on their own channel: place them now, in order.
-        for (VolumeUpdate& early : std::exchange(m_earlyVolume, {}))
-            if (!applyVolume(early, nowUs)) {
-                ++m_rejected;
-                m_stats.countMalformed();
-            }
-        m_earlyVolumeBytes = 0;
-        return true;
-    }
-    case MessageType::Scene: {
-        auto received = std::make_shared<ReceivedScene>();
-        if (!decodeScene(data, received->scene, &received->field))
-            return false;
-        // The scene of the welcome's volume, or none: another's dims would misplace everything.
-        if (!m_welcome || received->scene.dims != m_welcome->volumeDims ||
-            received->scene.spacing != m_welcome->spacing)
-            return false;
-        m_scene = std::move(received);
-        ++m_scenes;
-        return true;
-    }
-    case MessageType::ParticipantView: {
-        ParticipantView pv;
-        if (!decodeMessage(data, pv))
-            return false;
-        ++m_participantViews;
-        if (pv.clientId != m_viewAs)
-            return true; // one we no longer view as
-        // The participant's camera in our own window: the newest size we asked for.
-        const ViewSpec& mine = m_requested.empty() ? m_view : m_requested.rbegin()->second;
-        ViewSpec v = pv.view;
-        v.width = mine.width;
-        v.height = mine.height;
-        requestView(v);
-        return true;
-    }
-    case MessageType::Participants: {
-        Participants roster;
-        if (!decodeMessage(data, roster))
-            return false;
-        m_participants.clear();
-        for (const ParticipantInfo& p : roster.list)
-            m_participants[p.clientId] = p;
-        // Whoever left takes their tool and force plot along.
-        std::erase_if(m_others, [&](const auto& e) { return !m_participants.count(e.first); });
-        std::erase_if(m_relayedModels,
-                      [&](const auto& e) { return !m_participants.count(e.first); });
-        ++m_rosters;
-        return true;
-    }
-    case MessageType::Annotations: {
-        Annotations marks;
-        if (!decodeMessage(data, marks))
-            return false;
-        m_annotations = std::move(marks.list);
-        ++m_annotationLists;
-        return true;
-    }
-    case MessageType::ToolRelay: {
-        ToolRelay r;
-        if (!decodeMessage(data, r))
-            return false;
-        ++m_relays;
-        if (!listed(r.clientId))
-            return true; // someone who left: counted, not drawn
-        auto it = m_others.find(r.clientId);
-        // Unsequenced: keep the newest.
-        if (it == m_others.end() || int32_t(r.tool.sequence - it->second.sequence) > 0)
-            m_others[r.clientId] = r.tool;
-        return true;
-    }
-    case MessageType::ImageUpdate: {
-        ImageUpdate u;
-        if (!decodeMessage(data, u))
-            return false;
-        if (!applyImage(u, nowUs)) {
-            ++m_rejected;
-            return false;
-        }
-        return true;
-    }
-    case MessageType::VolumeUpdate: {
-        VolumeUpdate u;
-        if (!decodeMessage(data, u))
-            return false;
-        if (!m_welcome) {
-            // The volume channel is not ordered with the control channel: under loss a join's
-            // full volume can arrive before the welcome that gives its dims. Keep a few until
-            // the welcome comes (bounded: a server that floods them before welcoming is wrong).
-            if (m_earlyVolume.size() >= kMaxEarlyVolumeUpdates ||
-                m_earlyVolumeBytes + u.payload.size() > kMaxEarlyVolumeBytes)
-                return false;
-            m_earlyVolumeBytes += u.payload.size();
-            m_earlyVolume.push_back(std::move(u));
-            return true;
-        }
-        if (!applyVolume(u, nowUs)) {
-            ++m_rejected;
-            return false;
-        }
-        return true;
-    }
-    case MessageType::HapticModel: {
-        HapticModel m;
-        if (!decodeMessage(data, m))
-            return false;
-        ++m_hapticModels;
-        if (m.clientTimeUs > 0 && m.clientTimeUs <= nowUs)
-            m_stats.hapticRoundTripUs.add(double(nowUs - m.clientTimeUs));
-        if (!m_latestHaptic || int32_t(m.toolSequence - m_latestHaptic->toolSequence) > 0)
-            m_latestHaptic = m;
-        if (m_hapticCallback)
-            m_hapticCallback(m, nowUs);
-        return true;
-    }
-    case MessageType::HapticRelay: {
-        HapticRelay r;
-        if (!decodeMessage(data, r))
-            return false;
-        ++m_hapticRelays;
-        if (!listed(r.clientId))
-            return true; // someone who left: counted, not plotted
-        auto it = m_relayedModels.find(r.clientId);
-        if (it == m_relayedModels.end() ||
-            int32_t(r.model.toolSequence - it->second.toolSequence) > 0)
-            m_relayedModels[r.clientId] = r.model;
-        if (m_relayCallback)
-            m_relayCallback(r.clientId, r.model, nowUs);
-        return true;
-    }
-    case MessageType::Pong: {
-        Pong p;
-        if (!decodeMessage(data, p) || p.clientTimeUs > nowUs)
-            return false;
-        double rtt = double(nowUs - p.clientTimeUs);
-        m_stats.rttUs.add(rtt);
-        // The ping with the smallest round trip bounds the offset best (NTP's rule).
-        if (m_stats.bestRttUs < 0 || rtt < m_stats.bestRttUs) {
-            m_stats.bestRttUs = rtt;
-            int64_t offset = int64_t(p.serverTimeUs) - int64_t(p.clientTimeUs + uint64_t(rtt / 2));
-            // The true offset lies within +-rtt/2 of the estimate; when 0 does too, take the
-            // clocks as one (one machine, one CLOCK_MONOTONIC) rather than add the error.
-            m_stats.clockOffsetUs = double(std::abs(offset)) <= rtt / 2 ? 0 : offset;
-        }
-        return true;
-    }
+    case MessageType::Welcome:
+        return onWelcome(data, nowUs);
+    case MessageType::Scene:
+        return onScene(data);
+    case MessageType::ParticipantView:
+        return onParticipantView(data);
+    case MessageType::Participants:
+        return onParticipants(data);
+    case MessageType::Annotations:
+        return onAnnotations(data);
+    case MessageType::ToolRelay:
+        return onToolRelay(data);
+    case MessageType::ImageUpdate:
+        return onImageUpdate(data, nowUs);
+    case MessageType::VolumeUpdate:
+        return onVolumeUpdate(data, nowUs);
+    case MessageType::HapticModel:
+        return onHapticModel(data, nowUs);
+    case MessageType::HapticRelay:
+        return onHapticRelay(data, nowUs);
+    case MessageType::Pong:
+        return onPong(data, nowUs);
     default:
         return false;
     }
+}
+
+bool SessionClient::onWelcome(std::span<const uint8_t> data, uint64_t nowUs) {
+    Welcome w;
+    if (!decodeMessage(data, w))
+        return false;
+    m_welcome = w;
+    // Views asked for before the welcome could not be checked against the server's limit:
+    // the server drops one too large, and we would wait for its image for good (every later
+    // resync waits on the newest request too).
+    for (auto it = m_requested.begin(); it != m_requested.end();) {
+        if (int64_t(it->second.width) * int64_t(it->second.height) > w.maxViewPixels) {
+            ++m_viewsRefused;
+            it = m_requested.erase(it);
+        } else {
+            ++it;
+        }
+    }
+    if (m_requestedViewId != m_viewId && !m_requested.contains(m_requestedViewId))
+        m_requestedViewId = m_requested.empty() ? m_viewId : m_requested.rbegin()->first;
+    // Voxels that overtook the welcome on their own channel: place them now, in order.
+    for (VolumeUpdate& early : std::exchange(m_earlyVolume, {}))
+        if (!applyVolume(early, nowUs)) {
+            ++m_rejected;
+            m_stats.countMalformed();
+        }
+    m_earlyVolumeBytes = 0;
+    return true;
+}
+
+bool SessionClient::onScene(std::span<const uint8_t> data) {
+    auto received = std::make_shared<ReceivedScene>();
+    if (!decodeScene(data, received->scene, &received->field))
+        return false;
+    // The scene of the welcome's volume, or none: another's dims would misplace everything.
+    if (!m_welcome || received->scene.dims != m_welcome->volumeDims ||
+        received->scene.spacing != m_welcome->spacing)
+        return false;
+    m_scene = std::move(received);
+    ++m_scenes;
+    return true;
+}
+
+bool SessionClient::onParticipantView(std::span<const uint8_t> data) {
+    ParticipantView pv;
+    if (!decodeMessage(data, pv))
+        return false;
+    ++m_participantViews;
+    if (pv.clientId != m_viewAs)
+        return true; // one we no longer view as
+    // The participant's camera in our own window: the newest size we asked for.
+    const ViewSpec& mine = m_requested.empty() ? m_view : m_requested.rbegin()->second;
+    ViewSpec v = pv.view;
+    v.width = mine.width;
+    v.height = mine.height;
+    requestView(v);
+    return true;
+}
+
+bool SessionClient::onParticipants(std::span<const uint8_t> data) {
+    Participants roster;
+    if (!decodeMessage(data, roster))
+        return false;
+    m_participants.clear();
+    for (const ParticipantInfo& p : roster.list)
+        m_participants[p.clientId] = p;
+    // Whoever left takes their tool and force plot along.
+    std::erase_if(m_others, [&](const auto& e) { return !m_participants.count(e.first); });
+    std::erase_if(m_relayedModels, [&](const auto& e) { return !m_participants.count(e.first); });
+    ++m_rosters;
+    return true;
+}
+
+bool SessionClient::onAnnotations(std::span<const uint8_t> data) {
+    Annotations marks;
+    if (!decodeMessage(data, marks))
+        return false;
+    m_annotations = std::move(marks.list);
+    ++m_annotationLists;
+    return true;
+}
+
+bool SessionClient::onToolRelay(std::span<const uint8_t> data) {
+    ToolRelay r;
+    if (!decodeMessage(data, r))
+        return false;
+    ++m_relays;
+    if (!listed(r.clientId))
+        return true; // someone who left: counted, not drawn
+    auto it = m_others.find(r.clientId);
+    // Unsequenced: keep the newest.
+    if (it == m_others.end() || int32_t(r.tool.sequence - it->second.sequence) > 0)
+        m_others[r.clientId] = r.tool;
+    return true;
+}
+
+bool SessionClient::onImageUpdate(std::span<const uint8_t> data, uint64_t nowUs) {
+    ImageUpdate u;
+    if (!decodeMessage(data, u))
+        return false;
+    if (!applyImage(u, nowUs)) {
+        ++m_rejected;
+        return false;
+    }
+    return true;
+}
+
+bool SessionClient::onVolumeUpdate(std::span<const uint8_t> data, uint64_t nowUs) {
+    VolumeUpdate u;
+    if (!decodeMessage(data, u))
+        return false;
+    if (!m_welcome) {
+        // The volume channel is not ordered with the control channel: under loss a join's
+        // full volume can arrive before the welcome that gives its dims. Keep a few until
+        // the welcome comes (bounded: a server that floods them before welcoming is wrong).
+        if (m_earlyVolume.size() >= kMaxEarlyVolumeUpdates ||
+            m_earlyVolumeBytes + u.payload.size() > kMaxEarlyVolumeBytes)
+            return false;
+        m_earlyVolumeBytes += u.payload.size();
+        m_earlyVolume.push_back(std::move(u));
+        return true;
+    }
+    if (!applyVolume(u, nowUs)) {
+        ++m_rejected;
+        return false;
+    }
+    return true;
+}
+
+bool SessionClient::onHapticModel(std::span<const uint8_t> data, uint64_t nowUs) {
+    HapticModel m;
+    if (!decodeMessage(data, m))
+        return false;
+    ++m_hapticModels;
+    if (m.clientTimeUs > 0 && m.clientTimeUs <= nowUs)
+        m_stats.hapticRoundTripUs.add(double(nowUs - m.clientTimeUs));
+    if (!m_latestHaptic || int32_t(m.toolSequence - m_latestHaptic->toolSequence) > 0)
+        m_latestHaptic = m;
+    if (m_hapticCallback)
+        m_hapticCallback(m, nowUs);
+    return true;
+}
+
+bool SessionClient::onHapticRelay(std::span<const uint8_t> data, uint64_t nowUs) {
+    HapticRelay r;
+    if (!decodeMessage(data, r))
+        return false;
+    ++m_hapticRelays;
+    if (!listed(r.clientId))
+        return true; // someone who left: counted, not plotted
+    auto it = m_relayedModels.find(r.clientId);
+    if (it == m_relayedModels.end() || int32_t(r.model.toolSequence - it->second.toolSequence) > 0)
+        m_relayedModels[r.clientId] = r.model;
+    if (m_relayCallback)
+        m_relayCallback(r.clientId, r.model, nowUs);
+    return true;
+}
+
+bool SessionClient::onPong(std::span<const uint8_t> data, uint64_t nowUs) {
+    Pong p;
+    if (!decodeMessage(data, p) || p.clientTimeUs > nowUs)
+        return false;
+    double rtt = double(nowUs - p.clientTimeUs);
+    m_stats.rttUs.add(rtt);
+    // The ping with the smallest round trip bounds the offset best (NTP's rule).
+    if (m_stats.bestRttUs < 0 || rtt < m_stats.bestRttUs) {
+        m_stats.bestRttUs = rtt;
+        int64_t offset = int64_t(p.serverTimeUs) - int64_t(p.clientTimeUs + uint64_t(rtt / 2));
+        // The true offset lies within +-rtt/2 of the estimate; when 0 does too, take the
+        // clocks as one (one machine, one CLOCK_MONOTONIC) rather than add the error.
+        m_stats.clockOffsetUs = double(std::abs(offset)) <= rtt / 2 ? 0 : offset;
+    }
+    return true;
 }
 
 double SessionClient::transmitUs(uint64_t sentServerUs, uint64_t receivedUs) const {

@@ -188,7 +188,27 @@ private:
     };
     using Command = std::variant<ToolState, ViewCmd, PingCmd, SyncCmd, Annotate, TakeOver, ViewAs>;
 
+    // The 1 s rate tick's state for one connection (network thread only).
+    struct RateClock {
+        uint64_t lastTickUs = 0;
+        uint64_t nextTickUs = 0;
+        std::array<std::array<uint64_t, 4>, size_t(Channel::Count)> lastTotals{};
+        std::array<uint64_t, 2> lastModeUpdates{};
+    };
+
+    // The network thread: connects, runs the connection, waits and retries until stopped.
     void run();
+    // A client connecting to the address, or none (m_closeReason says why).
+    std::unique_ptr<SessionClient> connectClient(const ClientConfig& cc);
+    // One connection's life, from the callbacks to its close (its reason kept for the retry).
+    void runConnection(SessionClient& client, const ClientConfig& cc);
+    void installCallbacks(SessionClient& client, bool renderLocally);
+    void pollUntilClosed(SessionClient& client, const ClientConfig& cc);
+    // The UI's queued commands, sent on this connection.
+    void runCommands(SessionClient& client, bool renderLocally);
+    // The whole DBI / volume, when the UI dropped its queue (pushRect, pushBox).
+    void publishFullCopies(const SessionClient& c, uint64_t nowUs);
+    void tickRates(const SessionClient& c, uint64_t nowUs, RateClock& clock);
     bool push(Command c);
     void publish(const SessionClient* c, uint64_t nowUs);
     void pushRect(AppliedRect r);

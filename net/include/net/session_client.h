@@ -210,6 +210,18 @@ public:
 private:
     void onEvent(const ENetEvent& ev);
     bool handleMessage(std::span<const uint8_t> data, uint64_t nowUs);
+    // One per message type, each decoding its message; false for a malformed or rejected one.
+    bool onWelcome(std::span<const uint8_t> data, uint64_t nowUs);
+    bool onScene(std::span<const uint8_t> data);
+    bool onParticipantView(std::span<const uint8_t> data);
+    bool onParticipants(std::span<const uint8_t> data);
+    bool onAnnotations(std::span<const uint8_t> data);
+    bool onToolRelay(std::span<const uint8_t> data);
+    bool onImageUpdate(std::span<const uint8_t> data, uint64_t nowUs);
+    bool onVolumeUpdate(std::span<const uint8_t> data, uint64_t nowUs);
+    bool onHapticModel(std::span<const uint8_t> data, uint64_t nowUs);
+    bool onHapticRelay(std::span<const uint8_t> data, uint64_t nowUs);
+    bool onPong(std::span<const uint8_t> data, uint64_t nowUs);
     bool applyImage(const ImageUpdate& u, uint64_t nowUs);
     bool applyVolume(const VolumeUpdate& u, uint64_t nowUs);
     // Volume mode: the whole view rendered from the local volume into m_dbi.
