@@ -374,480 +374,610 @@ void printComparison(const ComparisonHistory& comparison) {
     }
 }
 
-} // namespace
-
 // [SECTION] frame loop
 
-int runTrainerWindow(const TrainerOptions& o) {
-    using Clock = std::chrono::steady_clock;
-    if (o.sync != "dbi" && o.sync != "volume")
-        throw Error("window: --sync must be dbi or volume, not '" + o.sync + "'");
-    ScriptedDriver script(o); // --script, --mark, --take-over, --screenshot, --frames, ...
+using Clock = std::chrono::steady_clock;
+
+// However the window ends (an exception from a GL upload or a screenshot included), the haptic
+// thread stops before the client it sends to, then the client (the core's order).
+struct StopCore {
+    net::TraineeCore& core;
+    ~StopCore() { core.stop(); }
+};
+
+// The trainee core: the client thread, and the haptic loop that sends the tool states the frames
+// set on the device and feels the force in either design.
+net::TraineeCore& started(net::TraineeCore& core, net::ToolSource& tools) {
+    core.connect();
+    core.startHaptics(tools);
+    return core;
+}
+
+// This frame's incremental updates, counted as on screen at the end of the frame that first drew
+// them, so both designs' latencies include their own drawing (the volume's GPU upload and ray
+// cast, the DBI's texture upload and restore).
+struct DrawnUpdate {
+    SyncDesign design;
+    double latencyUs; // cause -> applied by the client thread; -1: unknown
+    uint64_t appliedUs;
+    uint32_t bytes, rawBytes;
+};
+
+// What one frame found out, for the steps after: the snapshot, the picture and the tool drawn.
+struct FrameState {
+    Clock::time_point start;
+    double now = 0.0;
+    std::shared_ptr<const net::ClientSnapshot> snap;
+    uint16_t heldByOther = 0; // a trainee's holder
+    uint16_t holding = 0;     // the trainee an instructor holds
+    SyncDesign picture = SyncDesign::Dbi;
+    bool havePicture = false;
+    bool switching = false;
+    bool viewMatches = false;
+    Camera dbiCamera; // the camera the picture is drawn (and picked) with
+    ToolKind kind = ToolKind::Burr;
+    float diameter = 0.0f;
+    HapticLoopStats hstats;
+    int64_t maxViewPixels = 0;
+    bool viewTooLarge = false;
+};
+
+// The trainer window: its members are declared in the order the window needs them built, so
+// they go in reverse: the core stops (StopCore) before the device and tools its threads use, and
+// the GL objects go before the window's context.
+class TrainerWindow {
+public:
+    explicit TrainerWindow(const TrainerOptions& o);
+    int run();
+
+private:
+    static WindowConfig checkedWindowConfig(const TrainerOptions& o);
+    double seconds() const { return std::chrono::duration<double>(Clock::now() - t0).count(); }
+    Camera makeCamera() const;
+    bool frame();
+    void takeSnapshot(FrameState& f);
+    void takeScene(const FrameState& f);
+    void applyRects(const FrameState& f);
+    void applyVolumeBoxes(const FrameState& f);
+    void choosePicture(FrameState& f);
+    void updateTool(FrameState& f);
+    void mouseTool(const FrameState& f);
+    void composite(const FrameState& f);
+    void drawOverlays(FrameState& f);
+    std::string tooLargeText(const FrameState& f) const;
+    void drawPanels(const FrameState& f);
+    bool endFrame(const FrameState& f);
+    void closingFigures();
+
+    const TrainerOptions& o;
+    const int viewSize;
+
+    // The scripted driver (--script, --mark, --take-over, --screenshot, --frames, ...) and the
+    // Session panel's controls.
+    ScriptedDriver script;
     MarkControls markControls;
     MarkUndo markUndo; // the last removal of marks, for the Session panel's undo
-    markControls.canMark = o.instructor;
     TakeOverControls takeOverControls;
-    takeOverControls.canTakeOver = o.instructor;
-    if (!o.viewAs.empty() && !o.instructor)
-        throw Error("window: --view-as: only an instructor views as another participant");
     ViewAsControls viewAsControls;
-    viewAsControls.canViewAs = o.instructor;
-    viewAsControls.scripted = o.viewAs;
     std::optional<glm::vec3> pointerPick; // the bone under the pointer, last seen over the view
-    const int viewSize = o.size;
-    Window window(windowConfigFor(o));
-    // A scripted screenshot is the same whatever the pointer of the display happens to hover (no
-    // tooltip or highlighted panel from it).
-    if (script.ignoresPointer())
-        ImGui::GetIO().ConfigFlags |= ImGuiConfigFlags_NoMouse;
+
+    // GL: the window and what draws into it.
+    Window window;
     Compositor comp;
-    comp.resize(viewSize, viewSize);
     LocalVolume local; // the replicated-volume design's picture
     ToolMeshCache tools{&comp, {}};
     GpuMesh fieldMesh;
 
-    const net::TraineeCoreConfig coreConfig = coreConfigFor(o);
-    const net::ClientThreadConfig& cc = coreConfig.client;
-    // The trainee core: the client thread, and the haptic loop that sends the tool states the
-    // frames set on the device and feels the force in either design.
+    // Connection: the trainee core and the device its haptic loop reads.
+    const net::TraineeCoreConfig coreConfig;
     WindowDevice device;
-    WindowTools windowTools(device);
-    net::TraineeCore core(coreConfig);
+    WindowTools windowTools{device};
+    net::TraineeCore core{coreConfig};
     net::ClientThread& client = core.client();
-    core.connect();
-    core.startHaptics(windowTools);
-    // However the window ends (an exception from a GL upload or a screenshot included), the
-    // haptic thread stops before the client it sends to, then the client (the core's order).
-    struct StopCore {
-        net::TraineeCore& core;
-        ~StopCore() { core.stop(); }
-    } stopCore{core};
+    StopCore stopCore{started(core, windowTools)};
 
+    // Scene and camera.
     std::optional<Scene> scene;
     std::optional<uint64_t> sceneSeen; // the id of the last scene taken (or refused)
     std::string sceneError;            // the scene lacks what the options ask for (a preset)
     Camera baseCamera;                 // the view before orbiting
     ViewControls viewControls;
-    viewControls.distanceMm = o.distanceMm;
-    viewControls.yawDeg = o.orbitDeg;
-    viewControls.pitchDeg = o.tiltDeg;
     Camera wantedCamera;
+
+    // Panels' controls and the model behind them.
     ToolControls toolControls;
-    toolControls.canDrill = !o.instructor;
     DirtyBoxPanelState boxState;
     net::ClientModel model; // the panels' histories and the report's figures
 
+    // Picture: the DBI's textures and their CPU mirror, and the design that feeds them.
     Dbi cpuDbi;               // pass 1's picture on the CPU, for the cursor's depth lookups
     Camera cpuDbiCamera;      // the camera cpuDbi was rendered (or read back) with
     bool haveImage = false;   // the textures hold a full image of the current view
     uint32_t imageViewId = 0; // viewId of the image in the textures
     net::ViewSpec imageView;  // and its view: the camera it was rendered with
     DesignSwitch designs;
-    designs.picture = designs.wanted = designOf(cc.client.sync);
-    // This frame's incremental updates, counted as on screen at the end of the frame that first
-    // drew them, so both designs' latencies include their own drawing (the volume's GPU upload and
-    // ray cast, the DBI's texture upload and restore).
-    struct DrawnUpdate {
-        SyncDesign design;
-        double latencyUs; // cause -> applied by the client thread; -1: unknown
-        uint64_t appliedUs;
-        uint32_t bytes, rawBytes;
-    };
     std::vector<DrawnUpdate> drawnThisFrame;
     std::array<uint64_t, kSyncDesignCount> framesPerDesign{};
     double firstPictureAt = -1.0;
-    glm::vec3 toolPos(0.0f);
-    glm::quat toolRot(1, 0, 0, 0);
+
+    // Tool: our own pose, drawn and sent to the haptic loop.
+    glm::vec3 toolPos{0.0f};
+    glm::quat toolRot{1, 0, 0, 0};
     bool toolValid = false;
     double lastRectAt = 0.0;
-    const auto t0 = Clock::now();
-    auto seconds = [&] { return std::chrono::duration<double>(Clock::now() - t0).count(); };
+    const Clock::time_point t0 = Clock::now();
+};
 
-    auto makeCamera = [&]() {
-        return orbitCamera(baseCamera, viewControls.yawDeg, viewControls.pitchDeg,
-                           viewControls.distanceMm, {viewSize, viewSize}, scene->boundingRadiusMm);
-    };
+// --view-as is checked after the script's options and before a window opens.
+WindowConfig TrainerWindow::checkedWindowConfig(const TrainerOptions& o) {
+    if (!o.viewAs.empty() && !o.instructor)
+        throw Error("window: --view-as: only an instructor views as another participant");
+    return windowConfigFor(o);
+}
 
-    while (!window.shouldClose() && !(o.quit && o.quit->load())) {
-        const auto frameStart = Clock::now();
-        const double now = seconds();
-        auto snap = client.snapshot();
-        model.addSnapshot(snap, now);
-        // The server refused the volume design (its whole volume does not fit a message): the
-        // client thread goes on in DBI, and so does the toggle.
-        if (snap->volumeRefusals != designs.refusalsSeen) {
-            designs.refusalsSeen = snap->volumeRefusals;
-            std::fprintf(stderr, "window: %s; staying with %s\n", snap->closeReason.c_str(),
-                         syncDesignName(SyncDesign::Dbi));
-            designs.wanted = SyncDesign::Dbi;
-        }
-        // Taking over (the server's roster): a held trainee's drill is paused, and an instructor
-        // drills only while it holds a trainee.
-        const uint16_t selfId = snap->welcome ? snap->welcome->clientId : 0;
-        const uint16_t heldByOther = o.instructor ? 0 : takenOverBy(snap->participants, selfId);
-        const uint16_t holding = o.instructor ? heldBy(snap->participants, selfId) : 0;
-        toolControls.canDrill = o.instructor ? holding != 0 : heldByOther == 0;
+TrainerWindow::TrainerWindow(const TrainerOptions& options)
+    : o(options), viewSize(options.size), script(options), window(checkedWindowConfig(options)),
+      coreConfig(coreConfigFor(options)) {
+    markControls.canMark = o.instructor;
+    takeOverControls.canTakeOver = o.instructor;
+    viewAsControls.canViewAs = o.instructor;
+    viewAsControls.scripted = o.viewAs;
+    // A scripted screenshot is the same whatever the pointer of the display happens to hover (no
+    // tooltip or highlighted panel from it).
+    if (script.ignoresPointer())
+        ImGui::GetIO().ConfigFlags |= ImGuiConfigFlags_NoMouse;
+    comp.resize(viewSize, viewSize);
+    viewControls.distanceMm = o.distanceMm;
+    viewControls.yawDeg = o.orbitDeg;
+    viewControls.pitchDeg = o.tiltDeg;
+    toolControls.canDrill = !o.instructor;
+    designs.picture = designs.wanted = designOf(coreConfig.client.client.sync);
+}
 
-        // The scene the server sent after its welcome, and again when a reconnect's scene is
-        // another (a server restarted on another volume: the old skull's scalp, drape and camera
-        // would stay around the new one); the same scene again keeps the view as it is.
-        if (snap->scene && snap->scene->scene.sceneId != sceneSeen) {
-            sceneSeen = snap->scene->scene.sceneId;
-            scene = sceneFrom(snap->scene);
-            sceneError.clear();
-            comp.destroy(fieldMesh); // the previous scene's, if any
-            fieldMesh = comp.upload(scene->received->field);
-            std::optional<Camera> preset;
-            if (o.camera == "site")
-                preset = cameraLookingAt(scene->site.position, scene->site.normal, o.distanceMm,
-                                         45.0f, {viewSize, viewSize}, scene->boundingRadiusMm);
-            else
-                preset = net::presetCamera(scene->received->scene, o.camera, {viewSize, viewSize});
-            if (preset) {
-                baseCamera = *preset;
-                viewControls.distanceMm = glm::length(baseCamera.eye - baseCamera.target);
-                viewControls.setHome(); // --orbit, --tilt and this distance
-                wantedCamera = makeCamera();
-                client.requestView(net::toViewSpec(wantedCamera));
-            } else {
-                sceneError = "the server's scene has no camera preset '" + o.camera + "'";
-                scene.reset();
-            }
-        }
-        if (scene && viewControls.dirty) {
-            viewControls.dirty = false;
-            if (snap->viewingAs != 0) // the View panel moved: our own camera again
-                client.viewAs(0);
-            wantedCamera = makeCamera();
-            client.requestView(net::toViewSpec(wantedCamera));
-        }
+Camera TrainerWindow::makeCamera() const {
+    return orbitCamera(baseCamera, viewControls.yawDeg, viewControls.pitchDeg,
+                       viewControls.distanceMm, {viewSize, viewSize}, scene->boundingRadiusMm);
+}
 
-        // Applied rectangles: only their pixels are uploaded. A full image newer than the last
-        // whole volume makes the DBI the picture again (a switch back has completed).
-        for (net::AppliedRect& r : client.drainRects()) {
-            if (r.full) {
-                if (r.pixels.width() != viewSize || r.pixels.height() != viewSize)
-                    continue; // the placeholder view before ours
-                if (local.have && r.appliedUs < designs.pictureSinceUs)
-                    continue; // older than the volume that replaced the DBI
-                comp.uploadFull(r.pixels);
-                haveImage = true;
-                imageViewId = r.viewId;
-                imageView = r.view;
-                designs.arrived(SyncDesign::Dbi, r.appliedUs);
-                cpuDbi = std::move(r.pixels);
-                cpuDbiCamera = net::toCamera(r.view);
-            } else if (haveImage && r.viewId == imageViewId) {
-                comp.uploadRect(r.rect, r.pixels);
-                if (designs.picture == SyncDesign::Dbi && cpuDbi.bounds().contains(r.rect))
-                    cpuDbi.apply(r.pixels, r.rect.x, r.rect.y);
-                drawnThisFrame.push_back(
-                    {SyncDesign::Dbi, r.latencyUs, r.appliedUs, r.bytes, r.rawBytes});
-            } else {
-                continue;
-            }
-            lastRectAt = now;
-            model.addRect(r, now);
-        }
-        // Applied voxel boxes (volume design): the whole volume is uploaded, a box re-uploads
-        // only its voxels and the gradients around them. Both are timed: the volume client's
-        // apply stage on the GPU side.
-        for (net::AppliedVolumeBox& b : client.drainVolumeBoxes()) {
-            if (b.full) {
-                if (haveImage && b.appliedUs < designs.pictureSinceUs &&
-                    designs.picture == SyncDesign::Dbi)
-                    continue; // older than the DBI that replaced the volume
-                local.replace(b);
-                designs.arrived(SyncDesign::Volume, b.appliedUs);
-            } else if (local.update(b)) {
-                drawnThisFrame.push_back(
-                    {SyncDesign::Volume, b.latencyUs, b.appliedUs, b.bytes, b.rawBytes});
-            } else {
-                continue;
-            }
-            local.dirty = true;
-            lastRectAt = now;
-            PixelRect screen;
-            if (!b.full && snap->view.width > 1)
-                screen = dirtyScreenRect(net::toCamera(snap->view), local.volume, b.box);
-            model.addVolumeBox(b, screen, now);
-        }
-        const SyncDesign picture = designs.picture; // for the rest of the frame
-        // Forces on the local copy only while it is the picture and no switch away is under way:
-        // the server stops sending voxels at the request, so the copy would go stale.
-        core.setLocalForces(picture == SyncDesign::Volume && designs.wanted == SyncDesign::Volume);
-        const bool havePicture = picture == SyncDesign::Volume ? local.have : haveImage;
-        if (havePicture && firstPictureAt < 0)
-            firstPictureAt = now;
-        const bool switching = designs.switching();
-        // The DBI is drawn, and picked, with the camera it was rendered with: a new view's full
-        // image can reach the textures before a snapshot names the view (tools drawn with the old
-        // matrices over the new picture for a frame, a jitter while orbiting). The local volume is
-        // drawn with the view the client holds now.
-        const net::ViewSpec& shownView =
-            picture == SyncDesign::Dbi && haveImage ? imageView : snap->view;
-        const bool viewMatches = shownView.width == viewSize && shownView.height == viewSize;
-        const Camera dbiCamera = net::toCamera(shownView);
-        if (picture == SyncDesign::Volume && !(local.camera == dbiCamera)) {
-            local.dirty = true; // a new view: the picture for picking must be read back again
-            model.boxes.boxes.clear(); // the old view's rectangles (a DBI's go with its full image)
-        }
-
-        // The scripted toggle: flip at the next time, once the switch before it has completed.
-        if (const auto due = script.switchDue(now, firstPictureAt, switching, designs.wanted))
-            designs.request(*due, client);
-
-        // The frame begins (events polled, ImGui's new frame) before the tool reads the input:
-        // ImGui 1.86 zeroes io.MouseWheel at the end of each frame, so read before NewFrame the
-        // wheel was always 0, and keys came a frame late.
-        window.beginFrame();
-
-        // Tool: the script, or the mouse device on the bone under the cursor; the Session panel's
-        // last values (drawn below) kept within their ranges first.
-        toolControls = withinRanges(toolControls);
-        ImGuiIO& io = ImGui::GetIO();
-        if (scene && havePicture && script.drivesTool()) {
-            const ScriptPose p = script.tool(scene->site, now);
-            toolControls.kind = 0;
-            toolPos = p.position;
-            toolRot = glm::rotation(glm::vec3(0, 0, 1), p.axis);
-            toolControls.drilling = p.drilling;
-            toolValid = true;
-            if (script.toolJustDone())
-                lastRectAt = now; // the view settles from the script's end
-        } else if (scene && havePicture && viewMatches) {
-            // M marks the bone under the pointer now: over air or off the view it marks nothing
-            // (it marked the last bone point the pointer had crossed, wherever that was).
-            bool markKey = false;
-            if (!io.WantCaptureKeyboard) {
-                if (ImGui::IsKeyPressed(GLFW_KEY_B))
-                    toolControls.kind = 0;
-                if (ImGui::IsKeyPressed(GLFW_KEY_P))
-                    toolControls.kind = 1;
-                if (ImGui::IsKeyPressed(GLFW_KEY_LEFT_BRACKET))
-                    toolControls.burrMm = std::max(kBurrMinDiameterMm, toolControls.burrMm - 0.5f);
-                if (ImGui::IsKeyPressed(GLFW_KEY_RIGHT_BRACKET))
-                    toolControls.burrMm = std::min(kBurrMaxDiameterMm, toolControls.burrMm + 0.5f);
-                if (ImGui::IsKeyPressed(GLFW_KEY_DOWN))
-                    toolControls.pushMm = steppedPush(toolControls.pushMm, 1.0f);
-                if (ImGui::IsKeyPressed(GLFW_KEY_UP))
-                    toolControls.pushMm = steppedPush(toolControls.pushMm, -1.0f);
-                markKey = markControls.canMark && ImGui::IsKeyPressed(GLFW_KEY_M);
-            }
-            const bool overView = io.MousePos.x >= 0 && io.MousePos.y >= 0 &&
-                                  io.MousePos.x < float(viewSize) &&
-                                  io.MousePos.y < float(viewSize) && !io.WantCaptureMouse;
-            if (overView) {
-                toolControls.pushMm = steppedPush(toolControls.pushMm, io.MouseWheel);
-                int px = int(io.MousePos.x), py = viewSize - 1 - int(io.MousePos.y);
-                // Unprojected with the camera cpuDbi was made with: in volume mode its depth is
-                // read back after this pick, so for one frame after a view change (or a switch
-                // from DBI) it is still the old picture's, which the new camera would turn into a
-                // point off the bone.
-                if (auto hit = pickSurface(cpuDbi, cpuDbiCamera, px, py)) {
-                    pointerPick = *hit;
-                    markControls.addAtPointer = markControls.addAtPointer || markKey;
-                    ToolShape shape =
-                        toolControls.kind == 1
-                            ? ToolShape::perforator()
-                            : ToolShape::burr(std::clamp(toolControls.burrMm, kBurrMinDiameterMm,
-                                                         kBurrMaxDiameterMm));
-                    ToolPose pose = toolPoseAt(*hit, dbiCamera, shape, toolControls.pushMm);
-                    toolPos = pose.position;
-                    toolRot = pose.orientation;
-                    toolValid = true;
-                }
-            }
-            toolControls.drilling = toolControls.canDrill && toolValid && overView &&
-                                    ImGui::IsMouseDown(ImGuiMouseButton_Left);
-        }
-        const ToolKind kind = toolControls.kind == 1 ? ToolKind::Perforator : ToolKind::Burr;
-        const float diameter =
-            kind == ToolKind::Perforator ? kPerforatorDiameterMm : toolControls.burrMm;
-        {
-            DeviceState ds;
-            ds.pose.position = toolPos;
-            ds.pose.orientation = toolRot;
-            ds.buttons = toolControls.drilling ? 1u : 0u;
-            ds.valid = toolValid && snap->state == net::LinkState::Connected;
-            device.set(ds, {kind, diameter, toolControls.speed, toolControls.drilling}, now);
-        }
-
-        // The 1 kHz extrapolated force, straight from the haptic loop's recorder, on the
-        // window's clock (the model folded the server's samples with the snapshot).
-        model.setHapticTicks(core.hapticSamples(), now);
-        const HapticLoopStats hstats = core.hapticStats();
-
-        // Composite: pass 1 the DBI (or the ray cast of the local volume), pass 2 the anatomy
-        // and the tools with the same matrices and depth test, blitted top-left.
-        const float viewTop = 0.0f;
-        if (havePicture && viewMatches) {
-            if (picture == SyncDesign::Volume) {
-                comp.beginEmpty(dbiCamera);
-                local.view.draw(dbiCamera);
-                if (local.dirty) {
-                    // The picture's depth before the tools, for the cursor's depth lookups and
-                    // the marks' occlusion: read back only when the volume or the view changed,
-                    // and only the depth (the colour once, for the report, after the loop).
-                    comp.readBackDepth(cpuDbi);
-                    local.camera = cpuDbiCamera = dbiCamera;
-                    local.dirty = false;
-                }
-            } else {
-                comp.begin(dbiCamera);
-            }
-            if (scene)
-                comp.draw(fieldMesh, glm::mat4(1.0f));
-            for (const auto& [id, t] : snap->others)
-                comp.draw(tools.get(ToolKind(t.toolKind), t.diameterMm),
-                          toolMatrix(t.position, t.orientation), participantColor(int(id)));
-            if (toolValid)
-                comp.draw(tools.get(kind, diameter), toolMatrix(toolPos, toolRot),
-                          participantColor(0));
-            comp.blitTo(0, window.height() - viewSize);
-        }
-
-        // Overlays in the view: labels, dirty boxes, connection state.
-        const ToolPose ownTool{toolPos, toolRot};
-        if (havePicture && viewMatches) {
-            drawViewLabels(*snap, dbiCamera, cpuDbi, viewSize, toolValid ? &ownTool : nullptr,
-                           o.name + (toolControls.drilling ? " (drilling)" : ""));
-            drawDirtyBoxOverlay(boxState, model.boxes, now, 0.0f, viewTop, viewSize);
-        }
-        // A view larger than the server serves is refused by the client (the window waited for
-        // its first image for good, the reason in one line of the Network panel).
-        const int64_t maxViewPixels = snap->welcome ? snap->welcome->maxViewPixels : 0;
-        const bool viewTooLarge = snap->state == net::LinkState::Connected && snap->welcome &&
-                                  int64_t(viewSize) * viewSize > maxViewPixels;
-        auto tooLargeText = [&] {
-            return "The server serves views of at most " + std::to_string(maxViewPixels) +
-                   " pixels; this view is " + std::to_string(viewSize) + " x " +
-                   std::to_string(viewSize) + ": restart with " + o.sizeOption + " " +
-                   std::to_string(int(std::sqrt(double(maxViewPixels)))) + " or less";
-        };
-        {
-            std::string status;
-            if (viewTooLarge)
-                status = tooLargeText();
-            else if (snap->state == net::LinkState::Connecting)
-                status = "Connecting to " + o.address + " (attempt " +
-                         std::to_string(snap->attempts) + ")...";
-            else if (snap->state == net::LinkState::Retrying)
-                status = "Not connected: " + snap->closeReason + "\nRetrying...";
-            else if (!sceneError.empty())
-                status = "Cannot show the session: " + sceneError;
-            else if (!havePicture)
-                status = "Waiting for the first image of the skull...";
-            else if (snap->waitingForView)
-                status = "Waiting for the new view...";
-            else if (switching)
-                status = std::string("Switching to ") + syncDesignName(designs.wanted) +
-                         ": waiting for its first full update...";
-            drawViewMessage(status, havePicture, viewSize);
-            // Taken over, or holding a trainee: said at the foot of the view, on a solid band.
-            std::string held;
-            if (heldByOther)
-                held = participantName(snap->participants, heldByOther) +
-                       " has taken over: your drill is paused";
-            else if (holding)
-                held = "You hold " + participantName(snap->participants, holding) +
-                       ": your drill cuts, theirs is paused";
-            drawHeldBand(held, viewSize);
-        }
-
-        // Panels: Forces under the view, and two columns right of it.
-        const PanelLayout layout = panelLayout(viewSize, float(window.height()));
-        placeNextPanel(layout.session);
-        drawSessionPanel(*snap, toolControls, markControls, takeOverControls, viewAsControls,
-                         o.instructor ? "instructor" : "trainee", o.address, o.name);
-        // Marks asked for (the panel, the M key, --mark once joined); the server lists them back.
-        script.sendDue(*snap, client);
-        for (const net::Annotate& a : markRequests(markControls, markUndo, *snap, pointerPick))
-            client.annotate(a);
-        // Take over (the panel's buttons, --take-over once the trainee is listed) or hand back.
-        if (takeOverControls.asked)
-            client.takeOver(*takeOverControls.asked);
-        takeOverControls.asked.reset();
-        // View as (the panel, --view-as once the participant is listed).
-        if (scene && snap->welcome && snap->state == net::LinkState::Connected)
-            if (const auto id =
-                    viewAsControls.due(snap->attempts, snap->welcome->clientId, snap->participants))
-                client.viewAs(*id);
-        if (viewAsControls.asked)
-            client.viewAs(*viewAsControls.asked);
-        viewAsControls.asked.reset();
-        placeNextPanel(layout.view);
-        drawViewPanel(viewControls, snap->waitingForView || !havePicture,
-                      picture == SyncDesign::Volume ? "local render" : "DBI",
-                      havePicture ? &dbiCamera : nullptr);
-        placeNextPanel(layout.network);
-        drawNetworkPanel(*snap, model.network, now);
-        placeNextPanel(layout.comparison);
-        SyncDesign shown = designs.wanted;
-        if (drawComparisonPanel(shown, picture, model.comparison, now) && shown != designs.wanted)
-            designs.request(shown, client);
-        if (ImGui::Begin("Comparison")) { // appends to the panel: what only the window knows
-            // Short lines: the 400-pixel panel cut the longer ones off.
-            ImGui::TextDisabled("frame ms: start to swap + glFinish, median of 1 s");
-            ImGui::TextDisabled("volume GPU: full %.1f ms (%llu), box p50 %.2f ms (%llu)",
-                                local.uploadMs.size() ? local.uploadMs.percentile(50) : 0.0,
-                                (unsigned long long)local.uploads,
-                                local.boxMs.size() ? local.boxMs.percentile(50) : 0.0,
-                                (unsigned long long)local.boxUpdates);
-            ImGui::TextDisabled("haptic ticks: %llu local volume, %llu server models",
-                                (unsigned long long)core.localForceTicks(),
-                                (unsigned long long)core.serverForceTicks());
-        }
-        ImGui::End();
-        placeNextPanel(layout.forces);
-        drawForcesPanel(model.forces, hstats.achievedRateHz, now,
-                        o.instructor ? &model.participants : nullptr, &snap->participants);
-        placeNextPanel(layout.dirtyBoxes);
-        drawDirtyBoxPanel(boxState, model.boxes, now);
-
-        // The scripted run's rules: a view too large ends it, a settled view is captured.
-        ScriptedDriver::Frame scripted;
-        scripted.snap = snap.get();
-        scripted.havePicture = havePicture;
-        scripted.viewMatches = viewMatches;
-        scripted.haveScene = scene.has_value();
-        scripted.switching = switching;
-        scripted.sinceLastUpdateS = now - lastRectAt;
-        scripted.holding = holding;
-        if (viewTooLarge)
-            scripted.viewTooLarge = tooLargeText();
-        if (script.abortsBeforeEnd(scripted)) {
-            window.endFrame(nullptr);
+int TrainerWindow::run() {
+    while (!window.shouldClose() && !(o.quit && o.quit->load()))
+        if (!frame())
             break;
-        }
-        Dbi capture;
-        window.endFrame(script.wantsCapture(scripted, now) ? &capture : nullptr);
-        if (havePicture && viewMatches) {
-            // The frame's time in the design it drew: from its start to the swap, waiting for
-            // the GPU work (llvmpipe renders on glFinish); the pacing sleep is not included.
-            glFinish();
-            model.addFrame(
-                picture,
-                std::chrono::duration<double, std::milli>(Clock::now() - frameStart).count());
-            ++framesPerDesign[int(picture)];
-            const uint64_t drawnUs = net::steadyNowUs();
-            for (const DrawnUpdate& u : drawnThisFrame)
-                if (u.design == picture) // else in the textures, not on screen
-                    model.addDrawn(u.design, u.latencyUs, u.appliedUs, drawnUs, u.bytes,
-                                   u.rawBytes);
-        }
-        drawnThisFrame.clear();
-        // The Comparison panel's point for this second, for the design that fed the picture; the
-        // other keeps its last figures. None while a switch is under way: the server has stopped
-        // the old design's updates, so the second measures the wait.
-        model.tickComparison(now, picture, havePicture && !switching, hstats.ticks);
-        if (script.afterFrame(scripted, now, capture))
-            break;
-        std::this_thread::sleep_until(frameStart + std::chrono::milliseconds(10));
-    }
     script.closed(); // before its screenshot or frames: exit 1
     core.stop();     // (stopCore would; the report below reads the stopped client)
     printComparison(model.comparison);
+    closingFigures();
+    comp.destroy(fieldMesh);
+    return script.exitCode();
+}
+
+// One frame: snapshot -> scene -> rectangles / voxel boxes -> tool -> composite -> overlays ->
+// panels -> the frame's end; false: the window ends.
+bool TrainerWindow::frame() {
+    FrameState f;
+    f.start = Clock::now();
+    f.now = seconds();
+    takeSnapshot(f);
+    takeScene(f);
+    applyRects(f);
+    applyVolumeBoxes(f);
+    choosePicture(f);
+    // The frame begins (events polled, ImGui's new frame) before the tool reads the input:
+    // ImGui 1.86 zeroes io.MouseWheel at the end of each frame, so read before NewFrame the
+    // wheel was always 0, and keys came a frame late.
+    window.beginFrame();
+    updateTool(f);
+    composite(f);
+    drawOverlays(f);
+    drawPanels(f);
+    return endFrame(f);
+}
+
+void TrainerWindow::takeSnapshot(FrameState& f) {
+    f.snap = client.snapshot();
+    const net::ClientSnapshot& snap = *f.snap;
+    model.addSnapshot(f.snap, f.now);
+    // The server refused the volume design (its whole volume does not fit a message): the
+    // client thread goes on in DBI, and so does the toggle.
+    if (snap.volumeRefusals != designs.refusalsSeen) {
+        designs.refusalsSeen = snap.volumeRefusals;
+        std::fprintf(stderr, "window: %s; staying with %s\n", snap.closeReason.c_str(),
+                     syncDesignName(SyncDesign::Dbi));
+        designs.wanted = SyncDesign::Dbi;
+    }
+    // Taking over (the server's roster): a held trainee's drill is paused, and an instructor
+    // drills only while it holds a trainee.
+    const uint16_t selfId = snap.welcome ? snap.welcome->clientId : 0;
+    f.heldByOther = o.instructor ? 0 : takenOverBy(snap.participants, selfId);
+    f.holding = o.instructor ? heldBy(snap.participants, selfId) : 0;
+    toolControls.canDrill = o.instructor ? f.holding != 0 : f.heldByOther == 0;
+}
+
+// The scene the server sent after its welcome, and again when a reconnect's scene is another (a
+// server restarted on another volume: the old skull's scalp, drape and camera would stay around
+// the new one); the same scene again keeps the view as it is.
+void TrainerWindow::takeScene(const FrameState& f) {
+    const auto& snap = f.snap;
+    if (snap->scene && snap->scene->scene.sceneId != sceneSeen) {
+        sceneSeen = snap->scene->scene.sceneId;
+        scene = sceneFrom(snap->scene);
+        sceneError.clear();
+        comp.destroy(fieldMesh); // the previous scene's, if any
+        fieldMesh = comp.upload(scene->received->field);
+        std::optional<Camera> preset;
+        if (o.camera == "site")
+            preset = cameraLookingAt(scene->site.position, scene->site.normal, o.distanceMm, 45.0f,
+                                     {viewSize, viewSize}, scene->boundingRadiusMm);
+        else
+            preset = net::presetCamera(scene->received->scene, o.camera, {viewSize, viewSize});
+        if (preset) {
+            baseCamera = *preset;
+            viewControls.distanceMm = glm::length(baseCamera.eye - baseCamera.target);
+            viewControls.setHome(); // --orbit, --tilt and this distance
+            wantedCamera = makeCamera();
+            client.requestView(net::toViewSpec(wantedCamera));
+        } else {
+            sceneError = "the server's scene has no camera preset '" + o.camera + "'";
+            scene.reset();
+        }
+    }
+    if (scene && viewControls.dirty) {
+        viewControls.dirty = false;
+        if (snap->viewingAs != 0) // the View panel moved: our own camera again
+            client.viewAs(0);
+        wantedCamera = makeCamera();
+        client.requestView(net::toViewSpec(wantedCamera));
+    }
+}
+
+// Applied rectangles: only their pixels are uploaded. A full image newer than the last whole
+// volume makes the DBI the picture again (a switch back has completed).
+void TrainerWindow::applyRects(const FrameState& f) {
+    for (net::AppliedRect& r : client.drainRects()) {
+        if (r.full) {
+            if (r.pixels.width() != viewSize || r.pixels.height() != viewSize)
+                continue; // the placeholder view before ours
+            if (local.have && r.appliedUs < designs.pictureSinceUs)
+                continue; // older than the volume that replaced the DBI
+            comp.uploadFull(r.pixels);
+            haveImage = true;
+            imageViewId = r.viewId;
+            imageView = r.view;
+            designs.arrived(SyncDesign::Dbi, r.appliedUs);
+            cpuDbi = std::move(r.pixels);
+            cpuDbiCamera = net::toCamera(r.view);
+        } else if (haveImage && r.viewId == imageViewId) {
+            comp.uploadRect(r.rect, r.pixels);
+            if (designs.picture == SyncDesign::Dbi && cpuDbi.bounds().contains(r.rect))
+                cpuDbi.apply(r.pixels, r.rect.x, r.rect.y);
+            drawnThisFrame.push_back(
+                {SyncDesign::Dbi, r.latencyUs, r.appliedUs, r.bytes, r.rawBytes});
+        } else {
+            continue;
+        }
+        lastRectAt = f.now;
+        model.addRect(r, f.now);
+    }
+}
+
+// Applied voxel boxes (volume design): the whole volume is uploaded, a box re-uploads only its
+// voxels and the gradients around them. Both are timed: the volume client's apply stage on the
+// GPU side.
+void TrainerWindow::applyVolumeBoxes(const FrameState& f) {
+    for (net::AppliedVolumeBox& b : client.drainVolumeBoxes()) {
+        if (b.full) {
+            if (haveImage && b.appliedUs < designs.pictureSinceUs &&
+                designs.picture == SyncDesign::Dbi)
+                continue; // older than the DBI that replaced the volume
+            local.replace(b);
+            designs.arrived(SyncDesign::Volume, b.appliedUs);
+        } else if (local.update(b)) {
+            drawnThisFrame.push_back(
+                {SyncDesign::Volume, b.latencyUs, b.appliedUs, b.bytes, b.rawBytes});
+        } else {
+            continue;
+        }
+        local.dirty = true;
+        lastRectAt = f.now;
+        PixelRect screen;
+        if (!b.full && f.snap->view.width > 1)
+            screen = dirtyScreenRect(net::toCamera(f.snap->view), local.volume, b.box);
+        model.addVolumeBox(b, screen, f.now);
+    }
+}
+
+// The design that feeds this frame's picture, and the camera it is drawn with.
+void TrainerWindow::choosePicture(FrameState& f) {
+    f.picture = designs.picture; // for the rest of the frame
+    const SyncDesign picture = f.picture;
+    // Forces on the local copy only while it is the picture and no switch away is under way:
+    // the server stops sending voxels at the request, so the copy would go stale.
+    core.setLocalForces(picture == SyncDesign::Volume && designs.wanted == SyncDesign::Volume);
+    f.havePicture = picture == SyncDesign::Volume ? local.have : haveImage;
+    if (f.havePicture && firstPictureAt < 0)
+        firstPictureAt = f.now;
+    f.switching = designs.switching();
+    // The DBI is drawn, and picked, with the camera it was rendered with: a new view's full
+    // image can reach the textures before a snapshot names the view (tools drawn with the old
+    // matrices over the new picture for a frame, a jitter while orbiting). The local volume is
+    // drawn with the view the client holds now.
+    const net::ViewSpec& shownView =
+        picture == SyncDesign::Dbi && haveImage ? imageView : f.snap->view;
+    f.viewMatches = shownView.width == viewSize && shownView.height == viewSize;
+    f.dbiCamera = net::toCamera(shownView);
+    if (picture == SyncDesign::Volume && !(local.camera == f.dbiCamera)) {
+        local.dirty = true;        // a new view: the picture for picking must be read back again
+        model.boxes.boxes.clear(); // the old view's rectangles (a DBI's go with its full image)
+    }
+
+    // The scripted toggle: flip at the next time, once the switch before it has completed.
+    if (const auto due = script.switchDue(f.now, firstPictureAt, f.switching, designs.wanted))
+        designs.request(*due, client);
+}
+
+// Tool: the script, or the mouse device on the bone under the cursor; the Session panel's last
+// values (drawn below) kept within their ranges first.
+void TrainerWindow::updateTool(FrameState& f) {
+    toolControls = withinRanges(toolControls);
+    if (scene && f.havePicture && script.drivesTool()) {
+        const ScriptPose p = script.tool(scene->site, f.now);
+        toolControls.kind = 0;
+        toolPos = p.position;
+        toolRot = glm::rotation(glm::vec3(0, 0, 1), p.axis);
+        toolControls.drilling = p.drilling;
+        toolValid = true;
+        if (script.toolJustDone())
+            lastRectAt = f.now; // the view settles from the script's end
+    } else if (scene && f.havePicture && f.viewMatches) {
+        mouseTool(f);
+    }
+    f.kind = toolControls.kind == 1 ? ToolKind::Perforator : ToolKind::Burr;
+    f.diameter = f.kind == ToolKind::Perforator ? kPerforatorDiameterMm : toolControls.burrMm;
+    {
+        DeviceState ds;
+        ds.pose.position = toolPos;
+        ds.pose.orientation = toolRot;
+        ds.buttons = toolControls.drilling ? 1u : 0u;
+        ds.valid = toolValid && f.snap->state == net::LinkState::Connected;
+        device.set(ds, {f.kind, f.diameter, toolControls.speed, toolControls.drilling}, f.now);
+    }
+
+    // The 1 kHz extrapolated force, straight from the haptic loop's recorder, on the
+    // window's clock (the model folded the server's samples with the snapshot).
+    model.setHapticTicks(core.hapticSamples(), f.now);
+    f.hstats = core.hapticStats();
+}
+
+// The mouse device: keys pick the tool and its push, the pointer over the view places it on the
+// bone under it.
+void TrainerWindow::mouseTool(const FrameState& f) {
+    ImGuiIO& io = ImGui::GetIO();
+    // M marks the bone under the pointer now: over air or off the view it marks nothing
+    // (it marked the last bone point the pointer had crossed, wherever that was).
+    bool markKey = false;
+    if (!io.WantCaptureKeyboard) {
+        if (ImGui::IsKeyPressed(GLFW_KEY_B))
+            toolControls.kind = 0;
+        if (ImGui::IsKeyPressed(GLFW_KEY_P))
+            toolControls.kind = 1;
+        if (ImGui::IsKeyPressed(GLFW_KEY_LEFT_BRACKET))
+            toolControls.burrMm = std::max(kBurrMinDiameterMm, toolControls.burrMm - 0.5f);
+        if (ImGui::IsKeyPressed(GLFW_KEY_RIGHT_BRACKET))
+            toolControls.burrMm = std::min(kBurrMaxDiameterMm, toolControls.burrMm + 0.5f);
+        if (ImGui::IsKeyPressed(GLFW_KEY_DOWN))
+            toolControls.pushMm = steppedPush(toolControls.pushMm, 1.0f);
+        if (ImGui::IsKeyPressed(GLFW_KEY_UP))
+            toolControls.pushMm = steppedPush(toolControls.pushMm, -1.0f);
+        markKey = markControls.canMark && ImGui::IsKeyPressed(GLFW_KEY_M);
+    }
+    const bool overView = io.MousePos.x >= 0 && io.MousePos.y >= 0 &&
+                          io.MousePos.x < float(viewSize) && io.MousePos.y < float(viewSize) &&
+                          !io.WantCaptureMouse;
+    if (overView) {
+        toolControls.pushMm = steppedPush(toolControls.pushMm, io.MouseWheel);
+        int px = int(io.MousePos.x), py = viewSize - 1 - int(io.MousePos.y);
+        // Unprojected with the camera cpuDbi was made with: in volume mode its depth is
+        // read back after this pick, so for one frame after a view change (or a switch
+        // from DBI) it is still the old picture's, which the new camera would turn into a
+        // point off the bone.
+        if (auto hit = pickSurface(cpuDbi, cpuDbiCamera, px, py)) {
+            pointerPick = *hit;
+            markControls.addAtPointer = markControls.addAtPointer || markKey;
+            ToolShape shape =
+                toolControls.kind == 1
+                    ? ToolShape::perforator()
+                    : ToolShape::burr(
+                          std::clamp(toolControls.burrMm, kBurrMinDiameterMm, kBurrMaxDiameterMm));
+            ToolPose pose = toolPoseAt(*hit, f.dbiCamera, shape, toolControls.pushMm);
+            toolPos = pose.position;
+            toolRot = pose.orientation;
+            toolValid = true;
+        }
+    }
+    toolControls.drilling =
+        toolControls.canDrill && toolValid && overView && ImGui::IsMouseDown(ImGuiMouseButton_Left);
+}
+
+// Composite: pass 1 the DBI (or the ray cast of the local volume), pass 2 the anatomy and the
+// tools with the same matrices and depth test, blitted top-left.
+void TrainerWindow::composite(const FrameState& f) {
+    if (!(f.havePicture && f.viewMatches))
+        return;
+    if (f.picture == SyncDesign::Volume) {
+        comp.beginEmpty(f.dbiCamera);
+        local.view.draw(f.dbiCamera);
+        if (local.dirty) {
+            // The picture's depth before the tools, for the cursor's depth lookups and
+            // the marks' occlusion: read back only when the volume or the view changed,
+            // and only the depth (the colour once, for the report, after the loop).
+            comp.readBackDepth(cpuDbi);
+            local.camera = cpuDbiCamera = f.dbiCamera;
+            local.dirty = false;
+        }
+    } else {
+        comp.begin(f.dbiCamera);
+    }
+    if (scene)
+        comp.draw(fieldMesh, glm::mat4(1.0f));
+    for (const auto& [id, t] : f.snap->others)
+        comp.draw(tools.get(ToolKind(t.toolKind), t.diameterMm),
+                  toolMatrix(t.position, t.orientation), participantColor(int(id)));
+    if (toolValid)
+        comp.draw(tools.get(f.kind, f.diameter), toolMatrix(toolPos, toolRot), participantColor(0));
+    comp.blitTo(0, window.height() - viewSize);
+}
+
+// Overlays in the view: labels, dirty boxes, connection state.
+void TrainerWindow::drawOverlays(FrameState& f) {
+    const net::ClientSnapshot& snap = *f.snap;
+    const float viewTop = 0.0f;
+    const ToolPose ownTool{toolPos, toolRot};
+    if (f.havePicture && f.viewMatches) {
+        drawViewLabels(snap, f.dbiCamera, cpuDbi, viewSize, toolValid ? &ownTool : nullptr,
+                       o.name + (toolControls.drilling ? " (drilling)" : ""));
+        drawDirtyBoxOverlay(boxState, model.boxes, f.now, 0.0f, viewTop, viewSize);
+    }
+    // A view larger than the server serves is refused by the client (the window waited for
+    // its first image for good, the reason in one line of the Network panel).
+    f.maxViewPixels = snap.welcome ? snap.welcome->maxViewPixels : 0;
+    f.viewTooLarge = snap.state == net::LinkState::Connected && snap.welcome &&
+                     int64_t(viewSize) * viewSize > f.maxViewPixels;
+    std::string status;
+    if (f.viewTooLarge)
+        status = tooLargeText(f);
+    else if (snap.state == net::LinkState::Connecting)
+        status =
+            "Connecting to " + o.address + " (attempt " + std::to_string(snap.attempts) + ")...";
+    else if (snap.state == net::LinkState::Retrying)
+        status = "Not connected: " + snap.closeReason + "\nRetrying...";
+    else if (!sceneError.empty())
+        status = "Cannot show the session: " + sceneError;
+    else if (!f.havePicture)
+        status = "Waiting for the first image of the skull...";
+    else if (snap.waitingForView)
+        status = "Waiting for the new view...";
+    else if (f.switching)
+        status = std::string("Switching to ") + syncDesignName(designs.wanted) +
+                 ": waiting for its first full update...";
+    drawViewMessage(status, f.havePicture, viewSize);
+    // Taken over, or holding a trainee: said at the foot of the view, on a solid band.
+    std::string held;
+    if (f.heldByOther)
+        held = participantName(snap.participants, f.heldByOther) +
+               " has taken over: your drill is paused";
+    else if (f.holding)
+        held = "You hold " + participantName(snap.participants, f.holding) +
+               ": your drill cuts, theirs is paused";
+    drawHeldBand(held, viewSize);
+}
+
+std::string TrainerWindow::tooLargeText(const FrameState& f) const {
+    return "The server serves views of at most " + std::to_string(f.maxViewPixels) +
+           " pixels; this view is " + std::to_string(viewSize) + " x " + std::to_string(viewSize) +
+           ": restart with " + o.sizeOption + " " +
+           std::to_string(int(std::sqrt(double(f.maxViewPixels)))) + " or less";
+}
+
+// Panels: Forces under the view, and two columns right of it; and what their controls ask of
+// the server.
+void TrainerWindow::drawPanels(const FrameState& f) {
+    const net::ClientSnapshot& snap = *f.snap;
+    const SyncDesign picture = f.picture;
+    const PanelLayout layout = panelLayout(viewSize, float(window.height()));
+    placeNextPanel(layout.session);
+    drawSessionPanel(snap, toolControls, markControls, takeOverControls, viewAsControls,
+                     o.instructor ? "instructor" : "trainee", o.address, o.name);
+    // Marks asked for (the panel, the M key, --mark once joined); the server lists them back.
+    script.sendDue(snap, client);
+    for (const net::Annotate& a : markRequests(markControls, markUndo, snap, pointerPick))
+        client.annotate(a);
+    // Take over (the panel's buttons, --take-over once the trainee is listed) or hand back.
+    if (takeOverControls.asked)
+        client.takeOver(*takeOverControls.asked);
+    takeOverControls.asked.reset();
+    // View as (the panel, --view-as once the participant is listed).
+    if (scene && snap.welcome && snap.state == net::LinkState::Connected)
+        if (const auto id =
+                viewAsControls.due(snap.attempts, snap.welcome->clientId, snap.participants))
+            client.viewAs(*id);
+    if (viewAsControls.asked)
+        client.viewAs(*viewAsControls.asked);
+    viewAsControls.asked.reset();
+    placeNextPanel(layout.view);
+    drawViewPanel(viewControls, snap.waitingForView || !f.havePicture,
+                  picture == SyncDesign::Volume ? "local render" : "DBI",
+                  f.havePicture ? &f.dbiCamera : nullptr);
+    placeNextPanel(layout.network);
+    drawNetworkPanel(snap, model.network, f.now);
+    placeNextPanel(layout.comparison);
+    SyncDesign shown = designs.wanted;
+    if (drawComparisonPanel(shown, picture, model.comparison, f.now) && shown != designs.wanted)
+        designs.request(shown, client);
+    if (ImGui::Begin("Comparison")) { // appends to the panel: what only the window knows
+        // Short lines: the 400-pixel panel cut the longer ones off.
+        ImGui::TextDisabled("frame ms: start to swap + glFinish, median of 1 s");
+        ImGui::TextDisabled("volume GPU: full %.1f ms (%llu), box p50 %.2f ms (%llu)",
+                            local.uploadMs.size() ? local.uploadMs.percentile(50) : 0.0,
+                            (unsigned long long)local.uploads,
+                            local.boxMs.size() ? local.boxMs.percentile(50) : 0.0,
+                            (unsigned long long)local.boxUpdates);
+        ImGui::TextDisabled("haptic ticks: %llu local volume, %llu server models",
+                            (unsigned long long)core.localForceTicks(),
+                            (unsigned long long)core.serverForceTicks());
+    }
+    ImGui::End();
+    placeNextPanel(layout.forces);
+    drawForcesPanel(model.forces, f.hstats.achievedRateHz, f.now,
+                    o.instructor ? &model.participants : nullptr, &snap.participants);
+    placeNextPanel(layout.dirtyBoxes);
+    drawDirtyBoxPanel(boxState, model.boxes, f.now);
+}
+
+// The frame's end: the scripted run's rules (a view too large ends it, a settled view is
+// captured), the swap, and the frame's figures; false: the window ends.
+bool TrainerWindow::endFrame(const FrameState& f) {
+    const SyncDesign picture = f.picture;
+    ScriptedDriver::Frame scripted;
+    scripted.snap = f.snap.get();
+    scripted.havePicture = f.havePicture;
+    scripted.viewMatches = f.viewMatches;
+    scripted.haveScene = scene.has_value();
+    scripted.switching = f.switching;
+    scripted.sinceLastUpdateS = f.now - lastRectAt;
+    scripted.holding = f.holding;
+    if (f.viewTooLarge)
+        scripted.viewTooLarge = tooLargeText(f);
+    if (script.abortsBeforeEnd(scripted)) {
+        window.endFrame(nullptr);
+        return false;
+    }
+    Dbi capture;
+    window.endFrame(script.wantsCapture(scripted, f.now) ? &capture : nullptr);
+    if (f.havePicture && f.viewMatches) {
+        // The frame's time in the design it drew: from its start to the swap, waiting for
+        // the GPU work (llvmpipe renders on glFinish); the pacing sleep is not included.
+        glFinish();
+        model.addFrame(picture,
+                       std::chrono::duration<double, std::milli>(Clock::now() - f.start).count());
+        ++framesPerDesign[int(picture)];
+        const uint64_t drawnUs = net::steadyNowUs();
+        for (const DrawnUpdate& u : drawnThisFrame)
+            if (u.design == picture) // else in the textures, not on screen
+                model.addDrawn(u.design, u.latencyUs, u.appliedUs, drawnUs, u.bytes, u.rawBytes);
+    }
+    drawnThisFrame.clear();
+    // The Comparison panel's point for this second, for the design that fed the picture; the
+    // other keeps its last figures. None while a switch is under way: the server has stopped
+    // the old design's updates, so the second measures the wait.
+    model.tickComparison(f.now, picture, f.havePicture && !f.switching, f.hstats.ticks);
+    if (script.afterFrame(scripted, f.now, capture))
+        return false;
+    std::this_thread::sleep_until(f.start + std::chrono::milliseconds(10));
+    return true;
+}
+
+// The report's figures, once the core has stopped.
+void TrainerWindow::closingFigures() {
     if (o.report && designs.picture == SyncDesign::Volume && local.have &&
         cpuDbi.width() == local.camera.width && cpuDbi.height() == local.camera.height) {
         // The local volume's picture in colour, as last shown (the loop read back its depth).
@@ -878,8 +1008,15 @@ int runTrainerWindow(const TrainerOptions& o) {
                           {"sync", designs.picture == SyncDesign::Volume ? "volume" : "dbi"}};
         r.session = model.report(extras);
     }
-    comp.destroy(fieldMesh);
-    return script.exitCode();
+}
+
+} // namespace
+
+int runTrainerWindow(const TrainerOptions& o) {
+    if (o.sync != "dbi" && o.sync != "volume")
+        throw Error("window: --sync must be dbi or volume, not '" + o.sync + "'");
+    TrainerWindow window(o);
+    return window.run();
 }
 
 } // namespace trephine::ui
