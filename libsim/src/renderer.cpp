@@ -150,8 +150,8 @@ Frame makeFrame(const Volume& volume, const Camera& camera, const RenderOptions&
     // 3.5e9 with the eye 1e6 mm out on each axis (trephine render --eye) and 0.001 mm voxels, past
     // INT_MAX. Where that would pass kMaxSampleIndex the step widens so that it does not. Such a
     // view loses nothing by it: there float t is already rounded to ulp(2^30 dt), 64 to 128 dt,
-    // so finer samples would not be distinct. Every view a client may ask for (eye within 1e5 mm, 4096
-    // voxels, spacings within 1000x of each other) at the default half-voxel step stays under
+    // so finer samples would not be distinct. Every view a client may ask for (eye within 1e5 mm,
+    // 4096 voxels, spacings within 1000x of each other) at the default half-voxel step stays under
     // 3.7e8 and keeps its step bit for bit.
     f.dt = std::max(1e-3f, options.stepVoxels) * f.minSpacing;
     const double dtFloor = f.maxSampleT / kMaxSampleIndex;

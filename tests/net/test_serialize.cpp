@@ -134,8 +134,12 @@ TEST(Serialize, RandomBytesReadOnlyAsTheirValidPrefix) {
             for (auto& b : bytes)
                 b = uint8_t(rng());
         } else {
-            Sample a{uint8_t(rng() % 4), int32_t(rng()), uint64_t(rng()) << 32 | rng(),
-                     float(rng() % 1000) * 0.5f, rng() % 2 == 1, std::string(rng() % 33, 'n'),
+            Sample a{uint8_t(rng() % 4),
+                     int32_t(rng()),
+                     uint64_t(rng()) << 32 | rng(),
+                     float(rng() % 1000) * 0.5f,
+                     rng() % 2 == 1,
+                     std::string(rng() % 33, 'n'),
                      std::vector<uint8_t>(rng() % 40, uint8_t(rng()))};
             bytes = write(a);
             switch (rng() % 3) {
