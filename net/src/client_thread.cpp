@@ -76,6 +76,25 @@ double latencyOf(const SessionClient& c, uint32_t sequence, bool full) {
     return records.back().latencyUs;
 }
 
+// The client's picture after an image or volume update, as the window takes it: `rect` of its
+// DBI, or all of it after a full update.
+template <typename Update>
+AppliedRect appliedRect(const SessionClient& c, const Update& meta, const PixelRect& rect,
+                        bool full, uint32_t viewId) {
+    AppliedRect r;
+    r.full = full;
+    r.rect = full ? c.dbi().bounds() : rect;
+    r.pixels = full ? c.dbi() : c.dbi().extract(rect);
+    r.sequence = meta.sequence;
+    r.viewId = viewId;
+    r.view = c.view();
+    r.bytes = uint32_t(meta.payload.size());
+    r.rawBytes = meta.rawBytes;
+    r.appliedUs = steadyNowUs();
+    r.latencyUs = latencyOf(c, meta.sequence, full);
+    return r;
+}
+
 ModeFigures figures(const ModeStats& m, double ratePerS) {
     ModeFigures f;
     f.updatesApplied = m.updates;
@@ -359,35 +378,14 @@ void ClientThread::installCallbacks(SessionClient& client, bool renderLocally) {
         cp->setVolumeCallback([this, cp](const VolumeUpdate& meta, const Box3i&, bool full) {
             if (cp->dbi().width() == 0)
                 return;
-            AppliedRect r;
-            r.full = full;
-            r.rect = cp->dbi().bounds();
-            r.pixels = cp->dbi();
-            r.sequence = meta.sequence;
-            r.viewId = cp->viewId();
-            r.view = cp->view();
-            r.bytes = uint32_t(meta.payload.size());
-            r.rawBytes = meta.rawBytes;
-            r.appliedUs = steadyNowUs();
-            r.latencyUs = latencyOf(*cp, meta.sequence, full);
-            pushRect(std::move(r));
+            // The local render is the whole view again, whatever box changed.
+            pushRect(appliedRect(*cp, meta, cp->dbi().bounds(), full, cp->viewId()));
         });
     // Runs inside poll(), right after the update is applied to the client's DBI. Its
     // latency is its own record's, not the stats' latency window, which volume updates
     // feed too.
     cp->setUpdateCallback([this, cp](const ImageUpdate& meta, const PixelRect& rect, bool full) {
-        AppliedRect r;
-        r.full = full;
-        r.rect = full ? cp->dbi().bounds() : rect;
-        r.pixels = full ? cp->dbi() : cp->dbi().extract(rect);
-        r.sequence = meta.sequence;
-        r.viewId = meta.viewId;
-        r.view = cp->view();
-        r.bytes = uint32_t(meta.payload.size());
-        r.rawBytes = meta.rawBytes;
-        r.appliedUs = steadyNowUs();
-        r.latencyUs = latencyOf(*cp, meta.sequence, full);
-        pushRect(std::move(r));
+        pushRect(appliedRect(*cp, meta, rect, full, meta.viewId));
     });
     cp->setHapticCallback([this](const HapticModel& m, uint64_t) {
         m_haptic = m;
