@@ -51,8 +51,8 @@ uniform vec2 uViewportOrigin;
 uniform float uNearOverFar;
 uniform float uDt;         // sample step, mm
 uniform mat4 uViewProj;
-uniform vec3 uColor[5];    // materialColor, 0..255
-uniform vec4 uShade[5];    // ambient, diffuse, specular, log2 of the shininess
+uniform vec3 uColor[7];    // materialColor, 0..255
+uniform vec4 uShade[7];    // ambient, diffuse, specular, log2 of the shininess
 uniform vec4 uBackground;
 out vec4 fragColor;
 
@@ -182,12 +182,15 @@ void main() {
 })";
 
 // The shading constants of libsim's renderer (materialShade in renderer.cpp), per label.
+static_assert(kMaterialCount == 7, "uColor and uShade in the shader hold a vec per material");
 constexpr float kShade[kMaterialCount][4] = {
     {0.20f, 0.75f, 0.12f, 5}, // air (never shaded; the default)
     {0.20f, 0.75f, 0.12f, 5}, // cortical
     {0.22f, 0.75f, 0.05f, 4}, // diploe
     {0.22f, 0.75f, 0.15f, 6}, // dura
     {0.22f, 0.75f, 0.12f, 6}, // brain
+    {0.22f, 0.75f, 0.15f, 6}, // sinus
+    {0.22f, 0.75f, 0.15f, 6}, // artery
 };
 
 void setTexParams(GLenum filter) {

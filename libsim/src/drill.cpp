@@ -213,17 +213,17 @@ Nearby scanNearby(const Volume& vol, const Frame& f, const Box3i& box, const Too
         const uint8_t* drow = den + base;
         const uint8_t* mrow = mat + base;
         if (found.bone) {
-            // Only dura and brain are still of interest: skip rows without any, in one cheap
+            // Only soft tissue is still of interest: skip rows without any, in one cheap
             // (vectorisable) sweep over the labels.
             bool any = false;
             for (int x = x0; x <= x1; ++x)
-                any |= uint8_t(mrow[x] - uint8_t(Material::Dura)) <= 1;
+                any |= mrow[x] >= uint8_t(Material::Dura);
             if (!any)
                 return;
         }
         for (int x = x0; x <= x1; ++x) {
             Material m = Material(mrow[x]);
-            bool isDura = m == Material::Dura || m == Material::Brain;
+            bool isDura = isSoftTissue(m);
             bool isLiveBone = isBone(m) && drow[x] > 0;
             if (!(isDura && !found.dura) && !(isLiveBone && !found.bone))
                 continue;
@@ -287,7 +287,7 @@ void erodePass(Volume& vol, const Frame& f, const Box3i& box, const Clip& clip, 
             else if (m == uint8_t(Material::Diploe))
                 dec = decrement * kDiploeErosionFactor;
             else {
-                dura += (m == uint8_t(Material::Dura) || m == uint8_t(Material::Brain));
+                dura += isSoftTissue(Material(m));
                 continue;
             }
             if (dec == 0)

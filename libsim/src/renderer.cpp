@@ -32,6 +32,10 @@ glm::vec3 materialColor(Material m) {
         return {205.0f, 84.0f, 88.0f}; // pinkish red
     case Material::Brain:
         return {226.0f, 178.0f, 172.0f}; // pinkish grey
+    case Material::Sinus:
+        return {92.0f, 52.0f, 120.0f}; // venous blue-purple
+    case Material::Artery:
+        return {214.0f, 38.0f, 34.0f}; // arterial red
     default:
         return {232.0f, 222.0f, 196.0f};
     }
@@ -1077,6 +1081,8 @@ const Shade kShades[kMaterialCount] = {
     {{190.0f, 132.0f, 108.0f, 0.0f}, 0.22f, 0.75f, 0.05f, 4}, // diploe
     {{205.0f, 84.0f, 88.0f, 0.0f}, 0.22f, 0.75f, 0.15f, 6},   // dura: wet, a tighter highlight
     {{226.0f, 178.0f, 172.0f, 0.0f}, 0.22f, 0.75f, 0.12f, 6}, // brain
+    {{92.0f, 52.0f, 120.0f, 0.0f}, 0.22f, 0.75f, 0.15f, 6},   // sinus: wet
+    {{214.0f, 38.0f, 34.0f, 0.0f}, 0.22f, 0.75f, 0.15f, 6},   // artery: wet
 };
 
 // Headlight Phong: the light sits at the eye, so the half vector is the view vector.

@@ -16,6 +16,10 @@ std::string_view materialName(Material m) {
         return "dura";
     case Material::Brain:
         return "brain";
+    case Material::Sinus:
+        return "sinus";
+    case Material::Artery:
+        return "artery";
     default:
         return "unknown";
     }

@@ -14,20 +14,26 @@
 
 namespace trephine {
 
-// Material labels. Bone materials (cortical, diploe) can be drilled; dura and brain cannot and
-// report a violation when a cutter touches them.
+// Material labels. Bone materials (cortical, diploe) can be drilled; the soft tissues below them
+// (dura, brain and the critical structures a craniotomy must spare) cannot, and report a violation
+// when a cutter touches them. Every label from Dura up is soft tissue.
 enum class Material : uint8_t {
     Air = 0,
     Cortical = 1, // outer and inner tables
     Diploe = 2,   // porous cancellous bone between the tables
     Dura = 3,
     Brain = 4,
+    Sinus = 5,  // the superior sagittal sinus, in the midline under the inner table
+    Artery = 6, // the middle meningeal artery and its branches, in grooves of the inner table
     Count
 };
 inline constexpr int kMaterialCount = int(Material::Count);
 std::string_view materialName(Material m);
 inline bool isBone(Material m) {
     return m == Material::Cortical || m == Material::Diploe;
+}
+inline bool isSoftTissue(Material m) {
+    return m >= Material::Dura && m < Material::Count;
 }
 
 // Density at or above which a voxel is solid: the iso-value of the rendered surface and of haptic
