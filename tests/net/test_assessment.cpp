@@ -6,7 +6,11 @@
 #include "libsim/error.h"
 #include "libsim/skull.h"
 #include "net/debrief.h"
+#include "net/session_client.h"
+#include "net/session_server.h"
 #include "net/sim_step.h"
+
+#include "loopback.h"
 
 #include <gtest/gtest.h>
 
@@ -400,4 +404,59 @@ TEST(AssessmentProtocol, MessagesRoundTripAndOutOfRangeIsMalformed) {
     EXPECT_FALSE(decodeMessage(encodeMessage(unordered), sback));
     bytes.pop_back(); // cut short
     EXPECT_FALSE(decodeMessage(bytes, sback));
+}
+
+// Over loopback ENet: the same rules reach real clients.
+TEST(AssessmentSession, WarningsAndSnapshotsReachWhomTheyShould) {
+    using namespace trephine::testing;
+    const Volume v = sinusUnderBone();
+    SessionServer server(v, loopbackServerConfig("sinus"));
+    server.start();
+    SessionClient ada(namedClientConfig(v, "ada", Role::Trainee, 32));
+    SessionClient ben(namedClientConfig(v, "ben", Role::Trainee, 32));
+    SessionClient iris(namedClientConfig(v, "iris", Role::Instructor, 32));
+    std::vector<SessionClient*> all{&ada, &ben, &iris};
+    for (SessionClient* c : all)
+        c->connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil(all, [&] {
+        return ada.welcomed() && ben.welcomed() && iris.welcomed() &&
+               iris.participants().size() == 3;
+    }));
+    const uint16_t adaId = ada.welcome().clientId, benId = ben.welcome().clientId;
+    // Ada's burr goes down onto the sinus; Ben's stays high above the bone.
+    float z = 6.0f;
+    ASSERT_TRUE(pumpUntil(all, [&] {
+        ToolState t;
+        t.diameterMm = 3.0f;
+        t.position = {0.0f, 0.0f, z};
+        z = std::max(-4.0f, z - 0.05f);
+        ada.sendToolState(t);
+        t.position = {8.0f, 8.0f, 9.0f};
+        ben.sendToolState(t);
+        auto mine = ada.warnings().find(adaId);
+        auto seen = iris.warnings().find(adaId);
+        return mine != ada.warnings().end() && mine->second.zone == Zone::Violation &&
+               seen != iris.warnings().end() && seen->second.zone == Zone::Violation &&
+               iris.assessment().list.size() == 3 && ben.snapshotsReceived() > 0 &&
+               ada.snapshotsReceived() > 0;
+    }));
+    EXPECT_EQ(ben.warningsReceived(), 0u) << "another trainee's warnings never reach a trainee";
+    ASSERT_EQ(ben.assessment().list.size(), 1u);
+    EXPECT_EQ(ben.assessment().list[0].clientId, benId);
+    ASSERT_EQ(ada.assessment().list.size(), 1u);
+    std::set<Zone> zones;
+    for (const SafetyWarning& w : iris.warningLog())
+        zones.insert(w.zone);
+    EXPECT_TRUE(zones.count(Zone::Danger)) << "the instructor heard of the danger before";
+    for (SessionClient* c : all)
+        c->disconnect();
+    server.stop();
+    const nlohmann::json report = nlohmann::json::parse(server.reportJson());
+    ASSERT_EQ(report["participants"].size(), 3u);
+    EXPECT_EQ(report["participants"][0]["name"], "ada");
+    EXPECT_EQ(report["participants"][0]["metrics"]["contacts"]["sinus"], 1);
+    EXPECT_GE(report["participants"][0]["metrics"]["warnings"].get<int>(), 3);
+    EXPECT_EQ(report["participants"][1]["metrics"]["warnings"], 0);
+    // No artery in this volume: the structures present only.
+    EXPECT_EQ(report["assessment"]["structures"], nlohmann::json::array({"dura", "sinus"}));
 }
