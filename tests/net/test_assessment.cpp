@@ -453,10 +453,14 @@ TEST(AssessmentSession, WarningsAndSnapshotsReachWhomTheyShould) {
     server.stop();
     const nlohmann::json report = nlohmann::json::parse(server.reportJson());
     ASSERT_EQ(report["participants"].size(), 3u);
-    EXPECT_EQ(report["participants"][0]["name"], "ada");
-    EXPECT_EQ(report["participants"][0]["metrics"]["contacts"]["sinus"], 1);
-    EXPECT_GE(report["participants"][0]["metrics"]["warnings"].get<int>(), 3);
-    EXPECT_EQ(report["participants"][1]["metrics"]["warnings"], 0);
+    std::map<std::string, nlohmann::json> byName; // ids follow the order the connections came in
+    for (const auto& p : report["participants"])
+        byName[p["name"].get<std::string>()] = p;
+    EXPECT_EQ(byName.at("ada")["id"], adaId);
+    EXPECT_EQ(byName.at("ada")["metrics"]["contacts"]["sinus"], 1);
+    EXPECT_GE(byName.at("ada")["metrics"]["warnings"].get<int>(), 3);
+    EXPECT_EQ(byName.at("ben")["metrics"]["warnings"], 0);
+    EXPECT_EQ(byName.at("iris")["role"], "instructor");
     // No artery in this volume: the structures present only.
     EXPECT_EQ(report["assessment"]["structures"], nlohmann::json::array({"dura", "sinus"}));
 }
