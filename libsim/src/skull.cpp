@@ -10,6 +10,7 @@
 #include "libsim/thread_pool.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <glm/geometric.hpp>
 #include <glm/vec2.hpp>
@@ -148,9 +149,11 @@ struct SkullModel {
     }
 
     // Partial volume at the outer surface and the cut: 128 (kSurfaceDensity) exactly on the
-    // surface, linear in distance, 0 at kRampVoxels voxels outside. A ramp of +-1 voxel (rather
-    // than +-0.5) keeps most trilinear cells on the surface unclamped, which removes the
-    // "wood-grain" rings a clamped ramp shows under gradient shading.
+    // surface, linear in distance, 0 at kRampVoxels voxels outside. The renderer's normal is the
+    // trilinear blend of central differences at the hit cell's corners, a stencil reaching about
+    // 2.7 voxels either side of the surface; where it meets a clamped ramp the normal tilts with
+    // the surface's sub-voxel phase and the shading shows contour rings. A ramp of 2.5 voxels
+    // keeps that stencil on the linear part.
     float ramp(float sd) const {
         return std::clamp(128.0f - 128.0f * sd / (kRampVoxels * h), 0.0f, 255.0f);
     }
@@ -228,12 +231,83 @@ struct SkullModel {
             layer = std::clamp(float(kSkullDuraDensity) - 80.0f * below, float(kSkullBrainDensity),
                                float(kSkullDuraDensity));
             material = std::lround(layer) >= kSurfaceDensity ? Material::Dura : Material::Brain;
+            blend(sinusCoverage(p, depth - (tOuter + tDiploe + tInner)), kSkullSinusDensity,
+                  Material::Sinus, layer, material);
         }
+        // The artery lies in a groove of the inner table, half in bone and half in dura.
+        const float tBone = tOuter + tDiploe + tInner;
+        if (std::fabs(depth - tBone) < arteryRadius() + h)
+            blend(arteryCoverage(p, depth - (tBone - 0.35f * arteryRadius())), kSkullArteryDensity,
+                  Material::Artery, layer, material);
         float d = std::min(layer, cover);
         density = uint8_t(std::lround(d));
         if (density == 0)
             material = Material::Air;
     }
+
+    // [SECTION] Critical structures: the superior sagittal sinus and the middle meningeal artery.
+    // Each has a signed distance to its boundary; a voxel takes the structure's density and label
+    // by the fraction of it the structure covers (partial volume, one voxel wide), so the
+    // structures' surfaces shade smoothly once a drill exposes them.
+
+    // Fraction (0..1) of a voxel of edge h whose centre lies `sd` mm from a boundary (negative
+    // inside).
+    float coverage(float sd) const { return std::clamp(0.5f - sd / h, 0.0f, 1.0f); }
+    // Brain made visible by the blend is labelled the structure: no brain voxel is ever drawn.
+    static void blend(float cover, uint8_t density, Material m, float& layer, Material& material) {
+        if (cover <= 0.0f)
+            return;
+        layer += cover * (float(density) - layer);
+        if (cover >= 0.5f ||
+            (material == Material::Brain && std::lround(layer) >= long(kSurfaceDensity)))
+            material = m;
+    }
+
+    // The sinus: a triangle in cross-section, its base on the inner table in the midline and its
+    // apex below, widening from front to back as the real sinus does. `below` is the depth under
+    // the inner table.
+    float sinusCoverage(glm::vec3 p, float below) const {
+        float t = std::clamp((60.0f - p.y) / 160.0f, 0.0f, 1.0f);
+        float half = kSinusFrontHalfWidthMm + t * (kSinusBackHalfWidthMm - kSinusFrontHalfWidthMm);
+        float height = kSinusHeightPerWidth * half;
+        // Distance to the triangle's sloping side (approximately, in the x-depth plane) or to
+        // its base at the inner table.
+        float side = (std::fabs(p.x) - half * (1.0f - below / height)) * height /
+                     std::sqrt(height * height + half * half);
+        return coverage(std::max(side, -below));
+    }
+
+    float arteryRadius() const { return std::max(kArteryRadiusMm, 0.6f * h); }
+
+    // The artery: a tube along a branching path on each temporal-parietal wall, its course given
+    // in (y, z) (the walls are nearly vertical there, so a distance in y-z is one along the
+    // wall). `off` is the depth relative to the tube's centre line.
+    float arteryCoverage(glm::vec3 p, float off) const {
+        float along = 1e9f;
+        for (const auto& branch : kArteryBranches)
+            for (size_t i = 0; i + 1 < branch.size(); ++i)
+                along = std::min(along, segmentDistance({p.y, p.z}, branch[i], branch[i + 1]));
+        if (along > arteryRadius() + h)
+            return 0.0f;
+        return coverage(std::sqrt(along * along + off * off) - arteryRadius());
+    }
+    static float segmentDistance(glm::vec2 q, glm::vec2 a, glm::vec2 b) {
+        glm::vec2 ab = b - a;
+        float t = std::clamp(glm::dot(q - a, ab) / glm::dot(ab, ab), 0.0f, 1.0f);
+        return glm::length(q - (a + t * ab));
+    }
+
+    static constexpr float kSinusFrontHalfWidthMm = 2.0f;
+    static constexpr float kSinusBackHalfWidthMm = 4.5f;
+    static constexpr float kSinusHeightPerWidth = 1.4f;
+    static constexpr float kSinusMaxDepthMm = kSinusBackHalfWidthMm * kSinusHeightPerWidth;
+    static constexpr float kArteryRadiusMm = 0.8f;
+    // The trunk rises from the foramen spinosum above the cut, then splits into a frontal
+    // branch running up behind the coronal suture and a parietal branch running back.
+    static constexpr std::array<std::array<glm::vec2, 4>, 2> kArteryBranches = {{
+        {{{6.0f, -41.0f}, {8.0f, -28.0f}, {18.0f, -12.0f}, {17.0f, 16.0f}}},
+        {{{8.0f, -28.0f}, {-12.0f, -20.0f}, {-35.0f, -10.0f}, {-58.0f, 2.0f}}},
+    }};
 
     static constexpr float kBregmaY = 22.0f;
     static constexpr float kLambdaY = -62.0f;
@@ -243,9 +317,11 @@ struct SkullModel {
     // Bound on |grad F| over the volume: 1 / (smallest semi-axis, >= 62.9 mm over all seeds) plus
     // the egg term (< 0.001), with room to spare.
     static constexpr float kMaxGradF = 1.0f / 55.0f;
-    static constexpr float kRampVoxels = 1.0f;
+    static constexpr float kRampVoxels = 2.5f;
     // Below this depth every voxel is plain brain (the dura/brain blend is one voxel wide).
-    float deepMm() const { return kMaxBoneMm + duraMm + h + 0.01f; }
+    float deepMm() const {
+        return kMaxBoneMm + std::max({duraMm, kSinusMaxDepthMm, arteryRadius()}) + 2.0f * h + 0.01f;
+    }
     static constexpr float kMaxBoneMm =
         kSkullOuterTableMm + 0.2f + kSkullDiploeMm + 0.35f + kSkullInnerTableMm + 0.15f;
 };

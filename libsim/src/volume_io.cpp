@@ -810,6 +810,20 @@ FileFormat sniffFormat(const std::string& path) {
 
 } // namespace
 
+Volume detail::readVolumeFile(const std::string& path, const std::optional<DensityWindow>& window) {
+    switch (sniffFormat(path)) {
+    case FileFormat::Nrrd:
+        return readNrrd(path, window);
+    case FileFormat::Nifti:
+        return readNifti(path, window);
+    case FileFormat::Unknown:
+        break;
+    }
+    fail(path, "unknown volume format: expected .nrrd, .nhdr, .nii or .nii.gz (for raw voxels use "
+               "raw:" +
+                   path + "?dims=X,Y,Z&type=T)");
+}
+
 // [SECTION] loadVolume / saveVolume / help
 
 Volume loadVolume(const std::string& spec) {
@@ -829,7 +843,7 @@ Volume loadVolume(const std::string& spec) {
         fail(spec, "reading image slices needs sim_image (openVolume in "
                    "libsim_image/volume_slices.h)");
 
-    VolumeSpecQuery q = parseVolumeSpecQuery(spec, "window,spacing");
+    VolumeSpecQuery q = parseVolumeSpecQuery(spec, "window,spacing,labels,names");
     const std::string& path = q.name;
     std::error_code ec;
     fs::file_status st = fs::status(path, ec);
@@ -840,20 +854,18 @@ Volume loadVolume(const std::string& spec) {
         fail(path, "is a folder: reading image slices needs sim_image (openVolume in "
                    "libsim_image/volume_slices.h)");
     std::optional<DensityWindow> window = parseWindowOption(q, spec);
-    Volume v;
-    switch (sniffFormat(path)) {
-    case FileFormat::Nrrd:
-        v = readNrrd(path, window);
-        break;
-    case FileFormat::Nifti:
-        v = readNifti(path, window);
-        break;
-    case FileFormat::Unknown:
-        fail(path, "unknown volume format: expected .nrrd, .nhdr, .nii or .nii.gz (for raw "
-                   "voxels use raw:" +
-                       path + "?dims=X,Y,Z&type=T)");
-    }
+    Volume v = readVolumeFile(path, window);
     v.setSpacing(parseSpacingOption(q, spec, v.spacing()));
+    if (q.has("names") && !q.has("labels"))
+        fail(spec, "names=FILE names the labels of a label map: give labels=FILE too");
+    if (q.has("labels")) {
+        // Relative to the scan's folder, as a NRRD's detached data file is to its header.
+        const fs::path folder = fs::path(path).parent_path();
+        auto beside = [&](const std::string& p) {
+            return p.empty() || fs::path(p).is_absolute() ? p : (folder / p).string();
+        };
+        applyLabelMap(v, beside(q.get("labels")), beside(q.get("names")), spec);
+    }
     return v;
 }
 
@@ -927,8 +939,9 @@ std::string volumeSpecHelp() {
   skull[:N][?seed=S]   procedural skull, N^3 voxels, N 32..512 (default 128), seed default 1
   sphere[:N]           solid cortical sphere, N^3 voxels of 1 mm, N 8..512 (default 64)
   box[:N]              solid cortical box filling the middle half, N 8..512 (default 64)
-  FILE[?window=lo,hi&spacing=a,b,c]
-                       .nrrd/.nhdr (raw or gzip) or NIfTI-1 .nii/.nii.gz
+  FILE[?window=lo,hi&spacing=a,b,c&labels=SEG&names=TABLE]
+                       .nrrd/.nhdr (raw or gzip) or NIfTI-1 .nii/.nii.gz; SEG a label map
+                       naming dura, sinus, artery, brain (3D Slicer segment names or TABLE)
   raw:FILE?dims=X,Y,Z[&type=T&endian=little|big&spacing=a,b,c&offset=BYTES&window=lo,hi]
                        headerless voxels, x fastest; T: uint8 (default), int8, int16, uint16,
                        int32, uint32, float32, float64; FILE may end in .gz
@@ -936,7 +949,8 @@ std::string volumeSpecHelp() {
                        2D image slices (PNG, TIFF, ...) in natural filename order
 Spacing is in mm per voxel. Scalars other than uint8 map to density through the window
 (default -300..900, Hounsfield units: 300 HU is the bone surface); uint8 passes through.
-Materials: density >= 234 cortical, >= 128 diploe, else air (our NRRD keeps its own labels).
+Materials: density >= 234 cortical, >= 128 diploe, else air (our NRRD keeps its own labels,
+a label map adds the structures).
 See docs/volumes.md.)";
 }
 

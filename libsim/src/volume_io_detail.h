@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <cstdio>
+#include <map>
 #include <memory>
 #include <optional>
 #include <string>
@@ -165,9 +166,22 @@ Volume decodeVoxels(ByteSource& src, glm::ivec3 dims, glm::vec3 spacing, const D
 void checkRawSize(const FileSource& file, uint64_t offset, uint64_t need);
 
 // Formats
+// A NRRD or NIfTI file, by name or magic; anything else throws Error naming it.
+Volume readVolumeFile(const std::string& path, const std::optional<DensityWindow>& window);
 Volume readNrrd(const std::string& path, const std::optional<DensityWindow>& window);
 Volume readNifti(const std::string& path, const std::optional<DensityWindow>& window);
 void writeNrrd(const Volume& v, const std::string& path, bool compress);
+// The label value -> segment name table of a 3D Slicer segmentation NRRD's header (empty when it
+// has none).
+std::map<int, std::string> readNrrdSegmentNames(const std::string& path);
+// Label maps: label values 1..kMaxLabelValue (0 is unlabelled), read through the density window
+// 0..255 so each value is its own byte.
+inline constexpr int kMaxLabelValue = 254;
+// Applies the label map `labelsPath` (an integer NRRD or NIfTI of v's dimensions) to v, the names
+// from `namesPath` (a colour table: "VALUE NAME [R G B A]" lines) or else from the NRRD's segment
+// fields. `spec` names the volume in errors. volume_labels.cpp.
+void applyLabelMap(Volume& v, const std::string& labelsPath, const std::string& namesPath,
+                   const std::string& spec);
 void writeNifti(const Volume& v, const std::string& path, bool compress);
 
 // Number formatting that round-trips a float ("%.9g").

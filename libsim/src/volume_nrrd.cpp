@@ -398,6 +398,27 @@ Volume readNrrd(const std::string& path, const std::optional<DensityWindow>& win
     return decodeVoxels(*data, dims, spacing, spec, true);
 }
 
+std::map<int, std::string> readNrrdSegmentNames(const std::string& path) {
+    FileSource file(path, path);
+    const Header h = readHeader(file, path);
+    // 3D Slicer's segmentation fields: SegmentK_Name and SegmentK_LabelValue (K from 0).
+    std::map<int, std::string> names;
+    for (int k = 0;; ++k) {
+        const std::string prefix = "Segment" + std::to_string(k) + "_";
+        auto name = h.keyValues.find(prefix + "Name");
+        if (name == h.keyValues.end())
+            break;
+        int64_t value = k + 1;
+        auto label = h.keyValues.find(prefix + "LabelValue");
+        if (label != h.keyValues.end() &&
+            (!parseInt(trim(label->second), value) || value < 1 || value > kMaxLabelValue))
+            fail(path, prefix + "LabelValue '" + label->second + "' is not a label from 1 to " +
+                           std::to_string(kMaxLabelValue));
+        names[int(value)] = trim(name->second);
+    }
+    return names;
+}
+
 void writeNrrd(const Volume& v, const std::string& path, bool compress) {
     const bool detachedData = endsWith(toLower(path), ".nhdr");
     const std::string dataPath = detachedData ? detachedDataPath(path, compress) : path;

@@ -22,6 +22,8 @@ inline constexpr float kSkullDuraMm = 1.0f;          // at least one voxel at co
 inline constexpr uint8_t kSkullCorticalDensity = 240;
 inline constexpr uint8_t kSkullDuraDensity = 180;  // >= kSurfaceDensity: exposed dura is visible
 inline constexpr uint8_t kSkullBrainDensity = 100; // < kSurfaceDensity: never rendered
+inline constexpr uint8_t kSkullSinusDensity = 190; // blood-filled: visible once exposed
+inline constexpr uint8_t kSkullArteryDensity = 200;
 // Kocher's point on the patient's right (+x is the patient's left): 3 cm from the midline, about
 // 1 cm anterior to the coronal suture.
 inline constexpr float kKocherPointXMm = -30.0f;
@@ -30,9 +32,12 @@ inline constexpr float kKocherPointYMm = 35.0f;
 inline constexpr float kSphereRampMm = 2.0f;
 
 // Cranial vault (outer table, porous diploe, inner table; about 6-8 mm of bone) over a dura and
-// brain region. Axes: +z superior (vertex of the head), +y anterior (forehead), +x to the
-// patient's left. The physical size does not depend on n; the spacing is the field of view / n.
-// n from 32 to 512; other n throw Error.
+// brain region, with the critical structures a craniotomy must spare: the superior sagittal sinus
+// in the midline under the inner table, and the middle meningeal artery with its frontal and
+// parietal branches in grooves of the inner table on both temporal-parietal walls. Axes: +z
+// superior (vertex of the head), +y anterior (forehead), +x to the patient's left. The physical
+// size does not depend on n; the spacing is the field of view / n. n from 32 to 512; other n throw
+// Error.
 Volume makeSkull(int n, uint32_t seed = kDefaultSkullSeed);
 
 // Where a trainee drills the default burr hole on makeSkull(n, ...): a point on the outer table
