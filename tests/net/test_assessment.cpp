@@ -464,3 +464,50 @@ TEST(AssessmentSession, WarningsAndSnapshotsReachWhomTheyShould) {
     // No artery in this volume: the structures present only.
     EXPECT_EQ(report["assessment"]["structures"], nlohmann::json::array({"dura", "sinus"}));
 }
+
+TEST(Assessment, OnTheSkullTheDangerWarningPrecedesContactWithTheSinus) {
+    const Volume skull = makeSkull(128);
+    // A column down the midline whose first soft tissue under the bone is the sinus.
+    const glm::ivec3 d = skull.dims();
+    glm::vec3 top(0.0f), sinus(0.0f);
+    bool found = false;
+    for (int y = d.y / 2; y < d.y && !found; ++y)
+        for (int x : {d.x / 2 - 1, d.x / 2}) {
+            int z = d.z - 1;
+            while (z >= 0 && skull.material(x, y, z) == Material::Air)
+                --z;
+            int bone = z;
+            while (z >= 0 && isBone(skull.material(x, y, z)))
+                --z;
+            if (z >= 0 && bone > z && skull.material(x, y, z) == Material::Sinus) {
+                top = skull.voxelCenter({x, y, bone});
+                sinus = skull.voxelCenter({x, y, z});
+                found = true;
+                break;
+            }
+        }
+    ASSERT_TRUE(found) << "skull:128 has a sinus under the vault's midline";
+    Rig rig(skull);
+    rig.join(1, "ada", Role::Trainee);
+    // Straight down from 4 mm above the bone at 4 mm/s, drilling, 1 kHz states.
+    uint32_t firstDanger = 0, firstViolation = 0;
+    bool contact = false;
+    glm::vec3 p = top + glm::vec3(0.0f, 0.0f, 4.0f);
+    for (int batch = 0; batch < 1000 && !contact && p.z > sinus.z - 3.0f; ++batch) {
+        std::vector<SimEvent> events;
+        for (int i = 0; i < 10; ++i, p.z -= 0.004f)
+            events.push_back(rig.tool(1, p, true));
+        rig.run(events);
+        for (auto& [w, to] : rig.warnings()) {
+            if (w.zone == Zone::Danger && !firstDanger)
+                firstDanger = w.toolSequence;
+            if (w.zone == Zone::Violation && !firstViolation)
+                firstViolation = w.toolSequence;
+        }
+        contact = rig.metrics(1).structures.at("sinus").contacts > 0;
+    }
+    ASSERT_TRUE(contact) << "the burr reached the sinus";
+    ASSERT_NE(firstDanger, 0u);
+    EXPECT_LT(firstDanger, firstViolation);
+    EXPECT_EQ(rig.metrics(1).structures.at("dura").contacts, 0u) << "the sinus first";
+}
