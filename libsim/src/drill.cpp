@@ -287,7 +287,10 @@ void erodePass(Volume& vol, const Frame& f, const Box3i& box, const Clip& clip, 
             else if (m == uint8_t(Material::Diploe))
                 dec = decrement * kDiploeErosionFactor;
             else {
-                dura += isSoftTissue(Material(m));
+                if (isSoftTissue(Material(m))) {
+                    ++dura;
+                    ++res.contactBy[m];
+                }
                 continue;
             }
             if (dec == 0)
@@ -299,6 +302,7 @@ void erodePass(Volume& vol, const Frame& f, const Box3i& box, const Clip& clip, 
             if (nd == 0) {
                 mrow[x] = uint8_t(Material::Air);
                 ++zeroed;
+                ++res.removedBy[m];
             }
             ++changed;
             rowLo = std::min(rowLo, x);

@@ -252,6 +252,8 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
         s->others = c->others();
         s->participants = c->participants();
         s->annotations = c->annotations();
+        s->warnings = c->warnings();
+        s->assessment = c->assessment();
         s->updatesApplied = c->updatesApplied();
         s->fullUpdates = c->fullUpdates();
         s->updatesRejected = c->updatesRejected();

@@ -99,6 +99,8 @@ nlohmann::ordered_json toJson(const ServerReport& r, const NetStats& stats) {
                          {"sync_switches", p.syncSwitches},
                          {"kicked", p.kicked}});
     j["peers"] = std::move(peers);
+    j["assessment"] = toJson(r.assessment);
+    j["participants"] = toJson(r.participants);
     return j;
 }
 

@@ -147,6 +147,10 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         return onHapticRelay(data, nowUs);
     case MessageType::Pong:
         return onPong(data, nowUs);
+    case MessageType::SafetyWarning:
+        return onSafetyWarning(data);
+    case MessageType::AssessmentSnapshot:
+        return onAssessmentSnapshot(data);
     default:
         return false;
     }

@@ -240,6 +240,8 @@ bool SessionPolicy::hello(uint16_t id, Peer& p, std::span<const uint8_t> data, u
     ev.codec = h.codec;
     ev.sync = h.sync;
     ev.volumeCodec = h.volumeCodec;
+    ev.role = h.role;
+    ev.name = h.name;
     out.events.push_back(std::move(ev));
     return true;
 }
@@ -280,9 +282,11 @@ bool SessionPolicy::toolState(uint16_t id, Peer& p, std::span<const uint8_t> dat
         t.drilling = false;
         m_book.count(&ServerCounters::drillingPaused);
     }
+    float forceN = -1.0f;
     if (m_config.hapticModels)
-        answerHaptic(id, p, t, now, out);
+        forceN = answerHaptic(id, p, t, now, out);
     SimEvent ev = SimEvent::of(SimEvent::Kind::Tool, id);
+    ev.forceN = forceN; // the assessment's force figures
     ev.tool = t;
     ev.arrivedUs = now;
     out.events.push_back(std::move(ev));
@@ -296,8 +300,8 @@ bool SessionPolicy::toolState(uint16_t id, Peer& p, std::span<const uint8_t> dat
 
 // The force at the tool's pose, answered at once (before and independent of drilling), and
 // relayed to every instructor but the tool's own client.
-void SessionPolicy::answerHaptic(uint16_t id, Peer& p, const ToolState& t, uint64_t now,
-                                 PolicyOutput& out) {
+float SessionPolicy::answerHaptic(uint16_t id, Peer& p, const ToolState& t, uint64_t now,
+                                  PolicyOutput& out) {
     HapticModel m;
     m.toolSequence = t.sequence;
     m.serverReceivedUs = now;
@@ -325,6 +329,7 @@ void SessionPolicy::answerHaptic(uint16_t id, Peer& p, const ToolState& t, uint6
         out.messages.push_back({instructors, Channel::Haptic, encodeMessage(relay)});
     }
     out.flush = true;
+    return glm::length(f.force.force);
 }
 
 bool SessionPolicy::syncMode(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,

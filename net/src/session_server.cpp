@@ -4,6 +4,7 @@
 #include "libsim/force_model.h"
 #include "libsim/replacing_file.h"
 #include "libsim/volume_io.h"
+#include "net/debrief.h"
 #include "net/marks_file.h"
 #include "net/outbox.h"
 #include "net/session_policy.h"
@@ -36,6 +37,13 @@ ServerConfig withScene(ServerConfig c, const Volume& volume) {
     return c;
 }
 
+StepConfig stepConfig(const ServerConfig& c) {
+    StepConfig s{c.maxStepS, c.maxSweepMm, c.renderThreads, {}};
+    s.assessment.cautionMm = c.cautionMm;
+    s.assessment.dangerMm = c.dangerMm;
+    return s;
+}
+
 } // namespace
 
 struct SessionServer::Impl {
@@ -43,8 +51,7 @@ struct SessionServer::Impl {
         : host(Host::listen(c.port, c.maxClients + kSparePeers)),
           wakeFd(eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)),
           outbox(c.maxInFlightBytes, book, steadyNowUs, [this] { wakeNetwork(); }),
-          step(std::move(v), StepConfig{c.maxStepS, c.maxSweepMm, c.renderThreads}, outbox, book,
-               steadyNowUs),
+          step(std::move(v), stepConfig(c), outbox, book, steadyNowUs),
           policy(withScene(c, step.volume()), step.volume().dims(), step.volume().spacing(), book,
                  [this](const ToolState& t, glm::vec3 velocity) { return force(t, velocity); }),
           maxQueuedToolStates(c.maxQueuedToolStates) {
@@ -97,6 +104,7 @@ struct SessionServer::Impl {
     bool sendTo(uint16_t id, Channel ch, const std::vector<uint8_t>& bytes,
                 const Host::InFlight& inFlight = {});
     void sendUpdates();
+    void sendNotices();
     void sayGoodbye();
     void wakeNetwork();
     void waitNetwork(int timeoutMs);
@@ -242,6 +250,20 @@ void SessionServer::stop() {
     m_impl->outbox.clear();
     if (!m_config.saveOnExit.empty())
         saveSession();
+    if (!m_config.debriefDir.empty())
+        writeDebriefs();
+}
+
+// A debrief per participant (net/debrief.h); a folder that cannot be written loses only them.
+void SessionServer::writeDebriefs() {
+    std::lock_guard lock(m_impl->stepMutex);
+    try {
+        const Assessment& a = m_impl->step.assessment();
+        m_debriefs =
+            net::writeDebriefs(m_config.debriefDir, a, a.metrics(steadyNowUs()), a.timelines());
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "trephine server: no debrief: %s\n", e.what());
+    }
 }
 
 // Writes saveOnExit and the marks beside it; should that fail, an emergency copy in the
@@ -494,6 +516,14 @@ void SessionServer::Impl::sendUpdates() {
     }
 }
 
+// The assessment's warnings and snapshots (net/assessment.h), to whoever is still here.
+void SessionServer::Impl::sendNotices() {
+    for (const Assessment::Notice& n : step.assessment().takeNotices())
+        for (uint16_t id : n.to)
+            if (policy.live(id))
+                sendTo(id, Channel::Control, n.bytes);
+}
+
 // Says goodbye so clients print a reason, and gives the goodbyes a moment to leave; a client
 // connecting meanwhile is told the server is shutting down.
 void SessionServer::Impl::sayGoodbye() {
@@ -528,6 +558,7 @@ void SessionServer::networkLoop() {
         s.waitNetwork(1);
         s.host.service(0, [&](const ENetEvent& ev) { s.onEvent(ev); });
         s.sendUpdates();
+        s.sendNotices();
         const uint64_t now = steadyNowUs();
         PolicyOutput out;
         s.policy.update(now, out);
@@ -551,8 +582,11 @@ void SessionServer::simulationLoop() {
             std::unique_lock lock(s.inMutex);
             s.inCv.wait_for(lock, std::chrono::milliseconds(10),
                             [&] { return !s.inbox.empty() || s.stopSim; });
-            if (s.inbox.empty() && s.stopSim)
+            if (s.inbox.empty() && s.stopSim) {
+                std::lock_guard stepLock(s.stepMutex);
+                s.step.assessment().finish(steadyNowUs());
                 return;
+            }
             batch.clear();
             batch.swap(s.inbox);
             s.inboxTools = 0;
@@ -560,9 +594,10 @@ void SessionServer::simulationLoop() {
         }
         {
             std::lock_guard stepLock(s.stepMutex);
-            if (batch.empty())
+            if (batch.empty()) {
                 s.step.offerNoted();
-            else
+                s.step.assessment().tick(steadyNowUs());
+            } else
                 s.step.step(batch, steadyNowUs());
         }
         std::lock_guard lock(s.inMutex);

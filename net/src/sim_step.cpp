@@ -21,13 +21,19 @@ Volume normaliseAir(Volume v) {
     return v;
 }
 
+AssessmentConfig withSweep(const StepConfig& c) {
+    AssessmentConfig a = c.assessment;
+    a.maxSweepMm = c.maxSweepMm;
+    return a;
+}
+
 } // namespace
 
 SimulationStep::SimulationStep(Volume volume, const StepConfig& config, Outbox& outbox,
                                ReportBook& book, ServerClock clock)
     : m_config(config), m_outbox(outbox), m_book(book), m_clock(std::move(clock)),
       m_volume(normaliseAir(std::move(volume))), m_pool(config.renderThreads),
-      m_renderer(m_volume, &m_pool) {}
+      m_renderer(m_volume, &m_pool), m_assessment(m_volume, withSweep(config), book, &m_pool) {}
 
 void SimulationStep::Batch::changedBy(const Box3i& box, uint64_t arrivedUs) {
     changed.merge(box);
@@ -51,7 +57,7 @@ void SimulationStep::step(const std::vector<SimEvent>& batch, uint64_t now) {
             applyVoxels(ev, b);
             break;
         case SimEvent::Kind::Tool:
-            applyTool(ev, b);
+            applyTool(ev, b, now);
             break;
         }
     }
@@ -59,6 +65,7 @@ void SimulationStep::step(const std::vector<SimEvent>& batch, uint64_t now) {
     // the DBI clients' renders.
     postVolumes(b);
     renderViews(b, updateGrid(b));
+    m_assessment.tick(now);
 }
 
 // [SECTION] events
@@ -70,6 +77,7 @@ void SimulationStep::applyClientEvent(const SimEvent& ev, Batch& b, uint64_t now
         Client& c = m_clients[ev.client];
         c.camera = ev.camera;
         if (ev.kind == SimEvent::Kind::Join) {
+            m_assessment.join(ev.client, ev.name, ev.role, now);
             c.sync = ev.sync;
             m_outbox.join(ev.client, ev.inFlight, ev.codec, ev.volumeCodec);
             if (c.sync == Sync::Volume)
@@ -100,6 +108,7 @@ void SimulationStep::applyClientEvent(const SimEvent& ev, Batch& b, uint64_t now
         break;
     }
     case SimEvent::Kind::Leave:
+        m_assessment.leave(ev.client, now);
         m_clients.erase(ev.client);
         m_outbox.leave(ev.client);
         b.needFull.erase(ev.client);
@@ -139,7 +148,7 @@ void SimulationStep::applyVoxels(const SimEvent& ev, Batch& b) {
     b.materials = true;
 }
 
-void SimulationStep::applyTool(const SimEvent& ev, Batch& b) {
+void SimulationStep::applyTool(const SimEvent& ev, Batch& b, uint64_t now) {
     auto it = m_clients.find(ev.client);
     if (it == m_clients.end())
         return;
@@ -167,14 +176,19 @@ void SimulationStep::applyTool(const SimEvent& ev, Batch& b) {
     const bool sweep = c.lastDrilling;
     c.lastPose = pose;
     c.lastDrilling = t.drilling && t.speed > 0.0f;
+    AppliedTool applied{ev.client, shape,     pose,       c.lastDrilling,
+                        dt,        ev.forceN, t.sequence, ev.arrivedUs};
     if (!t.drilling || t.speed <= 0.0f) {
         // Lifted clear of bone between holes, the perforator's clutch re-engages (this is the
         // volume's only writer: reading it needs no lock).
         c.driller->observe(m_volume, pose);
+        m_assessment.apply(applied, now);
         return;
     }
-    if (dt <= 0.0f)
+    if (dt <= 0.0f) {
+        m_assessment.apply(applied, now);
         return;
+    }
     // The cutter moved from the last drilling pose to this one during dt: it sweeps the path (a
     // quarter voxel a sub-step, dt shared out), so a fast stroke cuts a groove rather than dents
     // at the sampled poses. The lock is taken per sub-step so that a haptic answer never waits
@@ -194,10 +208,15 @@ void SimulationStep::applyTool(const SimEvent& ev, Batch& b) {
             r = c.driller->drill(m_volume, p, t.speed, stepDt);
         }
         changed.merge(r.changed);
+        for (int m = 0; m < kMaterialCount; ++m) {
+            applied.removedBy[size_t(m)] += r.removedBy[size_t(m)];
+            applied.contactBy[size_t(m)] += r.contactBy[size_t(m)];
+        }
     }
     b.erodeUs += m_clock() - e0;
     if (!changed.empty())
         b.changedBy(changed, ev.arrivedUs);
+    m_assessment.apply(applied, now);
 }
 
 // [SECTION] posting

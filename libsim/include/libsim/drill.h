@@ -7,6 +7,7 @@
 #include "libsim/volume.h"
 
 #include <algorithm>
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -50,6 +51,10 @@ struct DrillResult {
     int64_t duraVoxels = 0;        // speed); dura and brain are never removed, bone around still is
     bool clutchDisengaged = false; // perforator only: the clutch was disengaged for this step
                                    // (the tip has broken through), so nothing was cut
+    // By material label: voxels eroded to zero (by the label they had), and soft-tissue voxels
+    // inside the cutter (which of the structures it touched). The assessment credits them.
+    std::array<int64_t, kMaterialCount> removedBy{};
+    std::array<int64_t, kMaterialCount> contactBy{};
 };
 
 // A tool's motion between two sampled poses, cut into sub-steps so that the cutter sweeps the

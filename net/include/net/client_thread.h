@@ -7,6 +7,7 @@
 #pragma once
 
 #include "libsim/dbi.h"
+#include "net/assessment_protocol.h"
 #include "net/net_stats.h"
 #include "net/protocol.h"
 #include "net/session_client.h"
@@ -97,6 +98,10 @@ struct ClientSnapshot {
     std::map<uint16_t, ParticipantInfo> participants;
     // The instructors' marks on the skull, by increasing id.
     std::vector<AnnotationInfo> annotations;
+    // [Assessment] The newest zone warning per tool (own; an instructor's, everyone's) and the
+    // newest metrics (own; an instructor's, everyone's).
+    std::map<uint16_t, SafetyWarning> warnings;
+    AssessmentSnapshot assessment;
     std::optional<HapticModel> hapticModel; // latest force model (when the client offers it)
     uint64_t hapticModels = 0;
     // [Instructor] the newest relayed force model of every other participant, by client id.

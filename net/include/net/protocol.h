@@ -30,7 +30,8 @@ namespace trephine::net {
 // after the welcome (extent, camera presets, sites, landmarks, the surgical field's mesh:
 // net/scene.h); the welcome's volume name is a label a client never opens; ViewAs and
 // ParticipantView (an instructor watches through a participant's camera).
-inline constexpr uint32_t kProtocolVersion = 8;
+// 9: SafetyWarning and AssessmentSnapshot (net/assessment_protocol.h).
+inline constexpr uint32_t kProtocolVersion = 9;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
 enum class RefuseReason : uint32_t {
@@ -109,8 +110,10 @@ enum class MessageType : uint8_t {
     Scene = 17, // net/scene.h
     ViewAs = 18,
     ParticipantView = 19,
+    SafetyWarning = 20,      // net/assessment_protocol.h
+    AssessmentSnapshot = 21, // net/assessment_protocol.h
 };
-inline constexpr uint8_t kMessageTypeCount = 20; // one past the largest type
+inline constexpr uint8_t kMessageTypeCount = 22; // one past the largest type
 
 enum class Role : uint8_t { Trainee = 0, Instructor = 1 };
 enum class Codec : uint8_t { Raw = 0, Lz4 = 1, Zstd = 2 };

@@ -54,6 +54,13 @@ struct ServerConfig {
     // A connection that has not said hello after this many seconds is closed (BadHello): it
     // would otherwise hold one of the maxClients slots for good.
     float helloTimeoutS = 5.0f;
+    // The assessment's zones (net/assessment.h): a cutter within cautionMm of a critical
+    // structure is in Caution, within dangerMm in Danger (0 < danger < caution < 20 mm).
+    float cautionMm = 3.0f;
+    float dangerMm = 1.0f;
+    // When set, stop() writes a Markdown debrief with SVG plots per participant here
+    // (net/debrief.h).
+    std::string debriefDir;
 };
 
 // The marks (Annotations) go to every participant at most this often, the whole list once.

@@ -5,6 +5,7 @@
 #pragma once
 
 #include "libsim/stats.h"
+#include "net/assessment_metrics.h"
 #include "net/net_stats.h"
 #include "net/protocol.h"
 
@@ -68,6 +69,10 @@ struct ServerReport {
     std::array<ModeReport, 2> modes;      // by Sync
     SampleWindow forceComputeUs{65536};
     SampleWindow hapticServiceUs{65536}; // tool state received -> its HapticModel ready
+    // The assessment (net/assessment.h): its structures and zones, and every participant's
+    // metrics by client id (refreshed with each snapshot, final at each leave).
+    AssessmentSummary assessment;
+    std::map<uint16_t, ParticipantMetrics> participants;
 
     // The totals of `mode` with the participants using it now.
     ModeTotals modeTotals(Sync mode) const;

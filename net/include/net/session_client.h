@@ -11,6 +11,7 @@
 #include "libsim/dbi.h"
 #include "libsim/renderer.h"
 #include "libsim/volume.h"
+#include "net/assessment_protocol.h"
 #include "net/enet_host.h"
 #include "net/net_stats.h"
 #include "net/protocol.h"
@@ -151,6 +152,15 @@ public:
     // The session's marks, as the server's newest Annotations message listed them (by id).
     const std::vector<AnnotationInfo>& annotations() const { return m_annotations; }
     uint64_t annotationListsReceived() const { return m_annotationLists; }
+    // [Assessment] The newest SafetyWarning about each tool this client hears of (its own; an
+    // instructor's, everyone's), by client id; every one received, oldest first (the newest
+    // kMaxWarningLog); and the newest AssessmentSnapshot (own figures, or everyone's).
+    static constexpr size_t kMaxWarningLog = 256;
+    const std::map<uint16_t, SafetyWarning>& warnings() const { return m_warnings; }
+    const std::deque<SafetyWarning>& warningLog() const { return m_warningLog; }
+    uint64_t warningsReceived() const { return m_warningsReceived; }
+    const AssessmentSnapshot& assessment() const { return m_assessment; }
+    uint64_t snapshotsReceived() const { return m_snapshots; }
     uint64_t relaysReceived() const { return m_relays; }
     uint64_t updatesApplied() const { return m_updatesApplied; }
     uint64_t fullUpdates() const { return m_fullUpdates; }
@@ -222,6 +232,8 @@ private:
     bool onHapticModel(std::span<const uint8_t> data, uint64_t nowUs);
     bool onHapticRelay(std::span<const uint8_t> data, uint64_t nowUs);
     bool onPong(std::span<const uint8_t> data, uint64_t nowUs);
+    bool onSafetyWarning(std::span<const uint8_t> data);      // session_client_assessment.cpp
+    bool onAssessmentSnapshot(std::span<const uint8_t> data); // session_client_assessment.cpp
     bool applyImage(const ImageUpdate& u, uint64_t nowUs);
     bool applyVolume(const VolumeUpdate& u, uint64_t nowUs);
     // Volume mode: the whole view rendered from the local volume into m_dbi.
@@ -262,6 +274,11 @@ private:
     uint64_t m_rosters = 0;
     std::vector<AnnotationInfo> m_annotations;
     uint64_t m_annotationLists = 0;
+    std::map<uint16_t, SafetyWarning> m_warnings;
+    std::deque<SafetyWarning> m_warningLog;
+    uint64_t m_warningsReceived = 0;
+    AssessmentSnapshot m_assessment;
+    uint64_t m_snapshots = 0;
     // Whether relays of `id` are kept: everyone until the first roster, then whom it lists (a relay
     // on the tool or haptic channel can trail the reliable roster that dropped its sender).
     bool listed(uint16_t id) const { return m_rosters == 0 || m_participants.count(id) > 0; }

@@ -130,7 +130,8 @@ private:
     void welcome(uint16_t id, uint64_t now, PolicyOutput& out);
     bool toolState(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
                    PolicyOutput& out);
-    void answerHaptic(uint16_t id, Peer& p, const ToolState& t, uint64_t now, PolicyOutput& out);
+    // Returns the force's magnitude (N).
+    float answerHaptic(uint16_t id, Peer& p, const ToolState& t, uint64_t now, PolicyOutput& out);
     bool syncMode(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
                   PolicyOutput& out);
     bool annotate(uint16_t id, const Peer& p, std::span<const uint8_t> data);

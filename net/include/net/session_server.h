@@ -84,6 +84,8 @@ public:
     // not).
     const std::string& savedTo() const { return m_savedTo; }
     const std::string& saveError() const { return m_saveError; }
+    // After stop() with ServerConfig::debriefDir: the debriefs written (Markdown files).
+    const std::vector<std::string>& debriefs() const { return m_debriefs; }
     uint64_t refusedFull() const { return counters().refusedFull; }
     // Connections closed for saying no hello within ServerConfig::helloTimeoutS.
     uint64_t helloTimeouts() const { return counters().helloTimeouts; }
@@ -110,12 +112,14 @@ private:
     void networkLoop();
     void simulationLoop();
     void saveSession();
+    void writeDebriefs();
 
     std::unique_ptr<Impl> m_impl;
     ServerConfig m_config;
     std::atomic<bool> m_stop{false};
     std::atomic<bool> m_started{false};
     std::string m_savedTo, m_saveError;
+    std::vector<std::string> m_debriefs;
     std::thread m_netThread;
     std::thread m_simThread;
 };

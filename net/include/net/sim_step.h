@@ -12,6 +12,7 @@
 #include "libsim/thread_pool.h"
 #include "libsim/tool.h"
 #include "libsim/volume.h"
+#include "net/assessment.h"
 #include "net/enet_host.h"
 #include "net/outbox.h"
 #include "net/protocol.h"
@@ -39,6 +40,9 @@ struct SimEvent {
     Box3i box;                              // Cut, Voxels
     std::vector<uint8_t> density, material; // Voxels
     uint64_t arrivedUs = 0;                 // Tool, Cut, Voxels: the cause time of what they change
+    Role role = Role::Trainee;              // Join
+    std::string name;                       // Join
+    float forceN = -1.0f;    // Tool: the haptic answer's force magnitude (< 0: none computed)
     Host::InFlight inFlight; // Join: the peer's bytes held by ENet (the outbox holds it back)
 
     static SimEvent of(Kind kind, uint16_t client) {
@@ -53,6 +57,7 @@ struct StepConfig {
     float maxStepS = 0.05f;   // ServerConfig::maxStepS
     float maxSweepMm = 10.0f; // ServerConfig::maxSweepMm
     int renderThreads = 0;    // 0: hardware concurrency
+    AssessmentConfig assessment; // zones; its maxSweepMm is taken from maxSweepMm
 };
 
 class SimulationStep {
@@ -67,6 +72,8 @@ public:
     void step(const std::vector<SimEvent>& batch, uint64_t now);
     // With nothing to apply: held-back volume clients' noted changes go once they can.
     void offerNoted() { m_outbox.offerNoted(m_volume); }
+    // The assessment of every applied tool state (its notices go out on the network thread).
+    Assessment& assessment() { return m_assessment; }
 
     // A fresh full render of the current volume (what a converged client holds).
     Dbi render(const Camera& camera);
@@ -110,7 +117,7 @@ private:
     void applyClientEvent(const SimEvent& ev, Batch& b, uint64_t now);
     void applyCut(const SimEvent& ev, Batch& b);
     void applyVoxels(const SimEvent& ev, Batch& b);
-    void applyTool(const SimEvent& ev, Batch& b);
+    void applyTool(const SimEvent& ev, Batch& b, uint64_t now);
     void postVolumes(const Batch& b);
     uint32_t updateGrid(const Batch& b);
     void renderViews(const Batch& b, uint32_t gridUs);
@@ -124,6 +131,7 @@ private:
     Volume m_volume;
     ThreadPool m_pool;
     Renderer m_renderer;
+    Assessment m_assessment;
     std::map<uint16_t, Client> m_clients;
     std::vector<ViewFrame> m_views;
     // Changes the renderer's brick grid has not taken yet. It is rendering data for DBI views,
