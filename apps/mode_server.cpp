@@ -8,6 +8,7 @@
 #include "libsim_image/volume_slices.h"
 #include "net/marks_file.h"
 #include "net/scene.h"
+#include "net/server_banner.h"
 #include "net/session_server.h"
 
 #include <atomic>
@@ -81,6 +82,12 @@ int runServer(const ServerOptions& o) {
     server.start();
     std::printf("trephine server: %s (%d x %d x %d) on port %u; Ctrl-C stops\n", o.volume.c_str(),
                 d.x, d.y, d.z, unsigned(server.port()));
+    // Where to join from, and whether the session outlives the server. A recording keeps it
+    // too: its option joins `keeps` here.
+    const bool keeps = !o.saveOnExit.empty();
+    for (const std::string& line :
+         net::serverStartLines(server.port(), net::localAddresses(), keeps))
+        std::printf("trephine server: %s\n", line.c_str());
     std::fflush(stdout);
     while (!g_stopRequested.load())
         std::this_thread::sleep_for(std::chrono::milliseconds(50));

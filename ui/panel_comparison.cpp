@@ -53,16 +53,19 @@ bool drawComparisonPanel(SyncDesign& wanted, SyncDesign live, const ComparisonHi
 
     using S = ComparisonHistory::Series;
     const SyncDesign order[kSyncDesignCount] = {SyncDesign::Dbi, SyncDesign::Volume};
-    if (ImGui::BeginTable("figures", 3,
-                          ImGuiTableFlags_BordersInnerH | ImGuiTableFlags_SizingStretchProp)) {
-        ImGui::TableSetupColumn("");
-        ImGui::TableSetupColumn("DBI");
-        ImGui::TableSetupColumn("Volume");
+    // Fixed-width figure columns, wide enough for the widest figure: a column that sized itself
+    // to its text jumped whenever a figure gained a digit.
+    const float figureW = ImGui::CalcTextSize("00000 (raw 000000)").x;
+    if (ImGui::BeginTable("figures", 3, ImGuiTableFlags_BordersInnerH)) {
+        ImGui::TableSetupColumn("", ImGuiTableColumnFlags_WidthStretch);
+        ImGui::TableSetupColumn("DBI", ImGuiTableColumnFlags_WidthFixed, figureW);
+        ImGui::TableSetupColumn("Volume", ImGuiTableColumnFlags_WidthFixed, figureW);
         ImGui::TableHeadersRow();
-        auto row = [&](const char* name, auto&& draw) {
+        auto row = [&](const char* name, const char* tip, auto&& draw) {
             ImGui::TableNextRow();
             ImGui::TableNextColumn();
             ImGui::TextUnformatted(name);
+            itemTip(tip);
             for (SyncDesign d : order) {
                 ImGui::TableNextColumn();
                 draw(history.series(d), history.measured(d), d == live);
@@ -82,16 +85,25 @@ bool drawComparisonPanel(SyncDesign& wanted, SyncDesign live, const ComparisonHi
             else
                 ImGui::TextDisabled("never");
         }
-        row("updates /s",
+        row("updates /s", "Updates drawn per second, over the last second.",
             [](const S& s, bool m, bool a) { cell(m, a, "%.1f", s.last.updatesPerS); });
-        row("bytes / update", [](const S& s, bool m, bool a) {
-            cell(m, a, "%.0f (raw %.0f)", s.last.bytesPerUpdate, s.last.rawBytesPerUpdate);
-        });
-        row("latency p50/p99 ms", [](const S& s, bool m, bool a) {
-            cell(m, a, "%.2f / %.2f", s.last.latencyP50Ms, s.last.latencyP99Ms);
-        });
-        row("frame ms", [](const S& s, bool m, bool a) { cell(m, a, "%.2f", s.last.frameMs); });
-        row("haptic Hz", [](const S& s, bool m, bool a) { cell(m, a, "%.0f", s.last.hapticHz); });
+        row("bytes / update",
+            "As sent (raw before compression). DBI: the rectangle's pixels. Volume: the changed "
+            "voxels, 1 byte each (2 with materials); a small cut changes few voxels though its "
+            "screen box is larger.",
+            [](const S& s, bool m, bool a) {
+                cell(m, a, "%.0f (raw %.0f)", s.last.bytesPerUpdate, s.last.rawBytesPerUpdate);
+            });
+        row("update latency ms",
+            "p50 / p99 over the last second. Update latency: from the cause "
+            "on the server to the change on this screen (drawn and swapped).",
+            [](const S& s, bool m, bool a) {
+                cell(m, a, "%.2f / %.2f", s.last.latencyP50Ms, s.last.latencyP99Ms);
+            });
+        row("frame ms", "This window's frame: start to swap and glFinish, median of 1 s.",
+            [](const S& s, bool m, bool a) { cell(m, a, "%.2f", s.last.frameMs); });
+        row("haptic Hz", "Ticks of the 1 kHz haptic loop per second.",
+            [](const S& s, bool m, bool a) { cell(m, a, "%.0f", s.last.hapticHz); });
         ImGui::EndTable();
     }
 
@@ -122,8 +134,8 @@ bool drawComparisonPanel(SyncDesign& wanted, SyncDesign live, const ComparisonHi
     using F = ComparisonFigures;
     plots("updates", &S::updatesPerS, &F::updatesPerS, "/s");
     plots("bytes", &S::bytesPerUpdate, &F::bytesPerUpdate, "B");
-    plots("p50", &S::latencyP50Ms, &F::latencyP50Ms, "ms");
-    plots("p99", &S::latencyP99Ms, &F::latencyP99Ms, "ms");
+    plots("latency p50", &S::latencyP50Ms, &F::latencyP50Ms, "ms");
+    plots("latency p99", &S::latencyP99Ms, &F::latencyP99Ms, "ms");
     plots("frame", &S::frameMs, &F::frameMs, "ms");
     plots("haptic", &S::hapticHz, &F::hapticHz, "Hz");
     ImGui::End();

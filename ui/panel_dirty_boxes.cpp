@@ -11,6 +11,7 @@ void drawDirtyBoxPanel(DirtyBoxPanelState& state, const DirtyBoxHistory& boxes, 
         return;
     }
     ImGui::Checkbox("show BB_screen on the view", &state.overlay);
+    itemTip("Outline each update's screen box on the view, fading over a second.");
     ImGui::SameLine();
     ImGui::TextDisabled("(%zu visible)", boxes.visible(now).size());
     if (ImGui::BeginTable("recent", 5,
@@ -22,8 +23,11 @@ void drawDirtyBoxPanel(DirtyBoxPanelState& state, const DirtyBoxHistory& boxes, 
         ImGui::TableSetupColumn("rect x y w h");
         ImGui::TableSetupColumn("pixels");
         ImGui::TableSetupColumn("bytes");
-        ImGui::TableSetupColumn("latency");
+        ImGui::TableSetupColumn("delivery");
         ImGui::TableHeadersRow();
+        itemTip("seq: the update's number; rect: its screen box (DBI pixels, row 0 at the "
+                "bottom);\nbytes: as sent; delivery: cause on the server to applied here "
+                "(not drawn yet).");
         for (auto it = boxes.boxes.rbegin(); it != boxes.boxes.rend(); ++it) {
             ImGui::TableNextRow();
             ImGui::TableNextColumn();

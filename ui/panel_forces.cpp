@@ -37,9 +37,9 @@ void scaleLine(float scale) {
 }
 
 // |F| and x/y/z of one participant's relayed samples, under its name in its tool's colour.
-void drawParticipant(uint16_t id, const std::string& name, const ForceHistory& h, double now) {
+void drawParticipant(uint16_t id, const std::string& name, glm::vec4 c, const ForceHistory& h,
+                     double now) {
     static const char* names[4] = {"x", "y", "z", "|F|"};
-    glm::vec4 c = participantColor(int(id));
     ImGui::PushStyleColor(ImGuiCol_Text, ImVec4(c.r, c.g, c.b, 1.0f));
     ImGui::PushStyleColor(ImGuiCol_PlotLines, ImVec4(c.r, c.g, c.b, 1.0f));
     ImGui::Text("%s   f %.0f /s", name.c_str(), h.serverRate());
@@ -67,7 +67,8 @@ void drawForcesPanel(const ForceHistory& forces, double loopRateHz, double now,
     if (participants) {
         ImGui::TextDisabled("participants (relayed by the server)");
         for (const auto& [id, h] : participants->byClient)
-            drawParticipant(id, participantName(roster ? *roster : kNoRoster, id), h, now);
+            drawParticipant(id, participantName(roster ? *roster : kNoRoster, id),
+                            participantColor(roster ? *roster : kNoRoster, id), h, now);
         if (participants->byClient.empty())
             ImGui::TextDisabled("no participant's force model in the last %.0f s",
                                 participants->windowS);

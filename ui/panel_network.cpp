@@ -13,8 +13,10 @@ void drawNetworkPanel(const net::ClientSnapshot& snap, const NetworkHistory& his
         ImGui::End();
         return;
     }
-    if (snap.rttUs >= 0)
+    if (snap.rttUs >= 0 && snap.rttP50Us >= 0)
         ImGui::Text("round trip  %.0f us (p50 %.0f us)", snap.rttUs, snap.rttP50Us);
+    else if (snap.rttUs >= 0)
+        ImGui::Text("round trip  %.0f us (p50 -)", snap.rttUs);
     else
         ImGui::TextDisabled("round trip  - (no pong yet)");
     if (snap.packetLoss >= 0)
@@ -60,7 +62,10 @@ void drawNetworkPanel(const net::ClientSnapshot& snap, const NetworkHistory& his
     }
     auto plot = [](const char* label, const std::vector<float>& v, const char* unit) {
         char overlay[64];
-        std::snprintf(overlay, sizeof overlay, "%.1f %s", v.empty() ? 0.0f : v.back(), unit);
+        if (v.empty() || v.back() < 0.0f) // none measured (a round trip before any pong)
+            std::snprintf(overlay, sizeof overlay, "- %s", unit);
+        else
+            std::snprintf(overlay, sizeof overlay, "%.1f %s", v.back(), unit);
         ImGui::PlotLines(label, v.data(), int(v.size()), 0, overlay, 0.0f, FLT_MAX, ImVec2(0, 38));
     };
     plot("image", history.imageKbitPerS, "kbit/s");
@@ -72,8 +77,10 @@ void drawNetworkPanel(const net::ClientSnapshot& snap, const NetworkHistory& his
     const std::string overlay = history.latencyCaption(maxUs);
     // ImGui 1.86's plots take a size literally (only 0 means the default), so -1 (other widgets'
     // "to the right edge") would draw a sliver: ask for the panel's width.
-    ImGui::PlotHistogram("##latency", hist.data(), int(hist.size()), 0, overlay.c_str(), 0.0f,
+    ImGui::PlotHistogram("##delivery", hist.data(), int(hist.size()), 0, overlay.c_str(), 0.0f,
                          FLT_MAX, ImVec2(ImGui::GetContentRegionAvail().x, 60));
+    itemTip("Delivery: from the cause on the server to the update applied here, before it is "
+            "drawn.\nUpdate latency (Comparison) also counts the drawing: cause to screen.");
     ImGui::End();
 }
 

@@ -21,20 +21,50 @@ float clampOrLowest(float v, float lo, float hi) {
 
 } // namespace
 
+ToolKind selectedKind(const ToolControls& c) {
+    return c.kind == 1 ? ToolKind::Perforator : ToolKind::Burr;
+}
+
+float selectedDiameter(const ToolControls& c) {
+    const SizeRange r = sizeRange(selectedKind(c));
+    return clampOrLowest(selectedKind(c) == ToolKind::Perforator ? c.perforatorMm : c.burrMm,
+                         r.minMm, r.maxMm);
+}
+
+SizeRange sizeRange(ToolKind kind) {
+    if (kind == ToolKind::Perforator)
+        return {kPerforatorMinDiameterMm, kPerforatorMaxDiameterMm, 1.0f};
+    return {kBurrMinDiameterMm, kBurrMaxDiameterMm, 0.5f};
+}
+
+void stepToolSize(ToolControls& c, int steps) {
+    const SizeRange r = sizeRange(selectedKind(c));
+    float& mm = selectedKind(c) == ToolKind::Perforator ? c.perforatorMm : c.burrMm;
+    mm =
+        std::clamp(clampOrLowest(mm, r.minMm, r.maxMm) + float(steps) * r.stepMm, r.minMm, r.maxMm);
+}
+
+void itemTip(const char* text) {
+    if (ImGui::IsItemHovered())
+        ImGui::SetTooltip("%s", text);
+}
+
 ToolControls withinRanges(ToolControls c) {
     c.burrMm = clampOrLowest(c.burrMm, kBurrMinDiameterMm, kBurrMaxDiameterMm);
+    c.perforatorMm =
+        clampOrLowest(c.perforatorMm, kPerforatorMinDiameterMm, kPerforatorMaxDiameterMm);
     c.speed = clampOrLowest(c.speed, 0.0f, 1.0f);
     c.pushMm = clampOrLowest(c.pushMm, kPushMinMm, kPushMaxMm);
     return c;
 }
 
-glm::vec4 participantColor(int index) {
-    static const glm::vec4 k[] = {{0.20f, 0.45f, 0.85f, 1}, {0.85f, 0.35f, 0.20f, 1},
-                                  {0.30f, 0.70f, 0.30f, 1}, {0.75f, 0.30f, 0.75f, 1},
-                                  {0.95f, 0.55f, 0.70f, 1}, {0.25f, 0.75f, 0.80f, 1}};
-    constexpr size_t n = sizeof k / sizeof k[0];
-    // 0 is this client's own colour; every other index cycles through the rest.
-    return index <= 0 ? k[0] : k[1 + size_t(index - 1) % (n - 1)];
+glm::vec4 toColour(net::Rgb8 c) {
+    return {c.r / 255.0f, c.g / 255.0f, c.b / 255.0f, 1.0f};
+}
+
+glm::vec4 participantColor(const std::map<uint16_t, net::ParticipantInfo>& roster, uint16_t id) {
+    auto it = roster.find(id);
+    return it == roster.end() ? glm::vec4(0.7f, 0.7f, 0.7f, 1.0f) : toColour(it->second.colour);
 }
 
 std::string participantName(const std::map<uint16_t, net::ParticipantInfo>& roster, uint16_t id) {
@@ -75,6 +105,138 @@ ViewAsControls::due(int attempt, uint16_t self,
     return std::nullopt;
 }
 
+namespace {
+
+// The tool's rows: which tool, its size (the selected tool's range), speed and depth.
+void toolRows(ToolControls& tool) {
+    ImGui::RadioButton("burr [B]", &tool.kind, 0);
+    itemTip("A spherical burr, 1-6 mm: thins and widens a hole.");
+    ImGui::SameLine();
+    ImGui::RadioButton("perforator [P]", &tool.kind, 1);
+    itemTip("The cranial perforator, 6-16 mm: opens a burr hole and stops at the inner table.");
+    // AlwaysClamp: a value typed in (Ctrl+click) stays in the range too (the window clamps again).
+    // The sliders leave room for the longest label, so no label is cut off.
+    const ImGuiSliderFlags clamp = ImGuiSliderFlags_AlwaysClamp;
+    ImGui::PushItemWidth(
+        -(ImGui::CalcTextSize("perforator mm [ ]").x + ImGui::GetStyle().ItemInnerSpacing.x));
+    const SizeRange range = sizeRange(selectedKind(tool));
+    if (selectedKind(tool) == ToolKind::Perforator)
+        ImGui::SliderFloat("perforator mm [ ]", &tool.perforatorMm, range.minMm, range.maxMm,
+                           "%.0f", clamp);
+    else
+        ImGui::SliderFloat("burr mm [ ]", &tool.burrMm, range.minMm, range.maxMm, "%.1f", clamp);
+    itemTip("The selected tool's diameter; [ and ] step it.");
+    ImGui::SliderFloat("speed", &tool.speed, 0.0f, 1.0f, "%.2f", clamp);
+    itemTip("Spindle speed, 0-1: faster cuts faster.");
+    ImGui::SliderFloat("depth mm [wheel]", &tool.pushMm, kPushMinMm, kPushMaxMm, "%.1f", clamp);
+    itemTip("How far the tip is pushed below the bone under the pointer. Wheel up or Up: deeper; "
+            "wheel down or Down: shallower.");
+    ImGui::PopItemWidth();
+}
+
+// One line, always drawn: who drills (taken over, holding, or the button's state).
+void drillLine(const net::ClientSnapshot& snap, const ToolControls& tool, uint16_t self,
+               bool canTakeOver) {
+    const uint16_t holder = takenOverBy(snap.participants, self);
+    const uint16_t held = canTakeOver ? heldBy(snap.participants, self) : 0;
+    const ImVec4 warn(1, 0.7f, 0.3f, 1);
+    if (holder)
+        ImGui::TextColored(warn, "%s has taken over: your drill is paused",
+                           participantName(snap.participants, holder).c_str());
+    else if (held)
+        ImGui::TextColored(warn, "you hold %s: your drill cuts, theirs is paused",
+                           participantName(snap.participants, held).c_str());
+    else if (tool.canDrill)
+        ImGui::TextColored(tool.drilling ? ImVec4(1, 0.4f, 0.3f, 1) : ImVec4(0.6f, 0.6f, 0.6f, 1),
+                           tool.drilling ? "DRILLING" : "hold the left button to drill");
+    else
+        ImGui::TextDisabled("pointer only: take over a trainee to drill");
+}
+
+// An instructor's mark controls: the same buttons every frame (greyed when they do nothing), so
+// none moves when marks arrive.
+void markControlRows(const net::ClientSnapshot& snap, MarkControls& marks) {
+    if (ImGui::SmallButton("mark the pointer [M]"))
+        marks.addAtPointer = true;
+    itemTip("Mark the bone last under the pointer for everyone, with the label below.");
+    ImGui::SameLine();
+    ImGui::BeginDisabled(snap.annotations.empty());
+    if (ImGui::SmallButton("clear marks"))
+        marks.clearAll = true;
+    ImGui::EndDisabled();
+    itemTip("Remove every mark (undo puts them back).");
+    ImGui::SameLine();
+    ImGui::BeginDisabled(marks.undoable == 0);
+    char undo[48];
+    std::snprintf(undo, sizeof undo, "undo removal (%zu)###undo", marks.undoable);
+    if (ImGui::SmallButton(undo))
+        marks.undo = true;
+    ImGui::EndDisabled();
+    itemTip("Put back the marks the last removal took.");
+    ImGui::SetNextItemWidth(-1.0f);
+    ImGui::InputTextWithHint("##label", "label of the next mark (Enter places it)", marks.label,
+                             sizeof marks.label);
+    marks.labelActive = ImGui::IsItemActive();
+    itemTip("The next mark's label. Enter places it at the bone last under the pointer; Escape "
+            "leaves the field.");
+}
+
+// One participant's row: take-over and view-as buttons first (a narrow panel shows them whole),
+// then the name in its colour, and its tool.
+void participantRow(const net::ClientSnapshot& snap, uint16_t id, const net::ParticipantInfo& p,
+                    uint16_t self, TakeOverControls& takeOver, ViewAsControls& viewAs) {
+    const glm::vec4 c = participantColor(snap.participants, id);
+    if (viewAs.canViewAs) {
+        ImGui::PushID(int(id) + 0x10000);
+        if (snap.viewingAs == id) {
+            if (ImGui::SmallButton("own view"))
+                viewAs.asked = uint16_t(0);
+            itemTip("Back to your own camera.");
+        } else if (ImGui::SmallButton("view as")) {
+            viewAs.asked = id;
+        } else {
+            itemTip("Watch through this participant's camera.");
+        }
+        ImGui::SameLine();
+        ImGui::PopID();
+    }
+    if (p.role == net::Role::Trainee) {
+        ImGui::PushID(int(id));
+        if (p.takenOverBy == self && self != 0) {
+            if (ImGui::SmallButton("hand back"))
+                takeOver.asked = uint16_t(0);
+            itemTip("Give the drill back to the trainee.");
+            ImGui::SameLine();
+        } else if (p.takenOverBy != 0) {
+            ImGui::TextDisabled("held by %s",
+                                participantName(snap.participants, p.takenOverBy).c_str());
+            ImGui::SameLine();
+        } else if (takeOver.canTakeOver) {
+            if (ImGui::SmallButton("take over"))
+                takeOver.asked = id;
+            itemTip("Pause this trainee's drill and cut with yours instead.");
+            ImGui::SameLine();
+        }
+        ImGui::PopID();
+    }
+    ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), "%s  %s, %s",
+                       participantName(snap.participants, id).c_str(),
+                       p.role == net::Role::Instructor ? "instructor" : "trainee",
+                       p.sync == net::Sync::Volume ? "volume" : "dbi");
+    auto t = snap.others.find(id);
+    if (t != snap.others.end()) {
+        ImGui::SameLine();
+        ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), " %s %.0f mm%s",
+                           t->second.toolKind == uint8_t(ToolKind::Perforator) ? "perforator"
+                                                                               : "burr",
+                           double(t->second.diameterMm), t->second.drilling ? " drilling" : "");
+    }
+}
+
+} // namespace
+
+// Fixed rows first (the link, the tool, the drill's state, an instructor's mark controls), the
+// lists that grow as people and marks arrive below them: nothing moves under the pointer.
 void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkControls& marks,
                       TakeOverControls& takeOver, ViewAsControls& viewAs, const std::string& role,
                       const std::string& address, const std::string& name) {
@@ -82,102 +244,52 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
         ImGui::End();
         return;
     }
-    ImVec4 stateColor = snap.state == net::LinkState::Connected ? ImVec4(0.4f, 0.9f, 0.4f, 1)
-                                                                : ImVec4(1.0f, 0.6f, 0.2f, 1);
+    const ImVec4 stateColor = snap.state == net::LinkState::Connected ? ImVec4(0.4f, 0.9f, 0.4f, 1)
+                                                                      : ImVec4(1.0f, 0.6f, 0.2f, 1);
     ImGui::TextColored(stateColor, "%s", net::linkStateName(snap.state));
     ImGui::SameLine();
     ImGui::Text("%s  (attempt %d)", address.c_str(), snap.attempts);
     if (!snap.closeReason.empty())
-        ImGui::TextWrapped("last close: %s", snap.closeReason.c_str());
-    ImGui::Text("%s '%s'", role.c_str(), name.c_str());
-    if (snap.welcome)
-        ImGui::Text("client %u on %s", unsigned(snap.welcome->clientId),
-                    snap.welcome->volumeName.c_str());
-    // Everyone the server lists, this client first; tools as last relayed.
+        itemTip(("last close: " + snap.closeReason).c_str());
     const uint16_t self = snap.welcome ? snap.welcome->clientId : 0;
+    const glm::vec4 own = participantColor(snap.participants, self);
+    ImGui::TextColored(ImVec4(own.r, own.g, own.b, 1), "%s '%s'", role.c_str(), name.c_str());
+    itemTip("You, in the colour everyone sees you in (the server's).");
+    ImGui::SameLine();
+    if (snap.welcome)
+        ImGui::TextDisabled("client %u on %s", unsigned(self), snap.welcome->volumeName.c_str());
+    else
+        ImGui::TextDisabled("not welcomed yet");
+    ImGui::Separator();
+    toolRows(tool);
+    drillLine(snap, tool, self, takeOver.canTakeOver);
+    if (snap.viewingAs)
+        ImGui::TextColored(ImVec4(0.5f, 0.8f, 1, 1), "viewing as %s",
+                           participantName(snap.participants, snap.viewingAs).c_str());
+    else
+        ImGui::TextDisabled("your own view");
+    if (marks.canMark)
+        markControlRows(snap, marks);
+    ImGui::Separator();
+    // Everyone the server lists but us, in client id order (a newcomer's row comes last).
     ImGui::Text("participants: you + %zu", snap.participants.empty()
                                                ? snap.others.size()
                                                : snap.participants.size() - (self != 0));
-    for (const auto& [id, p] : snap.participants) {
-        if (id == self)
-            continue;
-        glm::vec4 c = participantColor(int(id));
-        // View as (instructors): the participant's camera in this window, or back to our own.
-        if (viewAs.canViewAs) {
-            ImGui::PushID(int(id) + 0x10000);
-            if (snap.viewingAs == id) {
-                if (ImGui::SmallButton("own view"))
-                    viewAs.asked = uint16_t(0);
-            } else if (ImGui::SmallButton("view as")) {
-                viewAs.asked = id;
-            }
-            ImGui::SameLine();
-            ImGui::PopID();
-        }
-        // A trainee's take-over control leads its row, so a narrow (380-pixel) panel shows it
-        // whole.
-        if (p.role == net::Role::Trainee) {
-            ImGui::PushID(int(id));
-            if (p.takenOverBy == self && self != 0) {
-                if (ImGui::SmallButton("hand back"))
-                    takeOver.asked = uint16_t(0);
-                ImGui::SameLine();
-            } else if (p.takenOverBy != 0) {
-                ImGui::TextDisabled("held by %s",
-                                    participantName(snap.participants, p.takenOverBy).c_str());
-                ImGui::SameLine();
-            } else if (takeOver.canTakeOver) {
-                if (ImGui::SmallButton("take over"))
-                    takeOver.asked = id;
-                ImGui::SameLine();
-            }
-            ImGui::PopID();
-        }
-        ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), "  %s  %s, %s",
-                           participantName(snap.participants, id).c_str(),
-                           p.role == net::Role::Instructor ? "instructor" : "trainee",
-                           p.sync == net::Sync::Volume ? "volume" : "dbi");
-        auto t = snap.others.find(id);
-        if (t != snap.others.end()) {
-            ImGui::SameLine();
-            ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), "  %s %.0f mm%s",
-                               t->second.toolKind == uint8_t(ToolKind::Perforator) ? "perforator"
-                                                                                   : "burr",
-                               double(t->second.diameterMm), t->second.drilling ? " drilling" : "");
-        }
-    }
+    for (const auto& [id, p] : snap.participants)
+        if (id != self)
+            participantRow(snap, id, p, self, takeOver, viewAs);
     // Tools of ids the roster does not list yet (its message may trail the first relays).
     for (const auto& [id, t] : snap.others) {
         if (snap.participants.count(id))
             continue;
-        glm::vec4 c = participantColor(int(id));
-        ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), "  client %u: %s %.0f mm%s", unsigned(id),
-                           t.toolKind == uint8_t(ToolKind::Perforator) ? "perforator" : "burr",
-                           double(t.diameterMm), t.drilling ? " drilling" : "");
+        ImGui::TextDisabled("client %u: %s %.0f mm%s", unsigned(id),
+                            t.toolKind == uint8_t(ToolKind::Perforator) ? "perforator" : "burr",
+                            double(t.diameterMm), t.drilling ? " drilling" : "");
     }
-    // Marks: everyone sees the list; an instructor places, removes and clears them.
+    // Marks: everyone sees the list; an instructor removes them.
     const glm::vec4 mc = markColor();
     const ImVec4 markCol(mc.r, mc.g, mc.b, 1.0f);
     ImGui::Text("marks: %zu", snap.annotations.size());
-    if (marks.canMark) {
-        ImGui::SameLine();
-        if (ImGui::SmallButton("mark the pointer [M]"))
-            marks.addAtPointer = true;
-        if (!snap.annotations.empty()) {
-            ImGui::SameLine();
-            if (ImGui::SmallButton("clear marks"))
-                marks.clearAll = true;
-        }
-        if (marks.undoable) {
-            ImGui::SameLine();
-            char undo[48];
-            std::snprintf(undo, sizeof undo, "undo removal (%zu)", marks.undoable);
-            if (ImGui::SmallButton(undo))
-                marks.undo = true;
-        }
-        ImGui::InputTextWithHint("##label", "label of the next mark", marks.label,
-                                 sizeof marks.label);
-    }
     for (const net::AnnotationInfo& a : snap.annotations) {
         ImGui::TextColored(markCol, "  %u %s", unsigned(a.id), a.label.c_str());
         ImGui::SameLine();
@@ -187,40 +299,10 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
             ImGui::PushID(int(a.id));
             if (ImGui::SmallButton("remove"))
                 marks.removeId = a.id;
+            itemTip("Remove this mark for everyone.");
             ImGui::PopID();
         }
     }
-    ImGui::Separator();
-    ImGui::RadioButton("burr [B]", &tool.kind, 0);
-    ImGui::SameLine();
-    ImGui::RadioButton("perforator [P]", &tool.kind, 1);
-    // AlwaysClamp: a value typed in (Ctrl+click) stays in the range too (the window clamps again).
-    // The sliders leave room for the longest label, so no label is cut off.
-    const ImGuiSliderFlags clamp = ImGuiSliderFlags_AlwaysClamp;
-    ImGui::PushItemWidth(
-        -(ImGui::CalcTextSize("depth mm [wheel]").x + ImGui::GetStyle().ItemInnerSpacing.x));
-    ImGui::SliderFloat("burr mm [ ]", &tool.burrMm, kBurrMinDiameterMm, kBurrMaxDiameterMm, "%.1f",
-                       clamp);
-    ImGui::SliderFloat("speed", &tool.speed, 0.0f, 1.0f, "%.2f", clamp);
-    ImGui::SliderFloat("depth mm [wheel]", &tool.pushMm, kPushMinMm, kPushMaxMm, "%.1f", clamp);
-    ImGui::PopItemWidth();
-    if (snap.viewingAs)
-        ImGui::TextColored(ImVec4(0.5f, 0.8f, 1, 1), "viewing as %s",
-                           participantName(snap.participants, snap.viewingAs).c_str());
-    const uint16_t holder = takenOverBy(snap.participants, self);
-    const uint16_t held = takeOver.canTakeOver ? heldBy(snap.participants, self) : 0;
-    if (held)
-        ImGui::TextColored(ImVec4(1, 0.7f, 0.3f, 1),
-                           "you hold %s: your drill cuts, theirs is paused",
-                           participantName(snap.participants, held).c_str());
-    if (holder)
-        ImGui::TextColored(ImVec4(1, 0.7f, 0.3f, 1), "%s has taken over: your drill is paused",
-                           participantName(snap.participants, holder).c_str());
-    else if (tool.canDrill)
-        ImGui::TextColored(tool.drilling ? ImVec4(1, 0.4f, 0.3f, 1) : ImVec4(0.6f, 0.6f, 0.6f, 1),
-                           tool.drilling ? "DRILLING" : "hold the left button to drill");
-    else
-        ImGui::TextDisabled("pointer only: take over a trainee to drill");
     ImGui::End();
 }
 

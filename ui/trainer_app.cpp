@@ -22,14 +22,18 @@
 #include "net/trainee_core.h"
 #include "net/view.h"
 #include "ui/compositor.h"
+#include "ui/layout.h"
+#include "ui/link_message.h"
 #include "ui/mouse_tool.h"
 #include "ui/panels.h"
 #include "ui/scripted_driver.h"
+#include "ui/shortcuts.h"
 #include "ui/volume_view.h"
 #include "ui/window.h"
 
 #include <GLFW/glfw3.h>
 #include <imgui.h>
+#include <imgui_internal.h> // ClearActiveID: Enter or Escape leaves a text field
 
 #include <atomic>
 #include <chrono>
@@ -51,8 +55,6 @@ namespace {
 // The default layout, 1280 x 900 with the 500-pixel view: the view over Forces; Session, View and
 // Network in the middle column; Comparison over Dirty boxes on the right. Each panel gets the
 // height its content takes, so none scrolls in a default window (panels stay movable).
-constexpr int kPanelWidth = 380;   // the middle column
-constexpr int kSideWidth = 400;    // the right-hand column
 constexpr int kBottomHeight = 400; // Forces, under the view
 constexpr int kMinHeight = 760;
 // The band that says a trainee is taken over (opaque: tests find its pixels).
@@ -215,8 +217,21 @@ glm::mat4 toolMatrix(glm::vec3 position, glm::quat orientation) {
 
 // [SECTION] drawing
 
-// The view's labels (every tool's owner, ours last) and the instructors' marks, cut at the view's
-// edge; `own` null: no tool of ours is shown.
+// A held trainee's tool (paused by a take-over): drawn grey, its label says who holds it.
+constexpr glm::vec4 kHeldToolColour{0.55f, 0.55f, 0.55f, 1.0f};
+
+glm::vec4 toolColour(const net::ClientSnapshot& snap, uint16_t id) {
+    return takenOverBy(snap.participants, id) ? kHeldToolColour
+                                              : participantColor(snap.participants, id);
+}
+
+std::string heldSuffix(const net::ClientSnapshot& snap, uint16_t id) {
+    const uint16_t holder = takenOverBy(snap.participants, id);
+    return holder ? " (held by " + participantName(snap.participants, holder) + ")" : "";
+}
+
+// The view's labels (every tool's owner, ours last) and the instructors' marks, placed so they
+// avoid each other and cut at the view's edge; `own` null: no tool of ours is shown.
 void drawViewLabels(const net::ClientSnapshot& snap, const Camera& camera, const Dbi& cpuDbi,
                     int viewSize, const ToolPose* own, const std::string& ownLabel) {
     ImDrawList* fg = ImGui::GetForegroundDrawList();
@@ -224,25 +239,21 @@ void drawViewLabels(const net::ClientSnapshot& snap, const Camera& camera, const
     // Labels and marks belong to the view: one that projects outside it (orbited or
     // zoomed away) is cut at its edge, not drawn over the panels beside and under it.
     fg->PushClipRect(ImVec2(0.0f, viewTop), ImVec2(float(viewSize), viewTop + viewSize));
-    glm::dmat4 vp = viewProjection(camera);
-    auto label = [&](glm::vec3 p, glm::vec3 axis, glm::vec4 c, const std::string& text) {
-        WindowPoint w = projectToWindow(vp, camera, glm::dvec3(p + axis * 40.0f));
-        if (w.w <= 0)
-            return;
-        ImVec2 at(float(w.window.x) + 8.0f, viewTop + float(viewSize - w.window.y));
-        fg->AddRectFilled(
-            ImVec2(at.x - 3, at.y - 2),
-            ImVec2(at.x + ImGui::CalcTextSize(text.c_str()).x + 3, at.y + ImGui::GetFontSize() + 2),
-            IM_COL32(0, 0, 0, 140), 3.0f);
-        fg->AddText(at, ImGui::GetColorU32(ImVec4(c.r, c.g, c.b, 1.0f)), text.c_str());
+    const glm::dmat4 vp = viewProjection(camera);
+    struct Label {
+        std::string text;
+        ImU32 colour;
     };
-    for (const auto& [id, t] : snap.others)
-        label(t.position, t.orientation * glm::vec3(0, 0, 1), participantColor(int(id)),
-              participantName(snap.participants, id) + (t.drilling ? " (drilling)" : ""));
-    if (own)
-        label(own->position, own->orientation * glm::vec3(0, 0, 1), participantColor(0), ownLabel);
-    // The instructors' marks: a ring on the bone and its label beside it; faint where the
-    // bone in this view lies more than 2 mm in front of the mark (it is behind it).
+    std::vector<Label> labels;
+    std::vector<LabelRequest> requests;
+    const float textH = ImGui::GetFontSize();
+    auto add = [&](ImVec2 anchor, ImU32 colour, const std::string& text) {
+        labels.push_back({text, colour});
+        requests.push_back({anchor.x, anchor.y, ImGui::CalcTextSize(text.c_str()).x, textH});
+    };
+    // The instructors' marks: a ring on the bone and its label; faint where the bone in this
+    // view lies more than 2 mm in front of the mark (it is behind it). Placed first: a mark's
+    // label stays beside its ring, tools' labels make way.
     const glm::vec4 mc = markColor();
     for (const net::AnnotationInfo& a : snap.annotations) {
         WindowPoint w = projectToWindow(vp, camera, glm::dvec3(a.position));
@@ -261,14 +272,30 @@ void drawViewLabels(const net::ClientSnapshot& snap, const Camera& camera, const
         fg->AddCircle(c, 8.0f, IM_COL32(0, 0, 0, 160), 0, 4.5f);
         fg->AddCircle(c, 8.0f, markCol, 0, 2.5f);
         fg->AddCircleFilled(c, 2.5f, markCol);
-        if (!a.label.empty()) {
-            const ImVec2 at(c.x + 12.0f, c.y - ImGui::GetFontSize() * 0.5f);
-            fg->AddRectFilled(ImVec2(at.x - 3, at.y - 2),
-                              ImVec2(at.x + ImGui::CalcTextSize(a.label.c_str()).x + 3,
-                                     at.y + ImGui::GetFontSize() + 2),
-                              IM_COL32(0, 0, 0, 140), 3.0f);
-            fg->AddText(at, markCol, a.label.c_str());
-        }
+        if (!a.label.empty())
+            add(c, markCol, a.label);
+    }
+    auto toolLabel = [&](glm::vec3 p, glm::vec3 axis, glm::vec4 c, const std::string& text) {
+        WindowPoint w = projectToWindow(vp, camera, glm::dvec3(p + axis * 40.0f));
+        if (w.w > 0)
+            add(ImVec2(float(w.window.x), viewTop + float(viewSize - w.window.y)),
+                ImGui::GetColorU32(ImVec4(c.r, c.g, c.b, 1.0f)), text);
+    };
+    for (const auto& [id, t] : snap.others)
+        toolLabel(t.position, t.orientation * glm::vec3(0, 0, 1), toolColour(snap, id),
+                  participantName(snap.participants, id) + (t.drilling ? " (drilling)" : "") +
+                      heldSuffix(snap, id));
+    const uint16_t self = snap.welcome ? snap.welcome->clientId : 0;
+    if (own)
+        toolLabel(own->position, own->orientation * glm::vec3(0, 0, 1), toolColour(snap, self),
+                  ownLabel + heldSuffix(snap, self));
+    const std::vector<UiRect> at =
+        placeLabels(requests, UiRect{0, viewTop, float(viewSize), float(viewSize)});
+    for (size_t i = 0; i < labels.size(); ++i) {
+        const UiRect& r = at[i];
+        fg->AddRectFilled(ImVec2(r.x - 3, r.y - 2), ImVec2(r.x + r.w + 3, r.y + r.h + 2),
+                          IM_COL32(0, 0, 0, 140), 3.0f);
+        fg->AddText(ImVec2(r.x, r.y), labels[i].colour, labels[i].text.c_str());
     }
     fg->PopClipRect();
 }
@@ -293,41 +320,22 @@ void drawHeldBand(const std::string& held, int viewSize) {
     ImDrawList* fg = ImGui::GetForegroundDrawList();
     const float viewTop = 0.0f;
     if (!held.empty()) {
-        const ImVec2 sz = ImGui::CalcTextSize(held.c_str());
+        // Wrapped to the view: a small view (--window-size 300) shows the whole sentence.
+        const float wrap = std::max(40.0f, float(viewSize) - 40.0f);
+        const ImVec2 sz = ImGui::CalcTextSize(held.c_str(), nullptr, false, wrap);
         const ImVec2 at((float(viewSize) - sz.x) * 0.5f, viewTop + float(viewSize) - sz.y - 18.0f);
         fg->AddRectFilled(ImVec2(at.x - 12, at.y - 8), ImVec2(at.x + sz.x + 12, at.y + sz.y + 8),
                           kTakeOverBand, 6.0f);
-        fg->AddText(at, IM_COL32(255, 255, 255, 255), held.c_str());
+        fg->AddText(nullptr, 0.0f, at, IM_COL32(255, 255, 255, 255), held.c_str(), nullptr, wrap);
     }
 }
 
-// Where each panel opens (they stay movable): Session, View and Network in the middle column
-// (kPanelWidth), Comparison over Dirty boxes on the right (kSideWidth), Forces under the view.
-struct PanelLayout {
-    struct Box {
-        float x, y, w, h;
-    };
-    Box session, view, network, comparison, dirtyBoxes, forces;
-};
-
-PanelLayout panelLayout(int viewSize, float height) {
-    const float right = float(viewSize), colW = float(kPanelWidth);
-    const float side = right + colW, sideW = float(kSideWidth);
-    const float sessionH = std::floor(height * 0.31f), viewPanelH = 165.0f;
-    const float networkY = sessionH + viewPanelH, comparisonH = std::floor(height * 0.535f);
-    PanelLayout l;
-    l.session = {right, 0, colW, sessionH};
-    l.view = {right, sessionH, colW, viewPanelH};
-    l.network = {right, networkY, colW, height - networkY};
-    l.comparison = {side, 0, sideW, comparisonH};
-    l.dirtyBoxes = {side, comparisonH, sideW, height - comparisonH};
-    l.forces = {0, float(viewSize), right, height - float(viewSize)};
-    return l;
-}
-
-void placeNextPanel(const PanelLayout::Box& b) {
-    ImGui::SetNextWindowPos(ImVec2(b.x, b.y), ImGuiCond_FirstUseEver);
-    ImGui::SetNextWindowSize(ImVec2(b.w, b.h), ImGuiCond_FirstUseEver);
+// Where each panel goes: laid out again whenever the window's size, the view's or the full-view
+// toggle changes (panels stay movable in between), so none is cut off by a smaller window.
+void placeNextPanel(const UiRect& b, bool relayout) {
+    const ImGuiCond cond = relayout ? ImGuiCond_Always : ImGuiCond_FirstUseEver;
+    ImGui::SetNextWindowPos(ImVec2(b.x, b.y), cond);
+    ImGui::SetNextWindowSize(ImVec2(b.w, b.h), cond);
 }
 
 // The window's trainee core: the client asks for a 1x1 placeholder view until the scene is
@@ -353,8 +361,9 @@ net::TraineeCoreConfig coreConfigFor(const TrainerOptions& o) {
 
 WindowConfig windowConfigFor(const TrainerOptions& o) {
     WindowConfig wc;
-    wc.width = o.size + kPanelWidth + kSideWidth;
-    wc.height = std::max(o.size + kBottomHeight, kMinHeight);
+    wc.width =
+        o.windowWidth > 0 ? o.windowWidth : o.size + int(kPanelColumnWidth + kSideColumnWidth);
+    wc.height = o.windowHeight > 0 ? o.windowHeight : std::max(o.size + kBottomHeight, kMinHeight);
     wc.title =
         std::string("Trephine - ") + (o.instructor ? "instructor" : "trainee") + " - " + o.address;
     wc.visible = o.visible;
@@ -367,10 +376,11 @@ void printComparison(const ComparisonHistory& comparison) {
         if (!comparison.measured(d))
             continue;
         const ComparisonFigures& f = comparison.series(d).last;
-        std::printf("window: %s: %.1f updates/s, %.0f bytes/update (raw %.0f), latency p50 %.2f "
-                    "ms p99 %.2f ms, frame %.2f ms, haptics %.0f Hz\n",
-                    syncDesignName(d), f.updatesPerS, f.bytesPerUpdate, f.rawBytesPerUpdate,
-                    f.latencyP50Ms, f.latencyP99Ms, f.frameMs, f.hapticHz);
+        std::printf(
+            "window: %s: %.1f updates/s, %.0f bytes/update (raw %.0f), update latency p50 %.2f "
+            "ms p99 %.2f ms, frame %.2f ms, haptics %.0f Hz\n",
+            syncDesignName(d), f.updatesPerS, f.bytesPerUpdate, f.rawBytesPerUpdate, f.latencyP50Ms,
+            f.latencyP99Ms, f.frameMs, f.hapticHz);
     }
 }
 
@@ -446,6 +456,8 @@ private:
     void drawOverlays(FrameState& f);
     std::string tooLargeText(const FrameState& f) const;
     void drawPanels(const FrameState& f);
+    void drawComparisonExtras();
+    void drawFrameRate(double now);
     bool endFrame(const FrameState& f);
     void closingFigures();
 
@@ -486,6 +498,14 @@ private:
 
     // Panels' controls and the model behind them.
     ToolControls toolControls;
+    WindowToggles toggles;           // F1's overlay, H's full-window view
+    ViewNote note;                   // a key's feedback over the view
+    KeyActions frameKeys;            // what this frame's key presses asked for
+    size_t tapsDone = 0;             // [Tests] of TrainerOptions::tapKeys
+    std::array<int, 4> laidOutFor{}; // window w, h, view size, full view: the panels' layout
+    int attemptsWhenConnected = -1;  // the link's attempts when last up (-1: never)
+    int fpsFrames = 0;               // frames since fpsSince
+    double fpsSince = 0.0, fps = 0.0;
     DirtyBoxPanelState boxState;
     net::ClientModel model; // the panels' histories and the report's figures
 
@@ -562,6 +582,10 @@ bool TrainerWindow::frame() {
     applyRects(f);
     applyVolumeBoxes(f);
     choosePicture(f);
+    if (f.havePicture && tapsDone < o.tapKeys.size()) { // [Tests] a tap inside one frame
+        window.injectKey(o.tapKeys[tapsDone], GLFW_PRESS);
+        window.injectKey(o.tapKeys[tapsDone++], GLFW_RELEASE);
+    }
     // The frame begins (events polled, ImGui's new frame) before the tool reads the input:
     // ImGui 1.86 zeroes io.MouseWheel at the end of each frame, so read before NewFrame the
     // wheel was always 0, and keys came a frame late.
@@ -719,6 +743,13 @@ void TrainerWindow::choosePicture(FrameState& f) {
 // values (drawn below) kept within their ranges first.
 void TrainerWindow::updateTool(FrameState& f) {
     toolControls = withinRanges(toolControls);
+    {
+        const ImGuiIO& io = ImGui::GetIO();
+        frameKeys = applyKeys(window.keyPresses(), io.WantTextInput, markControls.labelActive,
+                              io.WantCaptureKeyboard && !io.WantTextInput, toolControls, toggles);
+        if (frameKeys.leaveTextField)
+            ImGui::ClearActiveID();
+    }
     if (scene && f.havePicture && script.drivesTool()) {
         const ScriptPose p = script.tool(scene->site, f.now);
         toolControls.kind = 0;
@@ -731,8 +762,8 @@ void TrainerWindow::updateTool(FrameState& f) {
     } else if (scene && f.havePicture && f.viewMatches) {
         mouseTool(f);
     }
-    f.kind = toolControls.kind == 1 ? ToolKind::Perforator : ToolKind::Burr;
-    f.diameter = f.kind == ToolKind::Perforator ? kPerforatorDiameterMm : toolControls.burrMm;
+    f.kind = selectedKind(toolControls);
+    f.diameter = selectedDiameter(toolControls);
     {
         DeviceState ds;
         ds.pose.position = toolPos;
@@ -752,23 +783,15 @@ void TrainerWindow::updateTool(FrameState& f) {
 // bone under it.
 void TrainerWindow::mouseTool(const FrameState& f) {
     ImGuiIO& io = ImGui::GetIO();
-    // M marks the bone under the pointer now: over air or off the view it marks nothing
-    // (it marked the last bone point the pointer had crossed, wherever that was).
-    bool markKey = false;
-    if (!io.WantCaptureKeyboard) {
-        if (ImGui::IsKeyPressed(GLFW_KEY_B))
-            toolControls.kind = 0;
-        if (ImGui::IsKeyPressed(GLFW_KEY_P))
-            toolControls.kind = 1;
-        if (ImGui::IsKeyPressed(GLFW_KEY_LEFT_BRACKET))
-            toolControls.burrMm = std::max(kBurrMinDiameterMm, toolControls.burrMm - 0.5f);
-        if (ImGui::IsKeyPressed(GLFW_KEY_RIGHT_BRACKET))
-            toolControls.burrMm = std::min(kBurrMaxDiameterMm, toolControls.burrMm + 0.5f);
-        if (ImGui::IsKeyPressed(GLFW_KEY_DOWN))
-            toolControls.pushMm = steppedPush(toolControls.pushMm, 1.0f);
-        if (ImGui::IsKeyPressed(GLFW_KEY_UP))
-            toolControls.pushMm = steppedPush(toolControls.pushMm, -1.0f);
-        markKey = markControls.canMark && ImGui::IsKeyPressed(GLFW_KEY_M);
+    // Keys from the window's queue (a tap inside one frame counts). M marks the bone under the
+    // pointer now: over air or off the view it marks nothing, and says so.
+    const KeyActions& keys = frameKeys;
+    const bool markKey = markControls.canMark && keys.markAtPointer;
+    if (keys.labelledMark) {
+        if (pointerPick)
+            markControls.addAtPointer = true;
+        else
+            note.show("Enter: point at the bone in the view first, then press M", f.now);
     }
     const bool overView = io.MousePos.x >= 0 && io.MousePos.y >= 0 &&
                           io.MousePos.x < float(viewSize) && io.MousePos.y < float(viewSize) &&
@@ -783,16 +806,18 @@ void TrainerWindow::mouseTool(const FrameState& f) {
         if (auto hit = pickSurface(cpuDbi, cpuDbiCamera, px, py)) {
             pointerPick = *hit;
             markControls.addAtPointer = markControls.addAtPointer || markKey;
-            ToolShape shape =
-                toolControls.kind == 1
-                    ? ToolShape::perforator()
-                    : ToolShape::burr(
-                          std::clamp(toolControls.burrMm, kBurrMinDiameterMm, kBurrMaxDiameterMm));
+            ToolShape shape = selectedKind(toolControls) == ToolKind::Perforator
+                                  ? ToolShape::perforator(selectedDiameter(toolControls))
+                                  : ToolShape::burr(selectedDiameter(toolControls));
             ToolPose pose = toolPoseAt(*hit, f.dbiCamera, shape, toolControls.pushMm);
             toolPos = pose.position;
             toolRot = pose.orientation;
             toolValid = true;
+        } else if (markKey) {
+            note.show("M: no bone under the pointer, nothing marked", f.now);
         }
+    } else if (markKey) {
+        note.show("M: point at the bone in the view, then press M", f.now);
     }
     toolControls.drilling =
         toolControls.canDrill && toolValid && overView && ImGui::IsMouseDown(ImGuiMouseButton_Left);
@@ -821,9 +846,10 @@ void TrainerWindow::composite(const FrameState& f) {
         comp.draw(fieldMesh, glm::mat4(1.0f));
     for (const auto& [id, t] : f.snap->others)
         comp.draw(tools.get(ToolKind(t.toolKind), t.diameterMm),
-                  toolMatrix(t.position, t.orientation), participantColor(int(id)));
+                  toolMatrix(t.position, t.orientation), toolColour(*f.snap, id));
     if (toolValid)
-        comp.draw(tools.get(f.kind, f.diameter), toolMatrix(toolPos, toolRot), participantColor(0));
+        comp.draw(tools.get(f.kind, f.diameter), toolMatrix(toolPos, toolRot),
+                  toolColour(*f.snap, f.snap->welcome ? f.snap->welcome->clientId : 0));
     comp.blitTo(0, window.height() - viewSize);
 }
 
@@ -842,14 +868,19 @@ void TrainerWindow::drawOverlays(FrameState& f) {
     f.maxViewPixels = snap.welcome ? snap.welcome->maxViewPixels : 0;
     f.viewTooLarge = snap.state == net::LinkState::Connected && snap.welcome &&
                      int64_t(viewSize) * viewSize > f.maxViewPixels;
+    if (snap.state == net::LinkState::Connected)
+        attemptsWhenConnected = snap.attempts;
+    const LinkMessage link = linkMessage(snap.state, snap.attempts, attemptsWhenConnected,
+                                         snap.closeReason, o.address, f.havePicture);
+    if (link.dim) // the picture is stale: dimmed under the message, the panels not
+        ImGui::GetBackgroundDrawList()->AddRectFilled(ImVec2(0, viewTop),
+                                                      ImVec2(float(viewSize), viewTop + viewSize),
+                                                      IM_COL32(0, 0, 0, 150));
     std::string status;
     if (f.viewTooLarge)
         status = tooLargeText(f);
-    else if (snap.state == net::LinkState::Connecting)
-        status =
-            "Connecting to " + o.address + " (attempt " + std::to_string(snap.attempts) + ")...";
-    else if (snap.state == net::LinkState::Retrying)
-        status = "Not connected: " + snap.closeReason + "\nRetrying...";
+    else if (!link.text.empty())
+        status = link.text;
     else if (!sceneError.empty())
         status = "Cannot show the session: " + sceneError;
     else if (!f.havePicture)
@@ -869,6 +900,8 @@ void TrainerWindow::drawOverlays(FrameState& f) {
         held = "You hold " + participantName(snap.participants, f.holding) +
                ": your drill cuts, theirs is paused";
     drawHeldBand(held, viewSize);
+    note.draw(f.now, 0.0f, viewTop, float(viewSize));
+    drawFrameRate(f.now);
 }
 
 std::string TrainerWindow::tooLargeText(const FrameState& f) const {
@@ -883,10 +916,20 @@ std::string TrainerWindow::tooLargeText(const FrameState& f) const {
 void TrainerWindow::drawPanels(const FrameState& f) {
     const net::ClientSnapshot& snap = *f.snap;
     const SyncDesign picture = f.picture;
-    const PanelLayout layout = panelLayout(viewSize, float(window.height()));
-    placeNextPanel(layout.session);
-    drawSessionPanel(snap, toolControls, markControls, takeOverControls, viewAsControls,
-                     o.instructor ? "instructor" : "trainee", o.address, o.name);
+    const WindowLayout layout =
+        windowLayout(window.width(), window.height(), viewSize, viewSize, toggles.fullView);
+    const std::array<int, 4> shape{window.width(), window.height(), viewSize,
+                                   int(toggles.fullView)};
+    const bool relayout = shape != laidOutFor;
+    laidOutFor = shape;
+    // The full-window view draws no panel; what their controls asked for still goes out.
+    const bool show = layout.panels;
+    const PanelLayout& box = layout.boxes;
+    if (show) {
+        placeNextPanel(box.session, relayout);
+        drawSessionPanel(snap, toolControls, markControls, takeOverControls, viewAsControls,
+                         o.instructor ? "instructor" : "trainee", o.address, o.name);
+    }
     // Marks asked for (the panel, the M key, --mark once joined); the server lists them back.
     script.sendDue(snap, client);
     for (const net::Annotate& a : markRequests(markControls, markUndo, snap, pointerPick))
@@ -903,16 +946,51 @@ void TrainerWindow::drawPanels(const FrameState& f) {
     if (viewAsControls.asked)
         client.viewAs(*viewAsControls.asked);
     viewAsControls.asked.reset();
-    placeNextPanel(layout.view);
-    drawViewPanel(viewControls, snap.waitingForView || !f.havePicture,
-                  picture == SyncDesign::Volume ? "local render" : "DBI",
-                  f.havePicture ? &f.dbiCamera : nullptr);
-    placeNextPanel(layout.network);
-    drawNetworkPanel(snap, model.network, f.now);
-    placeNextPanel(layout.comparison);
-    SyncDesign shown = designs.wanted;
-    if (drawComparisonPanel(shown, picture, model.comparison, f.now) && shown != designs.wanted)
-        designs.request(shown, client);
+    if (show) {
+        placeNextPanel(box.view, relayout);
+        drawViewPanel(viewControls, snap.waitingForView || !f.havePicture,
+                      picture == SyncDesign::Volume ? "local render" : "DBI",
+                      f.havePicture ? &f.dbiCamera : nullptr);
+        placeNextPanel(box.network, relayout);
+        drawNetworkPanel(snap, model.network, f.now);
+        placeNextPanel(box.comparison, relayout);
+        SyncDesign shown = designs.wanted;
+        if (drawComparisonPanel(shown, picture, model.comparison, f.now) && shown != designs.wanted)
+            designs.request(shown, client);
+        drawComparisonExtras();
+        placeNextPanel(box.forces, relayout);
+        drawForcesPanel(model.forces, f.hstats.achievedRateHz, f.now,
+                        o.instructor ? &model.participants : nullptr, &snap.participants);
+        placeNextPanel(box.dirtyBoxes, relayout);
+        drawDirtyBoxPanel(boxState, model.boxes, f.now);
+    }
+    drawShortcutOverlay(toggles);
+}
+
+// Frames drawn per second, counted over each second, in the view's top right corner (where a
+// game's readout sits): "-" until a second has passed.
+void TrainerWindow::drawFrameRate(double now) {
+    ++fpsFrames;
+    if (now - fpsSince >= 1.0) {
+        fps = double(fpsFrames) / (now - fpsSince);
+        fpsFrames = 0;
+        fpsSince = now;
+    }
+    char text[32];
+    if (fps > 0)
+        std::snprintf(text, sizeof text, "%.0f fps", fps);
+    else
+        std::snprintf(text, sizeof text, "- fps");
+    ImDrawList* fg = ImGui::GetForegroundDrawList();
+    const ImVec2 sz = ImGui::CalcTextSize(text);
+    const ImVec2 at(float(viewSize) - sz.x - 8.0f, 6.0f);
+    fg->AddRectFilled(ImVec2(at.x - 4, at.y - 2), ImVec2(at.x + sz.x + 4, at.y + sz.y + 2),
+                      IM_COL32(0, 0, 0, 140), 3.0f);
+    fg->AddText(at, IM_COL32(200, 220, 200, 255), text);
+}
+
+// What only the window knows, appended to the Comparison panel.
+void TrainerWindow::drawComparisonExtras() {
     if (ImGui::Begin("Comparison")) { // appends to the panel: what only the window knows
         // Short lines: the 400-pixel panel cut the longer ones off.
         ImGui::TextDisabled("frame ms: start to swap + glFinish, median of 1 s");
@@ -926,11 +1004,6 @@ void TrainerWindow::drawPanels(const FrameState& f) {
                             (unsigned long long)core.serverForceTicks());
     }
     ImGui::End();
-    placeNextPanel(layout.forces);
-    drawForcesPanel(model.forces, f.hstats.achievedRateHz, f.now,
-                    o.instructor ? &model.participants : nullptr, &snap.participants);
-    placeNextPanel(layout.dirtyBoxes);
-    drawDirtyBoxPanel(boxState, model.boxes, f.now);
 }
 
 // The frame's end: the scripted run's rules (a view too large ends it, a settled view is
@@ -1000,6 +1073,13 @@ void TrainerWindow::closingFigures() {
         r.localForceTicks = core.localForceTicks();
         r.serverForceTicks = core.serverForceTicks();
         r.frames = framesPerDesign;
+        for (const char* name :
+             {"Session", "View", "Network", "Comparison", "Forces", "Dirty boxes"})
+            if (const ImGuiWindow* w = ImGui::FindWindowByName(name); w && w->Active)
+                r.panels[name] = {w->Pos.x, w->Pos.y, w->Size.x, w->Size.y};
+        r.toolKind = int(selectedKind(toolControls));
+        r.toolDiameterMm = selectedDiameter(toolControls);
+        r.pushMm = toolControls.pushMm;
         net::ClientReportExtras extras = core.reportExtras();
         extras.durationS = seconds();
         extras.session = {{"server", o.address},

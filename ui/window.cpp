@@ -71,6 +71,9 @@ Window::Window(const WindowConfig& config) : m_imgui(config.imgui) {
         throw Error("ui: no OpenGL 3.3 core context (" + e + ")");
     }
     glfwMakeContextCurrent(m_window);
+    // Ours first: ImGui's backend, installed next, calls it from its own key callback.
+    glfwSetWindowUserPointer(m_window, this);
+    glfwSetKeyCallback(m_window, &Window::onKey);
     glfwSwapInterval(0); // the frame loop paces itself; llvmpipe has no vblank to wait for
     glfwGetFramebufferSize(m_window, &m_width, &m_height);
     if (m_imgui) {
@@ -104,8 +107,23 @@ void Window::requestClose() {
     glfwSetWindowShouldClose(m_window, GLFW_TRUE);
 }
 
+void Window::onKey(GLFWwindow* window, int key, int, int action, int mods) {
+    auto* self = static_cast<Window*>(glfwGetWindowUserPointer(window));
+    if (self && (action == GLFW_PRESS || action == GLFW_REPEAT))
+        self->m_queued.push_back({key, mods});
+}
+
+void Window::injectKey(int key, int action, int mods) {
+    if (m_imgui)
+        ImGui_ImplGlfw_KeyCallback(m_window, key, glfwGetKeyScancode(key), action, mods);
+    else
+        onKey(m_window, key, 0, action, mods);
+}
+
 void Window::beginFrame() {
     glfwPollEvents();
+    m_keys.swap(m_queued);
+    m_queued.clear();
     glfwGetFramebufferSize(m_window, &m_width, &m_height);
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
     glViewport(0, 0, m_width, m_height);

@@ -81,7 +81,8 @@ std::string NetworkHistory::latencyCaption(double maxUs) const {
     };
     char range[48];
     std::snprintf(range, sizeof range, " (0-%.0f ms)", maxUs * 1e-3);
-    return "latency p50 " + ms(latencyPercentile(50)) + " p99 " + ms(latencyPercentile(99)) + range;
+    return "delivery p50 " + ms(latencyPercentile(50)) + " p99 " + ms(latencyPercentile(99)) +
+           range;
 }
 
 void ForceHistory::addServer(double t, glm::vec3 f) {

@@ -215,6 +215,11 @@ bool SessionPolicy::hello(uint16_t id, Peer& p, std::span<const uint8_t> data, u
     Hello h;
     if (peekMessageType(data) != uint8_t(MessageType::Hello) || !decodeMessage(data, h))
         return false;
+    std::vector<uint8_t> worn; // the others' colours: a newcomer gets one nobody wears
+    for (const auto& [other, q] : m_peers)
+        if (q.hello && !q.kicked)
+            worn.push_back(q.colour);
+    p.colour = pickParticipantColour(worn);
     p.hello = true;
     p.helloMsg = h;
     p.sync = h.sync;
@@ -444,7 +449,8 @@ std::vector<uint8_t> SessionPolicy::rosterMessage() const {
             continue;
         auto held = m_takenOver.find(id);
         roster.list.push_back({id, p.helloMsg.role, p.sync, p.helloMsg.name,
-                               held == m_takenOver.end() ? uint16_t(0) : held->second});
+                               held == m_takenOver.end() ? uint16_t(0) : held->second,
+                               participantPalette()[p.colour]});
     }
     return encodeMessage(roster);
 }

@@ -37,11 +37,11 @@ TEST(NetworkHistory, RateCompressionAndHistogram) {
 // latencyPercentile returns for none.
 TEST(NetworkHistory, TheLatencyCaptionShowsADashBeforeAnyLatency) {
     NetworkHistory h;
-    EXPECT_EQ(h.latencyCaption(20000.0), "latency p50 - p99 - (0-20 ms)");
+    EXPECT_EQ(h.latencyCaption(20000.0), "delivery p50 - p99 - (0-20 ms)");
     h.addUpdate({0.1, -1.0, 100, 400, true}); // a full image: no latency
-    EXPECT_EQ(h.latencyCaption(20000.0), "latency p50 - p99 - (0-20 ms)");
+    EXPECT_EQ(h.latencyCaption(20000.0), "delivery p50 - p99 - (0-20 ms)");
     h.addUpdate({0.2, 2500.0, 100, 400, false});
-    EXPECT_EQ(h.latencyCaption(20000.0), "latency p50 2.5 ms p99 2.5 ms (0-20 ms)");
+    EXPECT_EQ(h.latencyCaption(20000.0), "delivery p50 2.5 ms p99 2.5 ms (0-20 ms)");
 }
 
 TEST(NetworkHistory, SeriesAreCapped) {
@@ -269,16 +269,21 @@ TEST(Panels, ParticipantsAreNamedFromTheRosterOrByTheirId) {
 }
 
 // Every participant's tool and name are told apart from the marks (a yellow participant read as
-// an instructor's mark) and from this client's own colour.
+// an instructor's mark) and from each other: the server's palette, drawn as the roster says.
 TEST(Panels, NoParticipantColourIsTheMarksYellow) {
     const glm::vec3 mark(markColor());
-    for (int i = 0; i < 12; ++i) {
-        const glm::vec3 c(participantColor(i));
-        EXPECT_GT(glm::distance(c, mark), 0.35f) << "participant " << i;
-        if (i > 0) {
-            EXPECT_NE(participantColor(i), participantColor(0)) << "participant " << i;
-        }
+    const auto palette = net::participantPalette();
+    for (size_t i = 0; i < palette.size(); ++i) {
+        const glm::vec3 c(toColour(palette[i]));
+        EXPECT_GT(glm::distance(c, mark), 0.35f) << "participant colour " << i;
+        for (size_t j = 0; j < i; ++j)
+            EXPECT_GT(glm::distance(c, glm::vec3(toColour(palette[j]))), 0.2f) << i << " " << j;
     }
+    std::map<uint16_t, net::ParticipantInfo> roster;
+    roster[3] = {3, net::Role::Trainee, net::Sync::Dbi, "Alex", 0, palette[2]};
+    EXPECT_EQ(participantColor(roster, 3), toColour(palette[2])) << "the server's colour";
+    EXPECT_GT(glm::distance(glm::vec3(participantColor(roster, 9)), mark), 0.35f)
+        << "not listed yet: neutral";
 }
 
 // Arrow keys and the wheel move the push depth in steps and never past the slider's range (held

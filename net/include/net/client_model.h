@@ -49,7 +49,9 @@ struct NetworkHistory {
     // Counts of latencies in `buckets` equal bins over [0, maxUs); larger ones go in the last.
     std::vector<float> latencyHistogram(int buckets, double maxUs) const;
     double latencyPercentile(double p) const; // -1 when none
-    // The latency histogram's caption: p50 and p99 in ms, "-" before any latency was measured.
+    // The histogram's caption: p50 and p99 in ms, "-" before any was measured. Named
+    // "delivery" (cause on the server -> applied here, before drawing): "update latency" is the
+    // Comparison panel's, cause to screen (docs/ui.md).
     std::string latencyCaption(double maxUs) const;
 };
 

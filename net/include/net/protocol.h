@@ -3,6 +3,7 @@
 // Reads check every length and range; a message that fails to read is dropped and counted.
 #pragma once
 
+#include "net/participant_colours.h"
 #include "net/serialize.h"
 
 #include "libsim/volume_io.h"
@@ -30,7 +31,8 @@ namespace trephine::net {
 // after the welcome (extent, camera presets, sites, landmarks, the surgical field's mesh:
 // net/scene.h); the welcome's volume name is a label a client never opens; ViewAs and
 // ParticipantView (an instructor watches through a participant's camera).
-// 9: SafetyWarning and AssessmentSnapshot (net/assessment_protocol.h).
+// 9: SafetyWarning and AssessmentSnapshot (net/assessment_protocol.h); Participants' colour (the
+// server gives each participant one; every window draws it).
 inline constexpr uint32_t kProtocolVersion = 9;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
@@ -446,13 +448,17 @@ struct ParticipantInfo {
     // A trainee an instructor has taken over: that instructor's client id (0: nobody). Its
     // drilling is paused and the instructor's drill cuts instead (TakeOver).
     uint16_t takenOverBy = 0;
+    // The colour every window draws this participant in (its name, tool and plots), given by the
+    // server (net/participant_colours.h) for as long as it stays.
+    Rgb8 colour;
 
     template <typename S>
     bool serialize(S& s) {
         return s.ranged(clientId, uint16_t(1), uint16_t(UINT16_MAX)) &&
                s.ranged(role, Role::Trainee, Role::Instructor) &&
                s.ranged(sync, Sync::Dbi, Sync::Volume) && s.string(name, kMaxNameLength) &&
-               s.integer(takenOverBy);
+               s.integer(takenOverBy) && s.integer(colour.r) && s.integer(colour.g) &&
+               s.integer(colour.b);
     }
     bool operator==(const ParticipantInfo&) const = default;
 };

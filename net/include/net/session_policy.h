@@ -120,6 +120,7 @@ private:
         uint64_t connectedUs = 0;
         Pacer modeSwitch{kSyncSwitchIntervalUs}; // each switch to volume encodes the volume
         VelocityEstimate toolVelocity;           // from its tool states' positions and times
+        uint8_t colour = 0; // its participantPalette() index, given at its hello
     };
 
     bool handle(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,

@@ -97,6 +97,9 @@ TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
     std::atomic<bool> stop{false};
     std::atomic<uint16_t> traineeId{0};
     std::atomic<size_t> traineeMarks{0}; // marks the trainee holds (the instructor places one)
+    // The colours the trainee's roster gives it and the instructor (0xRRGGBB + 1; 0: not listed):
+    // what the trainee's own window draws them in.
+    std::atomic<uint32_t> traineeOwnColour{0}, instructorColour{0};
     std::thread traineeThread([&] {
         auto next = std::chrono::steady_clock::now();
         while (!stop) {
@@ -104,6 +107,11 @@ TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
             if (trainee.welcomed()) {
                 traineeId = trainee.welcome().clientId;
                 traineeMarks = trainee.annotations().size();
+                for (const auto& [id, p] : trainee.participants()) {
+                    const uint32_t rgb =
+                        (uint32_t(p.colour.r) << 16 | p.colour.g << 8 | p.colour.b) + 1;
+                    (id == traineeId ? traineeOwnColour : instructorColour) = rgb;
+                }
                 if (std::chrono::steady_clock::now() >= next) {
                     net::ToolState t = tool;
                     trainee.sendToolState(t);
@@ -153,8 +161,16 @@ TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
         WindowPoint w = projectToWindow(vp, cam, glm::dvec3(p));
         return glm::ivec2(int(w.window.x), 500 - 1 - int(w.window.y));
     };
-    const glm::vec4 colour = ui::participantColor(int(traineeId.load()));
-    ASSERT_NE(colour, ui::participantColor(0)) << "a colour distinct from the instructor's own";
+    // Two windows, one colour: the instructor's screenshot shows the trainee in the colour the
+    // trainee's own roster gives it (the server's), distinct from the instructor's.
+    auto rgbOf = [](uint32_t packed) {
+        const uint32_t v = packed - 1;
+        return ui::toColour({uint8_t(v >> 16), uint8_t(v >> 8), uint8_t(v)});
+    };
+    ASSERT_NE(traineeOwnColour.load(), 0u) << "the trainee was listed to itself";
+    ASSERT_NE(instructorColour.load(), 0u) << "the instructor was listed to the trainee";
+    const glm::vec4 colour = rgbOf(traineeOwnColour);
+    ASSERT_NE(colour, rgbOf(instructorColour)) << "a colour distinct from the instructor's own";
     // The owner-coloured handpiece body lies 38..76 mm up the axis from the burr's centre.
     int onTool = 0, besideTool = 0;
     for (float d : {45.0f, 55.0f, 65.0f}) {

@@ -3,6 +3,7 @@
 // struct declared beside it here.
 #pragma once
 
+#include "libsim/tool.h"
 #include "net/client_thread.h"
 #include "ui/panel_data.h"
 
@@ -36,20 +37,33 @@ void drawForcesPanel(const ForceHistory& forces, double loopRateHz, double now,
 
 // [Session] role, participants, tool, burr size, speed, connection state.
 struct ToolControls {
-    int kind = 0;          // 0 burr, 1 perforator
-    float burrMm = 5.0f;   // burr diameter
-    float speed = 1.0f;    // [0, 1]
+    int kind = 0;                               // 0 burr, 1 perforator
+    float burrMm = 5.0f;                        // burr diameter
+    float perforatorMm = kPerforatorDiameterMm; // the perforator's (6-16 mm)
+    float speed = 1.0f;                         // [0, 1]
     float pushMm = 0.0f;   // how far the tip is pushed below the surface under the cursor
     bool drilling = false; // mouse button held (or the script drills)
     bool canDrill = true;  // a trainee nobody holds, or an instructor holding one (TakeOver)
 };
 // The range of ToolControls::pushMm (the slider's), and one step of the wheel or an arrow key.
 constexpr float kPushMinMm = -5.0f, kPushMaxMm = 10.0f, kPushStepMm = 0.25f;
-// pushMm moved by `steps` steps (the wheel's notches, +1 for Down, -1 for Up), kept in the range
-// so that a held arrow key cannot drive the tip through the inner table.
+// pushMm moved by `steps` steps (the wheel's notches up, or Up, +1: deeper; down, or Down, -1:
+// shallower), kept in the range so that a held arrow key cannot drive the tip through the inner
+// table.
 float steppedPush(float pushMm, float steps);
-// `c` with the burr size, speed and push depth within their sliders' ranges, NaN to the lowest:
-// the server counts an out-of-range tool state as malformed and disconnects a client sending many.
+// The selected tool, its diameter, and that diameter's range and one step of `[` / `]`: the burr
+// 1-6 mm by 0.5 mm, the perforator 6-16 mm by 1 mm (libsim/tool.h).
+ToolKind selectedKind(const ToolControls& c);
+float selectedDiameter(const ToolControls& c);
+struct SizeRange {
+    float minMm, maxMm, stepMm;
+};
+SizeRange sizeRange(ToolKind kind);
+// The selected tool's size moved by `steps` steps, kept in its range.
+void stepToolSize(ToolControls& c, int steps);
+// `c` with the burr and perforator sizes, speed and push depth within their sliders' ranges, NaN to
+// the lowest: the server counts an out-of-range tool state as malformed and disconnects a client
+// sending many.
 ToolControls withinRanges(ToolControls c);
 // The marks on the skull (the server's Annotations): listed for everyone; an instructor also
 // labels the next one, marks the bone under the pointer, removes one or clears them. The panel
@@ -59,9 +73,10 @@ struct MarkControls {
     bool canMark = false;      // instructors
     bool addAtPointer = false; // asked this frame ("mark the pointer" or the M key)
     bool clearAll = false;
-    uint32_t removeId = 0; // 0: none
-    size_t undoable = 0;   // marks the last removal took (the window's MarkUndo)
-    bool undo = false;     // asked this frame: put them back
+    uint32_t removeId = 0;    // 0: none
+    size_t undoable = 0;      // marks the last removal took (the window's MarkUndo)
+    bool undo = false;        // asked this frame: put them back
+    bool labelActive = false; // the label field had the keyboard when the panel was last drawn
 };
 // What the marks asked for this frame (`controls`, then reset) comes to, as Annotates to send: an
 // Add at the pointer, a Clear or a Remove (remembered in `undo` first) and the undo's Adds. Only
@@ -129,8 +144,13 @@ bool drawViewPanel(ViewControls& view, bool waitingForImage, const char* picture
 bool drawComparisonPanel(SyncDesign& wanted, SyncDesign live, const ComparisonHistory& history,
                          double now);
 
-// Distinct colours for participants (index 0: this client).
-glm::vec4 participantColor(int index);
+// A tooltip for the last item drawn, shown on hover.
+void itemTip(const char* text);
+
+// The colour the server gave participant `id` (Participants' colour), the same in every window;
+// a neutral grey while the roster does not list it yet.
+glm::vec4 participantColor(const std::map<uint16_t, net::ParticipantInfo>& roster, uint16_t id);
+glm::vec4 toColour(net::Rgb8 c);
 // How the window names participant `id`: the name from its hello as the server's roster lists it
 // ("client N" when the roster does not list it yet, or it gave no name).
 std::string participantName(const std::map<uint16_t, net::ParticipantInfo>& roster, uint16_t id);

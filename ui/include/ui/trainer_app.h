@@ -12,6 +12,7 @@
 #include <array>
 #include <atomic>
 #include <cstdint>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -30,6 +31,13 @@ struct TrainerReport {
     uint64_t localForceTicks = 0;  // haptic ticks whose force came from the local volume
     uint64_t serverForceTicks = 0; // ... from the server's models (multi-rate)
     std::array<uint64_t, kSyncDesignCount> frames{}; // frames drawn per design
+    // The tool as the window last set it (the Session panel's controls and the keys).
+    int toolKind = 0; // ToolKind
+    float toolDiameterMm = 0.0f;
+    float pushMm = 0.0f;
+    // Where each panel was when the window closed (ImGui's window rectangles: x, y, w, h), by
+    // its title; a panel not drawn (the full-window view) is absent.
+    std::map<std::string, std::array<float, 4>> panels;
     // The client model's report (net::ClientModel::report), as the headless trainee writes it.
     nlohmann::ordered_json session;
 };
@@ -45,7 +53,9 @@ struct TrainerOptions {
     float distanceMm = 170.0f;       // eye to site for "site"
     float orbitDeg = 0.0f; // initial orbit and tilt of the view (the View panel's sliders)
     float tiltDeg = 0.0f;
-    int size = 500;                    // DBI and view size in pixels (1:1 with the window)
+    int size = 500; // DBI and view size in pixels (1:1 with the window)
+    // The window's size; 0: the view's and the panels' default columns beside it.
+    int windowWidth = 0, windowHeight = 0;
     std::string sizeOption = "--size"; // the command-line option of `size`, for messages
     std::string script;                // "" (mouse) or "burrhole": a scripted drilling
     std::string screenshot; // write the window here after `frames` settled frames, then exit
@@ -71,6 +81,10 @@ struct TrainerOptions {
     // [Instructor] A participant to view as once it is listed (its name or client id): the view
     // follows that participant's camera. The view is not settled before the server says it.
     std::string viewAs;
+    // [Tests] GLFW keys tapped once the picture shows, one a frame: each press and its release
+    // reach the window's key callback together before the frame polls (a tap shorter than a
+    // frame).
+    std::vector<int> tapKeys;
     TrainerReport* report = nullptr; // [Tests] filled when the window closes
     // [Tests] The window closes once this is set, as if its close button was clicked (exit 0,
     // unless a screenshot or frames were asked for and not done).

@@ -5,6 +5,7 @@
 #include "libsim/dbi.h"
 
 #include <string>
+#include <vector>
 
 struct GLFWwindow;
 
@@ -19,6 +20,13 @@ struct WindowConfig {
     std::string title = "Trephine";
     bool visible = true;
     bool imgui = true;
+};
+
+// A key pressed (or repeated), as GLFW's key callback reported it.
+struct KeyPress {
+    int key = 0;  // GLFW_KEY_*
+    int mods = 0; // GLFW_MOD_*
+    bool operator==(const KeyPress&) const = default;
 };
 
 class Window {
@@ -39,13 +47,24 @@ public:
     // The back buffer as it is now (call between drawing and endFrame), row 0 at the bottom.
     Dbi readFramebuffer() const;
 
+    // The keys pressed since the frame before began, in order. ImGui 1.86 polls key state once a
+    // frame, so a tap whose press and release fall in one frame never reaches IsKeyPressed; this
+    // queue, filled by GLFW's key callback, keeps it.
+    const std::vector<KeyPress>& keyPresses() const { return m_keys; }
+    // [Tests] A key event as if GLFW had reported it: through the callbacks the window installed
+    // (ImGui's, which hands it on to the queue), so a test taps a key inside one frame.
+    void injectKey(int key, int action, int mods = 0);
+
     int width() const { return m_width; }
     int height() const { return m_height; }
     GLFWwindow* handle() const { return m_window; }
 
 private:
     GLFWwindow* m_window = nullptr;
+    static void onKey(GLFWwindow* window, int key, int scancode, int action, int mods);
     bool m_imgui = true;
+    std::vector<KeyPress> m_keys;   // this frame's
+    std::vector<KeyPress> m_queued; // arriving for the next frame
     int m_width = 0, m_height = 0;
 };
 

@@ -1,0 +1,66 @@
+// What the view says and where: the link's message (connecting, lost with the picture dimmed, the
+// likely causes after a few failures) and labels placed so they avoid each other. No GL.
+#include "ui/layout.h"
+#include "ui/link_message.h"
+
+#include <gtest/gtest.h>
+
+using namespace trephine;
+using namespace trephine::ui;
+
+namespace {
+
+bool overlap(const UiRect& a, const UiRect& b) {
+    return a.x < b.x + b.w && b.x < a.x + a.w && a.y < b.y + b.h && b.y < a.y + a.h;
+}
+
+bool has(const std::string& text, const std::string& part) {
+    return text.find(part) != std::string::npos;
+}
+
+} // namespace
+
+TEST(LinkMessage, AWrongAddressOrPortGetsItsLikelyCausesAfterAFewAttempts) {
+    using net::LinkState;
+    const std::string addr = "10.0.0.7:7778";
+    LinkMessage m = linkMessage(LinkState::Connecting, 1, -1, "", addr, false);
+    EXPECT_EQ(m.text, "Connecting to 10.0.0.7:7778 (attempt 1)...");
+    EXPECT_FALSE(m.dim) << "no picture to dim";
+    m = linkMessage(LinkState::Connecting, 3, -1, "", addr, false);
+    EXPECT_FALSE(has(m.text, "Likely causes")) << "two failures: not yet\n" << m.text;
+    m = linkMessage(LinkState::Retrying, 3, -1, "no answer", addr, false);
+    EXPECT_TRUE(has(m.text, "No answer after 3 attempts. Likely causes:")) << m.text;
+    EXPECT_TRUE(has(m.text, "is not running")) << m.text;
+    EXPECT_TRUE(has(m.text, "wrong address")) << m.text;
+    EXPECT_TRUE(has(m.text, "UDP port 7778")) << m.text;
+    EXPECT_TRUE(linkMessage(LinkState::Connected, 3, -1, "", addr, true).text.empty());
+}
+
+TEST(LinkMessage, ALostServerDimsThePictureAndSaysSo) {
+    using net::LinkState;
+    // Up on attempt 2, then lost: reconnecting on attempt 3.
+    LinkMessage m = linkMessage(LinkState::Connecting, 3, 2, "the server stopped", "h:7777", true);
+    EXPECT_TRUE(m.dim);
+    EXPECT_TRUE(has(m.text, "Lost the server at h:7777: the server stopped")) << m.text;
+    EXPECT_FALSE(has(m.text, "Likely causes")) << "failures count from the last connection";
+    m = linkMessage(LinkState::Retrying, 5, 2, "timed out", "h:7777", true);
+    EXPECT_TRUE(has(m.text, "has stopped")) << m.text;
+}
+
+TEST(Labels, LabelsAtOnePointDoNotCoverEachOther) {
+    const UiRect view{0, 0, 500, 500};
+    std::vector<LabelRequest> at(5, LabelRequest{200, 200, 80, 14});
+    at.push_back({205, 198, 120, 14}); // a mark's label next to them
+    const std::vector<UiRect> placed = placeLabels(at, view);
+    ASSERT_EQ(placed.size(), at.size());
+    for (size_t i = 0; i < placed.size(); ++i) {
+        EXPECT_GE(placed[i].x, 0.0f);
+        EXPECT_LE(placed[i].x + placed[i].w, 500.0f);
+        for (size_t j = 0; j < i; ++j)
+            EXPECT_FALSE(overlap(placed[i], placed[j])) << i << " and " << j;
+    }
+    EXPECT_EQ(placed[0].x, 210.0f) << "the first keeps its place right of its anchor";
+    // Near the view's right edge a label goes to the anchor's left rather than out of the view.
+    const auto edge = placeLabels({{490, 100, 80, 14}}, view);
+    EXPECT_LE(edge[0].x + edge[0].w, 500.0f);
+}
