@@ -133,6 +133,15 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
             }
             ImGui::PopID();
         }
+        // Removing is an instructor's too (docs/security.md): refused from that address with its
+        // role's code until "let removed rejoin".
+        if (takeOver.canTakeOver) {
+            ImGui::PushID(int(id) + 0x20000);
+            if (ImGui::SmallButton("remove"))
+                takeOver.remove = net::Remove{net::Remove::Op::Remove, id};
+            ImGui::SameLine();
+            ImGui::PopID();
+        }
         ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), "  %s  %s, %s",
                            participantName(snap.participants, id).c_str(),
                            p.role == net::Role::Instructor ? "instructor" : "trainee",
@@ -146,6 +155,8 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
                                double(t->second.diameterMm), t->second.drilling ? " drilling" : "");
         }
     }
+    if (takeOver.canTakeOver && ImGui::SmallButton("let removed rejoin"))
+        takeOver.remove = net::Remove{net::Remove::Op::AllowRejoin, 0};
     // Tools of ids the roster does not list yet (its message may trail the first relays).
     for (const auto& [id, t] : snap.others) {
         if (snap.participants.count(id))

@@ -54,6 +54,11 @@ struct ServerConfig {
     // A connection that has not said hello after this many seconds is closed (BadHello): it
     // would otherwise hold one of the maxClients slots for good.
     float helloTimeoutS = 5.0f;
+    // Role codes (docs/security.md): a client proves one in the handshake, its role is the
+    // code's, and every message after it is sealed. Both empty: an open session where anyone who
+    // reaches the port joins with the role its hello names, in the clear (`trephine server
+    // --open`; tests). Either form of a code (normaliseCode) works.
+    std::string traineeCode, instructorCode;
 };
 
 // The marks (Annotations) go to every participant at most this often, the whole list once.

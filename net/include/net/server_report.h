@@ -7,6 +7,7 @@
 #include "libsim/stats.h"
 #include "net/net_stats.h"
 #include "net/protocol.h"
+#include "net/security_counters.h"
 
 #include <nlohmann/json.hpp>
 
@@ -68,6 +69,7 @@ struct ServerReport {
     std::array<ModeReport, 2> modes;      // by Sync
     SampleWindow forceComputeUs{65536};
     SampleWindow hapticServiceUs{65536}; // tool state received -> its HapticModel ready
+    SecurityCounters security;           // net/session_gate.h
 
     // The totals of `mode` with the participants using it now.
     ModeTotals modeTotals(Sync mode) const;
