@@ -3,7 +3,10 @@
 // - image-update latency p50 and p99 of the update study's dbi method at N = 80 (an 80^3 box cut
 //   at the surface of the paper-spaced skull:128; target: sealed at most +5 %);
 // - the force round trip (tool state out, HapticModel back, one in flight at 1 kHz);
-// - the handshake: connect to sealed, and the code's argon2id hash alone.
+// - the handshake: connect to sealed, and the code's argon2id hash alone;
+// - sealing and opening one message of the sizes a session sends (a tool state, the lz4 image
+//   update of an 80^3 cut, 31.7 kB in docs/session.md, and a full 500x500 view, 142 kB): the
+//   crypto's own share of an update's latency, which load on the machine does not blur.
 #include "libsim/skull.h"
 #include "libsim/stats.h"
 #include "net/force_round_trip.h"
@@ -23,7 +26,7 @@ using namespace trephine::study;
 
 namespace {
 
-constexpr int kPairs = 3; // open, sealed, open, sealed, ...
+constexpr int kPairs = 9; // open, sealed, open, sealed, ...
 
 double median(std::array<double, kPairs> v) {
     std::sort(v.begin(), v.end());
@@ -62,7 +65,7 @@ void sealedUpdateLatency(benchmark::State& state) {
                 UpdateStudyConfig config;
                 config.sizes = {80};
                 config.methods = {"dbi"};
-                config.cycles = 40;
+                config.cycles = 24;
                 config.sealed = sealed == 1;
                 const UpdateStudyRow row = runUpdateStudy(paperSkull(), config).at(0);
                 p50[sealed][size_t(pair)] = row.latencyP50Ms * 1e3;
@@ -138,8 +141,26 @@ void sealedHandshake(benchmark::State& state) {
     state.counters["joins"] = double(joins.size());
 }
 
+void sealOpen(benchmark::State& state) {
+    const Salt salt{};
+    const Bytes32 w = codeScalar("BENCHTRAINEE", salt);
+    SpakeClient client(w, salt, Role::Trainee);
+    const auto server = spakeAnswer(w, salt, Role::Trainee, Role::Trainee, client.share());
+    SecureChannel sender(server->keys, true);
+    SecureChannel receiver(*client.keys(server->share, Role::Trainee), false);
+    const std::vector<uint8_t> message(size_t(state.range(0)), 0x5a);
+    std::vector<uint8_t> plain;
+    for (auto _ : state) {
+        const std::vector<uint8_t> sealed = sender.seal(Channel::Image, message);
+        if (receiver.open(Channel::Image, sealed, plain) != SecureChannel::Opened::Ok)
+            state.SkipWithError("did not open");
+    }
+    state.SetBytesProcessed(int64_t(state.iterations()) * state.range(0));
+}
+
 } // namespace
 
+BENCHMARK(sealOpen)->Arg(60)->Arg(31719)->Arg(142000)->Unit(benchmark::kMicrosecond);
 BENCHMARK(sealedUpdateLatency)->Iterations(1)->UseRealTime()->Unit(benchmark::kMillisecond);
 BENCHMARK(sealedForceRoundTrip)->Iterations(1)->UseRealTime()->Unit(benchmark::kMillisecond);
 BENCHMARK(sealedHandshake)->Iterations(1)->UseRealTime()->Unit(benchmark::kMillisecond);
