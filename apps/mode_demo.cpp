@@ -6,6 +6,7 @@
 #include "modes.h"
 
 #include "mode_window.h"
+#include "net/secure_channel.h"
 #include "net/session_server.h"
 
 #include "libsim/camera.h"
@@ -168,6 +169,19 @@ void printSession(const net::HeadlessView& view, const net::TraineeCore& core) {
                 s.hapticRoundTripP50Us, s.hapticRoundTripP99Us);
 }
 
+// The embedded server: on a free port, with codes of its own that it hands its trainee, so the
+// demo's session is sealed like any other.
+net::ServerConfig demoServerConfig(const std::string& volume) {
+    net::ServerConfig config;
+    config.port = 0;
+    config.volumeName = volume;
+    config.traineeCode = net::generateCode();
+    do
+        config.instructorCode = net::generateCode();
+    while (config.instructorCode == config.traineeCode);
+    return config;
+}
+
 int runHeadlessDemo(const DemoOptions& o) {
     std::printf("Trephine demo: an embedded server and a headless trainee over loopback: a burr "
                 "hole with the cranial perforator\n");
@@ -185,14 +199,13 @@ int runHeadlessDemo(const DemoOptions& o) {
 
     // The server owns the only volume; the trainee holds the DBI of its view and feels the
     // server's force models, as a remote one would.
-    net::ServerConfig config;
-    config.port = 0;
-    config.volumeName = o.volume;
+    net::ServerConfig config = demoServerConfig(o.volume);
     net::SessionServer server(std::move(skull), config);
     server.start();
     net::TraineeCoreConfig cc;
     cc.client.address = "127.0.0.1:" + std::to_string(server.port());
     cc.client.client.name = "demo";
+    cc.client.client.code = config.traineeCode;
     cc.client.client.view = net::toViewSpec(camera);
     cc.client.retryS = 3600.0; // one connection: a lost link ends the demo
     // The script's device and tool source outlive the core, whose haptic loop reads them.
@@ -287,14 +300,14 @@ int runDemo(DemoOptions& o) {
         return runHeadlessDemo(o);
     }
     // The embedded server on a free loopback port, then the trainee window.
-    net::ServerConfig config;
-    config.port = 0;
-    config.volumeName = o.volume;
+    net::ServerConfig config = demoServerConfig(o.volume);
     net::SessionServer server(openVolume(o.volume), config);
     server.start();
     o.window.connect = "127.0.0.1:" + std::to_string(server.port());
-    std::printf("demo: server on %s (%s), trainee window connected\n", o.window.connect.c_str(),
-                o.volume.c_str());
+    o.window.code = config.traineeCode;
+    std::printf("demo: server on %s (%s), trainee window connected; an instructor joins with "
+                "--code %s\n",
+                o.window.connect.c_str(), o.volume.c_str(), config.instructorCode.c_str());
     int rc = runWindowedClient(o.window);
     server.stop();
     return rc;

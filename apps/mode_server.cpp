@@ -9,7 +9,10 @@
 #include "net/marks_file.h"
 #include "net/scene.h"
 #include "net/server_banner.h"
+#include "net/secure_channel.h"
 #include "net/session_server.h"
+
+#include <fmt/format.h>
 
 #include <atomic>
 #include <chrono>
@@ -36,7 +39,42 @@ struct ServerOptions {
     int renderThreads = 0;
     size_t maxClients = 16;
     std::string report;
+    std::string traineeCode, instructorCode; // generated when not given (docs/security.md)
+    bool open = false;                       // no codes: anyone who reaches the port joins
 };
+
+// The codes the server runs with: given, or made now; none with --open.
+void chooseCodes(const ServerOptions& o, net::ServerConfig& config) {
+    if (o.open) {
+        if (!o.traineeCode.empty() || !o.instructorCode.empty())
+            throw Error(
+                "--open runs without codes: leave out --trainee-code and --instructor-code");
+        return;
+    }
+    config.traineeCode = o.traineeCode.empty() ? net::generateCode() : o.traineeCode;
+    config.instructorCode = o.instructorCode.empty() ? net::generateCode() : o.instructorCode;
+    if (net::normaliseCode(config.traineeCode) == net::normaliseCode(config.instructorCode))
+        throw Error("--trainee-code and --instructor-code are the same: give two codes");
+}
+
+// Said once the port is known (the lines after "on port N"): the codes to read out or, open,
+// that anyone can join (on stderr too, where it is hard to miss).
+void printCodes(const ServerOptions& o, const net::ServerConfig& config, uint16_t port) {
+    if (o.open) {
+        const std::string warning = fmt::format(
+            "trephine server: WARNING: --open: NO CODES. Anyone who can reach UDP port {} joins, "
+            "may claim the instructor's role, and sees everything in the clear (images, volumes, "
+            "marks, forces)\n",
+            port);
+        std::fputs(warning.c_str(), stdout);
+        std::fputs(warning.c_str(), stderr);
+        return;
+    }
+    std::printf("trephine server: trainee code    %s%s\n", config.traineeCode.c_str(),
+                o.traineeCode.empty() ? " (generated)" : "");
+    std::printf("trephine server: instructor code %s%s\n", config.instructorCode.c_str(),
+                o.instructorCode.empty() ? " (generated)" : "");
+}
 
 int runServer(const ServerOptions& o) {
     // Written when the session ends: a folder that is not there would lose its statistics.
@@ -73,6 +111,7 @@ int runServer(const ServerOptions& o) {
     config.saveOnExit = o.saveOnExit;
     config.renderThreads = o.renderThreads;
     config.maxClients = o.maxClients;
+    chooseCodes(o, config);
     glm::ivec3 d = volume.dims();
     net::SessionServer server(std::move(volume), config);
     // Every way a session is ended from outside saves it. Output gone (a `| tee` ended first) must
@@ -88,6 +127,7 @@ int runServer(const ServerOptions& o) {
     for (const std::string& line :
          net::serverStartLines(server.port(), net::localAddresses(), keeps))
         std::printf("trephine server: %s\n", line.c_str());
+    printCodes(o, config, server.port());
     std::fflush(stdout);
     while (!g_stopRequested.load())
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
@@ -130,6 +170,14 @@ void addServerMode(CLI::App& root, int& exitCode) {
                     "Participants at once; one more is refused (server full)")
         ->check(CLI::Range(1, 1024))
         ->capture_default_str();
+    sub->add_option("--trainee-code", o->traineeCode,
+                    "The code trainees join with (default: a fresh one, printed at start)")
+        ->check(roleCode());
+    sub->add_option("--instructor-code", o->instructorCode,
+                    "The code instructors join with (default: a fresh one, printed at start)")
+        ->check(roleCode());
+    sub->add_flag("--open", o->open,
+                  "No codes: anyone who reaches the port joins, in any role, unencrypted");
     sub->add_option("--report", o->report,
                     "Write server statistics as JSON here when it stops (per channel and peer)")
         ->check(outputFile());

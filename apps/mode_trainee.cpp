@@ -57,6 +57,7 @@ struct TraineeOptions {
     std::string report;
     std::string saveDbi;
     std::string name = "trainee";
+    std::string code;          // the trainee code (docs/security.md); empty: an open session
     double toolRateHz = 100.0; // tool states per second from the haptic loop
     std::string screenshot;    // window: as `trephine instructor --screenshot`
     int frames = 0;            // window: as `trephine instructor --frames` (0: run until closed)
@@ -259,6 +260,7 @@ int runHeadlessTrainee(const TraineeOptions& o, std::vector<Sample> script) {
     net::TraineeCoreConfig coreConfig;
     net::ClientConfig& config = coreConfig.client.client;
     config.name = o.name;
+    config.code = o.code;
     config.codec = net::parseCodec(o.codec);
     config.sync = o.sync == "volume" ? net::Sync::Volume : net::Sync::Dbi;
     config.volumeCodec = net::parseCodec(o.volumeCodec);
@@ -416,6 +418,7 @@ int runTrainee(const TraineeOptions& o) {
         WindowedOptions w;
         w.connect = o.connect;
         w.name = o.name;
+        w.code = o.code;
         w.codec = o.codec;
         w.size = o.size;
         w.sizeOption = "--size";
@@ -499,6 +502,7 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
     sub->add_option("--name", o->name, "Name shown to others")
         ->check(participantName())
         ->capture_default_str();
+    addCodeOption(sub, o->code, "trainee");
     sub->add_option("--screenshot", o->screenshot,
                     "Window: write it to this PNG once the view has settled, then exit")
         ->check(outputFile());

@@ -33,6 +33,7 @@ int runWindowedClient(const WindowedOptions& o) {
     ui::TrainerOptions t;
     t.address = o.connect;
     t.name = o.name;
+    t.code = o.code;
     t.instructor = o.instructor;
     t.camera = o.camera;
     t.codec = o.codec;
@@ -117,6 +118,7 @@ void addInstructorMode(CLI::App& root, int& exitCode) {
     sub->add_option("--name", o->name, "Name shown to others")
         ->check(participantName())
         ->capture_default_str();
+    addCodeOption(sub, o->code, "instructor");
     sub->add_option("--codec", o->codec, "Image codec: raw, lz4 or zstd")
         ->check(CLI::IsMember({"raw", "lz4", "zstd"}))
         ->capture_default_str();

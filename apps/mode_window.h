@@ -11,6 +11,7 @@ namespace trephine::app {
 struct WindowedOptions {
     std::string connect; // HOST:PORT
     std::string name = "trainee";
+    std::string code; // the role's code (docs/security.md); empty: an open session
     bool instructor = false;
     std::string camera = "site";
     std::string codec = "lz4";

@@ -7,6 +7,7 @@
 #include "libsim/error.h"
 #include "libsim/replacing_file.h"
 #include "net/protocol.h"
+#include "net/secure_channel.h"
 
 #include <cmath>
 #include <csignal>
@@ -140,6 +141,28 @@ inline CLI::Validator participantName() {
             return {};
         },
         "NAME");
+}
+
+// A role code (docs/security.md), checked when parsed: a typo in it is one line before anything
+// connects.
+inline CLI::Validator roleCode() {
+    return CLI::Validator(
+        [](std::string& c) -> std::string {
+            try {
+                net::normaliseCode(c);
+            } catch (const Error& e) {
+                return e.what();
+            }
+            return {};
+        },
+        "CODE");
+}
+
+// --code CODE for a client of `role`.
+inline void addCodeOption(CLI::App* sub, std::string& code, const std::string& role) {
+    sub->add_option("--code", code,
+                    "The " + role + " code the server printed (leave out for an --open server)")
+        ->check(roleCode());
 }
 
 void addServerMode(CLI::App& root, int& exitCode);

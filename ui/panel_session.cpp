@@ -219,6 +219,16 @@ void participantRow(const net::ClientSnapshot& snap, uint16_t id, const net::Par
         }
         ImGui::PopID();
     }
+    // Removing is an instructor's too (docs/security.md): refused from that address with its
+    // role's code until "let removed rejoin".
+    if (takeOver.canTakeOver) {
+        ImGui::PushID(int(id) + 0x20000);
+        if (ImGui::SmallButton("remove"))
+            takeOver.remove = net::Remove{net::Remove::Op::Remove, id};
+        itemTip("Send this participant away; they cannot rejoin with their code until allowed.");
+        ImGui::SameLine();
+        ImGui::PopID();
+    }
     ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), "%s  %s, %s",
                        participantName(snap.participants, id).c_str(),
                        p.role == net::Role::Instructor ? "instructor" : "trainee",
@@ -278,6 +288,9 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
     for (const auto& [id, p] : snap.participants)
         if (id != self)
             participantRow(snap, id, p, self, takeOver, viewAs);
+    if (takeOver.canTakeOver && ImGui::SmallButton("let removed rejoin"))
+        takeOver.remove = net::Remove{net::Remove::Op::AllowRejoin, 0};
+    itemTip("Let everyone removed from the session join again with their code.");
     // Tools of ids the roster does not list yet (its message may trail the first relays).
     for (const auto& [id, t] : snap.others) {
         if (snap.participants.count(id))

@@ -345,6 +345,7 @@ net::TraineeCoreConfig coreConfigFor(const TrainerOptions& o) {
     net::ClientThreadConfig& cc = coreConfig.client;
     cc.address = o.address;
     cc.client.name = o.name;
+    cc.client.code = o.code;
     cc.client.role = o.instructor ? net::Role::Instructor : net::Role::Trainee;
     cc.client.codec = net::parseCodec(o.codec);
     cc.client.sync = o.sync == "volume" ? net::Sync::Volume : net::Sync::Dbi;
@@ -938,6 +939,9 @@ void TrainerWindow::drawPanels(const FrameState& f) {
     if (takeOverControls.asked)
         client.takeOver(*takeOverControls.asked);
     takeOverControls.asked.reset();
+    if (takeOverControls.remove)
+        client.remove(*takeOverControls.remove);
+    takeOverControls.remove.reset();
     // View as (the panel, --view-as once the participant is listed).
     if (scene && snap.welcome && snap.state == net::LinkState::Connected)
         if (const auto id =

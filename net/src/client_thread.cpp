@@ -169,6 +169,9 @@ bool ClientThread::takeOver(uint16_t trainee) {
 bool ClientThread::viewAs(uint16_t id) {
     return push(ViewAs{id});
 }
+bool ClientThread::remove(Remove m) {
+    return push(m);
+}
 
 std::vector<AppliedVolumeBox> ClientThread::drainVolumeBoxes() {
     std::vector<AppliedVolumeBox> out;
@@ -478,6 +481,9 @@ void ClientThread::runCommands(SessionClient& client, bool renderLocally) {
         } else if (auto* as = std::get_if<ViewAs>(&c)) {
             if (cp->welcomed())
                 cp->viewAs(as->clientId);
+        } else if (auto* r = std::get_if<Remove>(&c)) {
+            if (cp->welcomed())
+                cp->remove(*r);
         } else if (cp->welcomed()) {
             cp->sendPing();
         }

@@ -14,6 +14,7 @@ ForceRoundTripResult measureForceRoundTrip(const ENetAddress& server,
                                            const ForceRoundTripConfig& config) {
     ClientConfig cc;
     cc.name = "force-round-trip";
+    cc.code = config.code;
     cc.view.width = cc.view.height = 8; // the image does not matter here
     SessionClient client(cc);
     client.connect(server);

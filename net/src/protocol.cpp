@@ -22,6 +22,23 @@ std::string refuseReasonText(uint32_t disconnectData) {
     case RefuseReason::VolumeTooLarge:
         return "the volume is too large to send whole in this volume codec: use --sync dbi, or "
                "a compressing --volume-codec";
+    case RefuseReason::WrongCode:
+        switch (CodeRefusal(version)) {
+        case CodeRefusal::None:
+            return "this session needs a code: give the one the server printed (--code)";
+        case CodeRefusal::TraineeAsInstructor:
+            return "that is the trainee code: the instructor's role needs the instructor code";
+        case CodeRefusal::ServerOpen:
+            return "the server runs an open session (no codes, nothing encrypted): not joining it "
+                   "with --code";
+        default:
+            return "wrong session code";
+        }
+    case RefuseReason::Removed:
+        return "the instructor removed you from the session";
+    case RefuseReason::TooManyAttempts:
+        return "too many wrong codes from this address: try again in " + std::to_string(version) +
+               " s";
     }
     return "the server closed the connection (reason " + std::to_string(disconnectData) + ")";
 }

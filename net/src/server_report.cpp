@@ -79,6 +79,7 @@ nlohmann::ordered_json toJson(const ServerReport& r, const NetStats& stats) {
     }
     j["modes"] = std::move(modes);
     j["haptic_service_us"] = window(r.hapticServiceUs);
+    j["security"] = securityJson(r.security);
     Json peers = Json::array();
     for (const auto& [id, p] : r.peers)
         peers.push_back({{"id", id},

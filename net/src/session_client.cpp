@@ -16,7 +16,10 @@ namespace trephine::net {
 SessionClient::SessionClient(ClientConfig config)
     : m_config(std::move(config)), m_host(Host::client()), m_view(m_config.view),
       m_dbi(m_config.view.width, m_config.view.height), m_sync(m_config.sync),
-      m_wantSync(m_config.sync) {}
+      m_wantSync(m_config.sync) {
+    if (!m_config.code.empty())
+        m_code = normaliseCode(m_config.code, "--code");
+}
 
 SessionClient::~SessionClient() {
     if (connected())
@@ -31,13 +34,32 @@ void SessionClient::connect(const ENetAddress& address) {
 }
 
 void SessionClient::send(Channel ch, const std::vector<uint8_t>& bytes) {
-    if (!connected() || bytes.empty())
+    // With a code nothing leaves in the clear but the handshake.
+    if (!connected() || bytes.empty() || (!m_code.empty() && !m_secure))
         return;
-    if (m_host.send(m_peer, ch, bytes))
-        m_stats.countOut(ch, bytes.size());
+    const std::vector<uint8_t> sealed =
+        m_secure ? m_secure->seal(ch, bytes) : std::vector<uint8_t>{};
+    const std::vector<uint8_t>& wire = m_secure ? sealed : bytes;
+    if (m_sendTap)
+        m_sendTap(ch, wire);
+    if (m_host.send(m_peer, ch, wire))
+        m_stats.countOut(ch, wire.size());
+}
+
+void SessionClient::sendHandshake(Handshake m) {
+    const std::vector<uint8_t> bytes = encodeMessage(m);
+    if (connected() && m_host.send(m_peer, Channel::Control, bytes)) {
+        m_stats.countOut(Channel::Control, bytes.size());
+        m_host.flush();
+    }
+}
+
+void SessionClient::remove(Remove m) {
+    send(Channel::Control, encodeMessage(m));
 }
 
 bool SessionClient::sendRaw(Channel channel, std::span<const uint8_t> bytes) {
+    // Raw bytes, unsealed: tests replay what the tap saw, or send what no code would.
     if (!connected())
         return false;
     return m_host.send(m_peer, channel, bytes);
@@ -80,39 +102,26 @@ void SessionClient::onEvent(const ENetEvent& ev) {
     switch (ev.type) {
     case ENET_EVENT_TYPE_CONNECT: {
         m_connected = true;
-        m_lastHeardUs = steadyNowUs();
+        m_lastHeardUs = m_connectedUs = steadyNowUs();
         disableThrottle(m_peer);
-        Hello h;
-        h.role = m_config.role;
-        h.name = m_config.name;
-        h.codec = m_config.codec;
-        h.sync = m_wantSync; // a switch asked for before the connection rides on the hello
-        h.volumeCodec = m_config.volumeCodec;
-        h.view = m_config.view;
-        send(Channel::Control, encodeMessage(h));
-        // A view asked for before the connection went nowhere: ask again, after the hello.
-        if (!m_requested.empty()) {
-            ViewRequest r;
-            r.requestId = m_requested.rbegin()->first;
-            r.view = m_requested.rbegin()->second;
-            send(Channel::Control, encodeMessage(r));
-        }
-        sendPing();
+        // Without a code the hello goes at once (an open session); with one, it goes sealed
+        // after the handshake that the server's Challenge starts.
+        if (m_code.empty())
+            sayHello();
         return;
     }
     case ENET_EVENT_TYPE_DISCONNECT:
         m_connected = false;
         m_closed = true;
-        m_closeReason = refuseReasonText(ev.data);
-        m_closeCode = ev.data;
+        m_closeCode = m_localRefusal ? m_localRefusal : ev.data;
+        m_closeReason = refuseReasonText(m_closeCode);
         m_peer = nullptr;
         return;
     case ENET_EVENT_TYPE_RECEIVE: {
         m_lastHeardUs = steadyNowUs();
-        m_stats.countIn(Channel(std::min<int>(ev.channelID, int(Channel::Count) - 1)),
-                        ev.packet->dataLength);
-        if (!handleMessage({ev.packet->data, ev.packet->dataLength}, steadyNowUs()))
-            m_stats.countMalformed();
+        const auto channel = Channel(std::min<int>(ev.channelID, int(Channel::Count) - 1));
+        m_stats.countIn(channel, ev.packet->dataLength);
+        onReceive(channel, {ev.packet->data, ev.packet->dataLength}, steadyNowUs());
         // And once handled: applying a large update (a whole volume, its first render) takes
         // long, and that is no silence of the server's.
         m_lastHeardUs = steadyNowUs();
@@ -121,6 +130,96 @@ void SessionClient::onEvent(const ENetEvent& ev) {
     default:
         return;
     }
+}
+
+void SessionClient::sayHello() {
+    Hello h;
+    h.role = m_config.role;
+    h.name = m_config.name;
+    h.codec = m_config.codec;
+    h.sync = m_wantSync; // a switch asked for before the connection rides on the hello
+    h.volumeCodec = m_config.volumeCodec;
+    h.view = m_config.view;
+    send(Channel::Control, encodeMessage(h));
+    // A view asked for before the connection went nowhere: ask again, after the hello.
+    if (!m_requested.empty()) {
+        ViewRequest r;
+        r.requestId = m_requested.rbegin()->first;
+        r.view = m_requested.rbegin()->second;
+        send(Channel::Control, encodeMessage(r));
+    }
+    sendPing();
+}
+
+void SessionClient::onReceive(Channel channel, std::span<const uint8_t> data, uint64_t nowUs) {
+    if (m_secure) {
+        std::vector<uint8_t> plain;
+        if (m_secure->open(channel, data, plain) != SecureChannel::Opened::Ok) {
+            ++m_sealedDropped;
+            m_stats.countMalformed();
+        } else if (!handleMessage(plain, nowUs)) {
+            m_stats.countMalformed();
+        }
+        return;
+    }
+    bool ok = false;
+    if (peekMessageType(data) == uint8_t(MessageType::Handshake))
+        ok = onHandshake(data);
+    else if (m_code.empty()) // an open session
+        ok = handleMessage(data, nowUs);
+    if (!ok)
+        m_stats.countMalformed();
+}
+
+bool SessionClient::onHandshake(std::span<const uint8_t> data) {
+    Handshake m;
+    if (!decodeMessage(data, m))
+        return false;
+    if (m.step == Handshake::Step::Challenge) {
+        if (m_code.empty() || m_spake)
+            return true; // without a code the hello went already; the server says the rest
+        if (m.open) {
+            // Joining with a code asks for a sealed session: not one anybody can join in the
+            // clear (nor one an attacker on the path claims is open).
+            m_localRefusal = uint32_t(RefuseReason::WrongCode) | uint32_t(CodeRefusal::ServerOpen)
+                                                                     << 8;
+            enet_peer_disconnect(m_peer, 0);
+            return true;
+        }
+        Salt salt;
+        std::copy(m.salt.begin(), m.salt.end(), salt.begin());
+        m_spake.emplace(codeScalar(m_code, salt), salt, m_config.role);
+        Handshake offer;
+        offer.step = Handshake::Step::Offer;
+        offer.role = m_config.role;
+        offer.share = m_spake->share();
+        sendHandshake(offer);
+        return true;
+    }
+    if (m.step != Handshake::Step::Answer || !m_spake || m_secure)
+        return false;
+    // The entry whose MAC our code reproduces: the code we hold is that entry's role's.
+    Handshake confirm;
+    confirm.step = Handshake::Step::Confirm;
+    std::optional<SessionKeys> proven;
+    for (size_t i = 0; i < m.entries.size() && !proven; ++i) {
+        const auto keys = m_spake->keys(m.entries[i].share, m.entries[i].role);
+        if (keys && sameMac(keys->serverConfirm, m.entries[i].mac)) {
+            confirm.entry = uint8_t(i);
+            confirm.mac = keys->clientConfirm;
+            if (m.entries[i].role == m_config.role)
+                proven = keys;
+        }
+    }
+    // Sent even when none matched, so the server names the reason and counts the attempt.
+    sendHandshake(confirm);
+    m_spake.reset();
+    if (proven) {
+        m_secure.emplace(*proven, false);
+        m_handshakeUs = steadyNowUs() - m_connectedUs;
+        sayHello();
+    }
+    return true;
 }
 
 bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs) {

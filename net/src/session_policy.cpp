@@ -93,6 +93,14 @@ void SessionPolicy::kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& o
         m_roster.mark(true);
 }
 
+void SessionPolicy::refuse(uint16_t id, uint32_t data, PolicyOutput& out) {
+    auto it = m_peers.find(id);
+    if (it == m_peers.end() || it->second.kicked)
+        return;
+    kick(id, it->second, RefuseReason::None, out);
+    out.disconnects.back().data = data;
+}
+
 void SessionPolicy::refuseVolume(uint16_t id, PolicyOutput& out) {
     auto it = m_peers.find(id);
     if (it != m_peers.end() && !it->second.kicked)
@@ -119,8 +127,8 @@ void SessionPolicy::update(uint64_t now, PolicyOutput& out) {
             m_book.count(&ServerCounters::helloTimeouts);
             kick(id, p, RefuseReason::BadHello, out);
         }
-    // The whole list, paced: a peer editing fast (any hello may claim the instructor's role)
-    // cannot make the server queue a list per edit for every participant.
+    // The whole list, paced: an instructor editing fast (in an open session, any hello may claim
+    // the role) cannot make the server queue a list per edit for every participant.
     if (m_marksOut.due(now))
         out.messages.push_back({participants(), Channel::Control, marksMessage()});
     if (m_roster.due(now))
@@ -139,15 +147,31 @@ PolicyOutput SessionPolicy::receive(uint16_t id, std::span<const uint8_t> messag
     if (it == m_peers.end() || it->second.kicked)
         return out;
     Peer& p = it->second;
-    if (handle(id, p, message, now, out))
-        return out;
+    if (!handle(id, p, message, now, out))
+        countMalformed(id, p, out);
+    return out;
+}
+
+PolicyOutput SessionPolicy::reject(uint16_t id) {
+    PolicyOutput out;
+    auto it = m_peers.find(id);
+    if (it != m_peers.end() && !it->second.kicked)
+        countMalformed(id, it->second, out);
+    return out;
+}
+
+void SessionPolicy::countMalformed(uint16_t id, Peer& p, PolicyOutput& out) {
     out.malformed = true;
     m_book.peer(id, [](PeerReport& r) { ++r.malformed; });
     if (++p.malformed > m_config.malformedLimit && !p.kicked) {
         m_book.count(&ServerCounters::malformedKicks);
         kick(id, p, RefuseReason::Malformed, out);
     }
-    return out;
+}
+
+void SessionPolicy::authenticate(uint16_t id, Role role) {
+    if (auto it = m_peers.find(id); it != m_peers.end())
+        it->second.proven = role;
 }
 
 // False for a malformed message.
@@ -197,6 +221,8 @@ bool SessionPolicy::handle(uint16_t id, Peer& p, std::span<const uint8_t> data, 
         return annotate(id, p, data);
     case MessageType::TakeOver:
         return takeOver(id, p, data);
+    case MessageType::Remove:
+        return remove(id, p, data, out);
     case MessageType::Ping: {
         Ping ping;
         if (!decodeMessage(data, ping))
@@ -220,6 +246,8 @@ bool SessionPolicy::hello(uint16_t id, Peer& p, std::span<const uint8_t> data, u
         if (q.hello && !q.kicked)
             worn.push_back(q.colour);
     p.colour = pickParticipantColour(worn);
+    if (p.proven) // the role comes from the code, never from the hello
+        h.role = *p.proven;
     p.hello = true;
     p.helloMsg = h;
     p.sync = h.sync;
@@ -429,6 +457,32 @@ bool SessionPolicy::takeOver(uint16_t id, const Peer& p, std::span<const uint8_t
     releaseTakeOvers(id);                            // one trainee at a time
     m_takenOver[m.trainee] = id;
     m_roster.mark();
+    return true;
+}
+
+// An instructor sends a participant away for good (until it allows them back): the gate keeps
+// the address and the role's code (net/session_gate.h).
+bool SessionPolicy::remove(uint16_t id, const Peer& p, std::span<const uint8_t> data,
+                           PolicyOutput& out) {
+    Remove m;
+    if (!decodeMessage(data, m))
+        return false;
+    if (p.helloMsg.role != Role::Instructor) {
+        m_book.record([](ServerReport& r) { ++r.security.removalsRefused; });
+        return true;
+    }
+    if (m.op == Remove::Op::AllowRejoin) {
+        out.allowRejoin = true;
+        return true;
+    }
+    auto target = m_peers.find(m.clientId);
+    if (m.clientId == id || target == m_peers.end() || !target->second.hello ||
+        target->second.kicked) {
+        m_book.record([](ServerReport& r) { ++r.security.removalsRefused; });
+        return true;
+    }
+    kick(m.clientId, target->second, RefuseReason::Removed, out);
+    out.removed.push_back(m.clientId);
     return true;
 }
 

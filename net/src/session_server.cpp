@@ -7,6 +7,7 @@
 #include "net/debrief.h"
 #include "net/marks_file.h"
 #include "net/outbox.h"
+#include "net/session_gate.h"
 #include "net/session_policy.h"
 #include "net/sim_step.h"
 #include "net/tool_model.h"
@@ -54,7 +55,7 @@ struct SessionServer::Impl {
           step(std::move(v), stepConfig(c), outbox, book, steadyNowUs),
           policy(withScene(c, step.volume()), step.volume().dims(), step.volume().spacing(), book,
                  [this](const ToolState& t, glm::vec3 velocity) { return force(t, velocity); }),
-          maxQueuedToolStates(c.maxQueuedToolStates) {
+          gate(c, book), maxQueuedToolStates(c.maxQueuedToolStates) {
         book.record([&](ServerReport& r) {
             r.port = host.port();
             r.volume = c.volumeName;
@@ -85,6 +86,7 @@ struct SessionServer::Impl {
     SimulationStep step;
     ForceModelCache forceModels;         // network thread only
     SessionPolicy policy;                // network thread only
+    SessionGate gate;                    // network thread only: codes, sealing (docs/security.md)
     std::map<uint16_t, ENetPeer*> links; // policy ids -> ENet peers (network thread only)
     int64_t peakInFlight = 0;            // network thread's copy of the report's peak
 
@@ -367,6 +369,10 @@ bool SessionServer::idle() {
     return m_impl->outbox.empty();
 }
 
+SecurityCounters SessionServer::security() const {
+    return m_impl->book.read([](const ServerReport& r) { return r.security; });
+}
+
 ServerCounters SessionServer::counters() const {
     return m_impl->book.read([](const ServerReport& r) { return r.counters; });
 }
@@ -407,7 +413,10 @@ SessionPolicy::ForceAnswer SessionServer::Impl::force(const ToolState& t, glm::v
 bool SessionServer::Impl::sendTo(uint16_t id, Channel ch, const std::vector<uint8_t>& bytes,
                                  const Host::InFlight& inFlight) {
     auto link = links.find(id);
-    if (bytes.empty() || link == links.end() || !host.send(link->second, ch, bytes, inFlight))
+    if (bytes.empty() || link == links.end())
+        return false;
+    if (gate.sealing(id) ? !host.send(link->second, ch, gate.seal(id, ch, bytes), inFlight)
+                         : !host.send(link->second, ch, bytes, inFlight))
         return false;
     stats.countOut(ch, bytes.size());
     book.peer(id, [&](PeerReport& r) {
@@ -426,6 +435,10 @@ void SessionServer::Impl::apply(PolicyOutput& out) {
             sendTo(id, m.channel, m.bytes);
     if (out.flush)
         host.flush();
+    for (uint16_t id : out.removed)
+        gate.remove(id);
+    if (out.allowRejoin)
+        gate.allowRejoin();
     for (const PolicyOutput::Disconnect& d : out.disconnects)
         if (auto link = links.find(d.client); link != links.end())
             enet_peer_disconnect(link->second, d.data);
@@ -445,6 +458,7 @@ void SessionServer::Impl::onEvent(const ENetEvent& ev) {
         }
         disableThrottle(ev.peer);
         links[id] = ev.peer;
+        sendTo(id, Channel::Control, gate.connect(id, ev.peer->address)); // the Challenge
         return;
     }
     case ENET_EVENT_TYPE_DISCONNECT: {
@@ -453,6 +467,7 @@ void SessionServer::Impl::onEvent(const ENetEvent& ev) {
         if (!id)
             return;
         policy.disconnect(id, now, out);
+        gate.leave(id);
         links.erase(id);
         apply(out);
         return;
@@ -467,7 +482,25 @@ void SessionServer::Impl::onEvent(const ENetEvent& ev) {
             r.bytesIn += bytes;
             ++r.messagesIn;
         });
-        out = policy.receive(id, {ev.packet->data, bytes}, now);
+        const SessionGate::Result in =
+            gate.receive(id, Channel(ev.channelID), {ev.packet->data, bytes}, now);
+        switch (in.kind) {
+        case SessionGate::Result::Kind::Deliver:
+            out = policy.receive(id, in.message, now);
+            break;
+        case SessionGate::Result::Kind::Reply:
+            sendTo(id, Channel::Control, {in.message.begin(), in.message.end()});
+            break;
+        case SessionGate::Result::Kind::Proven:
+            policy.authenticate(id, in.role);
+            break;
+        case SessionGate::Result::Kind::Refuse:
+            policy.refuse(id, in.refuse, out);
+            break;
+        case SessionGate::Result::Kind::Bad:
+            out = policy.reject(id);
+            break;
+        }
         if (out.malformed)
             stats.countMalformed();
         apply(out);
@@ -549,9 +582,37 @@ void SessionServer::Impl::sayGoodbye() {
     book.record([](ServerReport& r) { r.counters.clients = 0; });
 }
 
+namespace {
+
+// The report of the server whose network thread this is, for the datagram intercept below.
+thread_local ReportBook* t_netBook = nullptr;
+
+// Every datagram the server's host receives passes here first: one that names a connected peer
+// but comes from another address is counted (ENet would drop it silently too).
+int ENET_CALLBACK countForeignDatagrams(ENetHost* host, ENetEvent*) {
+    if (host->receivedDataLength < 2 || !t_netBook)
+        return 0;
+    const uint16_t header = uint16_t(host->receivedData[0] << 8 | host->receivedData[1]);
+    const uint16_t peerId =
+        header & ~(ENET_PROTOCOL_HEADER_FLAG_MASK | ENET_PROTOCOL_HEADER_SESSION_MASK);
+    if (peerId >= host->peerCount)
+        return 0; // a connect (the maximum id), or no peer of ours
+    const ENetPeer& peer = host->peers[peerId];
+    if (peer.state == ENET_PEER_STATE_DISCONNECTED || peer.state == ENET_PEER_STATE_ZOMBIE ||
+        (peer.address.host == host->receivedAddress.host &&
+         peer.address.port == host->receivedAddress.port))
+        return 0;
+    t_netBook->record([](ServerReport& r) { ++r.security.spoofed; });
+    return 1; // consumed: dropped here
+}
+
+} // namespace
+
 void SessionServer::networkLoop() {
     nameThread("trephine-net");
     Impl& s = *m_impl;
+    t_netBook = &s.book;
+    s.host.get()->intercept = countForeignDatagrams;
     uint64_t nextTick = 0;
     while (!m_stop.load()) {
         // Wait on the socket and the wake-up together, then handle everything pending.

@@ -123,6 +123,10 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
     sc.port = 0;
     sc.volumeName = config.volumeName;
     sc.hapticModels = false;
+    if (config.sealed) {
+        sc.traineeCode = "study-trainee";
+        sc.instructorCode = "study-instructor";
+    }
     SessionServer server(volume, sc);
     server.start();
     const ENetAddress serverAddress = parseAddress("127.0.0.1:" + std::to_string(server.port()));
@@ -183,6 +187,7 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
             server.setFullRenderUpdates(method.fullRender);
             ClientConfig cc;
             cc.name = "study-" + method.name;
+            cc.code = sc.traineeCode;
             cc.codec = config.codec;
             cc.sync = method.sync;
             cc.volumeCodec = method.volumeCodec;

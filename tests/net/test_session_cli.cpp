@@ -60,6 +60,10 @@ struct ServerProcess {
         int fds[2];
         if (pipe(fds) != 0)
             return;
+        // These tests' clients join without codes (the coded CLI has its own test).
+        if (std::string(mode) == "server" &&
+            std::find(args.begin(), args.end(), "--trainee-code") == args.end())
+            args.push_back("--open");
         args.insert(args.begin(), {TREPHINE_BIN, mode});
         pid = fork();
         if (pid == 0) {
@@ -520,4 +524,35 @@ TEST(SessionCli, AHeadlessTraineeThatCannotJoinSaysWhyInOneLine) {
     EXPECT_NE(r.exitCode, 0);
     EXPECT_EQ(r.err, "trephine: trainee: no answer from " + address +
                          " (is `trephine server` running?)\n");
+}
+
+// `trephine server` makes codes when none are given and prints them after its port; a headless
+// trainee with the trainee code joins, with a wrong one it stops in one line naming the reason.
+TEST(SessionCli, AServerPrintsItsCodesAndOnlyTheRightOneJoins) {
+    ServerProcess server({"--port", "0", "--volume", "sphere:32", "--render-threads", "1",
+                          "--trainee-code", "LAB-TRAINEE"});
+    const int port = portIn(server.line());
+    ASSERT_GT(port, 0);
+    EXPECT_EQ(server.line(), "trephine server: trainee code    LAB-TRAINEE\n");
+    const std::string instructor = server.line();
+    ASSERT_EQ(instructor.rfind("trephine server: instructor code ", 0), 0u) << instructor;
+    EXPECT_NE(instructor.find("(generated)"), std::string::npos) << instructor;
+    trephine::testing::TempDir dir;
+    const std::string address = "127.0.0.1:" + std::to_string(port);
+    const std::string trainee =
+        "trainee --headless --connect " + address + " --camera top --size 64 --duration 1 --code ";
+    auto r = trephine::testing::runTrephine(dir, trainee + "lab-trainee");
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    r = trephine::testing::runTrephine(dir, trainee + "LAB-TRAINER");
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_EQ(r.err, "trephine: trainee: " + address + " refused us: wrong session code\n");
+    r = trephine::testing::runTrephine(dir, "trainee --headless --connect " + address +
+                                                " --camera top --size 64 --duration 1");
+    EXPECT_EQ(r.err, "trephine: trainee: " + address +
+                         " refused us: this session needs a code: give the one the server "
+                         "printed (--code)\n");
+    r = trephine::testing::runTrephine(dir, trainee + "no!");
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_EQ(server.stop(), 0);
 }

@@ -512,3 +512,71 @@ TEST(Pacer, GoesAtOnceThenAtMostOnceAnIntervalAndUrgentAtTheNextPass) {
     p.mark(true);
     EXPECT_TRUE(p.due(106)) << "urgent";
 }
+
+// With codes the role is the proven code's (net/session_gate.h): a hello claiming the instructor
+// from a peer that proved the trainee code joins as a trainee, and its instructor's messages are
+// refused as a trainee's.
+TEST(SessionPolicy, AProvenRoleReplacesTheHellos) {
+    PolicyRig rig;
+    PolicyOutput out;
+    const uint16_t id = rig.p().connect(kProtocolVersion, rig.now, out);
+    rig.p().authenticate(id, Role::Trainee);
+    Hello h;
+    h.name = "Mallory";
+    h.role = Role::Instructor;
+    h.view = smallView();
+    out = rig.send(id, h);
+    const std::vector<Participants> rosters = [&] {
+        PolicyOutput later;
+        rig.p().update(rig.now, later);
+        return sentTo<Participants>(later, id);
+    }();
+    ASSERT_EQ(rosters.size(), 1u);
+    ASSERT_EQ(rosters[0].list.size(), 1u);
+    EXPECT_EQ(rosters[0].list[0].role, Role::Trainee);
+    rig.send(id, Annotate{Annotate::Op::Clear, 0, {}, ""});
+    EXPECT_EQ(rig.book.counter(&ServerCounters::annotationsRefused), 1u);
+    // And a trainee's Remove is refused, not applied.
+    const uint16_t other = rig.join("Ada", Role::Trainee);
+    out = rig.send(id, Remove{Remove::Op::Remove, other});
+    EXPECT_TRUE(out.removed.empty());
+    EXPECT_TRUE(out.disconnects.empty());
+    EXPECT_EQ(rig.book.read([](const ServerReport& r) { return r.security.removalsRefused; }), 1u);
+}
+
+// An instructor's Remove sends the participant away with its reason and names it for the gate;
+// letting the removed rejoin is passed on too. Itself, or someone not listed, it cannot remove.
+TEST(SessionPolicy, AnInstructorsRemoveSendsAParticipantAway) {
+    PolicyRig rig;
+    const uint16_t cho = rig.join("Dr. Cho", Role::Instructor);
+    const uint16_t ada = rig.join("Ada", Role::Trainee);
+    PolicyOutput out = rig.send(cho, Remove{Remove::Op::Remove, cho});
+    EXPECT_TRUE(out.removed.empty());
+    out = rig.send(cho, Remove{Remove::Op::Remove, 999});
+    EXPECT_TRUE(out.removed.empty());
+    out = rig.send(cho, Remove{Remove::Op::Remove, ada});
+    EXPECT_EQ(out.removed, std::vector<uint16_t>{ada});
+    EXPECT_TRUE(disconnected(out, ada, RefuseReason::Removed));
+    EXPECT_FALSE(rig.p().live(ada));
+    out = rig.send(cho, Remove{Remove::Op::AllowRejoin, 0});
+    EXPECT_TRUE(out.allowRejoin);
+    EXPECT_FALSE(out.malformed);
+}
+
+// A sealed message that fails to open (forged, replayed: the gate drops it) counts as malformed:
+// a peer that keeps sending them is sent away like one sending malformed messages.
+TEST(SessionPolicy, RejectedMessagesCountTowardTheMalformedLimit) {
+    ServerConfig c;
+    c.malformedLimit = 3;
+    PolicyRig rig(c);
+    const uint16_t ada = rig.join("Ada", Role::Trainee);
+    for (int i = 0; i < 3; ++i) {
+        const PolicyOutput out = rig.p().reject(ada);
+        EXPECT_TRUE(out.malformed);
+        EXPECT_TRUE(out.disconnects.empty());
+    }
+    const PolicyOutput out = rig.p().reject(ada);
+    EXPECT_TRUE(disconnected(out, ada, RefuseReason::Malformed));
+    EXPECT_FALSE(rig.p().live(ada));
+    EXPECT_EQ(rig.counters().malformedKicks, 1u);
+}

@@ -167,6 +167,8 @@ public:
     bool takeOver(uint16_t trainee);
     // [Instructor] Watches through a participant's camera (0: its own) (SessionClient::viewAs).
     bool viewAs(uint16_t id);
+    // [Instructor] Removes a participant, or lets the removed rejoin (SessionClient::remove).
+    bool remove(Remove m);
 
     // The latest snapshot (never null after construction).
     std::shared_ptr<const ClientSnapshot> snapshot() const;
@@ -191,7 +193,8 @@ private:
     struct SyncCmd {
         Sync sync;
     };
-    using Command = std::variant<ToolState, ViewCmd, PingCmd, SyncCmd, Annotate, TakeOver, ViewAs>;
+    using Command =
+        std::variant<ToolState, ViewCmd, PingCmd, SyncCmd, Annotate, TakeOver, ViewAs, Remove>;
 
     // The 1 s rate tick's state for one connection (network thread only).
     struct RateClock {

@@ -7,6 +7,7 @@
 #include "net/enet_host.h"
 
 #include <cstdint>
+#include <string>
 
 namespace trephine::net {
 
@@ -17,6 +18,7 @@ struct ForceRoundTripConfig {
     int warmup = 20;        // round trips not timed
     double rateHz = 1000.0; // tool states per second; one in flight at a time
     double guardS = 30.0;   // give up (returning what was measured) after this long
+    std::string code;       // the server's trainee code (docs/security.md); empty: an open session
 };
 
 struct ForceRoundTripResult {

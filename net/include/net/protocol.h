@@ -13,6 +13,7 @@
 #include <glm/vec3.hpp>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <span>
@@ -32,7 +33,9 @@ namespace trephine::net {
 // net/scene.h); the welcome's volume name is a label a client never opens; ViewAs and
 // ParticipantView (an instructor watches through a participant's camera).
 // 9: SafetyWarning and AssessmentSnapshot (net/assessment_protocol.h); Participants' colour (the
-// server gives each participant one; every window draws it).
+// server gives each participant one; every window draws it); Handshake (role codes proven by
+// SPAKE2, then every message sealed: docs/security.md) and Remove; refusals WrongCode, Removed,
+// TooManyAttempts.
 inline constexpr uint32_t kProtocolVersion = 9;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
@@ -45,6 +48,17 @@ enum class RefuseReason : uint32_t {
     BadHello = 5,   // first message was not a valid hello
     // volume sync: the whole volume does not fit a message in the client's volume codec
     VolumeTooLarge = 6,
+    // docs/security.md. WrongCode carries a CodeRefusal in bits 8 and up; TooManyAttempts the
+    // seconds until this address may try again.
+    WrongCode = 7,
+    Removed = 8, // the instructor removed this participant
+    TooManyAttempts = 9,
+};
+enum class CodeRefusal : uint32_t {
+    Wrong = 0,               // the code proved none of the session's
+    None = 1,                // the session needs a code and the client gave none
+    TraineeAsInstructor = 2, // the trainee code, in instructor mode
+    ServerOpen = 3, // said by the client itself: it will not join an open session with a code
 };
 std::string refuseReasonText(uint32_t disconnectData);
 
@@ -114,8 +128,10 @@ enum class MessageType : uint8_t {
     ParticipantView = 19,
     SafetyWarning = 20,      // net/assessment_protocol.h
     AssessmentSnapshot = 21, // net/assessment_protocol.h
+    Handshake = 24, // docs/security.md
+    Remove = 25,
 };
-inline constexpr uint8_t kMessageTypeCount = 22; // one past the largest type
+inline constexpr uint8_t kMessageTypeCount = 26; // one past the largest type
 
 enum class Role : uint8_t { Trainee = 0, Instructor = 1 };
 enum class Codec : uint8_t { Raw = 0, Lz4 = 1, Zstd = 2 };
@@ -568,6 +584,78 @@ struct ParticipantView {
     template <typename S>
     bool serialize(S& s) {
         return s.ranged(clientId, uint16_t(1), uint16_t(UINT16_MAX)) && view.serialize(s);
+    }
+};
+
+// Channel::Control, the only message ever sent in the clear (docs/security.md): the role-code
+// handshake, one step each. Server: Challenge at connect (whether the session takes codes, and
+// the salt of the codes' hash). Client: Offer (the role it asks for, its SPAKE2 share X*).
+// Server: Answer, one entry per code that may prove that role (an instructor's offer is also
+// answered with the trainee code's, so a trainee code there is told apart from a wrong one):
+// the code's role, its share Y* and its confirmation MAC. Client: Confirm, the entry whose MAC
+// it could verify (kNoEntry: none) and its own MAC. Everything after a Confirm is sealed.
+struct Handshake {
+    static constexpr MessageType kType = MessageType::Handshake;
+    enum class Step : uint8_t { Challenge = 0, Offer = 1, Answer = 2, Confirm = 3 };
+    static constexpr uint8_t kNoEntry = 255;
+    struct Entry {
+        Role role = Role::Trainee;
+        std::array<uint8_t, 32> share{}, mac{};
+        bool operator==(const Entry&) const = default;
+    };
+    Step step = Step::Challenge;
+    bool open = false;               // Challenge: no codes; the hello goes in the clear
+    std::array<uint8_t, 16> salt{};  // Challenge
+    Role role = Role::Trainee;       // Offer
+    std::array<uint8_t, 32> share{}; // Offer: X*
+    std::vector<Entry> entries;      // Answer: one or two
+    uint8_t entry = kNoEntry;        // Confirm
+    std::array<uint8_t, 32> mac{};   // Confirm
+
+    template <typename S>
+    bool serialize(S& s) {
+        if (!s.ranged(step, Step::Challenge, Step::Confirm))
+            return false;
+        switch (step) {
+        case Step::Challenge:
+            return s.boolean(open) && s.bytes(salt.data(), salt.size());
+        case Step::Offer:
+            return s.ranged(role, Role::Trainee, Role::Instructor) &&
+                   s.bytes(share.data(), share.size());
+        case Step::Answer: {
+            uint8_t count = uint8_t(std::min<size_t>(entries.size(), 2));
+            if (!s.ranged(count, uint8_t(1), uint8_t(2)))
+                return false;
+            if constexpr (S::kReading)
+                entries.assign(count, Entry{});
+            for (Entry& e : entries)
+                if (!s.ranged(e.role, Role::Trainee, Role::Instructor) ||
+                    !s.bytes(e.share.data(), e.share.size()) ||
+                    !s.bytes(e.mac.data(), e.mac.size()))
+                    return false;
+            return count < 2 || entries[0].role != entries[1].role;
+        }
+        case Step::Confirm:
+            return s.integer(entry) && (entry < 2 || entry == kNoEntry) &&
+                   s.bytes(mac.data(), mac.size());
+        }
+        return false;
+    }
+};
+
+// Client -> server (Channel::Control): an instructor removes a participant from the session (its
+// client id), or lets every removed participant join again. A removed participant is sent away
+// (RefuseReason::Removed) and refused from its address with the code of its role until then,
+// or until the server runs with new codes. The server refuses (counts) a trainee's.
+struct Remove {
+    static constexpr MessageType kType = MessageType::Remove;
+    enum class Op : uint8_t { Remove = 0, AllowRejoin = 1 };
+    Op op = Op::Remove;
+    uint16_t clientId = 0; // Remove
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.ranged(op, Op::Remove, Op::AllowRejoin) && s.integer(clientId);
     }
 };
 

@@ -61,6 +61,11 @@ struct ServerConfig {
     // When set, stop() writes a Markdown debrief with SVG plots per participant here
     // (net/debrief.h).
     std::string debriefDir;
+    // Role codes (docs/security.md): a client proves one in the handshake, its role is the
+    // code's, and every message after it is sealed. Both empty: an open session where anyone who
+    // reaches the port joins with the role its hello names, in the clear (`trephine server
+    // --open`; tests). Either form of a code (normaliseCode) works.
+    std::string traineeCode, instructorCode;
 };
 
 // The marks (Annotations) go to every participant at most this often, the whole list once.

@@ -8,6 +8,7 @@
 #include "net/assessment_metrics.h"
 #include "net/net_stats.h"
 #include "net/protocol.h"
+#include "net/security_counters.h"
 
 #include <nlohmann/json.hpp>
 
@@ -73,6 +74,7 @@ struct ServerReport {
     // metrics by client id (refreshed with each snapshot, final at each leave).
     AssessmentSummary assessment;
     std::map<uint16_t, ParticipantMetrics> participants;
+    SecurityCounters security;           // net/session_gate.h
 
     // The totals of `mode` with the participants using it now.
     ModeTotals modeTotals(Sync mode) const;

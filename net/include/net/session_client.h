@@ -16,6 +16,7 @@
 #include "net/net_stats.h"
 #include "net/protocol.h"
 #include "net/scene.h"
+#include "net/secure_channel.h"
 
 #include <cstdint>
 #include <deque>
@@ -48,6 +49,10 @@ struct ClientConfig {
     bool renderLocally = true;
     int renderThreads = 0;        // the local render's ThreadPool (0: hardware concurrency)
     size_t recordCapacity = 4096; // UpdateRecords kept (the newest)
+    // The role's code the server printed (docs/security.md): proven in a handshake, then every
+    // message is sealed; a client with a code will not join an open session. Empty: join an open
+    // session (a session with codes refuses it: "this session needs a code").
+    std::string code;
 };
 
 class SessionClient {
@@ -139,6 +144,9 @@ public:
     // client's own window size. A trainee's are ignored by the server.
     void viewAs(uint16_t id);
     uint16_t viewingAs() const { return m_viewAs; }
+    // [Instructor] Removes participant `id` from the session, or lets every removed one join
+    // again (Remove); the server refuses a trainee's.
+    void remove(Remove m);
     // ParticipantView messages received (of the participant viewed as, or a stale one).
     uint64_t participantViewsReceived() const { return m_participantViews; }
 
@@ -212,14 +220,28 @@ public:
     using RecordCallback = std::function<void(const UpdateRecord&)>;
     void setRecordCallback(RecordCallback callback) { m_recordCallback = std::move(callback); }
 
-    // [Test hooks] Sends raw bytes on a channel, bypassing every check.
+    // [Security] Microseconds from the connection to the handshake's end (the code's hash
+    // included; 0 until then, and without a code). Sealed messages dropped: forged or replayed.
+    uint64_t handshakeUs() const { return m_handshakeUs; }
+    bool sealed() const { return m_secure.has_value(); }
+    uint64_t sealedDropped() const { return m_sealedDropped; }
+
+    // [Test hooks] Sends raw bytes on a channel, bypassing every check (and the seal).
     bool sendRaw(Channel channel, std::span<const uint8_t> bytes);
+    // Sees every message as it goes on the wire (sealed, when the session is).
+    using SendTap = std::function<void(Channel, std::span<const uint8_t>)>;
+    void setSendTapForTest(SendTap tap) { m_sendTap = std::move(tap); }
     // Flips one colour bit of our DBI at (x, y): a copy the server no longer knows.
     void damagePixelForTest(int x, int y) { m_dbi.color(x, y)[0] ^= 1; }
 
 private:
     void onEvent(const ENetEvent& ev);
+    void onReceive(Channel channel, std::span<const uint8_t> data, uint64_t nowUs);
     bool handleMessage(std::span<const uint8_t> data, uint64_t nowUs);
+    // The handshake's steps (docs/security.md), then the hello once it may go.
+    bool onHandshake(std::span<const uint8_t> data);
+    void sayHello();
+    void sendHandshake(Handshake m);
     // One per message type, each decoding its message; false for a malformed or rejected one.
     bool onWelcome(std::span<const uint8_t> data, uint64_t nowUs);
     bool onScene(std::span<const uint8_t> data);
@@ -312,6 +334,12 @@ private:
     uint16_t m_viewAs = 0;
     uint64_t m_participantViews = 0;
     NetStats m_stats;
+    std::string m_code; // normalised; empty: none
+    std::optional<SpakeClient> m_spake;
+    std::optional<SecureChannel> m_secure;
+    uint64_t m_connectedUs = 0, m_handshakeUs = 0, m_sealedDropped = 0;
+    uint32_t m_localRefusal = 0; // why we closed ourselves (RefuseReason data), 0: we did not
+    SendTap m_sendTap;
 };
 
 } // namespace trephine::net

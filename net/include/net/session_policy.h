@@ -19,6 +19,7 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -68,6 +69,10 @@ struct PolicyOutput {
     std::vector<SimEvent> events; // for the simulation, in order
     bool flush = false;           // send at once (a haptic answer), not at the next service
     bool malformed = false;       // the message received was malformed (counted by the server)
+    // An instructor's Remove (net/session_gate.h keeps them): whom it removed (also in
+    // disconnects), and whether it let the removed join again.
+    std::vector<uint16_t> removed;
+    bool allowRejoin = false;
 };
 
 class SessionPolicy {
@@ -90,9 +95,16 @@ public:
     uint16_t connect(uint32_t connectData, uint64_t now, PolicyOutput& out);
     // A message from client `id` (one that has connected and was not sent away).
     PolicyOutput receive(uint16_t id, std::span<const uint8_t> message, uint64_t now);
+    // A message from `id` dropped before it was read (forged, replayed: net/session_gate.h):
+    // counted as malformed, under the same limit.
+    PolicyOutput reject(uint16_t id);
+    // Client `id` proved the code of `role`: its hello's role is replaced by it.
+    void authenticate(uint16_t id, Role role);
     void disconnect(uint16_t id, uint64_t now, PolicyOutput& out);
     // Time passes: hello timeouts, and whatever paced message is due.
     void update(uint64_t now, PolicyOutput& out);
+    // The gate refused `id` (a wrong code, a removed address): sent away with `data`.
+    void refuse(uint16_t id, uint32_t data, PolicyOutput& out);
     // A volume client whose whole volume fits no message: sent away, saying why.
     void refuseVolume(uint16_t id, PolicyOutput& out);
     // The server stops: everyone is told so and counts as gone from `now`.
@@ -121,6 +133,7 @@ private:
         Pacer modeSwitch{kSyncSwitchIntervalUs}; // each switch to volume encodes the volume
         VelocityEstimate toolVelocity;           // from its tool states' positions and times
         uint8_t colour = 0; // its participantPalette() index, given at its hello
+        std::optional<Role> proven;              // the role its code proved (none: open session)
     };
 
     bool handle(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
@@ -137,6 +150,8 @@ private:
                   PolicyOutput& out);
     bool annotate(uint16_t id, const Peer& p, std::span<const uint8_t> data);
     bool takeOver(uint16_t id, const Peer& p, std::span<const uint8_t> data);
+    bool remove(uint16_t id, const Peer& p, std::span<const uint8_t> data, PolicyOutput& out);
+    void countMalformed(uint16_t id, Peer& p, PolicyOutput& out);
     void kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& out);
     void pushSwitch(uint16_t id, Peer& p, uint64_t now, PolicyOutput& out);
 

@@ -98,6 +98,8 @@ public:
     // Drilling tool states whose cutting the server paused: a trainee taken over, or an
     // instructor holding nobody (their tools still touch the bone).
     uint64_t drillingPaused() const { return counters().drillingPaused; }
+    // The gate's figures (net/session_gate.h): handshakes, refusals, sealed messages dropped.
+    SecurityCounters security() const;
     const NetStats& stats() const;
     // Updates sent per sync mode (Dbi: image updates; Volume: volume updates) and the clients in
     // each mode now. Both modes share the transport and the channel statistics above.

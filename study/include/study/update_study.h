@@ -34,6 +34,9 @@ struct UpdateStudyConfig {
     std::optional<net::LinkConditions> link;
     double cycleTimeoutS = 10;        // one cycle that takes longer fails the study (an Error)
     std::vector<std::string> methods; // a subset of updateStudyMethods(codec); empty: all
+    // Run the session with role codes, so every message is sealed (docs/security.md); false: an
+    // open session, in the clear (what the encryption's cost is measured against).
+    bool sealed = false;
     // Called before each (method, size) with a label and the steps done/total.
     std::function<void(const std::string& label, int done, int total)> progress;
 };

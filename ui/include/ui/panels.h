@@ -89,8 +89,9 @@ std::vector<net::Annotate> markRequests(MarkControls& controls, MarkUndo& undo,
 // Taking over a trainee's drilling (TakeOver): an instructor's buttons in the participants list.
 // The panel only records what was asked this frame; the window sends it.
 struct TakeOverControls {
-    bool canTakeOver = false;      // instructors
-    std::optional<uint16_t> asked; // a trainee's client id, or 0 to hand back
+    bool canTakeOver = false;          // instructors
+    std::optional<uint16_t> asked;     // a trainee's client id, or 0 to hand back
+    std::optional<net::Remove> remove; // an instructor's remove, or letting the removed rejoin
 };
 // Who holds trainee `id` in `roster` (0: nobody, or not listed), and whom `instructor` holds.
 uint16_t takenOverBy(const std::map<uint16_t, net::ParticipantInfo>& roster, uint16_t id);

@@ -45,6 +45,7 @@ struct TrainerReport {
 struct TrainerOptions {
     std::string address = "127.0.0.1:7777"; // HOST:PORT
     std::string name = "trainee";
+    std::string code; // the role's code (docs/security.md); empty: an open session
     bool instructor = false;
     std::string codec = "lz4";
     std::string sync = "dbi";        // the design to start in: "dbi" or "volume"

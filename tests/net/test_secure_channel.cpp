@@ -1,0 +1,427 @@
+// The session's cryptography without sockets (docs/security.md): codes, the SPAKE2 handshake,
+// the sealed channel's tamper and replay checks, and the server's gate driven with the time
+// passed in: refusals and their reasons, the wrong-code limit per address, removals.
+#include "net/secure_channel.h"
+#include "net/session_gate.h"
+
+#include "libsim/error.h"
+
+#include <gtest/gtest.h>
+
+#include <set>
+
+using namespace trephine;
+using namespace trephine::net;
+
+namespace {
+
+Salt testSalt(uint8_t fill = 7) {
+    Salt s;
+    s.fill(fill);
+    return s;
+}
+
+// The client's side of the handshake against a gate, as SessionClient runs it.
+struct GateClient {
+    explicit GateClient(std::string c, Role r = Role::Trainee) : code(std::move(c)), role(r) {}
+    std::string code;
+    Role role;
+    std::optional<Bytes32> w; // the code's hash, kept: a guesser's next attempt reuses it
+    std::optional<SpakeClient> spake;
+    std::optional<SessionKeys> keys;
+
+    std::vector<uint8_t> offer(std::span<const uint8_t> challengeBytes) {
+        Handshake c;
+        EXPECT_TRUE(decodeMessage(challengeBytes, c));
+        Salt salt;
+        std::copy(c.salt.begin(), c.salt.end(), salt.begin());
+        if (!w)
+            w = codeScalar(normaliseCode(code), salt);
+        spake.emplace(*w, salt, role);
+        Handshake o;
+        o.step = Handshake::Step::Offer;
+        o.role = role;
+        o.share = spake->share();
+        return encodeMessage(o);
+    }
+    std::vector<uint8_t> confirm(std::span<const uint8_t> answerBytes) {
+        Handshake a;
+        EXPECT_TRUE(decodeMessage(answerBytes, a));
+        Handshake c;
+        c.step = Handshake::Step::Confirm;
+        for (size_t i = 0; i < a.entries.size(); ++i) {
+            const auto k = spake->keys(a.entries[i].share, a.entries[i].role);
+            if (k && sameMac(k->serverConfirm, a.entries[i].mac)) {
+                c.entry = uint8_t(i);
+                c.mac = k->clientConfirm;
+                keys = k;
+            }
+        }
+        return encodeMessage(c);
+    }
+};
+
+ServerConfig codedConfig() {
+    ServerConfig c;
+    c.traineeCode = "TRAIN-EE42";
+    c.instructorCode = "teach-3r99";
+    return c;
+}
+
+ENetAddress address(uint32_t host) {
+    ENetAddress a{};
+    a.host = host;
+    a.port = 5000;
+    return a;
+}
+
+// Runs one handshake through the gate; the result of the Confirm (or of the step that refused).
+SessionGate::Result join(SessionGate& gate, uint16_t id, uint32_t host, GateClient& client,
+                         uint64_t now) {
+    const std::vector<uint8_t> challenge = gate.connect(id, address(host));
+    const SessionGate::Result answer =
+        gate.receive(id, Channel::Control, client.offer(challenge), now);
+    if (answer.kind != SessionGate::Result::Kind::Reply)
+        return answer;
+    const std::vector<uint8_t> answerBytes(answer.message.begin(), answer.message.end());
+    return gate.receive(id, Channel::Control, client.confirm(answerBytes), now);
+}
+
+} // namespace
+
+// [SECTION] codes
+
+TEST(Codes, AGeneratedCodeIsEightReadableSymbolsAndFresh) {
+    std::set<std::string> seen;
+    for (int i = 0; i < 50; ++i) {
+        const std::string code = generateCode();
+        ASSERT_EQ(code.size(), 9u) << code;
+        EXPECT_EQ(code[4], '-');
+        EXPECT_EQ(code.find_first_of("ILOU"), std::string::npos) << code; // none to misread
+        EXPECT_EQ(normaliseCode(code).size(), 8u);
+        seen.insert(code);
+    }
+    EXPECT_EQ(seen.size(), 50u);
+}
+
+TEST(Codes, TheFormsPeopleTypeNormaliseToOneAndOthersAreRefusedInOneLine) {
+    EXPECT_EQ(normaliseCode("abcd-efgh"), "ABCDEFGH");
+    EXPECT_EQ(normaliseCode("AB CD EF GH"), "ABCDEFGH");
+    EXPECT_EQ(normaliseCode("0OIl-1234"), "00111234"); // read aloud, O is 0 and I, L are 1
+    for (const char* bad : {"", "abc", "abcd-ef?h", "läuft-gut"}) {
+        try {
+            normaliseCode(bad, "--code");
+            FAIL() << bad;
+        } catch (const Error& e) {
+            const std::string what = e.what();
+            EXPECT_EQ(what.find('\n'), std::string::npos);
+            EXPECT_EQ(what.rfind("--code", 0), 0u) << what;
+        }
+    }
+}
+
+// [SECTION] the handshake
+
+TEST(Spake, TheSameCodeGivesBothEndsTheSameKeysAndAnotherCodeDoesNot) {
+    const Salt salt = testSalt();
+    const Bytes32 w = codeScalar("ABCDEFGH", salt);
+    SpakeClient client(w, salt, Role::Trainee);
+    const auto server = spakeAnswer(w, salt, Role::Trainee, Role::Trainee, client.share());
+    ASSERT_TRUE(server);
+    const auto keys = client.keys(server->share, Role::Trainee);
+    ASSERT_TRUE(keys);
+    EXPECT_TRUE(sameMac(keys->serverConfirm, server->keys.serverConfirm));
+    EXPECT_TRUE(sameMac(keys->clientConfirm, server->keys.clientConfirm));
+    EXPECT_EQ(keys->clientToServer, server->keys.clientToServer);
+    EXPECT_EQ(keys->serverToClient, server->keys.serverToClient);
+    EXPECT_NE(keys->clientToServer, keys->serverToClient);
+
+    const Bytes32 other = codeScalar("ABCDEFGJ", salt);
+    SpakeClient wrong(other, salt, Role::Trainee);
+    const auto answer = spakeAnswer(w, salt, Role::Trainee, Role::Trainee, wrong.share());
+    ASSERT_TRUE(answer);
+    const auto wrongKeys = wrong.keys(answer->share, Role::Trainee);
+    ASSERT_TRUE(wrongKeys);
+    EXPECT_FALSE(sameMac(wrongKeys->serverConfirm, answer->keys.serverConfirm));
+    EXPECT_NE(wrongKeys->clientToServer, answer->keys.clientToServer);
+}
+
+TEST(Spake, SharesAreFreshAndCarryNothingOfTheCodeAnEavesdropperCouldCompare) {
+    // The same code twice: shares differ (fresh ephemeral scalars), so a listener cannot tell
+    // two joins with one code from joins with two.
+    const Salt salt = testSalt();
+    const Bytes32 w = codeScalar("ABCDEFGH", salt);
+    SpakeClient a(w, salt, Role::Trainee), b(w, salt, Role::Trainee);
+    EXPECT_NE(a.share(), b.share());
+    // Another salt gives another scalar for the same code (no table of codes carries over).
+    EXPECT_NE(codeScalar("ABCDEFGH", testSalt(8)), w);
+}
+
+TEST(Spake, AShareThatIsNoPointOfTheGroupIsRefused) {
+    const Salt salt = testSalt();
+    const Bytes32 w = codeScalar("ABCDEFGH", salt);
+    Bytes32 junk;
+    junk.fill(0xff);
+    EXPECT_FALSE(spakeAnswer(w, salt, Role::Trainee, Role::Trainee, junk));
+    Bytes32 zero{};
+    EXPECT_FALSE(spakeAnswer(w, salt, Role::Trainee, Role::Trainee, zero));
+    SpakeClient client(w, salt, Role::Trainee);
+    EXPECT_FALSE(client.keys(junk, Role::Trainee));
+}
+
+// [SECTION] the sealed channel
+
+namespace {
+std::pair<SecureChannel, SecureChannel> channelPair() {
+    const Salt salt = testSalt();
+    const Bytes32 w = codeScalar("ABCDEFGH", salt);
+    SpakeClient client(w, salt, Role::Trainee);
+    const auto server = spakeAnswer(w, salt, Role::Trainee, Role::Trainee, client.share());
+    return {SecureChannel(*client.keys(server->share, Role::Trainee), false),
+            SecureChannel(server->keys, true)};
+}
+} // namespace
+
+TEST(SecureChannel, SealedMessagesOpenOnceAndOnlyOnTheirChannel) {
+    auto [client, server] = channelPair();
+    const std::vector<uint8_t> msg{1, 2, 3, 4, 5};
+    const std::vector<uint8_t> sealed = client.seal(Channel::ToolState, msg);
+    EXPECT_EQ(sealed.size(), msg.size() + SecureChannel::kOverhead);
+    EXPECT_EQ(std::search(sealed.begin(), sealed.end(), msg.begin(), msg.end()), sealed.end());
+    std::vector<uint8_t> plain;
+    EXPECT_EQ(server.open(Channel::Haptic, sealed, plain), SecureChannel::Opened::Forged);
+    EXPECT_EQ(server.open(Channel::ToolState, sealed, plain), SecureChannel::Opened::Ok);
+    EXPECT_EQ(plain, msg);
+    EXPECT_EQ(server.open(Channel::ToolState, sealed, plain), SecureChannel::Opened::Replayed);
+    // Its own direction only: the client cannot open what it sealed.
+    EXPECT_EQ(client.open(Channel::ToolState, client.seal(Channel::ToolState, msg), plain),
+              SecureChannel::Opened::Forged);
+    // An empty message seals too (the tag alone).
+    EXPECT_EQ(server.open(Channel::Control, client.seal(Channel::Control, {}), plain),
+              SecureChannel::Opened::Ok);
+    EXPECT_TRUE(plain.empty());
+}
+
+TEST(SecureChannel, EveryFlippedBitAndEveryTruncationIsForged) {
+    auto [client, server] = channelPair();
+    const std::vector<uint8_t> msg(40, 0xab);
+    const std::vector<uint8_t> sealed = client.seal(Channel::Control, msg);
+    std::vector<uint8_t> plain;
+    for (size_t bit = 64; bit < sealed.size() * 8; ++bit) { // past the counter: ciphertext, tag
+        std::vector<uint8_t> b = sealed;
+        b[bit / 8] ^= uint8_t(1u << (bit % 8));
+        ASSERT_EQ(server.open(Channel::Control, b, plain), SecureChannel::Opened::Forged) << bit;
+    }
+    for (size_t len = 0; len < sealed.size(); ++len)
+        ASSERT_NE(server.open(Channel::Control, {sealed.data(), len}, plain),
+                  SecureChannel::Opened::Ok);
+    // A changed counter is a forgery too (the counter is the nonce).
+    std::vector<uint8_t> b = sealed;
+    b[0] ^= 2;
+    EXPECT_EQ(server.open(Channel::Control, b, plain), SecureChannel::Opened::Forged);
+    // None of that moved the window: the genuine message still opens.
+    EXPECT_EQ(server.open(Channel::Control, sealed, plain), SecureChannel::Opened::Ok);
+}
+
+TEST(SecureChannel, ReorderedMessagesOpenWithinTheWindowAndOlderOnesAreReplays) {
+    auto [client, server] = channelPair();
+    std::vector<std::vector<uint8_t>> sent;
+    for (int i = 0; i < 100; ++i)
+        sent.push_back(client.seal(Channel::ToolState, std::vector<uint8_t>{uint8_t(i)}));
+    std::vector<uint8_t> plain;
+    EXPECT_EQ(server.open(Channel::ToolState, sent[90], plain), SecureChannel::Opened::Ok);
+    EXPECT_EQ(server.open(Channel::ToolState, sent[60], plain), SecureChannel::Opened::Ok);
+    EXPECT_EQ(server.open(Channel::ToolState, sent[89], plain), SecureChannel::Opened::Ok);
+    EXPECT_EQ(server.open(Channel::ToolState, sent[99], plain), SecureChannel::Opened::Ok);
+    EXPECT_EQ(server.open(Channel::ToolState, sent[60], plain), SecureChannel::Opened::Replayed);
+    EXPECT_EQ(server.open(Channel::ToolState, sent[20], plain), SecureChannel::Opened::Replayed);
+    EXPECT_EQ(server.open(Channel::ToolState, sent[98], plain), SecureChannel::Opened::Ok);
+    // Channels count apart: a reliable channel's first message is fresh whatever the others did.
+    EXPECT_EQ(server.open(Channel::Image, client.seal(Channel::Image, sent[0]), plain),
+              SecureChannel::Opened::Ok);
+}
+
+// [SECTION] the gate
+
+TEST(SessionGate, TheRightCodesJoinInTheirRolesAndSealFromThenOn) {
+    ReportBook book;
+    SessionGate gate(codedConfig(), book);
+    ASSERT_FALSE(gate.open());
+    GateClient trainee{"train-ee42"};
+    const SessionGate::Result t = join(gate, 1, 0x0100007f, trainee, 0);
+    ASSERT_EQ(t.kind, SessionGate::Result::Kind::Proven);
+    EXPECT_EQ(t.role, Role::Trainee);
+    EXPECT_TRUE(gate.sealing(1));
+    GateClient instructor{"TEACH3R99", Role::Instructor};
+    const SessionGate::Result i = join(gate, 2, 0x0100007f, instructor, 0);
+    ASSERT_EQ(i.kind, SessionGate::Result::Kind::Proven);
+    EXPECT_EQ(i.role, Role::Instructor);
+
+    // What the gate seals, the client opens, and the other way round.
+    SecureChannel clientSide(*trainee.keys, false);
+    std::vector<uint8_t> plain;
+    const std::vector<uint8_t> hello{uint8_t(MessageType::Ping), 1, 2, 3, 4, 5, 6, 7, 8};
+    EXPECT_EQ(clientSide.open(Channel::Control, gate.seal(1, Channel::Control, hello), plain),
+              SecureChannel::Opened::Ok);
+    EXPECT_EQ(plain, hello);
+    const SessionGate::Result in =
+        gate.receive(1, Channel::Control, clientSide.seal(Channel::Control, hello), 0);
+    ASSERT_EQ(in.kind, SessionGate::Result::Kind::Deliver);
+    EXPECT_EQ(std::vector<uint8_t>(in.message.begin(), in.message.end()), hello);
+    // The plain message, now, is no message at all.
+    EXPECT_EQ(gate.receive(1, Channel::Control, hello, 0).kind, SessionGate::Result::Kind::Bad);
+    EXPECT_EQ(book.read([](const ServerReport& r) { return r.security; }).forged, 1u);
+    EXPECT_EQ(book.read([](const ServerReport& r) { return r.security; }).handshakes, 2u);
+}
+
+TEST(SessionGate, NoCodeAWrongCodeAndTheTraineeCodeAsInstructorAreEachRefusedWithTheirReason) {
+    ReportBook book;
+    SessionGate gate(codedConfig(), book);
+    // No code: the client says hello in the clear.
+    gate.connect(1, address(1));
+    Hello h;
+    const SessionGate::Result none = gate.receive(1, Channel::Control, encodeMessage(h), 0);
+    ASSERT_EQ(none.kind, SessionGate::Result::Kind::Refuse);
+    EXPECT_EQ(none.refuse, uint32_t(RefuseReason::WrongCode) | uint32_t(CodeRefusal::None) << 8);
+    EXPECT_EQ(refuseReasonText(none.refuse),
+              "this session needs a code: give the one the server printed (--code)");
+
+    GateClient wrong{"WRONG-C0DE"};
+    const SessionGate::Result w = join(gate, 2, 2, wrong, 0);
+    ASSERT_EQ(w.kind, SessionGate::Result::Kind::Refuse);
+    EXPECT_EQ(refuseReasonText(w.refuse), "wrong session code");
+    EXPECT_FALSE(gate.sealing(2));
+
+    GateClient traineeAsInstructor{"TRAINEE42", Role::Instructor};
+    const SessionGate::Result ti = join(gate, 3, 3, traineeAsInstructor, 0);
+    ASSERT_EQ(ti.kind, SessionGate::Result::Kind::Refuse);
+    EXPECT_EQ(refuseReasonText(ti.refuse),
+              "that is the trainee code: the instructor's role needs the instructor code");
+    // A trainee offer is answered with the trainee code only: the instructor code cannot join
+    // as a trainee, nor be tried through a trainee's offer.
+    GateClient instructorAsTrainee{"TEACH3R99", Role::Trainee};
+    EXPECT_EQ(join(gate, 4, 4, instructorAsTrainee, 0).kind, SessionGate::Result::Kind::Refuse);
+    EXPECT_EQ(book.read([](const ServerReport& r) { return r.security; }).codesRefused, 4u);
+    // Refused is refused: nothing more from it reaches anyone.
+    EXPECT_EQ(gate.receive(2, Channel::Control, encodeMessage(h), 0).kind,
+              SessionGate::Result::Kind::Bad);
+}
+
+TEST(SessionGate, MessagesBeforeTheHandshakeEndsAreDroppedAndCounted) {
+    ReportBook book;
+    SessionGate gate(codedConfig(), book);
+    const std::vector<uint8_t> challenge = gate.connect(1, address(1));
+    Ping ping{1};
+    EXPECT_EQ(gate.receive(1, Channel::Control, encodeMessage(ping), 0).kind,
+              SessionGate::Result::Kind::Bad);
+    // A Confirm before any Offer, an Answer from a client, garbage: malformed.
+    Handshake confirm;
+    confirm.step = Handshake::Step::Confirm;
+    EXPECT_EQ(gate.receive(1, Channel::Control, encodeMessage(confirm), 0).kind,
+              SessionGate::Result::Kind::Bad);
+    EXPECT_EQ(gate.receive(1, Channel::Control, std::vector<uint8_t>{24, 9, 9}, 0).kind,
+              SessionGate::Result::Kind::Bad);
+    EXPECT_EQ(book.read([](const ServerReport& r) { return r.security; }).unauthenticated, 1u);
+    // The handshake still works after them.
+    GateClient trainee{"TRAINEE42"};
+    const auto answer = gate.receive(1, Channel::Control, trainee.offer(challenge), 0);
+    ASSERT_EQ(answer.kind, SessionGate::Result::Kind::Reply);
+    const std::vector<uint8_t> answerBytes(answer.message.begin(), answer.message.end());
+    EXPECT_EQ(gate.receive(1, Channel::Control, trainee.confirm(answerBytes), 0).kind,
+              SessionGate::Result::Kind::Proven);
+}
+
+TEST(SessionGate, WrongCodesFromOneAddressAreLimitedToTheStatedRate) {
+    ReportBook book;
+    SessionGate gate(codedConfig(), book);
+    uint16_t id = 1;
+    uint64_t now = 1000;
+    // The burst: kBurst guesses at once, each answered (one guess per attempt) and refused.
+    for (int i = 0; i < int(AttemptLimit::kBurst); ++i) {
+        GateClient guess{"GUESS" + std::to_string(100 + i)};
+        ASSERT_EQ(refuseReasonText(join(gate, id++, 9, guess, now).refuse), "wrong session code");
+    }
+    GateClient guess{"GUESS999"};
+    SessionGate::Result limited = join(gate, id++, 9, guess, now);
+    ASSERT_EQ(limited.kind, SessionGate::Result::Kind::Refuse);
+    EXPECT_EQ(limited.refuse & 0xff, uint32_t(RefuseReason::TooManyAttempts));
+    EXPECT_EQ(refuseReasonText(limited.refuse), "too many wrong codes from this address: try "
+                                                "again in 30 s");
+    // Even the right code waits: the limit is per address, not per guess.
+    GateClient right{"TRAINEE42"};
+    EXPECT_EQ(join(gate, id++, 9, right, now + 1000000).refuse & 0xff,
+              uint32_t(RefuseReason::TooManyAttempts));
+    // Another address is not held back.
+    GateClient elsewhere{"TRAINEE42"};
+    EXPECT_EQ(join(gate, id++, 10, elsewhere, now).kind, SessionGate::Result::Kind::Proven);
+    // One more attempt every kRefillS: over an hour, 3600 / 30 = 120 guesses.
+    now += uint64_t(AttemptLimit::kRefillS * 1e6);
+    GateClient later{"TRAINEE42"};
+    EXPECT_EQ(join(gate, id++, 9, later, now).kind, SessionGate::Result::Kind::Proven);
+    int answered = 0;
+    GateClient g{"GUESS5000"}; // one wrong guess, tried every 5 s
+    for (int s = 0; s < 3600; s += 5) {
+        now += 5000000;
+        answered += join(gate, id++, 9, g, now).refuse == uint32_t(RefuseReason::WrongCode);
+    }
+    EXPECT_LE(answered, 3600 / int(AttemptLimit::kRefillS) + 1);
+    EXPECT_GE(answered, 3600 / int(AttemptLimit::kRefillS) - 1);
+    std::printf("[ wrong codes ] %d guesses answered in one hour from one address (stated: %d)\n",
+                answered, int(3600 / AttemptLimit::kRefillS));
+    EXPECT_GT(book.read([](const ServerReport& r) { return r.security; }).attemptsLimited, 500u);
+}
+
+TEST(SessionGate, ARemovedAddressIsRefusedWithItsRoleCodeUntilAllowedBack) {
+    ReportBook book;
+    SessionGate gate(codedConfig(), book);
+    GateClient trainee{"TRAINEE42"};
+    ASSERT_EQ(join(gate, 1, 5, trainee, 0).kind, SessionGate::Result::Kind::Proven);
+    gate.remove(1);
+    gate.leave(1);
+    GateClient again{"TRAINEE42"};
+    const SessionGate::Result r = join(gate, 2, 5, again, 0);
+    ASSERT_EQ(r.kind, SessionGate::Result::Kind::Refuse);
+    EXPECT_EQ(refuseReasonText(r.refuse), "the instructor removed you from the session");
+    // The instructor at that address still joins: the removal holds the trainee code only.
+    GateClient instructor{"TEACH3R99", Role::Instructor};
+    EXPECT_EQ(join(gate, 3, 5, instructor, 0).kind, SessionGate::Result::Kind::Proven);
+    gate.allowRejoin();
+    GateClient back{"TRAINEE42"};
+    EXPECT_EQ(join(gate, 4, 5, back, 0).kind, SessionGate::Result::Kind::Proven);
+    const SecurityCounters c = book.read([](const ServerReport& rep) { return rep.security; });
+    EXPECT_EQ(c.removed, 1u);
+    EXPECT_EQ(c.removedRefused, 1u);
+}
+
+TEST(SessionGate, AnOpenSessionPassesMessagesAsTheyAreAndStillKeepsRemovals) {
+    ReportBook book;
+    SessionGate gate(ServerConfig{}, book);
+    ASSERT_TRUE(gate.open());
+    Handshake challenge;
+    ASSERT_TRUE(decodeMessage(gate.connect(1, address(5)), challenge));
+    EXPECT_TRUE(challenge.open);
+    Hello h;
+    const std::vector<uint8_t> hello = encodeMessage(h);
+    const SessionGate::Result r = gate.receive(1, Channel::Control, hello, 0);
+    ASSERT_EQ(r.kind, SessionGate::Result::Kind::Deliver);
+    EXPECT_FALSE(gate.sealing(1));
+    EXPECT_EQ(gate.seal(1, Channel::Control, hello), hello);
+    gate.remove(1);
+    gate.leave(1);
+    gate.connect(2, address(5));
+    EXPECT_EQ(gate.receive(2, Channel::Control, hello, 0).refuse, uint32_t(RefuseReason::Removed));
+}
+
+TEST(SessionGate, CodesThatCannotWorkAreRefusedAtStart) {
+    ReportBook book;
+    ServerConfig one;
+    one.traineeCode = "ABCDEFGH";
+    EXPECT_THROW(SessionGate g(one, book), Error);
+    ServerConfig same;
+    same.traineeCode = "abcd-efgh";
+    same.instructorCode = "ABCDEFGH";
+    EXPECT_THROW(SessionGate g(same, book), Error);
+    ServerConfig bad = codedConfig();
+    bad.instructorCode = "x";
+    EXPECT_THROW(SessionGate g(bad, book), Error);
+}
