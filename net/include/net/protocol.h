@@ -42,6 +42,9 @@ enum class RefuseReason : uint32_t {
     BadHello = 5,   // first message was not a valid hello
     // volume sync: the whole volume does not fit a message in the client's volume codec
     VolumeTooLarge = 6,
+    Busy = 10,      // too many connections wait to be admitted (from this address, or in all)
+    Idle = 11,      // said nothing for ServerConfig::idleTimeoutS
+    ViewsFull = 12, // the views served together would pass ServerConfig::maxTotalViewPixels
 };
 std::string refuseReasonText(uint32_t disconnectData);
 

@@ -8,6 +8,7 @@
 
 #include "libsim/force_model.h"
 #include "libsim/volume.h"
+#include "net/budgets.h"
 #include "net/enet_host.h"
 #include "net/protocol.h"
 #include "net/server_config.h"
@@ -19,6 +20,7 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <optional>
 #include <span>
 #include <vector>
 
@@ -100,6 +102,9 @@ public:
 
     // Connected and not sent away: its updates are still wanted.
     bool live(uint16_t id) const;
+    // Admitted into the session (its hello accepted) and not sent away: it holds one of the
+    // maxClients places; until then it holds one of the admission's waiting slots.
+    bool admitted(uint16_t id) const;
     size_t peerCount() const { return m_peers.size(); }
     // Bytes of client `id`'s updates that ENet still holds (Host::send counts into it).
     Host::InFlight inFlight(uint16_t id) const;
@@ -120,6 +125,10 @@ private:
         uint64_t connectedUs = 0;
         Pacer modeSwitch{kSyncSwitchIntervalUs}; // each switch to volume encodes the volume
         VelocityEstimate toolVelocity;           // from its tool states' positions and times
+        uint64_t heardUs = 0;                    // its last message (idle timeout)
+        RateBudget viewPixels{0, 0};             // ServerConfig::viewPixelsPerS
+        std::optional<ViewRequest> waitingView;  // over budget: the newest, until it is due
+        int64_t pixels = 0;                      // of its view now (maxTotalViewPixels)
     };
 
     bool handle(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
@@ -145,6 +154,13 @@ private:
     bool mayCut(uint16_t id, Role role) const;
     bool releaseTakeOvers(uint16_t id);
     bool viewTooLarge(const ViewSpec& v) const;
+    // [Availability] availability.cpp: admission counts, idle timeouts, the view budget.
+    size_t admittedCount() const;
+    bool overViewTotal(uint16_t id, const ViewSpec& v) const;
+    void applyView(uint16_t id, Peer& p, const ViewRequest& r, PolicyOutput& out);
+    bool viewRequest(uint16_t id, Peer& p, const ViewRequest& r, uint64_t now, PolicyOutput& out);
+    void updateAvailability(uint64_t now, PolicyOutput& out);
+    std::string uniqueName(uint16_t id, const std::string& name);
     void countSwitches();
 
     ServerConfig m_config;
