@@ -151,10 +151,13 @@ Volume readNiftiFrom(ByteSource& src, const std::string& path,
     default:
         break; // mm, or unknown: taken as mm
     }
-    for (int i = 0; i < 3; ++i) {
-        float p = std::fabs(r.get<float>(kPixdim + 4 * size_t(i + 1)));
-        if (std::isfinite(p) && p > 0.0f && i < dim[0])
-            spacing[i] = float(p * unit);
+    for (int i = 0; i < 3 && i < dim[0]; ++i) {
+        const float p = std::fabs(r.get<float>(kPixdim + 4 * size_t(i + 1)));
+        // NaN or 0 would load as 1 mm: a skull of the wrong size, silently.
+        if (!std::isfinite(p) || p == 0.0f)
+            fail(path, "bad NIfTI pixdim[" + std::to_string(i + 1) + "] " + formatFloat(p) +
+                           ": a voxel's size must be finite and non-zero");
+        spacing[i] = float(p * unit);
     }
 
     float voxOffset = r.get<float>(kVoxOffset);

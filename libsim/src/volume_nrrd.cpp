@@ -250,12 +250,11 @@ glm::vec3 readSpacing(const Header& h, const std::string& path, int dimension,
         for (size_t i = 0; i < axes.size(); ++i) {
             const std::string& v = w[size_t(axes[i])];
             double s;
-            if (toLower(v) == "nan")
-                continue;
-            if (!parseDouble(v, s))
-                fail(path, "bad NRRD 'spacings' entry '" + v + "'");
-            if (std::isfinite(s) && s != 0.0)
-                spacing[int(i)] = std::fabs(s);
+            // A spatial axis needs a size: NaN (NRRD's "unknown") or 0 would load as 1 mm.
+            if (!parseDouble(v, s) || !std::isfinite(s) || s == 0.0)
+                fail(path, "bad NRRD 'spacings' entry '" + v +
+                               "' for a spatial axis: expected a finite, non-zero size in mm");
+            spacing[int(i)] = std::fabs(s);
         }
     }
     glm::vec3 out(spacing);

@@ -39,6 +39,12 @@ std::string refuseReasonText(uint32_t disconnectData) {
     case RefuseReason::TooManyAttempts:
         return "too many wrong codes from this address: try again in " + std::to_string(version) +
                " s";
+    case RefuseReason::Busy:
+        return "the server has too many connections waiting to join: try again in a few seconds";
+    case RefuseReason::Idle:
+        return "the server dropped us for saying nothing for too long";
+    case RefuseReason::ViewsFull:
+        return "the server serves as many view pixels as it can: try a smaller window";
     }
     return "the server closed the connection (reason " + std::to_string(disconnectData) + ")";
 }

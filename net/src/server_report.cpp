@@ -28,6 +28,23 @@ Json channels(const NetStats& stats) {
     return j;
 }
 
+Json availability(const AvailabilityCounters& a) {
+    return {{"connects_rate_limited", a.admission.rateLimited},
+            {"connects_address_busy", a.admission.addressBusy},
+            {"connects_pool_full", a.admission.poolFull},
+            {"handshakes_reset", a.admission.handshakesReset},
+            {"refused_busy", a.refusedBusy},
+            {"idle_timeouts", a.idleTimeouts},
+            {"views_deferred", a.viewsDeferred},
+            {"views_coalesced", a.viewsCoalesced},
+            {"views_over_total", a.viewsOverTotal},
+            {"refused_view_total", a.refusedViewTotal},
+            {"control_coalesced", a.controlCoalesced},
+            {"control_dropped", a.controlDropped},
+            {"names_repaired", a.namesRepaired},
+            {"peak_control_bytes", a.peakControlBytes}};
+}
+
 const char* syncName(Sync mode) {
     return mode == Sync::Dbi ? "dbi" : "volume";
 }
@@ -78,6 +95,7 @@ nlohmann::ordered_json toJson(const ServerReport& r, const NetStats& stats) {
                                  {"encode_us", window(m.encodeUs)}};
     }
     j["modes"] = std::move(modes);
+    j["availability"] = availability(r.availability);
     j["haptic_service_us"] = window(r.hapticServiceUs);
     j["security"] = securityJson(r.security);
     Json peers = Json::array();

@@ -30,9 +30,15 @@ uint16_t SessionPolicy::connect(uint32_t connectData, uint64_t now, PolicyOutput
         out.disconnects.push_back({0, uint32_t(RefuseReason::Version) | (kProtocolVersion << 8)});
         return 0;
     }
-    if (m_peers.size() >= m_config.maxClients) {
+    // Places are the admitted peers'; connections still to be admitted have slots of their own.
+    if (admittedCount() >= m_config.maxClients) {
         m_book.count(&ServerCounters::refusedFull);
         out.disconnects.push_back({0, uint32_t(RefuseReason::ServerFull)});
+        return 0;
+    }
+    if (m_peers.size() - admittedCount() >= m_config.admission.waitingSlots) {
+        m_book.record([](ServerReport& r) { ++r.availability.refusedBusy; });
+        out.disconnects.push_back({0, uint32_t(RefuseReason::Busy)});
         return 0;
     }
     // After 65535 joins the ids wrap: skip any still held (peers <= maxClients, so one is free
@@ -43,7 +49,9 @@ uint16_t SessionPolicy::connect(uint32_t connectData, uint64_t now, PolicyOutput
         if (m_nextId == 0)
             m_nextId = 1;
     } while (m_peers.count(id));
-    m_peers[id].connectedUs = now;
+    Peer& joined = m_peers[id];
+    joined.connectedUs = joined.heardUs = now;
+    joined.viewPixels = RateBudget(m_config.viewPixelsPerS, 2.0 * double(m_config.maxViewPixels));
     m_book.record([&](ServerReport& r) {
         // A fresh report: after the ids wrap, one may still hold a left peer's figures.
         r.peers[id] = PeerReport{};
@@ -120,6 +128,7 @@ Host::InFlight SessionPolicy::inFlight(uint16_t id) const {
 // [SECTION] time
 
 void SessionPolicy::update(uint64_t now, PolicyOutput& out) {
+    updateAvailability(now, out);
     // A connection that never says hello would hold a client slot for good.
     const uint64_t helloTimeoutUs = uint64_t(double(m_config.helloTimeoutS) * 1e6);
     for (auto& [id, p] : m_peers)
@@ -147,6 +156,7 @@ PolicyOutput SessionPolicy::receive(uint16_t id, std::span<const uint8_t> messag
     if (it == m_peers.end() || it->second.kicked)
         return out;
     Peer& p = it->second;
+    p.heardUs = now;
     if (!handle(id, p, message, now, out))
         countMalformed(id, p, out);
     return out;
@@ -192,15 +202,7 @@ bool SessionPolicy::handle(uint16_t id, Peer& p, std::span<const uint8_t> data, 
             });
             return true;
         }
-        SimEvent ev = SimEvent::of(SimEvent::Kind::View, id);
-        ev.camera = toCamera(r.view);
-        ev.viewId = r.requestId;
-        out.events.push_back(std::move(ev));
-        ParticipantView seen{id, r.view};
-        const std::vector<uint16_t> followers = m_follow.setView(id, r.view);
-        if (!followers.empty()) // instructors viewing as this one
-            out.messages.push_back({followers, Channel::Control, encodeMessage(seen)});
-        return true;
+        return viewRequest(id, p, r, now, out);
     }
     case MessageType::ViewAs: { // net/view_follow.h
         ViewAs m;
@@ -248,6 +250,7 @@ bool SessionPolicy::hello(uint16_t id, Peer& p, std::span<const uint8_t> data, u
     p.colour = pickParticipantColour(worn);
     if (p.proven) // the role comes from the code, never from the hello
         h.role = *p.proven;
+    h.name = uniqueName(id, h.name);
     p.hello = true;
     p.helloMsg = h;
     p.sync = h.sync;
@@ -258,13 +261,24 @@ bool SessionPolicy::hello(uint16_t id, Peer& p, std::span<const uint8_t> data, u
         r.role = h.role;
         r.sync = h.sync;
     });
+    RefuseReason refusal = RefuseReason::None;
     if (viewTooLarge(h.view)) {
+        refusal = RefuseReason::BadHello;
+    } else if (admittedCount() > m_config.maxClients) { // others were admitted since it connected
+        refusal = RefuseReason::ServerFull;
+        m_book.count(&ServerCounters::refusedFull);
+    } else if (overViewTotal(id, h.view)) {
+        refusal = RefuseReason::ViewsFull;
+        m_book.record([](ServerReport& r) { ++r.availability.refusedViewTotal; });
+    }
+    if (refusal != RefuseReason::None) {
         // Refused before it is listed: nobody else hears of it.
         p.kicked = true;
         m_book.peer(id, [](PeerReport& r) { r.kicked = true; });
-        out.disconnects.push_back({id, uint32_t(RefuseReason::BadHello)});
+        out.disconnects.push_back({id, uint32_t(refusal)});
         return true;
     }
+    p.pixels = int64_t(h.view.width) * int64_t(h.view.height);
     welcome(id, now, out);
     m_follow.setView(id, h.view);
     SimEvent ev = SimEvent::of(SimEvent::Kind::Join, id);

@@ -49,13 +49,19 @@ StepConfig stepConfig(const ServerConfig& c) {
 
 struct SessionServer::Impl {
     Impl(Volume v, const ServerConfig& c)
-        : host(Host::listen(c.port, c.maxClients + kSparePeers)),
+        : host(Host::listen(c.port, c.maxClients + c.admission.waitingSlots)),
           wakeFd(eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)),
           outbox(c.maxInFlightBytes, book, steadyNowUs, [this] { wakeNetwork(); }),
           step(std::move(v), stepConfig(c), outbox, book, steadyNowUs),
           policy(withScene(c, step.volume()), step.volume().dims(), step.volume().spacing(), book,
                  [this](const ToolState& t, glm::vec3 velocity) { return force(t, velocity); }),
-          gate(c, book), maxQueuedToolStates(c.maxQueuedToolStates) {
+          gate(c, book), maxQueuedToolStates(c.maxQueuedToolStates),
+          admission(host.get(), c.admission,
+               [this](const ENetPeer* p) {
+                   const auto id = uint16_t(reinterpret_cast<uintptr_t>(p->data));
+                   return id && policy.admitted(id);
+               }),
+          control(c.controlBudgetBytes) {
         book.record([&](ServerReport& r) {
             r.port = host.port();
             r.volume = c.volumeName;
@@ -68,9 +74,6 @@ struct SessionServer::Impl {
     }
     Impl(const Impl&) = delete;
     Impl& operator=(const Impl&) = delete;
-
-    // ENet peer slots beyond maxClients, so that one more can be told "server full".
-    static constexpr size_t kSparePeers = 4;
 
     ReportBook book;
     NetStats stats;
@@ -99,12 +102,22 @@ struct SessionServer::Impl {
     bool busy = false; // the simulation thread is applying a batch (under inMutex)
     bool stopSim = false;
 
+    // [Availability] Connections not yet admitted (net/admission.h) and each peer's control
+    // backlog (net/budgets.h); network thread only.
+    AdmissionGate admission;
+    ControlBudget control;
+    std::map<uint16_t, Host::InFlight> controlHeld; // control bytes ENet holds, per peer
+    AvailabilityCounters reported;                  // what the report has of the two above
+
     // [Network thread]
     SessionPolicy::ForceAnswer force(const ToolState& t, glm::vec3 velocity);
     void onEvent(const ENetEvent& ev);
     void apply(PolicyOutput& out);
     bool sendTo(uint16_t id, Channel ch, const std::vector<uint8_t>& bytes,
                 const Host::InFlight& inFlight = {});
+    bool sendControl(uint16_t id, const std::vector<uint8_t>& bytes);
+    void forget(uint16_t id, uint64_t now); // a peer gone (disconnected, or its slot reset)
+    void guard(uint64_t now);               // admission and control budgets, once a pass
     void sendUpdates();
     void sendNotices();
     void sayGoodbye();
@@ -178,6 +191,11 @@ Volume checkedVolume(Volume volume) {
 const ServerConfig& checkedConfig(const ServerConfig& config) {
     if (!(config.helloTimeoutS > 0.0f))
         throw Error("server: the hello timeout must be positive");
+    if (!(config.idleTimeoutS > 0.0f))
+        throw Error("server: the idle timeout must be positive");
+    // ENet numbers peers in 12 bits.
+    if (config.maxClients + config.admission.waitingSlots > 4000)
+        throw Error("server: --max-clients and the waiting slots come to more than 4000 peers");
     // Now, not at the end of the session: a path that cannot be written would lose it all.
     if (!config.saveOnExit.empty()) {
         checkSaveTarget(config.saveOnExit);
@@ -363,7 +381,7 @@ bool SessionServer::idle() {
         return false;
     {
         std::lock_guard lock(m_impl->inMutex);
-        if (!m_impl->inbox.empty() || m_impl->busy)
+        if (!m_impl->inbox.empty() || m_impl->busy || m_impl->step.rendering())
             return false;
     }
     return m_impl->outbox.empty();
@@ -412,6 +430,8 @@ SessionPolicy::ForceAnswer SessionServer::Impl::force(const ToolState& t, glm::v
 // False when ENet refused the packet (it is then not counted anywhere).
 bool SessionServer::Impl::sendTo(uint16_t id, Channel ch, const std::vector<uint8_t>& bytes,
                                  const Host::InFlight& inFlight) {
+    if (ch == Channel::Control && !inFlight)
+        return sendControl(id, bytes);
     auto link = links.find(id);
     if (bytes.empty() || link == links.end())
         return false;
@@ -426,6 +446,70 @@ bool SessionServer::Impl::sendTo(uint16_t id, Channel ch, const std::vector<uint
         r.hapticRelays += bytes[0] == uint8_t(MessageType::HapticRelay);
     });
     return true;
+}
+
+// [SECTION] availability
+
+// A control message within the peer's budget (net/budgets.h): sent, held as the latest of its
+// kind until the backlog drains, or dropped.
+bool SessionServer::Impl::sendControl(uint16_t id, const std::vector<uint8_t>& bytes) {
+    if (!links.count(id))
+        return false;
+    Host::InFlight& held = controlHeld[id];
+    if (!held)
+        held = std::make_shared<std::atomic<int64_t>>(0);
+    if (control.offer(id, bytes, held->load(std::memory_order_relaxed)) !=
+        ControlBudget::Action::Send)
+        return false;
+    return sendTo(id, Channel::Control, bytes, held);
+}
+
+void SessionServer::Impl::forget(uint16_t id, uint64_t now) {
+    PolicyOutput out;
+    policy.disconnect(id, now, out);
+    gate.leave(id);
+    links.erase(id);
+    control.forget(id);
+    controlHeld.erase(id);
+    apply(out);
+}
+
+void SessionServer::Impl::guard(uint64_t now) {
+    admission.reap(now, [&](ENetPeer* p) {
+        const auto id = uint16_t(reinterpret_cast<uintptr_t>(p->data));
+        p->data = nullptr;
+        if (id)
+            forget(id, now);
+    });
+    auto heldBy = [&](uint16_t id) {
+        auto it = controlHeld.find(id);
+        return it == controlHeld.end() ? int64_t(0) : it->second->load(std::memory_order_relaxed);
+    };
+    if (control.holding())
+        for (auto& [id, bytes] : control.due(heldBy))
+            if (links.count(id))
+                sendTo(id, Channel::Control, bytes, controlHeld[id]);
+    AvailabilityCounters seen = reported;
+    seen.admission = admission.counts();
+    seen.controlCoalesced = control.counts().coalesced;
+    seen.controlDropped = control.counts().dropped;
+    for (const auto& [id, held] : controlHeld)
+        seen.peakControlBytes = std::max(seen.peakControlBytes, heldBy(id));
+    const AdmissionCounts& a = seen.admission;
+    const AdmissionCounts& b = reported.admission;
+    if (a.rateLimited == b.rateLimited && a.addressBusy == b.addressBusy &&
+        a.poolFull == b.poolFull && a.handshakesReset == b.handshakesReset &&
+        seen.controlCoalesced == reported.controlCoalesced &&
+        seen.controlDropped == reported.controlDropped &&
+        seen.peakControlBytes == reported.peakControlBytes)
+        return;
+    reported = seen;
+    book.record([&](ServerReport& r) {
+        r.availability.admission = seen.admission;
+        r.availability.controlCoalesced = seen.controlCoalesced;
+        r.availability.controlDropped = seen.controlDropped;
+        r.availability.peakControlBytes = seen.peakControlBytes;
+    });
 }
 
 // Sends what the policy asked for; its events go to the simulation.
@@ -466,10 +550,7 @@ void SessionServer::Impl::onEvent(const ENetEvent& ev) {
         ev.peer->data = nullptr;
         if (!id)
             return;
-        policy.disconnect(id, now, out);
-        gate.leave(id);
-        links.erase(id);
-        apply(out);
+        forget(id, now);
         return;
     }
     case ENET_EVENT_TYPE_RECEIVE: {
@@ -617,10 +698,12 @@ void SessionServer::networkLoop() {
     while (!m_stop.load()) {
         // Wait on the socket and the wake-up together, then handle everything pending.
         s.waitNetwork(1);
+        s.admission.setNow(steadyNowUs());
         s.host.service(0, [&](const ENetEvent& ev) { s.onEvent(ev); });
         s.sendUpdates();
         s.sendNotices();
         const uint64_t now = steadyNowUs();
+        s.guard(now);
         PolicyOutput out;
         s.policy.update(now, out);
         s.apply(out);
@@ -641,7 +724,9 @@ void SessionServer::simulationLoop() {
     for (;;) {
         {
             std::unique_lock lock(s.inMutex);
-            s.inCv.wait_for(lock, std::chrono::milliseconds(10),
+            // A view partly rendered is work: its next slice goes without waiting.
+            const bool slices = s.step.rendering();
+            s.inCv.wait_for(lock, std::chrono::milliseconds(slices ? 0 : 10),
                             [&] { return !s.inbox.empty() || s.stopSim; });
             if (s.inbox.empty() && s.stopSim) {
                 std::lock_guard stepLock(s.stepMutex);
@@ -651,11 +736,11 @@ void SessionServer::simulationLoop() {
             batch.clear();
             batch.swap(s.inbox);
             s.inboxTools = 0;
-            s.busy = !batch.empty();
+            s.busy = !batch.empty() || slices;
         }
         {
             std::lock_guard stepLock(s.stepMutex);
-            if (batch.empty()) {
+            if (batch.empty() && !s.step.rendering()) {
                 s.step.offerNoted();
                 s.step.assessment().tick(steadyNowUs());
             } else

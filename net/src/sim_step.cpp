@@ -100,6 +100,7 @@ void SimulationStep::applyClientEvent(const SimEvent& ev, Batch& b, uint64_t now
         m_outbox.modeChanged(ev.client, ev.sync, ev.volumeCodec);
         if (ev.sync == Sync::Volume) {
             b.needFull.erase(ev.client);
+            it->second.fullCauseUs = 0;
             b.needVolume[ev.client] = now;
         } else {
             b.needVolume.erase(ev.client);
@@ -270,47 +271,92 @@ void SimulationStep::renderViews(const Batch& b, uint32_t gridUs) {
     auto dbiView = [](const Client& c, const Camera& cam) {
         return c.sync == Sync::Dbi && c.camera == cam;
     };
-    // Frames of views no DBI client holds any more are dropped; new views are rendered whole.
+    // Frames of views no DBI client holds any more are dropped (a view left half rendered
+    // included); new views start empty and render in slices below.
     std::erase_if(m_views, [&](const ViewFrame& v) {
         return std::none_of(m_clients.begin(), m_clients.end(),
                             [&](const auto& c) { return dbiView(c.second, v.camera); });
     });
+    for (const auto& [id, cause] : b.needFull)
+        if (auto c = m_clients.find(id); c != m_clients.end() && !c->second.fullCauseUs)
+            c->second.fullCauseUs = std::max<uint64_t>(cause, 1);
     for (const auto& [id, c] : m_clients) {
         if (c.sync != Sync::Dbi || std::any_of(m_views.begin(), m_views.end(),
                                                [&](const auto& v) { return v.camera == c.camera; }))
             continue;
         ViewFrame& v = m_views.emplace_back();
         v.camera = c.camera;
-        v.frame = m_renderer.render(c.camera, &v.cache);
-        m_book.count(&ServerCounters::renders);
+        v.frame = Dbi(c.camera.width, c.camera.height);
     }
-    for (ViewFrame& v : m_views) {
-        // The frame first takes the change, so a full refresh sent now holds it too.
-        PixelRect rect;
-        uint32_t renderUs = gridUs;
-        if (!b.changed.empty()) {
-            rect = dirtyScreenRect(v.camera, m_volume, b.changed);
-            if (!rect.empty()) {
-                const uint64_t r0 = m_clock();
-                // The paper's way re-renders the whole view, through the view's hit cache as the
-                // volume client's re-render does, so the study compares like with like.
-                m_renderer.render(v.camera, m_fullRender.load() ? v.frame.bounds() : rect, v.frame,
-                                  &v.cache);
-                renderUs += uint32_t(m_clock() - r0);
-                m_book.count(&ServerCounters::renders);
-            }
-        }
-        for (const auto& [id, c] : m_clients) {
-            if (!dbiView(c, v.camera))
-                continue;
-            auto full = b.needFull.find(id);
-            if (full != b.needFull.end())
-                m_outbox.postImage(id, v.camera, v.frame, v.frame.bounds(), true, full->second, {});
-            else if (!rect.empty())
-                m_outbox.postImage(id, v.camera, v.frame, rect, false, b.causeUs,
-                                   {uint32_t(b.erodeUs), renderUs, gridUs});
+    // Updates of whole views first: the other clients' latency never waits for a new view.
+    for (ViewFrame& v : m_views)
+        updateView(v, b, gridUs);
+    renderSlices();
+}
+
+// The batch's change in the rows rendered so far, then to the view's clients: a whole view's
+// full image to those waiting for one, BB_screen to the rest.
+void SimulationStep::updateView(ViewFrame& v, const Batch& b, uint32_t gridUs) {
+    PixelRect rect;
+    uint32_t renderUs = gridUs;
+    if (!b.changed.empty() && v.rowsDone > 0) {
+        rect = intersect(dirtyScreenRect(v.camera, m_volume, b.changed),
+                         {0, 0, v.frame.width(), v.rowsDone});
+        if (!rect.empty()) {
+            const uint64_t r0 = m_clock();
+            // The paper's way re-renders the whole view, through the view's hit cache as the
+            // volume client's re-render does, so the study compares like with like.
+            m_renderer.render(v.camera, m_fullRender.load() && v.whole() ? v.frame.bounds() : rect,
+                              v.frame, &v.cache);
+            renderUs += uint32_t(m_clock() - r0);
+            m_book.count(&ServerCounters::renders);
         }
     }
+    if (!v.whole())
+        return; // its clients get the full image once the last slice is done
+    for (auto& [id, c] : m_clients) {
+        if (c.sync != Sync::Dbi || !(c.camera == v.camera))
+            continue;
+        if (c.fullCauseUs) {
+            m_outbox.postImage(id, v.camera, v.frame, v.frame.bounds(), true, c.fullCauseUs, {});
+            c.fullCauseUs = 0;
+        } else if (!rect.empty()) {
+            m_outbox.postImage(id, v.camera, v.frame, rect, false, b.causeUs,
+                               {uint32_t(b.erodeUs), renderUs, gridUs});
+        }
+    }
+}
+
+// Up to slicePixels of rows of the views still being rendered, one view after another from where
+// the last step stopped; a view finished here goes to its clients whole.
+void SimulationStep::renderSlices() {
+    int64_t budget = std::max<int64_t>(m_config.slicePixels, 1);
+    const size_t n = m_views.size();
+    for (size_t k = 0; k < n && budget > 0; ++k) {
+        const size_t i = (m_nextSlice + k) % n;
+        ViewFrame& v = m_views[i];
+        if (v.whole())
+            continue;
+        const int width = std::max(v.frame.width(), 1);
+        const int rows = int(std::clamp<int64_t>(budget / width, 1, v.frame.height() - v.rowsDone));
+        m_renderer.render(v.camera, {0, v.rowsDone, v.frame.width(), rows}, v.frame, &v.cache);
+        v.rowsDone += rows;
+        budget -= int64_t(rows) * width;
+        m_nextSlice = i + 1;
+        if (v.whole()) {
+            m_book.count(&ServerCounters::renders);
+            updateView(v, Batch{}, 0);
+        }
+    }
+    m_rendering =
+        std::any_of(m_views.begin(), m_views.end(), [](const ViewFrame& v) { return !v.whole(); });
+}
+
+int64_t SimulationStep::viewPixels() const {
+    int64_t total = 0;
+    for (const ViewFrame& v : m_views)
+        total += int64_t(v.frame.width()) * v.frame.height();
+    return total;
 }
 
 // [SECTION] inspection

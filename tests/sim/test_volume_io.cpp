@@ -17,6 +17,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <limits>
 #include <map>
 #include <string>
 #include <sys/resource.h>
@@ -637,4 +638,37 @@ TEST(VolumeIo, SpacingsOutsideWhatTrephineCanWorkWithAreRefused) {
     writeFile(dir / "tiny.nrrd",
               concat(nrrdHeader("uchar", "2 1 1", "raw", "spacings: 1e-30 1 1"), Bytes{0, 200}));
     EXPECT_THROW(loadVolume(dir / "tiny.nrrd"), Error);
+}
+
+TEST(VolumeIo, NanOrZeroSpacingInAHeaderIsRefusedNotTakenAsOneMillimetre) {
+    TempDir dir;
+    for (const char* bad : {"nan 1 1", "1 0 1", "1 1 NaN"}) {
+        SCOPED_TRACE(bad);
+        writeFile(dir / "v.nrrd",
+                  concat(nrrdHeader("uchar", "2 1 1", "raw", std::string("spacings: ") + bad),
+                         Bytes{0, 200}));
+        expectError([&] { loadVolume(dir / "v.nrrd"); }, "v.nrrd", "'spacings' entry");
+    }
+    for (float bad : {std::numeric_limits<float>::quiet_NaN(), 0.0f}) {
+        SCOPED_TRACE(bad);
+        Bytes header = niftiHeader({2, 1, 1}, 2, 8, {1.0f, bad, 1.0f}, 1.0f, 0.0f, false);
+        writeFile(dir / "v.nii", concat(std::string(header.begin(), header.end()), Bytes{0, 200}));
+        expectError([&] { loadVolume(dir / "v.nii"); }, "v.nii", "pixdim[2]");
+    }
+}
+
+TEST(VolumeIo, APathWithANewlineIsNamedOnOneLine) {
+    TempDir dir;
+    const std::string path = std::string(dir / "two\nlines.nrrd");
+    try {
+        loadVolume(path);
+        FAIL() << "expected an error";
+    } catch (const Error& e) {
+        const std::string msg = e.what();
+        EXPECT_EQ(msg.find('\n'), std::string::npos) << msg;
+        EXPECT_NE(msg.find("two\\nlines.nrrd"), std::string::npos) << msg;
+    }
+    EXPECT_EQ(oneLine("a\tb\x01"
+                      "c\x7f"),
+              "a\\tb\\x01c\\x7F");
 }

@@ -35,7 +35,7 @@ namespace trephine::net {
 // 9: SafetyWarning and AssessmentSnapshot (net/assessment_protocol.h); Participants' colour (the
 // server gives each participant one; every window draws it); Handshake (role codes proven by
 // SPAKE2, then every message sealed: docs/security.md) and Remove; refusals WrongCode, Removed,
-// TooManyAttempts.
+// TooManyAttempts; refusals Busy, Idle, ViewsFull (docs/session.md, "Availability").
 inline constexpr uint32_t kProtocolVersion = 9;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
@@ -53,6 +53,9 @@ enum class RefuseReason : uint32_t {
     WrongCode = 7,
     Removed = 8, // the instructor removed this participant
     TooManyAttempts = 9,
+    Busy = 10,      // too many connections wait to be admitted (from this address, or in all)
+    Idle = 11,      // said nothing for ServerConfig::idleTimeoutS
+    ViewsFull = 12, // the views served together would pass ServerConfig::maxTotalViewPixels
 };
 enum class CodeRefusal : uint32_t {
     Wrong = 0,               // the code proved none of the session's

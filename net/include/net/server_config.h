@@ -3,6 +3,7 @@
 // net/outbox.h, net/sim_step.h).
 #pragma once
 
+#include "net/admission.h"
 #include "net/protocol.h"
 #include "net/scene.h"
 
@@ -66,6 +67,22 @@ struct ServerConfig {
     // reaches the port joins with the role its hello names, in the clear (`trephine server
     // --open`; tests). Either form of a code (normaliseCode) works.
     std::string traineeCode, instructorCode;
+
+    // [Availability] What peers may hold, whatever they send (docs/session.md, "Availability").
+    // Connections not yet admitted: ENet slots beyond maxClients, per-address limits, handshakes.
+    AdmissionLimits admission;
+    // A participant that sends nothing at all for this long is sent away (RefuseReason::Idle).
+    // Clients ping every 0.25 s while welcomed, so only a dead or hostile peer stays silent.
+    float idleTimeoutS = 60.0f;
+    // Control-channel bytes ENet may hold for one peer: beyond it the roster, the marks and
+    // followed views wait as their latest state only, and pongs are not sent.
+    int64_t controlBudgetBytes = 256 << 10;
+    // View pixels a peer may have rendered per second (a token bucket holding two of the largest
+    // views); a request beyond it waits, the newest one only, until its pixels are due.
+    double viewPixelsPerS = 8.0 * 1024 * 1024;
+    // All participants' views together (w x h each): a view that would pass it is refused. The
+    // server keeps about 40 bytes a pixel of view (frame, hit cache, coded copies).
+    int64_t maxTotalViewPixels = 16 << 20;
 };
 
 // The marks (Annotations) go to every participant at most this often, the whole list once.

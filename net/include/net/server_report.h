@@ -6,6 +6,7 @@
 
 #include "libsim/stats.h"
 #include "net/assessment_metrics.h"
+#include "net/admission.h"
 #include "net/net_stats.h"
 #include "net/protocol.h"
 #include "net/security_counters.h"
@@ -39,6 +40,22 @@ struct ServerCounters {
     int64_t peakInFlightBytes = 0; // the most one client's updates held by ENet at once
 };
 
+// Refusals and budgets that keep the session serving those who belong (docs/session.md,
+// "Availability"); the server's report lists them under "availability".
+struct AvailabilityCounters {
+    AdmissionCounts admission;   // CONNECT datagrams dropped, handshakes reset (net/admission.h)
+    uint64_t refusedBusy = 0;    // connections refused: too many waiting to be admitted
+    uint64_t idleTimeouts = 0;   // participants sent away for saying nothing (idleTimeoutS)
+    uint64_t viewsDeferred = 0;  // view requests held back by the peer's render budget
+    uint64_t viewsCoalesced = 0; // of which replaced by a newer one before it was due
+    uint64_t viewsOverTotal = 0; // views refused: all views together would pass maxTotalViewPixels
+    uint64_t refusedViewTotal = 0; // hellos refused for the same reason (RefuseReason::ViewsFull)
+    uint64_t controlCoalesced = 0; // rosters, marks, views replaced by a newer one while queued
+    uint64_t controlDropped = 0;   // pongs not sent: the peer's control backlog was over budget
+    uint64_t namesRepaired = 0;    // hello names that were not UTF-8 text, or already taken
+    int64_t peakControlBytes = 0;  // the most control bytes ENet held for one peer at once
+};
+
 // One peer's figures, kept after it leaves.
 struct PeerReport {
     std::string name;
@@ -66,6 +83,7 @@ struct ServerReport {
     std::string volume;
     size_t maxClients = 0;
     ServerCounters counters;
+    AvailabilityCounters availability;
     std::map<uint16_t, PeerReport> peers; // every peer that ever connected, by id
     std::array<ModeReport, 2> modes;      // by Sync
     SampleWindow forceComputeUs{65536};

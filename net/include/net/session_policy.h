@@ -8,6 +8,7 @@
 
 #include "libsim/force_model.h"
 #include "libsim/volume.h"
+#include "net/budgets.h"
 #include "net/enet_host.h"
 #include "net/protocol.h"
 #include "net/server_config.h"
@@ -112,6 +113,9 @@ public:
 
     // Connected and not sent away: its updates are still wanted.
     bool live(uint16_t id) const;
+    // Admitted into the session (its hello accepted) and not sent away: it holds one of the
+    // maxClients places; until then it holds one of the admission's waiting slots.
+    bool admitted(uint16_t id) const;
     size_t peerCount() const { return m_peers.size(); }
     // Bytes of client `id`'s updates that ENet still holds (Host::send counts into it).
     Host::InFlight inFlight(uint16_t id) const;
@@ -134,6 +138,10 @@ private:
         VelocityEstimate toolVelocity;           // from its tool states' positions and times
         uint8_t colour = 0; // its participantPalette() index, given at its hello
         std::optional<Role> proven;              // the role its code proved (none: open session)
+        uint64_t heardUs = 0;                    // its last message (idle timeout)
+        RateBudget viewPixels{0, 0};             // ServerConfig::viewPixelsPerS
+        std::optional<ViewRequest> waitingView;  // over budget: the newest, until it is due
+        int64_t pixels = 0;                      // of its view now (maxTotalViewPixels)
     };
 
     bool handle(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
@@ -162,6 +170,13 @@ private:
     bool mayCut(uint16_t id, Role role) const;
     bool releaseTakeOvers(uint16_t id);
     bool viewTooLarge(const ViewSpec& v) const;
+    // [Availability] availability.cpp: admission counts, idle timeouts, the view budget.
+    size_t admittedCount() const;
+    bool overViewTotal(uint16_t id, const ViewSpec& v) const;
+    void applyView(uint16_t id, Peer& p, const ViewRequest& r, PolicyOutput& out);
+    bool viewRequest(uint16_t id, Peer& p, const ViewRequest& r, uint64_t now, PolicyOutput& out);
+    void updateAvailability(uint64_t now, PolicyOutput& out);
+    std::string uniqueName(uint16_t id, const std::string& name);
     void countSwitches();
 
     ServerConfig m_config;

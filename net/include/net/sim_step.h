@@ -58,6 +58,10 @@ struct StepConfig {
     float maxSweepMm = 10.0f; // ServerConfig::maxSweepMm
     int renderThreads = 0;    // 0: hardware concurrency
     AssessmentConfig assessment; // zones; its maxSweepMm is taken from maxSweepMm
+    // New views render in slices of rows, at most this many pixels a step across all of them,
+    // taken in turn, so one peer's large views never hold up the others' updates for longer
+    // than a slice (docs/session.md, "Availability").
+    int64_t slicePixels = int64_t(1) << 18;
 };
 
 class SimulationStep {
@@ -84,6 +88,10 @@ public:
     // Re-render every view whole on each change (the paper's way) instead of BB_screen only.
     void setFullRender(bool on) { m_fullRender = on; }
     size_t viewCount() const { return m_views.size(); }
+    // [Any thread] Some view is partly rendered: step() has work even with no events.
+    bool rendering() const { return m_rendering.load(); }
+    // The pixels of every view frame held (the server's memory grows with them).
+    int64_t viewPixels() const;
 
 private:
     // A participant as the simulation sees it: its view and its tool.
@@ -93,6 +101,7 @@ private:
         std::optional<Driller> driller;
         ToolPose lastPose;         // of the newest applied tool state
         bool lastDrilling = false; // it drilled (with the driller there is now)
+        uint64_t fullCauseUs = 0;  // waits for a full image of its view (since this cause)
         bool hasTool = false;
         uint32_t lastSequence = 0;
         uint64_t lastClientUs = 0;
@@ -101,7 +110,9 @@ private:
     struct ViewFrame {
         Camera camera;
         Dbi frame;
-        HitCache cache; // where each pixel's ray met bone: dirty re-renders resume there
+        HitCache cache;   // where each pixel's ray met bone: dirty re-renders resume there
+        int rowsDone = 0; // rows rendered so far: the frame is whole at frame.height()
+        bool whole() const { return rowsDone >= frame.height(); }
     };
     // What one batch changed and who needs a full update.
     struct Batch {
@@ -121,6 +132,8 @@ private:
     void postVolumes(const Batch& b);
     uint32_t updateGrid(const Batch& b);
     void renderViews(const Batch& b, uint32_t gridUs);
+    void updateView(ViewFrame& v, const Batch& b, uint32_t gridUs);
+    void renderSlices();
     void syncGrid();
 
     StepConfig m_config;
@@ -140,6 +153,8 @@ private:
     Box3i m_gridPending;
     bool m_gridRebuildPending = false;
     std::atomic<bool> m_fullRender{false};
+    std::atomic<bool> m_rendering{false};
+    size_t m_nextSlice = 0; // the view whose slice comes first in the next step (round robin)
 };
 
 } // namespace trephine::net

@@ -1,0 +1,120 @@
+// Connection admission: peers not yet admitted (no accepted hello) must not hold the session's
+// scarce places. ENet spends a peer slot on every CONNECT datagram before the application hears
+// of it, so the gate sits in ENet's intercept (it sees raw datagrams first): a token bucket per
+// source address for new connections, and a cap on connections from one address still waiting to
+// be admitted. A reaper frees slots whose ENet handshake (or goodbye) never finishes. The rules
+// are plain classes with time passed in; AdmissionGate binds them to one ENet host.
+// docs/session.md ("Availability") gives the figures.
+#pragma once
+
+#include <enet/enet.h>
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <vector>
+
+namespace trephine::net {
+
+// True when `datagram` is an ENet datagram that asks for a new connection (a CONNECT command to
+// no peer yet). Anything else (or a datagram too short to tell) is ENet's to judge.
+bool isEnetConnect(std::span<const uint8_t> datagram);
+
+// New connections per source address: a bucket of `burst` tokens refilled at `perS` a second.
+// Addresses hash into a fixed table, so spoofed sources cannot grow it: two addresses that share
+// a bucket share its tokens (a stricter limit for both, never a looser one).
+class ConnectBuckets {
+public:
+    ConnectBuckets(double perS, double burst, uint64_t salt = 0x9e3779b97f4a7c15ull);
+    // Takes a token for a connection from `address` at `nowUs`; false when none is left.
+    bool take(uint32_t address, uint64_t nowUs);
+
+private:
+    struct Bucket {
+        uint32_t address = 0;
+        double tokens = 0;
+        uint64_t lastUs = 0;
+        bool used = false;
+    };
+    static constexpr size_t kBuckets = 4096;
+    double m_perS, m_burst;
+    uint64_t m_salt;
+    std::array<Bucket, kBuckets> m_table{};
+};
+
+// What the gate answers to a CONNECT datagram.
+enum class ConnectVerdict {
+    Accept,
+    RateLimited, // the address opened connections faster than its bucket allows
+    AddressBusy, // the address already has as many connections waiting as one may
+    PoolFull,    // every slot for waiting connections is taken
+};
+
+struct AdmissionLimits {
+    size_t waitingSlots = 256;     // ENet slots beyond maxClients for connections not admitted
+    size_t waitingPerAddress = 16; // of which one source address may hold at once
+    double connectsPerS = 8.0;     // new connections a second per address, after...
+    double connectBurst = 24.0;    // ...a burst of this many
+    uint64_t handshakeTimeoutUs = 3000000; // ENet handshake or goodbye unfinished: slot reset
+};
+
+// The decision for one CONNECT: `waitingFromAddress` and `waiting` count the ENet peers not yet
+// admitted (from that address, and in all).
+ConnectVerdict judgeConnect(const AdmissionLimits& limits, ConnectBuckets& buckets,
+                            uint32_t address, size_t waitingFromAddress, size_t waiting,
+                            uint64_t nowUs);
+
+// How long each slot has been in a state it must leave soon (an ENet handshake or goodbye): a
+// slot that stays longer than the timeout is due to be reset.
+class SlotTimer {
+public:
+    explicit SlotTimer(size_t slots) : m_since(slots, 0) {}
+    // Slot `index` is (`transient`) or is not in such a state at `nowUs`: true when it has been
+    // for longer than `timeoutUs`.
+    bool expired(size_t index, bool transient, uint64_t nowUs, uint64_t timeoutUs);
+    void forget(size_t index) { m_since.at(index) = 0; }
+
+private:
+    std::vector<uint64_t> m_since; // 0: not in a transient state
+};
+
+// Figures of refused and reclaimed connections (read into the server's report).
+struct AdmissionCounts {
+    uint64_t rateLimited = 0, addressBusy = 0, poolFull = 0, handshakesReset = 0;
+};
+
+// The gate on one ENet host (network thread only). `admitted` says whether an ENet peer has been
+// admitted into the session (its slot is then the session's, not the gate's).
+class AdmissionGate {
+public:
+    using Admitted = std::function<bool(const ENetPeer*)>;
+    // Called before a slot is reset with the peer it held (the server forgets it: ENet reports no
+    // disconnect for a reset peer).
+    using OnReset = std::function<void(ENetPeer*)>;
+
+    AdmissionGate(ENetHost* host, const AdmissionLimits& limits, Admitted admitted);
+    ~AdmissionGate();
+    AdmissionGate(const AdmissionGate&) = delete;
+    AdmissionGate& operator=(const AdmissionGate&) = delete;
+
+    // Sets the time the intercept judges by (the network thread's `now` of this pass).
+    void setNow(uint64_t nowUs) { m_nowUs = nowUs; }
+    // Resets every slot whose handshake or goodbye has outlasted the limit.
+    void reap(uint64_t nowUs, const OnReset& onReset);
+    const AdmissionCounts& counts() const { return m_counts; }
+
+private:
+    static int ENET_CALLBACK intercept(ENetHost* host, ENetEvent* event);
+    int judge(); // ENet's intercept answer: 1 drops the datagram, 0 lets ENet handle it
+
+    ENetHost* m_host;
+    AdmissionLimits m_limits;
+    Admitted m_admitted;
+    ConnectBuckets m_buckets;
+    SlotTimer m_timer;
+    AdmissionCounts m_counts;
+    uint64_t m_nowUs = 0;
+};
+
+} // namespace trephine::net

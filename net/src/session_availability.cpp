@@ -1,0 +1,110 @@
+// The session policy's availability rules (net/session_policy.h): places go to admitted peers
+// only, silent participants are sent away, a peer's view requests spend a render budget, and all
+// views together stay under a pixel total, so the server's memory has a bound whatever peers send.
+#include "net/session_policy.h"
+
+#include "net/view.h"
+
+#include <algorithm>
+
+namespace trephine::net {
+
+namespace {
+
+int64_t pixelsOf(const ViewSpec& v) {
+    return int64_t(v.width) * int64_t(v.height);
+}
+
+} // namespace
+
+bool SessionPolicy::admitted(uint16_t id) const {
+    auto it = m_peers.find(id);
+    return it != m_peers.end() && it->second.hello && !it->second.kicked;
+}
+
+size_t SessionPolicy::admittedCount() const {
+    return size_t(std::count_if(m_peers.begin(), m_peers.end(), [](const auto& kv) {
+        return kv.second.hello && !kv.second.kicked;
+    }));
+}
+
+// Whether peer `id` viewing `v` would take every admitted peer's views past the total.
+bool SessionPolicy::overViewTotal(uint16_t id, const ViewSpec& v) const {
+    int64_t total = pixelsOf(v);
+    for (const auto& [other, p] : m_peers)
+        if (other != id && p.hello && !p.kicked)
+            total += p.pixels;
+    return total > m_config.maxTotalViewPixels;
+}
+
+// A view request within the limits: to the simulation now if the peer's render budget covers
+// it, else it waits (replacing any older waiting one) until update() finds it due.
+bool SessionPolicy::viewRequest(uint16_t id, Peer& p, const ViewRequest& r, uint64_t now,
+                                PolicyOutput& out) {
+    if (overViewTotal(id, r.view)) {
+        m_book.record([&](ServerReport& rep) {
+            ++rep.availability.viewsOverTotal;
+            ++rep.peers[id].viewsRefused;
+        });
+        return true;
+    }
+    const bool replaced = p.waitingView.has_value();
+    if (!replaced && p.viewPixels.take(double(pixelsOf(r.view)), now)) {
+        applyView(id, p, r, out);
+        return true;
+    }
+    p.waitingView = r;
+    m_book.record([&](ServerReport& rep) {
+        ++rep.availability.viewsDeferred;
+        rep.availability.viewsCoalesced += replaced;
+    });
+    return true;
+}
+
+void SessionPolicy::applyView(uint16_t id, Peer& p, const ViewRequest& r, PolicyOutput& out) {
+    p.pixels = pixelsOf(r.view);
+    SimEvent ev = SimEvent::of(SimEvent::Kind::View, id);
+    ev.camera = toCamera(r.view);
+    ev.viewId = r.requestId;
+    out.events.push_back(std::move(ev));
+    ParticipantView seen{id, r.view};
+    const std::vector<uint16_t> followers = m_follow.setView(id, r.view);
+    if (!followers.empty()) // instructors viewing as this one
+        out.messages.push_back({followers, Channel::Control, encodeMessage(seen)});
+}
+
+void SessionPolicy::updateAvailability(uint64_t now, PolicyOutput& out) {
+    const uint64_t idleUs = uint64_t(double(m_config.idleTimeoutS) * 1e6);
+    for (auto& [id, p] : m_peers) {
+        if (!p.hello || p.kicked)
+            continue;
+        if (now > p.heardUs && now - p.heardUs > idleUs) {
+            m_book.record([](ServerReport& r) { ++r.availability.idleTimeouts; });
+            kick(id, p, RefuseReason::Idle, out);
+            continue;
+        }
+        if (p.waitingView && p.viewPixels.take(double(pixelsOf(p.waitingView->view)), now)) {
+            const ViewRequest r = *p.waitingView;
+            p.waitingView.reset();
+            if (overViewTotal(id, r.view))
+                m_book.record([&](ServerReport& rep) { ++rep.availability.viewsOverTotal; });
+            else
+                applyView(id, p, r, out);
+        }
+    }
+}
+
+// The hello's name, valid and not another participant's (net/budgets.h, admitName).
+std::string SessionPolicy::uniqueName(uint16_t id, const std::string& name) {
+    std::set<std::string> taken;
+    for (const auto& [other, p] : m_peers)
+        if (other != id && p.hello && !p.kicked)
+            taken.insert(p.helloMsg.name);
+    bool repaired = false;
+    std::string out = admitName(name, taken, kMaxNameLength, &repaired);
+    if (repaired)
+        m_book.record([](ServerReport& r) { ++r.availability.namesRepaired; });
+    return out;
+}
+
+} // namespace trephine::net

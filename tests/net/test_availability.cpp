@@ -1,0 +1,450 @@
+// Availability without sockets: the admission rules (net/admission.h), the per-peer budgets and
+// names (net/budgets.h), the policy's places, idle timeouts and view budget, and the simulation
+// step's sliced rendering. Time is passed in; nothing sleeps.
+#include "net/admission.h"
+#include "net/budgets.h"
+#include "net/codec.h"
+#include "net/session_policy.h"
+#include "net/sim_step.h"
+
+#include "libsim/skull.h"
+#include "net/view.h"
+
+#include <enet/protocol.h>
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+#include <cstring>
+#include <optional>
+
+using namespace trephine;
+using namespace trephine::net;
+
+namespace {
+
+constexpr uint64_t kStartUs = 1'000'000;
+
+// An ENet CONNECT datagram as a client sends it (header with sent time, then the command).
+std::vector<uint8_t> connectDatagram(uint32_t connectId = 0x1234) {
+    std::vector<uint8_t> d(4 + sizeof(ENetProtocolConnect), 0);
+    const uint16_t peer =
+        uint16_t(ENET_PROTOCOL_MAXIMUM_PEER_ID) | uint16_t(ENET_PROTOCOL_HEADER_FLAG_SENT_TIME);
+    d[0] = uint8_t(peer >> 8);
+    d[1] = uint8_t(peer);
+    ENetProtocolConnect c{};
+    c.header.command =
+        uint8_t(ENET_PROTOCOL_COMMAND_CONNECT) | uint8_t(ENET_PROTOCOL_COMMAND_FLAG_ACKNOWLEDGE);
+    c.channelCount = ENET_HOST_TO_NET_32(5);
+    c.connectID = connectId;
+    std::memcpy(d.data() + 4, &c, sizeof c);
+    return d;
+}
+
+bool disconnected(const PolicyOutput& out, uint16_t id, RefuseReason why) {
+    return std::any_of(out.disconnects.begin(), out.disconnects.end(),
+                       [&](const auto& d) { return d.client == id && d.data == uint32_t(why); });
+}
+
+size_t eventsOf(const PolicyOutput& out, SimEvent::Kind kind) {
+    return size_t(std::count_if(out.events.begin(), out.events.end(),
+                                [&](const SimEvent& e) { return e.kind == kind; }));
+}
+
+ViewSpec viewOf(int w, int h) {
+    ViewSpec v = toViewSpec(cameraPreset("top", makeSphere(32), {w, h}));
+    return v;
+}
+
+struct PolicyRig {
+    ServerConfig config;
+    ReportBook book;
+    std::optional<SessionPolicy> policy;
+    uint64_t now = kStartUs;
+
+    explicit PolicyRig(ServerConfig c = {}) : config(std::move(c)) {
+        const Volume sphere = makeSphere(32);
+        config.scene = std::make_shared<const Scene>(buildScene(sphere));
+        policy.emplace(config, sphere.dims(), sphere.spacing(), book,
+                       [this](const ToolState&, glm::vec3) {
+                           SessionPolicy::ForceAnswer a;
+                           a.doneUs = now;
+                           return a;
+                       });
+    }
+    SessionPolicy& p() { return *policy; }
+    template <typename M>
+    PolicyOutput send(uint16_t id, M m) {
+        return p().receive(id, encodeMessage(m), now);
+    }
+    uint16_t connect() {
+        PolicyOutput out;
+        return p().connect(kProtocolVersion, now, out);
+    }
+    PolicyOutput hello(uint16_t id, const std::string& name, ViewSpec view = viewOf(32, 32)) {
+        Hello h;
+        h.name = name;
+        h.view = view;
+        return send(id, h);
+    }
+    uint16_t join(const std::string& name, ViewSpec view = viewOf(32, 32)) {
+        const uint16_t id = connect();
+        EXPECT_NE(id, 0);
+        hello(id, name, view);
+        return id;
+    }
+    PolicyOutput update() {
+        PolicyOutput out;
+        p().update(now, out);
+        return out;
+    }
+    AvailabilityCounters availability() const {
+        return book.read([](const ServerReport& r) { return r.availability; });
+    }
+    ServerCounters counters() const {
+        return book.read([](const ServerReport& r) { return r.counters; });
+    }
+    std::vector<std::string> roster(const PolicyOutput& out) const {
+        std::vector<std::string> names;
+        for (const auto& m : out.messages) {
+            Participants list;
+            if (peekMessageType(m.bytes) == uint8_t(MessageType::Participants) &&
+                decodeMessage(m.bytes, list)) {
+                names.clear();
+                for (const auto& e : list.list)
+                    names.push_back(e.name);
+            }
+        }
+        return names;
+    }
+};
+
+} // namespace
+
+// [SECTION] admission rules
+
+TEST(Admission, AConnectDatagramIsToldFromEveryOtherDatagram) {
+    EXPECT_TRUE(isEnetConnect(connectDatagram()));
+    std::vector<uint8_t> toPeer = connectDatagram();
+    toPeer[1] = 3; // addressed to peer 3: a command within a connection
+    EXPECT_FALSE(isEnetConnect(toPeer));
+    std::vector<uint8_t> ping = connectDatagram();
+    ping[4] = ENET_PROTOCOL_COMMAND_PING;
+    EXPECT_FALSE(isEnetConnect(ping));
+    std::vector<uint8_t> cut = connectDatagram();
+    cut.resize(10);
+    EXPECT_FALSE(isEnetConnect(cut)) << "too short to be a connect";
+    EXPECT_FALSE(isEnetConnect({}));
+}
+
+TEST(Admission, EachAddressOpensABurstThenConnectionsAtItsRate) {
+    ConnectBuckets buckets(4.0, 3.0);
+    const uint32_t a = 0x0100007f, b = 0x0200007f;
+    for (int i = 0; i < 3; ++i)
+        EXPECT_TRUE(buckets.take(a, kStartUs)) << i;
+    EXPECT_FALSE(buckets.take(a, kStartUs)) << "burst spent";
+    EXPECT_TRUE(buckets.take(b, kStartUs)) << "another address has its own bucket";
+    EXPECT_FALSE(buckets.take(a, kStartUs + 240000)) << "0.96 of a token after 0.24 s";
+    EXPECT_TRUE(buckets.take(a, kStartUs + 250000)) << "one token after 0.25 s at 4/s";
+    EXPECT_FALSE(buckets.take(a, kStartUs + 250000));
+    // Idle for long, the bucket holds the burst, not more.
+    for (int i = 0; i < 3; ++i)
+        EXPECT_TRUE(buckets.take(a, kStartUs + 60'000'000)) << i;
+    EXPECT_FALSE(buckets.take(a, kStartUs + 60'000'000));
+}
+
+TEST(Admission, AConnectIsJudgedBySlotsThenAddressThenRate) {
+    AdmissionLimits limits;
+    limits.waitingSlots = 10;
+    limits.waitingPerAddress = 2;
+    limits.connectsPerS = 1.0;
+    limits.connectBurst = 1.0;
+    ConnectBuckets buckets(limits.connectsPerS, limits.connectBurst);
+    EXPECT_EQ(judgeConnect(limits, buckets, 7, 0, 10, kStartUs), ConnectVerdict::PoolFull);
+    EXPECT_EQ(judgeConnect(limits, buckets, 7, 2, 5, kStartUs), ConnectVerdict::AddressBusy);
+    EXPECT_EQ(judgeConnect(limits, buckets, 7, 1, 5, kStartUs), ConnectVerdict::Accept);
+    EXPECT_EQ(judgeConnect(limits, buckets, 7, 1, 5, kStartUs), ConnectVerdict::RateLimited);
+    EXPECT_EQ(judgeConnect(limits, buckets, 8, 0, 5, kStartUs), ConnectVerdict::Accept);
+}
+
+TEST(Admission, ASlotStuckInAHandshakeExpiresAfterTheTimeout) {
+    SlotTimer timer(3);
+    EXPECT_FALSE(timer.expired(1, true, kStartUs, 1000));
+    EXPECT_FALSE(timer.expired(1, true, kStartUs + 1000, 1000));
+    EXPECT_TRUE(timer.expired(1, true, kStartUs + 1001, 1000));
+    EXPECT_FALSE(timer.expired(2, false, kStartUs + 5000, 1000)) << "connected: never expires";
+    // Leaving the state restarts the clock.
+    EXPECT_FALSE(timer.expired(0, true, kStartUs, 1000));
+    EXPECT_FALSE(timer.expired(0, false, kStartUs + 500, 1000));
+    EXPECT_FALSE(timer.expired(0, true, kStartUs + 1200, 1000));
+    EXPECT_TRUE(timer.expired(0, true, kStartUs + 2201, 1000));
+}
+
+// [SECTION] budgets and names
+
+TEST(Budgets, AViewBudgetRefillsAtItsRateUpToItsBurst) {
+    RateBudget budget(1000.0, 2000.0);
+    EXPECT_TRUE(budget.take(1500, kStartUs));
+    EXPECT_FALSE(budget.take(1000, kStartUs));
+    EXPECT_TRUE(budget.take(1000, kStartUs + 500000));
+    EXPECT_FALSE(budget.covers(2001, kStartUs + 100'000'000)) << "never more than the burst";
+    EXPECT_TRUE(budget.covers(2000, kStartUs + 100'000'000));
+}
+
+TEST(Budgets, OverItsControlBudgetAPeerGetsTheLatestRosterAndNoPongs) {
+    ControlBudget budget(1000);
+    Participants first, second;
+    first.list.push_back({1, Role::Trainee, Sync::Dbi, "a", 0});
+    second.list.push_back({1, Role::Trainee, Sync::Dbi, "b", 0});
+    const auto roster1 = encodeMessage(first), roster2 = encodeMessage(second);
+    Pong pongMessage{1, 2};
+    const auto pong = encodeMessage(pongMessage);
+    Welcome w;
+    const auto welcome = encodeMessage(w);
+    EXPECT_EQ(budget.offer(4, roster1, 999), ControlBudget::Action::Send);
+    EXPECT_EQ(budget.offer(4, roster1, 1000), ControlBudget::Action::Hold);
+    EXPECT_EQ(budget.offer(4, roster2, 5000), ControlBudget::Action::Hold);
+    EXPECT_EQ(budget.counts().coalesced, 1u) << "the first roster held is superseded";
+    EXPECT_EQ(budget.offer(4, pong, 5000), ControlBudget::Action::Drop);
+    EXPECT_EQ(budget.offer(4, welcome, 5000), ControlBudget::Action::Send)
+        << "once-a-join messages go whatever the backlog";
+    EXPECT_EQ(budget.counts().dropped, 1u);
+    EXPECT_TRUE(budget.due([](uint16_t) { return int64_t(2000); }).empty()) << "still over";
+    const auto due = budget.due([](uint16_t) { return int64_t(0); });
+    ASSERT_EQ(due.size(), 1u);
+    EXPECT_EQ(due[0].first, 4);
+    EXPECT_EQ(due[0].second, roster2) << "the newest state only";
+    EXPECT_FALSE(budget.holding());
+    // A roster sent directly supersedes one held.
+    EXPECT_EQ(budget.offer(5, roster1, 5000), ControlBudget::Action::Hold);
+    EXPECT_EQ(budget.offer(5, roster2, 0), ControlBudget::Action::Send);
+    EXPECT_FALSE(budget.holding());
+}
+
+TEST(Budgets, NamesAreMadeValidTextAndUnique) {
+    bool repaired = false;
+    EXPECT_EQ(admitName("alice", {}, 64, &repaired), "alice");
+    EXPECT_FALSE(repaired);
+    EXPECT_EQ(admitName("alice", {"alice"}, 64, &repaired), "alice (2)");
+    EXPECT_TRUE(repaired);
+    EXPECT_EQ(admitName("alice", {"alice", "alice (2)"}, 64), "alice (3)");
+    EXPECT_EQ(admitName("b\xff\xfe"
+                        "c",
+                        {}, 64),
+              "b\xEF\xBF\xBD\xEF\xBF\xBD"
+              "c");
+    EXPECT_EQ(admitName("tab\there\nnl", {}, 64), "tab here nl");
+    EXPECT_EQ(admitName("\xC3\xA9t\xC3\xA9", {}, 64), "\xC3\xA9t\xC3\xA9") << "UTF-8 kept";
+    EXPECT_EQ(admitName("\xC0\xAF", {}, 64), "\xEF\xBF\xBD\xEF\xBF\xBD") << "overlong form";
+    // Cut to fit, on a character: 63 x 'a' then a 2-byte character does not fit 64.
+    const std::string longName = std::string(63, 'a') + "\xC3\xA9";
+    EXPECT_EQ(admitName(longName, {}, 64), std::string(63, 'a'));
+    EXPECT_EQ(admitName(std::string(64, 'x'), {std::string(64, 'x')}, 64),
+              std::string(60, 'x') + " (2)");
+    // Whatever the bytes, the result is JSON text.
+    std::string noise;
+    for (int i = 0; i < 256; ++i)
+        noise += char(i);
+    EXPECT_NO_THROW((void)nlohmann::json(admitName(noise, {}, 1000)).dump());
+}
+
+// [SECTION] the policy
+
+TEST(AvailabilityPolicy, ConnectionsNotYetAdmittedHoldNoPlace) {
+    ServerConfig c;
+    c.maxClients = 1;
+    PolicyRig rig(c);
+    const uint16_t silent = rig.connect();
+    const uint16_t slow = rig.connect();
+    ASSERT_NE(silent, 0);
+    ASSERT_NE(slow, 0) << "waiting connections do not fill the session";
+    const uint16_t ada = rig.join("ada");
+    EXPECT_TRUE(rig.p().admitted(ada));
+    EXPECT_FALSE(rig.p().admitted(silent));
+    PolicyOutput out;
+    EXPECT_EQ(rig.p().connect(kProtocolVersion, rig.now, out), 0);
+    EXPECT_TRUE(disconnected(out, 0, RefuseReason::ServerFull)) << "the place is taken";
+    // One that connected before the place was taken is refused at its hello.
+    out = rig.hello(slow, "late");
+    EXPECT_TRUE(disconnected(out, slow, RefuseReason::ServerFull));
+    EXPECT_EQ(rig.counters().refusedFull, 2u);
+}
+
+TEST(AvailabilityPolicy, TooManyWaitingConnectionsAreRefusedBusy) {
+    ServerConfig c;
+    c.admission.waitingSlots = 2;
+    PolicyRig rig(c);
+    ASSERT_NE(rig.connect(), 0);
+    ASSERT_NE(rig.connect(), 0);
+    PolicyOutput out;
+    EXPECT_EQ(rig.p().connect(kProtocolVersion, rig.now, out), 0);
+    EXPECT_TRUE(disconnected(out, 0, RefuseReason::Busy));
+    EXPECT_EQ(rig.availability().refusedBusy, 1u);
+    EXPECT_NE(refuseReasonText(uint32_t(RefuseReason::Busy)).find("try again"), std::string::npos);
+}
+
+TEST(AvailabilityPolicy, AParticipantSilentForTheIdleTimeoutIsSentAway) {
+    ServerConfig c;
+    c.idleTimeoutS = 2.0f;
+    c.helloTimeoutS = 100.0f;
+    PolicyRig rig(c);
+    const uint16_t talker = rig.join("talker");
+    const uint16_t quiet = rig.join("quiet");
+    rig.now += 1'500'000;
+    rig.send(talker, Ping{1});
+    rig.now += 600'000; // quiet: 2.1 s; talker: 0.6 s
+    PolicyOutput out = rig.update();
+    EXPECT_TRUE(disconnected(out, quiet, RefuseReason::Idle));
+    EXPECT_FALSE(disconnected(out, talker, RefuseReason::Idle));
+    EXPECT_EQ(rig.availability().idleTimeouts, 1u);
+    EXPECT_TRUE(rig.p().admitted(talker));
+    EXPECT_FALSE(rig.p().live(quiet));
+    rig.now += 1'500'000;
+    EXPECT_TRUE(disconnected(rig.update(), talker, RefuseReason::Idle));
+}
+
+TEST(AvailabilityPolicy, ViewRequestsBeyondTheRenderBudgetWaitAndTheNewestWins) {
+    ServerConfig c;
+    c.maxViewPixels = 100 * 100;
+    c.viewPixelsPerS = 10000; // one largest view a second, two saved up
+    PolicyRig rig(c);
+    const uint16_t id = rig.join("orbit");
+    size_t applied = 0;
+    for (uint32_t i = 1; i <= 5; ++i) {
+        ViewRequest r;
+        r.requestId = i;
+        r.view = viewOf(100, 100);
+        r.view.eye.x += float(i);
+        applied += eventsOf(rig.send(id, r), SimEvent::Kind::View);
+    }
+    EXPECT_EQ(applied, 2u) << "the saved-up budget";
+    const AvailabilityCounters a = rig.availability();
+    EXPECT_EQ(a.viewsDeferred, 3u);
+    EXPECT_EQ(a.viewsCoalesced, 2u);
+    rig.now += 500'000;
+    EXPECT_EQ(eventsOf(rig.update(), SimEvent::Kind::View), 0u) << "half a view's budget";
+    rig.now += 500'000;
+    PolicyOutput out = rig.update();
+    ASSERT_EQ(eventsOf(out, SimEvent::Kind::View), 1u);
+    const SimEvent& ev = *std::find_if(out.events.begin(), out.events.end(), [](const auto& e) {
+        return e.kind == SimEvent::Kind::View;
+    });
+    EXPECT_EQ(ev.viewId, 5u) << "the newest request";
+    rig.now += 10'000'000;
+    EXPECT_EQ(eventsOf(rig.update(), SimEvent::Kind::View), 0u) << "nothing left waiting";
+}
+
+TEST(AvailabilityPolicy, AllViewsTogetherStayUnderThePixelTotal) {
+    ServerConfig c;
+    c.maxViewPixels = 100 * 100;
+    c.maxTotalViewPixels = 2 * 100 * 100 + 50;
+    PolicyRig rig(c);
+    const uint16_t a = rig.join("a", viewOf(100, 100));
+    rig.join("b", viewOf(100, 100));
+    const uint16_t third = rig.connect();
+    PolicyOutput out = rig.hello(third, "c", viewOf(10, 10));
+    EXPECT_TRUE(disconnected(out, third, RefuseReason::ViewsFull));
+    EXPECT_EQ(rig.availability().refusedViewTotal, 1u);
+    const uint16_t small = rig.join("d", viewOf(5, 5));
+    EXPECT_TRUE(rig.p().admitted(small));
+    ViewRequest grow;
+    grow.view = viewOf(50, 50);
+    EXPECT_EQ(eventsOf(rig.send(small, grow), SimEvent::Kind::View), 0u);
+    EXPECT_EQ(rig.availability().viewsOverTotal, 1u);
+    // A view that shrinks frees pixels for the others.
+    ViewRequest shrink;
+    shrink.view = viewOf(10, 10);
+    EXPECT_EQ(eventsOf(rig.send(a, shrink), SimEvent::Kind::View), 1u);
+    EXPECT_EQ(eventsOf(rig.send(small, grow), SimEvent::Kind::View), 1u);
+}
+
+TEST(AvailabilityPolicy, NamesInTheRosterAreValidAndUnique) {
+    PolicyRig rig;
+    rig.join("alice");
+    const uint16_t second = rig.connect();
+    const PolicyOutput out = rig.hello(second, "alice");
+    rig.join("bad\xff");
+    const auto names = rig.roster(rig.update());
+    ASSERT_EQ(names.size(), 3u);
+    EXPECT_EQ(names[0], "alice");
+    EXPECT_EQ(names[1], "alice (2)");
+    EXPECT_EQ(names[2], "bad\xEF\xBF\xBD");
+    EXPECT_EQ(rig.availability().namesRepaired, 2u);
+    const std::string report =
+        rig.book.read([](const ServerReport& r) { return toJsonText(r, NetStats{}); });
+    EXPECT_TRUE(nlohmann::json::accept(report));
+    EXPECT_NE(report.find("\"names_repaired\": 2"), std::string::npos);
+}
+
+// [SECTION] the simulation step
+
+namespace {
+
+struct SliceRig {
+    ReportBook book;
+    Outbox outbox{1 << 30, book, steadyNowUs};
+    SimulationStep step;
+    uint64_t now = kStartUs;
+
+    SliceRig(Volume v, int64_t slicePixels)
+        : step(std::move(v), StepConfig{0.05f, 10.0f, 1, slicePixels}, outbox, book, steadyNowUs) {}
+    SimEvent join(uint16_t id, const Camera& camera) {
+        SimEvent ev = SimEvent::of(SimEvent::Kind::Join, id);
+        ev.camera = camera;
+        ev.codec = Codec::Raw;
+        ev.volumeCodec = Codec::Lz4;
+        ev.inFlight = std::make_shared<std::atomic<int64_t>>(0);
+        return ev;
+    }
+    std::vector<Outbox::Ready> run(std::vector<SimEvent> batch) {
+        now += 10000;
+        step.step(batch, now);
+        return outbox.take([](uint16_t) { return true; }).updates;
+    }
+};
+
+bool has(const std::vector<Outbox::Ready>& updates, uint16_t client, bool full) {
+    return std::any_of(updates.begin(), updates.end(),
+                       [&](const auto& u) { return u.client == client && u.full == full; });
+}
+
+} // namespace
+
+// A large new view renders a slice a step, while a small view's dirty rectangles go out at once;
+// whole, the large view is the full render's pixels.
+TEST(AvailabilitySlices, ALargeNewViewRendersInSlicesWhileOthersGetTheirUpdates) {
+    const Volume skull = makeSkull(48);
+    SliceRig rig(skull, 64 * 64);
+    const Camera small = cameraPreset("top", skull, {64, 64});
+    const Camera large = cameraPreset("paper", skull, {256, 256});
+    auto first = rig.run({rig.join(1, small)});
+    EXPECT_TRUE(has(first, 1, true)) << "64 x 64 fits one slice";
+    EXPECT_FALSE(rig.step.rendering());
+    EXPECT_TRUE(rig.run({rig.join(2, large)}).empty());
+    EXPECT_TRUE(rig.step.rendering());
+    int steps = 1;
+    Box3i box{skull.dims() / 2 - glm::ivec3(3), skull.dims() / 2 + glm::ivec3(3)};
+    box.lo.z = skull.dims().z - 12;
+    box.hi.z = skull.dims().z;
+    SimEvent cut = SimEvent::of(SimEvent::Kind::Cut, 0);
+    cut.box = box;
+    cut.arrivedUs = rig.now;
+    auto during = rig.run({cut});
+    ++steps;
+    EXPECT_TRUE(has(during, 1, false)) << "the small view's rectangle does not wait";
+    EXPECT_FALSE(has(during, 2, true));
+    std::vector<Outbox::Ready> done;
+    while (rig.step.rendering() && steps < 100) {
+        done = rig.run({});
+        ++steps;
+    }
+    EXPECT_EQ(steps, 256 * 256 / (64 * 64)) << "one slice a step";
+    ASSERT_TRUE(has(done, 2, true));
+    const auto& full =
+        *std::find_if(done.begin(), done.end(), [](const auto& u) { return u.client == 2; });
+    ImageUpdate u;
+    ASSERT_TRUE(decodeMessage(full.message, u));
+    Dbi got;
+    ASSERT_TRUE(decodeImage(u.payload, u.rawBytes, u.codec, u.width, u.height, large, got));
+    EXPECT_TRUE(compare(got, rig.step.render(large)).identical()) << "with the cut in it";
+    EXPECT_EQ(rig.step.viewPixels(), 64 * 64 + 256 * 256);
+}

@@ -1,0 +1,86 @@
+// Availability over loopback: a trainee joins and is served while hostile peers flood the server
+// with half-open connections (raw CONNECT datagrams) or reconnect as soon as they are dropped;
+// every refusal shows in the report. Tests assert what happens, never how fast (the benchmark
+// bench_availability prints the times beside their targets).
+#include "flood.h"
+#include "loopback.h"
+
+#include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
+
+using namespace trephine;
+using namespace trephine::net;
+using trephine::testing::HalfOpenFlood;
+using trephine::testing::loopback;
+using trephine::testing::loopbackServerConfig;
+using trephine::testing::pumpUntil;
+using trephine::testing::Reconnectors;
+
+namespace {
+
+nlohmann::json availabilityOf(const SessionServer& server) {
+    return nlohmann::json::parse(server.reportJson()).at("availability");
+}
+
+} // namespace
+
+// Without admission, a few dozen CONNECTs filled ENet's maxClients + 4 slots for ~30 s.
+TEST(SessionAvailability, AHalfOpenFloodDoesNotLockATraineeOut) {
+    const Volume sphere = makeSphere(24);
+    ServerConfig sc = loopbackServerConfig("sphere:24");
+    sc.maxClients = 2;
+    sc.admission.handshakeTimeoutUs = 300000;
+    SessionServer server(sphere, sc);
+    server.start();
+    HalfOpenFlood flood(server.port(), 8, 4, 5000); // 8 addresses x 4 sockets, 200/s each
+    ASSERT_EQ(flood.sockets(), 32u);
+    while (flood.sent() < 2000)
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    SessionClient trainee(trephine::testing::namedClientConfig(sphere, "ada", Role::Trainee, 32));
+    trainee.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil(
+        {&trainee}, [&] { return trainee.hasFullImage(); }, 20.0))
+        << trainee.closeReason();
+    const nlohmann::json a = availabilityOf(server);
+    EXPECT_GT(a.at("connects_rate_limited").get<uint64_t>() +
+                  a.at("connects_address_busy").get<uint64_t>(),
+              0u)
+        << a.dump();
+    EXPECT_GT(a.at("handshakes_reset").get<uint64_t>(), 0u) << "half-open slots reclaimed";
+    EXPECT_EQ(server.refusedFull(), 0u);
+}
+
+// Peers that complete ENet's handshake but never say hello, reconnecting whenever dropped, hold
+// no place: the places are for admitted peers.
+TEST(SessionAvailability, ReconnectingSilentPeersDoNotKeepTheServerFull) {
+    const Volume sphere = makeSphere(24);
+    ServerConfig sc = loopbackServerConfig("sphere:24");
+    sc.maxClients = 2;
+    sc.helloTimeoutS = 0.2f;
+    SessionServer server(sphere, sc);
+    server.start();
+    Reconnectors silent(server.port(), 6, 3, kProtocolVersion);
+    while (silent.connects() < 6)
+        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    SessionClient a(trephine::testing::namedClientConfig(sphere, "ada", Role::Trainee, 32));
+    SessionClient b(trephine::testing::namedClientConfig(sphere, "ada", Role::Trainee, 32));
+    a.connect(loopback(server.port()));
+    b.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil(
+        {&a, &b}, [&] { return a.hasFullImage() && b.hasFullImage(); }, 20.0))
+        << a.closeReason() << " / " << b.closeReason();
+    // Give the silent peers time to be dropped for saying no hello, and to come back.
+    const uint64_t before = server.helloTimeouts();
+    ASSERT_TRUE(pumpUntil(
+        {&a, &b}, [&] { return server.helloTimeouts() >= before + 6; }, 20.0));
+    EXPECT_FALSE(a.closed());
+    EXPECT_FALSE(b.closed());
+    EXPECT_EQ(server.refusedFull(), 0u);
+    // Two "ada"s: the second is listed as "ada (2)".
+    ASSERT_TRUE(pumpUntil(
+        {&a, &b}, [&] { return a.participants().size() == 2; }, 20.0));
+    std::vector<std::string> names;
+    for (const auto& [id, p] : a.participants())
+        names.push_back(p.name);
+    EXPECT_NE(std::find(names.begin(), names.end(), "ada (2)"), names.end());
+}
