@@ -14,6 +14,8 @@
 
 namespace trephine::net {
 
+class SessionRecorder;
+
 struct ServerConfig {
     uint16_t port = 7777; // 0: any free port (tests); see SessionServer::port()
     // Participants at once; one more is refused with RefuseReason::ServerFull (ENet keeps a few
@@ -54,6 +56,9 @@ struct ServerConfig {
     // A connection that has not said hello after this many seconds is closed (BadHello): it
     // would otherwise hold one of the maxClients slots for good.
     float helloTimeoutS = 5.0f;
+    // When set, every change to the session is appended here (net/session_log.h) before anything
+    // it caused is sent to a client.
+    std::shared_ptr<SessionRecorder> recorder;
 };
 
 // The marks (Annotations) go to every participant at most this often, the whole list once.

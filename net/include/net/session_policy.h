@@ -12,6 +12,7 @@
 #include "net/protocol.h"
 #include "net/server_config.h"
 #include "net/server_report.h"
+#include "net/session_log.h"
 #include "net/sim_step.h"
 #include "net/view_follow.h"
 
@@ -66,8 +67,11 @@ struct PolicyOutput {
     std::vector<Message> messages;
     std::vector<Disconnect> disconnects;
     std::vector<SimEvent> events; // for the simulation, in order
-    bool flush = false;           // send at once (a haptic answer), not at the next service
-    bool malformed = false;       // the message received was malformed (counted by the server)
+    // What the policy decided (names and roles, marks, take-overs), for the session log: the
+    // server writes it, and the events, before it sends the messages (net/session_log.h).
+    std::vector<LogRecord> log;
+    bool flush = false;     // send at once (a haptic answer), not at the next service
+    bool malformed = false; // the message received was malformed (counted by the server)
 };
 
 class SessionPolicy {
@@ -133,9 +137,11 @@ private:
     void answerHaptic(uint16_t id, Peer& p, const ToolState& t, uint64_t now, PolicyOutput& out);
     bool syncMode(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
                   PolicyOutput& out);
-    bool annotate(uint16_t id, const Peer& p, std::span<const uint8_t> data);
-    bool takeOver(uint16_t id, const Peer& p, std::span<const uint8_t> data);
-    void kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& out);
+    bool annotate(uint16_t id, const Peer& p, std::span<const uint8_t> data, uint64_t now,
+                  PolicyOutput& out);
+    bool takeOver(uint16_t id, const Peer& p, std::span<const uint8_t> data, uint64_t now,
+                  PolicyOutput& out);
+    void kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& out, uint64_t now = 0);
     void pushSwitch(uint16_t id, Peer& p, uint64_t now, PolicyOutput& out);
 
     // Participants (said hello, not sent away) other than `except`, with `role` when given.

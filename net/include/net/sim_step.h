@@ -53,6 +53,9 @@ struct StepConfig {
     float maxStepS = 0.05f;   // ServerConfig::maxStepS
     float maxSweepMm = 10.0f; // ServerConfig::maxSweepMm
     int renderThreads = 0;    // 0: hardware concurrency
+    // Post updates to the outbox (a server). A replay (net/session_replay.h) only drills: it
+    // renders nothing until asked (render()).
+    bool publish = true;
 };
 
 class SimulationStep {
