@@ -71,6 +71,7 @@ int main(int argc, char** argv) {
     addRenderMode(app, exitCode);
     addVolumeMode(app, exitCode);
     addDevicesMode(app, exitCode);
+    addReplayMode(app, exitCode);
 
     // Parse errors on one line, like every other error (CLI11's own form is two, unprefixed).
     app.failure_message([](const CLI::App*, const CLI::Error& e) {

@@ -1,7 +1,8 @@
 // `trephine server`: hold the skull and serve trainees and instructors over ENet until SIGINT,
 // SIGTERM, SIGHUP or SIGQUIT, then apply every queued tool state and write --save-on-exit (the
 // volume, and the instructors' marks and the scene beside it, which a later `--volume` of that
-// file reads back).
+// file reads back). --record FILE logs the session as it goes (net/session_log.h); --resume FILE
+// replays such a log to where its server stopped and goes on appending to it.
 #include "modes.h"
 
 #include "libsim/error.h"
@@ -10,6 +11,8 @@
 #include "net/scene.h"
 #include "net/server_banner.h"
 #include "net/secure_channel.h"
+#include "net/session_log.h"
+#include "net/session_replay.h"
 #include "net/session_server.h"
 
 #include <fmt/format.h>
@@ -41,6 +44,8 @@ struct ServerOptions {
     std::string report;
     std::string traineeCode, instructorCode; // generated when not given (docs/security.md)
     bool open = false;                       // no codes: anyone who reaches the port joins
+    std::string record;
+    std::string resume;
 };
 
 // The codes the server runs with: given, or made now; none with --open.
@@ -74,6 +79,20 @@ void printCodes(const ServerOptions& o, const net::ServerConfig& config, uint16_
                 o.traineeCode.empty() ? " (generated)" : "");
     std::printf("trephine server: instructor code %s%s\n", config.instructorCode.c_str(),
                 o.instructorCode.empty() ? " (generated)" : "");
+
+// Whether a spec regenerates its volume (skull:N, sphere:N, box:N): a log then carries only its
+// hash. Files and folders may change or vanish, so their voxels go into the log.
+bool regenerates(const std::string& spec) {
+    if (!volumeFileOf(spec).empty())
+        return false;
+    const std::string kind = spec.substr(0, spec.find_first_of(":?"));
+    return kind == "skull" || kind == "sphere" || kind == "box";
+}
+
+uint64_t unixNowUs() {
+    return uint64_t(std::chrono::duration_cast<std::chrono::microseconds>(
+                        std::chrono::system_clock::now().time_since_epoch())
+                        .count());
 }
 
 int runServer(const ServerOptions& o) {
@@ -90,28 +109,47 @@ int runServer(const ServerOptions& o) {
                                 "name");
         }
     }
-    Volume volume = openVolume(o.volume);
     net::ServerConfig config;
-    // A session saved by --save-on-exit left its marks beside the volume: they come back too.
-    const std::string volumeFile = volumeFileOf(o.volume);
-    const std::string marks = net::marksPathFor(volumeFile);
-    std::error_code ec;
-    if (!volumeFile.empty() && std::filesystem::is_regular_file(marks, ec)) {
-        config.marks = net::readMarksFile(marks);
-        std::printf("trephine server: %zu mark%s from %s\n", config.marks.size(),
-                    config.marks.size() == 1 ? "" : "s", marks.c_str());
-    }
-    // And its scene (presets, sites, the surgical field), so every preset names the view it named
-    // before the save, however the skull was drilled since; otherwise built from the volume.
-    config.scene = std::make_shared<const net::Scene>(net::sceneForVolume(volume, volumeFile));
-    if (!volumeFile.empty() && std::filesystem::is_regular_file(net::scenePathFor(volumeFile), ec))
-        std::printf("trephine server: the scene from %s\n", net::scenePathFor(volumeFile).c_str());
     config.port = o.port;
-    config.volumeName = o.volume;
     config.saveOnExit = o.saveOnExit;
     config.renderThreads = o.renderThreads;
     config.maxClients = o.maxClients;
     chooseCodes(o, config);
+    Volume volume;
+    if (!o.resume.empty()) {
+        net::Resumed resumed = net::resumeSession(o.resume, config, openVolume, unixNowUs());
+        if (!resumed.stopped.empty())
+            std::printf("trephine server: %s\n", resumed.stopped.c_str());
+        std::printf("trephine server: resumed %s: %zu records, %llu tool states applied, %zu "
+                    "mark%s\n",
+                    o.resume.c_str(), resumed.records, (unsigned long long)resumed.toolStates,
+                    config.marks.size(), config.marks.size() == 1 ? "" : "s");
+        volume = std::move(resumed.volume);
+    } else {
+        volume = openVolume(o.volume);
+        // A session saved by --save-on-exit left its marks beside the volume: they come back too.
+        const std::string volumeFile = volumeFileOf(o.volume);
+        const std::string marks = net::marksPathFor(volumeFile);
+        std::error_code ec;
+        if (!volumeFile.empty() && std::filesystem::is_regular_file(marks, ec)) {
+            config.marks = net::readMarksFile(marks);
+            std::printf("trephine server: %zu mark%s from %s\n", config.marks.size(),
+                        config.marks.size() == 1 ? "" : "s", marks.c_str());
+        }
+        // And its scene (presets, sites, the surgical field), so every preset names the view it
+        // named before the save, however the skull was drilled since; otherwise built from the
+        // volume.
+        config.scene = std::make_shared<const net::Scene>(net::sceneForVolume(volume, volumeFile));
+        if (!volumeFile.empty() &&
+            std::filesystem::is_regular_file(net::scenePathFor(volumeFile), ec))
+            std::printf("trephine server: the scene from %s\n",
+                        net::scenePathFor(volumeFile).c_str());
+        config.volumeName = o.volume;
+        if (!o.record.empty())
+            config.recorder = net::SessionRecorder::create(
+                o.record,
+                net::makeLogHeader(volume, config, o.volume, !regenerates(o.volume), unixNowUs()));
+    }
     glm::ivec3 d = volume.dims();
     net::SessionServer server(std::move(volume), config);
     // Every way a session is ended from outside saves it. Output gone (a `| tee` ended first) must
@@ -121,13 +159,17 @@ int runServer(const ServerOptions& o) {
     server.start();
     std::printf("trephine server: %s (%d x %d x %d) on port %u; Ctrl-C stops\n", o.volume.c_str(),
                 d.x, d.y, d.z, unsigned(server.port()));
-    // Where to join from, and whether the session outlives the server. A recording keeps it
-    // too: its option joins `keeps` here.
-    const bool keeps = !o.saveOnExit.empty();
+    // Where to join from, and whether the session outlives the server (saved, or recorded).
+    const bool keeps = !o.saveOnExit.empty() || config.recorder;
     for (const std::string& line :
          net::serverStartLines(server.port(), net::localAddresses(), keeps))
         std::printf("trephine server: %s\n", line.c_str());
     printCodes(o, config, server.port());
+    std::printf("trephine server: %s (%d x %d x %d) on port %u; Ctrl-C stops\n",
+                config.volumeName.c_str(), d.x, d.y, d.z, unsigned(server.port()));
+    if (config.recorder)
+        std::printf("trephine server: recording to %s (synced every %d ms)\n",
+                    config.recorder->path().c_str(), net::SessionRecorder::kDefaultSyncIntervalMs);
     std::fflush(stdout);
     while (!g_stopRequested.load())
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
@@ -181,6 +223,17 @@ void addServerMode(CLI::App& root, int& exitCode) {
     sub->add_option("--report", o->report,
                     "Write server statistics as JSON here when it stops (per channel and peer)")
         ->check(outputFile());
+    CLI::Option* record =
+        sub->add_option("--record", o->record,
+                        "Log every change to the session here as it happens (a new file; "
+                        "docs/recording.md): `trephine replay` plays it, --resume continues it")
+            ->check(outputFile());
+    sub->add_option("--resume", o->resume,
+                    "Start from a session log (--record's): replay it to where its server "
+                    "stopped, then go on appending to it (--volume is the log's)")
+        ->check(CLI::ExistingFile)
+        ->excludes(record)
+        ->excludes("--volume");
     sub->callback([o, &exitCode] { exitCode = runServer(*o); });
 }
 

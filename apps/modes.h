@@ -173,6 +173,7 @@ void addStudyMode(CLI::App& root, int& exitCode);
 void addRenderMode(CLI::App& root, int& exitCode);
 void addVolumeMode(CLI::App& root, int& exitCode);
 void addDevicesMode(CLI::App& root, int& exitCode);
+void addReplayMode(CLI::App& root, int& exitCode);
 
 // For modes whose issue has not landed yet: says so in one line and exits non-zero.
 void addPendingMode(CLI::App& root, int& exitCode, const char* name, const char* description,

@@ -92,11 +92,17 @@ void SessionPolicy::goodbye(uint64_t now, PolicyOutput& out) {
     });
 }
 
-void SessionPolicy::kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& out) {
+void SessionPolicy::kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& out, uint64_t now) {
     p.kicked = true;
     m_book.peer(id, [](PeerReport& r) { r.kicked = true; });
     out.disconnects.push_back({id, uint32_t(why)});
-    releaseTakeOvers(id);
+    if (releaseTakeOvers(id)) {
+        LogRecord logged;
+        logged.kind = LogRecord::Kind::Release;
+        logged.timeUs = now;
+        logged.client = id;
+        out.log.push_back(logged);
+    }
     if (p.hello)
         m_roster.mark(true);
 }
@@ -134,7 +140,7 @@ void SessionPolicy::update(uint64_t now, PolicyOutput& out) {
     for (auto& [id, p] : m_peers)
         if (!p.hello && !p.kicked && now - p.connectedUs > helloTimeoutUs) {
             m_book.count(&ServerCounters::helloTimeouts);
-            kick(id, p, RefuseReason::BadHello, out);
+            kick(id, p, RefuseReason::BadHello, out, now);
         }
     // The whole list, paced: an instructor editing fast (in an open session, any hello may claim
     // the role) cannot make the server queue a list per edit for every participant.
@@ -158,24 +164,24 @@ PolicyOutput SessionPolicy::receive(uint16_t id, std::span<const uint8_t> messag
     Peer& p = it->second;
     p.heardUs = now;
     if (!handle(id, p, message, now, out))
-        countMalformed(id, p, out);
+        countMalformed(id, p, out, now);
     return out;
 }
 
-PolicyOutput SessionPolicy::reject(uint16_t id) {
+PolicyOutput SessionPolicy::reject(uint16_t id, uint64_t now) {
     PolicyOutput out;
     auto it = m_peers.find(id);
     if (it != m_peers.end() && !it->second.kicked)
-        countMalformed(id, it->second, out);
+        countMalformed(id, it->second, out, now);
     return out;
 }
 
-void SessionPolicy::countMalformed(uint16_t id, Peer& p, PolicyOutput& out) {
+void SessionPolicy::countMalformed(uint16_t id, Peer& p, PolicyOutput& out, uint64_t now) {
     out.malformed = true;
     m_book.peer(id, [](PeerReport& r) { ++r.malformed; });
     if (++p.malformed > m_config.malformedLimit && !p.kicked) {
         m_book.count(&ServerCounters::malformedKicks);
-        kick(id, p, RefuseReason::Malformed, out);
+        kick(id, p, RefuseReason::Malformed, out, now);
     }
 }
 
@@ -220,9 +226,9 @@ bool SessionPolicy::handle(uint16_t id, Peer& p, std::span<const uint8_t> data, 
     case MessageType::SyncMode:
         return syncMode(id, p, data, now, out);
     case MessageType::Annotate:
-        return annotate(id, p, data);
+        return annotate(id, p, data, now, out);
     case MessageType::TakeOver:
-        return takeOver(id, p, data);
+        return takeOver(id, p, data, now, out);
     case MessageType::Remove:
         return remove(id, p, data, out);
     case MessageType::Ping: {
@@ -279,6 +285,7 @@ bool SessionPolicy::hello(uint16_t id, Peer& p, std::span<const uint8_t> data, u
         return true;
     }
     p.pixels = int64_t(h.view.width) * int64_t(h.view.height);
+    out.log.push_back(helloRecord(id, h.role, h.name, now));
     welcome(id, now, out);
     m_follow.setView(id, h.view);
     SimEvent ev = SimEvent::of(SimEvent::Kind::Join, id);
@@ -415,7 +422,8 @@ void SessionPolicy::pushSwitch(uint16_t id, Peer& p, uint64_t now, PolicyOutput&
 }
 
 // Well-formed but not allowed: counted, not applied (and not malformed).
-bool SessionPolicy::annotate(uint16_t id, const Peer& p, std::span<const uint8_t> data) {
+bool SessionPolicy::annotate(uint16_t id, const Peer& p, std::span<const uint8_t> data,
+                             uint64_t now, PolicyOutput& out) {
     Annotate a;
     if (!decodeMessage(data, a))
         return false;
@@ -425,16 +433,23 @@ bool SessionPolicy::annotate(uint16_t id, const Peer& p, std::span<const uint8_t
     };
     if (p.helloMsg.role != Role::Instructor)
         return refuse();
+    LogRecord logged;
+    logged.kind = LogRecord::Kind::Mark;
+    logged.timeUs = now;
+    logged.client = id;
+    logged.op = a.op;
     switch (a.op) {
     case Annotate::Op::Add:
         if (m_marks.size() >= kMaxAnnotations || m_nextMarkId == 0)
             return refuse();
         m_marks[m_nextMarkId] = {m_nextMarkId, id, a.position, a.label};
+        logged.mark = m_marks[m_nextMarkId];
         ++m_nextMarkId;
         break;
     case Annotate::Op::Remove:
         if (!m_marks.erase(a.id))
             return true; // already gone (another instructor removed it): nothing to do
+        logged.mark.id = a.id;
         break;
     case Annotate::Op::Clear:
         if (m_marks.empty())
@@ -442,11 +457,13 @@ bool SessionPolicy::annotate(uint16_t id, const Peer& p, std::span<const uint8_t
         m_marks.clear();
         break;
     }
+    out.log.push_back(logged);
     m_marksOut.mark();
     return true;
 }
 
-bool SessionPolicy::takeOver(uint16_t id, const Peer& p, std::span<const uint8_t> data) {
+bool SessionPolicy::takeOver(uint16_t id, const Peer& p, std::span<const uint8_t> data,
+                             uint64_t now, PolicyOutput& out) {
     TakeOver m;
     if (!decodeMessage(data, m))
         return false;
@@ -456,9 +473,15 @@ bool SessionPolicy::takeOver(uint16_t id, const Peer& p, std::span<const uint8_t
     };
     if (p.helloMsg.role != Role::Instructor)
         return refuse();
+    LogRecord logged;
+    logged.timeUs = now;
+    logged.client = id;
     if (m.trainee == 0) {
-        if (releaseTakeOvers(id))
+        if (releaseTakeOvers(id)) {
+            logged.kind = LogRecord::Kind::Release;
+            out.log.push_back(logged);
             m_roster.mark();
+        }
         return true;
     }
     auto target = m_peers.find(m.trainee);
@@ -470,6 +493,9 @@ bool SessionPolicy::takeOver(uint16_t id, const Peer& p, std::span<const uint8_t
         return held->second == id ? true : refuse(); // another instructor's: handed back first
     releaseTakeOvers(id);                            // one trainee at a time
     m_takenOver[m.trainee] = id;
+    logged.kind = LogRecord::Kind::Hold;
+    logged.trainee = m.trainee;
+    out.log.push_back(logged);
     m_roster.mark();
     return true;
 }

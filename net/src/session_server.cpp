@@ -8,6 +8,7 @@
 #include "net/marks_file.h"
 #include "net/outbox.h"
 #include "net/session_gate.h"
+#include "net/session_log.h"
 #include "net/session_policy.h"
 #include "net/sim_step.h"
 #include "net/tool_model.h"
@@ -61,7 +62,7 @@ struct SessionServer::Impl {
                    const auto id = uint16_t(reinterpret_cast<uintptr_t>(p->data));
                    return id && policy.admitted(id);
                }),
-          control(c.controlBudgetBytes) {
+          control(c.controlBudgetBytes), recorder(c.recorder) {
         book.record([&](ServerReport& r) {
             r.port = host.port();
             r.volume = c.volumeName;
@@ -124,8 +125,11 @@ struct SessionServer::Impl {
     void wakeNetwork();
     void waitNetwork(int timeoutMs);
     // [Any thread] Events for the simulation; tool states beyond maxQueuedToolStates are dropped
-    // and counted, as a lossy link would drop them.
-    void push(std::vector<SimEvent>& events);
+    // and counted, as a lossy link would drop them. With a recorder, the policy's `log` and the
+    // events queued are written to the session log first, in the order the simulation gets them.
+    void push(std::vector<SimEvent>& events, const std::vector<LogRecord>& log = {});
+    std::shared_ptr<SessionRecorder> recorder;
+    std::vector<LogRecord> logged; // push's records (under inMutex)
 };
 
 void SessionServer::Impl::wakeNetwork() {
@@ -145,12 +149,13 @@ void SessionServer::Impl::waitNetwork(int timeoutMs) {
     }
 }
 
-void SessionServer::Impl::push(std::vector<SimEvent>& events) {
-    if (events.empty())
+void SessionServer::Impl::push(std::vector<SimEvent>& events, const std::vector<LogRecord>& log) {
+    if (events.empty() && (log.empty() || !recorder))
         return;
     uint64_t dropped = 0;
     {
         std::lock_guard lock(inMutex);
+        const size_t queued = inbox.size();
         for (SimEvent& ev : events) {
             if (ev.kind == SimEvent::Kind::Tool) {
                 if (inboxTools >= maxQueuedToolStates) {
@@ -160,6 +165,16 @@ void SessionServer::Impl::push(std::vector<SimEvent>& events) {
                 ++inboxTools;
             }
             inbox.push_back(std::move(ev));
+        }
+        // Written before the simulation can take the events, and before the caller sends what
+        // they caused: nothing a client sees is missing from the log after a crash.
+        if (recorder) {
+            logged.assign(log.begin(), log.end());
+            const uint64_t now = steadyNowUs();
+            for (size_t i = queued; i < inbox.size(); ++i)
+                logged.push_back(
+                    logRecordOf(inbox[i], inbox[i].arrivedUs ? inbox[i].arrivedUs : now));
+            recorder->write(logged);
         }
     }
     inCv.notify_one();
@@ -512,8 +527,9 @@ void SessionServer::Impl::guard(uint64_t now) {
     });
 }
 
-// Sends what the policy asked for; its events go to the simulation.
+// Sends what the policy asked for; its events go to the simulation (and the log) first.
 void SessionServer::Impl::apply(PolicyOutput& out) {
+    push(out.events, out.log);
     for (const PolicyOutput::Message& m : out.messages)
         for (uint16_t id : m.to)
             sendTo(id, m.channel, m.bytes);
@@ -526,7 +542,6 @@ void SessionServer::Impl::apply(PolicyOutput& out) {
     for (const PolicyOutput::Disconnect& d : out.disconnects)
         if (auto link = links.find(d.client); link != links.end())
             enet_peer_disconnect(link->second, d.data);
-    push(out.events);
 }
 
 void SessionServer::Impl::onEvent(const ENetEvent& ev) {
@@ -579,7 +594,7 @@ void SessionServer::Impl::onEvent(const ENetEvent& ev) {
             policy.refuse(id, in.refuse, out);
             break;
         case SessionGate::Result::Kind::Bad:
-            out = policy.reject(id);
+            out = policy.reject(id, now);
             break;
         }
         if (out.malformed)
@@ -655,7 +670,7 @@ void SessionServer::Impl::sayGoodbye() {
                 PolicyOutput left;
                 policy.disconnect(id, steadyNowUs(), left);
                 links.erase(id);
-                push(left.events);
+                push(left.events, left.log);
             } else if (ev.type == ENET_EVENT_TYPE_CONNECT) {
                 enet_peer_disconnect(ev.peer, uint32_t(RefuseReason::Shutdown));
             }

@@ -61,6 +61,14 @@ void SimulationStep::step(const std::vector<SimEvent>& batch, uint64_t now) {
             break;
         }
     }
+    if (!m_config.publish) {
+        // The brick grid takes the change before the next render.
+        if (b.materials)
+            m_gridRebuildPending = true;
+        else
+            m_gridPending.merge(b.changed);
+        return;
+    }
     // Volume clients need none of the rendering below: in a mixed session they never wait for
     // the DBI clients' renders.
     postVolumes(b);

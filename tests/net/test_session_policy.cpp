@@ -571,11 +571,11 @@ TEST(SessionPolicy, RejectedMessagesCountTowardTheMalformedLimit) {
     PolicyRig rig(c);
     const uint16_t ada = rig.join("Ada", Role::Trainee);
     for (int i = 0; i < 3; ++i) {
-        const PolicyOutput out = rig.p().reject(ada);
+        const PolicyOutput out = rig.p().reject(ada, rig.now);
         EXPECT_TRUE(out.malformed);
         EXPECT_TRUE(out.disconnects.empty());
     }
-    const PolicyOutput out = rig.p().reject(ada);
+    const PolicyOutput out = rig.p().reject(ada, rig.now);
     EXPECT_TRUE(disconnected(out, ada, RefuseReason::Malformed));
     EXPECT_FALSE(rig.p().live(ada));
     EXPECT_EQ(rig.counters().malformedKicks, 1u);

@@ -15,6 +15,8 @@
 
 namespace trephine::net {
 
+class SessionRecorder;
+
 struct ServerConfig {
     uint16_t port = 7777; // 0: any free port (tests); see SessionServer::port()
     // Participants at once; one more is refused with RefuseReason::ServerFull (ENet keeps a few
@@ -83,6 +85,9 @@ struct ServerConfig {
     // All participants' views together (w x h each): a view that would pass it is refused. The
     // server keeps about 40 bytes a pixel of view (frame, hit cache, coded copies).
     int64_t maxTotalViewPixels = 16 << 20;
+    // When set, every change to the session is appended here (net/session_log.h) before anything
+    // it caused is sent to a client.
+    std::shared_ptr<SessionRecorder> recorder;
 };
 
 // The marks (Annotations) go to every participant at most this often, the whole list once.

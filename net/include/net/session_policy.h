@@ -13,6 +13,7 @@
 #include "net/protocol.h"
 #include "net/server_config.h"
 #include "net/server_report.h"
+#include "net/session_log.h"
 #include "net/sim_step.h"
 #include "net/view_follow.h"
 
@@ -68,6 +69,9 @@ struct PolicyOutput {
     std::vector<Message> messages;
     std::vector<Disconnect> disconnects;
     std::vector<SimEvent> events; // for the simulation, in order
+    // What the policy decided (names and roles, marks, take-overs), for the session log: the
+    // server writes it, and the events, before it sends the messages (net/session_log.h).
+    std::vector<LogRecord> log;
     bool flush = false;           // send at once (a haptic answer), not at the next service
     bool malformed = false;       // the message received was malformed (counted by the server)
     // An instructor's Remove (net/session_gate.h keeps them): whom it removed (also in
@@ -98,7 +102,7 @@ public:
     PolicyOutput receive(uint16_t id, std::span<const uint8_t> message, uint64_t now);
     // A message from `id` dropped before it was read (forged, replayed: net/session_gate.h):
     // counted as malformed, under the same limit.
-    PolicyOutput reject(uint16_t id);
+    PolicyOutput reject(uint16_t id, uint64_t now);
     // Client `id` proved the code of `role`: its hello's role is replaced by it.
     void authenticate(uint16_t id, Role role);
     void disconnect(uint16_t id, uint64_t now, PolicyOutput& out);
@@ -156,11 +160,13 @@ private:
     float answerHaptic(uint16_t id, Peer& p, const ToolState& t, uint64_t now, PolicyOutput& out);
     bool syncMode(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
                   PolicyOutput& out);
-    bool annotate(uint16_t id, const Peer& p, std::span<const uint8_t> data);
-    bool takeOver(uint16_t id, const Peer& p, std::span<const uint8_t> data);
+    bool annotate(uint16_t id, const Peer& p, std::span<const uint8_t> data, uint64_t now,
+                  PolicyOutput& out);
+    bool takeOver(uint16_t id, const Peer& p, std::span<const uint8_t> data, uint64_t now,
+                  PolicyOutput& out);
+    void kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& out, uint64_t now = 0);
     bool remove(uint16_t id, const Peer& p, std::span<const uint8_t> data, PolicyOutput& out);
-    void countMalformed(uint16_t id, Peer& p, PolicyOutput& out);
-    void kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& out);
+    void countMalformed(uint16_t id, Peer& p, PolicyOutput& out, uint64_t now);
     void pushSwitch(uint16_t id, Peer& p, uint64_t now, PolicyOutput& out);
 
     // Participants (said hello, not sent away) other than `except`, with `role` when given.

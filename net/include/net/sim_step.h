@@ -62,6 +62,9 @@ struct StepConfig {
     // taken in turn, so one peer's large views never hold up the others' updates for longer
     // than a slice (docs/session.md, "Availability").
     int64_t slicePixels = int64_t(1) << 18;
+    // Post updates to the outbox (a server). A replay (net/session_replay.h) only drills: it
+    // renders nothing until asked (render()).
+    bool publish = true;
 };
 
 class SimulationStep {

@@ -1,0 +1,241 @@
+// The session log (`trephine server --record FILE`): an append-only file of everything that
+// changed the session, in the order the server applied it, so a session can be replayed bit for
+// bit (net/session_replay.h), resumed after a crash, or exported. Each record is framed with its
+// length and a CRC-32; a torn or corrupt tail is found, reported in one line and dropped.
+// docs/recording.md is the format's reference (versioned: kLogVersion).
+#pragma once
+
+#include "libsim/box.h"
+#include "libsim/volume.h"
+#include "net/protocol.h"
+
+#include <condition_variable>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <span>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace trephine::net {
+
+struct ServerConfig;
+struct SimEvent;
+
+inline constexpr uint8_t kLogMagic[8] = {'T', 'R', 'E', 'P', 'H', 'L', 'O', 'G'};
+// 1: the first format (docs/recording.md).
+inline constexpr uint32_t kLogVersion = 1;
+// A frame's payload is at most this long (a Voxels record of the largest volume fits).
+inline constexpr uint32_t kMaxLogRecordBytes = 1u << 30;
+// The file's fixed start (magic, version) and each record's frame (length, CRC-32).
+inline constexpr size_t kLogPreambleBytes = 12, kLogFrameBytes = 8;
+
+// How the session began: the volume (its spec and a content hash, or the voxels themselves when
+// the spec cannot regenerate them), the scene every client got, the starting marks, and the
+// simulation settings drilling depends on.
+struct LogHeader {
+    uint64_t startUnixUs = 0; // wall clock when the server started
+    std::string volumeSpec;   // as the server was given it
+    std::string volumeName;   // the welcome's label
+    glm::ivec3 dims{0};
+    glm::vec3 spacing{1.0f};
+    uint32_t densityCrc = 0, materialCrc = 0; // CRC-32 of the starting voxels as given
+    std::vector<uint8_t> embedded; // zstd of every density then material byte; empty: from spec
+    float maxStepS = 0.05f, maxSweepMm = 10.0f;
+    std::vector<uint8_t> scene; // the Scene message, as clients got it
+    std::vector<AnnotationInfo> marks;
+
+    template <typename S>
+    bool serialize(S& s) {
+        uint16_t markCount = uint16_t(std::min<size_t>(marks.size(), kMaxAnnotations));
+        if (!(s.integer(startUnixUs) && s.string(volumeSpec, 4096) &&
+              s.string(volumeName, kMaxVolumeNameBytes) &&
+              s.ranged(dims.x, 1, int(kMaxVolumeDim)) && s.ranged(dims.y, 1, int(kMaxVolumeDim)) &&
+              s.ranged(dims.z, 1, int(kMaxVolumeDim)) && serializeSpacing(s, spacing) &&
+              s.integer(densityCrc) && s.integer(materialCrc) &&
+              s.blob(embedded, kMaxLogRecordBytes) && serializeFinite(s, maxStepS) &&
+              serializeFinite(s, maxSweepMm) && s.blob(scene, kMaxLogRecordBytes) &&
+              s.ranged(markCount, uint16_t(0), kMaxAnnotations)))
+            return false;
+        if constexpr (S::kReading)
+            marks.assign(markCount, AnnotationInfo{});
+        for (AnnotationInfo& m : marks)
+            if (!m.serialize(s))
+                return false;
+        return true;
+    }
+};
+
+// One change to the session. Which fields count depends on the kind (see each).
+struct LogRecord {
+    enum class Kind : uint8_t {
+        // What the simulation applies (SimEvent), in the order it applies it.
+        Join = 1,   // client, view, codec, sync, volumeCodec
+        View = 2,   // client, view, viewId
+        Tool = 3,   // client, tool (as the simulation gets it: drilling cleared when paused)
+        Leave = 4,  // client
+        Cut = 5,    // box
+        Sync = 6,   // client, sync, volumeCodec: a design switch
+        Voxels = 7, // box, density, material
+        // What the session policy decided.
+        Hello = 8,    // client, role, name: a participant, listed from here on
+        Mark = 9,     // op; Add: mark (id and author as the server gave them); Remove: mark.id
+        Hold = 10,    // client (an instructor) takes over trainee
+        Release = 11, // client hands back whoever it held or was held by
+        // A server resumed this log (`--resume`): everyone before it had gone; the marks were
+        // renumbered 1..n, author 0, as a server starting with them does.
+        Resume = 12,
+    };
+    Kind kind = Kind::Tool;
+    uint64_t timeUs = 0; // server time (the recording process's steady clock; Resume restarts it)
+    uint16_t client = 0;
+    ViewSpec view;
+    uint32_t viewId = 0;
+    Codec codec = Codec::Raw, volumeCodec = Codec::Raw;
+    Sync sync = Sync::Dbi;
+    ToolState tool;
+    Box3i box;
+    std::vector<uint8_t> density, material;
+    Role role = Role::Trainee;
+    std::string name;
+    Annotate::Op op = Annotate::Op::Add;
+    AnnotationInfo mark;
+    uint16_t trainee = 0;
+    uint64_t unixUs = 0; // Resume: wall clock
+
+    bool isSimulation() const { return kind >= Kind::Join && kind <= Kind::Voxels; }
+
+    template <typename S>
+    bool serialize(S& s);
+};
+
+// [SECTION] conversions
+
+// The record of what the simulation is handed (Join's camera as the ViewSpec it came from).
+LogRecord logRecordOf(const SimEvent& ev, uint64_t timeUs);
+// The event a replay hands the simulation (Join's in-flight counter a fresh one).
+SimEvent simEventOf(const LogRecord& r);
+LogRecord helloRecord(uint16_t client, Role role, const std::string& name, uint64_t now);
+
+// [SECTION] the starting volume
+
+// The header of a session on `volume` served with `config`: with `embed`, the voxels travel in
+// the log (a file or a resumed session, which no spec regenerates); else only their hash does.
+LogHeader makeLogHeader(const Volume& volume, const ServerConfig& config,
+                        const std::string& volumeSpec, bool embed, uint64_t startUnixUs);
+// The starting volume: the embedded voxels, or `open(volumeSpec)` checked against the hash.
+// Throws Error (one line) when they are not the recorded ones.
+Volume logStartVolume(const LogHeader& header,
+                      const std::function<Volume(const std::string&)>& open);
+
+// [SECTION] writing
+
+// Appends framed records with one write(2) a call, so a record is in the file (the page cache)
+// before the caller goes on to send what it caused; a thread of its own fdatasyncs what was
+// written every `syncIntervalMs` (docs/recording.md), so the simulation and network threads
+// never wait for the disk.
+class SessionRecorder {
+public:
+    static constexpr int kDefaultSyncIntervalMs = 100;
+
+    // A new log at `path` (refused when something is there) starting with `header`, synced.
+    static std::unique_ptr<SessionRecorder> create(const std::string& path, LogHeader header,
+                                                   int syncIntervalMs = kDefaultSyncIntervalMs);
+    // An existing log to append to: cut back to `intactBytes` first (its torn tail, if any).
+    static std::unique_ptr<SessionRecorder> append(const std::string& path, uint64_t intactBytes,
+                                                   int syncIntervalMs = kDefaultSyncIntervalMs);
+    ~SessionRecorder();
+    SessionRecorder(const SessionRecorder&) = delete;
+    SessionRecorder& operator=(const SessionRecorder&) = delete;
+
+    // Appends the records in one write(2). After a failed write nothing more is written: false,
+    // and error() says why (the session goes on unrecorded; said once on stderr).
+    bool write(std::span<const LogRecord> records);
+    // fdatasync now (the cadence does it anyway).
+    void sync();
+    std::string error() const;
+    uint64_t bytes() const;
+    uint64_t records() const;
+    uint64_t syncs() const;
+    const std::string& path() const { return m_path; }
+
+private:
+    SessionRecorder(std::string path, int fd, uint64_t bytes, int syncIntervalMs);
+    bool writeAll(const uint8_t* data, size_t n);
+    void syncLoop();
+
+    std::string m_path;
+    int m_fd = -1;
+    int m_syncIntervalMs;
+    mutable std::mutex m_mutex;
+    std::vector<uint8_t> m_buffer;
+    uint64_t m_bytes = 0, m_records = 0, m_synced = 0, m_syncs = 0;
+    std::string m_error;
+    std::condition_variable m_cv;
+    bool m_stop = false;
+    std::thread m_syncer;
+};
+
+// [SECTION] reading
+
+struct LogContents {
+    LogHeader header;
+    uint32_t version = 0;
+    std::vector<LogRecord> records;
+    uint64_t intactBytes = 0; // up to the end of the last intact record
+    uint64_t fileBytes = 0;
+    std::string stopped; // empty: read to the end; else where and why it stopped, one line
+};
+
+// Reads a log; a torn or corrupt record ends it (`stopped` says where and why; the records
+// before it are kept). Throws Error (one line naming `name`) when not even the header is intact.
+LogContents parseSessionLog(std::span<const uint8_t> bytes, const std::string& name);
+LogContents readSessionLog(const std::string& path);
+
+// [SECTION] record fields
+
+template <typename S>
+bool LogRecord::serialize(S& s) {
+    if (!(s.ranged(kind, Kind::Join, Kind::Resume) && s.integer(timeUs)))
+        return false;
+    auto boxed = [&] {
+        return s.integer(box.lo.x) && s.integer(box.lo.y) && s.integer(box.lo.z) &&
+               s.integer(box.hi.x) && s.integer(box.hi.y) && s.integer(box.hi.z);
+    };
+    switch (kind) {
+    case Kind::Join:
+        return s.integer(client) && view.serialize(s) && s.ranged(codec, Codec::Raw, Codec::Zstd) &&
+               s.ranged(sync, Sync::Dbi, Sync::Volume) &&
+               s.ranged(volumeCodec, Codec::Raw, Codec::Zstd);
+    case Kind::View:
+        return s.integer(client) && view.serialize(s) && s.integer(viewId);
+    case Kind::Tool:
+        return s.integer(client) && tool.serialize(s);
+    case Kind::Leave:
+    case Kind::Release:
+        return s.integer(client);
+    case Kind::Cut:
+        return boxed();
+    case Kind::Sync:
+        return s.integer(client) && s.ranged(sync, Sync::Dbi, Sync::Volume) &&
+               s.ranged(volumeCodec, Codec::Raw, Codec::Zstd);
+    case Kind::Voxels:
+        return boxed() && s.blob(density, kMaxLogRecordBytes / 2) &&
+               s.blob(material, kMaxLogRecordBytes / 2) && density.size() == material.size();
+    case Kind::Hello:
+        return s.integer(client) && s.ranged(role, Role::Trainee, Role::Instructor) &&
+               s.string(name, kMaxNameLength);
+    case Kind::Mark:
+        return s.ranged(op, Annotate::Op::Add, Annotate::Op::Clear) &&
+               (op == Annotate::Op::Clear || mark.serialize(s));
+    case Kind::Hold:
+        return s.integer(client) && s.integer(trainee);
+    case Kind::Resume:
+        return s.integer(unixUs);
+    }
+    return false;
+}
+
+} // namespace trephine::net

@@ -1,0 +1,105 @@
+// Replays a session log (net/session_log.h) through the simulation step the server ran
+// (net/sim_step.h), so the volume comes out bit for bit as the server held it, and folds the
+// policy's records into who was in the session, their marks and take-overs. `trephine replay`
+// and `trephine server --resume` use it; trajectoriesOf exports each participant's tool path.
+#pragma once
+
+#include "libsim/camera.h"
+#include "libsim/dbi.h"
+#include "libsim/volume.h"
+#include "net/outbox.h"
+#include "net/server_config.h"
+#include "net/server_report.h"
+#include "net/session_log.h"
+#include "net/sim_step.h"
+
+#include <functional>
+#include <map>
+#include <set>
+#include <span>
+#include <string>
+#include <vector>
+
+namespace trephine::net {
+
+class SessionReplay {
+public:
+    // One participant as the log has it; `ordinal` counts hellos from 1, so a client id the
+    // server gave again after a resume is still another person.
+    struct Participant {
+        uint16_t client = 0;
+        uint32_t ordinal = 0;
+        Role role = Role::Trainee;
+        std::string name;
+        Sync sync = Sync::Dbi;
+        uint16_t takenOverBy = 0;
+    };
+
+    // `start` is logStartVolume(header, ...).
+    SessionReplay(const LogHeader& header, Volume start, int renderThreads = 1);
+
+    // Applies the next record (records in the log's order).
+    void apply(const LogRecord& r);
+    void applyAll(std::span<const LogRecord> records) {
+        for (const LogRecord& r : records)
+            apply(r);
+    }
+
+    const Volume& volume() const { return m_step.volume(); }
+    // A full render of the volume now (what a converged client at that view holds).
+    Dbi render(const Camera& camera) { return m_step.render(camera); }
+    // Participants listed now (said hello, not left), by client id.
+    const std::map<uint16_t, Participant>& participants() const { return m_participants; }
+    const std::map<uint32_t, AnnotationInfo>& marks() const { return m_marks; }
+    // The marks as a server resuming here starts with them (ServerConfig::marks).
+    std::vector<AnnotationInfo> marksList() const;
+    uint64_t toolStatesApplied() const {
+        return m_book.counter(&ServerCounters::toolStatesApplied);
+    }
+    uint64_t recordsApplied() const { return m_applied; }
+
+private:
+    ReportBook m_book;
+    Outbox m_outbox;
+    SimulationStep m_step;
+    std::map<uint16_t, Participant> m_participants;
+    std::set<uint16_t> m_joined; // clients the simulation holds (joined, not left)
+    std::map<uint32_t, AnnotationInfo> m_marks;
+    uint32_t m_hellos = 0;
+    uint64_t m_applied = 0;
+};
+
+// [SECTION] resuming
+
+// A server's start from the log at `path` (`trephine server --resume`): the volume its server
+// held, and in `config` the scene, marks, volume name and drilling settings it had, with a
+// recorder appending to the log (its torn tail cut off) that has written the Resume record.
+// `open` regenerates a volume from its spec. Throws Error (one line) on a log it cannot use.
+struct Resumed {
+    Volume volume;
+    std::string stopped; // the log's torn or corrupt tail, said in one line (empty: none)
+    size_t records = 0;
+    uint64_t toolStates = 0;
+};
+Resumed resumeSession(const std::string& path, ServerConfig& config,
+                      const std::function<Volume(const std::string&)>& open, uint64_t unixNowUs);
+
+// [SECTION] trajectories
+
+// One participant's tool path: the tool states the simulation applied (newer sequences only),
+// as a trainee script (docs/scripts.md) replays them.
+struct Trajectory {
+    uint32_t ordinal = 0;
+    uint16_t client = 0;
+    Role role = Role::Trainee;
+    std::string name;
+    std::vector<ToolState> states;
+};
+std::vector<Trajectory> trajectoriesOf(std::span<const LogRecord> records);
+// The CSV of docs/scripts.md: time_s from the first state's client time, speed 0 where the
+// drill did not cut.
+std::string trajectoryCsv(const Trajectory& t);
+// A file name for it: NN-NAME-ROLE.csv (NAME kept to letters, digits, '-' and '_').
+std::string trajectoryFileName(const Trajectory& t);
+
+} // namespace trephine::net

@@ -1,0 +1,448 @@
+#include "net/session_log.h"
+
+#include "libsim/error.h"
+#include "net/scene.h"
+#include "net/server_config.h"
+#include "net/sim_step.h"
+#include "net/view.h"
+
+#include <fmt/format.h>
+#include <zlib.h>
+#include <zstd.h>
+
+#include <atomic>
+#include <cassert>
+#include <cerrno>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <fcntl.h>
+#include <fstream>
+#include <sys/stat.h>
+#include <unistd.h>
+
+namespace trephine::net {
+
+namespace {
+
+uint32_t crcOf(const uint8_t* data, size_t n, uint32_t crc = 0) {
+    // zlib's crc32 takes a uInt length: long buffers go in pieces.
+    while (n > 0) {
+        const uInt piece = uInt(std::min<size_t>(n, size_t(1) << 30));
+        crc = uint32_t(crc32(crc, data, piece));
+        data += piece;
+        n -= piece;
+    }
+    return crc;
+}
+
+void putU32(std::vector<uint8_t>& out, size_t at, uint32_t v) {
+    for (int i = 0; i < 4; ++i)
+        out[at + i] = uint8_t(v >> (8 * i));
+}
+
+uint32_t getU32(const uint8_t* p) {
+    return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
+}
+
+// Appends one frame: length, CRC-32 of the length's bytes and the payload, then the payload (a
+// record starts with its kind). False when a field is out of range.
+template <typename T>
+bool appendFrame(std::vector<uint8_t>& out, T& value) {
+    const size_t at = out.size();
+    out.resize(at + kLogFrameBytes);
+    WriteStream w(out);
+    if (!value.serialize(w) || out.size() - at - kLogFrameBytes > kMaxLogRecordBytes) {
+        out.resize(at);
+        return false;
+    }
+    const uint32_t length = uint32_t(out.size() - at - kLogFrameBytes);
+    putU32(out, at, length);
+    putU32(out, at + 4, crcOf(out.data() + at + kLogFrameBytes, length, crcOf(out.data() + at, 4)));
+    return true;
+}
+
+std::string errnoText() {
+    return std::strerror(errno);
+}
+
+} // namespace
+
+// [SECTION] conversions
+
+LogRecord logRecordOf(const SimEvent& ev, uint64_t timeUs) {
+    LogRecord r;
+    r.timeUs = timeUs;
+    r.client = ev.client;
+    switch (ev.kind) {
+    case SimEvent::Kind::Join:
+        r.kind = LogRecord::Kind::Join;
+        r.view = toViewSpec(ev.camera);
+        r.codec = ev.codec;
+        r.sync = ev.sync;
+        r.volumeCodec = ev.volumeCodec;
+        break;
+    case SimEvent::Kind::View:
+        r.kind = LogRecord::Kind::View;
+        r.view = toViewSpec(ev.camera);
+        r.viewId = ev.viewId;
+        break;
+    case SimEvent::Kind::Tool:
+        r.kind = LogRecord::Kind::Tool;
+        r.tool = ev.tool;
+        break;
+    case SimEvent::Kind::Leave:
+        r.kind = LogRecord::Kind::Leave;
+        break;
+    case SimEvent::Kind::Cut:
+        r.kind = LogRecord::Kind::Cut;
+        r.box = ev.box;
+        break;
+    case SimEvent::Kind::Sync:
+        r.kind = LogRecord::Kind::Sync;
+        r.sync = ev.sync;
+        r.volumeCodec = ev.volumeCodec;
+        break;
+    case SimEvent::Kind::Voxels:
+        r.kind = LogRecord::Kind::Voxels;
+        r.box = ev.box;
+        r.density = ev.density;
+        r.material = ev.material;
+        break;
+    }
+    return r;
+}
+
+SimEvent simEventOf(const LogRecord& r) {
+    SimEvent ev;
+    ev.client = r.client;
+    ev.arrivedUs = r.timeUs;
+    switch (r.kind) {
+    case LogRecord::Kind::Join:
+        ev.kind = SimEvent::Kind::Join;
+        ev.camera = toCamera(r.view);
+        ev.codec = r.codec;
+        ev.sync = r.sync;
+        ev.volumeCodec = r.volumeCodec;
+        ev.inFlight = std::make_shared<std::atomic<int64_t>>(0);
+        break;
+    case LogRecord::Kind::View:
+        ev.kind = SimEvent::Kind::View;
+        ev.camera = toCamera(r.view);
+        ev.viewId = r.viewId;
+        break;
+    case LogRecord::Kind::Tool:
+        ev.kind = SimEvent::Kind::Tool;
+        ev.tool = r.tool;
+        break;
+    case LogRecord::Kind::Leave:
+        ev.kind = SimEvent::Kind::Leave;
+        break;
+    case LogRecord::Kind::Cut:
+        ev.kind = SimEvent::Kind::Cut;
+        ev.box = r.box;
+        break;
+    case LogRecord::Kind::Sync:
+        ev.kind = SimEvent::Kind::Sync;
+        ev.sync = r.sync;
+        ev.volumeCodec = r.volumeCodec;
+        break;
+    case LogRecord::Kind::Voxels:
+        ev.kind = SimEvent::Kind::Voxels;
+        ev.box = r.box;
+        ev.density = r.density;
+        ev.material = r.material;
+        break;
+    default:
+        assert(false && "simEventOf: not a simulation record (check isSimulation())");
+    }
+    return ev;
+}
+
+LogRecord helloRecord(uint16_t client, Role role, const std::string& name, uint64_t now) {
+    LogRecord r;
+    r.kind = LogRecord::Kind::Hello;
+    r.timeUs = now;
+    r.client = client;
+    r.role = role;
+    r.name = name;
+    return r;
+}
+
+// [SECTION] the starting volume
+
+LogHeader makeLogHeader(const Volume& volume, const ServerConfig& config,
+                        const std::string& volumeSpec, bool embed, uint64_t startUnixUs) {
+    LogHeader h;
+    h.startUnixUs = startUnixUs;
+    h.volumeSpec = volumeSpec;
+    h.volumeName = config.volumeName;
+    h.dims = volume.dims();
+    h.spacing = volume.spacing();
+    h.densityCrc = crcOf(volume.densityData(), volume.voxelCount());
+    h.materialCrc = crcOf(volume.materialData(), volume.voxelCount());
+    if (embed) {
+        std::vector<uint8_t> raw(volume.voxelCount() * 2);
+        std::memcpy(raw.data(), volume.densityData(), volume.voxelCount());
+        std::memcpy(raw.data() + volume.voxelCount(), volume.materialData(), volume.voxelCount());
+        h.embedded.resize(ZSTD_compressBound(raw.size()));
+        const size_t n =
+            ZSTD_compress(h.embedded.data(), h.embedded.size(), raw.data(), raw.size(), 3);
+        if (ZSTD_isError(n))
+            throw Error(std::string("session log: cannot compress the volume: ") +
+                        ZSTD_getErrorName(n));
+        h.embedded.resize(n);
+        if (h.embedded.size() > kMaxLogRecordBytes / 2)
+            throw Error("session log: the volume does not fit a log record even compressed");
+    }
+    h.maxStepS = config.maxStepS;
+    h.maxSweepMm = config.maxSweepMm;
+    // The scene the server serves: the one given, or the one it builds from the volume.
+    Scene scene = config.scene ? *config.scene : buildScene(volume);
+    h.scene = encodeMessage(scene);
+    // Numbered as the server numbers its starting marks.
+    uint32_t id = 1;
+    for (const AnnotationInfo& m : config.marks)
+        h.marks.push_back({id++, 0, m.position, m.label});
+    return h;
+}
+
+Volume logStartVolume(const LogHeader& h, const std::function<Volume(const std::string&)>& open) {
+    const size_t count = size_t(h.dims.x) * size_t(h.dims.y) * size_t(h.dims.z);
+    Volume v;
+    if (!h.embedded.empty()) {
+        std::vector<uint8_t> raw(count * 2);
+        const size_t n =
+            ZSTD_decompress(raw.data(), raw.size(), h.embedded.data(), h.embedded.size());
+        if (ZSTD_isError(n) || n != raw.size())
+            throw Error("session log: the embedded volume does not decompress to " +
+                        std::to_string(raw.size()) + " bytes");
+        std::vector<uint8_t> density(raw.begin(), raw.begin() + ptrdiff_t(count));
+        std::vector<uint8_t> material(raw.begin() + ptrdiff_t(count), raw.end());
+        for (uint8_t m : material)
+            if (m >= uint8_t(kMaterialCount))
+                throw Error("session log: the embedded volume has an unknown material label");
+        v = Volume(h.dims, h.spacing, std::move(density), std::move(material));
+    } else {
+        v = open(h.volumeSpec);
+    }
+    if (v.dims() != h.dims || v.spacing() != h.spacing ||
+        crcOf(v.densityData(), v.voxelCount()) != h.densityCrc ||
+        crcOf(v.materialData(), v.voxelCount()) != h.materialCrc)
+        throw Error("session log: the volume '" + h.volumeSpec +
+                    "' is not the one recorded (its size or content hash differs; was it made by "
+                    "another version, or the file changed?)");
+    return v;
+}
+
+// [SECTION] writing
+
+SessionRecorder::SessionRecorder(std::string path, int fd, uint64_t bytes, int syncIntervalMs)
+    : m_path(std::move(path)), m_fd(fd), m_syncIntervalMs(std::max(1, syncIntervalMs)),
+      m_bytes(bytes), m_synced(bytes) {
+    m_syncer = std::thread([this] { syncLoop(); });
+}
+
+std::unique_ptr<SessionRecorder> SessionRecorder::create(const std::string& path, LogHeader header,
+                                                         int syncIntervalMs) {
+    std::vector<uint8_t> start(kLogMagic, kLogMagic + 8);
+    start.resize(kLogPreambleBytes);
+    putU32(start, 8, kLogVersion);
+    if (!appendFrame(start, header))
+        throw Error("--record " + path + ": the session's start does not fit the log's format");
+    const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_APPEND | O_CLOEXEC, 0644);
+    if (fd < 0)
+        throw Error("--record " + path + ": " +
+                    (errno == EEXIST ? std::string("a file is there already (--resume continues a "
+                                                   "log; give a new name to start one)")
+                                     : "cannot create it: " + errnoText()));
+    std::unique_ptr<SessionRecorder> r(new SessionRecorder(path, fd, 0, syncIntervalMs));
+    if (!r->writeAll(start.data(), start.size()) || ::fdatasync(fd) != 0)
+        throw Error("--record " + path + ": cannot write it: " + errnoText());
+    r->m_bytes = r->m_synced = start.size();
+    return r;
+}
+
+std::unique_ptr<SessionRecorder> SessionRecorder::append(const std::string& path,
+                                                         uint64_t intactBytes, int syncIntervalMs) {
+    const int fd = ::open(path.c_str(), O_WRONLY | O_APPEND | O_CLOEXEC);
+    if (fd < 0)
+        throw Error("--resume " + path + ": cannot open it to append: " + errnoText());
+    if (::ftruncate(fd, off_t(intactBytes)) != 0 || ::fdatasync(fd) != 0) {
+        const std::string why = errnoText();
+        ::close(fd);
+        throw Error("--resume " + path + ": cannot cut its torn tail: " + why);
+    }
+    return std::unique_ptr<SessionRecorder>(
+        new SessionRecorder(path, fd, intactBytes, syncIntervalMs));
+}
+
+SessionRecorder::~SessionRecorder() {
+    {
+        std::lock_guard lock(m_mutex);
+        m_stop = true;
+    }
+    m_cv.notify_all();
+    if (m_syncer.joinable())
+        m_syncer.join();
+    if (m_fd >= 0) {
+        ::fdatasync(m_fd);
+        ::close(m_fd);
+    }
+}
+
+bool SessionRecorder::writeAll(const uint8_t* data, size_t n) {
+    while (n > 0) {
+        const ssize_t done = ::write(m_fd, data, n);
+        if (done < 0 && errno == EINTR)
+            continue;
+        if (done <= 0)
+            return false;
+        data += done;
+        n -= size_t(done);
+    }
+    return true;
+}
+
+bool SessionRecorder::write(std::span<const LogRecord> records) {
+    if (records.empty())
+        return true;
+    std::lock_guard lock(m_mutex);
+    if (!m_error.empty())
+        return false;
+    m_buffer.clear();
+    for (const LogRecord& r : records) {
+        LogRecord copy = r; // serialize is one function for write and read: not const
+        if (!appendFrame(m_buffer, copy) && m_error.empty())
+            m_error = fmt::format("a record of kind {} does not fit the format", int(r.kind));
+    }
+    // A record that did not fit is a programmer mistake; the others still go.
+    if (!writeAll(m_buffer.data(), m_buffer.size())) {
+        m_error = "cannot write: " + errnoText();
+        std::fprintf(stderr, "trephine server: --record %s: %s; the session goes on unrecorded\n",
+                     m_path.c_str(), m_error.c_str());
+        return false;
+    }
+    m_bytes += m_buffer.size();
+    m_records += records.size();
+    return true;
+}
+
+void SessionRecorder::sync() {
+    uint64_t written;
+    {
+        std::lock_guard lock(m_mutex);
+        written = m_bytes;
+    }
+    if (::fdatasync(m_fd) == 0) {
+        std::lock_guard lock(m_mutex);
+        m_synced = std::max(m_synced, written);
+        ++m_syncs;
+    }
+}
+
+void SessionRecorder::syncLoop() {
+    std::unique_lock lock(m_mutex);
+    while (!m_stop) {
+        m_cv.wait_for(lock, std::chrono::milliseconds(m_syncIntervalMs));
+        if (m_bytes == m_synced || m_stop)
+            continue;
+        lock.unlock();
+        sync(); // off the lock: writers go on while the disk works
+        lock.lock();
+    }
+}
+
+std::string SessionRecorder::error() const {
+    std::lock_guard lock(m_mutex);
+    return m_error;
+}
+
+uint64_t SessionRecorder::bytes() const {
+    std::lock_guard lock(m_mutex);
+    return m_bytes;
+}
+
+uint64_t SessionRecorder::records() const {
+    std::lock_guard lock(m_mutex);
+    return m_records;
+}
+
+uint64_t SessionRecorder::syncs() const {
+    std::lock_guard lock(m_mutex);
+    return m_syncs;
+}
+
+// [SECTION] reading
+
+LogContents parseSessionLog(std::span<const uint8_t> bytes, const std::string& name) {
+    LogContents c;
+    c.fileBytes = bytes.size();
+    if (bytes.size() < kLogPreambleBytes || std::memcmp(bytes.data(), kLogMagic, 8) != 0)
+        throw Error(name + ": not a Trephine session log (it does not start with TREPHLOG)");
+    c.version = getU32(bytes.data() + 8);
+    if (c.version == 0 || c.version > kLogVersion)
+        throw Error(fmt::format("{}: a session log of format {}; this Trephine reads format {}",
+                                name, c.version, kLogVersion));
+    // One frame at `at`: its payload, or why it cannot be read (torn, or corrupt).
+    auto frame = [&](size_t at, std::span<const uint8_t>& payload) -> std::string {
+        if (bytes.size() - at < kLogFrameBytes)
+            return fmt::format("torn: {} bytes of a record's {}-byte frame", bytes.size() - at,
+                               kLogFrameBytes);
+        const uint32_t length = getU32(bytes.data() + at);
+        if (length > kMaxLogRecordBytes)
+            return fmt::format("corrupt: a record length of {} bytes", length);
+        if (bytes.size() - at - kLogFrameBytes < length)
+            return fmt::format("torn: the record says {} bytes, {} are there", length,
+                               bytes.size() - at - kLogFrameBytes);
+        const uint8_t* body = bytes.data() + at + kLogFrameBytes;
+        if (crcOf(body, length, crcOf(bytes.data() + at, 4)) != getU32(bytes.data() + at + 4))
+            return "corrupt: its checksum does not match";
+        payload = {body, length};
+        return {};
+    };
+    size_t at = kLogPreambleBytes;
+    std::span<const uint8_t> payload;
+    std::string why = frame(at, payload);
+    if (why.empty()) {
+        ReadStream r(payload);
+        if (!c.header.serialize(r) || !r.atEnd())
+            why = "corrupt: its fields do not read";
+    }
+    if (!why.empty())
+        throw Error(name + ": the session's start (at byte 12) cannot be read: " + why);
+    at += kLogFrameBytes + payload.size();
+    c.intactBytes = at;
+    while (at < bytes.size()) {
+        why = frame(at, payload);
+        LogRecord rec;
+        if (why.empty()) {
+            ReadStream r(payload);
+            if (!rec.serialize(r) || !r.atEnd())
+                why = "corrupt: its fields do not read";
+        }
+        if (!why.empty()) {
+            c.stopped = fmt::format("{}: kept {} records ({} bytes); dropped the tail at byte {} "
+                                    "(record {}), {}",
+                                    name, c.records.size(), at, at, c.records.size() + 1, why);
+            break;
+        }
+        c.records.push_back(std::move(rec));
+        at += kLogFrameBytes + payload.size();
+        c.intactBytes = at;
+    }
+    return c;
+}
+
+LogContents readSessionLog(const std::string& path) {
+    std::ifstream in(path, std::ios::binary | std::ios::ate);
+    if (!in)
+        throw Error(path + ": cannot open the session log");
+    std::vector<uint8_t> bytes(size_t(std::max<std::streamoff>(0, in.tellg())));
+    in.seekg(0);
+    if (!in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
+        throw Error(path + ": cannot read the session log");
+    return parseSessionLog(bytes, path);
+}
+
+} // namespace trephine::net

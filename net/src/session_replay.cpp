@@ -1,0 +1,209 @@
+#include "net/session_replay.h"
+
+#include "libsim/error.h"
+#include "libsim/tool.h"
+#include "net/net_stats.h"
+#include "net/scene.h"
+
+#include <fmt/format.h>
+
+#include <cctype>
+
+namespace trephine::net {
+
+namespace {
+
+uint64_t noClock() {
+    return 0; // stage timings mean nothing in a replay
+}
+
+} // namespace
+
+SessionReplay::SessionReplay(const LogHeader& header, Volume start, int renderThreads)
+    : m_outbox(0, m_book, noClock),
+      m_step(std::move(start),
+             StepConfig{header.maxStepS, header.maxSweepMm, std::max(1, renderThreads), false},
+             m_outbox, m_book, noClock) {
+    // A server numbers its starting marks 1..n, author 0 (SessionPolicy's constructor).
+    uint32_t id = 1;
+    for (const AnnotationInfo& m : header.marks) {
+        m_marks[id] = {id, 0, m.position, m.label};
+        ++id;
+    }
+}
+
+void SessionReplay::apply(const LogRecord& r) {
+    ++m_applied;
+    if (r.isSimulation()) {
+        if (r.kind == LogRecord::Kind::Join)
+            m_joined.insert(r.client);
+        if (r.kind == LogRecord::Kind::Leave) {
+            m_joined.erase(r.client);
+            m_participants.erase(r.client);
+            // The policy hands back whatever a leaving client held or was held by.
+            for (auto& [id, p] : m_participants)
+                if (p.takenOverBy == r.client)
+                    p.takenOverBy = 0;
+        }
+        if (r.kind == LogRecord::Kind::Sync)
+            if (auto p = m_participants.find(r.client); p != m_participants.end())
+                p->second.sync = r.sync;
+        m_step.step({simEventOf(r)}, r.timeUs);
+        return;
+    }
+    switch (r.kind) {
+    case LogRecord::Kind::Hello:
+        m_participants[r.client] = {r.client, ++m_hellos, r.role, r.name, Sync::Dbi, 0};
+        break;
+    case LogRecord::Kind::Mark:
+        if (r.op == Annotate::Op::Add)
+            m_marks[r.mark.id] = r.mark;
+        else if (r.op == Annotate::Op::Remove)
+            m_marks.erase(r.mark.id);
+        else
+            m_marks.clear();
+        break;
+    case LogRecord::Kind::Hold:
+        for (auto& [id, p] : m_participants)
+            if (p.takenOverBy == r.client)
+                p.takenOverBy = 0;
+        if (auto p = m_participants.find(r.trainee); p != m_participants.end())
+            p->second.takenOverBy = r.client;
+        break;
+    case LogRecord::Kind::Release:
+        for (auto& [id, p] : m_participants)
+            if (p.takenOverBy == r.client || id == r.client)
+                p.takenOverBy = 0;
+        break;
+    case LogRecord::Kind::Resume: {
+        // The killed server's clients are gone: the simulation forgets them as it would their
+        // leaves, and the resumed server numbers the marks afresh.
+        for (uint16_t id : std::set<uint16_t>(m_joined)) {
+            LogRecord leave;
+            leave.kind = LogRecord::Kind::Leave;
+            leave.timeUs = r.timeUs;
+            leave.client = id;
+            m_step.step({simEventOf(leave)}, r.timeUs);
+        }
+        m_joined.clear();
+        m_participants.clear();
+        const std::vector<AnnotationInfo> kept = marksList();
+        m_marks.clear();
+        for (const AnnotationInfo& m : kept)
+            m_marks[m.id] = m;
+        break;
+    }
+    default:
+        break;
+    }
+}
+
+std::vector<AnnotationInfo> SessionReplay::marksList() const {
+    std::vector<AnnotationInfo> list;
+    uint32_t id = 1;
+    for (const auto& [old, m] : m_marks)
+        list.push_back({id++, 0, m.position, m.label});
+    return list;
+}
+
+// [SECTION] resuming
+
+Resumed resumeSession(const std::string& path, ServerConfig& config,
+                      const std::function<Volume(const std::string&)>& open, uint64_t unixNowUs) {
+    LogContents log = readSessionLog(path);
+    SessionReplay replay(log.header, logStartVolume(log.header, open), config.renderThreads);
+    replay.applyAll(log.records);
+    Scene scene;
+    if (!decodeScene(log.header.scene, scene))
+        throw Error("--resume " + path + ": the scene in its header does not read");
+    config.scene = std::make_shared<const Scene>(std::move(scene));
+    config.marks = replay.marksList();
+    config.volumeName = log.header.volumeName;
+    config.maxStepS = log.header.maxStepS;
+    config.maxSweepMm = log.header.maxSweepMm;
+    config.recorder = SessionRecorder::append(path, log.intactBytes);
+    LogRecord resumed;
+    resumed.kind = LogRecord::Kind::Resume;
+    resumed.timeUs = steadyNowUs();
+    resumed.unixUs = unixNowUs;
+    if (!config.recorder->write({&resumed, 1}))
+        throw Error("--resume " + path + ": " + config.recorder->error());
+    return {replay.volume(), log.stopped, log.records.size(), replay.toolStatesApplied()};
+}
+
+// [SECTION] trajectories
+
+std::vector<Trajectory> trajectoriesOf(std::span<const LogRecord> records) {
+    std::vector<Trajectory> out;
+    std::map<uint16_t, size_t> current; // client id -> its trajectory now
+    std::map<uint16_t, uint32_t> lastSequence;
+    for (const LogRecord& r : records) {
+        switch (r.kind) {
+        case LogRecord::Kind::Hello: {
+            Trajectory t;
+            t.ordinal = uint32_t(out.size() + 1);
+            t.client = r.client;
+            t.role = r.role;
+            t.name = r.name;
+            current[r.client] = out.size();
+            lastSequence.erase(r.client);
+            out.push_back(std::move(t));
+            break;
+        }
+        case LogRecord::Kind::Leave:
+            current.erase(r.client);
+            break;
+        case LogRecord::Kind::Resume:
+            current.clear();
+            break;
+        case LogRecord::Kind::Tool: {
+            auto it = current.find(r.client);
+            if (it == current.end())
+                break;
+            // As the simulation applies them: an older sequence arriving late is dropped.
+            auto last = lastSequence.find(r.client);
+            if (last != lastSequence.end() && int32_t(r.tool.sequence - last->second) <= 0)
+                break;
+            lastSequence[r.client] = r.tool.sequence;
+            out[it->second].states.push_back(r.tool);
+            break;
+        }
+        default:
+            break;
+        }
+    }
+    std::erase_if(out, [](const Trajectory& t) { return t.states.empty(); });
+    return out;
+}
+
+std::string trajectoryCsv(const Trajectory& t) {
+    std::string csv = fmt::format("# {} ({}, client {}): {} tool states\n", t.name,
+                                  t.role == Role::Instructor ? "instructor" : "trainee", t.client,
+                                  t.states.size());
+    csv += "time_s,x,y,z,qw,qx,qy,qz,speed,tool\n";
+    const uint64_t t0 = t.states.empty() ? 0 : t.states.front().clientTimeUs;
+    uint64_t last = t0;
+    for (const ToolState& s : t.states) {
+        // A script's times must not decrease; a client's clock does not either.
+        last = std::max(last, s.clientTimeUs);
+        const double time = double(last - t0) * 1e-6;
+        const char* kind = s.toolKind == uint8_t(ToolKind::Perforator) ? "perforator" : "burr";
+        csv +=
+            fmt::format("{:.6f},{},{},{},{},{},{},{},{},{}:{}\n", time, s.position.x, s.position.y,
+                        s.position.z, s.orientation.w, s.orientation.x, s.orientation.y,
+                        s.orientation.z, s.drilling ? s.speed : 0.0f, kind, s.diameterMm);
+    }
+    return csv;
+}
+
+std::string trajectoryFileName(const Trajectory& t) {
+    std::string name;
+    for (char c : t.name)
+        name += std::isalnum(static_cast<unsigned char>(c)) || c == '-' || c == '_' ? c : '_';
+    if (name.empty())
+        name = "client" + std::to_string(t.client);
+    return fmt::format("{:02}-{}-{}.csv", t.ordinal, name,
+                       t.role == Role::Instructor ? "instructor" : "trainee");
+}
+
+} // namespace trephine::net

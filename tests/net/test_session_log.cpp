@@ -1,0 +1,461 @@
+// The session log (net/session_log.h) and its replay (net/session_replay.h): records round-trip;
+// a log cut at every byte of its last records, or with a byte flipped, keeps what is intact and
+// says where and why it stopped; a recorded session (two trainees, an instructor's marks and
+// take-over, a design switch) replays to the server's own --save-on-exit byte for byte, and so
+// does one resumed from its log; trajectories export what the simulation applied.
+#include "net/session_log.h"
+#include "net/session_replay.h"
+
+#include "net/session_client.h"
+#include "net/session_server.h"
+#include "net/view.h"
+
+#include "libsim/error.h"
+#include "libsim/skull.h"
+#include "libsim/volume_io.h"
+
+#include "loopback.h"
+
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+#include <unistd.h>
+#include <vector>
+
+using namespace trephine;
+using namespace trephine::net;
+
+using trephine::testing::burrState;
+using trephine::testing::loopback;
+using trephine::testing::loopbackServerConfig;
+using trephine::testing::namedClientConfig;
+using trephine::testing::pumpUntil;
+
+namespace {
+
+constexpr int kN = 48;
+
+std::string tempPath(const std::string& name) {
+    const std::string p = (std::filesystem::temp_directory_path() /
+                           ("trephine_log_" + std::to_string(getpid()) + "_" + name))
+                              .string();
+    std::filesystem::remove(p);
+    return p;
+}
+
+std::vector<uint8_t> fileBytes(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
+}
+
+// One record of every kind, with fields that differ from the defaults.
+std::vector<LogRecord> everyKind() {
+    std::vector<LogRecord> list;
+    auto add = [&](LogRecord::Kind kind) -> LogRecord& {
+        LogRecord& r = list.emplace_back();
+        r.kind = kind;
+        r.timeUs = 1000 + list.size() * 17;
+        r.client = uint16_t(list.size());
+        return r;
+    };
+    add(LogRecord::Kind::Hello).name = "Ada";
+    LogRecord& join = add(LogRecord::Kind::Join);
+    join.view.eye = {1, 2, 300};
+    join.view.width = 77;
+    join.codec = Codec::Zstd;
+    join.sync = Sync::Volume;
+    join.volumeCodec = Codec::Lz4;
+    LogRecord& view = add(LogRecord::Kind::View);
+    view.viewId = 9;
+    view.view.fovYDeg = 33.0f;
+    LogRecord& tool = add(LogRecord::Kind::Tool);
+    tool.tool.sequence = 42;
+    tool.tool.clientTimeUs = 123456789;
+    tool.tool.position = {1.5f, -2.25f, 30.0f};
+    tool.tool.speed = 0.75f;
+    tool.tool.drilling = true;
+    add(LogRecord::Kind::Leave);
+    add(LogRecord::Kind::Cut).box = Box3i::fromMinMax({1, 2, 3}, {4, 5, 6});
+    LogRecord& sync = add(LogRecord::Kind::Sync);
+    sync.sync = Sync::Volume;
+    sync.volumeCodec = Codec::Zstd;
+    LogRecord& voxels = add(LogRecord::Kind::Voxels);
+    voxels.box = Box3i::fromMinMax({0, 0, 0}, {2, 1, 1});
+    voxels.density = {200, 0};
+    voxels.material = {1, 0};
+    LogRecord& mark = add(LogRecord::Kind::Mark);
+    mark.mark = {3, 2, {1, 2, 3}, "here"};
+    add(LogRecord::Kind::Mark).op = Annotate::Op::Clear;
+    add(LogRecord::Kind::Hold).trainee = 1;
+    add(LogRecord::Kind::Release);
+    add(LogRecord::Kind::Resume).unixUs = 1700000000000000ull;
+    return list;
+}
+
+LogHeader sphereHeader(const Volume& v) {
+    ServerConfig c = loopbackServerConfig("sphere:48");
+    c.marks = {{0, 0, {0, 0, 24}, "start"}};
+    return makeLogHeader(v, c, "sphere:48", false, 1);
+}
+
+// A log of `records` on the 48^3 sphere; its bytes, and where each record starts.
+std::vector<uint8_t> writeLog(const std::string& path, const std::vector<LogRecord>& records,
+                              std::vector<size_t>& starts) {
+    const Volume sphere = makeSphere(kN);
+    {
+        auto recorder = SessionRecorder::create(path, sphereHeader(sphere));
+        for (const LogRecord& r : records) {
+            starts.push_back(recorder->bytes());
+            EXPECT_TRUE(recorder->write({&r, 1}));
+        }
+    }
+    return fileBytes(path);
+}
+
+void expectSame(const LogRecord& a, const LogRecord& b) {
+    LogRecord x = a, y = b;
+    std::vector<uint8_t> ea, eb;
+    WriteStream wa(ea), wb(eb);
+    ASSERT_TRUE(x.serialize(wa));
+    ASSERT_TRUE(y.serialize(wb));
+    EXPECT_EQ(ea, eb) << "kind " << int(a.kind);
+}
+
+} // namespace
+
+// [SECTION] the format
+
+TEST(SessionLog, EveryKindOfRecordRoundTrips) {
+    const std::string path = tempPath("kinds.log");
+    const std::vector<LogRecord> records = everyKind();
+    std::vector<size_t> starts;
+    writeLog(path, records, starts);
+    const LogContents log = readSessionLog(path);
+    EXPECT_EQ(log.version, kLogVersion);
+    EXPECT_TRUE(log.stopped.empty()) << log.stopped;
+    EXPECT_EQ(log.intactBytes, log.fileBytes);
+    ASSERT_EQ(log.records.size(), records.size());
+    for (size_t i = 0; i < records.size(); ++i)
+        expectSame(log.records[i], records[i]);
+    EXPECT_EQ(log.records[3].tool.position, records[3].tool.position);
+    EXPECT_EQ(log.header.volumeSpec, "sphere:48");
+    ASSERT_EQ(log.header.marks.size(), 1u);
+    EXPECT_EQ(log.header.marks[0].label, "start");
+    EXPECT_TRUE(log.header.embedded.empty()) << "a built-in volume travels as its spec and hash";
+    const Volume v = logStartVolume(log.header, loadVolume);
+    EXPECT_EQ(v.dims(), glm::ivec3(kN));
+    std::filesystem::remove(path);
+}
+
+TEST(SessionLog, AVolumeNoSpecRegeneratesTravelsInTheLogAndAWrongOneIsRefused) {
+    Volume v = makeSphere(kN);
+    v.fill(Box3i::fromMinMax({20, 20, 20}, {28, 28, 28}), 0, Material::Air);
+    ServerConfig c = loopbackServerConfig("cut.nrrd");
+    const LogHeader embedded = makeLogHeader(v, c, "cut.nrrd", true, 0);
+    ASSERT_FALSE(embedded.embedded.empty());
+    auto never = [](const std::string&) -> Volume {
+        ADD_FAILURE() << "an embedded volume is not opened from its spec";
+        return {};
+    };
+    const Volume back = logStartVolume(embedded, never);
+    EXPECT_TRUE(
+        std::equal(back.densityData(), back.densityData() + back.voxelCount(), v.densityData()));
+    // The spec regenerates another volume than the one recorded: said, not replayed wrongly.
+    const LogHeader bySpec = makeLogHeader(v, c, "sphere:48", false, 0);
+    EXPECT_THROW(logStartVolume(bySpec, loadVolume), Error);
+}
+
+TEST(SessionLog, ALogCutAtEveryByteOfItsLastRecordsKeepsWhatIsIntact) {
+    const std::string path = tempPath("cut.log");
+    std::vector<size_t> starts;
+    const std::vector<LogRecord> records = everyKind();
+    const std::vector<uint8_t> bytes = writeLog(path, records, starts);
+    starts.push_back(bytes.size());
+    // Every byte offset from the start of the fourth-last record to the end.
+    const size_t from = starts[records.size() - 4];
+    for (size_t cut = from; cut <= bytes.size(); ++cut) {
+        const LogContents log =
+            parseSessionLog(std::span(bytes.data(), cut), "cut at " + std::to_string(cut));
+        size_t whole = 0;
+        while (whole < records.size() && starts[whole + 1] <= cut)
+            ++whole;
+        ASSERT_EQ(log.records.size(), whole) << "cut at " << cut;
+        EXPECT_EQ(log.intactBytes, starts[whole]) << "cut at " << cut;
+        if (cut == starts[whole]) {
+            EXPECT_TRUE(log.stopped.empty()) << log.stopped;
+        } else {
+            EXPECT_NE(log.stopped.find("torn"), std::string::npos) << log.stopped;
+            EXPECT_NE(log.stopped.find("at byte " + std::to_string(starts[whole])),
+                      std::string::npos)
+                << log.stopped;
+            EXPECT_EQ(log.stopped.find('\n'), std::string::npos) << "one line";
+        }
+    }
+    std::filesystem::remove(path);
+}
+
+TEST(SessionLog, AFlippedByteStopsTheLogAtTheRecordItCorrupts) {
+    const std::string path = tempPath("flip.log");
+    std::vector<size_t> starts;
+    const std::vector<LogRecord> records = everyKind();
+    std::vector<uint8_t> bytes = writeLog(path, records, starts);
+    starts.push_back(bytes.size());
+    for (size_t at = starts[0]; at < bytes.size(); ++at) {
+        bytes[at] ^= 0x20;
+        const LogContents log = parseSessionLog(bytes, "flipped");
+        size_t hit = 0;
+        while (starts[hit + 1] <= at)
+            ++hit;
+        ASSERT_EQ(log.records.size(), hit) << "byte " << at << " flipped";
+        EXPECT_NE(log.stopped.find("at byte " + std::to_string(starts[hit])), std::string::npos)
+            << log.stopped;
+        EXPECT_TRUE(log.stopped.find("corrupt") != std::string::npos ||
+                    log.stopped.find("torn") != std::string::npos)
+            << log.stopped;
+        bytes[at] ^= 0x20;
+    }
+    EXPECT_TRUE(parseSessionLog(bytes, "restored").stopped.empty());
+    std::filesystem::remove(path);
+}
+
+TEST(SessionLog, AFileThatIsNoLogOrWhoseStartIsDamagedIsRefusedInOneLine) {
+    const std::string path = tempPath("head.log");
+    std::vector<size_t> starts;
+    std::vector<uint8_t> bytes = writeLog(path, everyKind(), starts);
+    auto refusal = [](std::span<const uint8_t> b) {
+        try {
+            parseSessionLog(b, "x.log");
+        } catch (const Error& e) {
+            return std::string(e.what());
+        }
+        return std::string("accepted");
+    };
+    std::vector<uint8_t> other = bytes;
+    other[0] = 'X';
+    EXPECT_NE(refusal(other).find("not a Trephine session log"), std::string::npos);
+    other = bytes;
+    other[8] = 99;
+    EXPECT_NE(refusal(other).find("format 99"), std::string::npos) << refusal(other);
+    other = bytes;
+    other[kLogPreambleBytes + kLogFrameBytes + 3] ^= 1;
+    EXPECT_NE(refusal(other).find("session's start"), std::string::npos) << refusal(other);
+    EXPECT_NE(refusal(std::span(bytes.data(), 20)).find("torn"), std::string::npos);
+    // A log is never overwritten by a new one.
+    EXPECT_THROW(SessionRecorder::create(path, sphereHeader(makeSphere(kN))), Error);
+    std::filesystem::remove(path);
+}
+
+TEST(SessionLog, ResumingCutsATornTailAndAppendsAfterWhatIsIntact) {
+    const std::string path = tempPath("append.log");
+    std::vector<size_t> starts;
+    std::vector<LogRecord> records = everyKind();
+    std::vector<uint8_t> bytes = writeLog(path, records, starts);
+    std::filesystem::resize_file(path, bytes.size() - 3); // killed mid-write
+    LogContents log = readSessionLog(path);
+    ASSERT_EQ(log.records.size(), records.size() - 1);
+    {
+        auto recorder = SessionRecorder::append(path, log.intactBytes);
+        ASSERT_TRUE(recorder->write({&records[0], 1}));
+        recorder->sync();
+        EXPECT_GE(recorder->syncs(), 1u);
+    }
+    log = readSessionLog(path);
+    EXPECT_TRUE(log.stopped.empty()) << log.stopped;
+    ASSERT_EQ(log.records.size(), records.size());
+    expectSame(log.records.back(), records[0]);
+    std::filesystem::remove(path);
+}
+
+// [SECTION] a recorded session
+
+namespace {
+
+// Two trainees and an instructor on a 48^3 sphere, recorded; strokes are waited for until the
+// server has applied them.
+struct RecordedSession {
+    Volume sphere = makeSphere(kN);
+    std::string log, saved;
+    SessionServer server;
+    SessionClient ada{namedClientConfig(sphere, "Ada", Role::Trainee, 32)};
+    SessionClient ben{namedClientConfig(sphere, "Ben", Role::Trainee, 40)};
+    SessionClient cho{namedClientConfig(sphere, "Dr. Cho", Role::Instructor, 32)};
+    std::vector<SessionClient*> all{&ada, &ben, &cho};
+    uint64_t applied = 0;
+    std::map<const SessionClient*, uint32_t> sequence;
+
+    static ServerConfig config(const Volume& v, const std::string& log, const std::string& saved,
+                               ServerConfig c) {
+        c.saveOnExit = saved;
+        if (!c.recorder)
+            c.recorder = SessionRecorder::create(log, makeLogHeader(v, c, "sphere:48", false, 1));
+        return c;
+    }
+    RecordedSession(const std::string& name, ServerConfig c = loopbackServerConfig("sphere:48"),
+                    Volume start = {})
+        : log(tempPath(name + ".log")), saved(tempPath(name + ".nrrd")),
+          server(start.empty() ? sphere : start,
+                 config(start.empty() ? sphere : start, log, saved, std::move(c))) {}
+
+    bool joined() {
+        server.start();
+        for (SessionClient* c : all)
+            c->connect(loopback(server.port()));
+        return pumpUntil(all, [&] {
+            return ada.hasFullImage() && ben.hasFullImage() && cho.hasFullImage() &&
+                   ada.participants().size() == 3 && ben.participants().size() == 3 &&
+                   cho.participants().size() == 3;
+        });
+    }
+    void stroke(SessionClient& who, float degrees, int states = 10) {
+        const float a = glm::radians(degrees);
+        const glm::vec3 normal(std::sin(a), 0.0f, std::cos(a));
+        const SurfaceSite site{normal * sphereRadiusMm(kN), normal};
+        for (int i = 0; i < states; ++i) {
+            ToolState t = burrState(site, i, states, 1000000 + applied * 10000);
+            t.sequence = ++sequence[&who];
+            who.sendToolState(t);
+            for (SessionClient* c : all)
+                c->poll(1);
+        }
+        applied += uint64_t(states);
+        EXPECT_TRUE(pumpUntil(all, [&] { return server.toolStatesApplied() >= applied; }));
+    }
+};
+
+Volume replayed(const std::string& path) {
+    const LogContents log = readSessionLog(path);
+    EXPECT_TRUE(log.stopped.empty()) << log.stopped;
+    SessionReplay replay(log.header, logStartVolume(log.header, loadVolume));
+    replay.applyAll(log.records);
+    return replay.volume();
+}
+
+} // namespace
+
+TEST(SessionLog, TwoTraineesMarksAndATakeOverReplayToTheSavedVolumeByteForByte) {
+    RecordedSession s("two");
+    ASSERT_TRUE(s.joined());
+    const uint16_t ada = s.ada.welcome().clientId;
+    s.stroke(s.ada, 0);
+    s.stroke(s.ben, 40);
+    Annotate mark;
+    mark.position = {0, 0, 24};
+    mark.label = "entry";
+    s.cho.annotate(mark);
+    mark.label = "second";
+    s.cho.annotate(mark);
+    ASSERT_TRUE(pumpUntil(s.all, [&] { return s.ada.annotations().size() == 2; }));
+    Annotate remove;
+    remove.op = Annotate::Op::Remove;
+    remove.id = s.ada.annotations()[1].id;
+    s.cho.annotate(remove);
+    s.cho.takeOver(ada);
+    ASSERT_TRUE(pumpUntil(s.all, [&] {
+        return s.ada.annotations().size() == 1 &&
+               s.ada.participants().at(ada).takenOverBy == s.cho.welcome().clientId;
+    }));
+    s.stroke(s.ada, -30); // paused: cuts nothing
+    s.stroke(s.cho, -30);
+    s.cho.takeOver(0);
+    ASSERT_TRUE(pumpUntil(s.all, [&] { return s.ada.participants().at(ada).takenOverBy == 0; }));
+    s.ben.requestSync(Sync::Volume); // a design switch mid-session
+    ASSERT_TRUE(pumpUntil(s.all, [&] { return s.ben.sync() == Sync::Volume; }));
+    s.stroke(s.ben, 60);
+    s.stroke(s.ada, -60);
+    s.server.stop();
+    ASSERT_EQ(s.server.savedTo(), s.saved) << s.server.saveError();
+
+    const LogContents log = readSessionLog(s.log);
+    ASSERT_TRUE(log.stopped.empty()) << log.stopped;
+    SessionReplay replay(log.header, logStartVolume(log.header, loadVolume));
+    replay.applyAll(log.records);
+    EXPECT_EQ(replay.toolStatesApplied(), s.server.toolStatesApplied());
+    ASSERT_EQ(replay.marks().size(), 1u);
+    EXPECT_EQ(replay.marks().begin()->second.label, "entry");
+    // Everyone left as the server stopped; the log said who they were.
+    size_t hellos = 0, holds = 0, releases = 0, syncs = 0;
+    for (const LogRecord& r : log.records) {
+        hellos += r.kind == LogRecord::Kind::Hello;
+        holds += r.kind == LogRecord::Kind::Hold;
+        releases += r.kind == LogRecord::Kind::Release;
+        syncs += r.kind == LogRecord::Kind::Sync;
+    }
+    EXPECT_EQ(hellos, 3u);
+    EXPECT_EQ(holds, 1u);
+    EXPECT_EQ(releases, 1u);
+    EXPECT_EQ(syncs, 1u);
+    const std::string again = tempPath("two-replayed.nrrd");
+    saveVolume(replay.volume(), again);
+    const std::vector<uint8_t> original = fileBytes(s.saved), replayedBytes = fileBytes(again);
+    ASSERT_FALSE(original.empty());
+    EXPECT_TRUE(original == replayedBytes) << "the replayed volume's file differs from the save";
+    const Volume start = makeSphere(kN);
+    EXPECT_FALSE(std::equal(start.densityData(), start.densityData() + start.voxelCount(),
+                            replay.volume().densityData()))
+        << "the session drilled something";
+
+    // Each participant's path, as the simulation applied it.
+    const std::vector<Trajectory> paths = trajectoriesOf(log.records);
+    ASSERT_EQ(paths.size(), 3u);
+    std::map<std::string, Trajectory> byName;
+    for (const Trajectory& t : paths)
+        byName[t.name] = t;
+    ASSERT_EQ(byName.size(), 3u);
+    EXPECT_EQ(byName["Ada"].states.size(), 30u);
+    EXPECT_EQ(byName["Ben"].states.size(), 20u);
+    EXPECT_EQ(byName["Dr. Cho"].role, Role::Instructor);
+    EXPECT_EQ(byName["Dr. Cho"].states.size(), 10u);
+    const std::string csv = trajectoryCsv(byName["Ada"]);
+    EXPECT_NE(csv.find("time_s,x,y,z,qw,qx,qy,qz,speed,tool\n0.000000,"), std::string::npos);
+    EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 32);
+    EXPECT_NE(csv.find(",0,burr:5\n"), std::string::npos) << "paused states cut nothing";
+    EXPECT_EQ(trajectoryFileName(byName["Dr. Cho"]),
+              "0" + std::to_string(byName["Dr. Cho"].ordinal) + "-Dr__Cho-instructor.csv");
+    for (const std::string& p : {s.log, s.saved, again})
+        std::filesystem::remove(p);
+}
+
+TEST(SessionLog, AResumedSessionKeepsAppendingAndReplaysToItsSave) {
+    std::string logPath;
+    {
+        RecordedSession first("resume-a");
+        logPath = first.log;
+        ASSERT_TRUE(first.joined());
+        Annotate mark;
+        mark.position = {0, 0, 24};
+        mark.label = "kept";
+        first.cho.annotate(mark);
+        ASSERT_TRUE(pumpUntil(first.all, [&] { return first.ada.annotations().size() == 1; }));
+        first.stroke(first.ada, 10);
+        first.stroke(first.ben, -20);
+        first.server.stop();
+    }
+    ServerConfig c = loopbackServerConfig("ignored");
+    const Resumed resumed = resumeSession(logPath, c, loadVolume, 2);
+    EXPECT_TRUE(resumed.stopped.empty());
+    EXPECT_EQ(resumed.toolStates, 20u);
+    ASSERT_EQ(c.marks.size(), 1u);
+    EXPECT_EQ(c.marks[0].label, "kept");
+    EXPECT_EQ(c.volumeName, "sphere:48");
+    ASSERT_TRUE(c.recorder);
+    RecordedSession second("resume-b", c, resumed.volume);
+    ASSERT_TRUE(second.joined());
+    EXPECT_EQ(second.ada.annotations().size(), 1u) << "the marks came back";
+    second.stroke(second.ada, 30);
+    second.stroke(second.cho, 50); // holds nobody: cuts nothing
+    second.server.stop();
+    ASSERT_EQ(second.server.savedTo(), second.saved);
+    c.recorder.reset();
+
+    const std::string again = tempPath("resume-replayed.nrrd");
+    saveVolume(replayed(logPath), again);
+    EXPECT_TRUE(fileBytes(second.saved) == fileBytes(again))
+        << "the whole log, across the resume, replays to the resumed server's save";
+    std::filesystem::remove(logPath);
+    std::filesystem::remove(second.log);
+    std::filesystem::remove(second.saved);
+    std::filesystem::remove(again);
+}
