@@ -79,6 +79,7 @@ void printCodes(const ServerOptions& o, const net::ServerConfig& config, uint16_
                 o.traineeCode.empty() ? " (generated)" : "");
     std::printf("trephine server: instructor code %s%s\n", config.instructorCode.c_str(),
                 o.instructorCode.empty() ? " (generated)" : "");
+}
 
 // Whether a spec regenerates its volume (skull:N, sphere:N, box:N): a log then carries only its
 // hash. Files and folders may change or vanish, so their voxels go into the log.
