@@ -55,7 +55,7 @@ bool drawComparisonPanel(SyncDesign& wanted, SyncDesign live, const ComparisonHi
     const SyncDesign order[kSyncDesignCount] = {SyncDesign::Dbi, SyncDesign::Volume};
     // Fixed-width figure columns, wide enough for the widest figure: a column that sized itself
     // to its text jumped whenever a figure gained a digit.
-    const float figureW = ImGui::CalcTextSize("00000 (raw 000000)").x;
+    const float figureW = ImGui::CalcTextSize("0000 (raw 00000)").x;
     if (ImGui::BeginTable("figures", 3, ImGuiTableFlags_BordersInnerH)) {
         ImGui::TableSetupColumn("", ImGuiTableColumnFlags_WidthStretch);
         ImGui::TableSetupColumn("DBI", ImGuiTableColumnFlags_WidthFixed, figureW);

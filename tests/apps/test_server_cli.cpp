@@ -1,6 +1,6 @@
 // `trephine server` says where to join it: its UDP port, this machine's addresses with the
 // command that joins from each, and a warning when the session will be discarded at exit (no
-// --save-on-exit). Runs the binary; `timeout` stops the server with SIGINT after it has started.
+// --save-on-exit). Runs the binary; SIGTERM stops the server a few seconds after its start.
 #include "test_support.h"
 
 #include <gtest/gtest.h>
@@ -15,13 +15,13 @@ using trephine::testing::TempDir;
 
 namespace {
 
-// The server's output until SIGINT stops it a few seconds after its start.
+// The server's output until SIGTERM stops it a few seconds after its start.
 trephine::testing::CommandResult serve(const TempDir& dir, const std::string& extra) {
     const std::string out = dir / "stdout.txt", err = dir / "stderr.txt";
     const std::string cmd = shellQuote(TREPHINE_BIN) +
                             " server --port 0 --volume sphere:32 --render-threads 1 " + extra +
                             " >" + shellQuote(out) + " 2>" + shellQuote(err) +
-                            " & p=$!; sleep 3; kill -INT $p; wait $p";
+                            " & p=$!; sleep 3; kill -TERM $p; wait $p";
     const int status = std::system(cmd.c_str());
     trephine::testing::CommandResult r;
     r.exitCode = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
