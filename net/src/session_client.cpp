@@ -48,6 +48,8 @@ void SessionClient::send(Channel ch, const std::vector<uint8_t>& bytes) {
 
 void SessionClient::sendHandshake(Handshake m) {
     const std::vector<uint8_t> bytes = encodeMessage(m);
+    if (m_sendTap)
+        m_sendTap(Channel::Control, bytes);
     if (connected() && m_host.send(m_peer, Channel::Control, bytes)) {
         m_stats.countOut(Channel::Control, bytes.size());
         m_host.flush();

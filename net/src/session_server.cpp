@@ -450,12 +450,16 @@ bool SessionServer::Impl::sendTo(uint16_t id, Channel ch, const std::vector<uint
     auto link = links.find(id);
     if (bytes.empty() || link == links.end())
         return false;
-    if (gate.sealing(id) ? !host.send(link->second, ch, gate.seal(id, ch, bytes), inFlight)
-                         : !host.send(link->second, ch, bytes, inFlight))
+    // A proven peer's messages go sealed (docs/security.md); the figures count what goes out.
+    const bool sealed = gate.sealing(id);
+    const std::vector<uint8_t> sealedBytes =
+        sealed ? gate.seal(id, ch, bytes) : std::vector<uint8_t>{};
+    const std::vector<uint8_t>& wire = sealed ? sealedBytes : bytes;
+    if (!host.send(link->second, ch, wire, inFlight))
         return false;
-    stats.countOut(ch, bytes.size());
+    stats.countOut(ch, wire.size());
     book.peer(id, [&](PeerReport& r) {
-        r.bytesOut += bytes.size();
+        r.bytesOut += wire.size();
         ++r.messagesOut;
         r.hapticModels += bytes[0] == uint8_t(MessageType::HapticModel);
         r.hapticRelays += bytes[0] == uint8_t(MessageType::HapticRelay);

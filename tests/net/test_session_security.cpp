@@ -20,6 +20,7 @@
 
 #include <poll.h>
 
+#include <algorithm>
 #include <atomic>
 #include <cstdio>
 #include <mutex>
@@ -470,4 +471,38 @@ TEST(SessionSecurity, RandomDatagramsDuringAHandshakeDoNotStopIt) {
     EXPECT_EQ(server.security().handshakes, 1u);
     enet_socket_destroy(noise);
     server.stop();
+}
+
+// What an eavesdropper sees of a sealed session: neither the code nor the hello's name nor any
+// message in the clear; in an open session the same name is there to read.
+TEST(SessionSecurity, NothingOfTheCodeOrTheMessagesTravelsInTheClear) {
+    Volume sphere = makeSphere(32);
+    const std::string name = "Ada Lovelace of Ockham";
+    auto wireOf = [&](const ServerConfig& sc, const std::string& code) {
+        SessionServer server(sphere, sc);
+        server.start();
+        SessionClient ada(member(sphere, name, Role::Trainee, code));
+        std::vector<std::vector<uint8_t>> wire;
+        ada.setSendTapForTest([&](Channel, std::span<const uint8_t> bytes) {
+            wire.emplace_back(bytes.begin(), bytes.end());
+        });
+        ada.connect(loopback(server.port()));
+        EXPECT_TRUE(pumpUntil({&ada}, [&] { return ada.hasFullImage(); })) << ada.closeReason();
+        server.stop();
+        return wire;
+    };
+    auto contains = [](const std::vector<std::vector<uint8_t>>& wire, const std::string& text) {
+        return std::any_of(wire.begin(), wire.end(), [&](const std::vector<uint8_t>& m) {
+            return std::search(m.begin(), m.end(), text.begin(), text.end()) != m.end();
+        });
+    };
+    const auto sealed = wireOf(codedServerConfig(), kTraineeCode);
+    ASSERT_FALSE(sealed.empty());
+    EXPECT_EQ(sealed[0][0], uint8_t(MessageType::Handshake)); // the offer, then the confirm
+    EXPECT_EQ(sealed[1][0], uint8_t(MessageType::Handshake));
+    EXPECT_FALSE(contains(sealed, name));
+    EXPECT_FALSE(contains(sealed, kTraineeCode));
+    EXPECT_FALSE(contains(sealed, "QX7M4KTD"));
+    const auto open = wireOf(loopbackServerConfig("sphere:32"), "");
+    EXPECT_TRUE(contains(open, name));
 }
