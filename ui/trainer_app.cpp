@@ -887,19 +887,23 @@ void TrainerWindow::mouseTool(const FrameState& f) {
     // the old picture's, which the new camera would turn into a point off the bone.
     std::optional<glm::vec3> hit;
     glm::vec3 axis(0.0f);
+    const float ringMm = 0.5f * shape.diameterMm + 2.0f; // the bone around a hole the cutter cut
+    hole.reset();
     if (overView)
         hit = pickSurface(cpuDbi, cpuDbiCamera, px, py);
     if (hit) {
         pointerPick = *hit;
         markControls.addAtPointer = markControls.addAtPointer || markKey;
-        // The normal over about the cutter's radius of bone around the point, so one voxel's step
-        // does not tilt the handpiece.
+        // The normal of the bone beyond a cutter's hole around the point (the ring readHole
+        // measures from), so neither one voxel's step nor the hole's own walls tilt the
+        // handpiece.
         const float mmPerPx = 2.0f * glm::length(cpuDbiCamera.eye - *hit) *
                               std::tan(glm::radians(cpuDbiCamera.fovYDeg) * 0.5f) /
                               float(std::max(1, cpuDbiCamera.height));
-        const int radiusPx = int(std::ceil(std::max(2.0f, 0.5f * shape.diameterMm) / mmPerPx));
+        const int radiusPx = int(std::ceil(ringMm / mmPerPx));
         axis = surfaceNormal(cpuDbi, cpuDbiCamera, px, py, radiusPx)
                    .value_or(glm::normalize(cpuDbiCamera.eye - *hit));
+        hole = readHole(cpuDbi, cpuDbiCamera, {px, py}, feed.held() ? feed.axis() : axis, ringMm);
     }
     if (!in.left || !toolControls.canDrill)
         feed.release();
@@ -920,17 +924,14 @@ void TrainerWindow::mouseTool(const FrameState& f) {
         toolValid = true;
     } else {
         feedRateMmPerS = 0.0f;
-        if (hit) { // lifted clear of the bone under the pointer, along its normal
-            const ToolPose pose = toolPoseAlong(*hit, axis, shape, -feed.config().liftMm);
+        if (hit) { // lifted clear of the bone around the pointer (a hole's rim), along its normal
+            const float lift = feed.config().liftMm + (hole ? hole->depthMm : 0.0f);
+            const ToolPose pose = toolPoseAlong(*hit, axis, shape, -lift);
             toolPos = pose.position;
             toolRot = pose.orientation;
             toolValid = true;
         }
     }
-    hole.reset();
-    if (overView && toolValid)
-        hole = readHole(cpuDbi, cpuDbiCamera, {px, py}, feed.held() ? feed.axis() : axis,
-                        0.5f * shape.diameterMm + 2.0f);
     toolControls.drilling = toolControls.canDrill && toolValid && feed.held();
 }
 
