@@ -22,7 +22,9 @@ struct WindowedOptions {
     int frames = 0;
     double timeoutS = 90.0;
     float orbitDeg = 0.0f;
-    float tiltDeg = 0.0f;
+    // The site seen at a working angle, as over a surgeon's shoulder, not straight down the
+    // drill's axis (which showed the handpiece end on).
+    float tiltDeg = 30.0f;
     std::string sync = "dbi";          // the design to start in: dbi or volume (issue 7)
     std::string volumeCodec = "raw";   // volume boxes: raw, lz4 or zstd
     std::vector<double> switchSyncAtS; // scripted Comparison toggles (s after the first picture)

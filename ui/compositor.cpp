@@ -31,6 +31,7 @@ in vec3 vNormal;
 in vec3 vPosEye;
 in vec4 vColor;
 uniform vec4 uOwner;
+uniform float uAlpha;
 out vec4 fragColor;
 void main() {
     vec3 n = normalize(vNormal);
@@ -38,7 +39,7 @@ void main() {
     float d = abs(dot(n, l));
     vec3 base = vColor.a == 0.0 ? uOwner.rgb : vColor.rgb;
     vec3 c = base * (0.22 + 0.78 * d) + vec3(0.35) * pow(d, 40.0);
-    fragColor = vec4(c, 1.0);
+    fragColor = vec4(c, uAlpha);
 })";
 
 } // namespace
@@ -49,6 +50,7 @@ Compositor::Compositor() {
     m_uView = glGetUniformLocation(m_meshProgram, "uView");
     m_uProj = glGetUniformLocation(m_meshProgram, "uProj");
     m_uOwner = glGetUniformLocation(m_meshProgram, "uOwner");
+    m_uAlpha = glGetUniformLocation(m_meshProgram, "uAlpha");
 }
 
 Compositor::~Compositor() {
@@ -196,13 +198,25 @@ void Compositor::begin(const Camera& camera) {
     beginMeshes();
 }
 
-void Compositor::draw(const GpuMesh& mesh, const glm::mat4& model, glm::vec4 ownerColor) {
+void Compositor::draw(const GpuMesh& mesh, const glm::mat4& model, glm::vec4 ownerColor,
+                      const MeshStyle& style) {
     if (!mesh.valid())
         return;
     glUniformMatrix4fv(m_uModel, 1, GL_FALSE, glm::value_ptr(model));
     glUniform4fv(m_uOwner, 1, glm::value_ptr(ownerColor));
+    glUniform1f(m_uAlpha, style.alpha);
+    const bool blend = style.alpha < 1.0f;
+    if (blend) { // over what is drawn, hiding nothing drawn after it
+        glEnable(GL_BLEND);
+        glBlendFunc(GL_SRC_ALPHA, GL_ONE_MINUS_SRC_ALPHA);
+        glDepthMask(GL_FALSE);
+    }
     glBindVertexArray(mesh.vao);
     glDrawElements(GL_TRIANGLES, mesh.indexCount, GL_UNSIGNED_INT, nullptr);
+    if (blend) {
+        glDisable(GL_BLEND);
+        glDepthMask(GL_TRUE);
+    }
 }
 
 void Compositor::blitTo(int x, int y) {

@@ -97,9 +97,9 @@ void ScriptedDriver::sendDue(const net::ClientSnapshot& snap, net::ClientThread&
 bool ScriptedDriver::settled(const Frame& f) const {
     // Connected too: a picture kept from before a lost link is not the session's now.
     return f.snap->state == net::LinkState::Connected && f.havePicture && f.viewMatches &&
-           f.haveScene && m_scriptDone && !f.switching && m_nextSwitch == m_switchAtS.size() &&
-           !f.snap->waitingForView && f.sinceLastUpdateS > 0.5 && m_marksSent &&
-           (m_takeOverName.empty() || f.holding != 0) &&
+           f.haveScene && m_scriptDone && !f.pointerBusy && !f.switching &&
+           m_nextSwitch == m_switchAtS.size() && !f.snap->waitingForView &&
+           f.sinceLastUpdateS > 0.5 && m_marksSent && (m_takeOverName.empty() || f.holding != 0) &&
            (m_viewAsName.empty() || f.snap->viewingAs != 0) &&
            f.snap->annotations.size() >= m_marks.size();
 }

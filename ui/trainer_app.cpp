@@ -32,6 +32,7 @@
 #include "ui/window.h"
 
 #include <GLFW/glfw3.h>
+#include <fmt/format.h>
 #include <imgui.h>
 #include <imgui_internal.h> // ClearActiveID: Enter or Escape leaves a text field
 
@@ -41,6 +42,7 @@
 #include <cstdio>
 #include <cstring>
 #include <deque>
+#include <functional>
 #include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtx/quaternion.hpp>
 #include <map>
@@ -57,6 +59,10 @@ namespace {
 // height its content takes, so none scrolls in a default window (panels stay movable).
 constexpr int kBottomHeight = 400; // Forces, under the view
 constexpr int kMinHeight = 760;
+// Our mouse tool's opacity (MeshStyle).
+constexpr float kOwnToolAlpha = 0.45f;
+// Idle after this long without a change (idleFor); then a redraw at most this often.
+constexpr double kIdleAfterS = 0.5, kIdleRedrawS = 0.5;
 // The band that says a trainee is taken over (opaque: tests find its pixels).
 constexpr ImU32 kTakeOverBand = IM_COL32(112, 40, 150, 255);
 
@@ -233,12 +239,12 @@ std::string heldSuffix(const net::ClientSnapshot& snap, uint16_t id) {
 // The view's labels (every tool's owner, ours last) and the instructors' marks, placed so they
 // avoid each other and cut at the view's edge; `own` null: no tool of ours is shown.
 void drawViewLabels(const net::ClientSnapshot& snap, const Camera& camera, const Dbi& cpuDbi,
-                    int viewSize, const ToolPose* own, const std::string& ownLabel) {
+                    glm::ivec2 viewSize, const ToolPose* own, const std::string& ownLabel) {
     ImDrawList* fg = ImGui::GetForegroundDrawList();
     const float viewTop = 0.0f;
     // Labels and marks belong to the view: one that projects outside it (orbited or
     // zoomed away) is cut at its edge, not drawn over the panels beside and under it.
-    fg->PushClipRect(ImVec2(0.0f, viewTop), ImVec2(float(viewSize), viewTop + viewSize));
+    fg->PushClipRect(ImVec2(0.0f, viewTop), ImVec2(float(viewSize.x), viewTop + viewSize.y));
     const glm::dmat4 vp = viewProjection(camera);
     struct Label {
         std::string text;
@@ -268,7 +274,7 @@ void drawViewLabels(const net::ClientSnapshot& snap, const Camera& camera, const
             hidden = bone - mark > 2.0; // eye z is negative in front of the eye
         }
         const ImU32 markCol = ImGui::GetColorU32(ImVec4(mc.r, mc.g, mc.b, hidden ? 0.35f : 1.0f));
-        const ImVec2 c(float(w.window.x), viewTop + float(viewSize - w.window.y));
+        const ImVec2 c(float(w.window.x), viewTop + float(viewSize.y - w.window.y));
         fg->AddCircle(c, 8.0f, IM_COL32(0, 0, 0, 160), 0, 4.5f);
         fg->AddCircle(c, 8.0f, markCol, 0, 2.5f);
         fg->AddCircleFilled(c, 2.5f, markCol);
@@ -278,7 +284,7 @@ void drawViewLabels(const net::ClientSnapshot& snap, const Camera& camera, const
     auto toolLabel = [&](glm::vec3 p, glm::vec3 axis, glm::vec4 c, const std::string& text) {
         WindowPoint w = projectToWindow(vp, camera, glm::dvec3(p + axis * 40.0f));
         if (w.w > 0)
-            add(ImVec2(float(w.window.x), viewTop + float(viewSize - w.window.y)),
+            add(ImVec2(float(w.window.x), viewTop + float(viewSize.y - w.window.y)),
                 ImGui::GetColorU32(ImVec4(c.r, c.g, c.b, 1.0f)), text);
     };
     for (const auto& [id, t] : snap.others)
@@ -290,7 +296,7 @@ void drawViewLabels(const net::ClientSnapshot& snap, const Camera& camera, const
         toolLabel(own->position, own->orientation * glm::vec3(0, 0, 1), toolColour(snap, self),
                   ownLabel + heldSuffix(snap, self));
     const std::vector<UiRect> at =
-        placeLabels(requests, UiRect{0, viewTop, float(viewSize), float(viewSize)});
+        placeLabels(requests, UiRect{0, viewTop, float(viewSize.x), float(viewSize.y)});
     for (size_t i = 0; i < labels.size(); ++i) {
         const UiRect& r = at[i];
         fg->AddRectFilled(ImVec2(r.x - 3, r.y - 2), ImVec2(r.x + r.w + 3, r.y + r.h + 2),
@@ -301,29 +307,47 @@ void drawViewLabels(const net::ClientSnapshot& snap, const Camera& camera, const
 }
 
 // A line about the link or the picture over the view (centred when no picture is shown).
-void drawViewMessage(const std::string& status, bool havePicture, int viewSize) {
+void drawViewMessage(const std::string& status, bool havePicture, glm::ivec2 viewSize) {
     ImDrawList* fg = ImGui::GetForegroundDrawList();
     const float viewTop = 0.0f;
     if (!status.empty()) {
-        ImVec2 sz = ImGui::CalcTextSize(status.c_str(), nullptr, false, viewSize - 40.0f);
-        ImVec2 at((float(viewSize) - sz.x) * 0.5f,
-                  havePicture ? 12.0f : viewTop + (float(viewSize) - sz.y) * 0.5f);
+        ImVec2 sz = ImGui::CalcTextSize(status.c_str(), nullptr, false, viewSize.x - 40.0f);
+        ImVec2 at((float(viewSize.x) - sz.x) * 0.5f,
+                  havePicture ? 12.0f : viewTop + (float(viewSize.y) - sz.y) * 0.5f);
         fg->AddRectFilled(ImVec2(at.x - 10, at.y - 8), ImVec2(at.x + sz.x + 10, at.y + sz.y + 8),
                           IM_COL32(20, 20, 24, 210), 6.0f);
         fg->AddText(nullptr, 0.0f, at, IM_COL32(255, 200, 90, 255), status.c_str(), nullptr,
-                    viewSize - 40.0f);
+                    viewSize.x - 40.0f);
     }
 }
 
+// The hole under the pointer, top left in the view: its depth below the bone around it, what its
+// floor shows, and the feed while the button is held.
+void drawHoleReadout(const std::optional<HoleReading>& hole, bool feeding, float feedMmPerS) {
+    std::string text = hole ? fmt::format("hole {:.1f} mm deep, floor: {}", hole->depthMm,
+                                          holeFloorName(hole->floor))
+                            : std::string("hole: no bone around to measure from");
+    if (hole && hole->floor >= HoleFloor::Dura)
+        text += " (through the inner table)";
+    if (feeding)
+        text += fmt::format("\nfeeding {:.1f} mm/s", feedMmPerS);
+    ImDrawList* fg = ImGui::GetForegroundDrawList();
+    const ImVec2 at(10.0f, 10.0f), sz = ImGui::CalcTextSize(text.c_str());
+    fg->AddRectFilled(ImVec2(at.x - 6, at.y - 4), ImVec2(at.x + sz.x + 6, at.y + sz.y + 4),
+                      IM_COL32(0, 0, 0, 150), 4.0f);
+    fg->AddText(at, IM_COL32(235, 235, 235, 255), text.c_str());
+}
+
 // Taken over, or holding a trainee: said at the foot of the view, on a solid band.
-void drawHeldBand(const std::string& held, int viewSize) {
+void drawHeldBand(const std::string& held, glm::ivec2 viewSize) {
     ImDrawList* fg = ImGui::GetForegroundDrawList();
     const float viewTop = 0.0f;
     if (!held.empty()) {
         // Wrapped to the view: a small view (--window-size 300) shows the whole sentence.
-        const float wrap = std::max(40.0f, float(viewSize) - 40.0f);
+        const float wrap = std::max(40.0f, float(viewSize.x) - 40.0f);
         const ImVec2 sz = ImGui::CalcTextSize(held.c_str(), nullptr, false, wrap);
-        const ImVec2 at((float(viewSize) - sz.x) * 0.5f, viewTop + float(viewSize) - sz.y - 18.0f);
+        const ImVec2 at((float(viewSize.x) - sz.x) * 0.5f,
+                        viewTop + float(viewSize.y) - sz.y - 18.0f);
         fg->AddRectFilled(ImVec2(at.x - 12, at.y - 8), ImVec2(at.x + sz.x + 12, at.y + sz.y + 8),
                           kTakeOverBand, 6.0f);
         fg->AddText(nullptr, 0.0f, at, IM_COL32(255, 255, 255, 255), held.c_str(), nullptr, wrap);
@@ -338,10 +362,20 @@ void placeNextPanel(const UiRect& b, bool relayout) {
     ImGui::SetNextWindowSize(ImVec2(b.w, b.h), cond);
 }
 
+// The view's size in a window of `window` pixels: what the panels' columns on the right
+// (panelsWidth) and Forces under the view leave (at least 64 x 64); the whole window in the
+// full-window view.
+glm::ivec2 viewAreaFor(glm::ivec2 window, bool fullView) {
+    const int columns = int(panelsWidth(window.x, fullView));
+    return glm::max(glm::ivec2(window.x - columns, fullView ? window.y : window.y - kBottomHeight),
+                    glm::ivec2(64));
+}
+
 // The window's trainee core: the client asks for a 1x1 placeholder view until the scene is
 // known, and hands voxel boxes over for the GPU rather than rendering them itself.
-net::TraineeCoreConfig coreConfigFor(const TrainerOptions& o) {
+net::TraineeCoreConfig coreConfigFor(const TrainerOptions& o, std::function<void()> onNews) {
     net::TraineeCoreConfig coreConfig;
+    coreConfig.client.onNews = std::move(onNews);
     net::ClientThreadConfig& cc = coreConfig.client;
     cc.address = o.address;
     cc.client.name = o.name;
@@ -446,6 +480,7 @@ private:
     double seconds() const { return std::chrono::duration<double>(Clock::now() - t0).count(); }
     Camera makeCamera() const;
     bool frame();
+    void fitViewToWindow();
     void takeSnapshot(FrameState& f);
     void takeScene(const FrameState& f);
     void applyRects(const FrameState& f);
@@ -453,6 +488,7 @@ private:
     void choosePicture(FrameState& f);
     void updateTool(FrameState& f);
     void mouseTool(const FrameState& f);
+    void viewGestures(const InjectedInput& in, glm::vec2 delta);
     void composite(const FrameState& f);
     void drawOverlays(FrameState& f);
     std::string tooLargeText(const FrameState& f) const;
@@ -460,10 +496,13 @@ private:
     void drawComparisonExtras();
     void drawFrameRate(double now);
     bool endFrame(const FrameState& f);
+    double idleFor(const FrameState& f);
     void closingFigures();
 
     const TrainerOptions& o;
-    const int viewSize;
+    glm::ivec2 viewSize;         // the view's (and the DBI's) width and height
+    glm::ivec2 windowSize{0};    // the window's size the view was last fitted to (0: not yet)
+    bool fittedFullView = false; // ... and whether it was the full-window view
 
     // The scripted driver (--script, --mark, --take-over, --screenshot, --frames, ...) and the
     // Session panel's controls.
@@ -482,6 +521,7 @@ private:
     GpuMesh fieldMesh;
 
     // Connection: the trainee core and the device its haptic loop reads.
+    std::atomic<bool> news{false}; // the client thread has something new to show (onNews)
     const net::TraineeCoreConfig coreConfig;
     WindowDevice device;
     WindowTools windowTools{device};
@@ -503,7 +543,7 @@ private:
     ViewNote note;                   // a key's feedback over the view
     KeyActions frameKeys;            // what this frame's key presses asked for
     size_t tapsDone = 0;             // [Tests] of TrainerOptions::tapKeys
-    std::array<int, 4> laidOutFor{}; // window w, h, view size, full view: the panels' layout
+    std::array<int, 5> laidOutFor{}; // window w, h, view w, h, full view: the panels' layout
     int attemptsWhenConnected = -1;  // the link's attempts when last up (-1: never)
     int fpsFrames = 0;               // frames since fpsSince
     double fpsSince = 0.0, fps = 0.0;
@@ -525,7 +565,15 @@ private:
     glm::vec3 toolPos{0.0f};
     glm::quat toolRot{1, 0, 0, 0};
     bool toolValid = false;
+    Feed feed;                       // the held button's stroke
+    glm::vec3 hapticForce{0.0f};     // the force the haptic loop output last (the bone's answer)
+    float feedRateMmPerS = 0.0f;     // this frame's feed
+    std::optional<HoleReading> hole; // the hole under the pointer, for the view's readout
+    double lastToolAt = -1.0;        // the last frame's time, for the feed's step
+    InjectedInput inputWas;          // the last frame's pointer: clicks and drags
+    InjectedInput injected;          // [Tests] this frame's TrainerOptions::input
     double lastRectAt = 0.0;
+    double lastActiveAt = 0.0; // idleFor's last activity
     const Clock::time_point t0 = Clock::now();
 };
 
@@ -537,8 +585,11 @@ WindowConfig TrainerWindow::checkedWindowConfig(const TrainerOptions& o) {
 }
 
 TrainerWindow::TrainerWindow(const TrainerOptions& options)
-    : o(options), viewSize(options.size), script(options), window(checkedWindowConfig(options)),
-      coreConfig(coreConfigFor(options)) {
+    : o(options), viewSize(options.size, options.size), script(options),
+      window(checkedWindowConfig(options)), coreConfig(coreConfigFor(options, [this] {
+          news = true;
+          Window::wake();
+      })) {
     markControls.canMark = o.instructor;
     takeOverControls.canTakeOver = o.instructor;
     viewAsControls.canViewAs = o.instructor;
@@ -547,7 +598,7 @@ TrainerWindow::TrainerWindow(const TrainerOptions& options)
     // tooltip or highlighted panel from it).
     if (script.ignoresPointer())
         ImGui::GetIO().ConfigFlags |= ImGuiConfigFlags_NoMouse;
-    comp.resize(viewSize, viewSize);
+    comp.resize(viewSize.x, viewSize.y);
     viewControls.distanceMm = o.distanceMm;
     viewControls.yawDeg = o.orbitDeg;
     viewControls.pitchDeg = o.tiltDeg;
@@ -557,7 +608,7 @@ TrainerWindow::TrainerWindow(const TrainerOptions& options)
 
 Camera TrainerWindow::makeCamera() const {
     return orbitCamera(baseCamera, viewControls.yawDeg, viewControls.pitchDeg,
-                       viewControls.distanceMm, {viewSize, viewSize}, scene->boundingRadiusMm);
+                       viewControls.distanceMm, viewSize, scene->boundingRadiusMm);
 }
 
 int TrainerWindow::run() {
@@ -578,6 +629,12 @@ bool TrainerWindow::frame() {
     FrameState f;
     f.start = Clock::now();
     f.now = seconds();
+    if (o.input) { // a test's hands, once a frame
+        injected = o.input(firstPictureAt < 0.0 ? -1.0 : f.now - firstPictureAt);
+        if (injected.windowWidth > 0 && injected.windowHeight > 0)
+            window.resize(injected.windowWidth, injected.windowHeight);
+    }
+    fitViewToWindow();
     takeSnapshot(f);
     takeScene(f);
     applyRects(f);
@@ -596,6 +653,30 @@ bool TrainerWindow::frame() {
     drawOverlays(f);
     drawPanels(f);
     return endFrame(f);
+}
+
+// A resized window (seen by the last frame's events): the view takes the area the panels leave,
+// and the server is asked for a DBI of its new size; until it comes no picture is drawn (the old
+// one is another size). The window opens fitted to --size, so the first size seen is kept.
+void TrainerWindow::fitViewToWindow() {
+    const glm::ivec2 now(window.width(), window.height());
+    if ((now == windowSize && toggles.fullView == fittedFullView) || now.x <= 0 || now.y <= 0)
+        return; // unchanged, or minimised: keep the view
+    const bool first = windowSize == glm::ivec2(0);
+    windowSize = now;
+    fittedFullView = toggles.fullView;
+    if (first)
+        return;
+    const glm::ivec2 view = viewAreaFor(now, toggles.fullView);
+    if (view == viewSize)
+        return;
+    viewSize = view;
+    comp.resize(view.x, view.y);
+    haveImage = false; // the old size's rectangles no longer fit the textures
+    if (scene) {
+        wantedCamera = makeCamera();
+        client.requestView(net::toViewSpec(wantedCamera));
+    }
 }
 
 void TrainerWindow::takeSnapshot(FrameState& f) {
@@ -632,9 +713,9 @@ void TrainerWindow::takeScene(const FrameState& f) {
         std::optional<Camera> preset;
         if (o.camera == "site")
             preset = cameraLookingAt(scene->site.position, scene->site.normal, o.distanceMm, 45.0f,
-                                     {viewSize, viewSize}, scene->boundingRadiusMm);
+                                     viewSize, scene->boundingRadiusMm);
         else
-            preset = net::presetCamera(scene->received->scene, o.camera, {viewSize, viewSize});
+            preset = net::presetCamera(scene->received->scene, o.camera, viewSize);
         if (preset) {
             baseCamera = *preset;
             viewControls.distanceMm = glm::length(baseCamera.eye - baseCamera.target);
@@ -660,7 +741,7 @@ void TrainerWindow::takeScene(const FrameState& f) {
 void TrainerWindow::applyRects(const FrameState& f) {
     for (net::AppliedRect& r : client.drainRects()) {
         if (r.full) {
-            if (r.pixels.width() != viewSize || r.pixels.height() != viewSize)
+            if (r.pixels.width() != viewSize.x || r.pixels.height() != viewSize.y)
                 continue; // the placeholder view before ours
             if (local.have && r.appliedUs < designs.pictureSinceUs)
                 continue; // older than the volume that replaced the DBI
@@ -728,7 +809,7 @@ void TrainerWindow::choosePicture(FrameState& f) {
     // drawn with the view the client holds now.
     const net::ViewSpec& shownView =
         picture == SyncDesign::Dbi && haveImage ? imageView : f.snap->view;
-    f.viewMatches = shownView.width == viewSize && shownView.height == viewSize;
+    f.viewMatches = shownView.width == viewSize.x && shownView.height == viewSize.y;
     f.dbiCamera = net::toCamera(shownView);
     if (picture == SyncDesign::Volume && !(local.camera == f.dbiCamera)) {
         local.dirty = true;        // a new view: the picture for picking must be read back again
@@ -751,6 +832,8 @@ void TrainerWindow::updateTool(FrameState& f) {
         if (frameKeys.leaveTextField)
             ImGui::ClearActiveID();
     }
+    const std::vector<HapticSample> ticks = core.hapticSamples();
+    hapticForce = ticks.empty() ? glm::vec3(0.0f) : ticks.back().force;
     if (scene && f.havePicture && script.drivesTool()) {
         const ScriptPose p = script.tool(scene->site, f.now);
         toolControls.kind = 0;
@@ -776,12 +859,13 @@ void TrainerWindow::updateTool(FrameState& f) {
 
     // The 1 kHz extrapolated force, straight from the haptic loop's recorder, on the
     // window's clock (the model folded the server's samples with the snapshot).
-    model.setHapticTicks(core.hapticSamples(), f.now);
+    model.setHapticTicks(ticks, f.now);
     f.hstats = core.hapticStats();
 }
 
-// The mouse device: keys pick the tool and its push, the pointer over the view places it on the
-// bone under it.
+// The mouse device: keys pick the tool and its push; over the view the pointer shows the bone
+// under it with the handpiece lifted clear along the surface's normal, the held left button feeds
+// the cutter in (Feed), a right drag orbits and Ctrl or Shift with the wheel zooms.
 void TrainerWindow::mouseTool(const FrameState& f) {
     ImGuiIO& io = ImGui::GetIO();
     // Keys from the window's queue (a tap inside one frame counts). M marks the bone under the
@@ -794,34 +878,109 @@ void TrainerWindow::mouseTool(const FrameState& f) {
         else
             note.show("Enter: point at the bone in the view first, then press M", f.now);
     }
-    const bool overView = io.MousePos.x >= 0 && io.MousePos.y >= 0 &&
-                          io.MousePos.x < float(viewSize) && io.MousePos.y < float(viewSize) &&
-                          !io.WantCaptureMouse;
-    if (overView) {
-        toolControls.pushMm = steppedPush(toolControls.pushMm, io.MouseWheel);
-        int px = int(io.MousePos.x), py = viewSize - 1 - int(io.MousePos.y);
-        // Unprojected with the camera cpuDbi was made with: in volume mode its depth is
-        // read back after this pick, so for one frame after a view change (or a switch
-        // from DBI) it is still the old picture's, which the new camera would turn into a
-        // point off the bone.
-        if (auto hit = pickSurface(cpuDbi, cpuDbiCamera, px, py)) {
-            pointerPick = *hit;
-            markControls.addAtPointer = markControls.addAtPointer || markKey;
-            ToolShape shape = selectedKind(toolControls) == ToolKind::Perforator
-                                  ? ToolShape::perforator(selectedDiameter(toolControls))
-                                  : ToolShape::burr(selectedDiameter(toolControls));
-            ToolPose pose = toolPoseAt(*hit, f.dbiCamera, shape, toolControls.pushMm);
+    // The mouse, or what a test drives in its place.
+    InjectedInput in;
+    if (o.input) {
+        in = injected;
+    } else {
+        in = {io.MousePos.x,
+              io.MousePos.y,
+              ImGui::IsMouseDown(ImGuiMouseButton_Left),
+              ImGui::IsMouseDown(ImGuiMouseButton_Right),
+              io.MouseWheel,
+              io.KeyCtrl || io.KeyShift};
+    }
+    const bool clicked = in.left && !inputWas.left;
+    const glm::vec2 delta = inputWas.x >= 0.0f && in.x >= 0.0f
+                                ? glm::vec2(in.x - inputWas.x, in.y - inputWas.y)
+                                : glm::vec2(0.0f);
+    inputWas = in;
+    const bool overView = in.x >= 0 && in.y >= 0 && in.x < float(viewSize.x) &&
+                          in.y < float(viewSize.y) && (o.input || !io.WantCaptureMouse);
+    const float dt = lastToolAt < 0.0 ? 0.0f : float(std::min(f.now - lastToolAt, 0.05));
+    lastToolAt = f.now;
+    if (overView)
+        viewGestures(in, delta);
+    const ToolShape shape = selectedKind(toolControls) == ToolKind::Perforator
+                                ? ToolShape::perforator(selectedDiameter(toolControls))
+                                : ToolShape::burr(selectedDiameter(toolControls));
+    const int px = int(in.x), py = viewSize.y - 1 - int(in.y);
+    // Unprojected with the camera cpuDbi was made with: in volume mode its depth is read back
+    // after this pick, so for one frame after a view change (or a switch from DBI) it is still
+    // the old picture's, which the new camera would turn into a point off the bone.
+    std::optional<glm::vec3> hit;
+    glm::vec3 axis(0.0f);
+    const float ringMm = 0.5f * shape.diameterMm + 2.0f; // the bone around a hole the cutter cut
+    hole.reset();
+    if (overView)
+        hit = pickSurface(cpuDbi, cpuDbiCamera, px, py);
+    if (hit) {
+        pointerPick = *hit;
+        markControls.addAtPointer = markControls.addAtPointer || markKey;
+        // The normal of the bone beyond a cutter's hole around the point (the ring readHole
+        // measures from), so neither one voxel's step nor the hole's own walls tilt the
+        // handpiece.
+        const float mmPerPx = 2.0f * glm::length(cpuDbiCamera.eye - *hit) *
+                              std::tan(glm::radians(cpuDbiCamera.fovYDeg) * 0.5f) /
+                              float(std::max(1, cpuDbiCamera.height));
+        const int radiusPx = int(std::ceil(ringMm / mmPerPx));
+        axis = surfaceNormal(cpuDbi, cpuDbiCamera, px, py, radiusPx)
+                   .value_or(glm::normalize(cpuDbiCamera.eye - *hit));
+        hole = readHole(cpuDbi, cpuDbiCamera, {px, py}, feed.held() ? feed.axis() : axis, ringMm);
+    }
+    if (!in.left || !toolControls.canDrill)
+        feed.release();
+    else if (!feed.held() && hit && clicked)
+        feed.press(*hit, axis, toolControls.pushMm);
+    if (feed.held()) {
+        // The pointer moved: the stroke follows it across the axis (where the pointer's ray
+        // meets the plane of the first contact), not to the picked floor of its own hole.
+        if (overView && (delta.x != 0.0f || delta.y != 0.0f))
+            if (const auto p = rayOnPlane(cpuDbiCamera, px, py, feed.surface(), feed.axis()))
+                feed.slideTo(*p);
+        const float vmax =
+            maxFeedMmPerS(shape.kind, toolControls.speed, scene->received->scene.spacing);
+        feedRateMmPerS = feed.advance(dt, hapticForce, vmax);
+        const ToolPose pose = toolPoseAlong(feed.surface(), feed.axis(), shape, feed.depthMm());
+        toolPos = pose.position;
+        toolRot = pose.orientation;
+        toolValid = true;
+    } else {
+        feedRateMmPerS = 0.0f;
+        if (hit) { // lifted clear of the bone around the pointer (a hole's rim), along its normal
+            const float lift = feed.config().liftMm + (hole ? hole->depthMm : 0.0f);
+            const ToolPose pose = toolPoseAlong(*hit, axis, shape, -lift);
             toolPos = pose.position;
             toolRot = pose.orientation;
             toolValid = true;
-        } else if (markKey) {
-            note.show("M: no bone under the pointer, nothing marked", f.now);
         }
-    } else if (markKey) {
-        note.show("M: point at the bone in the view, then press M", f.now);
     }
-    toolControls.drilling =
-        toolControls.canDrill && toolValid && overView && ImGui::IsMouseDown(ImGuiMouseButton_Left);
+    if (markKey && !hit)
+        note.show(overView ? "M: no bone under the pointer, nothing marked"
+                           : "M: point at the bone in the view, then press M",
+                  f.now);
+    toolControls.drilling = toolControls.canDrill && toolValid && feed.held();
+}
+
+// Gestures in the view: a right drag orbits, Ctrl or Shift with the wheel zooms, the plain wheel
+// sets the depth a stroke starts at (as the Session panel's push).
+void TrainerWindow::viewGestures(const InjectedInput& in, glm::vec2 delta) {
+    if (in.wheel != 0.0f) {
+        if (in.zoomKey) {
+            viewControls.distanceMm = std::clamp(viewControls.distanceMm * std::pow(0.9f, in.wheel),
+                                                 kViewMinDistanceMm, kViewMaxDistanceMm);
+            viewControls.dirty = true;
+        } else {
+            toolControls.pushMm = steppedPush(toolControls.pushMm, in.wheel);
+        }
+    }
+    if (in.right && (delta.x != 0.0f || delta.y != 0.0f)) {
+        viewControls.yawDeg = std::clamp(viewControls.yawDeg - delta.x * kOrbitDegPerPx,
+                                         kViewMinYawDeg, kViewMaxYawDeg);
+        viewControls.pitchDeg = std::clamp(viewControls.pitchDeg + delta.y * kOrbitDegPerPx,
+                                           kViewMinPitchDeg, kViewMaxPitchDeg);
+        viewControls.dirty = true;
+    }
 }
 
 // Composite: pass 1 the DBI (or the ray cast of the local volume), pass 2 the anatomy and the
@@ -848,10 +1007,12 @@ void TrainerWindow::composite(const FrameState& f) {
     for (const auto& [id, t] : f.snap->others)
         comp.draw(tools.get(ToolKind(t.toolKind), t.diameterMm),
                   toolMatrix(t.position, t.orientation), toolColour(*f.snap, id));
+    // Ours, placed by the mouse, is translucent: it always sits over the cut it makes.
     if (toolValid)
         comp.draw(tools.get(f.kind, f.diameter), toolMatrix(toolPos, toolRot),
-                  toolColour(*f.snap, f.snap->welcome ? f.snap->welcome->clientId : 0));
-    comp.blitTo(0, window.height() - viewSize);
+                  toolColour(*f.snap, f.snap->welcome ? f.snap->welcome->clientId : 0),
+                  MeshStyle{script.drivesTool() ? 1.0f : kOwnToolAlpha});
+    comp.blitTo(0, window.height() - viewSize.y);
 }
 
 // Overlays in the view: labels, dirty boxes, connection state.
@@ -862,21 +1023,23 @@ void TrainerWindow::drawOverlays(FrameState& f) {
     if (f.havePicture && f.viewMatches) {
         drawViewLabels(snap, f.dbiCamera, cpuDbi, viewSize, toolValid ? &ownTool : nullptr,
                        o.name + (toolControls.drilling ? " (drilling)" : ""));
-        drawDirtyBoxOverlay(boxState, model.boxes, f.now, 0.0f, viewTop, viewSize);
+        drawDirtyBoxOverlay(boxState, model.boxes, f.now, 0.0f, viewTop, viewSize.y);
+        if (hole || feed.held())
+            drawHoleReadout(hole, feed.held(), feedRateMmPerS);
     }
     // A view larger than the server serves is refused by the client (the window waited for
     // its first image for good, the reason in one line of the Network panel).
     f.maxViewPixels = snap.welcome ? snap.welcome->maxViewPixels : 0;
     f.viewTooLarge = snap.state == net::LinkState::Connected && snap.welcome &&
-                     int64_t(viewSize) * viewSize > f.maxViewPixels;
+                     int64_t(viewSize.x) * viewSize.y > f.maxViewPixels;
     if (snap.state == net::LinkState::Connected)
         attemptsWhenConnected = snap.attempts;
     const LinkMessage link = linkMessage(snap.state, snap.attempts, attemptsWhenConnected,
                                          snap.closeReason, o.address, f.havePicture);
     if (link.dim) // the picture is stale: dimmed under the message, the panels not
-        ImGui::GetBackgroundDrawList()->AddRectFilled(ImVec2(0, viewTop),
-                                                      ImVec2(float(viewSize), viewTop + viewSize),
-                                                      IM_COL32(0, 0, 0, 150));
+        ImGui::GetBackgroundDrawList()->AddRectFilled(
+            ImVec2(0, viewTop), ImVec2(float(viewSize.x), viewTop + float(viewSize.y)),
+            IM_COL32(0, 0, 0, 150));
     std::string status;
     if (f.viewTooLarge)
         status = tooLargeText(f);
@@ -901,14 +1064,14 @@ void TrainerWindow::drawOverlays(FrameState& f) {
         held = "You hold " + participantName(snap.participants, f.holding) +
                ": your drill cuts, theirs is paused";
     drawHeldBand(held, viewSize);
-    note.draw(f.now, 0.0f, viewTop, float(viewSize));
+    note.draw(f.now, 0.0f, viewTop, float(viewSize.x));
     drawFrameRate(f.now);
 }
 
 std::string TrainerWindow::tooLargeText(const FrameState& f) const {
     return "The server serves views of at most " + std::to_string(f.maxViewPixels) +
-           " pixels; this view is " + std::to_string(viewSize) + " x " + std::to_string(viewSize) +
-           ": restart with " + o.sizeOption + " " +
+           " pixels; this view is " + std::to_string(viewSize.x) + " x " +
+           std::to_string(viewSize.y) + ": restart with " + o.sizeOption + " " +
            std::to_string(int(std::sqrt(double(f.maxViewPixels)))) + " or less";
 }
 
@@ -918,8 +1081,8 @@ void TrainerWindow::drawPanels(const FrameState& f) {
     const net::ClientSnapshot& snap = *f.snap;
     const SyncDesign picture = f.picture;
     const WindowLayout layout =
-        windowLayout(window.width(), window.height(), viewSize, viewSize, toggles.fullView);
-    const std::array<int, 4> shape{window.width(), window.height(), viewSize,
+        windowLayout(window.width(), window.height(), viewSize.x, viewSize.y, toggles.fullView);
+    const std::array<int, 5> shape{window.width(), window.height(), viewSize.x, viewSize.y,
                                    int(toggles.fullView)};
     const bool relayout = shape != laidOutFor;
     laidOutFor = shape;
@@ -987,7 +1150,7 @@ void TrainerWindow::drawFrameRate(double now) {
         std::snprintf(text, sizeof text, "- fps");
     ImDrawList* fg = ImGui::GetForegroundDrawList();
     const ImVec2 sz = ImGui::CalcTextSize(text);
-    const ImVec2 at(float(viewSize) - sz.x - 8.0f, 6.0f);
+    const ImVec2 at(float(viewSize.x) - sz.x - 8.0f, 6.0f);
     fg->AddRectFilled(ImVec2(at.x - 4, at.y - 2), ImVec2(at.x + sz.x + 4, at.y + sz.y + 2),
                       IM_COL32(0, 0, 0, 140), 3.0f);
     fg->AddText(at, IM_COL32(200, 220, 200, 255), text);
@@ -1022,6 +1185,7 @@ bool TrainerWindow::endFrame(const FrameState& f) {
     scripted.switching = f.switching;
     scripted.sinceLastUpdateS = f.now - lastRectAt;
     scripted.holding = f.holding;
+    scripted.pointerBusy = o.input && !injected.done;
     if (f.viewTooLarge)
         scripted.viewTooLarge = tooLargeText(f);
     if (script.abortsBeforeEnd(scripted)) {
@@ -1049,8 +1213,34 @@ bool TrainerWindow::endFrame(const FrameState& f) {
     model.tickComparison(f.now, picture, f.havePicture && !f.switching, f.hstats.ticks);
     if (script.afterFrame(scripted, f.now, capture))
         return false;
-    std::this_thread::sleep_until(f.start + std::chrono::milliseconds(10));
+    // Idle (nothing new for a while, no input, nothing moving): wait for an event, or for the
+    // client thread's wake-up when something new arrives, redrawing a few times a second only;
+    // else about 100 frames a second.
+    if (idleFor(f) >= kIdleAfterS)
+        window.waitEvents(kIdleRedrawS);
+    else
+        std::this_thread::sleep_until(f.start + std::chrono::milliseconds(10));
     return true;
+}
+
+// Seconds since anything changed that a frame shows: input, an update, a snapshot with news, the
+// tool feeding or scripted, a view or a design on its way. Scripted runs (screenshots, frame
+// counts) are never idle, so their timing stays as it was.
+double TrainerWindow::idleFor(const FrameState& f) {
+    const ImGuiIO& io = ImGui::GetIO();
+    bool input = io.MouseDelta.x != 0.0f || io.MouseDelta.y != 0.0f || io.MouseWheel != 0.0f ||
+                 io.MouseWheelH != 0.0f || !io.InputQueueCharacters.empty();
+    for (bool down : io.MouseDown)
+        input |= down;
+    for (bool down : io.KeysDown)
+        input |= down;
+    const bool busy = news.exchange(false) || input || lastRectAt == f.now || feed.held() ||
+                      script.drivesTool() || viewControls.dirty || f.snap->waitingForView ||
+                      f.switching || !f.havePicture || o.frames > 0 || !o.screenshot.empty() ||
+                      !o.switchSyncAtS.empty() || bool(o.input);
+    if (busy)
+        lastActiveAt = f.now;
+    return f.now - lastActiveAt;
 }
 
 // The report's figures, once the core has stopped.

@@ -62,22 +62,28 @@ float density(vec3 p) { return texture(uDensity, (p + 0.5) / uDims).r * 255.0; }
 int voxelDensity(ivec3 v) { return int(texelFetch(uDensity, v, 0).r * 255.0 + 0.5); }
 int voxelMaterial(ivec3 v) { return int(texelFetch(uMaterial, v, 0).r * 255.0 + 0.5); }
 
-// Renderer's hitMaterial: the nearest voxel's label, or if that is air the densest labelled
-// corner of the first sample inside.
+// Renderer's hitMaterial: the nearest voxel's label, or if that is air the labelled corner of the
+// first sample inside nearest the hit (the denser on a tie).
 int hitMaterial(vec3 pHit, vec3 pIn) {
     ivec3 v = clamp(ivec3(floor(pHit + 0.5)), ivec3(0), uDimsI - 1);
     int m = voxelMaterial(v);
     if (m != 0)
         return m;
     ivec3 c = ivec3(floor(pIn));
+    float bestD2 = 1e30;
     int best = -1;
     for (int i = 0; i < 8; ++i) {
         ivec3 q = c + ivec3(i & 1, (i >> 1) & 1, i >> 2);
         if (any(lessThan(q, ivec3(0))) || any(greaterThanEqual(q, uDimsI)))
             continue;
-        int d = voxelDensity(q);
         int l = voxelMaterial(q);
-        if (d > best && l != 0) {
+        if (l == 0)
+            continue;
+        vec3 e = vec3(q) - pHit;
+        float d2 = dot(e, e);
+        int d = voxelDensity(q);
+        if (d2 < bestD2 || (d2 == bestD2 && d > best)) {
+            bestD2 = d2;
             best = d;
             m = l;
         }

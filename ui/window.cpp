@@ -148,6 +148,19 @@ void Window::endFrame(Dbi* capture) {
     glfwSwapBuffers(m_window);
 }
 
+void Window::waitEvents(double timeoutS) {
+    glfwWaitEventsTimeout(timeoutS);
+}
+
+void Window::resize(int width, int height) {
+    if (width != m_width || height != m_height)
+        glfwSetWindowSize(m_window, width, height);
+}
+
+void Window::wake() {
+    glfwPostEmptyEvent();
+}
+
 Dbi Window::readFramebuffer() const {
     Dbi out(m_width, m_height);
     glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);

@@ -851,18 +851,24 @@ Material hitMaterial(const Frame& f, v4sf pHit, v4sf pIn) {
     Material m = label(v.x, v.y, v.z);
     if (m != Material::Air)
         return m;
-    // The nearest voxel is air (the surface passes between voxels): take the densest labelled
-    // corner of the first sample inside, whose density reaches the iso-value.
+    // The nearest voxel is air (the surface passes between voxels): take the labelled corner of
+    // the first sample inside that lies nearest the hit, the denser on a tie: the layer the
+    // surface passes through, not a denser one beyond it (a hole's diploe floor over the inner
+    // table).
     const v4si ci = floorInt4(pIn);
     glm::ivec3 c(ci[0], ci[1], ci[2]);
+    float bestD2 = INFINITY;
     int best = -1;
     for (int i = 0; i < 8; ++i) {
         glm::ivec3 q = c + glm::ivec3(i & 1, (i >> 1) & 1, (i >> 2) & 1);
-        if (q.x < 0 || q.y < 0 || q.z < 0 || q.x >= f.n.x || q.y >= f.n.y || q.z >= f.n.z)
+        if (q.x < 0 || q.y < 0 || q.z < 0 || q.x >= f.n.x || q.y >= f.n.y || q.z >= f.n.z ||
+            label(q.x, q.y, q.z) == Material::Air)
             continue;
-        int d = f.density[q.x + f.sy * q.y + f.sz * q.z];
-        if (d > best && label(q.x, q.y, q.z) != Material::Air)
-            best = d, m = label(q.x, q.y, q.z);
+        const float dx = float(q.x) - pHit[0], dy = float(q.y) - pHit[1], dz = float(q.z) - pHit[2];
+        const float d2 = dx * dx + dy * dy + dz * dz;
+        const int d = f.density[q.x + f.sy * q.y + f.sz * q.z];
+        if (d2 < bestD2 || (d2 == bestD2 && d > best))
+            bestD2 = d2, best = d, m = label(q.x, q.y, q.z);
     }
     return m == Material::Air ? Material::Cortical : m;
 }

@@ -3,11 +3,13 @@
 #include "libsim/error.h"
 #include "net/codec.h"
 
+#include <algorithm>
 #include <chrono>
 #include <cstring>
 #include <functional>
 #include <mutex>
 #include <pthread.h>
+#include <utility>
 
 namespace trephine::net {
 
@@ -190,6 +192,8 @@ void ClientThread::pushBox(AppliedVolumeBox b) {
         m_needFullVolume = true;
     }
     m_boxesPublished.fetch_add(1);
+    if (m_config.onNews)
+        m_config.onNews();
 }
 
 bool ClientThread::withLocalVolume(const std::function<void(const Volume&)>& fn) const {
@@ -225,7 +229,31 @@ void ClientThread::pushRect(AppliedRect r) {
         m_needFull = true;
     }
     m_rectsPublished.fetch_add(1);
+    if (m_config.onNews)
+        m_config.onNews();
 }
+
+namespace {
+
+// What a window draws from a snapshot, apart from the rectangles and boxes (ClientThread::onNews):
+// equal here, a redraw would show the same picture.
+bool drawsTheSame(const ClientSnapshot& a, const ClientSnapshot& b) {
+    auto sameTool = [](const auto& x, const auto& y) {
+        return x.first == y.first && x.second.position == y.second.position &&
+               x.second.orientation == y.second.orientation &&
+               x.second.drilling == y.second.drilling && x.second.toolKind == y.second.toolKind &&
+               x.second.diameterMm == y.second.diameterMm;
+    };
+    return a.state == b.state && a.closeReason == b.closeReason && a.attempts == b.attempts &&
+           a.scene == b.scene && a.welcome.has_value() == b.welcome.has_value() &&
+           a.viewingAs == b.viewingAs && a.view == b.view && a.viewId == b.viewId &&
+           a.waitingForView == b.waitingForView && a.sync == b.sync &&
+           a.requestedSync == b.requestedSync && a.participants == b.participants &&
+           a.annotations == b.annotations &&
+           std::equal(a.others.begin(), a.others.end(), b.others.begin(), b.others.end(), sameTool);
+}
+
+} // namespace
 
 void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
     auto s = std::make_shared<ClientSnapshot>();
@@ -288,8 +316,13 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
         if (!s->rateHistory.empty())
             s->rates = s->rateHistory.back();
     }
-    std::lock_guard lock(m_snapMutex);
-    m_snapshot = std::move(s);
+    std::shared_ptr<const ClientSnapshot> last, now = s;
+    {
+        std::lock_guard lock(m_snapMutex);
+        last = std::exchange(m_snapshot, std::move(s));
+    }
+    if (m_config.onNews && (!last || !drawsTheSame(*last, *now)))
+        m_config.onNews();
 }
 
 void ClientThread::run() {

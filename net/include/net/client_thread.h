@@ -141,6 +141,11 @@ struct ClientThreadConfig {
     // Called on the network thread for every force model as it arrives (e.g. HapticLoop::setModel,
     // which is thread-safe); must be quick.
     std::function<void(const HapticModel&)> onHapticModel;
+    // Called on the network thread when there is something new to show: an applied rectangle or
+    // voxel box, or a snapshot that differs from the last in what a window draws (link state,
+    // scene, view, others' tools, participants, marks). A window waiting for events while idle
+    // wakes on it (e.g. glfwPostEmptyEvent); must be quick and thread-safe.
+    std::function<void()> onNews;
 };
 
 class ClientThread {

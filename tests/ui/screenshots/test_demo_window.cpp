@@ -29,7 +29,7 @@ bool boneColoured(const uint8_t* p) {
 std::string shoot(const std::string& name, const std::string& extra) {
     std::string out = (std::filesystem::temp_directory_path() / name).string();
     std::filesystem::remove(out);
-    std::string cmd = shellQuote(TREPHINE_BIN) + " demo --volume skull:128 --screenshot " +
+    std::string cmd = shellQuote(TREPHINE_BIN) + " demo --volume skull:128 --tilt 0 --screenshot " +
                       shellQuote(out) + " --frames 3 --timeout 80 " + extra + " > " +
                       shellQuote(out + ".log") + " 2>&1";
     int rc = std::system(cmd.c_str());
@@ -47,7 +47,8 @@ TEST(DemoWindow, ScreenshotShowsBoneTheDrilledHoleAndPanels) {
     ASSERT_EQ(plain.h, 900);
     ASSERT_EQ(drilled.w, plain.w);
     ASSERT_EQ(drilled.h, plain.h);
-    // The view is 500x500 at the top left, looking straight at the burr site (its centre).
+    // The view is 500x500 at the top left, looking straight at the burr site (its centre): the
+    // default working angle tilted off (--tilt 0), so the ring below is all exposed bone.
     const int cx = 250, cy = 250;
     int ring = 0, ringBone = 0, centre = 0, centreBonePlain = 0, centreChanged = 0;
     for (int y = 0; y < 500; ++y)

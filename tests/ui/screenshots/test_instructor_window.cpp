@@ -138,7 +138,7 @@ TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
                   double(markAt.x), double(markAt.y), double(markAt.z), double(hiddenAt.x),
                   double(hiddenAt.y), double(hiddenAt.z));
     const std::string cmd = shellQuote(TREPHINE_BIN) + " instructor --connect " + address + mark +
-                            " --window-size 500 --screenshot " + shellQuote(out) +
+                            " --window-size 500 --tilt 0 --screenshot " + shellQuote(out) +
                             " --frames 3 --timeout 80 > " + shellQuote(out + ".log") + " 2>&1";
     const int rc = std::system(cmd.c_str());
     const uint64_t relays = server.hapticRelaysSent();
@@ -153,7 +153,8 @@ TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
 
     Image img = readPng(out);
     ASSERT_EQ(img.w, 1280);
-    // The instructor's camera: its default close view of the burr site, 500 x 500 at the top left.
+    // The instructor's camera: its close view of the burr site, straight down the normal
+    // (--tilt 0), 500 x 500 at the top left.
     const Camera cam =
         cameraLookingAt(site.position, site.normal, 170.0f, 45.0f, {500, 500}, skull);
     const glm::dmat4 vp = viewProjection(cam);

@@ -23,6 +23,12 @@ struct GpuMesh {
     bool valid() const { return vao != 0; }
 };
 
+// How pass 2 draws one mesh: `alpha` below 1 blends it over the picture, still depth-tested,
+// without writing depth (a tool that would hide the cut).
+struct MeshStyle {
+    float alpha = 1.0f;
+};
+
 class Compositor {
 public:
     Compositor(); // needs a current GL 3.3 core context
@@ -50,7 +56,8 @@ public:
     // DBI's convention (e.g. VolumeView::draw) before the meshes.
     void beginEmpty(const Camera& camera);
     // Pass 2: one mesh with its model matrix; vertices with alpha 0 take ownerColor.
-    void draw(const GpuMesh& mesh, const glm::mat4& model, glm::vec4 ownerColor = glm::vec4(1));
+    void draw(const GpuMesh& mesh, const glm::mat4& model, glm::vec4 ownerColor = glm::vec4(1),
+              const MeshStyle& style = {});
     // Copies the composite into the bound window framebuffer with its bottom-left at (x, y).
     void blitTo(int x, int y);
 
@@ -69,7 +76,7 @@ private:
     GLuint m_fbo = 0, m_fboColor = 0, m_fboDepth = 0;    // the composite
     GLuint m_meshProgram = 0;
     std::vector<uint8_t> m_opaque; // uploadRect's colour with alpha 255
-    GLint m_uModel = -1, m_uView = -1, m_uProj = -1, m_uOwner = -1;
+    GLint m_uModel = -1, m_uView = -1, m_uProj = -1, m_uOwner = -1, m_uAlpha = -1;
     glm::mat4 m_view{1.0f}, m_proj{1.0f};
 };
 

@@ -19,10 +19,84 @@ namespace trephine::ui {
 // pixel shows no bone (depth 1) or lies outside the image.
 std::optional<glm::vec3> pickSurface(const Dbi& dbi, const Camera& camera, int px, int py);
 
+// Where the view ray through DBI pixel (px, py) meets the plane through `point` across `normal`;
+// nothing when it runs parallel to the plane or meets it behind the eye.
+std::optional<glm::vec3> rayOnPlane(const Camera& camera, int px, int py, glm::vec3 point,
+                                    glm::vec3 normal);
+
 // The tool touching `surface` from the eye's side, its shaft toward the eye, pushed `pushMm`
 // further along the line of sight (negative: lifted off). A burr's centre sits one radius out so
 // that the sphere touches the point; the perforator's apex sits on it.
 ToolPose toolPoseAt(glm::vec3 surface, const Camera& camera, const ToolShape& shape, float pushMm);
+
+// The outward surface normal at DBI pixel (px, py): the cross product of the bone points
+// `radiusPx` pixels to either side (unprojected from their depths), turned toward the eye; nothing
+// where any of them shows no bone. A radius of a few millimetres' worth of pixels smooths the
+// voxels' steps and a small pit.
+std::optional<glm::vec3> surfaceNormal(const Dbi& dbi, const Camera& camera, int px, int py,
+                                       int radiusPx);
+
+// The tool on `surface` with its shaft along `axis` (unit, out of the bone), pushed `pushMm`
+// into it along the axis (negative: lifted off); as toolPoseAt but along the handpiece's own axis.
+ToolPose toolPoseAlong(glm::vec3 surface, glm::vec3 axis, const ToolShape& shape, float pushMm);
+
+// [SECTION] the handpiece's feed
+// Holding the button advances the cutter along its axis as a hand pushing with a steady force
+// would: no faster than the cutter's front can erode the densest bone it meets (one voxel layer
+// of density 255 per 255 / (erosion rate x speed) seconds, libsim/drill.h's rates), and slowed
+// in proportion as the bone pushes back (the force along the axis, from the server's haptic
+// answer, against the hand's push): it stalls where the bone does not erode (dura) or pushes
+// back as hard as the hand. Releasing ends the stroke; the next one starts at the surface again.
+struct FeedConfig {
+    float pushForceN = 2.5f;  // the hand's push along the shaft
+    float liftMm = 8.0f;      // the cutter's clearance above the bone with the button up
+    float maxDepthMm = 15.0f; // past any skull's bone: a stroke over a hole in air stops there
+};
+// The fastest feed (mm/s) the erosion allows a `kind` cutter at `speed` in voxels of `spacing`.
+float maxFeedMmPerS(ToolKind kind, float speed, glm::vec3 spacing);
+
+class Feed {
+public:
+    explicit Feed(FeedConfig config = {}) : m_config(config) {}
+    // The button went down with the cutter touching `surface`, its shaft along `axis` (unit, out
+    // of the bone), starting `startMm` deep (the push setting).
+    void press(glm::vec3 surface, glm::vec3 axis, float startMm);
+    void release() { m_held = false; }
+    bool held() const { return m_held; }
+    // One frame of `dt` seconds with `force` (N, on the tool) the bone's answer at the current
+    // pose and `maxMmPerS` from maxFeedMmPerS: the depth advances by the feed rate times dt.
+    // Returns the feed rate (mm/s) used.
+    float advance(float dt, glm::vec3 force, float maxMmPerS);
+    // The pointer moved while the button is held: the stroke follows it sideways, at its depth,
+    // in the plane through the first contact across the axis (a groove, as a drill guided aside).
+    void slideTo(glm::vec3 surface);
+    glm::vec3 surface() const { return m_surface; }
+    glm::vec3 axis() const { return m_axis; }
+    float depthMm() const { return m_depthMm; } // cutter pushed below the first contact (mm)
+    const FeedConfig& config() const { return m_config; }
+
+private:
+    FeedConfig m_config;
+    bool m_held = false;
+    glm::vec3 m_surface{0.0f}, m_axis{0, 0, 1};
+    float m_depthMm = 0.0f;
+};
+
+// What the view says about the hole under the tool, from the DBI only (the client holds no
+// voxels): its depth below the bone around it (the median height of a ring of picked points
+// `ringMm` from the axis, over the point picked at `bottomPx`) and the layer its floor shows, by
+// the colour's hue (cortical ivory, diploe marrow red, dura red: libsim's materialColor).
+enum class HoleFloor : uint8_t { Unknown, Cortical, Diploe, Dura, Sinus, Artery };
+struct HoleReading {
+    float depthMm = 0.0f;
+    HoleFloor floor = HoleFloor::Unknown;
+};
+std::optional<HoleReading> readHole(const Dbi& dbi, const Camera& camera, glm::ivec2 bottomPx,
+                                    glm::vec3 axis, float ringMm);
+// The layer a shaded DBI colour shows: green over red stays with the material under diffuse
+// shading (ivory 0.96, marrow 0.69, dura 0.41).
+HoleFloor floorOfColor(uint8_t r, uint8_t g, uint8_t b);
+const char* holeFloorName(HoleFloor f);
 
 // The scripted burr hole (`--script burrhole`) at time t (s): plunge at the site, widen in a
 // spiral, lift out along the hole's axis and rest the drill to one side. The tool moves

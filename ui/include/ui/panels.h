@@ -116,6 +116,11 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
 glm::vec4 markColor();
 
 // [View] orbit and zoom about the site; a change requests a new DBI.
+// The View panel's ranges, which the view's own gestures (drag, Ctrl/Shift + wheel) keep too.
+constexpr float kViewMinYawDeg = -90.0f, kViewMaxYawDeg = 90.0f;
+constexpr float kViewMinPitchDeg = -60.0f, kViewMaxPitchDeg = 60.0f;
+constexpr float kViewMinDistanceMm = 80.0f, kViewMaxDistanceMm = 500.0f;
+constexpr float kOrbitDegPerPx = 0.3f; // a right drag across a 500-pixel view turns 150 degrees
 struct ViewControls {
     float yawDeg = 0.0f, pitchDeg = 0.0f, distanceMm = 200.0f;
     bool dirty = false; // changed since the last request

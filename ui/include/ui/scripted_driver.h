@@ -48,6 +48,7 @@ public:
         bool havePicture = false, viewMatches = false, haveScene = false, switching = false;
         double sinceLastUpdateS = 0;
         uint16_t holding = 0;     // [instructor] the trainee held
+        bool pointerBusy = false; // [Tests] an injected pointer has not finished its gesture
         std::string viewTooLarge; // the message when the view is larger than served
     };
     // Before the frame ends: true when it ends the run at once, unframed (a view too large).

@@ -13,6 +13,7 @@
 #include <atomic>
 #include <cstdint>
 #include <map>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -40,6 +41,19 @@ struct TrainerReport {
     std::map<std::string, std::array<float, 4>> panels;
     // The client model's report (net::ClientModel::report), as the headless trainee writes it.
     nlohmann::ordered_json session;
+};
+
+// [Tests] The user's hands as a test drives them, in place of the mouse's: the pointer in window
+// pixels from the top left (negative: off the window), the buttons held, the wheel's notches this
+// frame, whether Ctrl or Shift is held, and a size to resize the window to (as dragging its
+// corner; 0: leave it).
+struct InjectedInput {
+    float x = -1.0f, y = -1.0f;
+    bool left = false, right = false;
+    float wheel = 0.0f;
+    bool zoomKey = false;
+    int windowWidth = 0, windowHeight = 0;
+    bool done = false; // the gesture is over: the view may settle (a screenshot be taken)
 };
 
 struct TrainerOptions {
@@ -87,6 +101,10 @@ struct TrainerOptions {
     // frame).
     std::vector<int> tapKeys;
     TrainerReport* report = nullptr; // [Tests] filled when the window closes
+    // [Tests] Called once a frame (first thing) with the seconds since the first picture
+    // (negative before it); what it returns stands for the mouse (the view's tool and gestures
+    // only) and the window's frame.
+    std::function<InjectedInput(double)> input;
     // [Tests] The window closes once this is set, as if its close button was clicked (exit 0,
     // unless a screenshot or frames were asked for and not done).
     const std::atomic<bool>* quit = nullptr;

@@ -44,6 +44,14 @@ public:
     // Renders ImGui over the scene and swaps; when capture is given, reads the finished frame
     // into it first (row 0 at the bottom).
     void endFrame(Dbi* capture = nullptr);
+    // Sleeps until an event arrives, wake() is called, or `timeoutS` passes: an idle window's
+    // pause between frames.
+    void waitEvents(double timeoutS);
+    // Asks for a new size (as the user dragging a corner); width() and height() follow once the
+    // next frame's events have come.
+    void resize(int width, int height);
+    // Any thread: ends a waitEvents now (a client thread with something new to show).
+    static void wake();
     // The back buffer as it is now (call between drawing and endFrame), row 0 at the bottom.
     Dbi readFramebuffer() const;
 
