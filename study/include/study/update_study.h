@@ -34,6 +34,9 @@ struct UpdateStudyConfig {
     std::optional<net::LinkConditions> link;
     double cycleTimeoutS = 10;        // one cycle that takes longer fails the study (an Error)
     std::vector<std::string> methods; // a subset of updateStudyMethods(codec); empty: all
+    // A new file to log the server's session to (net/session_log.h), to measure what recording
+    // costs; empty: none.
+    std::string record;
     // Called before each (method, size) with a label and the steps done/total.
     std::function<void(const std::string& label, int done, int total)> progress;
 };
