@@ -71,6 +71,17 @@ int runServer(const ServerOptions& o) {
                                 "name");
         }
     }
+    // The log is the one record of the session: nothing else this run writes may land on it.
+    const std::string& log = o.record.empty() ? o.resume : o.record;
+    if (!log.empty()) {
+        std::vector<std::string> outputs{o.report};
+        if (!o.saveOnExit.empty())
+            outputs.insert(outputs.end(), {o.saveOnExit, net::marksPathFor(o.saveOnExit),
+                                           net::scenePathFor(o.saveOnExit)});
+        for (const std::string& other : outputs)
+            if (!other.empty() && samePath(log, other))
+                throw Error(log + " is the session log: write the volume and the report elsewhere");
+    }
     net::ServerConfig config;
     config.port = o.port;
     config.saveOnExit = o.saveOnExit;

@@ -17,6 +17,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <csignal>
 #include <cstdio>
 #include <filesystem>
@@ -203,4 +204,27 @@ TEST(SessionRecordingCli, ASigkilledServersLogHoldsEveryChangeItsClientHadSeen) 
                 "than the trainee saw\n",
                 kTrials, drilledSeen, torn, matchedBeforeEnd);
     EXPECT_GT(drilledSeen, kTrials / 2) << "most trials saw drilling before the kill";
+}
+
+TEST(SessionRecordingCli, BadLogsAndClashingFlagsAreRefusedInOneLine) {
+    const trephine::testing::TempDir dir;
+    auto run = [&](const std::string& args) { return trephine::testing::runTrephine(dir, args); };
+    const std::string notLog = dir / "not.log";
+    std::ofstream(notLog) << "hello\n";
+    trephine::testing::CommandResult r = run("replay " + trephine::testing::shellQuote(notLog));
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_NE(r.err.find("not a Trephine session log"), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    // An existing file is never overwritten by a new log.
+    r = run("server --port 0 --volume sphere:16 --record " + trephine::testing::shellQuote(notLog));
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_NE(r.err.find("--resume continues a log"), std::string::npos) << r.err;
+    r = run("server --port 0 --volume sphere:16 --resume " + trephine::testing::shellQuote(notLog));
+    EXPECT_NE(r.exitCode, 0) << "--resume takes its volume from the log";
+    const std::string log = dir / "s.log";
+    r = run("server --port 0 --record " + trephine::testing::shellQuote(log) + " --report " +
+            trephine::testing::shellQuote(log));
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_NE(r.err.find("is the session log"), std::string::npos) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(log));
 }
