@@ -132,8 +132,10 @@ int runServer(const ServerOptions& o) {
     std::printf("trephine server: %s (%d x %d x %d) on port %u; Ctrl-C stops\n",
                 config.volumeName.c_str(), d.x, d.y, d.z, unsigned(server.port()));
     if (config.recorder)
-        std::printf("trephine server: recording to %s (synced every %d ms)\n",
-                    config.recorder->path().c_str(), net::SessionRecorder::kDefaultSyncIntervalMs);
+        std::printf("trephine server: recording to %s (written back every %d ms, synced every %d "
+                    "ms)\n",
+                    config.recorder->path().c_str(), net::SessionRecorder::kWritebackIntervalMs,
+                    net::SessionRecorder::kDefaultSyncIntervalMs);
     std::fflush(stdout);
     while (!g_stopRequested.load())
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
