@@ -66,10 +66,15 @@ int runReplay(const ReplayOptions& o) {
     const double loadS = std::chrono::duration<double>(t1 - t0).count();
     const double replayS = std::chrono::duration<double>(t2 - t1).count();
     const double sessionS = sessionSeconds(log.records);
-    std::printf("trephine replay: %s: %zu records, %llu tool states applied, %.1f s of session "
-                "replayed in %.3f s (%.0fx real time; target >= 20x), start %.3f s\n",
+    // The target is the whole run's (reading, regenerating the volume, replaying): a short
+    // session is dominated by the start.
+    const double wholeS = loadS + replayS;
+    std::printf("trephine replay: %s: %zu records, %llu tool states applied; %.2f s of session "
+                "replayed in %.1f ms (%.0fx real time), %.0fx with the start's %.3f s (target "
+                ">= 20x)\n",
                 o.log.c_str(), log.records.size(), (unsigned long long)replay.toolStatesApplied(),
-                sessionS, replayS, replayS > 0 ? sessionS / replayS : 0.0, loadS);
+                sessionS, replayS * 1e3, replayS > 0 ? sessionS / replayS : 0.0,
+                wholeS > 0 ? sessionS / wholeS : 0.0, loadS);
     if (!o.save.empty()) {
         saveVolume(replay.volume(), o.save);
         std::printf("trephine replay: wrote %s\n", o.save.c_str());

@@ -110,6 +110,17 @@ int runServer(const ServerOptions& o) {
                                 "name");
         }
     }
+    // The log is the one record of the session: nothing else this run writes may land on it.
+    const std::string& log = o.record.empty() ? o.resume : o.record;
+    if (!log.empty()) {
+        std::vector<std::string> outputs{o.report};
+        if (!o.saveOnExit.empty())
+            outputs.insert(outputs.end(), {o.saveOnExit, net::marksPathFor(o.saveOnExit),
+                                           net::scenePathFor(o.saveOnExit)});
+        for (const std::string& other : outputs)
+            if (!other.empty() && samePath(log, other))
+                throw Error(log + " is the session log: write the volume and the report elsewhere");
+    }
     net::ServerConfig config;
     config.port = o.port;
     config.saveOnExit = o.saveOnExit;
@@ -169,8 +180,10 @@ int runServer(const ServerOptions& o) {
     std::printf("trephine server: %s (%d x %d x %d) on port %u; Ctrl-C stops\n",
                 config.volumeName.c_str(), d.x, d.y, d.z, unsigned(server.port()));
     if (config.recorder)
-        std::printf("trephine server: recording to %s (synced every %d ms)\n",
-                    config.recorder->path().c_str(), net::SessionRecorder::kDefaultSyncIntervalMs);
+        std::printf("trephine server: recording to %s (written back every %d ms, synced every %d "
+                    "ms)\n",
+                    config.recorder->path().c_str(), net::SessionRecorder::kWritebackIntervalMs,
+                    net::SessionRecorder::kDefaultSyncIntervalMs);
     std::fflush(stdout);
     while (!g_stopRequested.load())
         std::this_thread::sleep_for(std::chrono::milliseconds(50));

@@ -73,6 +73,11 @@ void addUpdatesCommand(CLI::App* study, int& exitCode) {
         ->add_option("--methods", u->methods,
                      "Only these methods (dbi, dbi-fullrender, volume, volume-CODEC)")
         ->delimiter(',');
+    updates
+        ->add_option("--record", u->record,
+                     "Log the server's session to this new file (docs/recording.md), to measure "
+                     "what recording costs")
+        ->check(outputFile());
     updates->add_flag(
         "--quick", u->quick,
         "Sizes 10, 40, 80 and 5 cycles in one round, under a minute (--sizes, --cycles and "

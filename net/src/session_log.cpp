@@ -239,7 +239,7 @@ Volume logStartVolume(const LogHeader& h, const std::function<Volume(const std::
 
 SessionRecorder::SessionRecorder(std::string path, int fd, uint64_t bytes, int syncIntervalMs)
     : m_path(std::move(path)), m_fd(fd), m_syncIntervalMs(std::max(1, syncIntervalMs)),
-      m_bytes(bytes), m_synced(bytes) {
+      m_bytes(bytes), m_synced(bytes), m_writtenBack(bytes & ~uint64_t(4095)) {
     m_syncer = std::thread([this] { syncLoop(); });
 }
 
@@ -341,14 +341,35 @@ void SessionRecorder::sync() {
     }
 }
 
+// Full pages only: the page appends go to is left alone, so no append waits for its writeback.
+void SessionRecorder::writeBack(uint64_t written) {
+    const uint64_t end = written & ~uint64_t(4095);
+    if (end <= m_writtenBack)
+        return;
+    if (::sync_file_range(m_fd, off_t(m_writtenBack), off_t(end - m_writtenBack),
+                          SYNC_FILE_RANGE_WAIT_BEFORE | SYNC_FILE_RANGE_WRITE |
+                              SYNC_FILE_RANGE_WAIT_AFTER) == 0)
+        m_writtenBack = end;
+}
+
 void SessionRecorder::syncLoop() {
+    using Clock = std::chrono::steady_clock;
+    const auto interval = std::chrono::milliseconds(m_syncIntervalMs);
+    auto nextSync = Clock::now() + interval;
     std::unique_lock lock(m_mutex);
     while (!m_stop) {
-        m_cv.wait_for(lock, std::chrono::milliseconds(m_syncIntervalMs));
-        if (m_bytes == m_synced || m_stop)
+        m_cv.wait_for(lock,
+                      std::chrono::milliseconds(std::min(kWritebackIntervalMs, m_syncIntervalMs)));
+        if (m_stop || m_bytes == m_synced)
             continue;
-        lock.unlock();
-        sync(); // off the lock: writers go on while the disk works
+        const uint64_t written = m_bytes;
+        lock.unlock(); // off the lock: writers go on while the disk works
+        if (Clock::now() >= nextSync) {
+            sync();
+            nextSync = Clock::now() + interval;
+        } else {
+            writeBack(written);
+        }
         lock.lock();
     }
 }

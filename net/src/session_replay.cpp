@@ -177,10 +177,11 @@ std::vector<Trajectory> trajectoriesOf(std::span<const LogRecord> records) {
 }
 
 std::string trajectoryCsv(const Trajectory& t) {
-    std::string csv = fmt::format("# {} ({}, client {}): {} tool states\n", t.name,
-                                  t.role == Role::Instructor ? "instructor" : "trainee", t.client,
-                                  t.states.size());
-    csv += "time_s,x,y,z,qw,qx,qy,qz,speed,tool\n";
+    // The header first: a script's header is its first line (comments may follow).
+    std::string csv = "time_s,x,y,z,qw,qx,qy,qz,speed,tool\n";
+    csv += fmt::format("# {} ({}, client {}): {} tool states\n", t.name,
+                       t.role == Role::Instructor ? "instructor" : "trainee", t.client,
+                       t.states.size());
     const uint64_t t0 = t.states.empty() ? 0 : t.states.front().clientTimeUs;
     uint64_t last = t0;
     for (const ToolState& s : t.states) {

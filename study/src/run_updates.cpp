@@ -41,6 +41,7 @@ void configureUpdatesStudy(const UpdatesOptions& o, UpdateStudyConfig& config) {
     if (!o.link.empty())
         config.link = studyLink(o.link);
     config.methods = o.methods;
+    config.record = o.record;
     if (o.quick) {
         if (!o.sizesGiven)
             config.sizes = {10, 40, 80};

@@ -8,6 +8,7 @@
 #include "net/codec.h"
 #include "net/link_emulator.h"
 #include "net/session_client.h"
+#include "net/session_log.h"
 #include "net/session_server.h"
 #include "net/view.h"
 
@@ -127,6 +128,9 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
         sc.traineeCode = "study-trainee";
         sc.instructorCode = "study-instructor";
     }
+    if (!config.record.empty())
+        sc.recorder = SessionRecorder::create(
+            config.record, makeLogHeader(volume, sc, config.volumeName, false, 0));
     SessionServer server(volume, sc);
     server.start();
     const ENetAddress serverAddress = parseAddress("127.0.0.1:" + std::to_string(server.port()));

@@ -409,7 +409,8 @@ TEST(SessionLog, TwoTraineesMarksAndATakeOverReplayToTheSavedVolumeByteForByte) 
     EXPECT_EQ(byName["Dr. Cho"].role, Role::Instructor);
     EXPECT_EQ(byName["Dr. Cho"].states.size(), 10u);
     const std::string csv = trajectoryCsv(byName["Ada"]);
-    EXPECT_NE(csv.find("time_s,x,y,z,qw,qx,qy,qz,speed,tool\n0.000000,"), std::string::npos);
+    EXPECT_EQ(csv.rfind("time_s,x,y,z,qw,qx,qy,qz,speed,tool\n# Ada (trainee", 0), 0u) << csv;
+    EXPECT_NE(csv.find(" tool states\n0.000000,"), std::string::npos);
     EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 32);
     EXPECT_NE(csv.find(",0,burr:5\n"), std::string::npos) << "paused states cut nothing";
     EXPECT_EQ(trajectoryFileName(byName["Dr. Cho"]),

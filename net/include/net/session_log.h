@@ -133,12 +133,15 @@ Volume logStartVolume(const LogHeader& header,
 // [SECTION] writing
 
 // Appends framed records with one write(2) a call, so a record is in the file (the page cache)
-// before the caller goes on to send what it caused; a thread of its own fdatasyncs what was
-// written every `syncIntervalMs` (docs/recording.md), so the simulation and network threads
-// never wait for the disk.
+// before the caller goes on to send what it caused. A thread of its own fdatasyncs what was
+// written every `syncIntervalMs`, and in between writes back the full pages every
+// kWritebackIntervalMs without a journal commit (an fdatasync's commit makes concurrent appends
+// wait for milliseconds; docs/recording.md), so the simulation and network threads never wait
+// for the disk.
 class SessionRecorder {
 public:
-    static constexpr int kDefaultSyncIntervalMs = 100;
+    static constexpr int kDefaultSyncIntervalMs = 1000;
+    static constexpr int kWritebackIntervalMs = 100;
 
     // A new log at `path` (refused when something is there) starting with `header`, synced.
     static std::unique_ptr<SessionRecorder> create(const std::string& path, LogHeader header,
@@ -165,6 +168,7 @@ private:
     SessionRecorder(std::string path, int fd, uint64_t bytes, int syncIntervalMs);
     bool writeAll(const uint8_t* data, size_t n);
     void syncLoop();
+    void writeBack(uint64_t written);
 
     std::string m_path;
     int m_fd = -1;
@@ -172,6 +176,7 @@ private:
     mutable std::mutex m_mutex;
     std::vector<uint8_t> m_buffer;
     uint64_t m_bytes = 0, m_records = 0, m_synced = 0, m_syncs = 0;
+    uint64_t m_writtenBack = 0; // the syncer's own: full pages handed to writeback
     std::string m_error;
     std::condition_variable m_cv;
     bool m_stop = false;

@@ -46,6 +46,7 @@ struct UpdatesOptions {
     std::string link; // empty: plain loopback
     std::string csvName = "updates.csv";
     std::vector<std::string> methods; // empty: every method
+    std::string record;               // log the server's session here (docs/recording.md)
     bool quick = false;
     bool sizesGiven = false;  // --sizes on the command line wins over --quick's sizes
     bool cyclesGiven = false; // likewise --cycles, and --rounds

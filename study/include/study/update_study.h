@@ -37,6 +37,9 @@ struct UpdateStudyConfig {
     // Run the session with role codes, so every message is sealed (docs/security.md); false: an
     // open session, in the clear (what the encryption's cost is measured against).
     bool sealed = false;
+    // A new file to log the server's session to (net/session_log.h), to measure what recording
+    // costs; empty: none.
+    std::string record;
     // Called before each (method, size) with a label and the steps done/total.
     std::function<void(const std::string& label, int done, int total)> progress;
 };
