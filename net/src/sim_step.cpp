@@ -296,9 +296,17 @@ void SimulationStep::renderViews(const Batch& b, uint32_t gridUs) {
         v.camera = c.camera;
         v.frame = Dbi(c.camera.width, c.camera.height);
     }
-    // Updates of whole views first: the other clients' latency never waits for a new view.
+    // Updates of whole views first, smallest view first: a client's rectangle never waits for
+    // a larger view's, nor for a new view.
+    std::vector<ViewFrame*> order;
     for (ViewFrame& v : m_views)
-        updateView(v, b, gridUs);
+        order.push_back(&v);
+    std::stable_sort(order.begin(), order.end(), [](const ViewFrame* x, const ViewFrame* y) {
+        return int64_t(x->frame.width()) * x->frame.height() <
+               int64_t(y->frame.width()) * y->frame.height();
+    });
+    for (ViewFrame* v : order)
+        updateView(*v, b, gridUs);
     renderSlices();
 }
 

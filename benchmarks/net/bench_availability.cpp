@@ -1,0 +1,239 @@
+// Availability under hostile peers, over loopback (docs/session.md, "Availability"): a trainee's
+// join time and update latency (tool state arrival -> rectangle applied) while (a) nobody else
+// is there, (b) a flood of half-open CONNECTs runs from 8 addresses, (c) silent peers reconnect
+// as soon as they are dropped, (d) a greedy peer sends the most expensive view requests its
+// budget allows (the largest view, a new camera every 5 ms). Each prints beside its target: join
+// <= 2 s; p99 <= 2x the figure without hostile peers (run (a) first, in the same process). The
+// memory run holds 15 peers asking for distinct 2048^2 views and prints the process's peak
+// resident memory growth beside the bound the server states.
+#include "flood.h"
+
+#include "libsim/skull.h"
+#include "net/session_client.h"
+#include "net/session_server.h"
+#include "net/view.h"
+
+#include <benchmark/benchmark.h>
+#include <glm/gtx/quaternion.hpp>
+#include <nlohmann/json.hpp>
+
+#include <cstdlib>
+#include <fstream>
+#include <memory>
+#include <optional>
+#include <string>
+#include <thread>
+
+using namespace trephine;
+using namespace trephine::net;
+
+namespace {
+
+constexpr int kWindow = 500;
+
+// A peer at 127.0.0.<address> that says hello with a `side`^2 view and then, every `everyUs`
+// (0: never), asks for a view of that size from a new eye; it drops what it receives.
+class GreedyPeer {
+public:
+    GreedyPeer(uint16_t port, const Volume& v, int side, int everyUs, uint8_t address = 5)
+        : m_view(toViewSpec(cameraPreset("paper", v, {side, side}))) {
+        m_thread = std::thread([=, this] { run(port, everyUs, address); });
+    }
+    ~GreedyPeer() {
+        m_stop = true;
+        m_thread.join();
+    }
+    bool welcomed() const { return m_welcomed.load(); }
+
+private:
+    void run(uint16_t port, int everyUs, uint8_t address) {
+        ENetAddress bindTo{};
+        bindTo.host = htonl(0x7f000000u | address);
+        ENetHost* host = enet_host_create(&bindTo, 1, size_t(Channel::Count), 0, 0);
+        if (!host)
+            return;
+        const ENetAddress server = parseAddress("127.0.0.1:" + std::to_string(port));
+        ENetPeer* peer = enet_host_connect(host, &server, size_t(Channel::Count), kProtocolVersion);
+        uint32_t request = 0;
+        uint64_t next = 0;
+        while (!m_stop) {
+            ENetEvent ev;
+            while (enet_host_service(host, &ev, 1) > 0) {
+                if (ev.type == ENET_EVENT_TYPE_CONNECT) {
+                    Hello h;
+                    h.name = "greedy";
+                    h.view = m_view;
+                    send(peer, encodeMessage(h));
+                } else if (ev.type == ENET_EVENT_TYPE_RECEIVE) {
+                    m_welcomed = m_welcomed || ev.packet->data[0] == uint8_t(MessageType::Welcome);
+                    enet_packet_destroy(ev.packet);
+                }
+            }
+            const uint64_t now = steadyNowUs();
+            if (everyUs > 0 && m_welcomed && now >= next) {
+                ViewRequest r;
+                r.requestId = ++request;
+                r.view = m_view;
+                r.view.eye += glm::vec3(float(request % 50) * 0.5f, 0, 0);
+                send(peer, encodeMessage(r));
+                next = now + uint64_t(everyUs);
+            }
+        }
+        enet_peer_disconnect_now(peer, 0);
+        enet_host_destroy(host);
+    }
+    static void send(ENetPeer* peer, const std::vector<uint8_t>& bytes) {
+        enet_peer_send(peer, uint8_t(Channel::Control),
+                       enet_packet_create(bytes.data(), bytes.size(), ENET_PACKET_FLAG_RELIABLE));
+    }
+
+    ViewSpec m_view;
+    std::atomic<bool> m_stop{false}, m_welcomed{false};
+    std::thread m_thread;
+};
+
+struct Figures {
+    double joinS = 0, p50Us = 0, p99Us = 0;
+    int64_t noUpdate = 0;
+};
+
+// The trainee joins `server` and drills a stroke of 300 tool states, one each update.
+Figures traineeRun(SessionServer& server, const Volume& skull) {
+    Figures f;
+    ClientConfig cc;
+    cc.name = "trainee";
+    cc.view = toViewSpec(cameraPreset("paper", skull, {kWindow, kWindow}));
+    SessionClient client(cc);
+    const uint64_t t0 = steadyNowUs();
+    client.connect(parseAddress("127.0.0.1:" + std::to_string(server.port())));
+    while (!client.hasFullImage() && !client.closed() && steadyNowUs() - t0 < 30000000)
+        client.poll(1);
+    f.joinS = double(steadyNowUs() - t0) * 1e-6;
+    if (!client.hasFullImage()) {
+        f.noUpdate = -1;
+        return f;
+    }
+    const SurfaceSite site = defaultBurrSite(skull);
+    const glm::vec3 n = site.normal;
+    const glm::vec3 along = glm::normalize(glm::cross(n, glm::vec3(1, 0, 0)));
+    uint64_t clientUs = 1000000;
+    for (int i = 0; i < 300; ++i) {
+        ToolState t;
+        t.sequence = uint32_t(i + 1);
+        t.clientTimeUs = clientUs += 10000;
+        t.diameterMm = 5.0f;
+        t.position = site.position - n * 1.0f + along * (0.2f * float(i % 100) - 10.0f);
+        t.orientation = glm::rotation(glm::vec3(0, 0, 1), n);
+        t.speed = 1.0f;
+        t.drilling = true;
+        const uint64_t target = client.updatesApplied() + 1;
+        client.sendToolState(t);
+        const uint64_t deadline = steadyNowUs() + 100000;
+        while (client.updatesApplied() < target && steadyNowUs() < deadline)
+            client.poll(0);
+        f.noUpdate += client.updatesApplied() < target;
+    }
+    f.p50Us = client.stats().updateLatencyUs.percentile(50);
+    f.p99Us = client.stats().updateLatencyUs.percentile(99);
+    client.disconnect(50);
+    return f;
+}
+
+enum class Hostile { None, HalfOpen, Reconnecting, Greedy };
+
+double g_quietP99Us = 0; // the figure without hostile peers, from the first run
+
+void underAttack(benchmark::State& state, Hostile kind) {
+    const Volume skull = makeSkull(80);
+    Figures f;
+    for (auto _ : state) {
+        ServerConfig config;
+        config.port = 0;
+        config.volumeName = "skull:80";
+        if (const char* e = std::getenv("TREPHINE_VIEW_PIXELS_PER_S"))
+            config.viewPixelsPerS = std::atof(e);
+        SessionServer server(skull, config);
+        server.start();
+        std::optional<testing::HalfOpenFlood> flood;
+        std::optional<testing::Reconnectors> reconnecting;
+        std::optional<GreedyPeer> greedy;
+        if (kind == Hostile::HalfOpen)
+            flood.emplace(server.port(), 8, 4, 5000); // ~6400 CONNECTs a second
+        if (kind == Hostile::Reconnecting)
+            reconnecting.emplace(server.port(), 32, 3, kProtocolVersion);
+        if (kind == Hostile::Greedy) {
+            greedy.emplace(server.port(), skull, 2048, 5000);
+            while (!greedy->welcomed())
+                std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(500)); // the attack under way
+        f = traineeRun(server, skull);
+        const nlohmann::json a = nlohmann::json::parse(server.reportJson()).at("availability");
+        for (const char* k : {"connects_rate_limited", "connects_address_busy",
+                              "connects_pool_full", "handshakes_reset", "views_deferred"})
+            state.counters[k] = a.at(k).get<double>();
+        state.counters["hello_timeouts"] = double(server.helloTimeouts());
+    }
+    if (kind == Hostile::None)
+        g_quietP99Us = f.p99Us;
+    state.counters["join_s"] = f.joinS;
+    state.counters["target_join_s"] = 2.0;
+    state.counters["latency_p50_us"] = f.p50Us;
+    state.counters["latency_p99_us"] = f.p99Us;
+    state.counters["target_p99_us"] = 2.0 * g_quietP99Us; // 2x the run without hostile peers
+    state.counters["p99_ratio"] = g_quietP99Us > 0 ? f.p99Us / g_quietP99Us : 0.0;
+    state.counters["no_update"] = double(f.noUpdate);
+}
+
+int64_t statusKb(const char* field) {
+    std::ifstream in("/proc/self/status");
+    std::string line;
+    while (std::getline(in, line))
+        if (line.rfind(field, 0) == 0)
+            return std::stoll(line.substr(std::string(field).size()));
+    return 0;
+}
+
+// 15 peers each ask for a distinct 2048^2 view; the server serves views up to
+// maxTotalViewPixels in all and refuses the rest (RefuseReason::ViewsFull).
+void memoryBound(benchmark::State& state) {
+    const Volume skull = makeSkull(80);
+    for (auto _ : state) {
+        ServerConfig config;
+        config.port = 0;
+        config.volumeName = "skull:80";
+        const int64_t before = statusKb("VmRSS:");
+        SessionServer server(skull, config);
+        server.start();
+        const int64_t started = statusKb("VmRSS:");
+        std::vector<std::unique_ptr<GreedyPeer>> peers;
+        for (int i = 0; i < 15; ++i) {
+            peers.push_back(
+                std::make_unique<GreedyPeer>(server.port(), skull, 2048 - i, 0, uint8_t(10 + i)));
+        }
+        std::this_thread::sleep_for(std::chrono::seconds(8));
+        while (!server.idle())
+            std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        const int64_t peak = statusKb("VmHWM:");
+        const nlohmann::json a = nlohmann::json::parse(server.reportJson()).at("availability");
+        state.counters["refused_view_total"] = a.at("refused_view_total").get<double>();
+        state.counters["server_start_mb"] = double(started - before) / 1024.0;
+        state.counters["peak_growth_mb"] = double(peak - before) / 1024.0;
+        // The bound docs/session.md states: ~40 bytes a view pixel of maxTotalViewPixels, plus
+        // maxInFlightBytes and the control budget per client, over the started server.
+        state.counters["bound_mb"] =
+            (double(started - before) * 1024.0 + 40.0 * double(config.maxTotalViewPixels) +
+             double(config.maxClients) *
+                 double(config.maxInFlightBytes + config.controlBudgetBytes)) /
+            (1024.0 * 1024.0);
+        peers.clear();
+    }
+}
+
+} // namespace
+
+BENCHMARK_CAPTURE(underAttack, quiet, Hostile::None)->Iterations(1)->UseRealTime();
+BENCHMARK_CAPTURE(underAttack, half_open_flood, Hostile::HalfOpen)->Iterations(1)->UseRealTime();
+BENCHMARK_CAPTURE(underAttack, reconnecting, Hostile::Reconnecting)->Iterations(1)->UseRealTime();
+BENCHMARK_CAPTURE(underAttack, greedy_views, Hostile::Greedy)->Iterations(1)->UseRealTime();
+BENCHMARK(memoryBound)->Iterations(1)->UseRealTime()->Unit(benchmark::kMillisecond);
