@@ -35,6 +35,8 @@ struct ServerOptions {
     int renderThreads = 0;
     size_t maxClients = 16;
     std::string report;
+    float cautionMm = 3.0f, dangerMm = 1.0f;
+    std::string debrief;
 };
 
 int runServer(const ServerOptions& o) {
@@ -51,8 +53,19 @@ int runServer(const ServerOptions& o) {
                                 "name");
         }
     }
+    if (!(o.dangerMm > 0.0f && o.dangerMm < o.cautionMm && o.cautionMm < 20.0f))
+        throw Error("--danger-mm and --caution-mm: need 0 < danger < caution < 20 mm");
+    if (!o.debrief.empty()) {
+        std::error_code made;
+        std::filesystem::create_directories(o.debrief, made);
+        if (!std::filesystem::is_directory(o.debrief))
+            throw Error("--debrief " + o.debrief + ": not a folder that can be made");
+    }
     Volume volume = openVolume(o.volume);
     net::ServerConfig config;
+    config.cautionMm = o.cautionMm;
+    config.dangerMm = o.dangerMm;
+    config.debriefDir = o.debrief;
     // A session saved by --save-on-exit left its marks beside the volume: they come back too.
     const std::string volumeFile = volumeFileOf(o.volume);
     const std::string marks = net::marksPathFor(volumeFile);
@@ -93,6 +106,8 @@ int runServer(const ServerOptions& o) {
         std::printf("trephine server: wrote %s, %s and %s\n", o.saveOnExit.c_str(),
                     net::marksPathFor(o.saveOnExit).c_str(),
                     net::scenePathFor(o.saveOnExit).c_str());
+    for (const std::string& d : server.debriefs())
+        std::printf("trephine server: wrote %s\n", d.c_str());
     if (!o.report.empty()) {
         if (!writeReplacing(o.report, server.reportJson()))
             throw Error("--report " + o.report + ": cannot write it");
@@ -126,6 +141,15 @@ void addServerMode(CLI::App& root, int& exitCode) {
     sub->add_option("--report", o->report,
                     "Write server statistics as JSON here when it stops (per channel and peer)")
         ->check(outputFile());
+    sub->add_option("--caution-mm", o->cautionMm,
+                    "A cutter this near a critical structure (dura, sinus, artery) is in caution")
+        ->capture_default_str();
+    sub->add_option("--danger-mm", o->dangerMm,
+                    "... and this near, in danger; touching it is a violation")
+        ->capture_default_str();
+    sub->add_option("--debrief", o->debrief,
+                    "Write a Markdown debrief with SVG plots per participant in this folder when "
+                    "the server stops");
     sub->callback([o, &exitCode] { exitCode = runServer(*o); });
 }
 
