@@ -5,6 +5,7 @@
 // must be refused or decode to something in range: never a crash, a hang or undefined behaviour
 // (run it under -fsanitize=address,undefined). Valid inputs must still decode. The seeds are fixed
 // and the counts bounded; TREPHINE_FUZZ_SCALE=N runs N times as many mutations for a long run.
+#include "net/assessment_protocol.h"
 #include "net/codec.h"
 #include "net/image_delta.h"
 #include "net/protocol.h"
@@ -109,6 +110,10 @@ bool decodeAny(std::span<const uint8_t> p) {
         return decodesCanonically<ViewAs>(p);
     case MessageType::ParticipantView:
         return decodesCanonically<ParticipantView>(p);
+    case MessageType::SafetyWarning:
+        return decodesCanonically<SafetyWarning>(p);
+    case MessageType::AssessmentSnapshot:
+        return decodesCanonically<AssessmentSnapshot>(p);
     }
     return false;
 }
@@ -244,6 +249,19 @@ std::vector<std::vector<uint8_t>> sampleMessages() {
     all.push_back(encoded(scene));
     all.push_back(encoded(ViewAs{3}));
     all.push_back(encoded(ParticipantView{3, sampleView(64, 48)}));
+    all.push_back(encoded(SafetyWarning{4, Zone::Danger, Zone::Caution, "sinus", 0.8f, 17, 99}));
+    AssessmentSnapshot snapshot;
+    snapshot.serverTimeUs = 5;
+    ParticipantFigures f;
+    f.clientId = 4;
+    f.zone = Zone::Caution;
+    f.sessionS = 12.5f;
+    f.zoneS = {1, 2, 3, 0};
+    f.removed = {{uint8_t(Material::Cortical), 40.0f}, {uint8_t(Material::Diploe), 12.0f}};
+    f.structures = {{"dura", 2.5f, 4.0f, 1}, {"sinus", 0.5f, 6.0f, 0}};
+    f.tools = {{"burr 4 mm", 9.0f}};
+    snapshot.list = {f};
+    all.push_back(encoded(snapshot));
     return all;
 }
 
