@@ -145,6 +145,7 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
                                                                                    : "burr",
                                double(t->second.diameterMm), t->second.drilling ? " drilling" : "");
         }
+        drawZoneBadge(snap, id); // the assessment's zone of its tool (instructors hear of all)
     }
     // Tools of ids the roster does not list yet (its message may trail the first relays).
     for (const auto& [id, t] : snap.others) {

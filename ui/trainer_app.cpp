@@ -307,7 +307,7 @@ struct PanelLayout {
     struct Box {
         float x, y, w, h;
     };
-    Box session, view, network, comparison, dirtyBoxes, forces;
+    Box session, view, network, comparison, dirtyBoxes, forces, assessment;
 };
 
 PanelLayout panelLayout(int viewSize, float height) {
@@ -320,7 +320,10 @@ PanelLayout panelLayout(int viewSize, float height) {
     l.view = {right, sessionH, colW, viewPanelH};
     l.network = {right, networkY, colW, height - networkY};
     l.comparison = {side, 0, sideW, comparisonH};
-    l.dirtyBoxes = {side, comparisonH, sideW, height - comparisonH};
+    // Dirty boxes share the rest of the right column with Assessment, below it.
+    const float boxesH = std::floor((height - comparisonH) * 0.4f);
+    l.dirtyBoxes = {side, comparisonH, sideW, boxesH};
+    l.assessment = {side, comparisonH + boxesH, sideW, height - comparisonH - boxesH};
     l.forces = {0, float(viewSize), right, height - float(viewSize)};
     return l;
 }
@@ -819,11 +822,15 @@ void TrainerWindow::composite(const FrameState& f) {
     }
     if (scene)
         comp.draw(fieldMesh, glm::mat4(1.0f));
+    // A tool near a critical structure takes its zone's colour (the server's SafetyWarning).
     for (const auto& [id, t] : f.snap->others)
         comp.draw(tools.get(ToolKind(t.toolKind), t.diameterMm),
-                  toolMatrix(t.position, t.orientation), participantColor(int(id)));
+                  toolMatrix(t.position, t.orientation),
+                  toolZoneColor(*f.snap, id).value_or(participantColor(int(id))));
+    const uint16_t self = f.snap->welcome ? f.snap->welcome->clientId : 0;
     if (toolValid)
-        comp.draw(tools.get(f.kind, f.diameter), toolMatrix(toolPos, toolRot), participantColor(0));
+        comp.draw(tools.get(f.kind, f.diameter), toolMatrix(toolPos, toolRot),
+                  toolZoneColor(*f.snap, self).value_or(participantColor(0)));
     comp.blitTo(0, window.height() - viewSize);
 }
 
@@ -869,6 +876,7 @@ void TrainerWindow::drawOverlays(FrameState& f) {
         held = "You hold " + participantName(snap.participants, f.holding) +
                ": your drill cuts, theirs is paused";
     drawHeldBand(held, viewSize);
+    drawSafetyBanner(snap, viewSize);
 }
 
 std::string TrainerWindow::tooLargeText(const FrameState& f) const {
@@ -931,6 +939,8 @@ void TrainerWindow::drawPanels(const FrameState& f) {
                     o.instructor ? &model.participants : nullptr, &snap.participants);
     placeNextPanel(layout.dirtyBoxes);
     drawDirtyBoxPanel(boxState, model.boxes, f.now);
+    placeNextPanel(layout.assessment);
+    drawAssessmentPanel(snap);
 }
 
 // The frame's end: the scripted run's rules (a view too large ends it, a settled view is

@@ -129,6 +129,16 @@ bool drawViewPanel(ViewControls& view, bool waitingForImage, const char* picture
 bool drawComparisonPanel(SyncDesign& wanted, SyncDesign live, const ComparisonHistory& history,
                          double now);
 
+// [Assessment] panel (panel_assessment.cpp): the server's live metrics, a trainee's own or an
+// instructor's everyone's; the safety banner across the top of the view (this client's zone
+// first, and for an instructor whoever else is in danger); a participant's zone for the Session
+// panel's row; a zone's colour, and a tool's while it is in a zone.
+void drawAssessmentPanel(const net::ClientSnapshot& snap);
+void drawSafetyBanner(const net::ClientSnapshot& snap, int viewSize);
+void drawZoneBadge(const net::ClientSnapshot& snap, uint16_t id);
+glm::vec4 zoneColor(net::Zone z);
+std::optional<glm::vec4> toolZoneColor(const net::ClientSnapshot& snap, uint16_t id);
+
 // Distinct colours for participants (index 0: this client).
 glm::vec4 participantColor(int index);
 // How the window names participant `id`: the name from its hello as the server's roster lists it
