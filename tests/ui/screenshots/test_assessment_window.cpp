@@ -88,13 +88,13 @@ TEST(AssessmentWindow, TheInstructorSeesTheViolationInTheBannerAndThePanel) {
     ASSERT_EQ(rc, 0) << cmd;
     EXPECT_TRUE(warned.load()) << "the trainee heard of its own violation";
 
-    // The violation's colour, exactly: the banner's fill in the view, the panel's swatch in the
-    // right-hand column.
+    // The violation's colour, exactly: the banner's fill in the view, the Assessment panel's
+    // swatch in the right-hand column, the Session panel's zone line in the middle one.
     const glm::vec4 c = ui::zoneColor(net::Zone::Violation);
     const int r = int(c.r * 255.0f + 0.5f), g = int(c.g * 255.0f + 0.5f),
               b = int(c.b * 255.0f + 0.5f);
     Image img = readPng(out);
-    int banner = 0, panel = 0, elsewhere = 0;
+    int banner = 0, panel = 0, badge = 0, elsewhere = 0;
     for (int y = 0; y < img.h; ++y)
         for (int x = 0; x < img.w; ++x) {
             const uint8_t* p = img.at(x, y);
@@ -104,10 +104,13 @@ TEST(AssessmentWindow, TheInstructorSeesTheViolationInTheBannerAndThePanel) {
                 ++banner;
             else if (x >= 500 + 380)
                 ++panel;
+            else if (x >= 500 && y < 280)
+                ++badge;
             else
                 ++elsewhere;
         }
     EXPECT_GT(banner, 5000) << "the banner across the top of the view";
     EXPECT_GT(panel, 50) << "the Assessment panel's zone swatch";
+    EXPECT_GT(badge, 20) << "the Session panel's zone line under Ada's row";
     EXPECT_LT(elsewhere, 200) << "nowhere much else";
 }
