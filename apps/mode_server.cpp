@@ -9,8 +9,8 @@
 #include "libsim_image/volume_slices.h"
 #include "net/marks_file.h"
 #include "net/scene.h"
-#include "net/server_banner.h"
 #include "net/secure_channel.h"
+#include "net/server_banner.h"
 #include "net/session_log.h"
 #include "net/session_replay.h"
 #include "net/session_server.h"
@@ -46,6 +46,8 @@ struct ServerOptions {
     bool open = false;                       // no codes: anyone who reaches the port joins
     std::string record;
     std::string resume;
+    float cautionMm = 3.0f, dangerMm = 1.0f;
+    std::string debrief;
 };
 
 // The codes the server runs with: given, or made now; none with --open.
@@ -121,7 +123,18 @@ int runServer(const ServerOptions& o) {
             if (!other.empty() && samePath(log, other))
                 throw Error(log + " is the session log: write the volume and the report elsewhere");
     }
+    if (!(o.dangerMm > 0.0f && o.dangerMm < o.cautionMm && o.cautionMm < 20.0f))
+        throw Error("--danger-mm and --caution-mm: need 0 < danger < caution < 20 mm");
+    if (!o.debrief.empty()) {
+        std::error_code made;
+        std::filesystem::create_directories(o.debrief, made);
+        if (!std::filesystem::is_directory(o.debrief))
+            throw Error("--debrief " + o.debrief + ": not a folder that can be made");
+    }
     net::ServerConfig config;
+    config.cautionMm = o.cautionMm;
+    config.dangerMm = o.dangerMm;
+    config.debriefDir = o.debrief;
     config.port = o.port;
     config.saveOnExit = o.saveOnExit;
     config.renderThreads = o.renderThreads;
@@ -196,6 +209,8 @@ int runServer(const ServerOptions& o) {
         std::printf("trephine server: wrote %s, %s and %s\n", o.saveOnExit.c_str(),
                     net::marksPathFor(o.saveOnExit).c_str(),
                     net::scenePathFor(o.saveOnExit).c_str());
+    for (const std::string& d : server.debriefs())
+        std::printf("trephine server: wrote %s\n", d.c_str());
     if (!o.report.empty()) {
         if (!writeReplacing(o.report, server.reportJson()))
             throw Error("--report " + o.report + ": cannot write it");
@@ -248,6 +263,15 @@ void addServerMode(CLI::App& root, int& exitCode) {
         ->check(CLI::ExistingFile)
         ->excludes(record)
         ->excludes("--volume");
+    sub->add_option("--caution-mm", o->cautionMm,
+                    "A cutter this near a critical structure (dura, sinus, artery) is in caution")
+        ->capture_default_str();
+    sub->add_option("--danger-mm", o->dangerMm,
+                    "... and this near, in danger; touching it is a violation")
+        ->capture_default_str();
+    sub->add_option("--debrief", o->debrief,
+                    "Write a Markdown debrief with SVG plots per participant in this folder when "
+                    "the server stops");
     sub->callback([o, &exitCode] { exitCode = runServer(*o); });
 }
 

@@ -69,7 +69,10 @@ WindowLayout windowLayout(int windowWidth, int windowHeight, int viewWidth, int 
             b.forces = {mid.x, networkY + b.network.h, mid.w, rest - b.network.h};
         }
         b.comparison = {side.x, 0, side.w, comparisonH};
-        b.dirtyBoxes = {side.x, comparisonH, side.w, H - comparisonH};
+        // Dirty boxes share the rest of the right column with Assessment, below it.
+        const float boxesH = std::floor((H - comparisonH) * 0.4f);
+        b.dirtyBoxes = {side.x, comparisonH, side.w, boxesH};
+        b.assessment = {side.x, comparisonH + boxesH, side.w, H - comparisonH - boxesH};
         return l;
     }
     UiRect column;
@@ -79,8 +82,8 @@ WindowLayout windowLayout(int windowWidth, int windowHeight, int viewWidth, int 
         // Under the view, across the window: two columns.
         const float half = std::floor(W * 0.5f), y = float(viewHeight);
         stack({0, y, half, below}, {0.40f, 0.25f, 0.35f}, {&b.session, &b.view, &b.network});
-        stack({half, y, W - half, below}, {0.40f, 0.25f, 0.35f},
-              {&b.comparison, &b.dirtyBoxes, &b.forces});
+        stack({half, y, W - half, below}, {0.30f, 0.20f, 0.25f, 0.25f},
+              {&b.comparison, &b.dirtyBoxes, &b.assessment, &b.forces});
         return l;
     } else {
         // No room beside or under the view: one column over its right-hand side (H hides it).
@@ -89,11 +92,12 @@ WindowLayout windowLayout(int windowWidth, int windowHeight, int viewWidth, int 
         column = {W - w, 0, w, H};
     }
     if (forcesBelow)
-        stack(column, {0.28f, 0.14f, 0.18f, 0.24f, 0.16f},
-              {&b.session, &b.view, &b.network, &b.comparison, &b.dirtyBoxes});
+        stack(column, {0.22f, 0.12f, 0.16f, 0.20f, 0.14f, 0.16f},
+              {&b.session, &b.view, &b.network, &b.comparison, &b.dirtyBoxes, &b.assessment});
     else
-        stack(column, {0.24f, 0.12f, 0.14f, 0.20f, 0.14f, 0.16f},
-              {&b.session, &b.view, &b.network, &b.comparison, &b.dirtyBoxes, &b.forces});
+        stack(column, {0.19f, 0.12f, 0.13f, 0.16f, 0.12f, 0.14f, 0.14f},
+              {&b.session, &b.view, &b.network, &b.comparison, &b.dirtyBoxes, &b.assessment,
+               &b.forces});
     return l;
 }
 

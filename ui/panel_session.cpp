@@ -241,6 +241,7 @@ void participantRow(const net::ClientSnapshot& snap, uint16_t id, const net::Par
                                                                                : "burr",
                            double(t->second.diameterMm), t->second.drilling ? " drilling" : "");
     }
+    drawZoneBadge(snap, id); // the assessment's zone of its tool (instructors hear of all)
 }
 
 } // namespace

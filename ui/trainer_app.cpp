@@ -1004,13 +1004,16 @@ void TrainerWindow::composite(const FrameState& f) {
     }
     if (scene)
         comp.draw(fieldMesh, glm::mat4(1.0f));
+    // A tool near a critical structure takes its zone's colour (the server's SafetyWarning).
     for (const auto& [id, t] : f.snap->others)
         comp.draw(tools.get(ToolKind(t.toolKind), t.diameterMm),
-                  toolMatrix(t.position, t.orientation), toolColour(*f.snap, id));
+                  toolMatrix(t.position, t.orientation),
+                  toolZoneColor(*f.snap, id).value_or(toolColour(*f.snap, id)));
+    const uint16_t self = f.snap->welcome ? f.snap->welcome->clientId : 0;
     // Ours, placed by the mouse, is translucent: it always sits over the cut it makes.
     if (toolValid)
         comp.draw(tools.get(f.kind, f.diameter), toolMatrix(toolPos, toolRot),
-                  toolColour(*f.snap, f.snap->welcome ? f.snap->welcome->clientId : 0),
+                  toolZoneColor(*f.snap, self).value_or(toolColour(*f.snap, self)),
                   MeshStyle{script.drivesTool() ? 1.0f : kOwnToolAlpha});
     comp.blitTo(0, window.height() - viewSize.y);
 }
@@ -1066,6 +1069,7 @@ void TrainerWindow::drawOverlays(FrameState& f) {
     drawHeldBand(held, viewSize);
     note.draw(f.now, 0.0f, viewTop, float(viewSize.x));
     drawFrameRate(f.now);
+    drawSafetyBanner(snap, viewSize.x);
 }
 
 std::string TrainerWindow::tooLargeText(const FrameState& f) const {
@@ -1130,6 +1134,8 @@ void TrainerWindow::drawPanels(const FrameState& f) {
                         o.instructor ? &model.participants : nullptr, &snap.participants);
         placeNextPanel(box.dirtyBoxes, relayout);
         drawDirtyBoxPanel(boxState, model.boxes, f.now);
+        placeNextPanel(box.assessment, relayout);
+        drawAssessmentPanel(snap);
     }
     drawShortcutOverlay(toggles);
 }

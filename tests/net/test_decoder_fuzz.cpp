@@ -5,6 +5,7 @@
 // must be refused or decode to something in range: never a crash, a hang or undefined behaviour
 // (run it under -fsanitize=address,undefined). Valid inputs must still decode. The seeds are fixed
 // and the counts bounded; TREPHINE_FUZZ_SCALE=N runs N times as many mutations for a long run.
+#include "net/assessment_protocol.h"
 #include "net/codec.h"
 #include "net/image_delta.h"
 #include "net/protocol.h"
@@ -114,6 +115,10 @@ bool decodeAny(std::span<const uint8_t> p) {
         return decodesCanonically<Handshake>(p);
     case MessageType::Remove:
         return decodesCanonically<Remove>(p);
+    case MessageType::SafetyWarning:
+        return decodesCanonically<SafetyWarning>(p);
+    case MessageType::AssessmentSnapshot:
+        return decodesCanonically<AssessmentSnapshot>(p);
     }
     return false;
 }
@@ -274,6 +279,19 @@ std::vector<std::vector<uint8_t>> sampleMessages() {
     confirm.mac.fill(0x66);
     all.push_back(encoded(confirm));
     all.push_back(encoded(Remove{Remove::Op::Remove, 4}));
+    all.push_back(encoded(SafetyWarning{4, Zone::Danger, Zone::Caution, "sinus", 0.8f, 17, 99}));
+    AssessmentSnapshot snapshot;
+    snapshot.serverTimeUs = 5;
+    ParticipantFigures f;
+    f.clientId = 4;
+    f.zone = Zone::Caution;
+    f.sessionS = 12.5f;
+    f.zoneS = {1, 2, 3, 0};
+    f.removed = {{uint8_t(Material::Cortical), 40.0f}, {uint8_t(Material::Diploe), 12.0f}};
+    f.structures = {{"dura", 2.5f, 4.0f, 1}, {"sinus", 0.5f, 6.0f, 0}};
+    f.tools = {{"burr 4 mm", 9.0f}};
+    snapshot.list = {f};
+    all.push_back(encoded(snapshot));
     return all;
 }
 
@@ -340,9 +358,9 @@ std::vector<uint32_t> hostileRawBytes(uint32_t valid) {
 
 TEST(DecoderFuzz, EveryMessageTypeRefusesMutationsOrDecodesThemInRange) {
     const std::vector<std::vector<uint8_t>> samples = sampleMessages();
-    // One of every type (the handshake's four steps each); types 20-23 belong to other branches
-    // until they merge (kUnassignedTypes then goes to 0).
-    constexpr size_t kUnassignedTypes = 4, kHandshakeSteps = 4;
+    // One of every type (the handshake's four steps each); types 22 and 23 are reserved, not
+    // assigned (docs/protocol.md).
+    constexpr size_t kUnassignedTypes = 2, kHandshakeSteps = 4;
     std::set<uint8_t> types;
     for (const std::vector<uint8_t>& s : samples)
         types.insert(s[0]);

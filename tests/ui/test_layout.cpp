@@ -24,7 +24,8 @@ namespace {
 std::vector<std::pair<std::string, UiRect>> boxesOf(const PanelLayout& b) {
     return {{"Session", b.session},        {"View", b.view},
             {"Network", b.network},        {"Comparison", b.comparison},
-            {"Dirty boxes", b.dirtyBoxes}, {"Forces", b.forces}};
+            {"Dirty boxes", b.dirtyBoxes}, {"Assessment", b.assessment},
+            {"Forces", b.forces}};
 }
 
 bool overlap(const UiRect& a, const UiRect& b) {
@@ -119,7 +120,7 @@ TEST(Layout, AWindowOf900By650DrawsEveryPanelInsideIt) {
     ASSERT_EQ(runTrainerWindow(o), 0);
     server.stop();
     const WindowLayout want = windowLayout(900, 650, 500, 500, false);
-    ASSERT_EQ(report.panels.size(), 6u) << "every panel drawn";
+    ASSERT_EQ(report.panels.size(), 7u) << "every panel drawn";
     for (const auto& [name, r] : boxesOf(want.boxes)) {
         SCOPED_TRACE(name);
         ASSERT_TRUE(report.panels.count(name));

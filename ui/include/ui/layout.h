@@ -14,7 +14,7 @@ struct UiRect {
 };
 
 struct PanelLayout {
-    UiRect session, view, network, comparison, dirtyBoxes, forces;
+    UiRect session, view, network, comparison, dirtyBoxes, assessment, forces;
 };
 
 // The narrowest a panel column gets (its sliders and figures still read), and the default

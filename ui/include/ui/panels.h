@@ -157,6 +157,16 @@ void itemTip(const char* text);
 // a neutral grey while the roster does not list it yet.
 glm::vec4 participantColor(const std::map<uint16_t, net::ParticipantInfo>& roster, uint16_t id);
 glm::vec4 toColour(net::Rgb8 c);
+
+// [Assessment] panel (panel_assessment.cpp): the server's live metrics, a trainee's own or an
+// instructor's everyone's; the safety banner across the top of the view (this client's zone
+// first, and for an instructor whoever else is in danger); a participant's zone for the Session
+// panel's row; a zone's colour, and a tool's while it is in a zone.
+void drawAssessmentPanel(const net::ClientSnapshot& snap);
+void drawSafetyBanner(const net::ClientSnapshot& snap, int viewSize);
+void drawZoneBadge(const net::ClientSnapshot& snap, uint16_t id);
+glm::vec4 zoneColor(net::Zone z);
+std::optional<glm::vec4> toolZoneColor(const net::ClientSnapshot& snap, uint16_t id);
 // How the window names participant `id`: the name from its hello as the server's roster lists it
 // ("client N" when the roster does not list it yet, or it gave no name).
 std::string participantName(const std::map<uint16_t, net::ParticipantInfo>& roster, uint16_t id);
