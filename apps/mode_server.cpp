@@ -187,7 +187,7 @@ int runServer(const ServerOptions& o) {
     // Where to join from, and whether the session outlives the server (saved, or recorded).
     const bool keeps = !o.saveOnExit.empty() || config.recorder;
     for (const std::string& line :
-         net::serverStartLines(server.port(), net::localAddresses(), keeps))
+         net::serverStartLines(server.port(), net::localAddresses(), keeps, config.traineeCode))
         std::printf("trephine server: %s\n", line.c_str());
     printCodes(o, config, server.port());
     std::printf("trephine server: %s (%d x %d x %d) on port %u; Ctrl-C stops\n",

@@ -32,7 +32,7 @@ std::vector<std::string> localAddresses() {
 }
 
 std::vector<std::string> serverStartLines(uint16_t port, const std::vector<std::string>& addresses,
-                                          bool keepsSession) {
+                                          bool keepsSession, const std::string& traineeCode) {
     std::vector<std::string> lines;
     lines.push_back(fmt::format("listening on UDP port {} on every interface (a firewall must "
                                 "let UDP {} in for other machines)",
@@ -40,11 +40,11 @@ std::vector<std::string> serverStartLines(uint16_t port, const std::vector<std::
     bool first = true;
     for (const std::string& a : addresses) {
         const bool loop = a.rfind("127.", 0) == 0;
-        lines.push_back(fmt::format("  {}: trephine trainee --connect {}:{}",
+        lines.push_back(fmt::format("  {}: trephine trainee --connect {}:{}{}",
                                     loop    ? "from this machine"
                                     : first ? "from another machine"
                                             : "or",
-                                    a, port));
+                                    a, port, traineeCode.empty() ? "" : " --code " + traineeCode));
         first = first && loop;
     }
     if (addresses.empty())
@@ -53,7 +53,7 @@ std::vector<std::string> serverStartLines(uint16_t port, const std::vector<std::
                                     port));
     if (!keepsSession)
         lines.push_back("warning: the session (the drilled skull and the marks) is discarded when "
-                        "the server stops; --save-on-exit FILE keeps it");
+                        "the server stops; --save-on-exit FILE keeps it, --record FILE logs it");
     return lines;
 }
 

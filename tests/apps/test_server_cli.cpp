@@ -40,9 +40,10 @@ TEST(ServerCli, PrintsItsUdpPortAddressesAndThatTheSessionIsDiscarded) {
     ASSERT_TRUE(std::regex_search(r.out, m, std::regex("on port ([0-9]+);"))) << r.out;
     const std::string port = m[1];
     EXPECT_NE(r.out.find("listening on UDP port " + port), std::string::npos) << r.out;
-    EXPECT_NE(r.out.find("from this machine: trephine trainee --connect 127.0.0.1:" + port),
-              std::string::npos)
-        << "the loopback address, with the command that joins it\n"
+    EXPECT_NE(
+        r.out.find("from this machine: trephine trainee --connect 127.0.0.1:" + port + " --code "),
+        std::string::npos)
+        << "the loopback address, with the command that joins it (the generated trainee code)\n"
         << r.out;
     EXPECT_NE(r.out.find("warning: the session (the drilled skull and the marks) is discarded"),
               std::string::npos)

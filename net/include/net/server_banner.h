@@ -13,8 +13,9 @@ namespace trephine::net {
 std::vector<std::string> localAddresses();
 
 // The lines (without the "trephine server: " prefix) for `port` and `addresses`. `keepsSession`:
-// the session is saved (--save-on-exit) or recorded when the server stops.
+// the session is saved (--save-on-exit) or recorded when the server stops. `traineeCode`: the
+// code the join commands carry (empty: an open session).
 std::vector<std::string> serverStartLines(uint16_t port, const std::vector<std::string>& addresses,
-                                          bool keepsSession);
+                                          bool keepsSession, const std::string& traineeCode = "");
 
 } // namespace trephine::net
