@@ -20,10 +20,12 @@ uint64_t noClock() {
 } // namespace
 
 SessionReplay::SessionReplay(const LogHeader& header, Volume start, int renderThreads)
-    : m_outbox(0, m_book, noClock),
-      m_step(std::move(start),
-             StepConfig{header.maxStepS, header.maxSweepMm, std::max(1, renderThreads), false},
-             m_outbox, m_book, noClock) {
+    : m_outbox(0, m_book, noClock), m_step(std::move(start),
+                                           StepConfig{.maxStepS = header.maxStepS,
+                                                      .maxSweepMm = header.maxSweepMm,
+                                                      .renderThreads = std::max(1, renderThreads),
+                                                      .publish = false},
+                                           m_outbox, m_book, noClock) {
     // A server numbers its starting marks 1..n, author 0 (SessionPolicy's constructor).
     uint32_t id = 1;
     for (const AnnotationInfo& m : header.marks) {

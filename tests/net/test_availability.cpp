@@ -386,7 +386,12 @@ struct SliceRig {
     uint64_t now = kStartUs;
 
     SliceRig(Volume v, int64_t slicePixels)
-        : step(std::move(v), StepConfig{0.05f, 10.0f, 1, slicePixels}, outbox, book, steadyNowUs) {}
+        : step(std::move(v),
+               StepConfig{.maxStepS = 0.05f,
+                          .maxSweepMm = 10.0f,
+                          .renderThreads = 1,
+                          .slicePixels = slicePixels},
+               outbox, book, steadyNowUs) {}
     SimEvent join(uint16_t id, const Camera& camera) {
         SimEvent ev = SimEvent::of(SimEvent::Kind::Join, id);
         ev.camera = camera;

@@ -131,7 +131,7 @@ enum class MessageType : uint8_t {
     ParticipantView = 19,
     SafetyWarning = 20,      // net/assessment_protocol.h
     AssessmentSnapshot = 21, // net/assessment_protocol.h
-    Handshake = 24, // docs/security.md
+    Handshake = 24,          // docs/security.md
     Remove = 25,
 };
 inline constexpr uint8_t kMessageTypeCount = 26; // one past the largest type
@@ -469,7 +469,7 @@ struct ParticipantInfo {
     uint16_t takenOverBy = 0;
     // The colour every window draws this participant in (its name, tool and plots), given by the
     // server (net/participant_colours.h) for as long as it stays.
-    Rgb8 colour;
+    Rgb8 colour{};
 
     template <typename S>
     bool serialize(S& s) {
