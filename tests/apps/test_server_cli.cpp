@@ -5,7 +5,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cstdlib>
+#include <filesystem>
 #include <regex>
 #include <string>
 #include <sys/wait.h>
@@ -56,4 +58,20 @@ TEST(ServerCli, SaysNothingIsDiscardedWithSaveOnExit) {
     ASSERT_EQ(r.exitCode, 0) << r.err;
     EXPECT_NE(r.out.find("listening on UDP port"), std::string::npos) << r.out;
     EXPECT_EQ(r.out.find("discarded"), std::string::npos) << r.out;
+}
+
+// The assessment's flags: zones out of order are refused in one line before anything starts; a
+// --debrief folder is made and gets a debrief when the server stops (nobody joined: it says so).
+TEST(ServerCli, AssessmentZonesAreCheckedAndTheDebriefFolderIsWritten) {
+    TempDir dir;
+    const auto bad = trephine::testing::runTrephine(
+        dir, "server --port 0 --volume sphere:32 --danger-mm 4 --caution-mm 3");
+    EXPECT_NE(bad.exitCode, 0);
+    EXPECT_NE(bad.err.find("need 0 < danger < caution < 20 mm"), std::string::npos) << bad.err;
+    EXPECT_EQ(std::count(bad.err.begin(), bad.err.end(), '\n'), 1) << bad.err;
+
+    const std::string debrief = dir / "debrief";
+    const auto r = serve(dir, "--caution-mm 4 --danger-mm 2 --debrief " + shellQuote(debrief));
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_TRUE(std::filesystem::is_directory(debrief)) << r.out;
 }
