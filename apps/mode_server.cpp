@@ -182,16 +182,14 @@ int runServer(const ServerOptions& o) {
     handleStopSignals(onStopSignal);
     std::signal(SIGPIPE, SIG_IGN);
     server.start();
-    std::printf("trephine server: %s (%d x %d x %d) on port %u; Ctrl-C stops\n", o.volume.c_str(),
-                d.x, d.y, d.z, unsigned(server.port()));
+    std::printf("trephine server: %s (%d x %d x %d) on port %u; Ctrl-C stops\n",
+                config.volumeName.c_str(), d.x, d.y, d.z, unsigned(server.port()));
+    printCodes(o, config, server.port());
     // Where to join from, and whether the session outlives the server (saved, or recorded).
     const bool keeps = !o.saveOnExit.empty() || config.recorder;
     for (const std::string& line :
          net::serverStartLines(server.port(), net::localAddresses(), keeps, config.traineeCode))
         std::printf("trephine server: %s\n", line.c_str());
-    printCodes(o, config, server.port());
-    std::printf("trephine server: %s (%d x %d x %d) on port %u; Ctrl-C stops\n",
-                config.volumeName.c_str(), d.x, d.y, d.z, unsigned(server.port()));
     if (config.recorder)
         std::printf("trephine server: recording to %s (written back every %d ms, synced every %d "
                     "ms)\n",

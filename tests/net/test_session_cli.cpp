@@ -378,7 +378,7 @@ TEST(SessionCli, AHangupOrAClosedOutputStillSavesTheSession) {
     trephine::testing::TempDir dir;
     for (int sig : {SIGHUP, SIGQUIT, SIGINT}) {
         SCOPED_TRACE(sig);
-        const std::string path = dir / ("s" + std::to_string(sig) + ".nrrd");
+        const std::string path = dir / (std::to_string(sig) + "-saved.nrrd");
         ServerProcess server({"--port", "0", "--volume", "sphere:32", "--render-threads", "1",
                               "--save-on-exit", path});
         ASSERT_GT(portIn(server.line()), 0);

@@ -57,7 +57,7 @@ struct StepConfig {
     float maxStepS = 0.05f;   // ServerConfig::maxStepS
     float maxSweepMm = 10.0f; // ServerConfig::maxSweepMm
     int renderThreads = 0;    // 0: hardware concurrency
-    AssessmentConfig assessment; // zones; its maxSweepMm is taken from maxSweepMm
+    AssessmentConfig assessment{}; // zones; its maxSweepMm is taken from maxSweepMm
     // New views render in slices of rows, at most this many pixels a step across all of them,
     // taken in turn, so one peer's large views never hold up the others' updates for longer
     // than a slice (docs/session.md, "Availability").
