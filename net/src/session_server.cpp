@@ -94,7 +94,11 @@ struct SessionServer::Impl {
     // [Network thread]
     SessionPolicy::ForceAnswer force(const ToolState& t, glm::vec3 velocity);
     void onEvent(const ENetEvent& ev);
-    void apply(PolicyOutput& out);
+    void apply(PolicyOutput& out, bool mayDrop = true);
+    // SessionServer::replay's records, for the network thread.
+    std::mutex replayMutex;
+    std::vector<LogRecord> replayQueue;
+    void playReplayed();
     bool sendTo(uint16_t id, Channel ch, const std::vector<uint8_t>& bytes,
                 const Host::InFlight& inFlight = {});
     void sendUpdates();
@@ -104,7 +108,8 @@ struct SessionServer::Impl {
     // [Any thread] Events for the simulation; tool states beyond maxQueuedToolStates are dropped
     // and counted, as a lossy link would drop them. With a recorder, the policy's `log` and the
     // events queued are written to the session log first, in the order the simulation gets them.
-    void push(std::vector<SimEvent>& events, const std::vector<LogRecord>& log = {});
+    void push(std::vector<SimEvent>& events, const std::vector<LogRecord>& log = {},
+              bool mayDrop = true);
     std::shared_ptr<SessionRecorder> recorder;
     std::vector<LogRecord> logged; // push's records (under inMutex)
 };
@@ -126,7 +131,8 @@ void SessionServer::Impl::waitNetwork(int timeoutMs) {
     }
 }
 
-void SessionServer::Impl::push(std::vector<SimEvent>& events, const std::vector<LogRecord>& log) {
+void SessionServer::Impl::push(std::vector<SimEvent>& events, const std::vector<LogRecord>& log,
+                               bool mayDrop) {
     if (events.empty() && (log.empty() || !recorder))
         return;
     uint64_t dropped = 0;
@@ -135,7 +141,7 @@ void SessionServer::Impl::push(std::vector<SimEvent>& events, const std::vector<
         const size_t queued = inbox.size();
         for (SimEvent& ev : events) {
             if (ev.kind == SimEvent::Kind::Tool) {
-                if (inboxTools >= maxQueuedToolStates) {
+                if (mayDrop && inboxTools >= maxQueuedToolStates) {
                     ++dropped;
                     continue;
                 }
@@ -335,6 +341,16 @@ void SessionServer::submitVoxels(const Box3i& box, std::vector<uint8_t> density,
     m_impl->push(events);
 }
 
+void SessionServer::replay(std::vector<LogRecord> records) {
+    {
+        std::lock_guard lock(m_impl->replayMutex);
+        m_impl->replayQueue.insert(m_impl->replayQueue.end(),
+                                   std::make_move_iterator(records.begin()),
+                                   std::make_move_iterator(records.end()));
+    }
+    m_impl->wakeNetwork();
+}
+
 void SessionServer::setFullRenderUpdates(bool on) {
     m_impl->step.setFullRender(on);
 }
@@ -352,6 +368,11 @@ Volume SessionServer::volumeSnapshot() {
 bool SessionServer::idle() {
     if (m_impl->policy.switchWaiting())
         return false;
+    {
+        std::lock_guard lock(m_impl->replayMutex);
+        if (!m_impl->replayQueue.empty())
+            return false;
+    }
     {
         std::lock_guard lock(m_impl->inMutex);
         if (!m_impl->inbox.empty() || m_impl->busy)
@@ -413,8 +434,8 @@ bool SessionServer::Impl::sendTo(uint16_t id, Channel ch, const std::vector<uint
 }
 
 // Sends what the policy asked for; its events go to the simulation (and the log) first.
-void SessionServer::Impl::apply(PolicyOutput& out) {
-    push(out.events, out.log);
+void SessionServer::Impl::apply(PolicyOutput& out, bool mayDrop) {
+    push(out.events, out.log, mayDrop);
     for (const PolicyOutput::Message& m : out.messages)
         for (uint16_t id : m.to)
             sendTo(id, m.channel, m.bytes);
@@ -468,6 +489,22 @@ void SessionServer::Impl::onEvent(const ENetEvent& ev) {
     }
     default:
         return;
+    }
+}
+
+// A replay's records: its tool states are the session's own, so none is dropped (the log holds
+// only those its server applied).
+void SessionServer::Impl::playReplayed() {
+    std::vector<LogRecord> records;
+    {
+        std::lock_guard lock(replayMutex);
+        records.swap(replayQueue);
+    }
+    const uint64_t now = steadyNowUs();
+    for (const LogRecord& r : records) {
+        PolicyOutput out;
+        policy.replayed(r, now, out);
+        apply(out, false);
     }
 }
 
@@ -542,6 +579,7 @@ void SessionServer::networkLoop() {
         // Wait on the socket and the wake-up together, then handle everything pending.
         s.waitNetwork(1);
         s.host.service(0, [&](const ENetEvent& ev) { s.onEvent(ev); });
+        s.playReplayed();
         s.sendUpdates();
         const uint64_t now = steadyNowUs();
         PolicyOutput out;
