@@ -46,7 +46,7 @@ struct ServedReplay {
             dup2(fds[1], 1);
             close(fds[0]);
             execl(TREPHINE_BIN, TREPHINE_BIN, "replay", log.c_str(), "--serve", "--port", "0",
-                  "--speed", "1000", "--wait", "--render-threads", "1", (char*)nullptr);
+                  "--speed", "1000", "--render-threads", "1", (char*)nullptr);
             _exit(127);
         }
         close(fds[1]);
@@ -66,6 +66,14 @@ struct ServedReplay {
             if (const char* at = std::strstr(buf, "on port "))
                 return std::atoi(at + 8);
         return -1;
+    }
+    // Reads on until it says the replay has finished; false when its output ended first.
+    bool finished() {
+        char buf[1024];
+        while (out && fgets(buf, sizeof buf, out))
+            if (std::strstr(buf, "the replay has finished"))
+                return true;
+        return false;
     }
 };
 
@@ -129,6 +137,9 @@ TEST(ReplayWindow, AWindowWatchingAReplayEndsOnTheOriginalSessionsPicture) {
     ServedReplay served(log);
     const int port = served.port();
     ASSERT_GT(port, 0);
+    // The window joins once the replay is over, as a late watcher: a window watching the drilling
+    // would show the fading BB_screen rectangles of its updates over the view.
+    ASSERT_TRUE(served.finished());
     ASSERT_EQ(screenshot("127.0.0.1:" + std::to_string(port), replayed), 0)
         << "the window on the replay";
 
