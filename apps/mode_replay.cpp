@@ -1,14 +1,21 @@
 // `trephine replay FILE`: plays a session log (`trephine server --record`) through the server's
 // own simulation step, and writes what is asked: the final volume (--save, bit for bit what the
 // server held), each participant's tool path as a trainee script (--trajectories). A torn or
-// corrupt tail is said in one line and dropped. docs/recording.md.
+// corrupt tail is said in one line and dropped. With --serve it then plays the session into a
+// live server at the recorded pace (times --speed), for any number of windows to watch, and
+// serves its final state until stopped. docs/recording.md.
 #include "modes.h"
 
 #include "libsim/error.h"
 #include "libsim/volume_io.h"
 #include "libsim_image/volume_slices.h"
+#include "net/replay_feed.h"
 #include "net/session_log.h"
 #include "net/session_replay.h"
+#include "net/session_server.h"
+
+#include <atomic>
+#include <thread>
 
 #include <chrono>
 #include <cstdio>
@@ -22,7 +29,71 @@ struct ReplayOptions {
     std::string log;
     std::string save;
     std::string trajectories;
+    bool serve = false;
+    uint16_t port = 7777;
+    double speed = 1.0;
+    bool wait = false;
+    int renderThreads = 0;
 };
+
+std::atomic<bool> g_replayStop{false};
+
+extern "C" void onReplayStop(int) {
+    g_replayStop = true;
+}
+
+// --serve: a live server on the log's starting volume and scene, open to anyone (a replay has
+// nothing to protect), fed the log's records as their time comes round at `speed`; then the
+// final state is served until a stop signal.
+int serveReplay(const ReplayOptions& o, net::LogContents log, Volume start) {
+    net::ServerConfig base;
+    base.port = o.port;
+    base.renderThreads = o.renderThreads;
+    net::ServerConfig config = net::replayServerConfig(log.header, base);
+    const glm::ivec3 d = start.dims();
+    net::SessionServer server(std::move(start), config);
+    net::ReplayFeed feed(std::move(log.records), o.speed);
+    handleStopSignals(onReplayStop);
+    std::signal(SIGPIPE, SIG_IGN);
+    server.start();
+    std::printf("trephine replay: serving %s (%s, %d x %d x %d) on port %u at %gx: a replay, "
+                "open to anyone who connects (trephine instructor --connect 127.0.0.1:%u); "
+                "Ctrl-C stops\n",
+                o.log.c_str(), config.volumeName.c_str(), d.x, d.y, d.z, unsigned(server.port()),
+                o.speed, unsigned(server.port()));
+    std::printf("trephine replay: %zu records over %.1f s\n", feed.size(),
+                double(feed.durationUs()) * 1e-6);
+    if (o.wait) {
+        std::printf("trephine replay: waiting for a window to connect before playing\n");
+        std::fflush(stdout);
+        while (!g_replayStop.load() && server.clientCount() == 0)
+            std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    }
+    std::fflush(stdout);
+    const auto t0 = std::chrono::steady_clock::now();
+    bool finished = false;
+    while (!g_replayStop.load()) {
+        if (!finished) {
+            const auto elapsed = std::chrono::duration_cast<std::chrono::microseconds>(
+                std::chrono::steady_clock::now() - t0);
+            std::vector<net::LogRecord> due = feed.due(uint64_t(elapsed.count()));
+            if (!due.empty())
+                server.replay(std::move(due));
+            if (feed.done()) {
+                finished = true;
+                std::printf("trephine replay: the replay has finished (%zu records played); "
+                            "serving its final state until Ctrl-C\n",
+                            feed.given());
+                std::fflush(stdout);
+            }
+        }
+        std::this_thread::sleep_for(std::chrono::milliseconds(finished ? 50 : 2));
+    }
+    std::printf("trephine replay: stopping (%llu tool states applied)\n",
+                (unsigned long long)server.toolStatesApplied());
+    server.stop();
+    return 0;
+}
 
 // Seconds of session the records span: each server's stretch (a Resume starts a new clock).
 double sessionSeconds(const std::vector<net::LogRecord>& records) {
@@ -59,7 +130,10 @@ int runReplay(const ReplayOptions& o) {
     net::LogContents log = net::readSessionLog(o.log);
     if (!log.stopped.empty())
         std::printf("trephine replay: %s\n", log.stopped.c_str());
-    net::SessionReplay replay(log.header, net::logStartVolume(log.header, openVolume));
+    Volume start = net::logStartVolume(log.header, openVolume);
+    if (o.serve && o.save.empty() && o.trajectories.empty())
+        return serveReplay(o, std::move(log), std::move(start));
+    net::SessionReplay replay(log.header, start);
     const auto t1 = std::chrono::steady_clock::now();
     replay.applyAll(log.records);
     const auto t2 = std::chrono::steady_clock::now();
@@ -90,6 +164,8 @@ int runReplay(const ReplayOptions& o) {
         std::printf("trephine replay: wrote %zu trajector%s into %s\n", paths.size(),
                     paths.size() == 1 ? "y" : "ies", o.trajectories.c_str());
     }
+    if (o.serve)
+        return serveReplay(o, std::move(log), std::move(start));
     return 0;
 }
 
@@ -98,7 +174,8 @@ int runReplay(const ReplayOptions& o) {
 void addReplayMode(CLI::App& root, int& exitCode) {
     auto o = std::make_shared<ReplayOptions>();
     CLI::App* sub = root.add_subcommand(
-        "replay", "Play a session log (server --record) and write its volume or tool paths");
+        "replay",
+        "Play a session log (server --record): write its volume or tool paths, or serve it");
     sub->add_option("FILE", o->log, "The session log")->required()->check(CLI::ExistingFile);
     sub->add_option("--save", o->save,
                     "Write the final volume here (.nrrd or .nhdr): bit for bit the server's")
@@ -106,6 +183,24 @@ void addReplayMode(CLI::App& root, int& exitCode) {
     sub->add_option("--trajectories", o->trajectories,
                     "Write each participant's tool path here as a trainee script CSV "
                     "(docs/scripts.md), one file each");
+    CLI::Option* serve = sub->add_flag(
+        "--serve", o->serve,
+        "Then play the session into a live server at its recorded pace, for windows to watch "
+        "(trephine instructor --connect HOST:PORT), and serve its final state until Ctrl-C");
+    sub->add_option("--port", o->port, "--serve: UDP port (0: any free port)")
+        ->needs(serve)
+        ->capture_default_str();
+    sub->add_option("--speed", o->speed, "--serve: times the recorded pace (2: twice as fast)")
+        ->needs(serve)
+        ->check(finiteRange(1e-3, 1e6))
+        ->capture_default_str();
+    sub->add_flag("--wait", o->wait,
+                  "--serve: start playing once the first window has connected, so it sees the "
+                  "whole session")
+        ->needs(serve);
+    sub->add_option("--render-threads", o->renderThreads, "--serve: render workers (0: all cores)")
+        ->needs(serve)
+        ->check(CLI::Range(0, 256));
     sub->callback([o, &exitCode] { exitCode = runReplay(*o); });
 }
 

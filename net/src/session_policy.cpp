@@ -20,6 +20,7 @@ SessionPolicy::SessionPolicy(const ServerConfig& config, glm::ivec3 dims, glm::v
     for (const AnnotationInfo& m : m_config.marks) {
         const uint32_t id = m_nextMarkId++;
         m_marks[id] = {id, 0, m.position, m.label};
+        m_replayMarks[id] = id; // a replayed log numbers its starting marks the same
     }
 }
 
@@ -48,7 +49,7 @@ uint16_t SessionPolicy::connect(uint32_t connectData, uint64_t now, PolicyOutput
         id = m_nextId++;
         if (m_nextId == 0)
             m_nextId = 1;
-    } while (m_peers.count(id));
+    } while (m_peers.count(id) || m_replayed.count(id));
     Peer& joined = m_peers[id];
     joined.connectedUs = joined.heardUs = now;
     joined.viewPixels = RateBudget(m_config.viewPixelsPerS, 2.0 * double(m_config.maxViewPixels));
@@ -538,14 +539,23 @@ std::vector<uint16_t> SessionPolicy::participants(uint16_t except, const Role* r
 
 std::vector<uint8_t> SessionPolicy::rosterMessage() const {
     Participants roster;
+    auto heldBy = [&](uint16_t id) {
+        auto held = m_takenOver.find(id);
+        return held == m_takenOver.end() ? uint16_t(0) : held->second;
+    };
     for (const auto& [id, p] : m_peers) {
         if (!p.hello || p.kicked)
             continue;
-        auto held = m_takenOver.find(id);
-        roster.list.push_back({id, p.helloMsg.role, p.sync, p.helloMsg.name,
-                               held == m_takenOver.end() ? uint16_t(0) : held->second,
+        roster.list.push_back({id, p.helloMsg.role, p.sync, p.helloMsg.name, heldBy(id),
                                participantPalette()[p.colour]});
     }
+    // A replay's recorded participants, in id order with the others (the message wants it).
+    for (const auto& [id, p] : m_replayed)
+        roster.list.push_back({id, p.role, p.sync, p.name, heldBy(id),
+                               participantPalette()[id % participantPalette().size()]});
+    std::sort(
+        roster.list.begin(), roster.list.end(),
+        [](const ParticipantInfo& a, const ParticipantInfo& b) { return a.clientId < b.clientId; });
     return encodeMessage(roster);
 }
 

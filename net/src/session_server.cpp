@@ -113,7 +113,11 @@ struct SessionServer::Impl {
     // [Network thread]
     SessionPolicy::ForceAnswer force(const ToolState& t, glm::vec3 velocity);
     void onEvent(const ENetEvent& ev);
-    void apply(PolicyOutput& out);
+    void apply(PolicyOutput& out, bool mayDrop = true);
+    // SessionServer::replay's records, for the network thread.
+    std::mutex replayMutex;
+    std::vector<LogRecord> replayQueue;
+    void playReplayed();
     bool sendTo(uint16_t id, Channel ch, const std::vector<uint8_t>& bytes,
                 const Host::InFlight& inFlight = {});
     bool sendControl(uint16_t id, const std::vector<uint8_t>& bytes);
@@ -127,7 +131,8 @@ struct SessionServer::Impl {
     // [Any thread] Events for the simulation; tool states beyond maxQueuedToolStates are dropped
     // and counted, as a lossy link would drop them. With a recorder, the policy's `log` and the
     // events queued are written to the session log first, in the order the simulation gets them.
-    void push(std::vector<SimEvent>& events, const std::vector<LogRecord>& log = {});
+    void push(std::vector<SimEvent>& events, const std::vector<LogRecord>& log = {},
+              bool mayDrop = true);
     std::shared_ptr<SessionRecorder> recorder;
     std::vector<LogRecord> logged; // push's records (under inMutex)
 };
@@ -149,7 +154,8 @@ void SessionServer::Impl::waitNetwork(int timeoutMs) {
     }
 }
 
-void SessionServer::Impl::push(std::vector<SimEvent>& events, const std::vector<LogRecord>& log) {
+void SessionServer::Impl::push(std::vector<SimEvent>& events, const std::vector<LogRecord>& log,
+                               bool mayDrop) {
     if (events.empty() && (log.empty() || !recorder))
         return;
     uint64_t dropped = 0;
@@ -158,7 +164,7 @@ void SessionServer::Impl::push(std::vector<SimEvent>& events, const std::vector<
         const size_t queued = inbox.size();
         for (SimEvent& ev : events) {
             if (ev.kind == SimEvent::Kind::Tool) {
-                if (inboxTools >= maxQueuedToolStates) {
+                if (mayDrop && inboxTools >= maxQueuedToolStates) {
                     ++dropped;
                     continue;
                 }
@@ -377,6 +383,16 @@ void SessionServer::submitVoxels(const Box3i& box, std::vector<uint8_t> density,
     m_impl->push(events);
 }
 
+void SessionServer::replay(std::vector<LogRecord> records) {
+    {
+        std::lock_guard lock(m_impl->replayMutex);
+        m_impl->replayQueue.insert(m_impl->replayQueue.end(),
+                                   std::make_move_iterator(records.begin()),
+                                   std::make_move_iterator(records.end()));
+    }
+    m_impl->wakeNetwork();
+}
+
 void SessionServer::setFullRenderUpdates(bool on) {
     m_impl->step.setFullRender(on);
 }
@@ -394,6 +410,11 @@ Volume SessionServer::volumeSnapshot() {
 bool SessionServer::idle() {
     if (m_impl->policy.switchWaiting())
         return false;
+    {
+        std::lock_guard lock(m_impl->replayMutex);
+        if (!m_impl->replayQueue.empty())
+            return false;
+    }
     {
         std::lock_guard lock(m_impl->inMutex);
         if (!m_impl->inbox.empty() || m_impl->busy || m_impl->step.rendering())
@@ -532,8 +553,8 @@ void SessionServer::Impl::guard(uint64_t now) {
 }
 
 // Sends what the policy asked for; its events go to the simulation (and the log) first.
-void SessionServer::Impl::apply(PolicyOutput& out) {
-    push(out.events, out.log);
+void SessionServer::Impl::apply(PolicyOutput& out, bool mayDrop) {
+    push(out.events, out.log, mayDrop);
     for (const PolicyOutput::Message& m : out.messages)
         for (uint16_t id : m.to)
             sendTo(id, m.channel, m.bytes);
@@ -608,6 +629,22 @@ void SessionServer::Impl::onEvent(const ENetEvent& ev) {
     }
     default:
         return;
+    }
+}
+
+// A replay's records: its tool states are the session's own, so none is dropped (the log holds
+// only those its server applied).
+void SessionServer::Impl::playReplayed() {
+    std::vector<LogRecord> records;
+    {
+        std::lock_guard lock(replayMutex);
+        records.swap(replayQueue);
+    }
+    const uint64_t now = steadyNowUs();
+    for (const LogRecord& r : records) {
+        PolicyOutput out;
+        policy.replayed(r, now, out);
+        apply(out, false);
     }
 }
 
@@ -719,6 +756,7 @@ void SessionServer::networkLoop() {
         s.waitNetwork(1);
         s.admission.setNow(steadyNowUs());
         s.host.service(0, [&](const ENetEvent& ev) { s.onEvent(ev); });
+        s.playReplayed();
         s.sendUpdates();
         s.sendNotices();
         const uint64_t now = steadyNowUs();

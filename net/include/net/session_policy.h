@@ -22,6 +22,7 @@
 #include <functional>
 #include <map>
 #include <optional>
+#include <set>
 #include <span>
 #include <vector>
 
@@ -114,6 +115,14 @@ public:
     void refuseVolume(uint16_t id, PolicyOutput& out);
     // The server stops: everyone is told so and counts as gone from `now`.
     void goodbye(uint64_t now, PolicyOutput& out);
+    // [Replay] One record of a session log played into this live session as its participant
+    // did it (`trephine replay --serve`, net/replay_feed.h): the recorded participants are listed
+    // in the roster under replayedId(), their tools relayed to everyone and drilled by the
+    // simulation, their marks and take-overs applied. Defined in replay_feed.cpp.
+    void replayed(const LogRecord& r, uint64_t now, PolicyOutput& out);
+    // The id a recorded client plays under: above the ids connect() gives while fewer than
+    // 32768 have joined (connect() skips one in use either way).
+    static uint16_t replayedId(uint16_t recorded) { return uint16_t(0x8000u | recorded); }
 
     // Connected and not sent away: its updates are still wanted.
     bool live(uint16_t id) const;
@@ -202,6 +211,16 @@ private:
     Pacer m_roster{kRosterIntervalUs};
     Pacer m_marksOut{kAnnotationsIntervalUs};
     std::atomic<int> m_switchesWaiting{0}; // read by SessionServer::idle() on any thread
+    // [Replay] The recorded participants now in the session, by replayedId(); the simulation
+    // clients they joined; the log's mark ids -> this session's.
+    struct Replayed {
+        Role role = Role::Trainee;
+        std::string name;
+        Sync sync = Sync::Dbi;
+    };
+    std::map<uint16_t, Replayed> m_replayed;
+    std::set<uint16_t> m_replayJoined;
+    std::map<uint32_t, uint32_t> m_replayMarks;
 };
 
 } // namespace trephine::net

@@ -17,6 +17,7 @@
 #include "net/protocol.h"
 #include "net/server_config.h"
 #include "net/server_report.h"
+#include "net/session_log.h"
 
 #include <atomic>
 #include <cstdint>
@@ -52,6 +53,10 @@ public:
     // its material bytes (VolumeUpdate::materials), since materials cannot be derived here.
     void submitVoxels(const Box3i& box, std::vector<uint8_t> density,
                       std::vector<uint8_t> material);
+    // Plays records of a session log into this session, in order, as their participants did
+    // them (SessionPolicy::replayed; `trephine replay --serve`, net/replay_feed.h): on the network
+    // thread at its next pass, their tool states never dropped. Thread-safe.
+    void replay(std::vector<LogRecord> records);
     // The paper's DBI way, for comparison: on every change re-render each view whole, then send
     // BB_screen of it (the default renders only BB_screen; the pixels are the same).
     void setFullRenderUpdates(bool on);

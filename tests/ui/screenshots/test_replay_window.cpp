@@ -1,0 +1,163 @@
+// An instructor window watching `trephine replay --serve` of a recorded session: its screenshot
+// at the end shows the view the same, pixel for pixel, as a window on the original session after
+// its trainee had drilled and left. Needs a display (xvfb-run).
+#include "gl_window_test.h"
+
+#include "libsim/skull.h"
+#include "net/scene.h"
+#include "net/session_client.h"
+#include "net/session_log.h"
+#include "net/session_server.h"
+
+#include "loopback.h"
+#include "screenshot.h"
+#include "test_support.h"
+
+#include <gtest/gtest.h>
+
+#include <csignal>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <filesystem>
+#include <string>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <vector>
+
+using namespace trephine;
+
+namespace {
+
+using trephine::testing::Image;
+using trephine::testing::readPng;
+using trephine::testing::shellQuote;
+
+// `trephine replay LOG --serve ...` in the background; port() reads its "on port N" line.
+struct ServedReplay {
+    pid_t pid = -1;
+    FILE* out = nullptr;
+    explicit ServedReplay(const std::string& log) {
+        int fds[2];
+        if (pipe(fds) != 0)
+            return;
+        pid = fork();
+        if (pid == 0) {
+            dup2(fds[1], 1);
+            close(fds[0]);
+            execl(TREPHINE_BIN, TREPHINE_BIN, "replay", log.c_str(), "--serve", "--port", "0",
+                  "--speed", "1000", "--render-threads", "1", (char*)nullptr);
+            _exit(127);
+        }
+        close(fds[1]);
+        out = fdopen(fds[0], "r");
+    }
+    ~ServedReplay() {
+        if (pid > 0) {
+            kill(pid, SIGTERM);
+            waitpid(pid, nullptr, 0);
+        }
+        if (out)
+            fclose(out);
+    }
+    int port() {
+        char buf[1024];
+        while (out && fgets(buf, sizeof buf, out))
+            if (const char* at = std::strstr(buf, "on port "))
+                return std::atoi(at + 8);
+        return -1;
+    }
+    // Reads on until it says the replay has finished; false when its output ended first.
+    bool finished() {
+        char buf[1024];
+        while (out && fgets(buf, sizeof buf, out))
+            if (std::strstr(buf, "the replay has finished"))
+                return true;
+        return false;
+    }
+};
+
+// `trephine instructor` on `address`, its settled view saved to `png`; the exit status.
+int screenshot(const std::string& address, const std::string& png) {
+    std::filesystem::remove(png);
+    const std::string cmd = shellQuote(TREPHINE_BIN) + " instructor --connect " + address +
+                            " --window-size 400 --screenshot " + shellQuote(png) +
+                            " --frames 3 --timeout 80 > " + shellQuote(png + ".log") + " 2>&1";
+    return std::system(cmd.c_str());
+}
+
+} // namespace
+
+TEST(ReplayWindow, AWindowWatchingAReplayEndsOnTheOriginalSessionsPicture) {
+    TREPHINE_NEED_DISPLAY("the instructor window");
+    const trephine::testing::TempDir dir;
+    const std::string log = dir / "s.log", original = dir / "original.png",
+                      replayed = dir / "replayed.png";
+    const Volume skull = makeSkull(96);
+    const SurfaceSite site = defaultBurrSite(skull);
+    {
+        net::ServerConfig sc;
+        sc.port = 0;
+        sc.volumeName = "skull:96";
+        sc.renderThreads = 1;
+        sc.scene = std::make_shared<const net::Scene>(net::buildScene(skull));
+        sc.recorder =
+            net::SessionRecorder::create(log, net::makeLogHeader(skull, sc, "skull:96", false, 0));
+        net::SessionServer server(skull, sc);
+        server.start();
+        // A trainee drills a hole at the site the instructor's view centres on, then leaves.
+        net::ClientConfig tc =
+            trephine::testing::namedClientConfig(skull, "Ada", net::Role::Trainee, 32);
+        net::SessionClient ada(tc);
+        ada.connect(trephine::testing::loopback(server.port()));
+        ASSERT_TRUE(trephine::testing::pumpUntil({&ada}, [&] { return ada.hasFullImage(); }));
+        for (int i = 0; i < 60; ++i) {
+            ada.sendToolState(trephine::testing::burrState(site, i, 60, 1000000));
+            ada.poll(2);
+        }
+        ASSERT_TRUE(trephine::testing::pumpUntil({&ada}, [&] { return server.idle(); }));
+        ada.disconnect();
+        ASSERT_TRUE(trephine::testing::pumpUntil({}, [&] { return server.clientCount() == 0; }));
+        ASSERT_EQ(screenshot("127.0.0.1:" + std::to_string(server.port()), original), 0)
+            << "the window on the original session";
+        server.stop();
+    }
+    // The same window on the undrilled skull: the hole must show in the view for the comparison
+    // to mean anything.
+    const std::string untouched = dir / "untouched.png";
+    {
+        net::ServerConfig sc;
+        sc.port = 0;
+        sc.volumeName = "skull:96";
+        sc.renderThreads = 1;
+        net::SessionServer server(skull, sc);
+        server.start();
+        ASSERT_EQ(screenshot("127.0.0.1:" + std::to_string(server.port()), untouched), 0);
+    }
+    ServedReplay served(log);
+    const int port = served.port();
+    ASSERT_GT(port, 0);
+    // The window joins once the replay is over, as a late watcher: a window watching the drilling
+    // would show the fading BB_screen rectangles of its updates over the view.
+    ASSERT_TRUE(served.finished());
+    ASSERT_EQ(screenshot("127.0.0.1:" + std::to_string(port), replayed), 0)
+        << "the window on the replay";
+
+    const Image a = readPng(original), b = readPng(replayed);
+    ASSERT_GT(a.w, 400);
+    ASSERT_EQ(a.w, b.w);
+    ASSERT_EQ(a.h, b.h);
+    const Image u = readPng(untouched);
+    ASSERT_EQ(u.w, a.w);
+    // The view: the window's top-left 400 x 400 (the panels beside it list other people).
+    auto differing = [](const Image& x, const Image& y) {
+        int n = 0;
+        for (int row = 0; row < 400; ++row)
+            for (int col = 0; col < 400; ++col)
+                n += std::memcmp(x.at(col, row), y.at(col, row), 3) != 0;
+        return n;
+    };
+    EXPECT_GT(differing(a, u), 200) << "the drilled hole shows in the original session's view";
+    EXPECT_EQ(differing(a, b), 0) << "pixels of the view that differ between " << original
+                                  << " and " << replayed;
+}
