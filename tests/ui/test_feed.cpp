@@ -25,7 +25,7 @@ struct ServerCut {
     Volume& volume;
     Driller driller{ToolShape::burr(5.0f)};
     bool lastDrilling = false;
-    ToolPose last;
+    ToolPose last{};
     int64_t removed = 0; // voxels eroded to air
 
     void state(const ToolPose& pose, bool drilling, float dt) {

@@ -46,8 +46,9 @@ void expectReachable(const WindowLayout& l, int w, int h, float minH, const std:
         EXPECT_LE(r.y + r.h, float(h));
         EXPECT_GE(r.h, minH) << "its title and a row show; the rest scrolls";
         EXPECT_GE(r.w, std::min(float(w), kPanelColumnMinWidth) - 1.0f);
-        if (!l.overlay)
+        if (!l.overlay) {
             EXPECT_FALSE(overlap(r, l.view)) << "beside or under the view";
+        }
         for (size_t j = 0; j < i; ++j)
             EXPECT_FALSE(overlap(r, boxes[j].second)) << "apart from " << boxes[j].first;
     }
