@@ -5,8 +5,6 @@
 #include <algorithm>
 #include <cstddef>
 #include <cstring>
-#include <map>
-#include <mutex>
 
 namespace trephine::net {
 
@@ -50,10 +48,6 @@ bool transient(ENetPeerState s) {
         return false;
     }
 }
-
-// ENet's intercept has no user pointer: the gate of each host, looked up per datagram.
-std::mutex g_gatesMutex;
-std::map<const ENetHost*, AdmissionGate*> g_gates;
 
 } // namespace
 
@@ -121,30 +115,7 @@ bool SlotTimer::expired(size_t index, bool transientNow, uint64_t nowUs, uint64_
 
 AdmissionGate::AdmissionGate(ENetHost* host, const AdmissionLimits& limits, Admitted admitted)
     : m_host(host), m_limits(limits), m_admitted(std::move(admitted)),
-      m_buckets(limits.connectsPerS, limits.connectBurst), m_timer(host->peerCount) {
-    {
-        std::lock_guard lock(g_gatesMutex);
-        g_gates[host] = this;
-    }
-    host->intercept = &AdmissionGate::intercept;
-}
-
-AdmissionGate::~AdmissionGate() {
-    m_host->intercept = nullptr;
-    std::lock_guard lock(g_gatesMutex);
-    g_gates.erase(m_host);
-}
-
-int ENET_CALLBACK AdmissionGate::intercept(ENetHost* host, ENetEvent*) {
-    AdmissionGate* gate = nullptr;
-    {
-        std::lock_guard lock(g_gatesMutex);
-        auto it = g_gates.find(host);
-        if (it != g_gates.end())
-            gate = it->second;
-    }
-    return gate ? gate->judge() : 0;
-}
+      m_buckets(limits.connectsPerS, limits.connectBurst), m_timer(host->peerCount) {}
 
 int AdmissionGate::judge() {
     const std::span<const uint8_t> d(m_host->receivedData, m_host->receivedDataLength);

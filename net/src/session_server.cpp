@@ -58,10 +58,10 @@ struct SessionServer::Impl {
                  [this](const ToolState& t, glm::vec3 velocity) { return force(t, velocity); }),
           gate(c, book), maxQueuedToolStates(c.maxQueuedToolStates),
           admission(host.get(), c.admission,
-               [this](const ENetPeer* p) {
-                   const auto id = uint16_t(reinterpret_cast<uintptr_t>(p->data));
-                   return id && policy.admitted(id);
-               }),
+                    [this](const ENetPeer* p) {
+                        const auto id = uint16_t(reinterpret_cast<uintptr_t>(p->data));
+                        return id && policy.admitted(id);
+                    }),
           control(c.controlBudgetBytes), recorder(c.recorder) {
         book.record([&](ServerReport& r) {
             r.port = host.port();
@@ -721,13 +721,15 @@ void SessionServer::Impl::sayGoodbye() {
 
 namespace {
 
-// The report of the server whose network thread this is, for the datagram intercept below.
-thread_local ReportBook* t_netBook = nullptr;
+// The gate and report of the server whose network thread this is: ENet's intercept has no user
+// pointer.
+thread_local AdmissionGate* t_admission = nullptr;
+thread_local ReportBook* t_book = nullptr;
 
-// Every datagram the server's host receives passes here first: one that names a connected peer
-// but comes from another address is counted (ENet would drop it silently too).
-int ENET_CALLBACK countForeignDatagrams(ENetHost* host, ENetEvent*) {
-    if (host->receivedDataLength < 2 || !t_netBook)
+// A datagram that names a connected peer but comes from another address: counted (ENet would
+// drop it silently too).
+int countForeignDatagram(ENetHost* host, ReportBook& book) {
+    if (host->receivedDataLength < 2)
         return 0;
     const uint16_t header = uint16_t(host->receivedData[0] << 8 | host->receivedData[1]);
     const uint16_t peerId =
@@ -739,8 +741,16 @@ int ENET_CALLBACK countForeignDatagrams(ENetHost* host, ENetEvent*) {
         (peer.address.host == host->receivedAddress.host &&
          peer.address.port == host->receivedAddress.port))
         return 0;
-    t_netBook->record([](ServerReport& r) { ++r.security.spoofed; });
+    book.record([](ServerReport& r) { ++r.security.spoofed; });
     return 1; // consumed: dropped here
+}
+
+// ENet has one intercept, so every rule on raw datagrams is here, in turn: admission judges
+// CONNECTs (net/admission.h), then a peer's datagrams from a foreign address are dropped.
+int ENET_CALLBACK screenDatagram(ENetHost* host, ENetEvent*) {
+    if (!t_admission || !t_book)
+        return 0;
+    return t_admission->judge() ? 1 : countForeignDatagram(host, *t_book);
 }
 
 } // namespace
@@ -748,8 +758,9 @@ int ENET_CALLBACK countForeignDatagrams(ENetHost* host, ENetEvent*) {
 void SessionServer::networkLoop() {
     nameThread("trephine-net");
     Impl& s = *m_impl;
-    t_netBook = &s.book;
-    s.host.get()->intercept = countForeignDatagrams;
+    t_admission = &s.admission;
+    t_book = &s.book;
+    s.host.get()->intercept = screenDatagram;
     uint64_t nextTick = 0;
     while (!m_stop.load()) {
         // Wait on the socket and the wake-up together, then handle everything pending.

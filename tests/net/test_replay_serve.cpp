@@ -245,8 +245,8 @@ TEST(ReplayServeCli, AWatcherSeesTheRecordedSessionsFinalPictureAndItsTrainee) {
     const trephine::testing::TempDir dir;
     const std::string log = dir / "s.log";
     {
-        Child server({"server", "--port", "0", "--volume", "sphere:48", "--render-threads", "1",
-                      "--record", log});
+        Child server({"server", "--open", "--port", "0", "--volume", "sphere:48",
+                      "--render-threads", "1", "--record", log});
         const int port = server.port();
         ASSERT_GT(port, 0);
         SessionClient ada(namedClientConfig(sphere, "Ada", Role::Trainee, 48));

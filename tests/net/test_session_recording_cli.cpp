@@ -110,8 +110,8 @@ TEST(SessionRecordingCli, ASigkilledServersLogHoldsEveryChangeItsClientHadSeen) 
     for (int trial = 0; trial < kTrials; ++trial) {
         SCOPED_TRACE("trial " + std::to_string(trial));
         const std::string log = tempPath(std::to_string(trial) + ".log");
-        Child server({"server", "--port", "0", "--volume", "sphere:48", "--render-threads", "1",
-                      "--record", log});
+        Child server({"server", "--open", "--port", "0", "--volume", "sphere:48",
+                      "--render-threads", "1", "--record", log});
         const int port = server.port();
         ASSERT_GT(port, 0);
         ClientConfig config = namedClientConfig(sphere, "Ada", Role::Trainee, 48);
@@ -174,8 +174,8 @@ TEST(SessionRecordingCli, ASigkilledServersLogHoldsEveryChangeItsClientHadSeen) 
             };
             trephine("replay " + trephine::testing::shellQuote(log) + " --trajectories " +
                      trephine::testing::shellQuote(paths));
-            Child resumed({"server", "--port", "0", "--resume", log, "--render-threads", "1",
-                           "--save-on-exit", saved});
+            Child resumed({"server", "--open", "--port", "0", "--resume", log, "--render-threads",
+                           "1", "--save-on-exit", saved});
             const int again_port = resumed.port();
             ASSERT_GT(again_port, 0);
             const std::string script = paths + "/01-Ada-trainee.csv";

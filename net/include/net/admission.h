@@ -94,9 +94,12 @@ public:
     using OnReset = std::function<void(ENetPeer*)>;
 
     AdmissionGate(ENetHost* host, const AdmissionLimits& limits, Admitted admitted);
-    ~AdmissionGate();
     AdmissionGate(const AdmissionGate&) = delete;
     AdmissionGate& operator=(const AdmissionGate&) = delete;
+
+    // The datagram the host received last (ENet's receivedData and receivedAddress), judged from
+    // ENet's intercept, which the server owns: 1 drops it, 0 lets ENet handle it.
+    int judge();
 
     // Sets the time the intercept judges by (the network thread's `now` of this pass).
     void setNow(uint64_t nowUs) { m_nowUs = nowUs; }
@@ -105,9 +108,6 @@ public:
     const AdmissionCounts& counts() const { return m_counts; }
 
 private:
-    static int ENET_CALLBACK intercept(ENetHost* host, ENetEvent* event);
-    int judge(); // ENet's intercept answer: 1 drops the datagram, 0 lets ENet handle it
-
     ENetHost* m_host;
     AdmissionLimits m_limits;
     Admitted m_admitted;
