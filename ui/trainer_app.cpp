@@ -1274,7 +1274,7 @@ void TrainerWindow::closingFigures() {
         r.serverForceTicks = core.serverForceTicks();
         r.frames = framesPerDesign;
         for (const char* name :
-             {"Session", "View", "Network", "Comparison", "Forces", "Dirty boxes"})
+             {"Session", "View", "Network", "Comparison", "Forces", "Dirty boxes", "Assessment"})
             if (const ImGuiWindow* w = ImGui::FindWindowByName(name); w && w->Active)
                 r.panels[name] = {w->Pos.x, w->Pos.y, w->Size.x, w->Size.y};
         r.toolKind = int(selectedKind(toolControls));

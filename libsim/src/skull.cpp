@@ -100,13 +100,15 @@ struct SkullModel {
         duraMm = std::max(kSkullDuraMm, h); // at least one voxel, so dura always lies under bone
         poreContrast = std::clamp((2.5f - h) / 1.5f, 0.0f, 1.0f); // full at h <= 1 mm
         zTop = zc + c;
+        rampMm = std::max(h, std::min(kRampVoxels * h, kMaxRampMm));
     }
 
     static constexpr float zc = -15.0f;     // the vault's widest level (parietal eminences)
     static constexpr float kSideC = 100.0f; // below it the temporal walls fall nearly vertically
     static constexpr float kPoreCellMm = 2.2f;
 
-    float h; // voxel spacing
+    float h;      // voxel spacing
+    float rampMm; // the partial-volume ramp's half-width at the surface
     float a, b, c, egg, duraMm, poreContrast, zTop;
     ValueNoise thickOuter, thickDiploe, thickInner, pores, poresFine, suture;
 
@@ -149,14 +151,12 @@ struct SkullModel {
     }
 
     // Partial volume at the outer surface and the cut: 128 (kSurfaceDensity) exactly on the
-    // surface, linear in distance, 0 at kRampVoxels voxels outside. The renderer's normal is the
-    // trilinear blend of central differences at the hit cell's corners, a stencil reaching about
-    // 2.7 voxels either side of the surface; where it meets a clamped ramp the normal tilts with
-    // the surface's sub-voxel phase and the shading shows contour rings. A ramp of 2.5 voxels
+    // surface, linear in distance, 0 at rampMm outside (2.5 voxels, capped). The renderer's normal
+    // is the trilinear blend of central differences at the hit cell's corners, a stencil reaching
+    // about 2.7 voxels either side of the surface; where it meets a clamped ramp the normal tilts
+    // with the surface's sub-voxel phase and the shading shows contour rings. A ramp of 2.5 voxels
     // keeps that stencil on the linear part.
-    float ramp(float sd) const {
-        return std::clamp(128.0f - 128.0f * sd / (kRampVoxels * h), 0.0f, 255.0f);
-    }
+    float ramp(float sd) const { return std::clamp(128.0f - 128.0f * sd / rampMm, 0.0f, 255.0f); }
 
     // Brain well below the inner table: depends on the cut plane only (y and z), so a row of
     // such voxels shares one value.
@@ -164,7 +164,7 @@ struct SkullModel {
         float sdCut = cutDistance(p);
         density = 0;
         material = Material::Air;
-        if (sdCut >= kRampVoxels * h)
+        if (sdCut >= rampMm)
             return;
         density = uint8_t(std::lround(std::min(float(kSkullBrainDensity), ramp(sdCut))));
         material = density ? Material::Brain : Material::Air;
@@ -178,7 +178,7 @@ struct SkullModel {
         float cz = zq > 0.0f ? c : kSideC;
         float ay = a * (1.0f - egg * y / b);
         float yz = y * y / (b * b) + zq * zq / (cz * cz);
-        float fOut = 1.0f + (kRampVoxels * h + 0.01f) * kMaxGradF;
+        float fOut = 1.0f + (rampMm + 0.01f) * kMaxGradF;
         float fIn = 1.0f - (deepMm() + 0.1f) * kMaxGradF;
         outer = fOut * fOut > yz ? ay * std::sqrt(fOut * fOut - yz) : -1.0f;
         deep = fIn > 0.0f && fIn * fIn > yz ? ay * std::sqrt(fIn * fIn - yz) : -1.0f;
@@ -189,7 +189,7 @@ struct SkullModel {
         float sdCut = cutDistance(p);
         density = 0;
         material = Material::Air;
-        if (sd >= kRampVoxels * h || sdCut >= kRampVoxels * h)
+        if (sd >= rampMm || sdCut >= rampMm)
             return;
         float depth = -sd;
         float cover = ramp(sdCut);
@@ -203,8 +203,7 @@ struct SkullModel {
         float layer;
         // The outer ramp applies to every layer: at coarse n a voxel whose centre is in the
         // diploe can still straddle the outer surface. Only the outer band holds suture grooves.
-        cover = std::min(cover,
-                         ramp(depth < kRampVoxels * h + kSutureDepth ? sd + sutureGroove(p) : sd));
+        cover = std::min(cover, ramp(depth < rampMm + kSutureDepth ? sd + sutureGroove(p) : sd));
         if (depth < tOuter) {
             layer = float(kSkullCorticalDensity);
             material = Material::Cortical;
@@ -318,6 +317,10 @@ struct SkullModel {
     // the egg term (< 0.001), with room to spare.
     static constexpr float kMaxGradF = 1.0f / 55.0f;
     static constexpr float kRampVoxels = 2.5f;
+    // The ramp's width: 2.5 voxels, but at most kMaxRampMm (the outer table is 1.8 mm thick: a
+    // wider ramp softens its bone and blurs it into the diploe at coarse spacings) and at least
+    // one voxel.
+    static constexpr float kMaxRampMm = 2.0f;
     // Below this depth every voxel is plain brain (the dura/brain blend is one voxel wide).
     float deepMm() const {
         return kMaxBoneMm + std::max({duraMm, kSinusMaxDepthMm, arteryRadius()}) + 2.0f * h + 0.01f;
