@@ -128,7 +128,7 @@ TEST(FeedWindow, AResizedWindowsViewFillsTheFreeAreaAtItsNewSize) {
     TrainerOptions o;
     o.address = "127.0.0.1:" + std::to_string(server.port());
     o.size = 200;
-    o.distanceMm = 80.0f; // the bone fills the view
+    o.distanceMm = 50.0f; // the bone fills the view, one column of panels beside it
     o.screenshot = shot;
     o.frames = 2;
     o.timeoutS = 100.0;
