@@ -3,6 +3,7 @@
 // (raw codec, so its depth is the server's floats) equals, bit for bit, a render of the volume
 // the log replays to after some prefix of its records. `--resume` then continues the log, and
 // its --save-on-exit equals `trephine replay --save` of the whole log.
+#include "child_process.h"
 #include "net/session_log.h"
 #include "net/session_replay.h"
 
@@ -32,6 +33,7 @@ using namespace trephine;
 using namespace trephine::net;
 
 using trephine::testing::burrState;
+using trephine::testing::Child;
 using trephine::testing::loopback;
 using trephine::testing::namedClientConfig;
 using trephine::testing::pumpUntil;
@@ -39,58 +41,6 @@ using trephine::testing::pumpUntil;
 namespace {
 
 constexpr int kN = 48;
-
-// `trephine ARGS` as a child process, its stdout read line by line.
-struct Child {
-    pid_t pid = -1;
-    FILE* out = nullptr;
-
-    explicit Child(std::vector<std::string> args) {
-        int fds[2];
-        if (pipe(fds) != 0)
-            return;
-        args.insert(args.begin(), TREPHINE_BIN);
-        pid = fork();
-        if (pid == 0) {
-            dup2(fds[1], 1);
-            close(fds[0]);
-            std::vector<char*> argv;
-            for (std::string& a : args)
-                argv.push_back(a.data());
-            argv.push_back(nullptr);
-            execv(TREPHINE_BIN, argv.data());
-            _exit(127);
-        }
-        close(fds[1]);
-        out = fdopen(fds[0], "r");
-    }
-    ~Child() {
-        if (pid > 0)
-            end(SIGKILL);
-    }
-    std::string line() {
-        char buf[512] = {};
-        return out && fgets(buf, sizeof buf, out) ? std::string(buf) : std::string();
-    }
-    // The port of its "... on port N; Ctrl-C stops" line (-1 when it printed none).
-    int port() {
-        for (std::string l = line(); !l.empty(); l = line())
-            if (const auto at = l.find("on port "); at != std::string::npos)
-                return std::stoi(l.substr(at + 8));
-        return -1;
-    }
-    // `sig`, then its exit status (-1: killed by a signal).
-    int end(int sig) {
-        kill(pid, sig);
-        int status = 0;
-        waitpid(pid, &status, 0);
-        pid = -1;
-        if (out)
-            fclose(out);
-        out = nullptr;
-        return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    }
-};
 
 std::string tempPath(const std::string& name) {
     const std::string p = (std::filesystem::temp_directory_path() /
