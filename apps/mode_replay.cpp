@@ -43,8 +43,8 @@ extern "C" void onReplayStop(int) {
 }
 
 // --serve: a live server on the log's starting volume and scene, open to anyone (a replay has
-// nothing to protect), fed the log's records as their time comes round at `speed`; then the
-// final state is served until a stop signal.
+// nothing to protect), playing the log on a timeline the windows drive (play, pause, seek,
+// speed); the server runs until a stop signal.
 int serveReplay(const ReplayOptions& o, net::LogContents log, Volume start) {
     net::ServerConfig base;
     base.port = o.port;
@@ -52,7 +52,8 @@ int serveReplay(const ReplayOptions& o, net::LogContents log, Volume start) {
     net::ServerConfig config = net::replayServerConfig(log.header, base);
     const glm::ivec3 d = start.dims();
     net::SessionServer server(std::move(start), config);
-    net::ReplayFeed feed(std::move(log.records), o.speed);
+    const size_t records = log.records.size();
+    server.serveLog(std::move(log.records), o.speed, !o.wait);
     handleStopSignals(onReplayStop);
     std::signal(SIGPIPE, SIG_IGN);
     server.start();
@@ -61,33 +62,35 @@ int serveReplay(const ReplayOptions& o, net::LogContents log, Volume start) {
                 "Ctrl-C stops\n",
                 o.log.c_str(), config.volumeName.c_str(), d.x, d.y, d.z, unsigned(server.port()),
                 o.speed, unsigned(server.port()));
-    std::printf("trephine replay: %zu records over %.1f s\n", feed.size(),
-                double(feed.durationUs()) * 1e-6);
+    auto state = [&] {
+        std::optional<net::ReplayState> s;
+        while (!(s = server.replayState()) && !g_replayStop.load())
+            std::this_thread::sleep_for(std::chrono::milliseconds(2));
+        return s.value_or(net::ReplayState{});
+    };
+    std::printf("trephine replay: %zu records over %.1f s of session; the windows' timeline "
+                "plays, pauses, seeks and changes the speed\n",
+                records, double(state().durationUs) * 1e-6);
     if (o.wait) {
         std::printf("trephine replay: waiting for a window to connect before playing\n");
         std::fflush(stdout);
         while (!g_replayStop.load() && server.clientCount() == 0)
             std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        server.controlReplay({net::ReplayControl::Op::Play});
     }
     std::fflush(stdout);
-    const auto t0 = std::chrono::steady_clock::now();
-    bool finished = false;
+    bool atEnd = false;
     while (!g_replayStop.load()) {
-        if (!finished) {
-            const auto elapsed = std::chrono::duration_cast<std::chrono::microseconds>(
-                std::chrono::steady_clock::now() - t0);
-            std::vector<net::LogRecord> due = feed.due(uint64_t(elapsed.count()));
-            if (!due.empty())
-                server.replay(std::move(due));
-            if (feed.done()) {
-                finished = true;
-                std::printf("trephine replay: the replay has finished (%zu records played); "
-                            "serving its final state until Ctrl-C\n",
-                            feed.given());
-                std::fflush(stdout);
-            }
+        const net::ReplayState s = state();
+        const bool end = !s.playing && s.positionUs == s.durationUs;
+        if (end && !atEnd) {
+            std::printf("trephine replay: at the end of the session (%.1f s); serving its final "
+                        "state until Ctrl-C or a window plays it again\n",
+                        double(s.durationUs) * 1e-6);
+            std::fflush(stdout);
         }
-        std::this_thread::sleep_for(std::chrono::milliseconds(finished ? 50 : 2));
+        atEnd = end;
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
     std::printf("trephine replay: stopping (%llu tool states applied)\n",
                 (unsigned long long)server.toolStatesApplied());
@@ -192,7 +195,7 @@ void addReplayMode(CLI::App& root, int& exitCode) {
         ->capture_default_str();
     sub->add_option("--speed", o->speed, "--serve: times the recorded pace (2: twice as fast)")
         ->needs(serve)
-        ->check(finiteRange(1e-3, 1e6))
+        ->check(finiteRange(net::kMinReplaySpeed, net::kMaxReplaySpeed))
         ->capture_default_str();
     sub->add_flag("--wait", o->wait,
                   "--serve: start playing once the first window has connected, so it sees the "

@@ -77,6 +77,7 @@ nlohmann::ordered_json toJson(const ServerReport& r, const NetStats& stats) {
               {"views_refused", c.viewsRefused},
               {"annotations_refused", c.annotationsRefused},
               {"take_overs_refused", c.takeOversRefused},
+              {"replay_controls_refused", c.replayControlsRefused},
               {"drilling_paused", c.drillingPaused},
               {"peak_in_flight_bytes", c.peakInFlightBytes},
               {"channels", channels(stats)},
