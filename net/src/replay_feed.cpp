@@ -54,6 +54,8 @@ ServerConfig replayServerConfig(const LogHeader& header, ServerConfig c) {
     c.volumeName = header.volumeName;
     c.maxStepS = header.maxStepS;
     c.maxSweepMm = header.maxSweepMm;
+    c.cautionMm = header.cautionMm;
+    c.dangerMm = header.dangerMm;
     c.recorder = nullptr;
     return c;
 }
