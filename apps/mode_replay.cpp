@@ -29,6 +29,7 @@ struct ReplayOptions {
     std::string log;
     std::string save;
     std::string trajectories;
+    std::string report;
     bool serve = false;
     uint16_t port = 7777;
     double speed = 1.0;
@@ -129,12 +130,19 @@ int runReplay(const ReplayOptions& o) {
         if (!std::filesystem::is_directory(o.trajectories, ec))
             throw Error("--trajectories " + o.trajectories + ": cannot make that folder");
     }
+    if (!o.report.empty()) {
+        checkOutputFolder("--report", o.report);
+        if (samePath(o.report, o.log))
+            throw Error("--report " + o.report + " is the session log: write the report elsewhere");
+        if (!o.save.empty() && samePath(o.report, o.save))
+            throw Error("--report and --save name one file " + o.report + ": give each its own");
+    }
     const auto t0 = std::chrono::steady_clock::now();
     net::LogContents log = net::readSessionLog(o.log);
     if (!log.stopped.empty())
         std::printf("trephine replay: %s\n", log.stopped.c_str());
     Volume start = net::logStartVolume(log.header, openVolume);
-    if (o.serve && o.save.empty() && o.trajectories.empty())
+    if (o.serve && o.save.empty() && o.trajectories.empty() && o.report.empty())
         return serveReplay(o, std::move(log), std::move(start));
     net::SessionReplay replay(log.header, start);
     const auto t1 = std::chrono::steady_clock::now();
@@ -167,6 +175,11 @@ int runReplay(const ReplayOptions& o) {
         std::printf("trephine replay: wrote %zu trajector%s into %s\n", paths.size(),
                     paths.size() == 1 ? "y" : "ies", o.trajectories.c_str());
     }
+    if (!o.report.empty()) {
+        if (!writeReplacing(o.report, net::replayReportText(replay, log, o.log)))
+            throw Error("--report " + o.report + ": cannot write it");
+        std::printf("trephine replay: wrote %s\n", o.report.c_str());
+    }
     if (o.serve)
         return serveReplay(o, std::move(log), std::move(start));
     return 0;
@@ -186,6 +199,10 @@ void addReplayMode(CLI::App& root, int& exitCode) {
     sub->add_option("--trajectories", o->trajectories,
                     "Write each participant's tool path here as a trainee script CSV "
                     "(docs/scripts.md), one file each");
+    sub->add_option("--report", o->report,
+                    "Write each participant's assessment metrics, recomputed from the log, here "
+                    "(JSON, as the server's --report has them; docs/assessment.md)")
+        ->check(outputFile());
     CLI::Option* serve = sub->add_flag(
         "--serve", o->serve,
         "Then play the session into a live server at its recorded pace, for windows to watch "

@@ -130,6 +130,8 @@ ServerConfig replayServerConfig(const LogHeader& header, ServerConfig c) {
     c.volumeName = header.volumeName;
     c.maxStepS = header.maxStepS;
     c.maxSweepMm = header.maxSweepMm;
+    c.cautionMm = header.cautionMm;
+    c.dangerMm = header.dangerMm;
     c.recorder = nullptr;
     c.replay = true;
     return c;

@@ -125,7 +125,11 @@ nlohmann::ordered_json toJson(const ServerReport& r, const NetStats& stats) {
 }
 
 std::string toJsonText(const ServerReport& report, const NetStats& stats) {
-    return toJson(report, stats).dump(2, ' ', false, Json::error_handler_t::replace) + "\n";
+    return jsonText(toJson(report, stats));
+}
+
+std::string jsonText(const nlohmann::ordered_json& j) {
+    return j.dump(2, ' ', false, Json::error_handler_t::replace) + "\n";
 }
 
 } // namespace trephine::net

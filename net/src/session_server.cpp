@@ -168,7 +168,12 @@ void SessionServer::Impl::push(std::vector<SimEvent>& events, const std::vector<
     {
         std::lock_guard lock(inMutex);
         const size_t queued = inbox.size();
+        // Every event carries its time, and its record the same, so a replay of the log times
+        // the assessment's joins and leaves as this server does (net/sim_step.cpp, eventTime).
+        const uint64_t now = steadyNowUs();
         for (SimEvent& ev : events) {
+            if (!ev.arrivedUs)
+                ev.arrivedUs = now;
             if (ev.kind == SimEvent::Kind::Tool) {
                 if (mayDrop && inboxTools >= maxQueuedToolStates) {
                     ++dropped;
@@ -182,10 +187,8 @@ void SessionServer::Impl::push(std::vector<SimEvent>& events, const std::vector<
         // they caused: nothing a client sees is missing from the log after a crash.
         if (recorder) {
             logged.assign(log.begin(), log.end());
-            const uint64_t now = steadyNowUs();
             for (size_t i = queued; i < inbox.size(); ++i)
-                logged.push_back(
-                    logRecordOf(inbox[i], inbox[i].arrivedUs ? inbox[i].arrivedUs : now));
+                logged.push_back(logRecordOf(inbox[i], inbox[i].arrivedUs));
             recorder->write(logged);
         }
     }
@@ -763,6 +766,15 @@ void SessionServer::Impl::sayGoodbye() {
                 enet_peer_disconnect(ev.peer, uint32_t(RefuseReason::Shutdown));
             }
         });
+    // Whoever did not answer in time is gone all the same: its leave is applied (and logged) at
+    // the stop, so its assessment ends there, as a replay of the log ends it.
+    for (const auto& [id, peer] : std::map<uint16_t, ENetPeer*>(links)) {
+        peer->data = nullptr;
+        PolicyOutput left;
+        policy.disconnect(id, steadyNowUs(), left);
+        links.erase(id);
+        push(left.events, left.log);
+    }
     book.record([](ServerReport& r) { r.counters.clients = 0; });
 }
 

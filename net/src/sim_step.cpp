@@ -21,6 +21,13 @@ Volume normaliseAir(Volume v) {
     return v;
 }
 
+// The assessment's time for an event: when it arrived (the server stamps every event it queues,
+// and a log records that time), else the step's. So a replay of the log times joins, leaves and
+// samples as the live server did, whenever each was stepped.
+uint64_t eventTime(const SimEvent& ev, uint64_t now) {
+    return ev.arrivedUs ? ev.arrivedUs : now;
+}
+
 AssessmentConfig withSweep(const StepConfig& c) {
     AssessmentConfig a = c.assessment;
     a.maxSweepMm = c.maxSweepMm;
@@ -85,7 +92,7 @@ void SimulationStep::applyClientEvent(const SimEvent& ev, Batch& b, uint64_t now
         Client& c = m_clients[ev.client];
         c.camera = ev.camera;
         if (ev.kind == SimEvent::Kind::Join) {
-            m_assessment.join(ev.client, ev.name, ev.role, now);
+            m_assessment.join(ev.client, ev.name, ev.role, eventTime(ev, now));
             c.sync = ev.sync;
             m_outbox.join(ev.client, ev.inFlight, ev.codec, ev.volumeCodec);
             if (c.sync == Sync::Volume)
@@ -117,7 +124,7 @@ void SimulationStep::applyClientEvent(const SimEvent& ev, Batch& b, uint64_t now
         break;
     }
     case SimEvent::Kind::Leave:
-        m_assessment.leave(ev.client, now);
+        m_assessment.leave(ev.client, eventTime(ev, now));
         m_clients.erase(ev.client);
         m_outbox.leave(ev.client);
         b.needFull.erase(ev.client);
@@ -191,11 +198,11 @@ void SimulationStep::applyTool(const SimEvent& ev, Batch& b, uint64_t now) {
         // Lifted clear of bone between holes, the perforator's clutch re-engages (this is the
         // volume's only writer: reading it needs no lock).
         c.driller->observe(m_volume, pose);
-        m_assessment.apply(applied, now);
+        m_assessment.apply(applied, eventTime(ev, now));
         return;
     }
     if (dt <= 0.0f) {
-        m_assessment.apply(applied, now);
+        m_assessment.apply(applied, eventTime(ev, now));
         return;
     }
     // The cutter moved from the last drilling pose to this one during dt: it sweeps the path (a
@@ -225,7 +232,7 @@ void SimulationStep::applyTool(const SimEvent& ev, Batch& b, uint64_t now) {
     b.erodeUs += m_clock() - e0;
     if (!changed.empty())
         b.changedBy(changed, ev.arrivedUs);
-    m_assessment.apply(applied, now);
+    m_assessment.apply(applied, eventTime(ev, now));
 }
 
 // [SECTION] posting

@@ -105,6 +105,8 @@ nlohmann::ordered_json toJson(const ServerReport& report, const NetStats& stats)
 // toJson as text, two spaces an indent. Peer names come from the wire and the volume's name from
 // the user: bytes that are not UTF-8 are replaced, never a reason to lose the report.
 std::string toJsonText(const ServerReport& report, const NetStats& stats);
+// Any report's JSON as text, as toJsonText writes it (`trephine replay --report` too).
+std::string jsonText(const nlohmann::ordered_json& j);
 
 // A ServerReport behind a mutex: the network and simulation threads record, anyone reads.
 class ReportBook {
