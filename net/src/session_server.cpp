@@ -691,11 +691,10 @@ void SessionServer::Impl::playReplayed() {
         policy.replayState(state, out);
         replayStateSentUs = now;
     }
-    {
-        std::lock_guard lock(replayMutex);
-        replayPublished = state;
-    }
     apply(out, false);
+    // After the records are queued: a reader that sees this state and idle() sees them applied.
+    std::lock_guard lock(replayMutex);
+    replayPublished = state;
 }
 
 // Sends the updates the outbox lets go, and sends away the volume clients it refused.
