@@ -23,6 +23,8 @@ std::vector<std::string> issueCodes(SessionGate& gate, SessionPolicy& policy, Po
     std::vector<std::string> lines;
     for (const CodeRequest& r : std::exchange(out.newCodes, {})) {
         const std::string code = gate.issue(r.role);
+        if (code.empty())
+            continue; // an open session's gate has no codes (the policy asks none of it)
         policy.codeIssued(r.role, code, out);
         lines.push_back(codeIssuedLine(r.role, code, r.byName));
     }
