@@ -246,6 +246,33 @@ void participantRow(const net::ClientSnapshot& snap, uint16_t id, const net::Par
     drawZoneBadge(snap, id); // the assessment's zone of its tool (instructors hear of all)
 }
 
+// An instructor's codes to read out, each with its button for a new one (the old code then joins
+// nobody, and those removed may rejoin with the new one). Drawn only when the server sent them.
+void codeRows(const net::Codes& codes, TakeOverControls& takeOver) {
+    const struct {
+        net::Role role;
+        const std::string& code;
+        const char* label;
+        const char* button;
+    } rows[] = {
+        {net::Role::Trainee, codes.trainee, "trainee code:", "new trainee code"},
+        {net::Role::Instructor, codes.instructor, "instructor code:", "new instructor code"}};
+    // Buttons first, as in the participant rows; the labels in one column after the wider one.
+    const ImGuiStyle& style = ImGui::GetStyle();
+    const float labelX = ImGui::GetCursorPosX() + ImGui::CalcTextSize(rows[1].button).x +
+                         2 * style.FramePadding.x + style.ItemSpacing.x;
+    for (const auto& r : rows) {
+        if (ImGui::SmallButton(r.button))
+            takeOver.newCode = r.role;
+        itemTip("Issue a new code: the old one no longer joins (those in stay), and anyone removed "
+                "may rejoin with the new one.");
+        ImGui::SameLine(labelX);
+        ImGui::TextDisabled("%s", r.label);
+        ImGui::SameLine();
+        ImGui::TextUnformatted(r.code.c_str());
+    }
+}
+
 } // namespace
 
 // Fixed rows first (the link, the tool, the drill's state, an instructor's mark controls), the
@@ -283,6 +310,8 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
         ImGui::TextDisabled("your own view");
     if (marks.canMark)
         markControlRows(snap, marks);
+    if (takeOver.canTakeOver && snap.codes)
+        codeRows(*snap.codes, takeOver);
     ImGui::Separator();
     // Everyone the server lists but us, in client id order (a newcomer's row comes last).
     ImGui::Text("participants: you + %zu", snap.participants.empty()

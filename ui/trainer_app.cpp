@@ -1111,6 +1111,9 @@ void TrainerWindow::drawPanels(const FrameState& f) {
     if (takeOverControls.remove)
         client.remove(*takeOverControls.remove);
     takeOverControls.remove.reset();
+    if (takeOverControls.newCode)
+        client.newCode(*takeOverControls.newCode);
+    takeOverControls.newCode.reset();
     // View as (the panel, --view-as once the participant is listed).
     if (scene && snap.welcome && snap.state == net::LinkState::Connected)
         if (const auto id =

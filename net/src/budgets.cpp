@@ -42,6 +42,7 @@ bool latestState(uint8_t type) {
     case MessageType::Participants:
     case MessageType::Annotations:
     case MessageType::ParticipantView:
+    case MessageType::Codes:
         return true;
     default:
         return false;

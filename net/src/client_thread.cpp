@@ -177,6 +177,12 @@ bool ClientThread::remove(Remove m) {
 bool ClientThread::controlReplay(const ReplayControl& c) {
     return push(c);
 }
+bool ClientThread::newCode(Role role) {
+    Codes m;
+    m.op = Codes::Op::Issue;
+    m.role = role;
+    return push(std::move(m));
+}
 
 std::vector<AppliedVolumeBox> ClientThread::drainVolumeBoxes() {
     std::vector<AppliedVolumeBox> out;
@@ -261,6 +267,7 @@ bool drawsTheSame(const ClientSnapshot& a, const ClientSnapshot& b) {
            a.waitingForView == b.waitingForView && a.sync == b.sync &&
            a.requestedSync == b.requestedSync && a.participants == b.participants &&
            a.annotations == b.annotations && sameTimeline(a.replay, b.replay) &&
+           a.codes == b.codes &&
            std::equal(a.others.begin(), a.others.end(), b.others.begin(), b.others.end(), sameTool);
 }
 
@@ -296,6 +303,7 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
         s->annotations = c->annotations();
         s->warnings = c->warnings();
         s->assessment = c->assessment();
+        s->codes = c->codes();
         if (c->replay()) {
             s->replay = *c->replay();
             s->replay->positionUs = c->replayPosition(nowUs);
@@ -352,6 +360,8 @@ void ClientThread::run() {
             cc.view = *m_wantedView;
         if (m_wantedSync)
             cc.sync = *m_wantedSync;
+        if (m_wantedCode)
+            cc.code = *m_wantedCode;
         if (std::unique_ptr<SessionClient> client = connectClient(cc))
             runConnection(*client, cc);
         if (m_stop)
@@ -478,6 +488,9 @@ void ClientThread::pollUntilClosed(SessionClient& client, const ClientConfig& cc
             nextPublish = now;
         }
         runCommands(*cp, cc.renderLocally);
+        // A new instructor code stops the old one joining: reconnects prove the new one.
+        if (cc.role == Role::Instructor && cp->codes())
+            m_wantedCode = cp->codes()->instructor;
         publishFullCopies(*cp, now);
         if (cp->welcomed() && now >= nextPing) {
             cp->sendPing();
@@ -535,6 +548,9 @@ void ClientThread::runCommands(SessionClient& client, bool renderLocally) {
         } else if (auto* rc = std::get_if<ReplayControl>(&c)) {
             if (cp->welcomed())
                 cp->controlReplay(*rc);
+        } else if (auto* k = std::get_if<Codes>(&c)) {
+            if (cp->welcomed())
+                cp->newCode(k->role);
         } else if (cp->welcomed()) {
             cp->sendPing();
         }

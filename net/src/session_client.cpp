@@ -254,6 +254,8 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         return onAssessmentSnapshot(data);
     case MessageType::ReplayState:
         return onReplayState(data, nowUs);
+    case MessageType::Codes:
+        return onCodes(data);
     default:
         return false;
     }

@@ -19,7 +19,9 @@ nlohmann::ordered_json securityJson(const SecurityCounters& c) {
             {"forged_dropped", c.forged},
             {"replayed_dropped", c.replayed},
             {"spoofed_dropped", c.spoofed},
-            {"unauthenticated_dropped", c.unauthenticated}};
+            {"unauthenticated_dropped", c.unauthenticated},
+            {"codes_issued", c.codesIssued},
+            {"new_codes_refused", c.newCodesRefused}};
 }
 
 SessionGate::SessionGate(const ServerConfig& config, ReportBook& book) : m_book(book) {

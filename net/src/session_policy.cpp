@@ -232,6 +232,8 @@ bool SessionPolicy::handle(uint16_t id, Peer& p, std::span<const uint8_t> data, 
         return takeOver(id, p, data, now, out);
     case MessageType::Remove:
         return remove(id, p, data, now, out);
+    case MessageType::Codes:
+        return codes(id, p, data, out);
     case MessageType::ReplayControl: {
         ReplayControl c;
         if (!decodeMessage(data, c))
@@ -328,6 +330,8 @@ void SessionPolicy::welcome(uint16_t id, uint64_t now, PolicyOutput& out) {
         out.messages.push_back({{id}, Channel::Control, marksMessage()});
     if (!m_replayState.empty())
         out.messages.push_back({{id}, Channel::Control, m_replayState});
+    if (m_peers.at(id).helloMsg.role == Role::Instructor)
+        sendCodes({id}, out); // the codes to read out (session_codes.cpp)
 }
 
 bool SessionPolicy::toolState(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,

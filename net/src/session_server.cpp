@@ -574,6 +574,12 @@ void SessionServer::Impl::guard(uint64_t now) {
 // Sends what the policy asked for; its events go to the simulation (and the log) first.
 void SessionServer::Impl::apply(PolicyOutput& out, bool mayDrop) {
     push(out.events, out.log, mayDrop);
+    // New codes first: the instructors' copies join this output's messages; printed like the
+    // start banner, for whoever reads them out.
+    for (const std::string& line : issueCodes(gate, policy, out)) {
+        std::printf("trephine server: %s\n", line.c_str());
+        std::fflush(stdout);
+    }
     for (const PolicyOutput::Message& m : out.messages)
         for (uint16_t id : m.to)
             sendTo(id, m.channel, m.bytes);

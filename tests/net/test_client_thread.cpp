@@ -193,6 +193,49 @@ TEST(ClientThread, ReconnectsToANewServerOnTheSamePort) {
     server->stop();
 }
 
+// An instructor's snapshot carries the session's codes; a new instructor code it asks for is
+// published, and is the one its reconnects prove (the old one joins nobody any more).
+TEST(ClientThread, AnInstructorSeesTheCodesAndReconnectsWithTheNewOneItIssued) {
+    Volume skull = makeSkull(64);
+    ServerConfig sc = loopbackServerConfig("skull:64");
+    sc.traineeCode = "QX7M-4KTD";
+    sc.instructorCode = "HW2R-9PZE";
+    auto server = std::make_unique<SessionServer>(skull, sc);
+    const uint16_t port = server->port();
+    server->start();
+    ClientThreadConfig cc = reconnectingClient(skull, port);
+    cc.client.role = Role::Instructor;
+    cc.client.code = sc.instructorCode;
+    ClientThread client(cc);
+    client.start();
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->codes.has_value(); }, 20.0));
+    EXPECT_EQ(client.snapshot()->codes->trainee, sc.traineeCode);
+    EXPECT_EQ(client.snapshot()->codes->instructor, sc.instructorCode);
+    ASSERT_TRUE(client.newCode(Role::Instructor));
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->codes->instructor != "HW2R-9PZE"; }, 20.0));
+    const std::string fresh = client.snapshot()->codes->instructor;
+    EXPECT_EQ(client.snapshot()->codes->trainee, sc.traineeCode);
+
+    // A server on the same port that knows only the new code: the thread joins it with that.
+    server->stop();
+    server.reset();
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->state != LinkState::Connected; }, 10.0));
+    sc.port = port;
+    sc.instructorCode = fresh;
+    server = std::make_unique<SessionServer>(skull, sc);
+    server->start();
+    ASSERT_TRUE(waitFor(
+        [&] {
+            auto s = client.snapshot();
+            return s->state == LinkState::Connected && s->codes.has_value();
+        },
+        20.0))
+        << client.snapshot()->closeReason;
+    EXPECT_EQ(client.snapshot()->codes->instructor, fresh);
+    client.stop();
+    server->stop();
+}
+
 // A switch and a view asked for while the link is down are not lost: the thread makes them on
 // the next connection (its hello, or right after the welcome when the request came later).
 TEST(ClientThread, ASwitchAndAViewAskedWhileDisconnectedAreMadeOnReconnect) {

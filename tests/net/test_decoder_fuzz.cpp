@@ -116,6 +116,8 @@ bool decodeAny(std::span<const uint8_t> p) {
         return decodesCanonically<Handshake>(p);
     case MessageType::Remove:
         return decodesCanonically<Remove>(p);
+    case MessageType::Codes:
+        return decodesCanonically<Codes>(p);
     case MessageType::SafetyWarning:
         return decodesCanonically<SafetyWarning>(p);
     case MessageType::AssessmentSnapshot:
@@ -284,6 +286,15 @@ std::vector<std::vector<uint8_t>> sampleMessages() {
     confirm.mac.fill(0x66);
     all.push_back(encoded(confirm));
     all.push_back(encoded(Remove{Remove::Op::Remove, 4}));
+    // Codes both ways: an instructor's request, and the codes the server sends instructors.
+    Codes request;
+    request.op = Codes::Op::Issue;
+    request.role = Role::Instructor;
+    all.push_back(encoded(request));
+    Codes current;
+    current.trainee = "QX7M-4KTD";
+    current.instructor = "HW2R-9PZE";
+    all.push_back(encoded(current));
     all.push_back(encoded(SafetyWarning{4, Zone::Danger, Zone::Caution, "sinus", 0.8f, 17, 99}));
     AssessmentSnapshot snapshot;
     snapshot.serverTimeUs = 5;
@@ -365,13 +376,13 @@ std::vector<uint32_t> hostileRawBytes(uint32_t valid) {
 
 TEST(DecoderFuzz, EveryMessageTypeRefusesMutationsOrDecodesThemInRange) {
     const std::vector<std::vector<uint8_t>> samples = sampleMessages();
-    // One of every type (the handshake's four steps each).
-    constexpr size_t kUnassignedTypes = 0, kHandshakeSteps = 4;
+    // One of every type (the handshake's four steps each, both of Codes' ops).
+    constexpr size_t kUnassignedTypes = 0, kHandshakeSteps = 4, kCodesOps = 2;
     std::set<uint8_t> types;
     for (const std::vector<uint8_t>& s : samples)
         types.insert(s[0]);
     ASSERT_EQ(types.size(), size_t(kMessageTypeCount - 1) - kUnassignedTypes);
-    ASSERT_EQ(samples.size(), types.size() + kHandshakeSteps - 1);
+    ASSERT_EQ(samples.size(), types.size() + (kHandshakeSteps - 1) + (kCodesOps - 1));
     const int random = 1500 * fuzzScale();
     size_t mutated = 0, decoded = 0;
     for (size_t s = 0; s < samples.size(); ++s) {

@@ -436,6 +436,47 @@ TEST(SessionSecurity, AnInstructorRemovesAParticipantWhoCannotRejoinUntilAllowed
     server.stop();
 }
 
+// A new trainee code while the server runs (docs/security.md, "New codes"): the instructor is
+// sent the codes and asks for a new one; the removed trainee rejoins with it, the old code is
+// refused as wrong, and the trainee is never sent the codes.
+TEST(SessionSecurity, AnInstructorIssuesANewTraineeCodeThatLetsTheRemovedBack) {
+    Volume sphere = makeSphere(32);
+    SessionServer server(sphere, codedServerConfig());
+    server.start();
+    SessionClient ada(member(sphere, "Ada", Role::Trainee, kTraineeCode));
+    SessionClient cho(member(sphere, "Dr. Cho", Role::Instructor, kInstructorCode));
+    std::vector<SessionClient*> both = {&ada, &cho};
+    for (SessionClient* c : both)
+        c->connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil(
+        both, [&] { return ada.welcomed() && cho.codes() && cho.participants().size() == 2; }));
+    EXPECT_EQ(cho.codes()->trainee, kTraineeCode);
+    EXPECT_EQ(cho.codes()->instructor, kInstructorCode);
+    ada.newCode(Role::Trainee); // a trainee's is refused
+    ASSERT_TRUE(pumpUntil(both, [&] { return server.security().newCodesRefused == 1; }));
+    cho.remove(Remove{Remove::Op::Remove, ada.welcome().clientId});
+    ASSERT_TRUE(pumpUntil(both, [&] { return ada.closed(); }));
+    EXPECT_FALSE(ada.codes().has_value());
+
+    cho.newCode(Role::Trainee);
+    ASSERT_TRUE(pumpUntil({&cho}, [&] { return cho.codes()->trainee != kTraineeCode; }));
+    const std::string fresh = cho.codes()->trainee;
+    EXPECT_EQ(cho.codes()->instructor, kInstructorCode);
+    SessionClient old(member(sphere, "Eve", Role::Trainee, kTraineeCode));
+    old.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&cho, &old}, [&] { return old.closed(); }));
+    EXPECT_EQ(old.closeReason(), "wrong session code");
+    EXPECT_EQ(sessionBytes(old), 0u);
+    SessionClient back(member(sphere, "Ada", Role::Trainee, fresh));
+    back.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&cho, &back}, [&] { return back.hasFullImage(); }))
+        << back.closeReason();
+    EXPECT_FALSE(back.codes().has_value());
+    EXPECT_FALSE(cho.closed());
+    EXPECT_EQ(server.security().codesIssued, 1u);
+    server.stop();
+}
+
 // Random datagrams at the server's port while a client runs its handshake (some naming its
 // peer, most nothing): the handshake completes, and the server neither crashes nor lets any in.
 TEST(SessionSecurity, RandomDatagramsDuringAHandshakeDoNotStopIt) {

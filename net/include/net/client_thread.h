@@ -105,6 +105,8 @@ struct ClientSnapshot {
     // [Replay] The timeline of the log the server serves, its position as of publishedUs (none:
     // a live session); replayPositionAfter moves it on.
     std::optional<ReplayState> replay;
+    // [Instructor] The session's codes, to read out (none: a trainee, or an open session).
+    std::optional<Codes> codes;
     std::optional<HapticModel> hapticModel; // latest force model (when the client offers it)
     uint64_t hapticModels = 0;
     // [Instructor] the newest relayed force model of every other participant, by client id.
@@ -179,6 +181,9 @@ public:
     bool remove(Remove m);
     // [Replay] Plays, pauses, seeks or changes the speed (SessionClient::controlReplay).
     bool controlReplay(const ReplayControl& c);
+    // [Instructor] Asks for a new code of `role` (SessionClient::newCode). A new instructor code
+    // is also this thread's for its reconnects.
+    bool newCode(Role role);
 
     // The latest snapshot (never null after construction).
     std::shared_ptr<const ClientSnapshot> snapshot() const;
@@ -204,7 +209,7 @@ private:
         Sync sync;
     };
     using Command = std::variant<ToolState, ViewCmd, PingCmd, SyncCmd, Annotate, TakeOver, ViewAs,
-                                 Remove, ReplayControl>;
+                                 Remove, ReplayControl, Codes>;
 
     // The 1 s rate tick's state for one connection (network thread only).
     struct RateClock {
@@ -264,6 +269,7 @@ private:
     uint32_t m_toolSequence = 0; // carried from one connection to the next (run() only)
     std::optional<ViewSpec> m_wantedView;
     std::optional<Sync> m_wantedSync;
+    std::optional<std::string> m_wantedCode; // an instructor's newest code (reconnects)
     std::array<double, 2> m_modeRates{};
     std::optional<HapticModel> m_haptic;
     uint64_t m_hapticModels = 0;

@@ -36,7 +36,8 @@ namespace trephine::net {
 // server gives each participant one; every window draws it); Handshake (role codes proven by
 // SPAKE2, then every message sealed: docs/security.md) and Remove; refusals WrongCode, Removed,
 // TooManyAttempts; refusals Busy, Idle, ViewsFull (docs/session.md, "Availability").
-// 10: ReplayState and ReplayControl (a replay's timeline: net/replay_protocol.h).
+// 10: ReplayState and ReplayControl (a replay's timeline: net/replay_protocol.h); Codes (type
+// 26: an instructor issues a new role code while the server runs).
 inline constexpr uint32_t kProtocolVersion = 10;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
@@ -68,6 +69,8 @@ std::string refuseReasonText(uint32_t disconnectData);
 
 inline constexpr uint16_t kMaxWindowSize = 4096;
 inline constexpr size_t kMaxNameLength = 64;
+// A role code as shown (Codes): a longer one given at start is sent in its normalised form.
+inline constexpr size_t kMaxCodeTextBytes = 96;
 // The most entries a Participants message may hold (the server's --max-clients is far below).
 inline constexpr uint16_t kMaxParticipants = 1024;
 // The most marks a session holds (Annotations); an Annotate add beyond it is refused.
@@ -136,8 +139,9 @@ enum class MessageType : uint8_t {
     ReplayControl = 23,      // net/replay_protocol.h
     Handshake = 24,          // docs/security.md
     Remove = 25,
+    Codes = 26, // docs/security.md
 };
-inline constexpr uint8_t kMessageTypeCount = 26; // one past the largest type
+inline constexpr uint8_t kMessageTypeCount = 27; // one past the largest type
 
 enum class Role : uint8_t { Trainee = 0, Instructor = 1 };
 enum class Codec : uint8_t { Raw = 0, Lz4 = 1, Zstd = 2 };
@@ -662,6 +666,29 @@ struct Remove {
     template <typename S>
     bool serialize(S& s) {
         return s.ranged(op, Op::Remove, Op::AllowRejoin) && s.integer(clientId);
+    }
+};
+
+// Both ways on Channel::Control (docs/security.md). Issue: an instructor asks the server for a
+// new code of `role` (the old one stops working for new connections, and those removed with it
+// may rejoin with the new one). Current: the session's codes as the server prints them, sent to
+// every instructor at its welcome and after each change, never to a trainee. The server refuses
+// (counts) a trainee's Issue, and any in an open session.
+struct Codes {
+    static constexpr MessageType kType = MessageType::Codes;
+    enum class Op : uint8_t { Issue = 0, Current = 1 };
+    Op op = Op::Current;
+    Role role = Role::Trainee;       // Issue
+    std::string trainee, instructor; // Current: at most kMaxCodeTextBytes each
+
+    bool operator==(const Codes&) const = default;
+    template <typename S>
+    bool serialize(S& s) {
+        if (!s.ranged(op, Op::Issue, Op::Current))
+            return false;
+        if (op == Op::Issue)
+            return s.ranged(role, Role::Trainee, Role::Instructor);
+        return s.string(trainee, kMaxCodeTextBytes) && s.string(instructor, kMaxCodeTextBytes);
     }
 };
 

@@ -19,6 +19,8 @@ struct SecurityCounters {
     uint64_t replayed = 0;        // sealed messages whose counter was seen or too old
     uint64_t spoofed = 0;         // datagrams naming a peer from another address (ENet drops them)
     uint64_t unauthenticated = 0; // messages before the handshake ended (dropped)
+    uint64_t codesIssued = 0;     // new codes an instructor issued while the server ran
+    uint64_t newCodesRefused = 0; // requests for one from trainees, or in an open session
 
     bool operator==(const SecurityCounters&) const = default;
 };

@@ -148,6 +148,11 @@ public:
     // [Instructor] Removes participant `id` from the session, or lets every removed one join
     // again (Remove); the server refuses a trainee's.
     void remove(Remove m);
+    // [Instructor] Asks the server for a new code of `role` (Codes); the server refuses a
+    // trainee's. codes(): the session's codes as the server last sent them (only instructors
+    // are sent them; none in an open session). session_client_codes.cpp.
+    void newCode(Role role);
+    const std::optional<Codes>& codes() const { return m_codes; }
     // ParticipantView messages received (of the participant viewed as, or a stale one).
     uint64_t participantViewsReceived() const { return m_participantViews; }
 
@@ -264,6 +269,7 @@ private:
     bool onSafetyWarning(std::span<const uint8_t> data);      // session_client_assessment.cpp
     bool onAssessmentSnapshot(std::span<const uint8_t> data); // session_client_assessment.cpp
     bool onReplayState(std::span<const uint8_t> data, uint64_t nowUs); // session_client_replay.cpp
+    bool onCodes(std::span<const uint8_t> data);                       // session_client_codes.cpp
     bool applyImage(const ImageUpdate& u, uint64_t nowUs);
     bool applyVolume(const VolumeUpdate& u, uint64_t nowUs);
     // Volume mode: the whole view rendered from the local volume into m_dbi.
@@ -310,6 +316,7 @@ private:
     AssessmentSnapshot m_assessment;
     uint64_t m_snapshots = 0;
     std::optional<ReplayState> m_replay;
+    std::optional<Codes> m_codes;
     uint64_t m_replayReceivedUs = 0;
     // Whether relays of `id` are kept: everyone until the first roster, then whom it lists (a relay
     // on the tool or haptic channel can trail the reliable roster that dropped its sender).

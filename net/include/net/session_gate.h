@@ -16,6 +16,7 @@
 #include <optional>
 #include <set>
 #include <span>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -64,6 +65,11 @@ public:
     // allowRejoin().
     void remove(uint16_t id);
     void allowRejoin();
+    // [Codes] A new code for `role` (generateCode), hashed with the session's salt: the old one
+    // proves nothing from now on, handshakes under way with it included, and the removals from
+    // that role's code are lifted. Peers already in stay. Returns the code as printed.
+    // Defined in session_codes.cpp.
+    std::string issue(Role role);
     size_t removedCount() const { return m_removed.size(); }
     // Seconds until `address` may try a code again (0: now).
     uint32_t waitS(const ENetAddress& address, uint64_t now);

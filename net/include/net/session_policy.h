@@ -14,6 +14,7 @@
 #include "net/replay_protocol.h"
 #include "net/server_config.h"
 #include "net/server_report.h"
+#include "net/session_codes.h"
 #include "net/session_log.h"
 #include "net/sim_step.h"
 #include "net/view_follow.h"
@@ -80,6 +81,8 @@ struct PolicyOutput {
     // disconnects), and whether it let the removed join again.
     std::vector<uint16_t> removed;
     bool allowRejoin = false;
+    // [Codes] Instructors' requests for new codes (net/session_codes.h: issueCodes).
+    std::vector<CodeRequest> newCodes;
     // [Replay] Windows' timeline controls, for the server's ReplayPlayer (net/replay_feed.h).
     std::vector<ReplayControl> replayControls;
 };
@@ -133,6 +136,10 @@ public:
     // The id a recorded client plays under: above the ids connect() gives while fewer than
     // 32768 have joined (connect() skips one in use either way).
     static uint16_t replayedId(uint16_t recorded) { return uint16_t(0x8000u | recorded); }
+
+    // [Codes] The gate issued `code` for `role`: every instructor is sent the session's codes.
+    // Defined in session_codes.cpp.
+    void codeIssued(Role role, const std::string& code, PolicyOutput& out);
 
     // Connected and not sent away: its updates are still wanted.
     bool live(uint16_t id) const;
@@ -188,6 +195,10 @@ private:
                    std::map<uint16_t, ToolState>& tools);
     bool remove(uint16_t id, const Peer& p, std::span<const uint8_t> data, uint64_t now,
                 PolicyOutput& out);
+    // [Codes] session_codes.cpp: an instructor's request, and the codes sent to `to` (nothing in
+    // an open session).
+    bool codes(uint16_t id, const Peer& p, std::span<const uint8_t> data, PolicyOutput& out);
+    void sendCodes(std::vector<uint16_t> to, PolicyOutput& out) const;
     void countMalformed(uint16_t id, Peer& p, PolicyOutput& out, uint64_t now);
     void pushSwitch(uint16_t id, Peer& p, uint64_t now, PolicyOutput& out);
 

@@ -1,0 +1,91 @@
+#include "net/session_codes.h"
+
+#include "net/secure_channel.h"
+#include "net/session_gate.h"
+#include "net/session_policy.h"
+
+#include <sodium.h>
+
+#include <fmt/format.h>
+
+namespace trephine::net {
+
+std::string codeIssuedLine(Role role, const std::string& code, const std::string& byName) {
+    return fmt::format("new {} code {} (issued by {}; the old one no longer joins)",
+                       role == Role::Instructor ? "instructor" : "trainee", code, byName);
+}
+
+std::string codeText(const std::string& code) {
+    return code.size() <= kMaxCodeTextBytes ? code : normaliseCode(code);
+}
+
+std::vector<std::string> issueCodes(SessionGate& gate, SessionPolicy& policy, PolicyOutput& out) {
+    std::vector<std::string> lines;
+    for (const CodeRequest& r : std::exchange(out.newCodes, {})) {
+        const std::string code = gate.issue(r.role);
+        if (code.empty())
+            continue; // an open session's gate has no codes (the policy asks none of it)
+        policy.codeIssued(r.role, code, out);
+        lines.push_back(codeIssuedLine(r.role, code, r.byName));
+    }
+    return lines;
+}
+
+// [SECTION] the gate
+
+std::string SessionGate::issue(Role role) {
+    if (!m_codes)
+        return {}; // the policy refuses any request in an open session
+    std::string code;
+    const Bytes32& other = role == Role::Trainee ? m_codes->instructor : m_codes->trainee;
+    Bytes32 w;
+    do { // 40 random bits: the other role's code again is unlikely, and would make roles one
+        code = generateCode();
+        w = codeScalar(normaliseCode(code), m_codes->salt); // the Challenge's salt, still
+    } while (w == other);
+    (role == Role::Trainee ? m_codes->trainee : m_codes->instructor) = w;
+    // A handshake answered with the old code must not end in the session: its confirmation can
+    // no longer match, so it is refused as a wrong code.
+    for (auto& [id, p] : m_peers)
+        for (auto& [answered, keys] : p.answers)
+            if (answered == role)
+                randombytes_buf(keys.clientConfirm.data(), keys.clientConfirm.size());
+    std::erase_if(m_removed, [&](const auto& r) { return r.second == role; });
+    count(&SecurityCounters::codesIssued);
+    return code;
+}
+
+// [SECTION] the policy
+
+bool SessionPolicy::codes(uint16_t id, const Peer& p, std::span<const uint8_t> data,
+                          PolicyOutput& out) {
+    Codes m;
+    if (!decodeMessage(data, m) || m.op != Codes::Op::Issue)
+        return false; // the codes themselves only ever come from the server
+    if (p.helloMsg.role != Role::Instructor || m_config.traineeCode.empty()) {
+        m_book.record([](ServerReport& r) { ++r.security.newCodesRefused; });
+        return true;
+    }
+    out.newCodes.push_back({m.role, id, p.helloMsg.name});
+    return true;
+}
+
+void SessionPolicy::codeIssued(Role role, const std::string& code, PolicyOutput& out) {
+    if (code.empty())
+        return;
+    (role == Role::Trainee ? m_config.traineeCode : m_config.instructorCode) = code;
+    const Role instructor = Role::Instructor;
+    sendCodes(participants(0, &instructor), out);
+}
+
+void SessionPolicy::sendCodes(std::vector<uint16_t> to, PolicyOutput& out) const {
+    if (m_config.traineeCode.empty() || to.empty())
+        return;
+    Codes m;
+    m.op = Codes::Op::Current;
+    m.trainee = codeText(m_config.traineeCode);
+    m.instructor = codeText(m_config.instructorCode);
+    out.messages.push_back({std::move(to), Channel::Control, encodeMessage(m)});
+}
+
+} // namespace trephine::net
