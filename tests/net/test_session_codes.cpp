@@ -106,7 +106,7 @@ struct CodesRig {
         PolicyOutput connected;
         j.id = policy->connect(kProtocolVersion, now, connected);
         EXPECT_NE(j.id, 0);
-        CodeClient client{code, role};
+        CodeClient client{code, role, {}, {}};
         const std::vector<uint8_t> challenge = gate->connect(j.id, address(host));
         SessionGate::Result r = gate->receive(j.id, Channel::Control, client.offer(challenge), now);
         if (r.kind == SessionGate::Result::Kind::Reply) {
@@ -283,7 +283,7 @@ TEST(SessionCodes, AHandshakeAnsweredWithTheOldCodeDoesNotEndInTheSession) {
     // Ada's offer is answered under the old trainee code; the new code comes before her confirm.
     PolicyOutput connected;
     const uint16_t id = rig.policy->connect(kProtocolVersion, rig.now, connected);
-    CodeClient ada{kTraineeCode, Role::Trainee};
+    CodeClient ada{kTraineeCode, Role::Trainee, {}, {}};
     const SessionGate::Result answer = rig.gate->receive(
         id, Channel::Control, ada.offer(rig.gate->connect(id, address(5))), rig.now);
     ASSERT_EQ(answer.kind, SessionGate::Result::Kind::Reply);

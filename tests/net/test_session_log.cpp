@@ -19,6 +19,7 @@
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
+#include <zlib.h>
 
 #include <cstdio>
 #include <filesystem>
@@ -570,15 +571,11 @@ TEST(SessionLog, AFormat1LogReadsWithTheDefaultZonesAndNoForces) {
     LogHeader header = sphereHeader(sphere);
     header.cautionMm = 7.0f; // not written in v1: read back as the default
     std::vector<uint8_t> bytes(kLogMagic, kLogMagic + 8);
-    bytes.insert(bytes.end(), {1, 0, 0, 0});
+    for (uint8_t b : {1, 0, 0, 0}) // the format version, little-endian
+        bytes.push_back(b);
+    // zlib's CRC-32, as the log frames records (docs/recording.md).
     auto crc32 = [](const uint8_t* p, size_t n, uint32_t crc) {
-        crc = ~crc;
-        for (size_t i = 0; i < n; ++i) {
-            crc ^= p[i];
-            for (int k = 0; k < 8; ++k)
-                crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
-        }
-        return ~crc;
+        return uint32_t(::crc32(crc, p, uInt(n)));
     };
     auto frame = [&](auto& value) {
         std::vector<uint8_t> payload;
