@@ -65,6 +65,9 @@ struct SessionServer::Impl {
                         return id && policy.admitted(id);
                     }),
           control(c.controlBudgetBytes), recorder(c.recorder) {
+        // The full image of a view larger than a slice is coded apart, as its rows are rendered
+        // in chunks: the simulation thread never stops for a whole large frame.
+        outbox.codeFullImagesApart(StepConfig{}.slicePixels + 1);
         book.record([&](ServerReport& r) {
             r.port = host.port();
             r.volume = c.volumeName;
