@@ -284,10 +284,16 @@ void SimulationStep::renderViews(const Batch& b, uint32_t gridUs) {
         return c.sync == Sync::Dbi && c.camera == cam;
     };
     // Frames of views no DBI client holds any more are dropped (a view left half rendered
-    // included); new views start empty and render in slices below.
-    std::erase_if(m_views, [&](const ViewFrame& v) {
-        return std::none_of(m_clients.begin(), m_clients.end(),
-                            [&](const auto& c) { return dbiView(c.second, v.camera); });
+    // included); new views render in slices below, into a dropped frame of their size if there
+    // is one: a fresh 2048 x 2048 frame costs ~20 ms of page faults, and its rows are all
+    // rendered before any pixel of it is sent.
+    std::vector<ViewFrame> dropped;
+    std::erase_if(m_views, [&](ViewFrame& v) {
+        const bool held = std::any_of(m_clients.begin(), m_clients.end(),
+                                      [&](const auto& c) { return dbiView(c.second, v.camera); });
+        if (!held)
+            dropped.push_back(std::move(v));
+        return !held;
     });
     for (const auto& [id, cause] : b.needFull)
         if (auto c = m_clients.find(id); c != m_clients.end() && !c->second.fullCauseUs)
@@ -298,7 +304,16 @@ void SimulationStep::renderViews(const Batch& b, uint32_t gridUs) {
             continue;
         ViewFrame& v = m_views.emplace_back();
         v.camera = c.camera;
-        v.frame = Dbi(c.camera.width, c.camera.height);
+        auto reuse = std::find_if(dropped.begin(), dropped.end(), [&](const ViewFrame& d) {
+            return d.frame.width() == c.camera.width && d.frame.height() == c.camera.height;
+        });
+        if (reuse != dropped.end()) {
+            v.frame = std::move(reuse->frame);
+            v.cache = std::move(reuse->cache); // restarted for the new camera, its memory kept
+            dropped.erase(reuse);
+        } else {
+            v.frame = Dbi(c.camera.width, c.camera.height);
+        }
     }
     for (ViewFrame& v : m_views)
         markChanged(v, b, gridUs);

@@ -181,6 +181,7 @@ private:
     int64_t m_apartPixels = 0;
     uint64_t m_tickets = 0;
     std::deque<CodingJob> m_jobs;
+    Dbi m_spare; // the pixels of the last job, a buffer for the next
     int m_jobsRunning = 0;
     bool m_stopCoder = false;
     std::condition_variable m_coderCv;
