@@ -9,6 +9,7 @@
 
 #include <algorithm>
 #include <pthread.h>
+#include <utility>
 
 namespace trephine::net {
 
@@ -98,6 +99,26 @@ void Outbox::countNoted() {
 
 void Outbox::postImage(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect,
                        bool full, uint64_t causeUs, ImageTiming timing) {
+    post(id, camera, frame, rect, full, causeUs, timing, nullptr);
+}
+
+void Outbox::postFullImage(uint16_t id, const Camera& camera, Dbi pixels, uint64_t causeUs) {
+    post(id, camera, pixels, pixels.bounds(), true, causeUs, {}, &pixels);
+}
+
+Dbi Outbox::buffer(int width, int height) {
+    Dbi spare;
+    {
+        std::lock_guard lock(m_mutex);
+        spare = std::exchange(m_spare, Dbi()); // a moved-from Dbi keeps its size, not its pixels
+    }
+    return spare.width() == width && spare.height() == height ? std::move(spare)
+                                                              : Dbi(width, height);
+}
+
+// `owned`: `frame` itself, which a full image coded apart takes instead of a copy.
+void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect, bool full,
+                  uint64_t causeUs, ImageTiming timing, Dbi* owned) {
     Client& c = m_clients[id];
     std::optional<PendingImage> old;
     {
@@ -152,20 +173,18 @@ void Outbox::postImage(uint16_t id, const Camera& camera, const Dbi& frame, Pixe
     u.codec = c.codec == Codec::Raw && uint64_t(rect.area()) * 8 > kMaxImagePayloadBytes
                   ? Codec::Lz4
                   : c.codec;
-    if (full && m_apartPixels > 0 && rect.area() >= m_apartPixels) {
-        // Into the coder's last buffer when it fits: a fresh one costs ~20 ms of page faults.
-        Dbi pixels;
-        {
-            std::lock_guard lock(m_mutex);
-            pixels = std::move(m_spare);
-        }
-        if (pixels.width() == frame.width() && pixels.height() == frame.height())
-            pixels = frame; // rect is the frame's bounds
-        else
-            pixels = frame.extract(rect);
-        codeApart(id, CodingJob{id, 0, std::move(u), std::move(pixels), camera});
+    if (full && (owned || (m_apartPixels > 0 && rect.area() >= m_apartPixels))) {
         // Only zstd clients get predicted updates, so only they need the copy.
         c.shadow = c.codec == Codec::Zstd ? frame : Dbi();
+        Dbi pixels;
+        if (owned) {
+            pixels = std::move(*owned);
+        } else {
+            // Into the coder's last buffer when it fits: a fresh one costs ~20 ms of page faults.
+            pixels = buffer(frame.width(), frame.height());
+            pixels = frame; // rect is the frame's bounds
+        }
+        codeApart(id, CodingJob{id, 0, std::move(u), std::move(pixels), camera});
         return;
     }
     const uint64_t e0 = m_clock();

@@ -92,6 +92,12 @@ public:
     // outside the frame is never merged: the client gets the whole frame.
     void postImage(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect, bool full,
                    uint64_t causeUs, ImageTiming timing);
+    // A full image of `pixels` (a copy of the view's frame the caller made, see buffer()), coded
+    // apart like the large ones postImage copies itself.
+    void postFullImage(uint16_t id, const Camera& camera, Dbi pixels, uint64_t causeUs);
+    // [Posting thread] A frame of that size for postFullImage: the coder's last buffer when it
+    // fits (its memory already mapped), else a new one.
+    Dbi buffer(int width, int height);
     // A volume client's change (or none, to retry one noted earlier). Posted, merged with its
     // waiting update, unless the client is held back with one waiting: then it is only noted and
     // coded once, when the waiting one has gone. A box too large for a message goes as the whole
@@ -154,6 +160,8 @@ private:
     };
 
     bool heldBack(const Host::InFlight& inFlight) const;
+    void post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect, bool full,
+              uint64_t causeUs, ImageTiming timing, Dbi* owned);
     bool postVolume(uint16_t id, const Client& c, const Volume& volume, VolumeChange change);
     void postVolumeOrRefuse(uint16_t id, const Client& c, const Volume& volume,
                             const VolumeChange& change);

@@ -129,8 +129,13 @@ private:
         PixelRect stale, fresh;
         uint64_t causeUs = 0;
         ImageTiming timing;
+        // A view larger than a slice: the copy of the frame its full image is coded from, made
+        // in chunks (the frame holds still meanwhile); -1: none under way.
+        Dbi copy;
+        int rowsCopied = -1;
         bool whole() const { return rowsDone >= frame.height(); }
-        bool settled() const { return whole() && stale.empty(); }
+        bool copying() const { return rowsCopied >= 0; }
+        bool settled() const { return whole() && stale.empty() && !copying(); }
     };
     // What one batch changed and who needs a full update.
     struct Batch {
@@ -155,6 +160,8 @@ private:
     void renderSlices();
     bool chunkDone();
     void postView(ViewFrame& v);
+    bool copyFrame(ViewFrame& v);
+    bool settle(ViewFrame& v, bool stopped);
     void syncGrid();
 
     StepConfig m_config;
