@@ -29,6 +29,7 @@ struct ReplayOptions {
     std::string log;
     std::string save;
     std::string trajectories;
+    std::string report;
     bool serve = false;
     uint16_t port = 7777;
     double speed = 1.0;
@@ -43,8 +44,8 @@ extern "C" void onReplayStop(int) {
 }
 
 // --serve: a live server on the log's starting volume and scene, open to anyone (a replay has
-// nothing to protect), fed the log's records as their time comes round at `speed`; then the
-// final state is served until a stop signal.
+// nothing to protect), playing the log on a timeline the windows drive (play, pause, seek,
+// speed); the server runs until a stop signal.
 int serveReplay(const ReplayOptions& o, net::LogContents log, Volume start) {
     net::ServerConfig base;
     base.port = o.port;
@@ -52,7 +53,8 @@ int serveReplay(const ReplayOptions& o, net::LogContents log, Volume start) {
     net::ServerConfig config = net::replayServerConfig(log.header, base);
     const glm::ivec3 d = start.dims();
     net::SessionServer server(std::move(start), config);
-    net::ReplayFeed feed(std::move(log.records), o.speed);
+    const size_t records = log.records.size();
+    server.serveLog(std::move(log.records), o.speed, !o.wait);
     handleStopSignals(onReplayStop);
     std::signal(SIGPIPE, SIG_IGN);
     server.start();
@@ -61,33 +63,35 @@ int serveReplay(const ReplayOptions& o, net::LogContents log, Volume start) {
                 "Ctrl-C stops\n",
                 o.log.c_str(), config.volumeName.c_str(), d.x, d.y, d.z, unsigned(server.port()),
                 o.speed, unsigned(server.port()));
-    std::printf("trephine replay: %zu records over %.1f s\n", feed.size(),
-                double(feed.durationUs()) * 1e-6);
+    auto state = [&] {
+        std::optional<net::ReplayState> s;
+        while (!(s = server.replayState()) && !g_replayStop.load())
+            std::this_thread::sleep_for(std::chrono::milliseconds(2));
+        return s.value_or(net::ReplayState{});
+    };
+    std::printf("trephine replay: %zu records over %.1f s of session; the windows' timeline "
+                "plays, pauses, seeks and changes the speed\n",
+                records, double(state().durationUs) * 1e-6);
     if (o.wait) {
         std::printf("trephine replay: waiting for a window to connect before playing\n");
         std::fflush(stdout);
         while (!g_replayStop.load() && server.clientCount() == 0)
             std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        server.controlReplay({net::ReplayControl::Op::Play});
     }
     std::fflush(stdout);
-    const auto t0 = std::chrono::steady_clock::now();
-    bool finished = false;
+    bool atEnd = false;
     while (!g_replayStop.load()) {
-        if (!finished) {
-            const auto elapsed = std::chrono::duration_cast<std::chrono::microseconds>(
-                std::chrono::steady_clock::now() - t0);
-            std::vector<net::LogRecord> due = feed.due(uint64_t(elapsed.count()));
-            if (!due.empty())
-                server.replay(std::move(due));
-            if (feed.done()) {
-                finished = true;
-                std::printf("trephine replay: the replay has finished (%zu records played); "
-                            "serving its final state until Ctrl-C\n",
-                            feed.given());
-                std::fflush(stdout);
-            }
+        const net::ReplayState s = state();
+        const bool end = !s.playing && s.positionUs == s.durationUs;
+        if (end && !atEnd) {
+            std::printf("trephine replay: at the end of the session (%.1f s); serving its final "
+                        "state until Ctrl-C or a window plays it again\n",
+                        double(s.durationUs) * 1e-6);
+            std::fflush(stdout);
         }
-        std::this_thread::sleep_for(std::chrono::milliseconds(finished ? 50 : 2));
+        atEnd = end;
+        std::this_thread::sleep_for(std::chrono::milliseconds(20));
     }
     std::printf("trephine replay: stopping (%llu tool states applied)\n",
                 (unsigned long long)server.toolStatesApplied());
@@ -126,12 +130,19 @@ int runReplay(const ReplayOptions& o) {
         if (!std::filesystem::is_directory(o.trajectories, ec))
             throw Error("--trajectories " + o.trajectories + ": cannot make that folder");
     }
+    if (!o.report.empty()) {
+        checkOutputFolder("--report", o.report);
+        if (samePath(o.report, o.log))
+            throw Error("--report " + o.report + " is the session log: write the report elsewhere");
+        if (!o.save.empty() && samePath(o.report, o.save))
+            throw Error("--report and --save name one file " + o.report + ": give each its own");
+    }
     const auto t0 = std::chrono::steady_clock::now();
     net::LogContents log = net::readSessionLog(o.log);
     if (!log.stopped.empty())
         std::printf("trephine replay: %s\n", log.stopped.c_str());
     Volume start = net::logStartVolume(log.header, openVolume);
-    if (o.serve && o.save.empty() && o.trajectories.empty())
+    if (o.serve && o.save.empty() && o.trajectories.empty() && o.report.empty())
         return serveReplay(o, std::move(log), std::move(start));
     net::SessionReplay replay(log.header, start);
     const auto t1 = std::chrono::steady_clock::now();
@@ -164,6 +175,11 @@ int runReplay(const ReplayOptions& o) {
         std::printf("trephine replay: wrote %zu trajector%s into %s\n", paths.size(),
                     paths.size() == 1 ? "y" : "ies", o.trajectories.c_str());
     }
+    if (!o.report.empty()) {
+        if (!writeReplacing(o.report, net::replayReportText(replay, log, o.log)))
+            throw Error("--report " + o.report + ": cannot write it");
+        std::printf("trephine replay: wrote %s\n", o.report.c_str());
+    }
     if (o.serve)
         return serveReplay(o, std::move(log), std::move(start));
     return 0;
@@ -183,6 +199,10 @@ void addReplayMode(CLI::App& root, int& exitCode) {
     sub->add_option("--trajectories", o->trajectories,
                     "Write each participant's tool path here as a trainee script CSV "
                     "(docs/scripts.md), one file each");
+    sub->add_option("--report", o->report,
+                    "Write each participant's assessment metrics, recomputed from the log, here "
+                    "(JSON, as the server's --report has them; docs/assessment.md)")
+        ->check(outputFile());
     CLI::Option* serve = sub->add_flag(
         "--serve", o->serve,
         "Then play the session into a live server at its recorded pace, for windows to watch "
@@ -192,7 +212,7 @@ void addReplayMode(CLI::App& root, int& exitCode) {
         ->capture_default_str();
     sub->add_option("--speed", o->speed, "--serve: times the recorded pace (2: twice as fast)")
         ->needs(serve)
-        ->check(finiteRange(1e-3, 1e6))
+        ->check(finiteRange(net::kMinReplaySpeed, net::kMaxReplaySpeed))
         ->capture_default_str();
     sub->add_flag("--wait", o->wait,
                   "--serve: start playing once the first window has connected, so it sees the "

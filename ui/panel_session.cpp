@@ -146,6 +146,8 @@ void drillLine(const net::ClientSnapshot& snap, const ToolControls& tool, uint16
     else if (held)
         ImGui::TextColored(warn, "you hold %s: your drill cuts, theirs is paused",
                            participantName(snap.participants, held).c_str());
+    else if (snap.replay)
+        ImGui::TextDisabled("a replay: your tool points, it does not cut");
     else if (tool.canDrill)
         ImGui::TextColored(tool.drilling ? ImVec4(1, 0.4f, 0.3f, 1) : ImVec4(0.6f, 0.6f, 0.6f, 1),
                            tool.drilling ? "DRILLING" : "hold the left button to drill");

@@ -22,6 +22,8 @@ constexpr Shortcut kShortcuts[] = {
     {"Enter (in the label field)", "place the labelled mark at the last bone pointed at"},
     {"Escape", "leave a text field; close this list"},
     {"H or F11", "full-window view: hide the panels, again to show them"},
+    {"Space", "replay: play / pause"},
+    {"Left / Right", "replay: 5 s back / on"},
     {"F1", "show or hide this list"},
 };
 
@@ -81,6 +83,15 @@ KeyActions applyKeys(const std::vector<KeyPress>& presses, bool textField, bool 
             break;
         case GLFW_KEY_DOWN:
             tool.pushMm = steppedPush(tool.pushMm, -1.0f);
+            break;
+        case GLFW_KEY_SPACE:
+            a.playPause = !a.playPause;
+            break;
+        case GLFW_KEY_LEFT:
+            --a.replaySteps;
+            break;
+        case GLFW_KEY_RIGHT:
+            ++a.replaySteps;
             break;
         default:
             break;

@@ -511,6 +511,7 @@ private:
     MarkUndo markUndo; // the last removal of marks, for the Session panel's undo
     TakeOverControls takeOverControls;
     ViewAsControls viewAsControls;
+    ReplayControls replayControls;        // a served log's timeline (drawn only for one)
     std::optional<glm::vec3> pointerPick; // the bone under the pointer, last seen over the view
 
     // GL: the window and what draws into it.
@@ -696,7 +697,8 @@ void TrainerWindow::takeSnapshot(FrameState& f) {
     const uint16_t selfId = snap.welcome ? snap.welcome->clientId : 0;
     f.heldByOther = o.instructor ? 0 : takenOverBy(snap.participants, selfId);
     f.holding = o.instructor ? heldBy(snap.participants, selfId) : 0;
-    toolControls.canDrill = o.instructor ? f.holding != 0 : f.heldByOther == 0;
+    // Nobody drills a replay: the server cuts only what the log holds.
+    toolControls.canDrill = !snap.replay && (o.instructor ? f.holding != 0 : f.heldByOther == 0);
 }
 
 // The scene the server sent after its welcome, and again when a reconnect's scene is another (a
@@ -1137,6 +1139,16 @@ void TrainerWindow::drawPanels(const FrameState& f) {
         placeNextPanel(box.assessment, relayout);
         drawAssessmentPanel(snap);
     }
+    // A replay's timeline over the view's bottom, in the full-window view too.
+    if (snap.replay && snap.state == net::LinkState::Connected) {
+        const uint64_t positionUs = net::replayPositionAfter(
+            *snap.replay, net::steadyNowUs() - std::min(net::steadyNowUs(), snap.publishedUs));
+        replayControls.keys(frameKeys.playPause, frameKeys.replaySteps, *snap.replay, positionUs);
+        drawReplayTimeline(*snap.replay, positionUs, replayControls, layout.view);
+        for (const net::ReplayControl& c : replayControls.asked)
+            client.controlReplay(c);
+    }
+    replayControls.asked.clear();
     drawShortcutOverlay(toggles);
 }
 
@@ -1242,6 +1254,7 @@ double TrainerWindow::idleFor(const FrameState& f) {
         input |= down;
     const bool busy = news.exchange(false) || input || lastRectAt == f.now || feed.held() ||
                       script.drivesTool() || viewControls.dirty || f.snap->waitingForView ||
+                      (f.snap->replay && f.snap->replay->playing) || replayControls.dragS ||
                       f.switching || !f.havePicture || o.frames > 0 || !o.screenshot.empty() ||
                       !o.switchSyncAtS.empty() || bool(o.input);
     if (busy)

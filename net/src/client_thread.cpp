@@ -174,6 +174,9 @@ bool ClientThread::viewAs(uint16_t id) {
 bool ClientThread::remove(Remove m) {
     return push(m);
 }
+bool ClientThread::controlReplay(const ReplayControl& c) {
+    return push(c);
+}
 
 std::vector<AppliedVolumeBox> ClientThread::drainVolumeBoxes() {
     std::vector<AppliedVolumeBox> out;
@@ -235,6 +238,14 @@ void ClientThread::pushRect(AppliedRect r) {
 
 namespace {
 
+// A replay's timeline as a window draws it: a playing cursor moves on by itself.
+bool sameTimeline(const std::optional<ReplayState>& a, const std::optional<ReplayState>& b) {
+    if (!a || !b)
+        return a.has_value() == b.has_value();
+    return a->playing == b->playing && a->seeks == b->seeks && a->speed == b->speed &&
+           a->durationUs == b->durationUs && (a->playing || a->positionUs == b->positionUs);
+}
+
 // What a window draws from a snapshot, apart from the rectangles and boxes (ClientThread::onNews):
 // equal here, a redraw would show the same picture.
 bool drawsTheSame(const ClientSnapshot& a, const ClientSnapshot& b) {
@@ -249,7 +260,7 @@ bool drawsTheSame(const ClientSnapshot& a, const ClientSnapshot& b) {
            a.viewingAs == b.viewingAs && a.view == b.view && a.viewId == b.viewId &&
            a.waitingForView == b.waitingForView && a.sync == b.sync &&
            a.requestedSync == b.requestedSync && a.participants == b.participants &&
-           a.annotations == b.annotations &&
+           a.annotations == b.annotations && sameTimeline(a.replay, b.replay) &&
            std::equal(a.others.begin(), a.others.end(), b.others.begin(), b.others.end(), sameTool);
 }
 
@@ -285,6 +296,10 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
         s->annotations = c->annotations();
         s->warnings = c->warnings();
         s->assessment = c->assessment();
+        if (c->replay()) {
+            s->replay = *c->replay();
+            s->replay->positionUs = c->replayPosition(nowUs);
+        }
         s->updatesApplied = c->updatesApplied();
         s->fullUpdates = c->fullUpdates();
         s->updatesRejected = c->updatesRejected();
@@ -517,6 +532,9 @@ void ClientThread::runCommands(SessionClient& client, bool renderLocally) {
         } else if (auto* r = std::get_if<Remove>(&c)) {
             if (cp->welcomed())
                 cp->remove(*r);
+        } else if (auto* rc = std::get_if<ReplayControl>(&c)) {
+            if (cp->welcomed())
+                cp->controlReplay(*rc);
         } else if (cp->welcomed()) {
             cp->sendPing();
         }

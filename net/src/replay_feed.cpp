@@ -4,6 +4,8 @@
 #include "net/scene.h"
 #include "net/session_policy.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <cmath>
 
@@ -27,22 +29,96 @@ std::vector<uint64_t> sessionTimesUs(std::span<const LogRecord> records) {
     return times;
 }
 
-ReplayFeed::ReplayFeed(std::vector<LogRecord> records, double speed)
-    : m_records(std::move(records)), m_times(sessionTimesUs(m_records)), m_speed(speed) {
-    if (!(speed > 0.0) || !std::isfinite(speed))
-        throw Error("replay: the speed must be a positive number");
+ReplayPlayer::ReplayPlayer(std::vector<LogRecord> records, double speed, bool playing,
+                           uint64_t nowUs)
+    : m_records(std::move(records)), m_times(sessionTimesUs(m_records)), m_speed(1.0),
+      m_playing(playing), m_anchorNowUs(nowUs) {
+    setSpeed(speed, nowUs);
 }
 
-std::vector<LogRecord> ReplayFeed::due(uint64_t elapsedUs) {
-    const double sessionUs = double(elapsedUs) * m_speed;
-    std::vector<LogRecord> out;
-    while (m_next < m_records.size() && double(m_times[m_next]) <= sessionUs)
-        out.push_back(m_records[m_next++]);
-    return out;
+uint64_t ReplayPlayer::positionUs(uint64_t nowUs) const {
+    if (!m_playing || nowUs <= m_anchorNowUs)
+        return m_anchorPosUs;
+    const double pos = double(m_anchorPosUs) + double(nowUs - m_anchorNowUs) * m_speed;
+    return pos >= double(durationUs()) ? durationUs() : uint64_t(pos);
 }
 
-uint64_t ReplayFeed::durationUs() const {
-    return m_times.empty() ? 0 : uint64_t(std::ceil(double(m_times.back()) / m_speed));
+void ReplayPlayer::anchor(uint64_t nowUs) {
+    m_anchorPosUs = positionUs(nowUs);
+    m_anchorNowUs = nowUs;
+}
+
+ReplayPlayer::Due ReplayPlayer::advance(uint64_t nowUs) {
+    Due due;
+    const uint64_t pos = positionUs(nowUs);
+    if (m_rewind) {
+        due.rewind = true;
+        m_rewind = false;
+        m_next = 0;
+    }
+    while (m_next < m_records.size() && m_times[m_next] <= pos)
+        due.records.push_back(m_records[m_next++]);
+    if (m_playing && pos >= durationUs()) {
+        anchor(nowUs);
+        m_playing = false;
+    }
+    return due;
+}
+
+void ReplayPlayer::play(uint64_t nowUs) {
+    if (m_playing)
+        return;
+    if (positionUs(nowUs) >= durationUs() && done())
+        seek(0, nowUs); // at the end, as a video player does: again from the start
+    m_anchorNowUs = nowUs;
+    m_playing = true;
+}
+
+void ReplayPlayer::pause(uint64_t nowUs) {
+    anchor(nowUs);
+    m_playing = false;
+}
+
+void ReplayPlayer::seek(uint64_t positionUs, uint64_t nowUs) {
+    positionUs = std::min(positionUs, durationUs());
+    // Something already applied lies past the new position: only a rebuild takes it back.
+    if (m_next > 0 && m_times[m_next - 1] > positionUs)
+        m_rewind = true;
+    m_anchorPosUs = positionUs;
+    m_anchorNowUs = nowUs;
+    ++m_seeks;
+}
+
+void ReplayPlayer::setSpeed(double speed, uint64_t nowUs) {
+    if (!(speed >= double(kMinReplaySpeed) && speed <= double(kMaxReplaySpeed)))
+        throw Error(fmt::format("replay: the speed must be within {:g} and {:g}",
+                                double(kMinReplaySpeed), double(kMaxReplaySpeed)));
+    anchor(nowUs);
+    m_speed = speed;
+}
+
+bool ReplayPlayer::control(const ReplayControl& c, uint64_t nowUs) {
+    switch (c.op) {
+    case ReplayControl::Op::Play:
+        play(nowUs);
+        return true;
+    case ReplayControl::Op::Pause:
+        pause(nowUs);
+        return true;
+    case ReplayControl::Op::Seek:
+        seek(c.positionUs, nowUs);
+        return true;
+    case ReplayControl::Op::Speed:
+        if (!(c.speed >= kMinReplaySpeed && c.speed <= kMaxReplaySpeed))
+            return false;
+        setSpeed(double(c.speed), nowUs);
+        return true;
+    }
+    return false;
+}
+
+ReplayState ReplayPlayer::state(uint64_t nowUs) const {
+    return {positionUs(nowUs), durationUs(), float(m_speed), m_playing, m_seeks};
 }
 
 ServerConfig replayServerConfig(const LogHeader& header, ServerConfig c) {
@@ -54,13 +130,60 @@ ServerConfig replayServerConfig(const LogHeader& header, ServerConfig c) {
     c.volumeName = header.volumeName;
     c.maxStepS = header.maxStepS;
     c.maxSweepMm = header.maxSweepMm;
+    c.cautionMm = header.cautionMm;
+    c.dangerMm = header.dangerMm;
     c.recorder = nullptr;
+    c.replay = true;
     return c;
 }
 
 // [SECTION] the policy's side
 
-void SessionPolicy::replayed(const LogRecord& r, uint64_t now, PolicyOutput& out) {
+void SessionPolicy::replayed(std::span<const LogRecord> records, uint64_t now, PolicyOutput& out) {
+    std::map<uint16_t, ToolState> tools; // each participant's newest of the batch
+    for (const LogRecord& r : records)
+        replayOne(r, now, out, tools);
+    const std::vector<uint16_t> watchers = participants();
+    if (watchers.empty())
+        return;
+    for (auto& [id, tool] : tools)
+        if (m_replayed.count(id)) {
+            ToolRelay relay{id, tool};
+            out.messages.push_back({watchers, Channel::ToolState, encodeMessage(relay)});
+        }
+}
+
+void SessionPolicy::rewindReplay(PolicyOutput& out) {
+    for (uint16_t joined : m_replayJoined)
+        out.events.push_back(SimEvent::of(SimEvent::Kind::Leave, joined));
+    m_replayJoined.clear();
+    for (const auto& [gone, p] : m_replayed)
+        releaseTakeOvers(gone);
+    m_replayed.clear();
+    // The log's marks go (its starting ones come back under their ids); the watchers' stay.
+    std::erase_if(m_marks, [](const auto& m) {
+        return m.second.author == 0 || (m.second.author & 0x8000u) != 0;
+    });
+    m_replayMarks.clear();
+    uint32_t id = 1;
+    for (const AnnotationInfo& m : m_config.marks) {
+        m_marks[id] = {id, 0, m.position, m.label};
+        m_replayMarks[id] = id;
+        ++id;
+    }
+    m_marksOut.mark(true);
+    m_roster.mark(true);
+}
+
+void SessionPolicy::replayState(ReplayState state, PolicyOutput& out) {
+    m_replayState = encodeMessage(state);
+    const std::vector<uint16_t> watchers = participants();
+    if (!watchers.empty())
+        out.messages.push_back({watchers, Channel::Control, m_replayState});
+}
+
+void SessionPolicy::replayOne(const LogRecord& r, uint64_t now, PolicyOutput& out,
+                              std::map<uint16_t, ToolState>& tools) {
     const uint16_t id = replayedId(r.client);
     auto event = [&](uint16_t client) {
         SimEvent ev = simEventOf(r);
@@ -74,6 +197,10 @@ void SessionPolicy::replayed(const LogRecord& r, uint64_t now, PolicyOutput& out
         // keeps the simulation's work for it small.
         SimEvent ev = event(id);
         ev.sync = Sync::Dbi;
+        if (auto p = m_replayed.find(id); p != m_replayed.end()) { // the assessment names it
+            ev.name = p->second.name;
+            ev.role = p->second.role;
+        }
         out.events.push_back(std::move(ev));
         m_replayJoined.insert(id);
         break;
@@ -87,17 +214,13 @@ void SessionPolicy::replayed(const LogRecord& r, uint64_t now, PolicyOutput& out
             m_roster.mark();
         }
         break;
-    case LogRecord::Kind::Tool: {
+    case LogRecord::Kind::Tool:
         out.events.push_back(event(id));
-        const std::vector<uint16_t> watchers = participants();
-        if (!watchers.empty()) {
-            ToolRelay relay{id, r.tool};
-            out.messages.push_back({watchers, Channel::ToolState, encodeMessage(relay)});
-        }
+        tools[id] = r.tool;
         break;
-    }
     case LogRecord::Kind::Leave:
         out.events.push_back(event(id));
+        tools.erase(id);
         m_replayJoined.erase(id);
         if (m_replayed.erase(id))
             m_roster.mark(true);

@@ -77,6 +77,7 @@ nlohmann::ordered_json toJson(const ServerReport& r, const NetStats& stats) {
               {"views_refused", c.viewsRefused},
               {"annotations_refused", c.annotationsRefused},
               {"take_overs_refused", c.takeOversRefused},
+              {"replay_controls_refused", c.replayControlsRefused},
               {"drilling_paused", c.drillingPaused},
               {"peak_in_flight_bytes", c.peakInFlightBytes},
               {"channels", channels(stats)},
@@ -124,7 +125,11 @@ nlohmann::ordered_json toJson(const ServerReport& r, const NetStats& stats) {
 }
 
 std::string toJsonText(const ServerReport& report, const NetStats& stats) {
-    return toJson(report, stats).dump(2, ' ', false, Json::error_handler_t::replace) + "\n";
+    return jsonText(toJson(report, stats));
+}
+
+std::string jsonText(const nlohmann::ordered_json& j) {
+    return j.dump(2, ' ', false, Json::error_handler_t::replace) + "\n";
 }
 
 } // namespace trephine::net

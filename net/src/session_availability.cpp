@@ -80,7 +80,7 @@ void SessionPolicy::updateAvailability(uint64_t now, PolicyOutput& out) {
             continue;
         if (now > p.heardUs && now - p.heardUs > idleUs) {
             m_book.record([](ServerReport& r) { ++r.availability.idleTimeouts; });
-            kick(id, p, RefuseReason::Idle, out);
+            kick(id, p, RefuseReason::Idle, out, now);
             continue;
         }
         if (p.waitingView && p.viewPixels.take(double(pixelsOf(p.waitingView->view)), now)) {

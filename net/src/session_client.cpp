@@ -252,6 +252,8 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         return onSafetyWarning(data);
     case MessageType::AssessmentSnapshot:
         return onAssessmentSnapshot(data);
+    case MessageType::ReplayState:
+        return onReplayState(data, nowUs);
     default:
         return false;
     }

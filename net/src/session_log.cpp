@@ -48,11 +48,11 @@ uint32_t getU32(const uint8_t* p) {
 // Appends one frame: length, CRC-32 of the length's bytes and the payload, then the payload (a
 // record starts with its kind). False when a field is out of range.
 template <typename T>
-bool appendFrame(std::vector<uint8_t>& out, T& value) {
+bool appendFrame(std::vector<uint8_t>& out, T& value, uint32_t version = kLogVersion) {
     const size_t at = out.size();
     out.resize(at + kLogFrameBytes);
     WriteStream w(out);
-    if (!value.serialize(w) || out.size() - at - kLogFrameBytes > kMaxLogRecordBytes) {
+    if (!value.serialize(w, version) || out.size() - at - kLogFrameBytes > kMaxLogRecordBytes) {
         out.resize(at);
         return false;
     }
@@ -90,6 +90,7 @@ LogRecord logRecordOf(const SimEvent& ev, uint64_t timeUs) {
     case SimEvent::Kind::Tool:
         r.kind = LogRecord::Kind::Tool;
         r.tool = ev.tool;
+        r.forceN = ev.forceN;
         break;
     case SimEvent::Kind::Leave:
         r.kind = LogRecord::Kind::Leave;
@@ -134,6 +135,7 @@ SimEvent simEventOf(const LogRecord& r) {
     case LogRecord::Kind::Tool:
         ev.kind = SimEvent::Kind::Tool;
         ev.tool = r.tool;
+        ev.forceN = r.forceN;
         break;
     case LogRecord::Kind::Leave:
         ev.kind = SimEvent::Kind::Leave;
@@ -197,6 +199,9 @@ LogHeader makeLogHeader(const Volume& volume, const ServerConfig& config,
     }
     h.maxStepS = config.maxStepS;
     h.maxSweepMm = config.maxSweepMm;
+    h.cautionMm = config.cautionMm;
+    h.dangerMm = config.dangerMm;
+    h.clampMm = DistanceField::kDefaultClampMm; // the server's (AssessmentConfig's default)
     // The scene the server serves: the one given, or the one it builds from the volume.
     Scene scene = config.scene ? *config.scene : buildScene(volume);
     h.scene = encodeMessage(scene);
@@ -237,9 +242,10 @@ Volume logStartVolume(const LogHeader& h, const std::function<Volume(const std::
 
 // [SECTION] writing
 
-SessionRecorder::SessionRecorder(std::string path, int fd, uint64_t bytes, int syncIntervalMs)
+SessionRecorder::SessionRecorder(std::string path, int fd, uint64_t bytes, int syncIntervalMs,
+                                 uint32_t version)
     : m_path(std::move(path)), m_fd(fd), m_syncIntervalMs(std::max(1, syncIntervalMs)),
-      m_bytes(bytes), m_synced(bytes), m_writtenBack(bytes & ~uint64_t(4095)) {
+      m_version(version), m_bytes(bytes), m_synced(bytes), m_writtenBack(bytes & ~uint64_t(4095)) {
     m_syncer = std::thread([this] { syncLoop(); });
 }
 
@@ -256,7 +262,8 @@ std::unique_ptr<SessionRecorder> SessionRecorder::create(const std::string& path
                     (errno == EEXIST ? std::string("a file is there already (--resume continues a "
                                                    "log; give a new name to start one)")
                                      : "cannot create it: " + errnoText()));
-    std::unique_ptr<SessionRecorder> r(new SessionRecorder(path, fd, 0, syncIntervalMs));
+    std::unique_ptr<SessionRecorder> r(
+        new SessionRecorder(path, fd, 0, syncIntervalMs, kLogVersion));
     if (!r->writeAll(start.data(), start.size()) || ::fdatasync(fd) != 0)
         throw Error("--record " + path + ": cannot write it: " + errnoText());
     r->m_bytes = r->m_synced = start.size();
@@ -264,7 +271,10 @@ std::unique_ptr<SessionRecorder> SessionRecorder::create(const std::string& path
 }
 
 std::unique_ptr<SessionRecorder> SessionRecorder::append(const std::string& path,
-                                                         uint64_t intactBytes, int syncIntervalMs) {
+                                                         uint64_t intactBytes, uint32_t version,
+                                                         int syncIntervalMs) {
+    if (version == 0 || version > kLogVersion)
+        throw Error(fmt::format("--resume {}: cannot append to a log of format {}", path, version));
     const int fd = ::open(path.c_str(), O_WRONLY | O_APPEND | O_CLOEXEC);
     if (fd < 0)
         throw Error("--resume " + path + ": cannot open it to append: " + errnoText());
@@ -274,7 +284,7 @@ std::unique_ptr<SessionRecorder> SessionRecorder::append(const std::string& path
         throw Error("--resume " + path + ": cannot cut its torn tail: " + why);
     }
     return std::unique_ptr<SessionRecorder>(
-        new SessionRecorder(path, fd, intactBytes, syncIntervalMs));
+        new SessionRecorder(path, fd, intactBytes, syncIntervalMs, version));
 }
 
 SessionRecorder::~SessionRecorder() {
@@ -313,7 +323,7 @@ bool SessionRecorder::write(std::span<const LogRecord> records) {
     m_buffer.clear();
     for (const LogRecord& r : records) {
         LogRecord copy = r; // serialize is one function for write and read: not const
-        if (!appendFrame(m_buffer, copy) && m_error.empty())
+        if (!appendFrame(m_buffer, copy, m_version) && m_error.empty())
             m_error = fmt::format("a record of kind {} does not fit the format", int(r.kind));
     }
     // A record that did not fit is a programmer mistake; the others still go.
@@ -427,7 +437,7 @@ LogContents parseSessionLog(std::span<const uint8_t> bytes, const std::string& n
     std::string why = frame(at, payload);
     if (why.empty()) {
         ReadStream r(payload);
-        if (!c.header.serialize(r) || !r.atEnd())
+        if (!c.header.serialize(r, c.version) || !r.atEnd())
             why = "corrupt: its fields do not read";
     }
     if (!why.empty())
@@ -439,7 +449,7 @@ LogContents parseSessionLog(std::span<const uint8_t> bytes, const std::string& n
         LogRecord rec;
         if (why.empty()) {
             ReadStream r(payload);
-            if (!rec.serialize(r) || !r.atEnd())
+            if (!rec.serialize(r, c.version) || !r.atEnd())
                 why = "corrupt: its fields do not read";
         }
         if (!why.empty()) {

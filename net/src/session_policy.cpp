@@ -108,18 +108,18 @@ void SessionPolicy::kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& o
         m_roster.mark(true);
 }
 
-void SessionPolicy::refuse(uint16_t id, uint32_t data, PolicyOutput& out) {
+void SessionPolicy::refuse(uint16_t id, uint32_t data, uint64_t now, PolicyOutput& out) {
     auto it = m_peers.find(id);
     if (it == m_peers.end() || it->second.kicked)
         return;
-    kick(id, it->second, RefuseReason::None, out);
+    kick(id, it->second, RefuseReason::None, out, now);
     out.disconnects.back().data = data;
 }
 
-void SessionPolicy::refuseVolume(uint16_t id, PolicyOutput& out) {
+void SessionPolicy::refuseVolume(uint16_t id, uint64_t now, PolicyOutput& out) {
     auto it = m_peers.find(id);
     if (it != m_peers.end() && !it->second.kicked)
-        kick(id, it->second, RefuseReason::VolumeTooLarge, out);
+        kick(id, it->second, RefuseReason::VolumeTooLarge, out, now);
 }
 
 bool SessionPolicy::live(uint16_t id) const {
@@ -231,7 +231,17 @@ bool SessionPolicy::handle(uint16_t id, Peer& p, std::span<const uint8_t> data, 
     case MessageType::TakeOver:
         return takeOver(id, p, data, now, out);
     case MessageType::Remove:
-        return remove(id, p, data, out);
+        return remove(id, p, data, now, out);
+    case MessageType::ReplayControl: {
+        ReplayControl c;
+        if (!decodeMessage(data, c))
+            return false;
+        if (m_config.replay)
+            out.replayControls.push_back(c);
+        else
+            m_book.count(&ServerCounters::replayControlsRefused);
+        return true;
+    }
     case MessageType::Ping: {
         Ping ping;
         if (!decodeMessage(data, ping))
@@ -316,6 +326,8 @@ void SessionPolicy::welcome(uint16_t id, uint64_t now, PolicyOutput& out) {
     m_roster.mark(true);
     if (!m_marks.empty())
         out.messages.push_back({{id}, Channel::Control, marksMessage()});
+    if (!m_replayState.empty())
+        out.messages.push_back({{id}, Channel::Control, m_replayState});
 }
 
 bool SessionPolicy::toolState(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
@@ -503,7 +515,7 @@ bool SessionPolicy::takeOver(uint16_t id, const Peer& p, std::span<const uint8_t
 
 // An instructor sends a participant away for good (until it allows them back): the gate keeps
 // the address and the role's code (net/session_gate.h).
-bool SessionPolicy::remove(uint16_t id, const Peer& p, std::span<const uint8_t> data,
+bool SessionPolicy::remove(uint16_t id, const Peer& p, std::span<const uint8_t> data, uint64_t now,
                            PolicyOutput& out) {
     Remove m;
     if (!decodeMessage(data, m))
@@ -522,7 +534,7 @@ bool SessionPolicy::remove(uint16_t id, const Peer& p, std::span<const uint8_t> 
         m_book.record([](ServerReport& r) { ++r.security.removalsRefused; });
         return true;
     }
-    kick(m.clientId, target->second, RefuseReason::Removed, out);
+    kick(m.clientId, target->second, RefuseReason::Removed, out, now);
     out.removed.push_back(m.clientId);
     return true;
 }
@@ -566,8 +578,10 @@ std::vector<uint8_t> SessionPolicy::marksMessage() const {
     return encodeMessage(marks);
 }
 
-// A trainee nobody holds, or an instructor holding a trainee, may cut.
+// A trainee nobody holds, or an instructor holding a trainee, may cut; nobody watching a replay.
 bool SessionPolicy::mayCut(uint16_t id, Role role) const {
+    if (m_config.replay)
+        return false;
     if (role == Role::Trainee)
         return !m_takenOver.count(id);
     return std::any_of(m_takenOver.begin(), m_takenOver.end(),

@@ -17,15 +17,24 @@ uint64_t noClock() {
     return 0; // stage timings mean nothing in a replay
 }
 
+// The simulation settings of the server that wrote the log: drilling and the assessment's zones.
+StepConfig replayStepConfig(const LogHeader& header, int renderThreads) {
+    StepConfig c{.maxStepS = header.maxStepS,
+                 .maxSweepMm = header.maxSweepMm,
+                 .renderThreads = std::max(1, renderThreads),
+                 .publish = false};
+    c.assessment.cautionMm = header.cautionMm;
+    c.assessment.dangerMm = header.dangerMm;
+    c.assessment.clampMm = header.clampMm;
+    return c;
+}
+
 } // namespace
 
 SessionReplay::SessionReplay(const LogHeader& header, Volume start, int renderThreads)
-    : m_outbox(0, m_book, noClock), m_step(std::move(start),
-                                           StepConfig{.maxStepS = header.maxStepS,
-                                                      .maxSweepMm = header.maxSweepMm,
-                                                      .renderThreads = std::max(1, renderThreads),
-                                                      .publish = false},
-                                           m_outbox, m_book, noClock) {
+    : m_outbox(0, m_book, noClock),
+      m_step(std::move(start), replayStepConfig(header, renderThreads), m_outbox, m_book, noClock),
+      m_earlier(nlohmann::ordered_json::array()) {
     // A server numbers its starting marks 1..n, author 0 (SessionPolicy's constructor).
     uint32_t id = 1;
     for (const AnnotationInfo& m : header.marks) {
@@ -36,9 +45,19 @@ SessionReplay::SessionReplay(const LogHeader& header, Volume start, int renderTh
 
 void SessionReplay::apply(const LogRecord& r) {
     ++m_applied;
+    if (r.kind != LogRecord::Kind::Resume)
+        m_lastUs = std::max(m_lastUs, r.timeUs);
     if (r.isSimulation()) {
-        if (r.kind == LogRecord::Kind::Join)
+        SimEvent ev = simEventOf(r);
+        if (r.kind == LogRecord::Kind::Join) {
             m_joined.insert(r.client);
+            m_stretch.insert(r.client);
+            // The assessment lists it by its hello's name and role, as the policy's Join does.
+            if (auto p = m_participants.find(r.client); p != m_participants.end()) {
+                ev.name = p->second.name;
+                ev.role = p->second.role;
+            }
+        }
         if (r.kind == LogRecord::Kind::Leave) {
             m_joined.erase(r.client);
             m_participants.erase(r.client);
@@ -50,7 +69,7 @@ void SessionReplay::apply(const LogRecord& r) {
         if (r.kind == LogRecord::Kind::Sync)
             if (auto p = m_participants.find(r.client); p != m_participants.end())
                 p->second.sync = r.sync;
-        m_step.step({simEventOf(r)}, r.timeUs);
+        m_step.step({ev}, r.timeUs);
         return;
     }
     switch (r.kind) {
@@ -79,15 +98,20 @@ void SessionReplay::apply(const LogRecord& r) {
         break;
     case LogRecord::Kind::Resume: {
         // The killed server's clients are gone: the simulation forgets them as it would their
-        // leaves, and the resumed server numbers the marks afresh.
+        // leaves, and the resumed server numbers the marks afresh. They left at the killed
+        // server's last record, on its clock (the Resume's is the new server's).
         for (uint16_t id : std::set<uint16_t>(m_joined)) {
             LogRecord leave;
             leave.kind = LogRecord::Kind::Leave;
-            leave.timeUs = r.timeUs;
+            leave.timeUs = m_lastUs;
             leave.client = id;
-            m_step.step({simEventOf(leave)}, r.timeUs);
+            m_step.step({simEventOf(leave)}, m_lastUs);
         }
         m_joined.clear();
+        for (nlohmann::ordered_json& p : toJson(stretchMetrics()))
+            m_earlier.push_back(std::move(p));
+        m_stretch.clear();
+        m_lastUs = r.timeUs;
         m_participants.clear();
         const std::vector<AnnotationInfo> kept = marksList();
         m_marks.clear();
@@ -108,6 +132,37 @@ std::vector<AnnotationInfo> SessionReplay::marksList() const {
     return list;
 }
 
+// [SECTION] the assessment
+
+std::map<uint16_t, ParticipantMetrics> SessionReplay::stretchMetrics() {
+    std::map<uint16_t, ParticipantMetrics> all = m_step.assessment().metrics(m_lastUs);
+    std::erase_if(all, [&](const auto& p) { return !m_stretch.count(p.first); });
+    return all;
+}
+
+nlohmann::ordered_json SessionReplay::assessmentJson() {
+    nlohmann::ordered_json participants = m_earlier;
+    for (nlohmann::ordered_json& p : toJson(stretchMetrics()))
+        participants.push_back(std::move(p));
+    const AssessmentSummary summary =
+        m_book.read([](const ServerReport& r) { return r.assessment; });
+    nlohmann::ordered_json j = nlohmann::ordered_json::object();
+    j["assessment"] = toJson(summary);
+    j["participants"] = std::move(participants);
+    return j;
+}
+
+std::string replayReportText(SessionReplay& replay, const LogContents& log,
+                             const std::string& name) {
+    nlohmann::ordered_json j = nlohmann::ordered_json::object();
+    j["log"] = name;
+    j["log_format"] = log.version;
+    j["records"] = log.records.size();
+    j["stopped"] = log.stopped; // empty: the log was read to its end
+    j.update(replay.assessmentJson());
+    return jsonText(j);
+}
+
 // [SECTION] resuming
 
 Resumed resumeSession(const std::string& path, ServerConfig& config,
@@ -123,7 +178,9 @@ Resumed resumeSession(const std::string& path, ServerConfig& config,
     config.volumeName = log.header.volumeName;
     config.maxStepS = log.header.maxStepS;
     config.maxSweepMm = log.header.maxSweepMm;
-    config.recorder = SessionRecorder::append(path, log.intactBytes);
+    config.cautionMm = log.header.cautionMm;
+    config.dangerMm = log.header.dangerMm;
+    config.recorder = SessionRecorder::append(path, log.intactBytes, log.version);
     LogRecord resumed;
     resumed.kind = LogRecord::Kind::Resume;
     resumed.timeUs = steadyNowUs();

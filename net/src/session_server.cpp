@@ -7,6 +7,7 @@
 #include "net/debrief.h"
 #include "net/marks_file.h"
 #include "net/outbox.h"
+#include "net/replay_feed.h"
 #include "net/session_gate.h"
 #include "net/session_log.h"
 #include "net/session_policy.h"
@@ -124,9 +125,14 @@ struct SessionServer::Impl {
     SessionPolicy::ForceAnswer force(const ToolState& t, glm::vec3 velocity);
     void onEvent(const ENetEvent& ev);
     void apply(PolicyOutput& out, bool mayDrop = true);
-    // SessionServer::replay's records, for the network thread.
-    std::mutex replayMutex;
-    std::vector<LogRecord> replayQueue;
+    // [Replay] The timeline of a log served (serveLog; network thread only once started), the
+    // log's start to rebuild from, and what other threads hand it and read of it.
+    std::optional<ReplayPlayer> player;
+    Volume replayStart;
+    uint64_t replayStateSentUs = 0;
+    mutable std::mutex replayMutex;
+    std::vector<ReplayControl> replayControls;  // under replayMutex
+    std::optional<ReplayState> replayPublished; // under replayMutex
     void playReplayed();
     bool sendTo(uint16_t id, Channel ch, const std::vector<uint8_t>& bytes,
                 const Host::InFlight& inFlight = {});
@@ -172,7 +178,12 @@ void SessionServer::Impl::push(std::vector<SimEvent>& events, const std::vector<
     {
         std::lock_guard lock(inMutex);
         const size_t queued = inbox.size();
+        // Every event carries its time, and its record the same, so a replay of the log times
+        // the assessment's joins and leaves as this server does (net/sim_step.cpp, eventTime).
+        const uint64_t now = steadyNowUs();
         for (SimEvent& ev : events) {
+            if (!ev.arrivedUs)
+                ev.arrivedUs = now;
             if (ev.kind == SimEvent::Kind::Tool) {
                 if (mayDrop && inboxTools >= maxQueuedToolStates) {
                     ++dropped;
@@ -186,10 +197,8 @@ void SessionServer::Impl::push(std::vector<SimEvent>& events, const std::vector<
         // they caused: nothing a client sees is missing from the log after a crash.
         if (recorder) {
             logged.assign(log.begin(), log.end());
-            const uint64_t now = steadyNowUs();
             for (size_t i = queued; i < inbox.size(); ++i)
-                logged.push_back(
-                    logRecordOf(inbox[i], inbox[i].arrivedUs ? inbox[i].arrivedUs : now));
+                logged.push_back(logRecordOf(inbox[i], inbox[i].arrivedUs));
             recorder->write(logged);
         }
     }
@@ -393,14 +402,24 @@ void SessionServer::submitVoxels(const Box3i& box, std::vector<uint8_t> density,
     m_impl->push(events);
 }
 
-void SessionServer::replay(std::vector<LogRecord> records) {
+void SessionServer::serveLog(std::vector<LogRecord> records, double speed, bool playing) {
+    if (m_netThread.joinable())
+        throw Error("serveLog: call it before start()");
+    m_impl->player.emplace(std::move(records), speed, playing, steadyNowUs());
+    m_impl->replayStart = m_impl->step.volume();
+}
+
+void SessionServer::controlReplay(const ReplayControl& control) {
     {
         std::lock_guard lock(m_impl->replayMutex);
-        m_impl->replayQueue.insert(m_impl->replayQueue.end(),
-                                   std::make_move_iterator(records.begin()),
-                                   std::make_move_iterator(records.end()));
+        m_impl->replayControls.push_back(control);
     }
     m_impl->wakeNetwork();
+}
+
+std::optional<ReplayState> SessionServer::replayState() const {
+    std::lock_guard lock(m_impl->replayMutex);
+    return m_impl->replayPublished;
 }
 
 void SessionServer::setFullRenderUpdates(bool on) {
@@ -422,7 +441,7 @@ bool SessionServer::idle() {
         return false;
     {
         std::lock_guard lock(m_impl->replayMutex);
-        if (!m_impl->replayQueue.empty())
+        if (!m_impl->replayControls.empty())
             return false;
     }
     {
@@ -574,6 +593,11 @@ void SessionServer::Impl::apply(PolicyOutput& out, bool mayDrop) {
         gate.remove(id);
     if (out.allowRejoin)
         gate.allowRejoin();
+    if (!out.replayControls.empty()) { // played at this pass's playReplayed()
+        std::lock_guard lock(replayMutex);
+        replayControls.insert(replayControls.end(), out.replayControls.begin(),
+                              out.replayControls.end());
+    }
     for (const PolicyOutput::Disconnect& d : out.disconnects)
         if (auto link = links.find(d.client); link != links.end())
             enet_peer_disconnect(link->second, d.data);
@@ -626,7 +650,7 @@ void SessionServer::Impl::onEvent(const ENetEvent& ev) {
             policy.authenticate(id, in.role);
             break;
         case SessionGate::Result::Kind::Refuse:
-            policy.refuse(id, in.refuse, out);
+            policy.refuse(id, in.refuse, now, out);
             break;
         case SessionGate::Result::Kind::Bad:
             out = policy.reject(id, now);
@@ -642,20 +666,45 @@ void SessionServer::Impl::onEvent(const ENetEvent& ev) {
     }
 }
 
-// A replay's records: its tool states are the session's own, so none is dropped (the log holds
-// only those its server applied).
+// A served log's timeline: the windows' controls, then the records due (after a rebuild from the
+// start when a seek went backwards). Its tool states are the session's own, so none is dropped
+// (the log holds only those its server applied).
 void SessionServer::Impl::playReplayed() {
-    std::vector<LogRecord> records;
+    if (!player)
+        return;
+    const uint64_t now = steadyNowUs();
+    bool changed = false;
     {
         std::lock_guard lock(replayMutex);
-        records.swap(replayQueue);
+        for (const ReplayControl& c : replayControls)
+            changed = player->control(c, now) || changed;
+        replayControls.clear();
     }
-    const uint64_t now = steadyNowUs();
-    for (const LogRecord& r : records) {
-        PolicyOutput out;
-        policy.replayed(r, now, out);
-        apply(out, false);
+    const bool wasPlaying = player->playing();
+    ReplayPlayer::Due due = player->advance(now);
+    changed = changed || wasPlaying != player->playing();
+    PolicyOutput out;
+    if (due.rewind) {
+        policy.rewindReplay(out);
+        SimEvent start = SimEvent::of(SimEvent::Kind::Voxels, 0);
+        start.box = replayStart.bounds();
+        replayStart.copyBox(start.box, start.density, start.material);
+        start.arrivedUs = now;
+        out.events.push_back(std::move(start));
     }
+    if (!due.records.empty())
+        policy.replayed(due.records, now, out);
+    const ReplayState state = player->state(now);
+    // The first pass's state is what every welcome carries from then on.
+    if (changed || replayStateSentUs == 0 ||
+        (state.playing && now - replayStateSentUs >= kReplayStateIntervalUs)) {
+        policy.replayState(state, out);
+        replayStateSentUs = now;
+    }
+    apply(out, false);
+    // After the records are queued: a reader that sees this state and idle() sees them applied.
+    std::lock_guard lock(replayMutex);
+    replayPublished = state;
 }
 
 // Sends the updates the outbox lets go, and sends away the volume clients it refused.
@@ -669,7 +718,7 @@ void SessionServer::Impl::sendUpdates() {
                      "trephine server: client %u: the whole volume does not fit a message in "
                      "its volume codec; disconnected (volume sync refused)\n",
                      unsigned(id));
-        policy.refuseVolume(id, out);
+        policy.refuseVolume(id, steadyNowUs(), out);
     }
     apply(out);
     for (Outbox::Ready& u : taken.updates) {
@@ -726,6 +775,15 @@ void SessionServer::Impl::sayGoodbye() {
                 enet_peer_disconnect(ev.peer, uint32_t(RefuseReason::Shutdown));
             }
         });
+    // Whoever did not answer in time is gone all the same: its leave is applied (and logged) at
+    // the stop, so its assessment ends there, as a replay of the log ends it.
+    for (const auto& [id, peer] : std::map<uint16_t, ENetPeer*>(links)) {
+        peer->data = nullptr;
+        PolicyOutput left;
+        policy.disconnect(id, steadyNowUs(), left);
+        links.erase(id);
+        push(left.events, left.log);
+    }
     book.record([](ServerReport& r) { r.counters.clients = 0; });
 }
 

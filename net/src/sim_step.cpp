@@ -26,6 +26,13 @@ int64_t pixelsOf(const Dbi& frame) {
     return int64_t(frame.width()) * frame.height();
 }
 
+// The assessment's time for an event: when it arrived (the server stamps every event it queues,
+// and a log records that time), else the step's. So a replay of the log times joins, leaves and
+// samples as the live server did, whenever each was stepped.
+uint64_t eventTime(const SimEvent& ev, uint64_t now) {
+    return ev.arrivedUs ? ev.arrivedUs : now;
+}
+
 AssessmentConfig withSweep(const StepConfig& c) {
     AssessmentConfig a = c.assessment;
     a.maxSweepMm = c.maxSweepMm;
@@ -90,7 +97,7 @@ void SimulationStep::applyClientEvent(const SimEvent& ev, Batch& b, uint64_t now
         Client& c = m_clients[ev.client];
         c.camera = ev.camera;
         if (ev.kind == SimEvent::Kind::Join) {
-            m_assessment.join(ev.client, ev.name, ev.role, now);
+            m_assessment.join(ev.client, ev.name, ev.role, eventTime(ev, now));
             c.sync = ev.sync;
             m_outbox.join(ev.client, ev.inFlight, ev.codec, ev.volumeCodec);
             if (c.sync == Sync::Volume)
@@ -122,7 +129,7 @@ void SimulationStep::applyClientEvent(const SimEvent& ev, Batch& b, uint64_t now
         break;
     }
     case SimEvent::Kind::Leave:
-        m_assessment.leave(ev.client, now);
+        m_assessment.leave(ev.client, eventTime(ev, now));
         m_clients.erase(ev.client);
         m_outbox.leave(ev.client);
         b.needFull.erase(ev.client);
@@ -196,11 +203,11 @@ void SimulationStep::applyTool(const SimEvent& ev, Batch& b, uint64_t now) {
         // Lifted clear of bone between holes, the perforator's clutch re-engages (this is the
         // volume's only writer: reading it needs no lock).
         c.driller->observe(m_volume, pose);
-        m_assessment.apply(applied, now);
+        m_assessment.apply(applied, eventTime(ev, now));
         return;
     }
     if (dt <= 0.0f) {
-        m_assessment.apply(applied, now);
+        m_assessment.apply(applied, eventTime(ev, now));
         return;
     }
     // The cutter moved from the last drilling pose to this one during dt: it sweeps the path (a
@@ -230,7 +237,7 @@ void SimulationStep::applyTool(const SimEvent& ev, Batch& b, uint64_t now) {
     b.erodeUs += m_clock() - e0;
     if (!changed.empty())
         b.changedBy(changed, ev.arrivedUs);
-    m_assessment.apply(applied, now);
+    m_assessment.apply(applied, eventTime(ev, now));
 }
 
 // [SECTION] posting

@@ -9,6 +9,7 @@
 #include "net/codec.h"
 #include "net/image_delta.h"
 #include "net/protocol.h"
+#include "net/replay_protocol.h"
 #include "net/scene.h"
 #include "net/view.h"
 
@@ -119,6 +120,10 @@ bool decodeAny(std::span<const uint8_t> p) {
         return decodesCanonically<SafetyWarning>(p);
     case MessageType::AssessmentSnapshot:
         return decodesCanonically<AssessmentSnapshot>(p);
+    case MessageType::ReplayState:
+        return decodesCanonically<ReplayState>(p);
+    case MessageType::ReplayControl:
+        return decodesCanonically<ReplayControl>(p);
     }
     return false;
 }
@@ -292,6 +297,8 @@ std::vector<std::vector<uint8_t>> sampleMessages() {
     f.tools = {{"burr 4 mm", 9.0f}};
     snapshot.list = {f};
     all.push_back(encoded(snapshot));
+    all.push_back(encoded(ReplayState{1'500'000, 60'000'000, 2.0f, true, 3}));
+    all.push_back(encoded(ReplayControl{ReplayControl::Op::Seek, 30'000'000, 1.0f}));
     return all;
 }
 
@@ -358,9 +365,8 @@ std::vector<uint32_t> hostileRawBytes(uint32_t valid) {
 
 TEST(DecoderFuzz, EveryMessageTypeRefusesMutationsOrDecodesThemInRange) {
     const std::vector<std::vector<uint8_t>> samples = sampleMessages();
-    // One of every type (the handshake's four steps each); types 22 and 23 are reserved, not
-    // assigned (docs/protocol.md).
-    constexpr size_t kUnassignedTypes = 2, kHandshakeSteps = 4;
+    // One of every type (the handshake's four steps each).
+    constexpr size_t kUnassignedTypes = 0, kHandshakeSteps = 4;
     std::set<uint8_t> types;
     for (const std::vector<uint8_t>& s : samples)
         types.insert(s[0]);

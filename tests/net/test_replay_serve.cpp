@@ -10,6 +10,7 @@
 #include "net/session_replay.h"
 
 #include "net/session_client.h"
+#include "net/session_server.h"
 #include "net/view.h"
 
 #include "libsim/error.h"
@@ -18,6 +19,7 @@
 #include "libsim/volume_io.h"
 
 #include "loopback.h"
+#include "recorded_session.h"
 #include "test_support.h"
 
 #include <gtest/gtest.h>
@@ -68,7 +70,7 @@ std::vector<M> sentTo(const PolicyOutput& out, uint16_t id) {
 
 } // namespace
 
-TEST(ReplayFeed, GivesEachRecordWhenItsTimeComesRoundAtTheSpeed) {
+TEST(ReplayPlayer, GivesEachRecordWhenItsTimeComesRoundAtTheSpeed) {
     std::vector<LogRecord> records{
         record(LogRecord::Kind::Hello, 5'000'000, 1), record(LogRecord::Kind::Tool, 5'100'000, 1),
         record(LogRecord::Kind::Tool, 6'000'000, 1),
@@ -76,20 +78,81 @@ TEST(ReplayFeed, GivesEachRecordWhenItsTimeComesRoundAtTheSpeed) {
         record(LogRecord::Kind::Resume, 200, 0), record(LogRecord::Kind::Tool, 500'200, 1)};
     EXPECT_EQ(sessionTimesUs(records),
               (std::vector<uint64_t>{0, 100'000, 1'000'000, 1'000'000, 1'500'000}));
-    ReplayFeed feed(records, 2.0);
-    EXPECT_EQ(feed.durationUs(), 750'000u);
-    EXPECT_EQ(feed.due(0).size(), 1u);
-    EXPECT_TRUE(feed.due(49'999).empty());
-    EXPECT_EQ(feed.due(50'000).size(), 1u);
-    const std::vector<LogRecord> next = feed.due(700'000);
-    ASSERT_EQ(next.size(), 2u) << "the stroke's end and the resume, not the state after";
-    EXPECT_EQ(next[1].kind, LogRecord::Kind::Resume);
-    EXPECT_FALSE(feed.done());
-    EXPECT_EQ(feed.due(750'000).size(), 1u);
-    EXPECT_TRUE(feed.done());
-    EXPECT_TRUE(feed.due(10'000'000).empty());
-    EXPECT_THROW(ReplayFeed(records, 0.0), Error);
-    EXPECT_THROW(ReplayFeed(records, -1.0), Error);
+    const uint64_t t0 = 7'000'000; // wall time: the player takes any origin
+    ReplayPlayer player(records, 2.0, true, t0);
+    EXPECT_EQ(player.durationUs(), 1'500'000u);
+    EXPECT_EQ(player.advance(t0).records.size(), 1u);
+    EXPECT_TRUE(player.advance(t0 + 49'999).records.empty());
+    EXPECT_EQ(player.advance(t0 + 50'000).records.size(), 1u);
+    const ReplayPlayer::Due next = player.advance(t0 + 700'000);
+    ASSERT_EQ(next.records.size(), 2u) << "the stroke's end and the resume, not the state after";
+    EXPECT_EQ(next.records[1].kind, LogRecord::Kind::Resume);
+    EXPECT_FALSE(next.rewind);
+    EXPECT_FALSE(player.done());
+    EXPECT_TRUE(player.playing());
+    EXPECT_EQ(player.advance(t0 + 750'000).records.size(), 1u);
+    EXPECT_TRUE(player.done());
+    EXPECT_FALSE(player.playing()) << "it pauses at the end";
+    EXPECT_EQ(player.positionUs(t0 + 10'000'000), 1'500'000u);
+    EXPECT_TRUE(player.advance(t0 + 10'000'000).records.empty());
+    EXPECT_THROW(ReplayPlayer(records, 0.0, true, 0), Error);
+    EXPECT_THROW(ReplayPlayer(records, -1.0, true, 0), Error);
+    EXPECT_THROW(ReplayPlayer(records, 1e7, true, 0), Error);
+}
+
+TEST(ReplayPlayer, PausesSeeksAndChangesSpeedAtTheTimesGiven) {
+    std::vector<LogRecord> records;
+    for (uint64_t s = 0; s <= 10; ++s)
+        records.push_back(record(LogRecord::Kind::Tool, s * 1'000'000, 1));
+    uint64_t now = 100;
+    ReplayPlayer player(records, 1.0, false, now);
+    EXPECT_FALSE(player.playing());
+    EXPECT_EQ(player.advance(now + 5'000'000).records.size(), 1u) << "paused at the start";
+    now += 5'000'000;
+    player.play(now);
+    EXPECT_EQ(player.advance(now + 2'500'000).records.size(), 2u); // 1 s and 2 s
+    now += 2'500'000;
+    player.pause(now);
+    EXPECT_EQ(player.positionUs(now + 9'000'000), 2'500'000u);
+    EXPECT_TRUE(player.advance(now + 9'000'000).records.empty());
+    // Forward: only what lies between is given, no rebuild.
+    player.seek(6'000'000, now);
+    ReplayPlayer::Due d = player.advance(now);
+    EXPECT_FALSE(d.rewind);
+    ASSERT_EQ(d.records.size(), 4u);
+    EXPECT_EQ(d.records.back().timeUs, 6'000'000u);
+    // Backwards: a rebuild, then everything up to the new position again.
+    player.seek(1'500'000, now);
+    d = player.advance(now);
+    EXPECT_TRUE(d.rewind);
+    ASSERT_EQ(d.records.size(), 2u);
+    EXPECT_EQ(d.records.back().timeUs, 1'000'000u);
+    // A seek back to where nothing given lies past it needs no rebuild.
+    player.seek(1'800'000, now);
+    EXPECT_FALSE(player.advance(now).rewind);
+    EXPECT_EQ(player.seeks(), 3u);
+    // Four times as fast from 1.8 s: 2 s of wall time is 8 s of session, clamped to the end.
+    player.setSpeed(4.0, now);
+    player.play(now);
+    EXPECT_EQ(player.positionUs(now + 1'000'000), 5'800'000u);
+    EXPECT_EQ(player.advance(now + 2'100'000).records.size(), 9u); // 2 s .. 10 s
+    EXPECT_FALSE(player.playing());
+    const ReplayState s = player.state(now + 3'000'000);
+    EXPECT_EQ(s.positionUs, 10'000'000u);
+    EXPECT_EQ(s.durationUs, 10'000'000u);
+    EXPECT_EQ(s.speed, 4.0f);
+    // Play at the end starts again from the start, as a video player does.
+    now += 3'000'000;
+    player.play(now);
+    d = player.advance(now);
+    EXPECT_TRUE(d.rewind);
+    EXPECT_EQ(d.records.size(), 1u);
+    EXPECT_TRUE(player.playing());
+    // A window's controls: a speed out of range changes nothing.
+    EXPECT_FALSE(player.control({ReplayControl::Op::Speed, 0, 0.0f}, now));
+    EXPECT_EQ(player.speed(), 4.0);
+    EXPECT_TRUE(player.control({ReplayControl::Op::Pause}, now));
+    EXPECT_FALSE(player.playing());
 }
 
 TEST(SessionPolicyReplay, RecordedParticipantsAreListedRelayedDrilledAndLeave) {
@@ -111,7 +174,7 @@ TEST(SessionPolicyReplay, RecordedParticipantsAreListedRelayedDrilledAndLeave) {
 
     auto play = [&](const LogRecord& r) {
         PolicyOutput o;
-        policy.replayed(r, now, o);
+        policy.replayed({&r, 1}, now, o);
         return o;
     };
     LogRecord hello = record(LogRecord::Kind::Hello, 0, 1);
@@ -240,12 +303,109 @@ TEST(ReplayServeCli, AWatcherSeesTheRecordedSessionsFinalPictureAndItsTrainee) {
     })) << "the watcher's picture never became the replayed session's last";
     EXPECT_TRUE(listedAda) << "the roster never listed the recorded trainee";
     EXPECT_TRUE(sawAdasTool) << "the recorded trainee's tool was never relayed";
-    EXPECT_NE(served.waitFor("the replay has finished"), "");
+    EXPECT_NE(served.waitFor("at the end of the session"), "");
     // Served on after the end: the picture stays the session's last.
     for (int i = 0; i < 100; ++i)
         watcher.poll(1);
     EXPECT_TRUE(watcher.dbi() == expected);
     EXPECT_EQ(served.end(SIGTERM), 0);
+}
+
+TEST(ReplayServe, WindowsSeekBackAndForthAndTheVolumeIsTheLogsAtThatTimeBitForBit) {
+    const trephine::testing::TempDir dir;
+    const LogContents log = trephine::testing::recordTwoStrokes(dir / "two.log");
+    ASSERT_TRUE(log.stopped.empty()) << log.stopped;
+    const std::vector<uint64_t> times = sessionTimesUs(log.records);
+    // Between the strokes: the session time of the first stroke's last tool state.
+    size_t tools = 0;
+    uint64_t between = 0;
+    for (size_t i = 0; i < log.records.size(); ++i)
+        if (log.records[i].kind == LogRecord::Kind::Tool && ++tools == 12)
+            between = times[i];
+    ASSERT_EQ(tools, 24u);
+    const Volume start = logStartVolume(log.header, loadVolume);
+    auto volumeAt = [&](uint64_t positionUs) {
+        SessionReplay replay(log.header, start);
+        for (size_t i = 0; i < log.records.size() && times[i] <= positionUs; ++i)
+            replay.apply(log.records[i]);
+        return replay.volume();
+    };
+    const Volume middle = volumeAt(between), end = volumeAt(times.back());
+    ASSERT_FALSE(middle == end) << "the second stroke drilled nothing";
+
+    ServerConfig base = trephine::testing::loopbackServerConfig("sphere:48");
+    SessionServer server(start, replayServerConfig(log.header, base));
+    server.serveLog(log.records, 1.0, false);
+    server.start();
+    ClientConfig config = namedClientConfig(start, "Watcher", Role::Instructor, 40);
+    config.codec = Codec::Raw; // the DBI's depth is then the server's floats, bit for bit
+    SessionClient watcher(config);
+    // A trainee's window on a replay watches: its drill touches the bone but never cuts.
+    SessionClient trainee(namedClientConfig(start, "Eve", Role::Trainee, 32));
+    watcher.connect(loopback(server.port()));
+    trainee.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&watcher, &trainee}, [&] {
+        return watcher.hasFullImage() && trainee.hasFullImage() && watcher.replay().has_value();
+    }));
+    EXPECT_FALSE(watcher.replay()->playing) << "served paused until a window plays it";
+    EXPECT_EQ(watcher.replay()->positionUs, 0u);
+    EXPECT_EQ(watcher.replay()->durationUs, times.back());
+
+    const SurfaceSite top{glm::vec3(0.0f, 0.0f, sphereRadiusMm(48)), glm::vec3(0, 0, 1)};
+    for (int i = 0; i < 12; ++i) {
+        trainee.sendToolState(burrState(top, i, 12, 2000000));
+        trainee.poll(1);
+    }
+    const Camera camera = toCamera(config.view);
+    auto shows = [&](const Volume& v, uint32_t seeks) {
+        SessionReplay at(log.header, v);
+        const Dbi picture = at.render(camera);
+        return pumpUntil({&watcher, &trainee}, [&] {
+            return server.idle() && watcher.replay() && watcher.replay()->seeks == seeks &&
+                   server.volumeSnapshot() == v && watcher.dbi() == picture;
+        });
+    };
+    watcher.controlReplay({ReplayControl::Op::Seek, times.back()});
+    EXPECT_TRUE(shows(end, 1)) << "a seek to the end did not reach the log's final volume";
+    EXPECT_GT(server.drillingPaused(), 0u);
+    watcher.controlReplay({ReplayControl::Op::Seek, between});
+    EXPECT_TRUE(shows(middle, 2)) << "a seek back did not rebuild the volume between the strokes";
+    EXPECT_EQ(watcher.replay()->positionUs, between);
+    EXPECT_TRUE(pumpUntil({&watcher, &trainee}, [&] {
+        return std::any_of(watcher.participants().begin(), watcher.participants().end(),
+                           [](const auto& p) { return p.second.name == "Ada"; });
+    })) << "the recorded trainee is listed again after the rebuild";
+    // Played on from there at 100x, it ends on the final volume, paused at the end.
+    trainee.controlReplay({ReplayControl::Op::Speed, 0, 100.0f});
+    trainee.controlReplay({ReplayControl::Op::Play});
+    EXPECT_TRUE(pumpUntil({&watcher, &trainee}, [&] {
+        return watcher.replay() && !watcher.replay()->playing &&
+               watcher.replay()->positionUs == times.back() && server.idle() &&
+               server.volumeSnapshot() == end;
+    }));
+    EXPECT_EQ(watcher.replay()->speed, 100.0f);
+    EXPECT_EQ(server.counters().replayControlsRefused, 0u);
+    server.stop();
+}
+
+TEST(SessionPolicyReplay, ALiveSessionIgnoresTimelineControlsAndCountsThem) {
+    const Volume sphere = makeSphere(32);
+    ServerConfig config;
+    config.volumeName = "sphere:32";
+    config.scene = std::make_shared<const Scene>(buildScene(sphere));
+    ReportBook book;
+    SessionPolicy policy(config, sphere.dims(), sphere.spacing(), book,
+                         [](const ToolState&, glm::vec3) { return SessionPolicy::ForceAnswer{}; });
+    PolicyOutput out;
+    const uint16_t id = policy.connect(kProtocolVersion, 1000, out);
+    Hello h;
+    h.view.width = h.view.height = 32;
+    policy.receive(id, encodeMessage(h), 1000);
+    ReplayControl seek{ReplayControl::Op::Seek, 5};
+    PolicyOutput o = policy.receive(id, encodeMessage(seek), 2000);
+    EXPECT_TRUE(o.replayControls.empty());
+    EXPECT_FALSE(o.malformed);
+    EXPECT_EQ(book.counter(&ServerCounters::replayControlsRefused), 1u);
 }
 
 TEST(ReplayServeCli, ServeOptionsAreCheckedInOneLine) {

@@ -2,7 +2,8 @@
 // a log cut at every byte of its last records, or with a byte flipped, keeps what is intact and
 // says where and why it stopped; a recorded session (two trainees, an instructor's marks and
 // take-over, a design switch) replays to the server's own --save-on-exit byte for byte, and so
-// does one resumed from its log; trajectories export what the simulation applied.
+// does one resumed from its log; trajectories export what the simulation applied; the
+// participants' assessment metrics recomputed from the log equal the live report's.
 #include "net/session_log.h"
 #include "net/session_replay.h"
 
@@ -17,6 +18,7 @@
 #include "loopback.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <cstdio>
 #include <filesystem>
@@ -459,4 +461,191 @@ TEST(SessionLog, AResumedSessionKeepsAppendingAndReplaysToItsSave) {
     std::filesystem::remove(second.log);
     std::filesystem::remove(second.saved);
     std::filesystem::remove(again);
+}
+
+// [SECTION] the assessment, replayed
+
+namespace {
+
+// The 48^3 sphere with dura from 3 mm under its surface inwards: a critical structure that the
+// strokes (burrState: 5 mm burr, down to 2.5 mm deep) come near and touch.
+Volume sphereOverDura() {
+    Volume v = makeSphere(kN);
+    const float r = sphereRadiusMm(kN) - 3.0f;
+    for (int z = 0; z < kN; ++z)
+        for (int y = 0; y < kN; ++y)
+            for (int x = 0; x < kN; ++x)
+                if (glm::length(v.voxelCenter({x, y, z})) < r)
+                    v.set(x, y, z, 255, Material::Dura);
+    return v;
+}
+
+const nlohmann::json& byName(const nlohmann::json& participants, const std::string& name) {
+    for (const nlohmann::json& p : participants)
+        if (p.at("name") == name)
+            return p;
+    throw std::runtime_error("no participant " + name);
+}
+
+} // namespace
+
+TEST(SessionLog, MetricsRecomputedFromTheLogEqualTheLiveReportsAssessment) {
+    const Volume start = sphereOverDura();
+    const std::string logPath = tempPath("metrics-own.log");
+    ServerConfig c = loopbackServerConfig("dura sphere");
+    // Not the defaults: the replay must take the zones from the log.
+    c.cautionMm = 4.0f;
+    c.dangerMm = 2.0f;
+    c.recorder = SessionRecorder::create(logPath, makeLogHeader(start, c, "", true, 1));
+    nlohmann::json live;
+    {
+        RecordedSession s("metrics", c, start);
+        ASSERT_TRUE(s.joined());
+        const uint16_t ada = s.ada.welcome().clientId;
+        s.stroke(s.ada, 0);
+        s.stroke(s.ben, 40);
+        s.cho.takeOver(ada);
+        ASSERT_TRUE(pumpUntil(s.all, [&] {
+            return s.ada.participants().at(ada).takenOverBy == s.cho.welcome().clientId;
+        }));
+        s.stroke(s.ada, -30); // paused: no drilling time, no cut
+        s.stroke(s.cho, -30); // the instructor cuts in the trainee's place
+        s.cho.takeOver(0);
+        ASSERT_TRUE(
+            pumpUntil(s.all, [&] { return s.ada.participants().at(ada).takenOverBy == 0; }));
+        s.stroke(s.ben, 60, 25);
+        s.stroke(s.ada, -60, 15);
+        s.server.stop();
+        live = nlohmann::json::parse(s.server.reportJson());
+    }
+    c.recorder.reset();
+
+    const LogContents log = readSessionLog(logPath);
+    ASSERT_TRUE(log.stopped.empty()) << log.stopped;
+    EXPECT_EQ(log.version, kLogVersion);
+    SessionReplay replay(log.header, logStartVolume(log.header, loadVolume));
+    replay.applyAll(log.records);
+    const nlohmann::json again = nlohmann::json::parse(replayReportText(replay, log, logPath));
+    EXPECT_EQ(again.at("log"), logPath);
+    EXPECT_EQ(again.at("records"), log.records.size());
+
+    // The settings and structures as the server had them (its field build time is its own).
+    for (const char* key : {"structures", "caution_mm", "danger_mm", "field_clamp_mm"})
+        EXPECT_EQ(again.at("assessment").at(key), live.at("assessment").at(key)) << key;
+    EXPECT_EQ(again.at("assessment").at("caution_mm"), 4.0);
+    EXPECT_EQ(again.at("assessment").at("structures"), nlohmann::json::array({"dura"}));
+
+    // Every participant's metrics, figure for figure (JSON numbers compared exactly).
+    ASSERT_EQ(live.at("participants").size(), 3u);
+    EXPECT_EQ(again.at("participants"), live.at("participants"))
+        << "live:\n"
+        << live.at("participants").dump(1) << "\nreplayed:\n"
+        << again.at("participants").dump(1);
+
+    // ... and they are not trivially equal: the strokes drilled, came near the dura and touched
+    // it, with forces, over time.
+    const nlohmann::json& a = byName(live.at("participants"), "Ada").at("metrics");
+    const nlohmann::json& b = byName(live.at("participants"), "Ben").at("metrics");
+    const nlohmann::json& cho = byName(live.at("participants"), "Dr. Cho");
+    EXPECT_EQ(cho.at("role"), "instructor");
+    for (const nlohmann::json* m : {&a, &b}) {
+        EXPECT_GT(m->at("bone_removed_mm3").at("cortical").get<double>(), 0.0);
+        EXPECT_GE(m->at("warnings").get<int>(), 1);
+        EXPECT_GE(m->at("contacts").at("dura").get<int>(), 1);
+        EXPECT_LE(m->at("closest_mm").at("dura").get<double>(), 0.0);
+        EXPECT_GT(m->at("max_force_n").get<double>(), 0.0) << "forces travel in the log";
+        EXPECT_GT(m->at("path_length_mm").get<double>(), 0.0);
+        EXPECT_GT(m->at("zone_time_s").at("violation").get<double>(), 0.0);
+        EXPECT_GT(m->at("session_time_s").get<double>(), 0.0);
+        EXPECT_GT(m->at("drilling_time_s").get<double>(), 0.0);
+    }
+    EXPECT_NE(a.at("drilling_time_s"), b.at("drilling_time_s"));
+    EXPECT_GT(cho.at("metrics").at("drilling_time_s").get<double>(), 0.0) << "holding Ada, cuts";
+    std::filesystem::remove(logPath);
+}
+
+TEST(SessionLog, AFormat1LogReadsWithTheDefaultZonesAndNoForces) {
+    // A v1 log, written as the first format did: no zones in the header, no force in a Tool.
+    const Volume sphere = makeSphere(kN);
+    LogHeader header = sphereHeader(sphere);
+    header.cautionMm = 7.0f; // not written in v1: read back as the default
+    std::vector<uint8_t> bytes(kLogMagic, kLogMagic + 8);
+    bytes.insert(bytes.end(), {1, 0, 0, 0});
+    auto crc32 = [](const uint8_t* p, size_t n, uint32_t crc) {
+        crc = ~crc;
+        for (size_t i = 0; i < n; ++i) {
+            crc ^= p[i];
+            for (int k = 0; k < 8; ++k)
+                crc = (crc >> 1) ^ (0xEDB88320u & (0u - (crc & 1u)));
+        }
+        return ~crc;
+    };
+    auto frame = [&](auto& value) {
+        std::vector<uint8_t> payload;
+        WriteStream w(payload);
+        ASSERT_TRUE(value.serialize(w, 1));
+        uint8_t head[8];
+        for (int i = 0; i < 4; ++i)
+            head[i] = uint8_t(payload.size() >> (8 * i));
+        const uint32_t crc = crc32(payload.data(), payload.size(), crc32(head, 4, 0));
+        for (int i = 0; i < 4; ++i)
+            head[4 + i] = uint8_t(crc >> (8 * i));
+        bytes.insert(bytes.end(), head, head + 8);
+        bytes.insert(bytes.end(), payload.begin(), payload.end());
+    };
+    frame(header);
+    std::vector<LogRecord> records;
+    records.push_back(helloRecord(1, Role::Trainee, "Ada", 100));
+    LogRecord join;
+    join.kind = LogRecord::Kind::Join;
+    join.timeUs = 100;
+    join.client = 1;
+    join.view = toViewSpec(cameraPreset("top", sphere, {32, 32}));
+    records.push_back(join);
+    const SurfaceSite site = trephine::testing::sphereTop(kN);
+    for (int i = 0; i < 10; ++i) {
+        LogRecord tool;
+        tool.kind = LogRecord::Kind::Tool;
+        tool.timeUs = 200 + uint64_t(i) * 10000;
+        tool.client = 1;
+        tool.tool = burrState(site, i, 10, 1000000);
+        tool.forceN = 3.0f; // not written in v1
+        records.push_back(tool);
+    }
+    for (LogRecord& r : records)
+        frame(r);
+    const std::string path = tempPath("v1.log");
+    std::ofstream(path, std::ios::binary)
+        .write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+
+    // Resuming it goes on in format 1.
+    {
+        auto recorder = SessionRecorder::append(path, bytes.size(), 1);
+        LogRecord leave;
+        leave.kind = LogRecord::Kind::Leave;
+        leave.timeUs = 500000;
+        leave.client = 1;
+        ASSERT_TRUE(recorder->write({&leave, 1}));
+    }
+    const LogContents log = readSessionLog(path);
+    ASSERT_TRUE(log.stopped.empty()) << log.stopped;
+    EXPECT_EQ(log.version, 1u);
+    ASSERT_EQ(log.records.size(), 13u);
+    EXPECT_EQ(log.header.cautionMm, 3.0f);
+    EXPECT_EQ(log.header.dangerMm, 1.0f);
+    EXPECT_EQ(log.records[2].forceN, -1.0f);
+    EXPECT_EQ(log.records.back().kind, LogRecord::Kind::Leave);
+
+    SessionReplay replay(log.header, logStartVolume(log.header, loadVolume));
+    replay.applyAll(log.records);
+    const nlohmann::json j = nlohmann::json::parse(replayReportText(replay, log, path));
+    EXPECT_EQ(j.at("log_format"), 1);
+    EXPECT_EQ(j.at("assessment").at("caution_mm"), 3.0);
+    ASSERT_EQ(j.at("participants").size(), 1u);
+    const nlohmann::json& m = j.at("participants")[0].at("metrics");
+    EXPECT_EQ(j.at("participants")[0].at("name"), "Ada");
+    EXPECT_EQ(m.at("max_force_n"), 0.0) << "a v1 log has no forces";
+    EXPECT_GT(m.at("bone_removed_mm3").at("cortical").get<double>(), 0.0);
+    EXPECT_DOUBLE_EQ(m.at("session_time_s").get<double>(), 0.4999);
+    std::filesystem::remove(path);
 }

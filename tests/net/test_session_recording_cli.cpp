@@ -2,7 +2,8 @@
 // log it leaves holds every change the trainee had seen. The check is exact: the trainee's DBI
 // (raw codec, so its depth is the server's floats) equals, bit for bit, a render of the volume
 // the log replays to after some prefix of its records. `--resume` then continues the log, and
-// its --save-on-exit equals `trephine replay --save` of the whole log.
+// its --save-on-exit equals `trephine replay --save` of the whole log. `trephine replay --report`
+// recomputes the participants' assessment metrics: they equal the server's own --report.
 #include "child_process.h"
 #include "net/session_log.h"
 #include "net/session_replay.h"
@@ -17,6 +18,7 @@
 #include "test_support.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <csignal>
@@ -177,4 +179,82 @@ TEST(SessionRecordingCli, BadLogsAndClashingFlagsAreRefusedInOneLine) {
     EXPECT_EQ(r.exitCode, 1);
     EXPECT_NE(r.err.find("is the session log"), std::string::npos) << r.err;
     EXPECT_FALSE(std::filesystem::exists(log));
+}
+
+TEST(SessionRecordingCli, ReplayReportRecomputesTheServersParticipantMetrics) {
+    const trephine::testing::TempDir dir;
+    const Volume sphere = makeSphere(kN);
+    const std::string log = dir / "s.log", live = dir / "live.json", again = dir / "again.json";
+    {
+        Child server({"server", "--open", "--port", "0", "--volume", "sphere:48",
+                      "--render-threads", "1", "--record", log, "--report", live, "--caution-mm",
+                      "5", "--danger-mm", "2"});
+        const int port = server.port();
+        ASSERT_GT(port, 0);
+        SessionClient ada(namedClientConfig(sphere, "Ada", Role::Trainee, 32));
+        SessionClient ben(namedClientConfig(sphere, "Ben", Role::Trainee, 32));
+        ada.connect(loopback(uint16_t(port)));
+        ben.connect(loopback(uint16_t(port)));
+        ASSERT_TRUE(pumpUntil({&ada, &ben}, [&] {
+            return ada.hasFullImage() && ben.hasFullImage() && ada.participants().size() == 2;
+        }));
+        const SurfaceSite top = trephine::testing::sphereTop(kN);
+        const SurfaceSite side{{sphereRadiusMm(kN), 0.0f, 0.0f}, {1.0f, 0.0f, 0.0f}};
+        for (int i = 0; i < 30; ++i) {
+            ada.sendToolState(burrState(top, i, 30, 1000000));
+            if (i < 20)
+                ben.sendToolState(burrState(side, i, 20, 5000000));
+            ada.poll(1);
+            ben.poll(1);
+        }
+        // Whatever the server has received when it stops is both logged and applied (its
+        // simulation drains the queue), so the report and the log hold the same states.
+        for (int i = 0; i < 100; ++i) {
+            ada.poll(1);
+            ben.poll(1);
+        }
+        EXPECT_EQ(server.end(SIGTERM), 0);
+    }
+    auto run = [&](const std::string& args) { return trephine::testing::runTrephine(dir, args); };
+    using trephine::testing::shellQuote;
+    trephine::testing::CommandResult r =
+        run("replay " + shellQuote(log) + " --report " + shellQuote(again));
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.out.find("wrote " + again), std::string::npos) << r.out;
+    const nlohmann::json j = nlohmann::json::parse(trephine::testing::slurp(again));
+    const nlohmann::json server = nlohmann::json::parse(trephine::testing::slurp(live));
+    EXPECT_EQ(j.at("log"), log);
+    EXPECT_EQ(j.at("stopped"), "");
+    EXPECT_EQ(j.at("assessment").at("caution_mm"), 5.0) << "the zones come from the log";
+    EXPECT_EQ(j.at("assessment").at("danger_mm"), 2.0);
+    ASSERT_EQ(j.at("participants").size(), 2u);
+    EXPECT_EQ(j.at("participants")[0].at("name"), "Ada");
+    EXPECT_EQ(j.at("participants")[1].at("name"), "Ben");
+    for (const nlohmann::json& p : j.at("participants")) {
+        EXPECT_GT(p.at("metrics").at("bone_removed_voxels").at("cortical").get<int64_t>(), 0);
+        EXPECT_GT(p.at("metrics").at("max_force_n").get<double>(), 0.0);
+    }
+    EXPECT_EQ(j.at("participants"), server.at("participants"))
+        << "replayed:\n"
+        << j.at("participants").dump(1) << "\nlive:\n"
+        << server.at("participants").dump(1);
+
+    // Bad paths: one line each, and the log is never overwritten.
+    const std::string logBytes = trephine::testing::slurp(log);
+    r = run("replay " + shellQuote(log) + " --report " + shellQuote(dir / "no/such/r.json"));
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_NE(r.err.find("--report"), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    r = run("replay " + shellQuote(log) + " --report " + shellQuote(log));
+    EXPECT_EQ(r.exitCode, 1);
+    EXPECT_NE(r.err.find("is the session log"), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_EQ(trephine::testing::slurp(log), logBytes);
+    r = run("replay " + shellQuote(log) + " --report " + shellQuote(dir.path.string()));
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_NE(r.err.find("is a folder"), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    r = run("replay " + shellQuote(dir / "missing.log") + " --report " + shellQuote(again));
+    EXPECT_NE(r.exitCode, 0);
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
 }

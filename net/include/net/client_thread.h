@@ -102,6 +102,9 @@ struct ClientSnapshot {
     // newest metrics (own; an instructor's, everyone's).
     std::map<uint16_t, SafetyWarning> warnings;
     AssessmentSnapshot assessment;
+    // [Replay] The timeline of the log the server serves, its position as of publishedUs (none:
+    // a live session); replayPositionAfter moves it on.
+    std::optional<ReplayState> replay;
     std::optional<HapticModel> hapticModel; // latest force model (when the client offers it)
     uint64_t hapticModels = 0;
     // [Instructor] the newest relayed force model of every other participant, by client id.
@@ -174,6 +177,8 @@ public:
     bool viewAs(uint16_t id);
     // [Instructor] Removes a participant, or lets the removed rejoin (SessionClient::remove).
     bool remove(Remove m);
+    // [Replay] Plays, pauses, seeks or changes the speed (SessionClient::controlReplay).
+    bool controlReplay(const ReplayControl& c);
 
     // The latest snapshot (never null after construction).
     std::shared_ptr<const ClientSnapshot> snapshot() const;
@@ -198,8 +203,8 @@ private:
     struct SyncCmd {
         Sync sync;
     };
-    using Command =
-        std::variant<ToolState, ViewCmd, PingCmd, SyncCmd, Annotate, TakeOver, ViewAs, Remove>;
+    using Command = std::variant<ToolState, ViewCmd, PingCmd, SyncCmd, Annotate, TakeOver, ViewAs,
+                                 Remove, ReplayControl>;
 
     // The 1 s rate tick's state for one connection (network thread only).
     struct RateClock {

@@ -36,7 +36,8 @@ namespace trephine::net {
 // server gives each participant one; every window draws it); Handshake (role codes proven by
 // SPAKE2, then every message sealed: docs/security.md) and Remove; refusals WrongCode, Removed,
 // TooManyAttempts; refusals Busy, Idle, ViewsFull (docs/session.md, "Availability").
-inline constexpr uint32_t kProtocolVersion = 9;
+// 10: ReplayState and ReplayControl (a replay's timeline: net/replay_protocol.h).
+inline constexpr uint32_t kProtocolVersion = 10;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
 enum class RefuseReason : uint32_t {
@@ -131,6 +132,8 @@ enum class MessageType : uint8_t {
     ParticipantView = 19,
     SafetyWarning = 20,      // net/assessment_protocol.h
     AssessmentSnapshot = 21, // net/assessment_protocol.h
+    ReplayState = 22,        // net/replay_protocol.h
+    ReplayControl = 23,      // net/replay_protocol.h
     Handshake = 24,          // docs/security.md
     Remove = 25,
 };

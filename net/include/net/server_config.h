@@ -88,6 +88,9 @@ struct ServerConfig {
     // When set, every change to the session is appended here (net/session_log.h) before anything
     // it caused is sent to a client.
     std::shared_ptr<SessionRecorder> recorder;
+    // Serving a session log (`trephine replay --serve`): the windows are watchers, whose drills
+    // never cut (they touch the bone as paused burrs), and any of them drives the timeline.
+    bool replay = false;
 };
 
 // The marks (Annotations) go to every participant at most this often, the whole list once.

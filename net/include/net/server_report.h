@@ -5,8 +5,8 @@
 #pragma once
 
 #include "libsim/stats.h"
-#include "net/assessment_metrics.h"
 #include "net/admission.h"
+#include "net/assessment_metrics.h"
 #include "net/net_stats.h"
 #include "net/protocol.h"
 #include "net/security_counters.h"
@@ -37,7 +37,8 @@ struct ServerCounters {
     uint64_t hapticModelsSent = 0, hapticRelaysSent = 0;
     uint64_t refusedFull = 0, helloTimeouts = 0, viewsRefused = 0;
     uint64_t annotationsRefused = 0, takeOversRefused = 0, drillingPaused = 0;
-    int64_t peakInFlightBytes = 0; // the most one client's updates held by ENet at once
+    uint64_t replayControlsRefused = 0; // ReplayControl to a server not serving a log
+    int64_t peakInFlightBytes = 0;      // the most one client's updates held by ENet at once
 };
 
 // Refusals and budgets that keep the session serving those who belong (docs/session.md,
@@ -92,7 +93,7 @@ struct ServerReport {
     // metrics by client id (refreshed with each snapshot, final at each leave).
     AssessmentSummary assessment;
     std::map<uint16_t, ParticipantMetrics> participants;
-    SecurityCounters security;           // net/session_gate.h
+    SecurityCounters security; // net/session_gate.h
 
     // The totals of `mode` with the participants using it now.
     ModeTotals modeTotals(Sync mode) const;
@@ -104,6 +105,8 @@ nlohmann::ordered_json toJson(const ServerReport& report, const NetStats& stats)
 // toJson as text, two spaces an indent. Peer names come from the wire and the volume's name from
 // the user: bytes that are not UTF-8 are replaced, never a reason to lose the report.
 std::string toJsonText(const ServerReport& report, const NetStats& stats);
+// Any report's JSON as text, as toJsonText writes it (`trephine replay --report` too).
+std::string jsonText(const nlohmann::ordered_json& j);
 
 // A ServerReport behind a mutex: the network and simulation threads record, anyone reads.
 class ReportBook {

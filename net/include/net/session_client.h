@@ -15,6 +15,7 @@
 #include "net/enet_host.h"
 #include "net/net_stats.h"
 #include "net/protocol.h"
+#include "net/replay_protocol.h"
 #include "net/scene.h"
 #include "net/secure_channel.h"
 
@@ -169,6 +170,12 @@ public:
     uint64_t warningsReceived() const { return m_warningsReceived; }
     const AssessmentSnapshot& assessment() const { return m_assessment; }
     uint64_t snapshotsReceived() const { return m_snapshots; }
+    // [Replay] The newest ReplayState of the log this server serves (none: it serves a live
+    // session), and steadyNowUs() when it arrived; replayPosition() moves it on to `nowUs`.
+    const std::optional<ReplayState>& replay() const { return m_replay; }
+    uint64_t replayPosition(uint64_t nowUs) const;
+    // [Replay] Plays, pauses, seeks or changes the speed of the replay every window watches.
+    void controlReplay(ReplayControl c);
     uint64_t relaysReceived() const { return m_relays; }
     uint64_t updatesApplied() const { return m_updatesApplied; }
     uint64_t fullUpdates() const { return m_fullUpdates; }
@@ -256,6 +263,7 @@ private:
     bool onPong(std::span<const uint8_t> data, uint64_t nowUs);
     bool onSafetyWarning(std::span<const uint8_t> data);      // session_client_assessment.cpp
     bool onAssessmentSnapshot(std::span<const uint8_t> data); // session_client_assessment.cpp
+    bool onReplayState(std::span<const uint8_t> data, uint64_t nowUs); // session_client_replay.cpp
     bool applyImage(const ImageUpdate& u, uint64_t nowUs);
     bool applyVolume(const VolumeUpdate& u, uint64_t nowUs);
     // Volume mode: the whole view rendered from the local volume into m_dbi.
@@ -301,6 +309,8 @@ private:
     uint64_t m_warningsReceived = 0;
     AssessmentSnapshot m_assessment;
     uint64_t m_snapshots = 0;
+    std::optional<ReplayState> m_replay;
+    uint64_t m_replayReceivedUs = 0;
     // Whether relays of `id` are kept: everyone until the first roster, then whom it lists (a relay
     // on the tool or haptic channel can trail the reliable roster that dropped its sender).
     bool listed(uint16_t id) const { return m_rosters == 0 || m_participants.count(id) > 0; }

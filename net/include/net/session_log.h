@@ -6,6 +6,7 @@
 #pragma once
 
 #include "libsim/box.h"
+#include "libsim/distance_field.h"
 #include "libsim/volume.h"
 #include "net/protocol.h"
 
@@ -25,8 +26,9 @@ struct ServerConfig;
 struct SimEvent;
 
 inline constexpr uint8_t kLogMagic[8] = {'T', 'R', 'E', 'P', 'H', 'L', 'O', 'G'};
-// 1: the first format (docs/recording.md).
-inline constexpr uint32_t kLogVersion = 1;
+// 1: the first format (docs/recording.md). 2: the header's assessment zones, each Tool record's
+// haptic force (what `trephine replay --report` needs to recompute the live metrics).
+inline constexpr uint32_t kLogVersion = 2;
 // A frame's payload is at most this long (a Voxels record of the largest volume fits).
 inline constexpr uint32_t kMaxLogRecordBytes = 1u << 30;
 // The file's fixed start (magic, version) and each record's frame (length, CRC-32).
@@ -34,7 +36,7 @@ inline constexpr size_t kLogPreambleBytes = 12, kLogFrameBytes = 8;
 
 // How the session began: the volume (its spec and a content hash, or the voxels themselves when
 // the spec cannot regenerate them), the scene every client got, the starting marks, and the
-// simulation settings drilling depends on.
+// simulation settings drilling depends on, and the assessment's zones.
 struct LogHeader {
     uint64_t startUnixUs = 0; // wall clock when the server started
     std::string volumeSpec;   // as the server was given it
@@ -46,9 +48,13 @@ struct LogHeader {
     float maxStepS = 0.05f, maxSweepMm = 10.0f;
     std::vector<uint8_t> scene; // the Scene message, as clients got it
     std::vector<AnnotationInfo> marks;
+    // The assessment's zones (v2; a v1 log reads the server's defaults, which it was made with
+    // unless --caution-mm/--danger-mm were given).
+    float cautionMm = 3.0f, dangerMm = 1.0f, clampMm = DistanceField::kDefaultClampMm;
 
+    // `version`: the log's format (a reader passes the file's; a writer writes kLogVersion).
     template <typename S>
-    bool serialize(S& s) {
+    bool serialize(S& s, uint32_t version = kLogVersion) {
         uint16_t markCount = uint16_t(std::min<size_t>(marks.size(), kMaxAnnotations));
         if (!(s.integer(startUnixUs) && s.string(volumeSpec, 4096) &&
               s.string(volumeName, kMaxVolumeNameBytes) &&
@@ -64,7 +70,8 @@ struct LogHeader {
         for (AnnotationInfo& m : marks)
             if (!m.serialize(s))
                 return false;
-        return true;
+        return version < 2 || (serializeFinite(s, cautionMm) && serializeFinite(s, dangerMm) &&
+                               serializeFinite(s, clampMm));
     }
 };
 
@@ -74,7 +81,7 @@ struct LogRecord {
         // What the simulation applies (SimEvent), in the order it applies it.
         Join = 1,   // client, view, codec, sync, volumeCodec
         View = 2,   // client, view, viewId
-        Tool = 3,   // client, tool (as the simulation gets it: drilling cleared when paused)
+        Tool = 3,   // client, tool (as the simulation gets it: drilling cleared when paused), force
         Leave = 4,  // client
         Cut = 5,    // box
         Sync = 6,   // client, sync, volumeCodec: a design switch
@@ -96,6 +103,7 @@ struct LogRecord {
     Codec codec = Codec::Raw, volumeCodec = Codec::Raw;
     Sync sync = Sync::Dbi;
     ToolState tool;
+    float forceN = -1.0f; // Tool: the haptic answer's force magnitude (< 0: none; v1: none)
     Box3i box;
     std::vector<uint8_t> density, material;
     Role role = Role::Trainee;
@@ -108,7 +116,7 @@ struct LogRecord {
     bool isSimulation() const { return kind >= Kind::Join && kind <= Kind::Voxels; }
 
     template <typename S>
-    bool serialize(S& s);
+    bool serialize(S& s, uint32_t version = kLogVersion);
 };
 
 // [SECTION] conversions
@@ -147,7 +155,9 @@ public:
     static std::unique_ptr<SessionRecorder> create(const std::string& path, LogHeader header,
                                                    int syncIntervalMs = kDefaultSyncIntervalMs);
     // An existing log to append to: cut back to `intactBytes` first (its torn tail, if any).
+    // Its records are written in the file's format `version`, so an older log stays one format.
     static std::unique_ptr<SessionRecorder> append(const std::string& path, uint64_t intactBytes,
+                                                   uint32_t version = kLogVersion,
                                                    int syncIntervalMs = kDefaultSyncIntervalMs);
     ~SessionRecorder();
     SessionRecorder(const SessionRecorder&) = delete;
@@ -165,7 +175,7 @@ public:
     const std::string& path() const { return m_path; }
 
 private:
-    SessionRecorder(std::string path, int fd, uint64_t bytes, int syncIntervalMs);
+    SessionRecorder(std::string path, int fd, uint64_t bytes, int syncIntervalMs, uint32_t version);
     bool writeAll(const uint8_t* data, size_t n);
     void syncLoop();
     void writeBack(uint64_t written);
@@ -173,6 +183,7 @@ private:
     std::string m_path;
     int m_fd = -1;
     int m_syncIntervalMs;
+    uint32_t m_version; // the format its records are written in
     mutable std::mutex m_mutex;
     std::vector<uint8_t> m_buffer;
     uint64_t m_bytes = 0, m_records = 0, m_synced = 0, m_syncs = 0;
@@ -202,7 +213,7 @@ LogContents readSessionLog(const std::string& path);
 // [SECTION] record fields
 
 template <typename S>
-bool LogRecord::serialize(S& s) {
+bool LogRecord::serialize(S& s, uint32_t version) {
     if (!(s.ranged(kind, Kind::Join, Kind::Resume) && s.integer(timeUs)))
         return false;
     auto boxed = [&] {
@@ -217,7 +228,8 @@ bool LogRecord::serialize(S& s) {
     case Kind::View:
         return s.integer(client) && view.serialize(s) && s.integer(viewId);
     case Kind::Tool:
-        return s.integer(client) && tool.serialize(s);
+        return s.integer(client) && tool.serialize(s) &&
+               (version < 2 || serializeFinite(s, forceN));
     case Kind::Leave:
     case Kind::Release:
         return s.integer(client);

@@ -11,6 +11,7 @@
 #include "net/budgets.h"
 #include "net/enet_host.h"
 #include "net/protocol.h"
+#include "net/replay_protocol.h"
 #include "net/server_config.h"
 #include "net/server_report.h"
 #include "net/session_log.h"
@@ -73,12 +74,14 @@ struct PolicyOutput {
     // What the policy decided (names and roles, marks, take-overs), for the session log: the
     // server writes it, and the events, before it sends the messages (net/session_log.h).
     std::vector<LogRecord> log;
-    bool flush = false;           // send at once (a haptic answer), not at the next service
-    bool malformed = false;       // the message received was malformed (counted by the server)
+    bool flush = false;     // send at once (a haptic answer), not at the next service
+    bool malformed = false; // the message received was malformed (counted by the server)
     // An instructor's Remove (net/session_gate.h keeps them): whom it removed (also in
     // disconnects), and whether it let the removed join again.
     std::vector<uint16_t> removed;
     bool allowRejoin = false;
+    // [Replay] Windows' timeline controls, for the server's ReplayPlayer (net/replay_feed.h).
+    std::vector<ReplayControl> replayControls;
 };
 
 class SessionPolicy {
@@ -110,16 +113,23 @@ public:
     // Time passes: hello timeouts, and whatever paced message is due.
     void update(uint64_t now, PolicyOutput& out);
     // The gate refused `id` (a wrong code, a removed address): sent away with `data`.
-    void refuse(uint16_t id, uint32_t data, PolicyOutput& out);
+    void refuse(uint16_t id, uint32_t data, uint64_t now, PolicyOutput& out);
     // A volume client whose whole volume fits no message: sent away, saying why.
-    void refuseVolume(uint16_t id, PolicyOutput& out);
+    void refuseVolume(uint16_t id, uint64_t now, PolicyOutput& out);
     // The server stops: everyone is told so and counts as gone from `now`.
     void goodbye(uint64_t now, PolicyOutput& out);
-    // [Replay] One record of a session log played into this live session as its participant
-    // did it (`trephine replay --serve`, net/replay_feed.h): the recorded participants are listed
-    // in the roster under replayedId(), their tools relayed to everyone and drilled by the
-    // simulation, their marks and take-overs applied. Defined in replay_feed.cpp.
-    void replayed(const LogRecord& r, uint64_t now, PolicyOutput& out);
+    // [Replay] Records of a session log played into this live session as their participants
+    // did them (`trephine replay --serve`, net/replay_feed.h): the recorded participants are
+    // listed in the roster under replayedId(), their tools drilled by the simulation and relayed
+    // to everyone (each one's newest state of the batch: a seek's thousands are not sent), their
+    // marks and take-overs applied. Defined in replay_feed.cpp.
+    void replayed(std::span<const LogRecord> records, uint64_t now, PolicyOutput& out);
+    // [Replay] Back to the log's start before records are played again (a seek backwards): the
+    // recorded participants leave the simulation and the roster, their take-overs end, the marks
+    // are the log's starting ones again (the watchers' own stay). The server rewrites the voxels.
+    void rewindReplay(PolicyOutput& out);
+    // [Replay] The timeline now, sent to every participant and to each newcomer at its welcome.
+    void replayState(ReplayState state, PolicyOutput& out);
     // The id a recorded client plays under: above the ids connect() gives while fewer than
     // 32768 have joined (connect() skips one in use either way).
     static uint16_t replayedId(uint16_t recorded) { return uint16_t(0x8000u | recorded); }
@@ -149,12 +159,12 @@ private:
         uint64_t connectedUs = 0;
         Pacer modeSwitch{kSyncSwitchIntervalUs}; // each switch to volume encodes the volume
         VelocityEstimate toolVelocity;           // from its tool states' positions and times
-        uint8_t colour = 0; // its participantPalette() index, given at its hello
-        std::optional<Role> proven;              // the role its code proved (none: open session)
-        uint64_t heardUs = 0;                    // its last message (idle timeout)
-        RateBudget viewPixels{0, 0};             // ServerConfig::viewPixelsPerS
-        std::optional<ViewRequest> waitingView;  // over budget: the newest, until it is due
-        int64_t pixels = 0;                      // of its view now (maxTotalViewPixels)
+        uint8_t colour = 0;          // its participantPalette() index, given at its hello
+        std::optional<Role> proven;  // the role its code proved (none: open session)
+        uint64_t heardUs = 0;        // its last message (idle timeout)
+        RateBudget viewPixels{0, 0}; // ServerConfig::viewPixelsPerS
+        std::optional<ViewRequest> waitingView; // over budget: the newest, until it is due
+        int64_t pixels = 0;                     // of its view now (maxTotalViewPixels)
     };
 
     bool handle(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
@@ -173,8 +183,11 @@ private:
                   PolicyOutput& out);
     bool takeOver(uint16_t id, const Peer& p, std::span<const uint8_t> data, uint64_t now,
                   PolicyOutput& out);
-    void kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& out, uint64_t now = 0);
-    bool remove(uint16_t id, const Peer& p, std::span<const uint8_t> data, PolicyOutput& out);
+    void kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& out, uint64_t now);
+    void replayOne(const LogRecord& r, uint64_t now, PolicyOutput& out,
+                   std::map<uint16_t, ToolState>& tools);
+    bool remove(uint16_t id, const Peer& p, std::span<const uint8_t> data, uint64_t now,
+                PolicyOutput& out);
     void countMalformed(uint16_t id, Peer& p, PolicyOutput& out, uint64_t now);
     void pushSwitch(uint16_t id, Peer& p, uint64_t now, PolicyOutput& out);
 
@@ -221,6 +234,7 @@ private:
     std::map<uint16_t, Replayed> m_replayed;
     std::set<uint16_t> m_replayJoined;
     std::map<uint32_t, uint32_t> m_replayMarks;
+    std::vector<uint8_t> m_replayState; // the newest ReplayState, encoded (empty: no replay)
 };
 
 } // namespace trephine::net

@@ -1,7 +1,9 @@
 // Replays a session log (net/session_log.h) through the simulation step the server ran
 // (net/sim_step.h), so the volume comes out bit for bit as the server held it, and folds the
-// policy's records into who was in the session, their marks and take-overs. `trephine replay`
-// and `trephine server --resume` use it; trajectoriesOf exports each participant's tool path.
+// policy's records into who was in the session, their marks and take-overs, and recomputes each
+// participant's assessment metrics with the step's own Assessment (`replay --report`).
+// `trephine replay` and `trephine server --resume` use it; trajectoriesOf exports each
+// participant's tool path.
 #pragma once
 
 #include "libsim/camera.h"
@@ -58,7 +60,18 @@ public:
     }
     uint64_t recordsApplied() const { return m_applied; }
 
+    // The assessment as the live server's report has it (docs/assessment.md): "assessment" (the
+    // zones and structures; field_build_ms and field_bytes are this replay's own) and
+    // "participants", every participant's metrics recomputed from the recorded tool states at
+    // the recorded times, by the ids their server gave them. A log resumed N times lists each
+    // server's participants in turn; those still present at the log's end (a killed server's)
+    // are measured up to its last record.
+    nlohmann::ordered_json assessmentJson();
+
 private:
+    // The participants (by client id) of the server that wrote the log since its last Resume.
+    std::map<uint16_t, ParticipantMetrics> stretchMetrics();
+
     ReportBook m_book;
     Outbox m_outbox;
     SimulationStep m_step;
@@ -67,7 +80,16 @@ private:
     std::map<uint32_t, AnnotationInfo> m_marks;
     uint32_t m_hellos = 0;
     uint64_t m_applied = 0;
+    uint64_t m_lastUs = 0;            // the newest record's time since the last Resume
+    std::set<uint16_t> m_stretch;     // clients that joined since the last Resume
+    nlohmann::ordered_json m_earlier; // the participants of the servers before it
 };
+
+// `trephine replay FILE --report R.json`: the log's name, format, records and torn tail (if any),
+// then the assessment sections (SessionReplay::assessmentJson) of `replay`, which has applied
+// all of `log`'s records.
+std::string replayReportText(SessionReplay& replay, const LogContents& log,
+                             const std::string& name);
 
 // [SECTION] resuming
 

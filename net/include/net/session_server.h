@@ -15,6 +15,7 @@
 #include "net/enet_host.h"
 #include "net/net_stats.h"
 #include "net/protocol.h"
+#include "net/replay_protocol.h"
 #include "net/server_config.h"
 #include "net/server_report.h"
 #include "net/session_log.h"
@@ -22,6 +23,7 @@
 #include <atomic>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <string>
 #include <thread>
 #include <vector>
@@ -53,10 +55,17 @@ public:
     // its material bytes (VolumeUpdate::materials), since materials cannot be derived here.
     void submitVoxels(const Box3i& box, std::vector<uint8_t> density,
                       std::vector<uint8_t> material);
-    // Plays records of a session log into this session, in order, as their participants did
-    // them (SessionPolicy::replayed; `trephine replay --serve`, net/replay_feed.h): on the network
-    // thread at its next pass, their tool states never dropped. Thread-safe.
-    void replay(std::vector<LogRecord> records);
+    // Serves a session log's timeline (`trephine replay --serve`, net/replay_feed.h): its records
+    // are played into this session as their participants did them (SessionPolicy::replayed) when
+    // their time comes round, paused at the start unless `playing`; windows play, pause, seek and
+    // change the speed (ReplayControl), and all of them are told where it is (ReplayState). A
+    // seek backwards rebuilds from the volume this server was made with, which must be the log's
+    // start (logStartVolume). Call before start(), with ServerConfig::replay set.
+    void serveLog(std::vector<LogRecord> records, double speed, bool playing);
+    // [Thread-safe] A timeline control, as a window sends it (applied on the network thread).
+    void controlReplay(const ReplayControl& control);
+    // [Thread-safe] The timeline at the network thread's last pass (none: not serving a log).
+    std::optional<ReplayState> replayState() const;
     // The paper's DBI way, for comparison: on every change re-render each view whole, then send
     // BB_screen of it (the default renders only BB_screen; the pixels are the same).
     void setFullRenderUpdates(bool on);

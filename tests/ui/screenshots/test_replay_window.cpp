@@ -1,6 +1,7 @@
 // An instructor window watching `trephine replay --serve` of a recorded session: its screenshot
 // at the end shows the view the same, pixel for pixel, as a window on the original session after
-// its trainee had drilled and left. Needs a display (xvfb-run).
+// its trainee had drilled and left, with the replay's timeline over the view's bottom, at its
+// end. Needs a display (xvfb-run).
 #include "gl_window_test.h"
 
 #include "libsim/skull.h"
@@ -67,11 +68,11 @@ struct ServedReplay {
                 return std::atoi(at + 8);
         return -1;
     }
-    // Reads on until it says the replay has finished; false when its output ended first.
+    // Reads on until it says the replay is at its end; false when its output ended first.
     bool finished() {
         char buf[1024];
         while (out && fgets(buf, sizeof buf, out))
-            if (std::strstr(buf, "the replay has finished"))
+            if (std::strstr(buf, "at the end of the session"))
                 return true;
         return false;
     }
@@ -149,15 +150,33 @@ TEST(ReplayWindow, AWindowWatchingAReplayEndsOnTheOriginalSessionsPicture) {
     ASSERT_EQ(a.h, b.h);
     const Image u = readPng(untouched);
     ASSERT_EQ(u.w, a.w);
-    // The view: the window's top-left 400 x 400 (the panels beside it list other people).
-    auto differing = [](const Image& x, const Image& y) {
+    // The view: the window's top-left 400 x 400 (the panels beside it list other people), above
+    // the replay's timeline, which lies over the view's bottom 44 rows.
+    constexpr int kView = 400, kBar = 44;
+    auto differing = [&](const Image& x, const Image& y) {
         int n = 0;
-        for (int row = 0; row < 400; ++row)
-            for (int col = 0; col < 400; ++col)
+        for (int row = 0; row < kView - kBar; ++row)
+            for (int col = 0; col < kView; ++col)
                 n += std::memcmp(x.at(col, row), y.at(col, row), 3) != 0;
         return n;
     };
     EXPECT_GT(differing(a, u), 200) << "the drilled hole shows in the original session's view";
     EXPECT_EQ(differing(a, b), 0) << "pixels of the view that differ between " << original
                                   << " and " << replayed;
+    // The timeline: ImGui's blue (the Play button, the slider's grab) in the bar, which a
+    // window on a live session does not draw; the grab at the slider's right end (the replay is
+    // over), the button at the bar's left.
+    auto blue = [&](const Image& x, int fromCol, int toCol) {
+        int n = 0;
+        for (int row = kView - kBar; row < kView; ++row)
+            for (int col = fromCol; col < toCol; ++col) {
+                const uint8_t* p = x.at(col, row);
+                n += p[2] > p[0] + 60 && p[2] > p[1] + 30;
+            }
+        return n;
+    };
+    EXPECT_LT(blue(a, 0, kView), 5) << "no timeline on a live session";
+    EXPECT_GT(blue(b, 0, 70), 50) << "the Play button at the bar's left in " << replayed;
+    EXPECT_GT(blue(b, 250, kView - 80), 20) << "the slider's grab at its end in " << replayed;
+    EXPECT_LT(blue(b, 80, 200), 5) << "no grab in the slider's first part in " << replayed;
 }

@@ -5,11 +5,13 @@
 
 #include "libsim/tool.h"
 #include "net/client_thread.h"
+#include "ui/layout.h"
 #include "ui/panel_data.h"
 
 #include <map>
 #include <optional>
 #include <string>
+#include <vector>
 
 namespace trephine::ui {
 
@@ -163,6 +165,27 @@ glm::vec4 toColour(net::Rgb8 c);
 // first, and for an instructor whoever else is in danger); a participant's zone for the Session
 // panel's row; a zone's colour, and a tool's while it is in a zone.
 void drawAssessmentPanel(const net::ClientSnapshot& snap);
+
+// [Replay] The timeline of the log the server serves (net/replay_protocol.h): a bar along the
+// bottom of the view (`view`, ImGui coordinates) with play / pause, the position to drag (the
+// seek goes on release), the time and the speed. The bar and the keys (Space, Left / Right)
+// only record what was asked; the window sends it.
+struct ReplayControls {
+    std::vector<net::ReplayControl> asked; // this frame's, in order (the window sends and clears)
+    std::optional<double> dragS;           // the position slider held here (s)
+    // The last seek asked, shown until the server's state has answered it (its seeks count).
+    std::optional<uint64_t> seekUs;
+    uint32_t seekAnswered = 0;
+    // The position to show: the slider's while held, a seek asked until answered, else the
+    // server's (`positionUs`, moved on to now).
+    uint64_t shownUs(const net::ReplayState& state, uint64_t positionUs) const;
+    void seek(const net::ReplayState& state, uint64_t toUs);
+    // One frame's keys: Space (play / pause) and `steps` of kReplayStepS (Right on, Left back).
+    void keys(bool playPause, int steps, const net::ReplayState& state, uint64_t positionUs);
+};
+inline constexpr double kReplayStepS = 5.0;
+void drawReplayTimeline(const net::ReplayState& state, uint64_t positionUs, ReplayControls& c,
+                        const UiRect& view);
 void drawSafetyBanner(const net::ClientSnapshot& snap, int viewSize);
 void drawZoneBadge(const net::ClientSnapshot& snap, uint16_t id);
 glm::vec4 zoneColor(net::Zone z);

@@ -31,6 +31,8 @@ struct KeyActions {
     bool leaveTextField = false; // Enter or Escape while a text field has the keyboard
     bool labelledMark = false;   // Enter in the mark's label field
     bool toolChanged = false;    // kind, size or depth moved
+    bool playPause = false;      // Space, an odd number of times (a replay's: the caller checks)
+    int replaySteps = 0;         // Right presses less Left presses: kReplayStepS each
 };
 
 // Applies one frame's presses in order. While a text field has the keyboard (`textField`) only
