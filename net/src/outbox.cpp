@@ -3,7 +3,13 @@
 #include "net/codec.h"
 #include "net/image_delta.h"
 
+#include <sys/resource.h>
+#include <sys/syscall.h>
+#include <unistd.h>
+
 #include <algorithm>
+#include <pthread.h>
+#include <utility>
 
 namespace trephine::net {
 
@@ -11,6 +17,10 @@ Outbox::Outbox(int64_t maxInFlightBytes, ReportBook& book, ServerClock clock,
                std::function<void()> wake)
     : m_maxInFlightBytes(maxInFlightBytes), m_book(book), m_clock(std::move(clock)),
       m_wake(std::move(wake)) {}
+
+Outbox::~Outbox() {
+    stopCoder();
+}
 
 // [SECTION] clients
 
@@ -54,6 +64,7 @@ void Outbox::modeChanged(uint16_t id, Sync mode, Codec volumeCodec) {
 }
 
 void Outbox::clear() {
+    stopCoder(); // it may call `wake`, whose target goes when the server does
     for (auto& [id, c] : m_clients)
         c.noted.reset();
     countNoted();
@@ -88,15 +99,49 @@ void Outbox::countNoted() {
 
 void Outbox::postImage(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect,
                        bool full, uint64_t causeUs, ImageTiming timing) {
+    post(id, camera, frame, rect, full, causeUs, timing, nullptr);
+}
+
+void Outbox::postFullImage(uint16_t id, const Camera& camera, Dbi pixels, uint64_t causeUs) {
+    post(id, camera, pixels, pixels.bounds(), true, causeUs, {}, &pixels);
+}
+
+Dbi Outbox::buffer(int width, int height) {
+    Dbi spare;
+    {
+        std::lock_guard lock(m_mutex);
+        spare = std::exchange(m_spare, Dbi()); // a moved-from Dbi keeps its size, not its pixels
+    }
+    return spare.width() == width && spare.height() == height ? std::move(spare)
+                                                              : Dbi(width, height);
+}
+
+// `owned`: `frame` itself, which a full image coded apart takes instead of a copy.
+void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect, bool full,
+                  uint64_t causeUs, ImageTiming timing, Dbi* owned) {
     Client& c = m_clients[id];
     std::optional<PendingImage> old;
     {
         std::lock_guard lock(m_mutex);
         auto it = m_images.find(id);
         if (it != m_images.end()) {
-            if (it->second.viewId == c.viewId)
-                old = std::move(it->second);
-            m_images.erase(it);
+            std::vector<PendingImage>& waiting = it->second;
+            if (full) {
+                // The whole frame says all they said (a job coding one of them is dropped).
+                for (const PendingImage& w : waiting)
+                    if (w.viewId == c.viewId)
+                        causeUs = std::min(causeUs, w.causeUs);
+                waiting.clear();
+            } else if (!waiting.empty() && waiting.back().viewId != c.viewId) {
+                waiting.clear();
+            } else if (!waiting.empty() && !waiting.back().ticket) {
+                // The newest merges unless it is a full image coded apart: that one is never
+                // coded again, and this rectangle waits behind it.
+                old = std::move(waiting.back());
+                waiting.pop_back();
+            }
+            if (waiting.empty())
+                m_images.erase(it);
         }
     }
     // Not of this frame (a view change drops waiting images; this is the safety net): the
@@ -128,6 +173,20 @@ void Outbox::postImage(uint16_t id, const Camera& camera, const Dbi& frame, Pixe
     u.codec = c.codec == Codec::Raw && uint64_t(rect.area()) * 8 > kMaxImagePayloadBytes
                   ? Codec::Lz4
                   : c.codec;
+    if (full && (owned || (m_apartPixels > 0 && rect.area() >= m_apartPixels))) {
+        // Only zstd clients get predicted updates, so only they need the copy.
+        c.shadow = c.codec == Codec::Zstd ? frame : Dbi();
+        Dbi pixels;
+        if (owned) {
+            pixels = std::move(*owned);
+        } else {
+            // Into the coder's last buffer when it fits: a fresh one costs ~20 ms of page faults.
+            pixels = buffer(frame.width(), frame.height());
+            pixels = frame; // rect is the frame's bounds
+        }
+        codeApart(id, CodingJob{id, 0, std::move(u), std::move(pixels), camera});
+        return;
+    }
     const uint64_t e0 = m_clock();
     const Dbi pixels = frame.extract(rect);
     Dbi undo;
@@ -179,10 +238,95 @@ void Outbox::postImage(uint16_t id, const Camera& camera, const Dbi& frame, Pixe
                    c.inFlight};
     {
         std::lock_guard lock(m_mutex);
-        m_images[id] = std::move(p);
+        m_images[id].push_back(std::move(p));
     }
     if (m_wake)
         m_wake();
+}
+
+// The full image waits, being coded, at the end of the client's images; the coder thread fills
+// in its message, and the network takes nothing of the client's from it on until then.
+void Outbox::codeApart(uint16_t id, CodingJob job) {
+    PendingImage p;
+    p.viewId = job.update.viewId;
+    p.rect = {0, 0, job.pixels.width(), job.pixels.height()};
+    p.full = true;
+    p.causeUs = job.update.causeServerUs;
+    p.inFlight = m_clients[id].inFlight;
+    p.coding = true;
+    {
+        std::lock_guard lock(m_mutex);
+        p.ticket = job.ticket = ++m_tickets;
+        m_images[id].push_back(std::move(p));
+        m_jobs.push_back(std::move(job));
+        if (!m_coder.joinable())
+            m_coder = std::thread([this] { coderLoop(); });
+    }
+    m_coderCv.notify_all();
+}
+
+void Outbox::coderLoop() {
+    pthread_setname_np(pthread_self(), "trephine-coder");
+    // It takes what the simulation and network threads leave of the CPU (Linux: a thread's own
+    // nice value).
+    setpriority(PRIO_PROCESS, id_t(syscall(SYS_gettid)), 10);
+    std::unique_lock lock(m_mutex);
+    for (;;) {
+        m_coderCv.wait(lock, [&] { return m_stopCoder || !m_jobs.empty(); });
+        if (m_stopCoder)
+            return;
+        CodingJob job = std::move(m_jobs.front());
+        m_jobs.pop_front();
+        ++m_jobsRunning;
+        lock.unlock();
+        ImageUpdate& u = job.update;
+        const uint64_t e0 = m_clock();
+        EncodedImage e = encodeImage(job.pixels, u.codec, job.camera);
+        u.rawBytes = e.rawBytes;
+        u.payload = std::move(e.payload);
+        u.sentServerUs = m_clock();
+        u.encodeUs = uint32_t(u.sentServerUs - e0);
+        m_book.record(
+            [&](ServerReport& r) { r.modes[size_t(Sync::Dbi)].encodeUs.add(double(u.encodeUs)); });
+        std::vector<uint8_t> message = encodeMessage(u);
+        bool done = false;
+        lock.lock();
+        m_spare = std::move(job.pixels);
+        --m_jobsRunning;
+        if (auto it = m_images.find(job.client); it != m_images.end())
+            for (PendingImage& p : it->second)
+                if (p.ticket == job.ticket && p.coding) {
+                    p.rawBytes = u.rawBytes;
+                    p.payloadBytes = uint32_t(u.payload.size());
+                    p.message = std::move(message);
+                    p.coding = false;
+                    done = true;
+                }
+        m_coderCv.notify_all();
+        if (done && m_wake) {
+            lock.unlock();
+            m_wake();
+            lock.lock();
+        }
+    }
+}
+
+void Outbox::finishCoding() {
+    std::unique_lock lock(m_mutex);
+    m_coderCv.wait(lock, [&] { return m_stopCoder || (m_jobs.empty() && m_jobsRunning == 0); });
+}
+
+void Outbox::stopCoder() {
+    {
+        std::lock_guard lock(m_mutex);
+        m_stopCoder = true;
+        m_jobs.clear();
+    }
+    m_coderCv.notify_all();
+    if (m_coder.joinable())
+        m_coder.join();
+    std::lock_guard lock(m_mutex);
+    m_stopCoder = false;
 }
 
 // [SECTION] volumes
@@ -315,29 +459,36 @@ Outbox::Taken Outbox::take(const std::function<bool(uint16_t)>& live) {
     std::lock_guard lock(m_mutex);
     taken.refused.swap(m_refused);
     // A live client with too much still in ENet's hands gets nothing now: its update stays here,
-    // where the next changes merge into it.
-    auto drain = [&](auto& waiting, Sync mode) {
-        for (auto it = waiting.begin(); it != waiting.end();) {
-            const bool isLive = live(it->first);
-            if (isLive && heldBack(it->second.inFlight)) {
-                ++it;
-                continue;
-            }
-            if (isLive) {
-                auto& p = it->second;
-                bool full = false;
-                if constexpr (std::is_same_v<std::decay_t<decltype(p)>, PendingImage>)
-                    full = p.full;
-                else
-                    full = p.change.full;
-                taken.updates.push_back(
-                    {it->first, mode, full, p.payloadBytes, p.rawBytes, std::move(p.message)});
-            }
-            it = waiting.erase(it);
+    // where the next changes merge into it. A client's images go in order, up to one still being
+    // coded.
+    for (auto it = m_images.begin(); it != m_images.end();) {
+        const bool isLive = live(it->first);
+        std::vector<PendingImage>& waiting = it->second;
+        if (isLive && heldBack(waiting.front().inFlight)) {
+            ++it;
+            continue;
         }
-    };
-    drain(m_images, Sync::Dbi);
-    drain(m_volumes, Sync::Volume);
+        size_t n = 0;
+        for (; isLive && n < waiting.size() && !waiting[n].coding; ++n) {
+            PendingImage& p = waiting[n];
+            taken.updates.push_back(
+                {it->first, Sync::Dbi, p.full, p.payloadBytes, p.rawBytes, std::move(p.message)});
+        }
+        waiting.erase(waiting.begin(), isLive ? waiting.begin() + long(n) : waiting.end());
+        it = waiting.empty() ? m_images.erase(it) : std::next(it);
+    }
+    for (auto it = m_volumes.begin(); it != m_volumes.end();) {
+        const bool isLive = live(it->first);
+        PendingVolume& p = it->second;
+        if (isLive && heldBack(p.inFlight)) {
+            ++it;
+            continue;
+        }
+        if (isLive)
+            taken.updates.push_back({it->first, Sync::Volume, p.change.full, p.payloadBytes,
+                                     p.rawBytes, std::move(p.message)});
+        it = m_volumes.erase(it);
+    }
     return taken;
 }
 

@@ -40,8 +40,9 @@ ServerConfig withScene(ServerConfig c, const Volume& volume) {
     return c;
 }
 
-StepConfig stepConfig(const ServerConfig& c) {
+StepConfig stepConfig(const ServerConfig& c, std::function<bool()> yield) {
     StepConfig s{c.maxStepS, c.maxSweepMm, c.renderThreads, {}};
+    s.yield = std::move(yield);
     s.assessment.cautionMm = c.cautionMm;
     s.assessment.dangerMm = c.dangerMm;
     return s;
@@ -54,7 +55,8 @@ struct SessionServer::Impl {
         : host(Host::listen(c.port, c.maxClients + c.admission.waitingSlots)),
           wakeFd(eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)),
           outbox(c.maxInFlightBytes, book, steadyNowUs, [this] { wakeNetwork(); }),
-          step(std::move(v), stepConfig(c), outbox, book, steadyNowUs),
+          step(std::move(v), stepConfig(c, [this] { return eventsWaiting(); }), outbox, book,
+               steadyNowUs),
           policy(withScene(c, step.volume()), step.volume().dims(), step.volume().spacing(), book,
                  [this](const ToolState& t, glm::vec3 velocity) { return force(t, velocity); }),
           gate(c, book), maxQueuedToolStates(c.maxQueuedToolStates),
@@ -64,6 +66,9 @@ struct SessionServer::Impl {
                         return id && policy.admitted(id);
                     }),
           control(c.controlBudgetBytes), recorder(c.recorder) {
+        // The full image of a view larger than a slice is coded apart, as its rows are rendered
+        // in chunks: the simulation thread never stops for a whole large frame.
+        outbox.codeFullImagesApart(StepConfig{}.slicePixels + 1);
         book.record([&](ServerReport& r) {
             r.port = host.port();
             r.volume = c.volumeName;
@@ -103,6 +108,11 @@ struct SessionServer::Impl {
     size_t maxQueuedToolStates;
     bool busy = false; // the simulation thread is applying a batch (under inMutex)
     bool stopSim = false;
+    // [Simulation thread] Events wait for the next batch: a large view's rendering yields to them.
+    bool eventsWaiting() {
+        std::lock_guard lock(inMutex);
+        return !inbox.empty();
+    }
 
     // [Availability] Connections not yet admitted (net/admission.h) and each peer's control
     // backlog (net/budgets.h); network thread only.

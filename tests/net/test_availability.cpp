@@ -385,12 +385,22 @@ struct SliceRig {
     SimulationStep step;
     uint64_t now = kStartUs;
 
-    SliceRig(Volume v, int64_t slicePixels)
+    // What the step's `yield` says (events wait) and how often it was asked.
+    bool eventsWait = false;
+    int yieldAsked = 0;
+
+    SliceRig(Volume v, int64_t slicePixels, int64_t chunkPixels = int64_t(1) << 13)
         : step(std::move(v),
                StepConfig{.maxStepS = 0.05f,
                           .maxSweepMm = 10.0f,
                           .renderThreads = 1,
-                          .slicePixels = slicePixels},
+                          .slicePixels = slicePixels,
+                          .chunkPixels = chunkPixels,
+                          .yield =
+                              [this] {
+                                  ++yieldAsked;
+                                  return eventsWait;
+                              }},
                outbox, book, steadyNowUs) {}
     SimEvent join(uint16_t id, const Camera& camera) {
         SimEvent ev = SimEvent::of(SimEvent::Kind::Join, id);
@@ -403,6 +413,7 @@ struct SliceRig {
     std::vector<Outbox::Ready> run(std::vector<SimEvent> batch) {
         now += 10000;
         step.step(batch, now);
+        outbox.finishCoding(); // full images of views larger than a slice are coded apart
         return outbox.take([](uint16_t) { return true; }).updates;
     }
 };
@@ -452,4 +463,113 @@ TEST(AvailabilitySlices, ALargeNewViewRendersInSlicesWhileOthersGetTheirUpdates)
     ASSERT_TRUE(decodeImage(u.payload, u.rawBytes, u.codec, u.width, u.height, large, got));
     EXPECT_TRUE(compare(got, rig.step.render(large)).identical()) << "with the cut in it";
     EXPECT_EQ(rig.step.viewPixels(), 64 * 64 + 256 * 256);
+}
+
+namespace {
+
+// A cut of bone in the middle of the skull's top, seen by the `top` and `paper` cameras.
+SimEvent topCut(const Volume& skull, uint64_t now) {
+    Box3i box{skull.dims() / 2 - glm::ivec3(6), skull.dims() / 2 + glm::ivec3(6)};
+    box.lo.z = skull.dims().z - 12;
+    box.hi.z = skull.dims().z;
+    SimEvent cut = SimEvent::of(SimEvent::Kind::Cut, 0);
+    cut.box = box;
+    cut.arrivedUs = now;
+    return cut;
+}
+
+// The decoded pixels of client `id`'s update in `updates`, written over `into`.
+bool applyUpdate(const std::vector<Outbox::Ready>& updates, uint16_t id, const Camera& camera,
+                 Dbi& into) {
+    auto it =
+        std::find_if(updates.begin(), updates.end(), [&](const auto& u) { return u.client == id; });
+    if (it == updates.end())
+        return false;
+    ImageUpdate u;
+    Dbi got;
+    if (!decodeMessage(it->message, u) ||
+        !decodeImage(u.payload, u.rawBytes, u.codec, u.width, u.height, camera, got))
+        return false;
+    if (u.full)
+        into = got;
+    else
+        into.apply(got, u.x, u.y);
+    return true;
+}
+
+} // namespace
+
+// Past the smallest view's rectangle, a large view's change renders a chunk of rows at a time
+// while events wait (each step applies them first), and reaches its client whole once done; the
+// small view's rectangle goes in the step of the change however many events wait.
+TEST(AvailabilitySlices, ALargeViewsChangeYieldsToWaitingEventsAChunkAtATime) {
+    const Volume skull = makeSkull(48);
+    SliceRig rig(skull, 64 * 64, 256 * 4);
+    const Camera small = cameraPreset("top", skull, {64, 64});
+    const Camera large = cameraPreset("top", skull, {256, 256});
+    Dbi smallSeen, largeSeen;
+    auto joined = rig.run({rig.join(1, small), rig.join(2, large)});
+    while (rig.step.rendering())
+        for (const auto& u : rig.run({}))
+            joined.push_back(std::move(u));
+    ASSERT_TRUE(applyUpdate(joined, 1, small, smallSeen));
+    ASSERT_TRUE(applyUpdate(joined, 2, large, largeSeen));
+
+    rig.eventsWait = true; // from now on, events always wait
+    rig.yieldAsked = 0;
+    auto during = rig.run({topCut(skull, rig.now)});
+    ASSERT_TRUE(applyUpdate(during, 1, small, smallSeen)) << "the small view does not wait";
+    EXPECT_FALSE(has(during, 2, false)) << "the large view's change is more than one chunk";
+    EXPECT_EQ(rig.yieldAsked, 1) << "one chunk of the large view, then the events";
+    EXPECT_TRUE(rig.step.rendering());
+    int steps = 1;
+    std::vector<Outbox::Ready> done;
+    while (!has(done, 2, false) && steps < 200) {
+        rig.yieldAsked = 0;
+        done = rig.run({});
+        EXPECT_LE(rig.yieldAsked, 1) << "step " << steps;
+        ++steps;
+    }
+    EXPECT_GT(steps, 2) << "the change took several chunks, one a step";
+    EXPECT_FALSE(rig.step.rendering());
+    ASSERT_TRUE(applyUpdate(done, 2, large, largeSeen));
+    EXPECT_TRUE(compare(smallSeen, rig.step.render(small)).identical());
+    EXPECT_TRUE(compare(largeSeen, rig.step.render(large)).identical()) << "with the cut in it";
+
+    // Nothing waiting: the whole change goes in the step, as before.
+    rig.eventsWait = false;
+    SimEvent again = topCut(skull, rig.now);
+    again.box.lo.z -= 4;
+    auto at = rig.run({again});
+    EXPECT_TRUE(has(at, 1, false));
+    ASSERT_TRUE(applyUpdate(at, 2, large, largeSeen));
+    EXPECT_TRUE(compare(largeSeen, rig.step.render(large)).identical());
+}
+
+// A new view larger than a slice renders a chunk a step while events wait, a slice a step when
+// none do.
+TEST(AvailabilitySlices, ANewLargeViewRendersAChunkAStepWhileEventsWait) {
+    const Volume skull = makeSkull(48);
+    SliceRig rig(skull, 256 * 64, 256 * 16);
+    const Camera large = cameraPreset("paper", skull, {256, 256});
+    rig.eventsWait = true;
+    int steps = 0;
+    std::vector<Outbox::Ready> done = rig.run({rig.join(2, large)});
+    for (++steps; !has(done, 2, true) && steps < 100; ++steps)
+        done = rig.run({});
+    EXPECT_EQ(steps, 256 / 16 + 1) << "16 rows a step, then the copy for its full image";
+    rig.eventsWait = false;
+    steps = 0;
+    const Camera other = cameraPreset("top", skull, {256, 256});
+    SimEvent view = SimEvent::of(SimEvent::Kind::View, 2);
+    view.camera = other;
+    view.viewId = 1;
+    rig.outbox.viewChanged(2, 1);
+    done = rig.run({view});
+    for (++steps; !has(done, 2, true) && steps < 100; ++steps)
+        done = rig.run({});
+    EXPECT_EQ(steps, 256 / 64) << "64 rows a step";
+    Dbi seen;
+    ASSERT_TRUE(applyUpdate(done, 2, other, seen));
+    EXPECT_TRUE(compare(seen, rig.step.render(other)).identical());
 }

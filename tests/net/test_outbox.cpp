@@ -314,3 +314,70 @@ TEST(Outbox, AHeldBackVolumeClientsChangesAreCodedOnceNotAtEveryBatch) {
     EXPECT_TRUE(copy == volume);
     EXPECT_TRUE(rig.outbox.empty());
 }
+
+// A full image of a large view is coded on the coder thread from the pixels at the post; a change
+// posted meanwhile goes after it as a rectangle of its own (the full image is never coded again),
+// and the client's copy ends as the frame. A small full image is still coded at the post.
+TEST(Outbox, AFullImageCodedApartGoesFirstAndALaterChangeWaitsBehindIt) {
+    ReportBook book;
+    Outbox outbox(1 << 20, book, steadyNowUs);
+    outbox.codeFullImagesApart(64 * 64);
+    const Camera cam = cameraFor(128, 128);
+    outbox.join(1, inFlight(), Codec::Lz4, Codec::Lz4);
+    Dbi frame = picture(128, 128, 0);
+    const Dbi posted = frame;
+    outbox.postImage(1, cam, frame, frame.bounds(), true, 10, {});
+    const PixelRect rect{20, 30, 16, 8};
+    frame = with(frame, picture(128, 128, 5), rect);
+    outbox.postImage(1, cam, frame, rect, false, 20, {});
+    outbox.finishCoding();
+    Outbox::Taken t = outbox.take(live);
+    ASSERT_EQ(t.updates.size(), 2u);
+    const ImageUpdate first = decoded(t.updates[0]), second = decoded(t.updates[1]);
+    EXPECT_TRUE(first.full);
+    EXPECT_EQ(first.causeServerUs, 10u);
+    EXPECT_FALSE(second.full);
+    EXPECT_EQ(second.causeServerUs, 20u);
+    EXPECT_EQ(second.width, 16) << "the rectangle alone, not merged into the full image";
+    EXPECT_LT(first.sequence, second.sequence);
+    ClientCopy copy{cam, {}};
+    copy.apply(t.updates[0]);
+    EXPECT_TRUE(compare(copy.dbi, quantised(posted, cam)).identical()) << "the pixels posted";
+    copy.apply(t.updates[1]);
+    EXPECT_TRUE(compare(copy.dbi, quantised(frame, cam)).identical());
+    EXPECT_TRUE(outbox.empty());
+
+    outbox.join(2, inFlight(), Codec::Lz4, Codec::Lz4);
+    const Camera small = cameraFor(32, 32);
+    const Dbi smallFrame = picture(32, 32, 1);
+    outbox.postImage(2, small, smallFrame, smallFrame.bounds(), true, 30, {});
+    t = outbox.take(live); // no waiting for the coder
+    ASSERT_EQ(t.updates.size(), 1u);
+    EXPECT_TRUE(decoded(t.updates[0]).full);
+}
+
+// A newer full image supersedes one being coded (with the older cause), and a view change drops
+// it: what the coder made of them never leaves.
+TEST(Outbox, AFullImageBeingCodedIsSupersededOrDroppedLikeAnyWaitingImage) {
+    ReportBook book;
+    Outbox outbox(1 << 20, book, steadyNowUs);
+    outbox.codeFullImagesApart(64 * 64);
+    const Camera cam = cameraFor(128, 128);
+    outbox.join(1, inFlight(), Codec::Lz4, Codec::Lz4);
+    const Dbi older = picture(128, 128, 0), newer = picture(128, 128, 9);
+    outbox.postImage(1, cam, older, older.bounds(), true, 10, {});
+    outbox.postImage(1, cam, newer, newer.bounds(), true, 20, {});
+    outbox.finishCoding();
+    Outbox::Taken t = outbox.take(live);
+    ASSERT_EQ(t.updates.size(), 1u);
+    EXPECT_EQ(decoded(t.updates[0]).causeServerUs, 10u);
+    ClientCopy copy{cam, {}};
+    copy.apply(t.updates[0]);
+    EXPECT_TRUE(compare(copy.dbi, quantised(newer, cam)).identical());
+
+    outbox.postImage(1, cam, older, older.bounds(), true, 30, {});
+    outbox.viewChanged(1, 1);
+    outbox.finishCoding();
+    EXPECT_TRUE(outbox.take(live).updates.empty());
+    EXPECT_TRUE(outbox.empty());
+}

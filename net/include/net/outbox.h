@@ -17,11 +17,14 @@
 #include "net/server_report.h"
 
 #include <atomic>
+#include <condition_variable>
 #include <cstdint>
+#include <deque>
 #include <functional>
 #include <map>
 #include <mutex>
 #include <optional>
+#include <thread>
 #include <vector>
 
 namespace trephine::net {
@@ -62,6 +65,17 @@ public:
     // `wake` is called after each post (the server wakes its network thread with it).
     Outbox(int64_t maxInFlightBytes, ReportBook& book, ServerClock clock,
            std::function<void()> wake = {});
+    ~Outbox();
+    Outbox(const Outbox&) = delete;
+    Outbox& operator=(const Outbox&) = delete;
+
+    // [Posting thread, before any post] Full images of at least `minPixels` (0: none) are coded
+    // on a coder thread of low priority, from a copy taken at the post, so the posting thread
+    // does not stop for the whole frame's coding (a 2048 x 2048 view: ~140 ms on the 2-core VM).
+    // A change posted meanwhile waits behind that image as a rectangle of its own.
+    void codeFullImagesApart(int64_t minPixels) { m_apartPixels = minPixels; }
+    // [Posting thread] Waits until the coder thread has coded everything posted so far.
+    void finishCoding();
 
     // [Posting thread] A client joins with the counter of its bytes ENet holds (Host::send),
     // its image codec and its volume codec; its view id starts at 0.
@@ -78,6 +92,12 @@ public:
     // outside the frame is never merged: the client gets the whole frame.
     void postImage(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect, bool full,
                    uint64_t causeUs, ImageTiming timing);
+    // A full image of `pixels` (a copy of the view's frame the caller made, see buffer()), coded
+    // apart like the large ones postImage copies itself.
+    void postFullImage(uint16_t id, const Camera& camera, Dbi pixels, uint64_t causeUs);
+    // [Posting thread] A frame of that size for postFullImage: the coder's last buffer when it
+    // fits (its memory already mapped), else a new one.
+    Dbi buffer(int width, int height);
     // A volume client's change (or none, to retry one noted earlier). Posted, merged with its
     // waiting update, unless the client is held back with one waiting: then it is only noted and
     // coded once, when the waiting one has gone. A box too large for a message goes as the whole
@@ -112,6 +132,16 @@ private:
         std::vector<uint8_t> message;
         Dbi undo; // empty when full
         Host::InFlight inFlight;
+        uint64_t ticket = 0; // coded apart: its job's ticket (0: coded at the post)
+        bool coding = false; // coded apart, not yet done: it and what follows it wait
+    };
+    // A full image for the coder thread: its message but the payload, and the pixels.
+    struct CodingJob {
+        uint16_t client = 0;
+        uint64_t ticket = 0;
+        ImageUpdate update;
+        Dbi pixels;
+        Camera camera;
     };
     struct PendingVolume {
         VolumeChange change;
@@ -130,10 +160,15 @@ private:
     };
 
     bool heldBack(const Host::InFlight& inFlight) const;
+    void post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect, bool full,
+              uint64_t causeUs, ImageTiming timing, Dbi* owned);
     bool postVolume(uint16_t id, const Client& c, const Volume& volume, VolumeChange change);
     void postVolumeOrRefuse(uint16_t id, const Client& c, const Volume& volume,
                             const VolumeChange& change);
     void countNoted();
+    void codeApart(uint16_t id, CodingJob job);
+    void coderLoop();
+    void stopCoder();
 
     int64_t m_maxInFlightBytes;
     ReportBook& m_book;
@@ -144,9 +179,21 @@ private:
     std::atomic<int> m_noted{0};
 
     mutable std::mutex m_mutex; // the waiting updates, between the two threads
-    std::map<uint16_t, PendingImage> m_images;
+    // Per client its waiting images, oldest first: at most a full image coded apart and the
+    // rectangle posted after it.
+    std::map<uint16_t, std::vector<PendingImage>> m_images;
     std::map<uint16_t, PendingVolume> m_volumes;
     std::vector<uint16_t> m_refused;
+
+    // The coder thread (started at the first image coded apart) and its jobs, under m_mutex.
+    int64_t m_apartPixels = 0;
+    uint64_t m_tickets = 0;
+    std::deque<CodingJob> m_jobs;
+    Dbi m_spare; // the pixels of the last job, a buffer for the next
+    int m_jobsRunning = 0;
+    bool m_stopCoder = false;
+    std::condition_variable m_coderCv;
+    std::thread m_coder;
 };
 
 } // namespace trephine::net

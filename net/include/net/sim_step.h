@@ -20,6 +20,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <functional>
 #include <map>
 #include <optional>
 #include <shared_mutex>
@@ -59,9 +60,17 @@ struct StepConfig {
     int renderThreads = 0;    // 0: hardware concurrency
     AssessmentConfig assessment{}; // zones; its maxSweepMm is taken from maxSweepMm
     // New views render in slices of rows, at most this many pixels a step across all of them,
-    // taken in turn, so one peer's large views never hold up the others' updates for longer
-    // than a slice (docs/session.md, "Availability").
+    // taken in turn (docs/session.md, "Availability").
     int64_t slicePixels = int64_t(1) << 18;
+    // The changes of views larger than a slice, and new views' rows, render in chunks of rows of
+    // at most this many pixels, and the step stops after any chunk when `yield` says events
+    // wait: they are applied first, so nobody's update waits behind more than one chunk of
+    // another's large view. A view of at most a slice costs at most a slice even re-rendered
+    // whole: its change always goes in the step.
+    int64_t chunkPixels = int64_t(1) << 13;
+    // [Simulation thread] True when events wait for the next step (the server: its queue is not
+    // empty); empty: never.
+    std::function<bool()> yield = {};
     // Post updates to the outbox (a server). A replay (net/session_replay.h) only drills: it
     // renders nothing until asked (render()).
     bool publish = true;
@@ -115,7 +124,18 @@ private:
         Dbi frame;
         HitCache cache;   // where each pixel's ray met bone: dirty re-renders resume there
         int rowsDone = 0; // rows rendered so far: the frame is whole at frame.height()
+        // Changed pixels (of the rows done) still to render, and those rendered since the
+        // view's clients last got them; the oldest cause and the stage times they carry.
+        PixelRect stale, fresh;
+        uint64_t causeUs = 0;
+        ImageTiming timing;
+        // A view larger than a slice: the copy of the frame its full image is coded from, made
+        // in chunks (the frame holds still meanwhile); -1: none under way.
+        Dbi copy;
+        int rowsCopied = -1;
         bool whole() const { return rowsDone >= frame.height(); }
+        bool copying() const { return rowsCopied >= 0; }
+        bool settled() const { return whole() && stale.empty() && !copying(); }
     };
     // What one batch changed and who needs a full update.
     struct Batch {
@@ -135,8 +155,13 @@ private:
     void postVolumes(const Batch& b);
     uint32_t updateGrid(const Batch& b);
     void renderViews(const Batch& b, uint32_t gridUs);
-    void updateView(ViewFrame& v, const Batch& b, uint32_t gridUs);
+    void markChanged(ViewFrame& v, const Batch& b, uint32_t gridUs);
+    bool renderStale(ViewFrame& v, bool mayYield);
     void renderSlices();
+    bool chunkDone();
+    void postView(ViewFrame& v);
+    bool copyFrame(ViewFrame& v);
+    bool settle(ViewFrame& v, bool stopped);
     void syncGrid();
 
     StepConfig m_config;
