@@ -153,13 +153,19 @@ void SessionPolicy::replayed(std::span<const LogRecord> records, uint64_t now, P
         }
 }
 
-void SessionPolicy::rewindReplay(PolicyOutput& out) {
+// Every recorded participant leaves the simulation and the roster, its take-overs handed back.
+void SessionPolicy::replayedLeave(PolicyOutput& out) {
     for (uint16_t joined : m_replayJoined)
         out.events.push_back(SimEvent::of(SimEvent::Kind::Leave, joined));
     m_replayJoined.clear();
     for (const auto& [gone, p] : m_replayed)
         releaseTakeOvers(gone);
     m_replayed.clear();
+    m_roster.mark(true);
+}
+
+void SessionPolicy::rewindReplay(PolicyOutput& out) {
+    replayedLeave(out);
     // The log's marks go (its starting ones come back under their ids); the watchers' stay.
     std::erase_if(m_marks, [](const auto& m) {
         return m.second.author == 0 || (m.second.author & 0x8000u) != 0;
@@ -172,7 +178,6 @@ void SessionPolicy::rewindReplay(PolicyOutput& out) {
         ++id;
     }
     m_marksOut.mark(true);
-    m_roster.mark(true);
 }
 
 void SessionPolicy::replayState(ReplayState state, PolicyOutput& out) {
@@ -265,19 +270,13 @@ void SessionPolicy::replayOne(const LogRecord& r, uint64_t now, PolicyOutput& ou
     case LogRecord::Kind::Resume: {
         // The recorded server was killed: its clients were gone, and the resumed one numbered
         // the marks left 1..n in the order of their ids.
-        for (uint16_t joined : m_replayJoined)
-            out.events.push_back(SimEvent::of(SimEvent::Kind::Leave, joined));
-        m_replayJoined.clear();
-        for (const auto& [gone, p] : m_replayed)
-            releaseTakeOvers(gone);
-        m_replayed.clear();
+        replayedLeave(out);
         std::map<uint32_t, uint32_t> renumbered;
         uint32_t recorded = 1;
         for (const auto& [old, mark] : m_replayMarks)
             if (m_marks.count(mark))
                 renumbered[recorded++] = mark;
         m_replayMarks = std::move(renumbered);
-        m_roster.mark(true);
         break;
     }
     }

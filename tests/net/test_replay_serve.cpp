@@ -68,6 +68,20 @@ std::vector<M> sentTo(const PolicyOutput& out, uint16_t id) {
     return found;
 }
 
+// A live session's policy on the 32^3 sphere, driven without sockets.
+struct SpherePolicy {
+    Volume sphere = makeSphere(32);
+    ServerConfig config = [&] {
+        ServerConfig c;
+        c.volumeName = "sphere:32";
+        c.scene = std::make_shared<const Scene>(buildScene(sphere));
+        return c;
+    }();
+    ReportBook book;
+    SessionPolicy policy{config, sphere.dims(), sphere.spacing(), book,
+                         [](const ToolState&, glm::vec3) { return SessionPolicy::ForceAnswer{}; }};
+};
+
 } // namespace
 
 TEST(ReplayPlayer, GivesEachRecordWhenItsTimeComesRoundAtTheSpeed) {
@@ -156,13 +170,8 @@ TEST(ReplayPlayer, PausesSeeksAndChangesSpeedAtTheTimesGiven) {
 }
 
 TEST(SessionPolicyReplay, RecordedParticipantsAreListedRelayedDrilledAndLeave) {
-    const Volume sphere = makeSphere(32);
-    ServerConfig config;
-    config.volumeName = "sphere:32";
-    config.scene = std::make_shared<const Scene>(buildScene(sphere));
-    ReportBook book;
-    SessionPolicy policy(config, sphere.dims(), sphere.spacing(), book,
-                         [](const ToolState&, glm::vec3) { return SessionPolicy::ForceAnswer{}; });
+    SpherePolicy live;
+    SessionPolicy& policy = live.policy;
     uint64_t now = 1'000'000;
     PolicyOutput out;
     const uint16_t watcher = policy.connect(kProtocolVersion, now, out);
@@ -389,13 +398,9 @@ TEST(ReplayServe, WindowsSeekBackAndForthAndTheVolumeIsTheLogsAtThatTimeBitForBi
 }
 
 TEST(SessionPolicyReplay, ALiveSessionIgnoresTimelineControlsAndCountsThem) {
-    const Volume sphere = makeSphere(32);
-    ServerConfig config;
-    config.volumeName = "sphere:32";
-    config.scene = std::make_shared<const Scene>(buildScene(sphere));
-    ReportBook book;
-    SessionPolicy policy(config, sphere.dims(), sphere.spacing(), book,
-                         [](const ToolState&, glm::vec3) { return SessionPolicy::ForceAnswer{}; });
+    SpherePolicy live;
+    SessionPolicy& policy = live.policy;
+    ReportBook& book = live.book;
     PolicyOutput out;
     const uint16_t id = policy.connect(kProtocolVersion, 1000, out);
     Hello h;

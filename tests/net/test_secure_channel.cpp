@@ -6,12 +6,15 @@
 
 #include "libsim/error.h"
 
+#include "gate_client.h"
+
 #include <gtest/gtest.h>
 
 #include <set>
 
 using namespace trephine;
 using namespace trephine::net;
+using trephine::testing::GateClient;
 
 namespace {
 
@@ -20,46 +23,6 @@ Salt testSalt(uint8_t fill = 7) {
     s.fill(fill);
     return s;
 }
-
-// The client's side of the handshake against a gate, as SessionClient runs it.
-struct GateClient {
-    explicit GateClient(std::string c, Role r = Role::Trainee) : code(std::move(c)), role(r) {}
-    std::string code;
-    Role role;
-    std::optional<Bytes32> w; // the code's hash, kept: a guesser's next attempt reuses it
-    std::optional<SpakeClient> spake;
-    std::optional<SessionKeys> keys;
-
-    std::vector<uint8_t> offer(std::span<const uint8_t> challengeBytes) {
-        Handshake c;
-        EXPECT_TRUE(decodeMessage(challengeBytes, c));
-        Salt salt;
-        std::copy(c.salt.begin(), c.salt.end(), salt.begin());
-        if (!w)
-            w = codeScalar(normaliseCode(code), salt);
-        spake.emplace(*w, salt, role);
-        Handshake o;
-        o.step = Handshake::Step::Offer;
-        o.role = role;
-        o.share = spake->share();
-        return encodeMessage(o);
-    }
-    std::vector<uint8_t> confirm(std::span<const uint8_t> answerBytes) {
-        Handshake a;
-        EXPECT_TRUE(decodeMessage(answerBytes, a));
-        Handshake c;
-        c.step = Handshake::Step::Confirm;
-        for (size_t i = 0; i < a.entries.size(); ++i) {
-            const auto k = spake->keys(a.entries[i].share, a.entries[i].role);
-            if (k && sameMac(k->serverConfirm, a.entries[i].mac)) {
-                c.entry = uint8_t(i);
-                c.mac = k->clientConfirm;
-                keys = k;
-            }
-        }
-        return encodeMessage(c);
-    }
-};
 
 ServerConfig codedConfig() {
     ServerConfig c;

@@ -9,51 +9,20 @@
 
 #include "libsim/skull.h"
 
+#include "gate_client.h"
+
 #include <gtest/gtest.h>
 
 #include <optional>
 
 using namespace trephine;
 using namespace trephine::net;
+using trephine::testing::GateClient;
 
 namespace {
 
 constexpr const char* kTraineeCode = "TRAIN-EE42";
 constexpr const char* kInstructorCode = "TEACH-3R99";
-
-// A client's side of the handshake, as SessionClient runs it.
-struct CodeClient {
-    std::string code;
-    Role role;
-    std::optional<SpakeClient> spake;
-    std::optional<SessionKeys> keys;
-
-    std::vector<uint8_t> offer(std::span<const uint8_t> challengeBytes) {
-        Handshake c;
-        EXPECT_TRUE(decodeMessage(challengeBytes, c));
-        spake.emplace(codeScalar(normaliseCode(code), c.salt), c.salt, role);
-        Handshake o;
-        o.step = Handshake::Step::Offer;
-        o.role = role;
-        o.share = spake->share();
-        return encodeMessage(o);
-    }
-    std::vector<uint8_t> confirm(std::span<const uint8_t> answerBytes) {
-        Handshake a;
-        EXPECT_TRUE(decodeMessage(answerBytes, a));
-        Handshake c;
-        c.step = Handshake::Step::Confirm;
-        for (size_t i = 0; i < a.entries.size(); ++i) {
-            const auto k = spake->keys(a.entries[i].share, a.entries[i].role);
-            if (k && sameMac(k->serverConfirm, a.entries[i].mac)) {
-                c.entry = uint8_t(i);
-                c.mac = k->clientConfirm;
-                keys = k;
-            }
-        }
-        return encodeMessage(c);
-    }
-};
 
 ENetAddress address(uint32_t host) {
     ENetAddress a{};
@@ -106,7 +75,7 @@ struct CodesRig {
         PolicyOutput connected;
         j.id = policy->connect(kProtocolVersion, now, connected);
         EXPECT_NE(j.id, 0);
-        CodeClient client{code, role, {}, {}};
+        GateClient client{code, role};
         const std::vector<uint8_t> challenge = gate->connect(j.id, address(host));
         SessionGate::Result r = gate->receive(j.id, Channel::Control, client.offer(challenge), now);
         if (r.kind == SessionGate::Result::Kind::Reply) {
@@ -283,7 +252,7 @@ TEST(SessionCodes, AHandshakeAnsweredWithTheOldCodeDoesNotEndInTheSession) {
     // Ada's offer is answered under the old trainee code; the new code comes before her confirm.
     PolicyOutput connected;
     const uint16_t id = rig.policy->connect(kProtocolVersion, rig.now, connected);
-    CodeClient ada{kTraineeCode, Role::Trainee, {}, {}};
+    GateClient ada{kTraineeCode, Role::Trainee};
     const SessionGate::Result answer = rig.gate->receive(
         id, Channel::Control, ada.offer(rig.gate->connect(id, address(5))), rig.now);
     ASSERT_EQ(answer.kind, SessionGate::Result::Kind::Reply);

@@ -396,15 +396,26 @@ TEST(SessionSecurity, ReplayedTamperedAndForeignDatagramsAreDroppedAndCountedAnd
 
 // [SECTION] the instructor's powers
 
-TEST(SessionSecurity, AnInstructorRemovesAParticipantWhoCannotRejoinUntilAllowed) {
+// A session with codes on the 32^3 sphere, trainee Ada and instructor Dr. Cho connecting.
+struct AdaAndCho {
     Volume sphere = makeSphere(32);
-    SessionServer server(sphere, codedServerConfig());
-    server.start();
-    SessionClient ada(member(sphere, "Ada", Role::Trainee, kTraineeCode));
-    SessionClient cho(member(sphere, "Dr. Cho", Role::Instructor, kInstructorCode));
-    std::vector<SessionClient*> both = {&ada, &cho};
-    for (SessionClient* c : both)
-        c->connect(loopback(server.port()));
+    SessionServer server{sphere, codedServerConfig()};
+    SessionClient ada{member(sphere, "Ada", Role::Trainee, kTraineeCode)};
+    SessionClient cho{member(sphere, "Dr. Cho", Role::Instructor, kInstructorCode)};
+    std::vector<SessionClient*> both{&ada, &cho};
+    AdaAndCho() {
+        server.start();
+        for (SessionClient* c : both)
+            c->connect(loopback(server.port()));
+    }
+};
+
+TEST(SessionSecurity, AnInstructorRemovesAParticipantWhoCannotRejoinUntilAllowed) {
+    AdaAndCho session;
+    Volume& sphere = session.sphere;
+    SessionServer& server = session.server;
+    SessionClient &ada = session.ada, &cho = session.cho;
+    std::vector<SessionClient*>& both = session.both;
     ASSERT_TRUE(pumpUntil(
         both, [&] { return ada.welcomed() && cho.welcomed() && cho.participants().size() == 2; }));
     // A trainee may not remove anyone.
@@ -440,14 +451,11 @@ TEST(SessionSecurity, AnInstructorRemovesAParticipantWhoCannotRejoinUntilAllowed
 // sent the codes and asks for a new one; the removed trainee rejoins with it, the old code is
 // refused as wrong, and the trainee is never sent the codes.
 TEST(SessionSecurity, AnInstructorIssuesANewTraineeCodeThatLetsTheRemovedBack) {
-    Volume sphere = makeSphere(32);
-    SessionServer server(sphere, codedServerConfig());
-    server.start();
-    SessionClient ada(member(sphere, "Ada", Role::Trainee, kTraineeCode));
-    SessionClient cho(member(sphere, "Dr. Cho", Role::Instructor, kInstructorCode));
-    std::vector<SessionClient*> both = {&ada, &cho};
-    for (SessionClient* c : both)
-        c->connect(loopback(server.port()));
+    AdaAndCho session;
+    Volume& sphere = session.sphere;
+    SessionServer& server = session.server;
+    SessionClient &ada = session.ada, &cho = session.cho;
+    std::vector<SessionClient*>& both = session.both;
     ASSERT_TRUE(pumpUntil(
         both, [&] { return ada.welcomed() && cho.codes() && cho.participants().size() == 2; }));
     EXPECT_EQ(cho.codes()->trainee, kTraineeCode);

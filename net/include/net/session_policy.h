@@ -193,6 +193,7 @@ private:
     void kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& out, uint64_t now);
     void replayOne(const LogRecord& r, uint64_t now, PolicyOutput& out,
                    std::map<uint16_t, ToolState>& tools);
+    void replayedLeave(PolicyOutput& out);
     bool remove(uint16_t id, const Peer& p, std::span<const uint8_t> data, uint64_t now,
                 PolicyOutput& out);
     // [Codes] session_codes.cpp: an instructor's request, and the codes sent to `to` (nothing in
