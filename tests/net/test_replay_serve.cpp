@@ -22,6 +22,8 @@
 #include "recorded_session.h"
 #include "test_support.h"
 
+#include "policy_output.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -37,6 +39,7 @@
 
 using namespace trephine;
 using namespace trephine::net;
+using trephine::testing::sentTo;
 
 using trephine::testing::burrState;
 using trephine::testing::Child;
@@ -52,20 +55,6 @@ LogRecord record(LogRecord::Kind kind, uint64_t timeUs, uint16_t client = 0) {
     r.timeUs = timeUs;
     r.client = client;
     return r;
-}
-
-template <typename M>
-std::vector<M> sentTo(const PolicyOutput& out, uint16_t id) {
-    std::vector<M> found;
-    for (const PolicyOutput::Message& m : out.messages) {
-        if (std::find(m.to.begin(), m.to.end(), id) == m.to.end() ||
-            peekMessageType(m.bytes) != uint8_t(M::kType))
-            continue;
-        M decoded;
-        EXPECT_TRUE(decodeMessage(m.bytes, decoded));
-        found.push_back(std::move(decoded));
-    }
-    return found;
 }
 
 // A live session's policy on the 32^3 sphere, driven without sockets.

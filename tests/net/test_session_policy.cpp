@@ -7,6 +7,8 @@
 #include "libsim/tool.h"
 #include "net/view.h"
 
+#include "policy_output.h"
+
 #include <gtest/gtest.h>
 
 #include <optional>
@@ -14,25 +16,11 @@
 
 using namespace trephine;
 using namespace trephine::net;
+using trephine::testing::sentTo;
 
 namespace {
 
 constexpr uint64_t kStartUs = 1'000'000;
-
-// Every message of type M in `out` addressed to `id`, decoded.
-template <typename M>
-std::vector<M> sentTo(const PolicyOutput& out, uint16_t id) {
-    std::vector<M> found;
-    for (const PolicyOutput::Message& m : out.messages) {
-        if (std::find(m.to.begin(), m.to.end(), id) == m.to.end() ||
-            peekMessageType(m.bytes) != uint8_t(M::kType))
-            continue;
-        M decoded;
-        EXPECT_TRUE(decodeMessage(m.bytes, decoded));
-        found.push_back(std::move(decoded));
-    }
-    return found;
-}
 
 size_t eventsOf(const PolicyOutput& out, SimEvent::Kind kind) {
     return size_t(std::count_if(out.events.begin(), out.events.end(),
