@@ -754,6 +754,8 @@ void TrainerWindow::applyRects(const FrameState& f) {
             designs.arrived(SyncDesign::Dbi, r.appliedUs);
             cpuDbi = std::move(r.pixels);
             cpuDbiCamera = net::toCamera(r.view);
+            if (o.onPicture)
+                o.onPicture(cpuDbiCamera);
         } else if (haveImage && r.viewId == imageViewId) {
             comp.uploadRect(r.rect, r.pixels);
             if (designs.picture == SyncDesign::Dbi && cpuDbi.bounds().contains(r.rect))
@@ -1000,6 +1002,8 @@ void TrainerWindow::composite(const FrameState& f) {
             comp.readBackDepth(cpuDbi);
             local.camera = cpuDbiCamera = f.dbiCamera;
             local.dirty = false;
+            if (o.onPicture)
+                o.onPicture(cpuDbiCamera);
         }
     } else {
         comp.begin(f.dbiCamera);

@@ -12,8 +12,8 @@
 #include <array>
 #include <atomic>
 #include <cstdint>
-#include <map>
 #include <functional>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -108,6 +108,9 @@ struct TrainerOptions {
     // [Tests] The window closes once this is set, as if its close button was clicked (exit 0,
     // unless a screenshot or frames were asked for and not done).
     const std::atomic<bool>* quit = nullptr;
+    // [Tests] Called on the window's thread with the camera of each whole picture the view takes
+    // in (a server's full image, or the local volume's picture redrawn after a change).
+    std::function<void(const Camera&)> onPicture;
 };
 
 // Runs the window until it closes. Returns the process exit code; throws trephine::Error when no
