@@ -193,7 +193,9 @@ TEST(SessionRecordingCli, ReplayReportRecomputesTheServersParticipantMetrics) {
         ASSERT_GT(port, 0);
         SessionClient ada(namedClientConfig(sphere, "Ada", Role::Trainee, 32));
         SessionClient ben(namedClientConfig(sphere, "Ben", Role::Trainee, 32));
+        // Ada joins first: the report lists participants in the order they joined.
         ada.connect(loopback(uint16_t(port)));
+        ASSERT_TRUE(pumpUntil({&ada}, [&] { return ada.welcomed(); }));
         ben.connect(loopback(uint16_t(port)));
         ASSERT_TRUE(pumpUntil({&ada, &ben}, [&] {
             return ada.hasFullImage() && ben.hasFullImage() && ada.participants().size() == 2;
