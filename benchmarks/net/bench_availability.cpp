@@ -2,7 +2,8 @@
 // join time and update latency (tool state arrival -> rectangle applied) while (a) nobody else
 // is there, (b) a flood of half-open CONNECTs runs from 8 addresses, (c) silent peers reconnect
 // as soon as they are dropped, (d) a greedy peer sends the most expensive view requests its
-// budget allows (the largest view, a new camera every 5 ms). Each prints beside its target: join
+// budget allows (the largest view, a new camera every 5 ms), (e) a peer holds the largest view
+// of the trainee's site (every change is rendered for it too). Each prints beside its target: join
 // <= 2 s; p99 <= 2x the figure without hostile peers (run (a) first, in the same process). The
 // memory run holds 15 peers asking for distinct 2048^2 views and prints the process's peak
 // resident memory growth beside the bound the server states.
@@ -97,7 +98,9 @@ struct Figures {
     int64_t noUpdate = 0;
 };
 
-// The trainee joins `server` and drills a stroke of 300 tool states, one each update.
+// The trainee joins `server` and drills 1000 tool states, one every 10 ms (a 10 s run, so the
+// attack's periodic work falls into it): ten 20 mm strokes side by side, 5.5 mm apart, at two
+// depths, so each goes through fresh bone and nearly every state gives an update.
 Figures traineeRun(SessionServer& server, const Volume& skull) {
     Figures f;
     ClientConfig cc;
@@ -116,21 +119,28 @@ Figures traineeRun(SessionServer& server, const Volume& skull) {
     const SurfaceSite site = defaultBurrSite(skull);
     const glm::vec3 n = site.normal;
     const glm::vec3 along = glm::normalize(glm::cross(n, glm::vec3(1, 0, 0)));
+    const glm::vec3 across = glm::cross(n, along);
     uint64_t clientUs = 1000000;
-    for (int i = 0; i < 300; ++i) {
+    constexpr int kStates = 1000;
+    constexpr uint64_t kPeriodUs = 10000;
+    const uint64_t start = steadyNowUs();
+    for (int i = 0; i < kStates; ++i) {
         ToolState t;
         t.sequence = uint32_t(i + 1);
-        t.clientTimeUs = clientUs += 10000;
+        t.clientTimeUs = clientUs += kPeriodUs;
         t.diameterMm = 5.0f;
-        t.position = site.position - n * 1.0f + along * (0.2f * float(i % 100) - 10.0f);
+        const int stroke = i / 100;
+        t.position = site.position - n * (1.0f + 2.5f * float(stroke / 5)) +
+                     across * (5.5f * float(stroke % 5 - 2)) +
+                     along * (0.2f * float(i % 100) - 10.0f);
         t.orientation = glm::rotation(glm::vec3(0, 0, 1), n);
         t.speed = 1.0f;
         t.drilling = true;
         const uint64_t target = client.updatesApplied() + 1;
         client.sendToolState(t);
-        const uint64_t deadline = steadyNowUs() + 100000;
-        while (client.updatesApplied() < target && steadyNowUs() < deadline)
-            client.poll(0);
+        const uint64_t next = start + uint64_t(i + 1) * kPeriodUs;
+        while (steadyNowUs() < next)
+            client.poll(1);
         f.noUpdate += client.updatesApplied() < target;
     }
     f.p50Us = client.stats().updateLatencyUs.percentile(50);
@@ -139,7 +149,7 @@ Figures traineeRun(SessionServer& server, const Volume& skull) {
     return f;
 }
 
-enum class Hostile { None, HalfOpen, Reconnecting, Greedy };
+enum class Hostile { None, HalfOpen, Reconnecting, Greedy, Holding };
 
 double g_quietP99Us = 0; // the figure without hostile peers, from the first run
 
@@ -152,6 +162,8 @@ void underAttack(benchmark::State& state, Hostile kind) {
         config.volumeName = "skull:80";
         if (const char* e = std::getenv("TREPHINE_VIEW_PIXELS_PER_S"))
             config.viewPixelsPerS = std::atof(e);
+        if (const char* e = std::getenv("TREPHINE_LARGE_VIEW_PIXELS_PER_S"))
+            config.largeViewPixelsPerS = std::atof(e);
         SessionServer server(skull, config);
         server.start();
         std::optional<testing::HalfOpenFlood> flood;
@@ -161,8 +173,8 @@ void underAttack(benchmark::State& state, Hostile kind) {
             flood.emplace(server.port(), 8, 4, 5000); // ~6400 CONNECTs a second
         if (kind == Hostile::Reconnecting)
             reconnecting.emplace(server.port(), 32, 3, kProtocolVersion);
-        if (kind == Hostile::Greedy) {
-            greedy.emplace(server.port(), skull, 2048, 5000);
+        if (kind == Hostile::Greedy || kind == Hostile::Holding) {
+            greedy.emplace(server.port(), skull, 2048, kind == Hostile::Greedy ? 5000 : 0);
             while (!greedy->welcomed())
                 std::this_thread::sleep_for(std::chrono::milliseconds(5));
         }
@@ -236,4 +248,5 @@ BENCHMARK_CAPTURE(underAttack, quiet, Hostile::None)->Iterations(1)->UseRealTime
 BENCHMARK_CAPTURE(underAttack, half_open_flood, Hostile::HalfOpen)->Iterations(1)->UseRealTime();
 BENCHMARK_CAPTURE(underAttack, reconnecting, Hostile::Reconnecting)->Iterations(1)->UseRealTime();
 BENCHMARK_CAPTURE(underAttack, greedy_views, Hostile::Greedy)->Iterations(1)->UseRealTime();
+BENCHMARK_CAPTURE(underAttack, holding_large_view, Hostile::Holding)->Iterations(1)->UseRealTime();
 BENCHMARK(memoryBound)->Iterations(1)->UseRealTime()->Unit(benchmark::kMillisecond);

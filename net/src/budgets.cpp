@@ -3,6 +3,7 @@
 #include "net/protocol.h"
 
 #include <algorithm>
+#include <cmath>
 
 namespace trephine::net {
 
@@ -23,6 +24,20 @@ void RateBudget::refill(uint64_t nowUs) {
 bool RateBudget::covers(double amount, uint64_t nowUs) {
     refill(nowUs);
     return m_tokens >= amount;
+}
+
+void RateBudget::spend(double amount, uint64_t nowUs) {
+    refill(nowUs);
+    m_tokens -= amount;
+}
+
+uint64_t RateBudget::dueUs(double amount, uint64_t nowUs) {
+    refill(nowUs);
+    if (m_tokens >= amount)
+        return nowUs;
+    if (m_perS <= 0.0)
+        return UINT64_MAX;
+    return nowUs + uint64_t(std::ceil((amount - m_tokens) / m_perS * 1e6));
 }
 
 bool RateBudget::take(double amount, uint64_t nowUs) {

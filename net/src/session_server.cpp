@@ -43,6 +43,7 @@ ServerConfig withScene(ServerConfig c, const Volume& volume) {
 StepConfig stepConfig(const ServerConfig& c, std::function<bool()> yield) {
     StepConfig s{c.maxStepS, c.maxSweepMm, c.renderThreads, {}};
     s.yield = std::move(yield);
+    s.largeViewPixelsPerS = c.largeViewPixelsPerS;
     s.assessment.cautionMm = c.cautionMm;
     s.assessment.dangerMm = c.dangerMm;
     return s;
@@ -866,9 +867,14 @@ void SessionServer::simulationLoop() {
     for (;;) {
         {
             std::unique_lock lock(s.inMutex);
-            // A view partly rendered is work: its next slice goes without waiting.
+            // A view partly rendered is work: its next slice goes without waiting, or once
+            // the large views' render budget is due.
             const bool slices = s.step.rendering();
-            s.inCv.wait_for(lock, std::chrono::milliseconds(slices ? 0 : 10),
+            const uint64_t now = steadyNowUs(), due = s.step.renderDueUs();
+            const uint64_t waitUs = !slices     ? 10000
+                                    : due > now ? std::min<uint64_t>(due - now, 10000)
+                                                : 0;
+            s.inCv.wait_for(lock, std::chrono::microseconds(waitUs),
                             [&] { return !s.inbox.empty() || s.stopSim; });
             if (s.inbox.empty() && s.stopSim) {
                 std::lock_guard stepLock(s.stepMutex);

@@ -45,7 +45,8 @@ SimulationStep::SimulationStep(Volume volume, const StepConfig& config, Outbox& 
                                ReportBook& book, ServerClock clock)
     : m_config(config), m_outbox(outbox), m_book(book), m_clock(std::move(clock)),
       m_volume(normaliseAir(std::move(volume))), m_pool(config.renderThreads),
-      m_renderer(m_volume, &m_pool), m_assessment(m_volume, withSweep(config), book, &m_pool) {}
+      m_renderer(m_volume, &m_pool), m_assessment(m_volume, withSweep(config), book, &m_pool),
+      m_largeBudget(config.largeViewPixelsPerS, double(config.slicePixels)) {}
 
 void SimulationStep::Batch::changedBy(const Box3i& box, uint64_t arrivedUs) {
     changed.merge(box);
@@ -53,6 +54,7 @@ void SimulationStep::Batch::changedBy(const Box3i& box, uint64_t arrivedUs) {
 }
 
 void SimulationStep::step(const std::vector<SimEvent>& batch, uint64_t now) {
+    m_nowUs = now;
     Batch b;
     for (const SimEvent& ev : batch) {
         switch (ev.kind) {
@@ -347,8 +349,34 @@ void SimulationStep::renderViews(const Batch& b, uint32_t gridUs) {
     }
     if (!stopped)
         renderSlices();
-    m_rendering = std::any_of(m_views.begin(), m_views.end(),
-                              [](const ViewFrame& v) { return !v.settled(); });
+    noteRenderDue();
+}
+
+bool SimulationStep::large(const ViewFrame& v) const {
+    return pixelsOf(v.frame) > m_config.slicePixels;
+}
+
+bool SimulationStep::budgetAllows(const ViewFrame& v) {
+    return !large(v) || m_config.largeViewPixelsPerS <= 0 || m_largeBudget.covers(1.0, m_nowUs);
+}
+
+void SimulationStep::spendBudget(const ViewFrame& v, int64_t pixels) {
+    if (large(v) && m_config.largeViewPixelsPerS > 0)
+        m_largeBudget.spend(double(pixels), m_nowUs);
+}
+
+// Whether a step has work without events, and from when: at once for a small view's rows or a
+// frame's copy, at the budget's due time when only large views' rendering is left.
+void SimulationStep::noteRenderDue() {
+    bool now = false, later = false;
+    for (const ViewFrame& v : m_views) {
+        if (v.settled())
+            continue;
+        const bool budgeted = !v.copying() && large(v) && m_config.largeViewPixelsPerS > 0;
+        (budgeted ? later : now) = true;
+    }
+    m_renderDueUs = now || !later ? m_nowUs : m_largeBudget.dueUs(1.0, m_nowUs);
+    m_rendering = now || later;
 }
 
 // The batch's change in the rows rendered so far joins the view's stale pixels.
@@ -387,6 +415,8 @@ bool SimulationStep::renderStale(ViewFrame& v, bool mayYield) {
         return false;
     }
     while (!v.stale.empty()) {
+        if (mayYield && !budgetAllows(v))
+            return false; // resumed when the budget is due (renderDueUs)
         const int rows =
             mayYield ? int(std::clamp<int64_t>(m_config.chunkPixels / std::max(v.stale.w, 1), 1,
                                                v.stale.h))
@@ -395,6 +425,7 @@ bool SimulationStep::renderStale(ViewFrame& v, bool mayYield) {
         const uint64_t r0 = m_clock();
         m_renderer.render(v.camera, chunk, v.frame, &v.cache);
         v.timing.renderUs += uint32_t(m_clock() - r0);
+        spendBudget(v, int64_t(rows) * chunk.w);
         v.fresh = unite(v.fresh, chunk);
         v.stale.y += rows;
         v.stale.h -= rows;
@@ -482,16 +513,17 @@ void SimulationStep::renderSlices() {
         ViewFrame& v = m_views[i];
         if (v.whole())
             continue;
-        const bool mayYield = pixelsOf(v.frame) > m_config.slicePixels;
+        const bool mayYield = large(v);
         if (renderStale(v, mayYield))
             return;
         const int width = std::max(v.frame.width(), 1);
         bool stop = false;
-        while (!v.whole() && budget > 0 && !stop) {
+        while (!v.whole() && budget > 0 && !stop && budgetAllows(v)) {
             const int64_t pixels = mayYield ? std::min(budget, m_config.chunkPixels) : budget;
             const int rows =
                 int(std::clamp<int64_t>(pixels / width, 1, v.frame.height() - v.rowsDone));
             m_renderer.render(v.camera, {0, v.rowsDone, v.frame.width(), rows}, v.frame, &v.cache);
+            spendBudget(v, int64_t(rows) * width);
             v.rowsDone += rows;
             budget -= int64_t(rows) * width;
             stop = mayYield && chunkDone();

@@ -190,6 +190,17 @@ TEST(Budgets, AViewBudgetRefillsAtItsRateUpToItsBurst) {
     EXPECT_TRUE(budget.covers(2000, kStartUs + 100'000'000));
 }
 
+// Work measured once done is spent into debt, and the budget says when it holds enough again.
+TEST(Budgets, ASpentBudgetOwesItsDebtAndSaysWhenItIsDue) {
+    RateBudget budget(1000.0, 500.0);
+    EXPECT_EQ(budget.dueUs(1, kStartUs), kStartUs) << "starts full";
+    budget.spend(1500, kStartUs);
+    EXPECT_FALSE(budget.covers(1, kStartUs + 999'000));
+    EXPECT_EQ(budget.dueUs(1, kStartUs + 999'000), kStartUs + 1'001'000) << "1000 owed, then 1";
+    EXPECT_TRUE(budget.covers(1, kStartUs + 1'001'000));
+    EXPECT_EQ(RateBudget(0, 0).dueUs(1, kStartUs), UINT64_MAX) << "a budget that never refills";
+}
+
 TEST(Budgets, OverItsControlBudgetAPeerGetsTheLatestRosterAndNoPongs) {
     ControlBudget budget(1000);
     Participants first, second;
@@ -389,13 +400,15 @@ struct SliceRig {
     bool eventsWait = false;
     int yieldAsked = 0;
 
-    SliceRig(Volume v, int64_t slicePixels, int64_t chunkPixels = int64_t(1) << 13)
+    SliceRig(Volume v, int64_t slicePixels, int64_t chunkPixels = int64_t(1) << 13,
+             double largeViewPixelsPerS = 0)
         : step(std::move(v),
                StepConfig{.maxStepS = 0.05f,
                           .maxSweepMm = 10.0f,
                           .renderThreads = 1,
                           .slicePixels = slicePixels,
                           .chunkPixels = chunkPixels,
+                          .largeViewPixelsPerS = largeViewPixelsPerS,
                           .yield =
                               [this] {
                                   ++yieldAsked;
@@ -410,8 +423,8 @@ struct SliceRig {
         ev.inFlight = std::make_shared<std::atomic<int64_t>>(0);
         return ev;
     }
-    std::vector<Outbox::Ready> run(std::vector<SimEvent> batch) {
-        now += 10000;
+    std::vector<Outbox::Ready> run(std::vector<SimEvent> batch, uint64_t advanceUs = 10000) {
+        now += advanceUs;
         step.step(batch, now);
         outbox.finishCoding(); // full images of views larger than a slice are coded apart
         return outbox.take([](uint16_t) { return true; }).updates;
@@ -572,4 +585,65 @@ TEST(AvailabilitySlices, ANewLargeViewRendersAChunkAStepWhileEventsWait) {
     Dbi seen;
     ASSERT_TRUE(applyUpdate(done, 2, other, seen));
     EXPECT_TRUE(compare(seen, rig.step.render(other)).identical());
+}
+
+// Views larger than a slice render within their budget of pixels a second (new rows and changes
+// alike, at most a slice saved up), so their pictures trail; a small view's image and rectangles
+// go in the step as before, and the step says when the large views' work is due again.
+TEST(AvailabilitySlices, LargeViewsRenderWithinTheirBudgetWhileSmallViewsNeverWait) {
+    const Volume skull = makeSkull(48);
+    constexpr int64_t kSlice = 64 * 64, kChunk = 256 * 4;
+    constexpr double kPerS = 40960; // 410 pixels per 10 ms step: less than a chunk
+    SliceRig rig(skull, kSlice, kChunk, kPerS);
+    const Camera small = cameraPreset("top", skull, {64, 64});
+    const Camera large = cameraPreset("top", skull, {256, 256});
+    const uint64_t start = rig.now;
+    auto first = rig.run({rig.join(1, small), rig.join(2, large)});
+    EXPECT_TRUE(has(first, 1, true)) << "the small view's image does not wait";
+    Dbi smallSeen, largeSeen;
+    ASSERT_TRUE(applyUpdate(first, 1, small, smallSeen));
+    std::vector<Outbox::Ready> done;
+    int steps = 1, idleSteps = 0;
+    while (!has(done, 2, true) && steps < 1000) {
+        const uint64_t due = rig.step.renderDueUs();
+        ASSERT_TRUE(rig.step.rendering());
+        idleSteps += due > rig.now + 10000; // the next step, too early, must render nothing
+        done = rig.run({});
+        ++steps;
+    }
+    ASSERT_TRUE(has(done, 2, true));
+    // The frame's pixels less the slice saved up, at the budget's rate (less one chunk of debt).
+    const double seconds = double(rig.now - start) * 1e-6;
+    EXPECT_GE(seconds, double(256 * 256 - kSlice - kChunk) / kPerS);
+    EXPECT_LE(seconds, double(256 * 256) / kPerS + 0.05);
+    EXPECT_GT(idleSteps, 0) << "steps before the due time wait for the budget";
+    ASSERT_TRUE(applyUpdate(done, 2, large, largeSeen));
+
+    // A cut with the budget spent: the small view's rectangle goes in the step; the large
+    // view's change when its pixels are due, which the step says.
+    auto cut = rig.run({topCut(skull, rig.now)});
+    ASSERT_TRUE(applyUpdate(cut, 1, small, smallSeen)) << "the small view does not wait";
+    EXPECT_FALSE(has(cut, 2, false)) << "the large view's budget is spent";
+    steps = 0;
+    while (rig.step.rendering() && steps < 100) {
+        const uint64_t due = rig.step.renderDueUs();
+        ASSERT_GT(due, rig.now);
+        auto later = rig.run({}, due - rig.now);
+        applyUpdate(later, 2, large, largeSeen);
+        EXPECT_FALSE(has(later, 1, false)) << "nothing new for the small view";
+        ++steps;
+    }
+    EXPECT_GT(steps, 0);
+    EXPECT_FALSE(rig.step.rendering());
+    EXPECT_TRUE(compare(smallSeen, rig.step.render(small)).identical());
+    EXPECT_TRUE(compare(largeSeen, rig.step.render(large)).identical()) << "with the cut in it";
+
+    // After a rest (a slice saved up), a small change of the large view goes in the step.
+    rig.run({}, 1000000);
+    SimEvent again = topCut(skull, rig.now);
+    again.box.lo.z -= 4;
+    auto rested = rig.run({again});
+    EXPECT_TRUE(has(rested, 1, false));
+    ASSERT_TRUE(applyUpdate(rested, 2, large, largeSeen));
+    EXPECT_TRUE(compare(largeSeen, rig.step.render(large)).identical());
 }

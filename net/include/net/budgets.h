@@ -23,6 +23,11 @@ public:
     // Takes `amount` at `nowUs` when the budget holds it; false (nothing taken) otherwise.
     bool take(double amount, uint64_t nowUs);
     bool covers(double amount, uint64_t nowUs);
+    // Takes `amount` whatever the budget holds (work measured once done): a debt delays what
+    // comes next.
+    void spend(double amount, uint64_t nowUs);
+    // When the budget will hold `amount` (`nowUs` when it does now).
+    uint64_t dueUs(double amount, uint64_t nowUs);
 
 private:
     void refill(uint64_t nowUs);

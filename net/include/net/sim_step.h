@@ -13,6 +13,7 @@
 #include "libsim/tool.h"
 #include "libsim/volume.h"
 #include "net/assessment.h"
+#include "net/budgets.h"
 #include "net/enet_host.h"
 #include "net/outbox.h"
 #include "net/protocol.h"
@@ -55,9 +56,9 @@ struct SimEvent {
 };
 
 struct StepConfig {
-    float maxStepS = 0.05f;   // ServerConfig::maxStepS
-    float maxSweepMm = 10.0f; // ServerConfig::maxSweepMm
-    int renderThreads = 0;    // 0: hardware concurrency
+    float maxStepS = 0.05f;        // ServerConfig::maxStepS
+    float maxSweepMm = 10.0f;      // ServerConfig::maxSweepMm
+    int renderThreads = 0;         // 0: hardware concurrency
     AssessmentConfig assessment{}; // zones; its maxSweepMm is taken from maxSweepMm
     // New views render in slices of rows, at most this many pixels a step across all of them,
     // taken in turn (docs/session.md, "Availability").
@@ -68,6 +69,11 @@ struct StepConfig {
     // another's large view. A view of at most a slice costs at most a slice even re-rendered
     // whole: its change always goes in the step.
     int64_t chunkPixels = int64_t(1) << 13;
+    // Views larger than a slice render (changes and new rows alike) at most this many pixels a
+    // second, all of them together, at most a slice saved up: a peer holding or asking for the
+    // largest views gets its pictures later, and the CPU stays with the small views, which never
+    // wait for it. 0: no limit.
+    double largeViewPixelsPerS = 0;
     // [Simulation thread] True when events wait for the next step (the server: its queue is not
     // empty); empty: never.
     std::function<bool()> yield = {};
@@ -100,8 +106,11 @@ public:
     // Re-render every view whole on each change (the paper's way) instead of BB_screen only.
     void setFullRender(bool on) { m_fullRender = on; }
     size_t viewCount() const { return m_views.size(); }
-    // [Any thread] Some view is partly rendered: step() has work even with no events.
+    // [Any thread] Some view is partly rendered: step() has work even with no events...
     bool rendering() const { return m_rendering.load(); }
+    // ...from this server time on (later than the last step's when only large views' work is
+    // left and their render budget is spent).
+    uint64_t renderDueUs() const { return m_renderDueUs.load(); }
     // The pixels of every view frame held (the server's memory grows with them).
     int64_t viewPixels() const;
 
@@ -158,6 +167,10 @@ private:
     void markChanged(ViewFrame& v, const Batch& b, uint32_t gridUs);
     bool renderStale(ViewFrame& v, bool mayYield);
     void renderSlices();
+    bool large(const ViewFrame& v) const;
+    bool budgetAllows(const ViewFrame& v);
+    void spendBudget(const ViewFrame& v, int64_t pixels);
+    void noteRenderDue();
     bool chunkDone();
     void postView(ViewFrame& v);
     bool copyFrame(ViewFrame& v);
@@ -182,7 +195,10 @@ private:
     bool m_gridRebuildPending = false;
     std::atomic<bool> m_fullRender{false};
     std::atomic<bool> m_rendering{false};
-    size_t m_nextSlice = 0; // the view whose slice comes first in the next step (round robin)
+    std::atomic<uint64_t> m_renderDueUs{0};
+    RateBudget m_largeBudget; // StepConfig::largeViewPixelsPerS
+    uint64_t m_nowUs = 0;     // the step's server time (the budget's clock)
+    size_t m_nextSlice = 0;   // the view whose slice comes first in the next step (round robin)
 };
 
 } // namespace trephine::net
