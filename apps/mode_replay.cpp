@@ -101,19 +101,7 @@ int serveReplay(const ReplayOptions& o, net::LogContents log, Volume start) {
 
 // Seconds of session the records span: each server's stretch (a Resume starts a new clock).
 double sessionSeconds(const std::vector<net::LogRecord>& records) {
-    double total = 0.0;
-    uint64_t first = 0, last = 0;
-    bool open = false;
-    for (const net::LogRecord& r : records) {
-        if (r.kind == net::LogRecord::Kind::Resume || !open) {
-            total += open ? double(last - first) * 1e-6 : 0.0;
-            first = last = r.timeUs;
-            open = true;
-            continue;
-        }
-        last = std::max(last, r.timeUs);
-    }
-    return total + (open ? double(last - first) * 1e-6 : 0.0);
+    return records.empty() ? 0.0 : double(net::sessionTimesUs(records).back()) * 1e-6;
 }
 
 int runReplay(const ReplayOptions& o) {
