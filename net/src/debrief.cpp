@@ -32,29 +32,6 @@ const char* zoneColour(Zone z) {
     return "#000000";
 }
 
-std::string escape(const std::string& s) {
-    std::string out;
-    for (char c : s) {
-        switch (c) {
-        case '<':
-            out += "&lt;";
-            break;
-        case '>':
-            out += "&gt;";
-            break;
-        case '&':
-            out += "&amp;";
-            break;
-        case '"':
-            out += "&quot;";
-            break;
-        default:
-            out += c;
-        }
-    }
-    return out;
-}
-
 // A file name part from a participant's name: letters, digits, '-' and '_' only.
 std::string slug(const std::string& name) {
     std::string s;
@@ -83,6 +60,29 @@ double tickStep(double range) {
 
 } // namespace
 
+std::string escapeXml(const std::string& s) {
+    std::string out;
+    for (char c : s) {
+        switch (c) {
+        case '<':
+            out += "&lt;";
+            break;
+        case '>':
+            out += "&gt;";
+            break;
+        case '&':
+            out += "&amp;";
+            break;
+        case '"':
+            out += "&quot;";
+            break;
+        default:
+            out += c;
+        }
+    }
+    return out;
+}
+
 std::string svgPlot(const std::string& title, const std::string& xLabel, const std::string& yLabel,
                     const std::vector<PlotSeries>& series, const std::vector<PlotMark>& marks,
                     const std::vector<PlotLine>& lines) {
@@ -106,7 +106,7 @@ std::string svgPlot(const std::string& title, const std::string& xLabel, const s
                     "viewBox=\"0 0 {} {}\" font-family=\"sans-serif\" font-size=\"12\">\n"
                     "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n"
                     "<text x=\"{}\" y=\"20\" font-size=\"14\" font-weight=\"bold\">{}</text>\n",
-                    kW, kH, kW, kH, kLeft, escape(title));
+                    kW, kH, kW, kH, kLeft, escapeXml(title));
     // Axes and ticks.
     svg += fmt::format("<rect x=\"{}\" y=\"{}\" width=\"{}\" height=\"{}\" fill=\"none\" "
                        "stroke=\"#444\"/>\n",
@@ -121,21 +121,21 @@ std::string svgPlot(const std::string& title, const std::string& xLabel, const s
                            "stroke=\"#eee\"/>\n",
                            kLeft - 4, py(y) + 4, y, kLeft, py(y), kLeft + pw, py(y));
     svg += fmt::format("<text x=\"{:.1f}\" y=\"{:.1f}\" text-anchor=\"middle\">{}</text>\n",
-                       kLeft + pw / 2, kH - 8, escape(xLabel));
+                       kLeft + pw / 2, kH - 8, escapeXml(xLabel));
     svg += fmt::format("<text transform=\"translate(14 {:.1f}) rotate(-90)\" "
                        "text-anchor=\"middle\">{}</text>\n",
-                       kTop + ph / 2, escape(yLabel));
+                       kTop + ph / 2, escapeXml(yLabel));
     for (const PlotLine& l : lines)
         svg += fmt::format("<line x1=\"{:.1f}\" y1=\"{:.1f}\" x2=\"{:.1f}\" y2=\"{:.1f}\" "
                            "stroke=\"{}\" stroke-dasharray=\"6 4\"/>\n"
                            "<text x=\"{:.1f}\" y=\"{:.1f}\" fill=\"{}\">{}</text>\n",
                            kLeft, py(l.y), kLeft + pw, py(l.y), l.colour, kLeft + pw + 4,
-                           py(l.y) + 4, l.colour, escape(l.label));
+                           py(l.y) + 4, l.colour, escapeXml(l.label));
     for (const PlotMark& m : marks)
         svg += fmt::format("<line x1=\"{0:.1f}\" y1=\"{1:.1f}\" x2=\"{0:.1f}\" y2=\"{2:.1f}\" "
                            "stroke=\"{3}\" stroke-width=\"1.5\" opacity=\"0.8\">"
                            "<title>{4}</title></line>\n",
-                           px(m.x), kTop, kTop + ph, m.colour, escape(m.label));
+                           px(m.x), kTop, kTop + ph, m.colour, escapeXml(m.label));
     double legendY = kTop + 10;
     for (const PlotSeries& s : series) {
         std::string points;
@@ -147,7 +147,7 @@ std::string svgPlot(const std::string& title, const std::string& xLabel, const s
         svg += fmt::format("<rect x=\"{:.1f}\" y=\"{:.1f}\" width=\"12\" height=\"3\" "
                            "fill=\"{}\"/><text x=\"{:.1f}\" y=\"{:.1f}\">{}</text>\n",
                            kLeft + pw + 8, legendY - 4, s.colour, kLeft + pw + 24, legendY,
-                           escape(s.name));
+                           escapeXml(s.name));
         legendY += 16;
     }
     svg += "</svg>\n";

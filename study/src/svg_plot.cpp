@@ -1,5 +1,7 @@
 #include "study/svg_plot.h"
 
+#include "net/debrief.h"
+
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -12,30 +14,6 @@ namespace {
 
 const char* const kPalette[] = {"#1f77b4", "#d62728", "#2ca02c", "#ff7f0e",
                                 "#9467bd", "#8c564b", "#e377c2", "#7f7f7f"};
-
-std::string escapeXml(const std::string& s) {
-    std::string out;
-    out.reserve(s.size());
-    for (char c : s) {
-        switch (c) {
-        case '&':
-            out += "&amp;";
-            break;
-        case '<':
-            out += "&lt;";
-            break;
-        case '>':
-            out += "&gt;";
-            break;
-        case '"':
-            out += "&quot;";
-            break;
-        default:
-            out += c;
-        }
-    }
-    return out;
-}
 
 std::string tickLabel(double v) {
     if (v == 0.0)
@@ -123,7 +101,7 @@ std::string svgLinePlot(const PlotSpec& spec) {
                     W, H, W, H);
     svg += fmt::format("<text x=\"{:.1f}\" y=\"22\" text-anchor=\"middle\" font-size=\"14\" "
                        "font-weight=\"bold\">{}</text>\n",
-                       left + pw / 2, escapeXml(spec.title).c_str());
+                       left + pw / 2, net::escapeXml(spec.title).c_str());
 
     // Grid and ticks.
     for (double t : niceTicks(xmin, xmax, 8)) {
@@ -151,10 +129,10 @@ std::string svgLinePlot(const PlotSpec& spec) {
                        "fill=\"none\" stroke=\"#333\"/>\n",
                        left, top, pw, ph);
     svg += fmt::format("<text x=\"{:.1f}\" y=\"{:.1f}\" text-anchor=\"middle\">{}</text>\n",
-                       left + pw / 2, H - 12, escapeXml(spec.xLabel).c_str());
+                       left + pw / 2, H - 12, net::escapeXml(spec.xLabel).c_str());
     svg += fmt::format("<text x=\"16\" y=\"{:.1f}\" text-anchor=\"middle\" "
                        "transform=\"rotate(-90 16 {:.1f})\">{}{}</text>\n",
-                       top + ph / 2, top + ph / 2, escapeXml(spec.yLabel).c_str(),
+                       top + ph / 2, top + ph / 2, net::escapeXml(spec.yLabel).c_str(),
                        spec.logY ? " (log)" : "");
 
     // Series and legend.
@@ -184,7 +162,7 @@ std::string svgLinePlot(const PlotSpec& spec) {
             "stroke-width=\"2\"{}/>\n<text x=\"{:.1f}\" y=\"{:.1f}\">{}</text>\n",
             left + pw + 12, ly, left + pw + 36, ly, color.c_str(),
             s.dashed ? " stroke-dasharray=\"6 4\"" : "", left + pw + 42, ly + 4,
-            escapeXml(s.name).c_str());
+            net::escapeXml(s.name).c_str());
     }
     svg += "</svg>\n";
     return svg;

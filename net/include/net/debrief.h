@@ -19,6 +19,9 @@ std::vector<std::string> writeDebriefs(const std::string& dir, const Assessment&
                                        const std::map<uint16_t, ParticipantMetrics>& metrics,
                                        const std::map<uint16_t, Timeline>& timelines);
 
+// `s` as XML text or an attribute value (SVG labels): & < > " escaped.
+std::string escapeXml(const std::string& s);
+
 // One line plot as SVG text (the debrief's), with vertical marks.
 struct PlotSeries {
     std::string name, colour;
