@@ -10,6 +10,7 @@
 #include "flood.h"
 
 #include "libsim/skull.h"
+#include "libsim/stats.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
 #include "net/view.h"
@@ -95,6 +96,9 @@ private:
 
 struct Figures {
     double joinS = 0, p50Us = 0, p99Us = 0;
+    // The latency split at the update's sending (one clock: server and client share the process):
+    // on the server (cause -> sent) and delivery (sent -> applied), each p99.
+    double serverP99Us = 0, deliveryP99Us = 0;
     int64_t noUpdate = 0;
 };
 
@@ -116,6 +120,14 @@ Figures traineeRun(SessionServer& server, const Volume& skull) {
         f.noUpdate = -1;
         return f;
     }
+    SampleWindow serverUs(65536), deliveryUs(65536);
+    client.setUpdateCallback([&](const ImageUpdate& u, const PixelRect&, bool full) {
+        if (full)
+            return;
+        const uint64_t now = steadyNowUs();
+        serverUs.add(double(u.sentServerUs - u.causeServerUs));
+        deliveryUs.add(double(now - u.sentServerUs));
+    });
     const SurfaceSite site = defaultBurrSite(skull);
     const glm::vec3 n = site.normal;
     const glm::vec3 along = glm::normalize(glm::cross(n, glm::vec3(1, 0, 0)));
@@ -145,6 +157,8 @@ Figures traineeRun(SessionServer& server, const Volume& skull) {
     }
     f.p50Us = client.stats().updateLatencyUs.percentile(50);
     f.p99Us = client.stats().updateLatencyUs.percentile(99);
+    f.serverP99Us = serverUs.size() ? serverUs.percentile(99) : 0;
+    f.deliveryP99Us = deliveryUs.size() ? deliveryUs.percentile(99) : 0;
     client.disconnect(50);
     return f;
 }
@@ -192,6 +206,8 @@ void underAttack(benchmark::State& state, Hostile kind) {
     state.counters["target_join_s"] = 2.0;
     state.counters["latency_p50_us"] = f.p50Us;
     state.counters["latency_p99_us"] = f.p99Us;
+    state.counters["server_p99_us"] = f.serverP99Us;
+    state.counters["delivery_p99_us"] = f.deliveryP99Us;
     state.counters["target_p99_us"] = 2.0 * g_quietP99Us; // 2x the run without hostile peers
     state.counters["p99_ratio"] = g_quietP99Us > 0 ? f.p99Us / g_quietP99Us : 0.0;
     state.counters["no_update"] = double(f.noUpdate);
