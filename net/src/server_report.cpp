@@ -37,6 +37,8 @@ Json availability(const AvailabilityCounters& a) {
             {"idle_timeouts", a.idleTimeouts},
             {"views_deferred", a.viewsDeferred},
             {"views_coalesced", a.viewsCoalesced},
+            {"large_view_pixels", a.largeViewPixels},
+            {"large_view_waits", a.largeViewWaits},
             {"views_over_total", a.viewsOverTotal},
             {"refused_view_total", a.refusedViewTotal},
             {"control_coalesced", a.controlCoalesced},

@@ -361,8 +361,10 @@ bool SimulationStep::budgetAllows(const ViewFrame& v) {
 }
 
 void SimulationStep::spendBudget(const ViewFrame& v, int64_t pixels) {
-    if (large(v) && m_config.largeViewPixelsPerS > 0)
-        m_largeBudget.spend(double(pixels), m_nowUs);
+    if (!large(v) || m_config.largeViewPixelsPerS <= 0)
+        return;
+    m_largeBudget.spend(double(pixels), m_nowUs);
+    m_book.record([&](ServerReport& r) { r.availability.largeViewPixels += uint64_t(pixels); });
 }
 
 // Whether a step has work without events, and from when: at once for a small view's rows or a
@@ -377,6 +379,8 @@ void SimulationStep::noteRenderDue() {
     }
     m_renderDueUs = now || !later ? m_nowUs : m_largeBudget.dueUs(1.0, m_nowUs);
     m_rendering = now || later;
+    if (m_renderDueUs > m_nowUs)
+        m_book.record([](ServerReport& r) { ++r.availability.largeViewWaits; });
 }
 
 // The batch's change in the rows rendered so far joins the view's stale pixels.

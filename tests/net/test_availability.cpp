@@ -624,6 +624,10 @@ TEST(AvailabilitySlices, LargeViewsRenderWithinTheirBudgetWhileSmallViewsNeverWa
     EXPECT_GE(seconds, double(256 * 256 - kSlice - kChunk) / kPerS);
     EXPECT_LE(seconds, double(256 * 256) / kPerS + 0.05);
     EXPECT_GT(idleSteps, 0) << "steps before the due time wait for the budget";
+    const AvailabilityCounters counted =
+        rig.book.read([](const ServerReport& r) { return r.availability; });
+    EXPECT_GE(counted.largeViewPixels, uint64_t(256 * 256)) << "the large view's rows";
+    EXPECT_GT(counted.largeViewWaits, 0u);
     ASSERT_TRUE(applyUpdate(done, 2, large, largeSeen));
 
     // A cut with the budget spent: the small view's rectangle goes in the step; the large

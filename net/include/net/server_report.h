@@ -49,6 +49,9 @@ struct AvailabilityCounters {
     uint64_t idleTimeouts = 0;   // participants sent away for saying nothing (idleTimeoutS)
     uint64_t viewsDeferred = 0;  // view requests held back by the peer's render budget
     uint64_t viewsCoalesced = 0; // of which replaced by a newer one before it was due
+    // Pixels rendered for views larger than a slice (under largeViewPixelsPerS), and the steps
+    // that left such views' work for later because that budget was spent.
+    uint64_t largeViewPixels = 0, largeViewWaits = 0;
     uint64_t viewsOverTotal = 0; // views refused: all views together would pass maxTotalViewPixels
     uint64_t refusedViewTotal = 0; // hellos refused for the same reason (RefuseReason::ViewsFull)
     uint64_t controlCoalesced = 0; // rosters, marks, views replaced by a newer one while queued
