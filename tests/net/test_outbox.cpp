@@ -315,15 +315,29 @@ TEST(Outbox, AHeldBackVolumeClientsChangesAreCodedOnceNotAtEveryBatch) {
     EXPECT_TRUE(rig.outbox.empty());
 }
 
+namespace {
+
+// An outbox coding full images over 64 x 64 on its coder thread, with client 1 joined (lz4) on a
+// 128 x 128 view.
+struct CodedApart {
+    ReportBook book;
+    Outbox outbox{1 << 20, book, steadyNowUs};
+    const Camera cam = cameraFor(128, 128);
+    CodedApart() {
+        outbox.codeFullImagesApart(64 * 64);
+        outbox.join(1, inFlight(), Codec::Lz4, Codec::Lz4);
+    }
+};
+
+} // namespace
+
 // A full image of a large view is coded on the coder thread from the pixels at the post; a change
 // posted meanwhile goes after it as a rectangle of its own (the full image is never coded again),
 // and the client's copy ends as the frame. A small full image is still coded at the post.
 TEST(Outbox, AFullImageCodedApartGoesFirstAndALaterChangeWaitsBehindIt) {
-    ReportBook book;
-    Outbox outbox(1 << 20, book, steadyNowUs);
-    outbox.codeFullImagesApart(64 * 64);
-    const Camera cam = cameraFor(128, 128);
-    outbox.join(1, inFlight(), Codec::Lz4, Codec::Lz4);
+    CodedApart rig;
+    Outbox& outbox = rig.outbox;
+    const Camera& cam = rig.cam;
     Dbi frame = picture(128, 128, 0);
     const Dbi posted = frame;
     outbox.postImage(1, cam, frame, frame.bounds(), true, 10, {});
@@ -359,11 +373,9 @@ TEST(Outbox, AFullImageCodedApartGoesFirstAndALaterChangeWaitsBehindIt) {
 // A newer full image supersedes one being coded (with the older cause), and a view change drops
 // it: what the coder made of them never leaves.
 TEST(Outbox, AFullImageBeingCodedIsSupersededOrDroppedLikeAnyWaitingImage) {
-    ReportBook book;
-    Outbox outbox(1 << 20, book, steadyNowUs);
-    outbox.codeFullImagesApart(64 * 64);
-    const Camera cam = cameraFor(128, 128);
-    outbox.join(1, inFlight(), Codec::Lz4, Codec::Lz4);
+    CodedApart rig;
+    Outbox& outbox = rig.outbox;
+    const Camera& cam = rig.cam;
     const Dbi older = picture(128, 128, 0), newer = picture(128, 128, 9);
     outbox.postImage(1, cam, older, older.bounds(), true, 10, {});
     outbox.postImage(1, cam, newer, newer.bounds(), true, 20, {});

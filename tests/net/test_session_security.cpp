@@ -23,6 +23,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cstdio>
+#include <memory>
 #include <mutex>
 #include <optional>
 #include <random>
@@ -408,11 +409,18 @@ struct AdaAndCho {
         for (SessionClient* c : both)
             c->connect(loopback(server.port()));
     }
+    // Trainee `name` connecting with `code`, pumped (with Dr. Cho) until it is refused or has its
+    // picture.
+    std::unique_ptr<SessionClient> trainee(const std::string& name, const std::string& code) {
+        auto c = std::make_unique<SessionClient>(member(sphere, name, Role::Trainee, code));
+        c->connect(loopback(server.port()));
+        pumpUntil({&cho, c.get()}, [&] { return c->closed() || c->hasFullImage(); });
+        return c;
+    }
 };
 
 TEST(SessionSecurity, AnInstructorRemovesAParticipantWhoCannotRejoinUntilAllowed) {
     AdaAndCho session;
-    Volume& sphere = session.sphere;
     SessionServer& server = session.server;
     SessionClient &ada = session.ada, &cho = session.cho;
     std::vector<SessionClient*>& both = session.both;
@@ -427,21 +435,18 @@ TEST(SessionSecurity, AnInstructorRemovesAParticipantWhoCannotRejoinUntilAllowed
     ASSERT_TRUE(pumpUntil(both, [&] { return ada.closed() && cho.participants().size() == 1; }));
     EXPECT_EQ(ada.closeReason(), "the instructor removed you from the session");
 
-    SessionClient again(member(sphere, "Ada", Role::Trainee, kTraineeCode));
-    again.connect(loopback(server.port()));
-    ASSERT_TRUE(pumpUntil({&cho, &again}, [&] { return again.closed(); }));
-    EXPECT_EQ(again.closeReason(), "the instructor removed you from the session");
-    EXPECT_EQ(sessionBytes(again), 0u);
+    const auto again = session.trainee("Ada", kTraineeCode);
+    ASSERT_TRUE(again->closed());
+    EXPECT_EQ(again->closeReason(), "the instructor removed you from the session");
+    EXPECT_EQ(sessionBytes(*again), 0u);
 
     cho.remove(Remove{Remove::Op::AllowRejoin, 0});
     // The server applies the instructor's messages in order: once the mark sent after the allow
     // comes back, the allow has been applied.
     cho.annotate(Annotate{Annotate::Op::Add, 0, glm::vec3(0.0f), "after"});
     ASSERT_TRUE(pumpUntil({&cho}, [&] { return cho.annotations().size() == 1; }));
-    SessionClient back(member(sphere, "Ada", Role::Trainee, kTraineeCode));
-    back.connect(loopback(server.port()));
-    ASSERT_TRUE(pumpUntil({&cho, &back}, [&] { return back.hasFullImage(); }))
-        << back.closeReason();
+    const auto back = session.trainee("Ada", kTraineeCode);
+    ASSERT_TRUE(back->hasFullImage()) << back->closeReason();
     EXPECT_EQ(server.security().removed, 1u);
     EXPECT_EQ(server.security().removedRefused, 1u);
     server.stop();
@@ -452,7 +457,6 @@ TEST(SessionSecurity, AnInstructorRemovesAParticipantWhoCannotRejoinUntilAllowed
 // refused as wrong, and the trainee is never sent the codes.
 TEST(SessionSecurity, AnInstructorIssuesANewTraineeCodeThatLetsTheRemovedBack) {
     AdaAndCho session;
-    Volume& sphere = session.sphere;
     SessionServer& server = session.server;
     SessionClient &ada = session.ada, &cho = session.cho;
     std::vector<SessionClient*>& both = session.both;
@@ -470,16 +474,13 @@ TEST(SessionSecurity, AnInstructorIssuesANewTraineeCodeThatLetsTheRemovedBack) {
     ASSERT_TRUE(pumpUntil({&cho}, [&] { return cho.codes()->trainee != kTraineeCode; }));
     const std::string fresh = cho.codes()->trainee;
     EXPECT_EQ(cho.codes()->instructor, kInstructorCode);
-    SessionClient old(member(sphere, "Eve", Role::Trainee, kTraineeCode));
-    old.connect(loopback(server.port()));
-    ASSERT_TRUE(pumpUntil({&cho, &old}, [&] { return old.closed(); }));
-    EXPECT_EQ(old.closeReason(), "wrong session code");
-    EXPECT_EQ(sessionBytes(old), 0u);
-    SessionClient back(member(sphere, "Ada", Role::Trainee, fresh));
-    back.connect(loopback(server.port()));
-    ASSERT_TRUE(pumpUntil({&cho, &back}, [&] { return back.hasFullImage(); }))
-        << back.closeReason();
-    EXPECT_FALSE(back.codes().has_value());
+    const auto old = session.trainee("Eve", kTraineeCode);
+    ASSERT_TRUE(old->closed());
+    EXPECT_EQ(old->closeReason(), "wrong session code");
+    EXPECT_EQ(sessionBytes(*old), 0u);
+    const auto back = session.trainee("Ada", fresh);
+    ASSERT_TRUE(back->hasFullImage()) << back->closeReason();
+    EXPECT_FALSE(back->codes().has_value());
     EXPECT_FALSE(cho.closed());
     EXPECT_EQ(server.security().codesIssued, 1u);
     server.stop();
