@@ -343,7 +343,7 @@ void SimulationStep::renderViews(const Batch& b, uint32_t gridUs) {
         if (!stopped && v->copying())
             stopped = copyFrame(*v);
         if (!stopped && !v->copying())
-            stopped = renderStale(*v, pixelsOf(v->frame) > m_config.slicePixels);
+            stopped = renderStale(*v);
         if (v->settled())
             stopped = settle(*v, stopped);
     }
@@ -402,11 +402,12 @@ bool SimulationStep::chunkDone() {
     return m_config.yield && m_config.yield();
 }
 
-// Renders the view's stale pixels (in chunks of rows when `mayYield`, stopping after one once
-// events wait); true when it stopped for them.
-bool SimulationStep::renderStale(ViewFrame& v, bool mayYield) {
+// Renders the view's stale pixels (a view larger than a slice in chunks of rows within the render
+// budget, stopping after one once events wait); true when it stopped for them.
+bool SimulationStep::renderStale(ViewFrame& v) {
     if (v.stale.empty())
         return false;
+    const bool mayYield = large(v);
     if (m_fullRender.load() && v.whole()) {
         // The paper's way re-renders the whole view, through the view's hit cache as the volume
         // client's re-render does, so the study compares like with like; BB_screen is sent.
@@ -454,11 +455,10 @@ bool SimulationStep::settle(ViewFrame& v, bool stopped) {
 // waiting for one. A view larger than a slice starts a copy of its frame for them instead:
 // copying 33 MB at once stopped the step for ~11 ms (2048 x 2048 on the 2-core VM).
 void SimulationStep::postView(ViewFrame& v) {
-    const bool large = pixelsOf(v.frame) > m_config.slicePixels;
     for (auto& [id, c] : m_clients) {
         if (c.sync != Sync::Dbi || !(c.camera == v.camera))
             continue;
-        if (c.fullCauseUs && large) {
+        if (c.fullCauseUs && large(v)) {
             if (!v.copying()) {
                 v.copy = m_outbox.buffer(v.frame.width(), v.frame.height());
                 v.rowsCopied = 0;
@@ -510,26 +510,26 @@ bool SimulationStep::copyFrame(ViewFrame& v) {
 // to its clients whole. A view larger than a slice renders in chunks and stops after one once
 // events wait.
 void SimulationStep::renderSlices() {
-    int64_t budget = std::max<int64_t>(m_config.slicePixels, 1);
+    int64_t sliceLeft = std::max<int64_t>(m_config.slicePixels, 1);
     const size_t n = m_views.size();
-    for (size_t k = 0; k < n && budget > 0; ++k) {
+    for (size_t k = 0; k < n && sliceLeft > 0; ++k) {
         const size_t i = (m_nextSlice + k) % n;
         ViewFrame& v = m_views[i];
         if (v.whole())
             continue;
-        const bool mayYield = large(v);
-        if (renderStale(v, mayYield))
+        if (renderStale(v))
             return;
+        const bool mayYield = large(v);
         const int width = std::max(v.frame.width(), 1);
         bool stop = false;
-        while (!v.whole() && budget > 0 && !stop && budgetAllows(v)) {
-            const int64_t pixels = mayYield ? std::min(budget, m_config.chunkPixels) : budget;
+        while (!v.whole() && sliceLeft > 0 && !stop && budgetAllows(v)) {
+            const int64_t pixels = mayYield ? std::min(sliceLeft, m_config.chunkPixels) : sliceLeft;
             const int rows =
                 int(std::clamp<int64_t>(pixels / width, 1, v.frame.height() - v.rowsDone));
             m_renderer.render(v.camera, {0, v.rowsDone, v.frame.width(), rows}, v.frame, &v.cache);
             spendBudget(v, int64_t(rows) * width);
             v.rowsDone += rows;
-            budget -= int64_t(rows) * width;
+            sliceLeft -= int64_t(rows) * width;
             stop = mayYield && chunkDone();
         }
         m_nextSlice = i + 1;

@@ -165,7 +165,7 @@ private:
     uint32_t updateGrid(const Batch& b);
     void renderViews(const Batch& b, uint32_t gridUs);
     void markChanged(ViewFrame& v, const Batch& b, uint32_t gridUs);
-    bool renderStale(ViewFrame& v, bool mayYield);
+    bool renderStale(ViewFrame& v);
     void renderSlices();
     bool large(const ViewFrame& v) const;
     bool budgetAllows(const ViewFrame& v);
