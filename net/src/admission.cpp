@@ -1,10 +1,13 @@
 #include "net/admission.h"
 
+#include "net/protocol.h"
+
 #include <enet/protocol.h>
 
 #include <algorithm>
 #include <cstddef>
 #include <cstring>
+#include <optional>
 
 namespace trephine::net {
 
@@ -60,6 +63,26 @@ bool isEnetConnect(std::span<const uint8_t> d) {
            (d[at] & ENET_PROTOCOL_COMMAND_MASK) == ENET_PROTOCOL_COMMAND_CONNECT;
 }
 
+std::vector<uint8_t> refusalDatagram(std::span<const uint8_t> d, uint32_t data) {
+    if (!isEnetConnect(d))
+        return {};
+    ENetProtocolConnect c;
+    std::memcpy(&c, d.data() + firstCommand(d), sizeof c);
+    // The header names the client's own peer (its outgoing id in the CONNECT); a connecting
+    // peer checks no session id yet. No ACKNOWLEDGE flag: nothing comes back.
+    std::vector<uint8_t> out(2 + sizeof(ENetProtocolDisconnect));
+    const uint16_t peer = ENET_NET_TO_HOST_16(c.outgoingPeerID) & ENET_PROTOCOL_MAXIMUM_PEER_ID;
+    out[0] = uint8_t(peer >> 8);
+    out[1] = uint8_t(peer);
+    ENetProtocolDisconnect cmd{};
+    cmd.header.command =
+        uint8_t(ENET_PROTOCOL_COMMAND_DISCONNECT) | uint8_t(ENET_PROTOCOL_COMMAND_FLAG_UNSEQUENCED);
+    cmd.header.channelID = 0xFF;
+    cmd.data = ENET_HOST_TO_NET_32(data);
+    std::memcpy(out.data() + 2, &cmd, sizeof cmd);
+    return out;
+}
+
 // [SECTION] rules
 
 ConnectBuckets::ConnectBuckets(double perS, double burst, uint64_t salt)
@@ -86,18 +109,43 @@ bool ConnectBuckets::take(uint32_t address, uint64_t nowUs) {
     return true;
 }
 
-ConnectVerdict judgeConnect(const AdmissionLimits& limits, ConnectBuckets& buckets,
-                            uint32_t address, size_t waitingFromAddress, size_t waiting,
-                            uint64_t nowUs) {
-    // Slots first: a refused datagram spends no token, so a client that retries once the slots
-    // free finds its bucket as it left it.
-    if (waiting >= limits.waitingSlots)
-        return ConnectVerdict::PoolFull;
-    if (waitingFromAddress >= limits.waitingPerAddress)
-        return ConnectVerdict::AddressBusy;
+ConnectDecision judgeConnect(const AdmissionLimits& limits, ConnectBuckets& buckets,
+                             uint32_t address, std::span<const WaitingPeer> waiting,
+                             uint64_t nowUs) {
+    ConnectDecision d;
+    const auto held = [&](uint32_t a) {
+        return size_t(std::count_if(waiting.begin(), waiting.end(),
+                                    [&](const WaitingPeer& w) { return w.address == a; }));
+    };
+    const size_t mine = held(address);
+    // Refusals that spend no token come first, so a client that retries once the slots free
+    // finds its bucket as it left it.
+    if (mine >= limits.waitingPerAddress) {
+        d.verdict = ConnectVerdict::AddressBusy;
+        return d;
+    }
+    if (waiting.size() >= limits.waitingSlots) {
+        // The address holding the most (ties: the one with the oldest peer), and its oldest.
+        size_t most = 0;
+        std::optional<size_t> victim;
+        for (size_t i = 0; i < waiting.size(); ++i) {
+            const size_t n = held(waiting[i].address);
+            if (n > most ||
+                (n == most && victim && waiting[i].sinceUs < waiting[*victim].sinceUs)) {
+                most = n;
+                victim = i;
+            }
+        }
+        if (!victim || most <= mine) {
+            d.verdict = ConnectVerdict::PoolFull;
+            return d;
+        }
+        d.verdict = ConnectVerdict::Displace;
+        d.displace = *victim;
+    }
     if (!buckets.take(address, nowUs))
-        return ConnectVerdict::RateLimited;
-    return ConnectVerdict::Accept;
+        d.verdict = ConnectVerdict::RateLimited;
+    return d;
 }
 
 bool SlotTimer::expired(size_t index, bool transientNow, uint64_t nowUs, uint64_t timeoutUs) {
@@ -113,9 +161,32 @@ bool SlotTimer::expired(size_t index, bool transientNow, uint64_t nowUs, uint64_
 
 // [SECTION] the gate on an ENet host
 
-AdmissionGate::AdmissionGate(ENetHost* host, const AdmissionLimits& limits, Admitted admitted)
+AdmissionGate::AdmissionGate(ENetHost* host, const AdmissionLimits& limits, Admitted admitted,
+                             OnReset onReset)
     : m_host(host), m_limits(limits), m_admitted(std::move(admitted)),
-      m_buckets(limits.connectsPerS, limits.connectBurst), m_timer(host->peerCount) {}
+      m_onReset(std::move(onReset)), m_buckets(limits.connectsPerS, limits.connectBurst),
+      m_refusals(2.0, 2.0), m_timer(host->peerCount), m_occupant(host->peerCount, {0, 0}) {}
+
+uint64_t AdmissionGate::occupiedSince(size_t index) {
+    auto& [connectId, since] = m_occupant.at(index);
+    const ENetPeer& p = m_host->peers[index];
+    if (since == 0 || connectId != p.connectID) {
+        connectId = p.connectID;
+        since = std::max<uint64_t>(m_nowUs, 1);
+    }
+    return since;
+}
+
+void AdmissionGate::reset(ENetPeer* p, bool tell) {
+    m_timer.forget(size_t(p - m_host->peers));
+    m_occupant.at(size_t(p - m_host->peers)) = {0, 0};
+    if (m_onReset)
+        m_onReset(p);
+    if (tell) // a displaced peer learns why, and that the server is there
+        enet_peer_disconnect_now(p, uint32_t(RefuseReason::Busy));
+    else
+        enet_peer_reset(p);
+}
 
 int AdmissionGate::judge() {
     const std::span<const uint8_t> d(m_host->receivedData, m_host->receivedDataLength);
@@ -123,19 +194,26 @@ int AdmissionGate::judge() {
         return 0;
     const ENetAddress& from = m_host->receivedAddress;
     const uint32_t connectId = connectIdOf(d);
-    size_t waiting = 0, fromAddress = 0;
+    m_waiting.clear();
+    m_waitingPeers.clear();
     for (size_t i = 0; i < m_host->peerCount; ++i) {
-        const ENetPeer& p = m_host->peers[i];
+        ENetPeer& p = m_host->peers[i];
         if (p.state == ENET_PEER_STATE_DISCONNECTED || m_admitted(&p))
             continue;
         // ENet answers a repeated CONNECT of a handshake under way itself: not a new connection.
         if (p.address.host == from.host && p.address.port == from.port && p.connectID == connectId)
             return 0;
-        ++waiting;
-        fromAddress += p.address.host == from.host;
+        m_waiting.push_back({p.address.host, occupiedSince(i)});
+        m_waitingPeers.push_back(&p);
     }
-    switch (judgeConnect(m_limits, m_buckets, from.host, fromAddress, waiting, m_nowUs)) {
+    const ConnectDecision decision =
+        judgeConnect(m_limits, m_buckets, from.host, m_waiting, m_nowUs);
+    switch (decision.verdict) {
     case ConnectVerdict::Accept:
+        return 0;
+    case ConnectVerdict::Displace:
+        ++m_counts.displaced;
+        reset(m_waitingPeers.at(decision.displace), true);
         return 0;
     case ConnectVerdict::RateLimited:
         ++m_counts.rateLimited;
@@ -147,20 +225,22 @@ int AdmissionGate::judge() {
         ++m_counts.poolFull;
         break;
     }
+    if (m_refusals.take(from.host, m_nowUs)) {
+        const std::vector<uint8_t> refusal = refusalDatagram(d, uint32_t(RefuseReason::Busy));
+        ENetBuffer b{const_cast<uint8_t*>(refusal.data()), refusal.size()};
+        enet_socket_send(m_host->socket, &from, &b, 1);
+    }
     return 1;
 }
 
-void AdmissionGate::reap(uint64_t nowUs, const OnReset& onReset) {
+void AdmissionGate::reap(uint64_t nowUs) {
     for (size_t i = 0; i < m_host->peerCount; ++i) {
         ENetPeer* p = &m_host->peers[i];
         if (!m_timer.expired(i, transient(ENetPeerState(p->state)), nowUs,
                              m_limits.handshakeTimeoutUs))
             continue;
-        m_timer.forget(i);
         ++m_counts.handshakesReset;
-        if (onReset)
-            onReset(p);
-        enet_peer_reset(p);
+        reset(p, false);
     }
 }
 

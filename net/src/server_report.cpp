@@ -33,6 +33,7 @@ Json availability(const AvailabilityCounters& a) {
             {"connects_address_busy", a.admission.addressBusy},
             {"connects_pool_full", a.admission.poolFull},
             {"handshakes_reset", a.admission.handshakesReset},
+            {"connects_displaced", a.admission.displaced},
             {"refused_busy", a.refusedBusy},
             {"idle_timeouts", a.idleTimeouts},
             {"views_deferred", a.viewsDeferred},

@@ -5,7 +5,6 @@
 #include <sodium.h>
 
 #include <algorithm>
-#include <cmath>
 
 namespace trephine::net {
 
@@ -77,9 +76,58 @@ SessionGate::Bucket& SessionGate::bucket(uint32_t host, uint64_t now) {
     return b;
 }
 
-uint32_t SessionGate::waitS(const ENetAddress& address, uint64_t now) {
-    const Bucket& b = bucket(address.host, now);
-    return b.tokens >= 1.0 ? 0u : uint32_t(std::ceil((1.0 - b.tokens) * AttemptLimit::kRefillS));
+bool SessionGate::mayAnswer(const Peer& p, uint64_t now) {
+    for (const auto& [id, q] : m_peers)
+        if (q.stage == Peer::Stage::Waiting && q.host == p.host && q.turn < p.turn)
+            return false; // an earlier offer from the address goes first
+    Bucket& b = bucket(p.host, now);
+    if (b.tokens >= 1.0) {
+        b.tokens -= 1.0; // given back when the code is proven
+        return true;
+    }
+    if (now < b.nextExcessUs)
+        return false;
+    b.nextExcessUs = now + uint64_t(AttemptLimit::kExcessS * 1e6);
+    return true;
+}
+
+bool SessionGate::answer(Peer& p) {
+    Handshake answer;
+    answer.step = Handshake::Step::Answer;
+    std::vector<std::pair<Role, const Bytes32*>> codes{{Role::Trainee, &m_codes->trainee}};
+    if (p.wanted == Role::Instructor)
+        codes.insert(codes.begin(), {Role::Instructor, &m_codes->instructor});
+    for (const auto& [role, w] : codes) {
+        const auto a = spakeAnswer(*w, m_codes->salt, p.wanted, role, p.share);
+        if (!a) {
+            p.answers.clear();
+            return false;
+        }
+        answer.entries.push_back({role, a->share, a->keys.serverConfirm});
+        p.answers.emplace_back(role, a->keys);
+    }
+    p.stage = Peer::Stage::Answered;
+    m_reply = encodeMessage(answer);
+    return true;
+}
+
+std::vector<std::pair<uint16_t, std::vector<uint8_t>>> SessionGate::release(uint64_t now) {
+    std::vector<std::pair<uint16_t, std::vector<uint8_t>>> out;
+    std::vector<std::pair<uint64_t, uint16_t>> waiting;
+    for (const auto& [id, p] : m_peers)
+        if (p.stage == Peer::Stage::Waiting)
+            waiting.push_back({p.turn, id});
+    std::sort(waiting.begin(), waiting.end());
+    for (const auto& [turn, id] : waiting) {
+        Peer& p = m_peers.at(id);
+        if (!mayAnswer(p, now))
+            continue;
+        if (answer(p))
+            out.push_back({id, m_reply});
+        else
+            p.stage = Peer::Stage::Refused; // not a point of the group: nothing more from it
+    }
+    return out;
 }
 
 SessionGate::Result SessionGate::refuse(Peer& p, RefuseReason why, uint32_t detail,
@@ -132,27 +180,19 @@ SessionGate::Result SessionGate::handshake(Peer& p, std::span<const uint8_t> dat
     if (m.step == Handshake::Step::Offer && p.stage == Peer::Stage::Connected) {
         if (m_removed.count({p.host, m.role}))
             return refuse(p, RefuseReason::Removed, 0, &SecurityCounters::removedRefused);
-        Bucket& b = bucket(p.host, now);
-        if (b.tokens < 1.0)
-            return refuse(p, RefuseReason::TooManyAttempts,
-                          uint32_t(std::ceil((1.0 - b.tokens) * AttemptLimit::kRefillS)),
-                          &SecurityCounters::attemptsLimited);
-        b.tokens -= 1.0; // given back when the code is proven
         p.wanted = m.role;
-        Handshake answer;
-        answer.step = Handshake::Step::Answer;
-        std::vector<std::pair<Role, const Bytes32*>> codes{{Role::Trainee, &m_codes->trainee}};
-        if (m.role == Role::Instructor)
-            codes.insert(codes.begin(), {Role::Instructor, &m_codes->instructor});
-        for (const auto& [role, w] : codes) {
-            const auto a = spakeAnswer(*w, m_codes->salt, m.role, role, m.share);
-            if (!a)
-                return r; // not a point of the group: malformed
-            answer.entries.push_back({role, a->share, a->keys.serverConfirm});
-            p.answers.emplace_back(role, a->keys);
+        p.share = m.share;
+        p.stage = Peer::Stage::Waiting;
+        p.turn = m_nextTurn++;
+        if (!mayAnswer(p, now)) {
+            count(&SecurityCounters::attemptsLimited);
+            r.kind = Result::Kind::Held;
+            return r;
         }
-        p.stage = Peer::Stage::Answered;
-        m_reply = encodeMessage(answer);
+        if (!answer(p)) { // not a point of the group: malformed
+            p.stage = Peer::Stage::Connected;
+            return r;
+        }
         r.kind = Result::Kind::Reply;
         r.message = m_reply;
         return r;

@@ -61,11 +61,13 @@ struct SessionServer::Impl {
           policy(withScene(c, step.volume()), step.volume().dims(), step.volume().spacing(), book,
                  [this](const ToolState& t, glm::vec3 velocity) { return force(t, velocity); }),
           gate(c, book), maxQueuedToolStates(c.maxQueuedToolStates),
-          admission(host.get(), c.admission,
-                    [this](const ENetPeer* p) {
-                        const auto id = uint16_t(reinterpret_cast<uintptr_t>(p->data));
-                        return id && policy.admitted(id);
-                    }),
+          admission(
+              host.get(), c.admission,
+              [this](const ENetPeer* p) {
+                  const auto id = uint16_t(reinterpret_cast<uintptr_t>(p->data));
+                  return id && policy.admitted(id);
+              },
+              [this](ENetPeer* p) { forgetPeer(p, steadyNowUs()); }),
           control(c.controlBudgetBytes), recorder(c.recorder) {
         // The full image of a view larger than a slice is coded apart, as its rows are rendered
         // in chunks: the simulation thread never stops for a whole large frame.
@@ -138,8 +140,9 @@ struct SessionServer::Impl {
     bool sendTo(uint16_t id, Channel ch, const std::vector<uint8_t>& bytes,
                 const Host::InFlight& inFlight = {});
     bool sendControl(uint16_t id, const std::vector<uint8_t>& bytes);
-    void forget(uint16_t id, uint64_t now); // a peer gone (disconnected, or its slot reset)
-    void guard(uint64_t now);               // admission and control budgets, once a pass
+    void forget(uint16_t id, uint64_t now);     // a peer gone (disconnected, or its slot reset)
+    void forgetPeer(ENetPeer* p, uint64_t now); // the peer in an ENet slot the gate resets
+    void guard(uint64_t now);                   // admission and control budgets, once a pass
     void sendUpdates();
     void sendNotices();
     void sayGoodbye();
@@ -544,13 +547,17 @@ void SessionServer::Impl::forget(uint16_t id, uint64_t now) {
     apply(out);
 }
 
+void SessionServer::Impl::forgetPeer(ENetPeer* p, uint64_t now) {
+    const auto id = uint16_t(reinterpret_cast<uintptr_t>(p->data));
+    p->data = nullptr;
+    if (id)
+        forget(id, now);
+}
+
 void SessionServer::Impl::guard(uint64_t now) {
-    admission.reap(now, [&](ENetPeer* p) {
-        const auto id = uint16_t(reinterpret_cast<uintptr_t>(p->data));
-        p->data = nullptr;
-        if (id)
-            forget(id, now);
-    });
+    admission.reap(now);
+    for (const auto& [id, answer] : gate.release(now))
+        sendTo(id, Channel::Control, answer);
     auto heldBy = [&](uint16_t id) {
         auto it = controlHeld.find(id);
         return it == controlHeld.end() ? int64_t(0) : it->second->load(std::memory_order_relaxed);
@@ -565,10 +572,7 @@ void SessionServer::Impl::guard(uint64_t now) {
     seen.controlDropped = control.counts().dropped;
     for (const auto& [id, held] : controlHeld)
         seen.peakControlBytes = std::max(seen.peakControlBytes, heldBy(id));
-    const AdmissionCounts& a = seen.admission;
-    const AdmissionCounts& b = reported.admission;
-    if (a.rateLimited == b.rateLimited && a.addressBusy == b.addressBusy &&
-        a.poolFull == b.poolFull && a.handshakesReset == b.handshakesReset &&
+    if (seen.admission == reported.admission &&
         seen.controlCoalesced == reported.controlCoalesced &&
         seen.controlDropped == reported.controlDropped &&
         seen.peakControlBytes == reported.peakControlBytes)
@@ -655,6 +659,8 @@ void SessionServer::Impl::onEvent(const ENetEvent& ev) {
             break;
         case SessionGate::Result::Kind::Proven:
             policy.authenticate(id, in.role);
+            break;
+        case SessionGate::Result::Kind::Held:
             break;
         case SessionGate::Result::Kind::Refuse:
             policy.refuse(id, in.refuse, now, out);

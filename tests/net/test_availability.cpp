@@ -152,18 +152,109 @@ TEST(Admission, EachAddressOpensABurstThenConnectionsAtItsRate) {
     EXPECT_FALSE(buckets.take(a, kStartUs + 60'000'000));
 }
 
-TEST(Admission, AConnectIsJudgedBySlotsThenAddressThenRate) {
+TEST(Admission, AConnectIsJudgedByAddressThenSlotsThenRate) {
     AdmissionLimits limits;
-    limits.waitingSlots = 10;
+    limits.waitingSlots = 4;
     limits.waitingPerAddress = 2;
     limits.connectsPerS = 1.0;
     limits.connectBurst = 1.0;
     ConnectBuckets buckets(limits.connectsPerS, limits.connectBurst);
-    EXPECT_EQ(judgeConnect(limits, buckets, 7, 0, 10, kStartUs), ConnectVerdict::PoolFull);
-    EXPECT_EQ(judgeConnect(limits, buckets, 7, 2, 5, kStartUs), ConnectVerdict::AddressBusy);
-    EXPECT_EQ(judgeConnect(limits, buckets, 7, 1, 5, kStartUs), ConnectVerdict::Accept);
-    EXPECT_EQ(judgeConnect(limits, buckets, 7, 1, 5, kStartUs), ConnectVerdict::RateLimited);
-    EXPECT_EQ(judgeConnect(limits, buckets, 8, 0, 5, kStartUs), ConnectVerdict::Accept);
+    const std::vector<WaitingPeer> some{{7, 10}, {8, 20}};
+    const std::vector<WaitingPeer> busy{{7, 10}, {7, 20}};
+    const std::vector<WaitingPeer> even{{7, 10}, {8, 20}, {9, 30}, {10, 40}};
+    EXPECT_EQ(judgeConnect(limits, buckets, 7, busy, kStartUs).verdict,
+              ConnectVerdict::AddressBusy);
+    EXPECT_EQ(judgeConnect(limits, buckets, 7, even, kStartUs).verdict, ConnectVerdict::PoolFull)
+        << "every address holds one: 7 holds no fewer than any";
+    const ConnectDecision newcomer = judgeConnect(limits, buckets, 11, even, kStartUs);
+    EXPECT_EQ(newcomer.verdict, ConnectVerdict::Displace) << "a newcomer holds none";
+    EXPECT_EQ(newcomer.displace, 0u) << "the oldest of those holding the most";
+    EXPECT_EQ(judgeConnect(limits, buckets, 7, some, kStartUs).verdict, ConnectVerdict::Accept);
+    EXPECT_EQ(judgeConnect(limits, buckets, 7, some, kStartUs).verdict,
+              ConnectVerdict::RateLimited);
+    EXPECT_EQ(judgeConnect(limits, buckets, 8, some, kStartUs).verdict, ConnectVerdict::Accept);
+}
+
+// The pool full, a newcomer takes the oldest slot of the address holding the most; it spends a
+// token like any accepted connection.
+TEST(Admission, ANewcomerDisplacesTheOldestPeerOfTheAddressHoldingTheMost) {
+    AdmissionLimits limits;
+    limits.waitingSlots = 5;
+    limits.waitingPerAddress = 4;
+    ConnectBuckets buckets(limits.connectsPerS, limits.connectBurst);
+    const std::vector<WaitingPeer> pool{{7, 50}, {8, 10}, {7, 30}, {7, 40}, {9, 5}};
+    const ConnectDecision d = judgeConnect(limits, buckets, 11, pool, kStartUs);
+    EXPECT_EQ(d.verdict, ConnectVerdict::Displace);
+    EXPECT_EQ(d.displace, 2u) << "address 7 holds three; its oldest is at index 2";
+    EXPECT_EQ(judgeConnect(limits, buckets, 8, pool, kStartUs).verdict, ConnectVerdict::Displace)
+        << "8 holds one, fewer than 7's three";
+    EXPECT_EQ(judgeConnect(limits, buckets, 7, pool, kStartUs).verdict, ConnectVerdict::PoolFull)
+        << "the address holding the most takes no one's slot";
+    ConnectBuckets empty(1.0, 1.0);
+    ASSERT_TRUE(empty.take(11, kStartUs));
+    EXPECT_EQ(judgeConnect(limits, empty, 11, pool, kStartUs).verdict, ConnectVerdict::RateLimited)
+        << "a newcomer over its rate displaces no one";
+}
+
+// The probe that locked every newcomer out: 16 addresses each sending 1000 half-open CONNECTs a
+// second keep the 256 waiting slots full. With the pool shared fairly, a newcomer's CONNECT
+// always finds a slot, and keeps it while it joins.
+TEST(Admission, SixteenFloodingAddressesCannotKeepANewcomerOut) {
+    const AdmissionLimits limits; // the server's defaults
+    ConnectBuckets buckets(limits.connectsPerS, limits.connectBurst);
+    std::vector<WaitingPeer> pool;
+    const uint32_t newcomer = 0x0100007f;
+    uint64_t now = kStartUs;
+    size_t refused = 0, displacedNewcomer = 0;
+    auto connect = [&](uint32_t address) {
+        std::erase_if(pool, [&](const WaitingPeer& w) {
+            return now - w.sinceUs > limits.handshakeTimeoutUs; // the reaper
+        });
+        const ConnectDecision d = judgeConnect(limits, buckets, address, pool, now);
+        if (d.verdict == ConnectVerdict::Displace) {
+            displacedNewcomer += pool[d.displace].address == newcomer;
+            pool.erase(pool.begin() + ptrdiff_t(d.displace));
+        }
+        if (d.verdict == ConnectVerdict::Accept || d.verdict == ConnectVerdict::Displace) {
+            pool.push_back({address, now});
+            return true;
+        }
+        ++refused;
+        return false;
+    };
+    // 10 s of flood: each address every 1 ms; the pool fills within the first seconds.
+    for (int ms = 0; ms < 10000; ++ms, now += 1000)
+        for (uint32_t a = 0; a < 16; ++a)
+            connect(0x0200007f + (a << 24));
+    EXPECT_EQ(pool.size(), limits.waitingSlots) << "the flood holds every waiting slot";
+    EXPECT_GT(refused, 0u);
+    // The newcomer connects in the thick of it; its handshake and hello take 50 ms of flood.
+    ASSERT_TRUE(connect(newcomer));
+    for (int ms = 0; ms < 50; ++ms, now += 1000)
+        for (uint32_t a = 0; a < 16; ++a)
+            connect(0x0200007f + (a << 24));
+    EXPECT_EQ(displacedNewcomer, 0u);
+    EXPECT_EQ(std::count_if(pool.begin(), pool.end(),
+                            [&](const WaitingPeer& w) { return w.address == newcomer; }),
+              1);
+}
+
+// A refused CONNECT is answered with a DISCONNECT to the connecting peer, carrying the reason.
+TEST(Admission, ARefusalAnswersTheConnectingPeerByItsOwnId) {
+    std::vector<uint8_t> connect = connectDatagram();
+    ENetProtocolConnect c;
+    std::memcpy(&c, connect.data() + 4, sizeof c);
+    c.outgoingPeerID = ENET_HOST_TO_NET_16(3);
+    std::memcpy(connect.data() + 4, &c, sizeof c);
+    const std::vector<uint8_t> r = refusalDatagram(connect, uint32_t(RefuseReason::Busy));
+    ASSERT_EQ(r.size(), 2 + sizeof(ENetProtocolDisconnect));
+    EXPECT_EQ((r[0] << 8 | r[1]), 3) << "addressed to the client's peer 3, no flags";
+    ENetProtocolDisconnect cmd;
+    std::memcpy(&cmd, r.data() + 2, sizeof cmd);
+    EXPECT_EQ(cmd.header.command & ENET_PROTOCOL_COMMAND_MASK, ENET_PROTOCOL_COMMAND_DISCONNECT);
+    EXPECT_EQ(cmd.header.command & ENET_PROTOCOL_COMMAND_FLAG_ACKNOWLEDGE, 0);
+    EXPECT_EQ(ENET_NET_TO_HOST_32(cmd.data), uint32_t(RefuseReason::Busy));
+    EXPECT_TRUE(refusalDatagram(std::vector<uint8_t>(6, 0), 1).empty()) << "not a CONNECT";
 }
 
 TEST(Admission, ASlotStuckInAHandshakeExpiresAfterTheTimeout) {

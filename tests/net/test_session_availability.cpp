@@ -15,6 +15,7 @@ using trephine::testing::loopback;
 using trephine::testing::loopbackServerConfig;
 using trephine::testing::pumpUntil;
 using trephine::testing::Reconnectors;
+using trephine::testing::waitFor;
 
 namespace {
 
@@ -83,4 +84,48 @@ TEST(SessionAvailability, ReconnectingSilentPeersDoNotKeepTheServerFull) {
     for (const auto& [id, p] : a.participants())
         names.push_back(p.name);
     EXPECT_NE(std::find(names.begin(), names.end(), "ada (2)"), names.end());
+}
+
+// Silent peers from a few addresses hold every waiting slot; a newcomer from another address
+// takes the oldest slot of the address holding the most instead of waiting for one to free.
+TEST(SessionAvailability, AFewAddressesHoldingEveryWaitingSlotDoNotKeepANewcomerOut) {
+    const Volume sphere = makeSphere(24);
+    ServerConfig sc = loopbackServerConfig("sphere:24");
+    sc.maxClients = 2;
+    sc.helloTimeoutS = 60.0f; // silent peers stay for the whole test
+    sc.admission.waitingSlots = 12;
+    sc.admission.waitingPerAddress = 6;
+    SessionServer server(sphere, sc);
+    server.start();
+    std::vector<std::unique_ptr<Reconnectors>> silent;
+    for (uint8_t a = 2; a < 5; ++a) // 3 addresses x 6 peers: 18 for 12 slots
+        silent.push_back(std::make_unique<Reconnectors>(server.port(), 6, a, kProtocolVersion));
+    ASSERT_TRUE(waitFor(
+        [&] { return availabilityOf(server).at("connects_pool_full").get<uint64_t>() > 0; }, 20.0))
+        << "the pool fills";
+    SessionClient trainee(trephine::testing::namedClientConfig(sphere, "ada", Role::Trainee, 32));
+    trainee.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil(
+        {&trainee}, [&] { return trainee.hasFullImage(); }, 20.0))
+        << trainee.closeReason();
+    EXPECT_GT(availabilityOf(server).at("connects_displaced").get<uint64_t>(), 0u);
+}
+
+// A CONNECT the gate refuses is answered: the client hears at once that the server is busy,
+// not "no answer" after ENet's timeout.
+TEST(SessionAvailability, ARefusedConnectionHearsTheServerIsBusy) {
+    const Volume sphere = makeSphere(24);
+    ServerConfig sc = loopbackServerConfig("sphere:24");
+    sc.helloTimeoutS = 60.0f;
+    sc.admission.waitingPerAddress = 2;
+    SessionServer server(sphere, sc);
+    server.start();
+    Reconnectors silent(server.port(), 2, 1, kProtocolVersion); // both of 127.0.0.1's places
+    ASSERT_TRUE(waitFor([&] { return silent.connects() >= 2; }, 20.0));
+    SessionClient trainee(trephine::testing::namedClientConfig(sphere, "ada", Role::Trainee, 32));
+    trainee.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil(
+        {&trainee}, [&] { return trainee.closed(); }, 20.0));
+    EXPECT_EQ(trainee.closeCode(), uint32_t(RefuseReason::Busy)) << trainee.closeReason();
+    EXPECT_GT(availabilityOf(server).at("connects_address_busy").get<uint64_t>(), 0u);
 }

@@ -1,10 +1,12 @@
 // Connection admission: peers not yet admitted (no accepted hello) must not hold the session's
 // scarce places. ENet spends a peer slot on every CONNECT datagram before the application hears
 // of it, so the gate sits in ENet's intercept (it sees raw datagrams first): a token bucket per
-// source address for new connections, and a cap on connections from one address still waiting to
-// be admitted. A reaper frees slots whose ENet handshake (or goodbye) never finishes. The rules
-// are plain classes with time passed in; AdmissionGate binds them to one ENet host.
-// docs/session.md ("Availability") gives the figures.
+// source address for new connections, a cap on connections from one address still waiting to be
+// admitted, and, when every waiting slot is taken, a newcomer displaces the oldest waiting peer
+// of the address that holds the most, so a few addresses cannot keep everyone else out. A reaper
+// frees slots whose ENet handshake (or goodbye) never finishes. The rules are plain functions
+// with time passed in; AdmissionGate binds them to one ENet host. docs/session.md
+// ("Availability") gives the figures.
 #pragma once
 
 #include <enet/enet.h>
@@ -20,6 +22,12 @@ namespace trephine::net {
 // True when `datagram` is an ENet datagram that asks for a new connection (a CONNECT command to
 // no peer yet). Anything else (or a datagram too short to tell) is ENet's to judge.
 bool isEnetConnect(std::span<const uint8_t> datagram);
+
+// The ENet datagram that refuses the connection `connect` (an isEnetConnect datagram) with
+// `data` as its disconnect data: a DISCONNECT command to the connecting peer, which ENet on
+// the client reports as a disconnect event. It lets a refused client know the server is there
+// without the server keeping any state for it. Empty when `connect` is not a CONNECT.
+std::vector<uint8_t> refusalDatagram(std::span<const uint8_t> connect, uint32_t data);
 
 // New connections per source address: a bucket of `burst` tokens refilled at `perS` a second.
 // Addresses hash into a fixed table, so spoofed sources cannot grow it: two addresses that share
@@ -46,9 +54,10 @@ private:
 // What the gate answers to a CONNECT datagram.
 enum class ConnectVerdict {
     Accept,
+    Displace,    // accepted in place of another address's oldest waiting peer
     RateLimited, // the address opened connections faster than its bucket allows
     AddressBusy, // the address already has as many connections waiting as one may
-    PoolFull,    // every slot for waiting connections is taken
+    PoolFull,    // every slot for waiting connections is taken by addresses holding no more
 };
 
 struct AdmissionLimits {
@@ -59,11 +68,23 @@ struct AdmissionLimits {
     uint64_t handshakeTimeoutUs = 3000000; // ENet handshake or goodbye unfinished: slot reset
 };
 
-// The decision for one CONNECT: `waitingFromAddress` and `waiting` count the ENet peers not yet
-// admitted (from that address, and in all).
-ConnectVerdict judgeConnect(const AdmissionLimits& limits, ConnectBuckets& buckets,
-                            uint32_t address, size_t waitingFromAddress, size_t waiting,
-                            uint64_t nowUs);
+// A connection not yet admitted: its source address and since when it has held its slot.
+struct WaitingPeer {
+    uint32_t address = 0;
+    uint64_t sinceUs = 0;
+};
+
+struct ConnectDecision {
+    ConnectVerdict verdict = ConnectVerdict::Accept;
+    size_t displace = 0; // with Displace: the index in `waiting` of the peer to reset
+};
+
+// The decision for one CONNECT from `address`, given every peer still waiting. With the pool
+// full, the slots are shared max-min fairly: a newcomer whose address holds fewer waiting peers
+// than the address holding the most takes the oldest of that address's slots.
+ConnectDecision judgeConnect(const AdmissionLimits& limits, ConnectBuckets& buckets,
+                             uint32_t address, std::span<const WaitingPeer> waiting,
+                             uint64_t nowUs);
 
 // How long each slot has been in a state it must leave soon (an ENet handshake or goodbye): a
 // slot that stays longer than the timeout is due to be reset.
@@ -81,7 +102,8 @@ private:
 
 // Figures of refused and reclaimed connections (read into the server's report).
 struct AdmissionCounts {
-    uint64_t rateLimited = 0, addressBusy = 0, poolFull = 0, handshakesReset = 0;
+    uint64_t rateLimited = 0, addressBusy = 0, poolFull = 0, handshakesReset = 0, displaced = 0;
+    bool operator==(const AdmissionCounts&) const = default;
 };
 
 // The gate on one ENet host (network thread only). `admitted` says whether an ENet peer has been
@@ -93,7 +115,9 @@ public:
     // disconnect for a reset peer).
     using OnReset = std::function<void(ENetPeer*)>;
 
-    AdmissionGate(ENetHost* host, const AdmissionLimits& limits, Admitted admitted);
+    // `onReset` is also called for a peer displaced by a newcomer, from within ENet's service.
+    AdmissionGate(ENetHost* host, const AdmissionLimits& limits, Admitted admitted,
+                  OnReset onReset = {});
     AdmissionGate(const AdmissionGate&) = delete;
     AdmissionGate& operator=(const AdmissionGate&) = delete;
 
@@ -104,15 +128,24 @@ public:
     // Sets the time the intercept judges by (the network thread's `now` of this pass).
     void setNow(uint64_t nowUs) { m_nowUs = nowUs; }
     // Resets every slot whose handshake or goodbye has outlasted the limit.
-    void reap(uint64_t nowUs, const OnReset& onReset);
+    void reap(uint64_t nowUs);
     const AdmissionCounts& counts() const { return m_counts; }
 
 private:
+    void reset(ENetPeer* peer, bool tell);
+    // When each slot's present occupant (told apart by its connect ID) was first seen.
+    uint64_t occupiedSince(size_t index);
+
     ENetHost* m_host;
     AdmissionLimits m_limits;
     Admitted m_admitted;
+    OnReset m_onReset;
     ConnectBuckets m_buckets;
+    ConnectBuckets m_refusals; // refusals answered per address: no flood is reflected 1:1
     SlotTimer m_timer;
+    std::vector<std::pair<uint32_t, uint64_t>> m_occupant; // per slot: connect ID, since
+    std::vector<WaitingPeer> m_waiting;                    // judge()'s scratch
+    std::vector<ENetPeer*> m_waitingPeers;
     AdmissionCounts m_counts;
     uint64_t m_nowUs = 0;
 };

@@ -22,11 +22,17 @@
 
 namespace trephine::net {
 
-// Wrong codes from one address: a burst of kBurst, then one more every kRefillS seconds, so at
-// most kBurst + 3600 / kRefillS (130) guesses in the first hour and 120 an hour after it.
+// Attempts from one address: a burst of kBurst answered at once, then one more every kRefillS
+// seconds; a code proven gives its attempt back. Past them an offer waits, never refused: the
+// address's waiting offers are answered in arrival order, one every kExcessS, and each code
+// proven lets the next one through at once. So participants behind one address (a classroom's
+// NAT) join while a guesser there waits its turn, and each answer is one guess tested: at most
+// kBurst + t / kRefillS + t / kExcessS + (codes proven there) in t seconds per address
+// (3,730 in the first hour), with every address held to that bound apart.
 struct AttemptLimit {
     static constexpr double kBurst = 10.0;
     static constexpr double kRefillS = 30.0;
+    static constexpr double kExcessS = 1.0;
 };
 
 class SessionGate {
@@ -46,6 +52,7 @@ public:
             Reply,   // a handshake step to send back: `message`
             Proven,  // the handshake ended: the peer holds `role` from now on
             Refuse,  // send the peer away with `refuse` (the disconnect data)
+            Held,    // an offer waits for its turn: release() answers it
             Bad,     // malformed, forged or replayed: dropped, counted as malformed
         } kind = Kind::Bad;
         std::span<const uint8_t> message;
@@ -71,8 +78,8 @@ public:
     // Defined in session_codes.cpp.
     std::string issue(Role role);
     size_t removedCount() const { return m_removed.size(); }
-    // Seconds until `address` may try a code again (0: now).
-    uint32_t waitS(const ENetAddress& address, uint64_t now);
+    // The answers due at `now` to offers that waited (AttemptLimit), for the peers named.
+    std::vector<std::pair<uint16_t, std::vector<uint8_t>>> release(uint64_t now);
 
 private:
     struct Codes {
@@ -81,18 +88,25 @@ private:
     };
     struct Peer {
         uint32_t host = 0;
-        enum class Stage { Connected, Answered, Secure, Refused } stage = Stage::Connected;
+        enum class Stage { Connected, Waiting, Answered, Secure, Refused } stage = Stage::Connected;
         Role wanted = Role::Trainee; // Offer's role; in an open session, the hello's
+        Bytes32 share{};             // a waiting Offer's
+        uint64_t turn = 0;           // a waiting Offer's place in the queue
         std::vector<std::pair<Role, SessionKeys>> answers;
         std::optional<SecureChannel> channel;
     };
     struct Bucket {
         double tokens = AttemptLimit::kBurst;
         uint64_t atUs = 0;
+        uint64_t nextExcessUs = 0; // when the slow lane answers its next waiting offer
     };
 
     Result refuse(Peer& p, RefuseReason why, uint32_t detail, uint64_t SecurityCounters::*counter);
     Result handshake(Peer& p, std::span<const uint8_t> data, uint64_t now);
+    // Whether `p`'s waiting offer may be answered at `now` (its turn, and a token or the slow
+    // lane); spends what answering it costs.
+    bool mayAnswer(const Peer& p, uint64_t now);
+    bool answer(Peer& p); // answers the waiting offer into m_reply; false: not a group point
     Result openSealed(Peer& p, Channel channel, std::span<const uint8_t> data);
     Bucket& bucket(uint32_t host, uint64_t now);
     void count(uint64_t SecurityCounters::*counter);
@@ -104,6 +118,7 @@ private:
     std::set<std::pair<uint32_t, Role>> m_removed; // address and role code of removed peers
     std::vector<uint8_t> m_plain;                  // the last message opened
     std::vector<uint8_t> m_reply;
+    uint64_t m_nextTurn = 1;
 };
 
 } // namespace trephine::net
