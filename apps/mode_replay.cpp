@@ -1,9 +1,9 @@
 // `trephine replay FILE`: plays a session log (`trephine server --record`) through the server's
 // own simulation step, and writes what is asked: the final volume (--save, bit for bit what the
-// server held), each participant's tool path as a trainee script (--trajectories). A torn or
-// corrupt tail is said in one line and dropped. With --serve it then plays the session into a
-// live server at the recorded pace (times --speed), for any number of windows to watch, and
-// serves its final state until stopped. docs/recording.md.
+// server held), each participant's tool path as a trainee script (--trajectories). A damaged
+// stretch is said in one line and skipped, the records after it kept. With --serve it then plays
+// the session into a live server at the recorded pace (times --speed), for any number of windows
+// to watch, and serves its final state until stopped. docs/recording.md.
 #include "modes.h"
 
 #include "libsim/error.h"
@@ -20,6 +20,7 @@
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
+#include <sstream>
 
 namespace trephine::app {
 
@@ -127,8 +128,9 @@ int runReplay(const ReplayOptions& o) {
     }
     const auto t0 = std::chrono::steady_clock::now();
     net::LogContents log = net::readSessionLog(o.log);
-    if (!log.stopped.empty())
-        std::printf("trephine replay: %s\n", log.stopped.c_str());
+    std::istringstream damage(log.stopped);
+    for (std::string line; std::getline(damage, line);)
+        std::printf("trephine replay: %s\n", line.c_str());
     Volume start = net::logStartVolume(log.header, openVolume);
     if (o.serve && o.save.empty() && o.trajectories.empty() && o.report.empty())
         return serveReplay(o, std::move(log), std::move(start));

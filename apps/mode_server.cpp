@@ -2,7 +2,8 @@
 // SIGTERM, SIGHUP or SIGQUIT, then apply every queued tool state and write --save-on-exit (the
 // volume, and the instructors' marks and the scene beside it, which a later `--volume` of that
 // file reads back). --record FILE logs the session as it goes (net/session_log.h); --resume FILE
-// replays such a log to where its server stopped and goes on appending to it.
+// replays such a log to where its server stopped and goes on appending to it (a damaged one kept
+// aside whole first).
 #include "modes.h"
 
 #include "libsim/error.h"
@@ -23,6 +24,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 #include <thread>
 
 namespace trephine::app {
@@ -143,8 +145,13 @@ int runServer(const ServerOptions& o) {
     Volume volume;
     if (!o.resume.empty()) {
         net::Resumed resumed = net::resumeSession(o.resume, config, openVolume, unixNowUs());
-        if (!resumed.stopped.empty())
-            std::printf("trephine server: %s\n", resumed.stopped.c_str());
+        std::istringstream damage(resumed.stopped);
+        for (std::string line; std::getline(damage, line);)
+            std::printf("trephine server: %s\n", line.c_str());
+        if (!resumed.keptAside.empty())
+            std::printf("trephine server: kept the damaged log whole as %s; %s now holds its %zu "
+                        "intact records, and goes on from them\n",
+                        resumed.keptAside.c_str(), o.resume.c_str(), resumed.records);
         std::printf("trephine server: resumed %s: %zu records, %llu tool states applied, %zu "
                     "mark%s\n",
                     o.resume.c_str(), resumed.records, (unsigned long long)resumed.toolStates,

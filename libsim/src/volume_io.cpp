@@ -9,6 +9,7 @@
 // [SECTION] loadVolume / saveVolume / help
 #include "libsim/volume_io.h"
 
+#include "libsim/regular_file.h"
 #include "libsim/replacing_file.h"
 
 #include "libsim/skull.h"
@@ -110,17 +111,13 @@ uint64_t ByteSource::skip(uint64_t n) {
 }
 
 FileSource::FileSource(const std::string& path, const std::string& name) : ByteSource(name) {
-    std::error_code ec;
-    const fs::file_status st = fs::status(path, ec);
-    if (fs::is_directory(st))
-        fail(name, "is a folder, not a file");
     // A device or a pipe has no size to check a header against and may never end or never open:
     // a NRRD's `data file: /dev/urandom` with a large line skip read forever, a FIFO blocked.
-    if (fs::exists(st) && !fs::is_regular_file(st))
-        fail(name, "is not a regular file (a device, pipe or socket): volumes are read from files");
+    requireRegularFile(path, name, "volumes are read from files");
     m_file = std::fopen(path.c_str(), "rb");
     if (!m_file)
         fail(name, "cannot open: " + systemError());
+    std::error_code ec;
     uint64_t size = fs::file_size(path, ec);
     m_size = ec ? 0 : size;
 }

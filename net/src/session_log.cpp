@@ -1,6 +1,8 @@
 #include "net/session_log.h"
 
 #include "libsim/error.h"
+#include "libsim/regular_file.h"
+#include "libsim/replacing_file.h"
 #include "net/scene.h"
 #include "net/server_config.h"
 #include "net/sim_step.h"
@@ -17,6 +19,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fcntl.h>
+#include <filesystem>
 #include <fstream>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -256,6 +259,7 @@ std::unique_ptr<SessionRecorder> SessionRecorder::create(const std::string& path
     putU32(start, 8, kLogVersion);
     if (!appendFrame(start, header))
         throw Error("--record " + path + ": the session's start does not fit the log's format");
+    requireRegularFile(path, "--record " + path, "session logs are kept in files");
     const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_APPEND | O_CLOEXEC, 0644);
     if (fd < 0)
         throw Error("--record " + path + ": " +
@@ -278,10 +282,13 @@ std::unique_ptr<SessionRecorder> SessionRecorder::append(const std::string& path
     const int fd = ::open(path.c_str(), O_WRONLY | O_APPEND | O_CLOEXEC);
     if (fd < 0)
         throw Error("--resume " + path + ": cannot open it to append: " + errnoText());
-    if (::ftruncate(fd, off_t(intactBytes)) != 0 || ::fdatasync(fd) != 0) {
-        const std::string why = errnoText();
+    // Appending after damage would bury it mid-file; cutting it off would lose what was there.
+    struct stat st {};
+    if (::fstat(fd, &st) != 0 || uint64_t(st.st_size) != intactBytes) {
         ::close(fd);
-        throw Error("--resume " + path + ": cannot cut its torn tail: " + why);
+        throw Error(fmt::format("--resume {}: it is {} bytes, not the {} intact ones read (damaged "
+                                "past them, or written since)",
+                                path, uint64_t(st.st_size), intactBytes));
     }
     return std::unique_ptr<SessionRecorder>(
         new SessionRecorder(path, fd, intactBytes, syncIntervalMs, version));
@@ -406,6 +413,90 @@ uint64_t SessionRecorder::syncs() const {
 
 // [SECTION] reading
 
+namespace {
+
+// The frame at `at`: its payload, or why there is none (torn, or a length out of range). The CRC
+// is checked by the caller.
+std::string frameAt(std::span<const uint8_t> bytes, size_t at, std::span<const uint8_t>& payload) {
+    if (bytes.size() - at < kLogFrameBytes)
+        return fmt::format("torn: {} bytes of a record's {}-byte frame", bytes.size() - at,
+                           kLogFrameBytes);
+    const uint32_t length = getU32(bytes.data() + at);
+    if (length > kMaxLogRecordBytes)
+        return fmt::format("corrupt: a record length of {} bytes", length);
+    if (bytes.size() - at - kLogFrameBytes < length)
+        return fmt::format("torn: the record says {} bytes, {} are there", length,
+                           bytes.size() - at - kLogFrameBytes);
+    payload = bytes.subspan(at + kLogFrameBytes, length);
+    return {};
+}
+
+bool crcMatches(std::span<const uint8_t> bytes, size_t at, std::span<const uint8_t> payload) {
+    return crcOf(payload.data(), payload.size(), crcOf(bytes.data() + at, 4)) ==
+           getU32(bytes.data() + at + 4);
+}
+
+// The record framed at `at` ("" when intact: `rec` holds it, `next` is past it), or why not. Its
+// fields are read before its CRC is computed: while scanning past damage, almost every offset's
+// "payload" fails to read within a few bytes, where a CRC would cost its whole claimed length.
+std::string recordAt(std::span<const uint8_t> bytes, size_t at, uint32_t version, LogRecord& rec,
+                     size_t& next) {
+    std::span<const uint8_t> payload;
+    std::string why = frameAt(bytes, at, payload);
+    if (!why.empty())
+        return why;
+    ReadStream r(payload);
+    if (!rec.serialize(r, version) || !r.atEnd())
+        return "corrupt: its fields do not read";
+    if (!crcMatches(bytes, at, payload))
+        return "corrupt: its checksum does not match";
+    next = at + kLogFrameBytes + payload.size();
+    return {};
+}
+
+// How many records the damaged stretch [at, end) holds, as their length fields chain through it
+// to exactly `end`; 0 when they do not (a damaged length, or zeros: no record is that short).
+size_t framesChained(std::span<const uint8_t> bytes, size_t at, size_t end) {
+    constexpr uint64_t kShortestRecord = 9; // its kind and time
+    size_t count = 0;
+    while (end - at >= kLogFrameBytes) {
+        const uint64_t length = getU32(bytes.data() + at);
+        if (length < kShortestRecord || length > end - at - kLogFrameBytes)
+            return 0;
+        at += kLogFrameBytes + size_t(length);
+        ++count;
+    }
+    return at == end ? count : 0;
+}
+
+// One line for each damaged stretch of `c`.
+std::string damageText(const LogContents& c, const std::string& name) {
+    std::string text;
+    for (size_t i = 0; i < c.damage.size(); ++i) {
+        const LogDamage& d = c.damage[i];
+        if (!text.empty())
+            text += '\n';
+        if (d.tail) {
+            text += fmt::format("{}: kept {} records ({} bytes); dropped the tail at byte {} "
+                                "({} bytes), {}",
+                                name, c.records.size(), c.intactBytes, d.offset, d.bytes, d.why);
+            continue;
+        }
+        const std::string which = d.records == 0   ? std::string("one or more records")
+                                  : d.records == 1 ? std::string("1 record")
+                                                   : fmt::format("{} records", d.records);
+        const size_t after =
+            (i + 1 < c.damage.size() ? c.damage[i + 1].recordsBefore : c.records.size()) -
+            d.recordsBefore;
+        text += fmt::format("{}: skipped {} damaged bytes at byte {} ({}, {}); kept {} record{} "
+                            "after it",
+                            name, d.bytes, d.offset, which, d.why, after, after == 1 ? "" : "s");
+    }
+    return text;
+}
+
+} // namespace
+
 LogContents parseSessionLog(std::span<const uint8_t> bytes, const std::string& name) {
     LogContents c;
     c.fileBytes = bytes.size();
@@ -415,26 +506,11 @@ LogContents parseSessionLog(std::span<const uint8_t> bytes, const std::string& n
     if (c.version == 0 || c.version > kLogVersion)
         throw Error(fmt::format("{}: a session log of format {}; this Trephine reads format {}",
                                 name, c.version, kLogVersion));
-    // One frame at `at`: its payload, or why it cannot be read (torn, or corrupt).
-    auto frame = [&](size_t at, std::span<const uint8_t>& payload) -> std::string {
-        if (bytes.size() - at < kLogFrameBytes)
-            return fmt::format("torn: {} bytes of a record's {}-byte frame", bytes.size() - at,
-                               kLogFrameBytes);
-        const uint32_t length = getU32(bytes.data() + at);
-        if (length > kMaxLogRecordBytes)
-            return fmt::format("corrupt: a record length of {} bytes", length);
-        if (bytes.size() - at - kLogFrameBytes < length)
-            return fmt::format("torn: the record says {} bytes, {} are there", length,
-                               bytes.size() - at - kLogFrameBytes);
-        const uint8_t* body = bytes.data() + at + kLogFrameBytes;
-        if (crcOf(body, length, crcOf(bytes.data() + at, 4)) != getU32(bytes.data() + at + 4))
-            return "corrupt: its checksum does not match";
-        payload = {body, length};
-        return {};
-    };
     size_t at = kLogPreambleBytes;
     std::span<const uint8_t> payload;
-    std::string why = frame(at, payload);
+    std::string why = frameAt(bytes, at, payload);
+    if (why.empty() && !crcMatches(bytes, at, payload))
+        why = "corrupt: its checksum does not match";
     if (why.empty()) {
         ReadStream r(payload);
         if (!c.header.serialize(r, c.version) || !r.atEnd())
@@ -445,27 +521,37 @@ LogContents parseSessionLog(std::span<const uint8_t> bytes, const std::string& n
     at += kLogFrameBytes + payload.size();
     c.intactBytes = at;
     while (at < bytes.size()) {
-        why = frame(at, payload);
         LogRecord rec;
+        size_t next = 0;
+        why = recordAt(bytes, at, c.version, rec, next);
         if (why.empty()) {
-            ReadStream r(payload);
-            if (!rec.serialize(r, c.version) || !r.atEnd())
-                why = "corrupt: its fields do not read";
+            c.records.push_back(std::move(rec));
+            c.intactBytes += next - at;
+            at = next;
+            continue;
         }
-        if (!why.empty()) {
-            c.stopped = fmt::format("{}: kept {} records ({} bytes); dropped the tail at byte {} "
-                                    "(record {}), {}",
-                                    name, c.records.size(), at, at, c.records.size() + 1, why);
-            break;
+        // Resynchronise: the next offset where an intact record starts, or the end.
+        size_t resume = at + 1;
+        for (; resume < bytes.size(); ++resume) {
+            LogRecord probe;
+            if (recordAt(bytes, resume, c.version, probe, next).empty())
+                break;
         }
-        c.records.push_back(std::move(rec));
-        at += kLogFrameBytes + payload.size();
-        c.intactBytes = at;
+        const bool tail = resume == bytes.size();
+        // A length past the end is a torn write only at the end; with records after it, the
+        // length itself is damaged.
+        if (!tail && why.starts_with("torn: "))
+            why = "corrupt: " + why.substr(6);
+        c.damage.push_back({at, resume - at, c.records.size(),
+                            tail ? 0 : framesChained(bytes, at, resume), why, tail});
+        at = resume;
     }
+    c.stopped = damageText(c, name);
     return c;
 }
 
 LogContents readSessionLog(const std::string& path) {
+    requireRegularFile(path, path, "session logs are read from files");
     std::ifstream in(path, std::ios::binary | std::ios::ate);
     if (!in)
         throw Error(path + ": cannot open the session log");
@@ -474,6 +560,99 @@ LogContents readSessionLog(const std::string& path) {
     if (!in.read(reinterpret_cast<char*>(bytes.data()), std::streamsize(bytes.size())))
         throw Error(path + ": cannot read the session log");
     return parseSessionLog(bytes, path);
+}
+
+// [SECTION] repairing
+
+namespace {
+
+// `bytes` into a new file at `path` (refused when something is there), synced. False: errno says.
+bool writeNewFile(const std::string& path, std::span<const uint8_t> bytes) {
+    const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_EXCL | O_CLOEXEC, 0644);
+    if (fd < 0)
+        return false;
+    const uint8_t* p = bytes.data();
+    size_t left = bytes.size();
+    while (left > 0) {
+        const ssize_t done = ::write(fd, p, left);
+        if (done < 0 && errno == EINTR)
+            continue;
+        if (done <= 0) {
+            const int saved = errno;
+            ::close(fd);
+            ::unlink(path.c_str());
+            errno = done == 0 ? EIO : saved;
+            return false;
+        }
+        p += done;
+        left -= size_t(done);
+    }
+    if (::fdatasync(fd) != 0) {
+        const int saved = errno;
+        ::close(fd);
+        ::unlink(path.c_str());
+        errno = saved;
+        return false;
+    }
+    return ::close(fd) == 0;
+}
+
+} // namespace
+
+std::string repairSessionLog(const std::string& path, const LogContents& log) {
+    if (log.damage.empty())
+        return {};
+    // A symbolic link stays one: what it names is repaired.
+    const std::string target = replacementTarget(path).value_or(path).string();
+    std::vector<uint8_t> bytes;
+    {
+        std::ifstream in(target, std::ios::binary);
+        bytes.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+        if (!in.eof() && in.fail())
+            throw Error("--resume " + path + ": cannot read it again to repair it");
+    }
+    if (bytes.size() != log.fileBytes)
+        throw Error(fmt::format("--resume {}: it changed while being read ({} bytes, then {})",
+                                path, log.fileBytes, bytes.size()));
+    // First the whole file, byte for byte, under a name nothing else has.
+    std::string aside;
+    for (int n = 1;; ++n) {
+        aside = target + ".damaged-" + std::to_string(n);
+        if (writeNewFile(aside, bytes))
+            break;
+        if (errno != EEXIST || n == 1000)
+            throw Error("--resume " + path + ": cannot keep the damaged log aside as " + aside +
+                        ": " + errnoText());
+    }
+    // Then its intact frames, put in its place by a rename: at every moment the log's name holds
+    // the damaged file or the repaired one, and the damaged one is kept.
+    std::vector<uint8_t> intact;
+    intact.reserve(size_t(log.intactBytes));
+    size_t from = 0;
+    for (const LogDamage& d : log.damage) {
+        intact.insert(intact.end(), bytes.begin() + ptrdiff_t(from),
+                      bytes.begin() + ptrdiff_t(d.offset));
+        from = size_t(d.offset + d.bytes);
+    }
+    intact.insert(intact.end(), bytes.begin() + ptrdiff_t(from), bytes.end());
+    assert(intact.size() == log.intactBytes && "repairSessionLog: `log` is not this file's");
+    const std::string temp = target + ".trephine-" + std::to_string(::getpid()) + ".tmp";
+    ::unlink(temp.c_str()); // a killed run's of this pid
+    if (!writeNewFile(temp, intact) || std::rename(temp.c_str(), target.c_str()) != 0) {
+        const std::string why = errnoText();
+        ::unlink(temp.c_str());
+        throw Error("--resume " + path +
+                    ": cannot write its intact records (the damaged log is "
+                    "kept whole as " +
+                    aside + "): " + why);
+    }
+    const std::filesystem::path folder = std::filesystem::path(target).parent_path();
+    const int dir = ::open(folder.empty() ? "." : folder.c_str(), O_RDONLY | O_DIRECTORY);
+    if (dir >= 0) {
+        ::fsync(dir); // the rename, durable before anything is appended
+        ::close(dir);
+    }
+    return aside;
 }
 
 } // namespace trephine::net

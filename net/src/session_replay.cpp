@@ -180,6 +180,9 @@ Resumed resumeSession(const std::string& path, ServerConfig& config,
     config.maxSweepMm = log.header.maxSweepMm;
     config.cautionMm = log.header.cautionMm;
     config.dangerMm = log.header.dangerMm;
+    // Only now that the log is known to be usable: a damaged one is kept aside whole, and its
+    // intact records become the log appended to.
+    const std::string keptAside = repairSessionLog(path, log);
     config.recorder = SessionRecorder::append(path, log.intactBytes, log.version);
     LogRecord resumed;
     resumed.kind = LogRecord::Kind::Resume;
@@ -187,7 +190,8 @@ Resumed resumeSession(const std::string& path, ServerConfig& config,
     resumed.unixUs = unixNowUs;
     if (!config.recorder->write({&resumed, 1}))
         throw Error("--resume " + path + ": " + config.recorder->error());
-    return {replay.volume(), log.stopped, log.records.size(), replay.toolStatesApplied()};
+    return {replay.volume(), log.stopped, keptAside, log.records.size(),
+            replay.toolStatesApplied()};
 }
 
 // [SECTION] trajectories

@@ -200,7 +200,7 @@ TEST(SessionLog, ALogCutAtEveryByteOfItsLastRecordsKeepsWhatIsIntact) {
     std::filesystem::remove(path);
 }
 
-TEST(SessionLog, AFlippedByteStopsTheLogAtTheRecordItCorrupts) {
+TEST(SessionLog, AFlippedByteSkipsTheRecordItCorruptsAndKeepsEveryLaterOne) {
     const std::string path = tempPath("flip.log");
     std::vector<size_t> starts;
     const std::vector<LogRecord> records = everyKind();
@@ -212,15 +212,74 @@ TEST(SessionLog, AFlippedByteStopsTheLogAtTheRecordItCorrupts) {
         size_t hit = 0;
         while (starts[hit + 1] <= at)
             ++hit;
-        ASSERT_EQ(log.records.size(), hit) << "byte " << at << " flipped";
+        SCOPED_TRACE("byte " + std::to_string(at) + " flipped, in record " + std::to_string(hit));
+        // Exactly the record hit is gone; every other one is there, in order.
+        ASSERT_EQ(log.records.size(), records.size() - 1) << log.stopped;
+        for (size_t i = 0, j = 0; i < records.size(); ++i)
+            if (i != hit)
+                expectSame(log.records[j++], records[i]);
+        ASSERT_EQ(log.damage.size(), 1u);
+        const LogDamage& d = log.damage[0];
+        EXPECT_EQ(d.offset, starts[hit]);
+        EXPECT_EQ(d.bytes, starts[hit + 1] - starts[hit]);
+        EXPECT_EQ(d.recordsBefore, hit);
+        EXPECT_EQ(d.tail, hit + 1 == records.size());
+        EXPECT_EQ(log.intactBytes, bytes.size() - d.bytes);
+        EXPECT_EQ(log.stopped.find('\n'), std::string::npos) << "one line";
         EXPECT_NE(log.stopped.find("at byte " + std::to_string(starts[hit])), std::string::npos)
             << log.stopped;
+        // In the last record a flipped length looks like a torn write: either is said.
         EXPECT_TRUE(log.stopped.find("corrupt") != std::string::npos ||
-                    log.stopped.find("torn") != std::string::npos)
+                    (d.tail && log.stopped.find("torn") != std::string::npos))
             << log.stopped;
+        if (!d.tail) {
+            // A flipped length breaks the chain of lengths: how many records it was is unknown.
+            const bool inLength = at < starts[hit] + 4;
+            EXPECT_EQ(d.records, inLength ? 0u : 1u);
+            EXPECT_NE(log.stopped.find("skipped " + std::to_string(d.bytes) +
+                                       " damaged bytes at byte " + std::to_string(d.offset) +
+                                       (inLength ? " (one or more records, " : " (1 record, ")),
+                      std::string::npos)
+                << log.stopped;
+            const size_t after = records.size() - hit - 1;
+            EXPECT_NE(log.stopped.find("; kept " + std::to_string(after) +
+                                       (after == 1 ? " record" : " records") + " after it"),
+                      std::string::npos)
+                << log.stopped;
+        }
         bytes[at] ^= 0x20;
     }
     EXPECT_TRUE(parseSessionLog(bytes, "restored").stopped.empty());
+    std::filesystem::remove(path);
+}
+
+TEST(SessionLog, EachDamagedStretchIsSkippedAndSaidInItsOwnLine) {
+    const std::string path = tempPath("two-flips.log");
+    std::vector<size_t> starts;
+    const std::vector<LogRecord> records = everyKind();
+    std::vector<uint8_t> bytes = writeLog(path, records, starts);
+    starts.push_back(bytes.size());
+    // Records 3 and 4 (one stretch, two records whose lengths still chain), and record 9.
+    bytes[starts[2] + 9] ^= 0x01; // a time's byte: the fields read, the CRC does not match
+    bytes[starts[3] + 10] ^= 0x80;
+    bytes[starts[8] + 11] ^= 0x04;
+    const LogContents log = parseSessionLog(bytes, "x.log");
+    ASSERT_EQ(log.records.size(), records.size() - 3) << log.stopped;
+    ASSERT_EQ(log.damage.size(), 2u);
+    EXPECT_EQ(log.damage[0].records, 2u);
+    EXPECT_EQ(log.damage[0].bytes, starts[4] - starts[2]);
+    EXPECT_EQ(log.damage[1].recordsBefore, 6u);
+    EXPECT_EQ(log.damage[1].records, 1u);
+    expectSame(log.records[2], records[4]);
+    expectSame(log.records.back(), records.back());
+    auto n = [](size_t v) { return std::to_string(v); };
+    EXPECT_EQ(log.stopped, "x.log: skipped " + n(starts[4] - starts[2]) +
+                               " damaged bytes at byte " + n(starts[2]) +
+                               " (2 records, corrupt: its checksum does not match); kept 4 "
+                               "records after it\nx.log: skipped " +
+                               n(starts[9] - starts[8]) + " damaged bytes at byte " + n(starts[8]) +
+                               " (1 record, corrupt: its checksum does not match); kept " +
+                               n(records.size() - 9) + " records after it");
     std::filesystem::remove(path);
 }
 
@@ -251,14 +310,28 @@ TEST(SessionLog, AFileThatIsNoLogOrWhoseStartIsDamagedIsRefusedInOneLine) {
     std::filesystem::remove(path);
 }
 
-TEST(SessionLog, ResumingCutsATornTailAndAppendsAfterWhatIsIntact) {
+TEST(SessionLog, ResumingATornLogKeepsItAsideWholeAndAppendsAfterItsIntactRecords) {
     const std::string path = tempPath("append.log");
     std::vector<size_t> starts;
     std::vector<LogRecord> records = everyKind();
     std::vector<uint8_t> bytes = writeLog(path, records, starts);
     std::filesystem::resize_file(path, bytes.size() - 3); // killed mid-write
+    bytes.resize(bytes.size() - 3);
     LogContents log = readSessionLog(path);
     ASSERT_EQ(log.records.size(), records.size() - 1);
+    // Nothing cuts a damaged file: appending is refused until it is repaired.
+    EXPECT_THROW(SessionRecorder::append(path, log.intactBytes), Error);
+    EXPECT_EQ(fileBytes(path), bytes);
+    // Something is already there under the first name: never overwritten.
+    const std::string taken = path + ".damaged-1";
+    std::ofstream(taken) << "someone else's\n";
+    const std::string aside = repairSessionLog(path, log);
+    EXPECT_EQ(aside, path + ".damaged-2");
+    EXPECT_EQ(fileBytes(taken), std::vector<uint8_t>({'s', 'o', 'm', 'e', 'o', 'n', 'e', ' ', 'e',
+                                                      'l', 's', 'e', '\'', 's', '\n'}));
+    EXPECT_EQ(fileBytes(aside), bytes) << "the torn log, byte for byte";
+    EXPECT_EQ(std::filesystem::file_size(path), log.intactBytes);
+    EXPECT_EQ(repairSessionLog(path, readSessionLog(path)), "") << "a whole log is left alone";
     {
         auto recorder = SessionRecorder::append(path, log.intactBytes);
         ASSERT_TRUE(recorder->write({&records[0], 1}));
@@ -269,7 +342,8 @@ TEST(SessionLog, ResumingCutsATornTailAndAppendsAfterWhatIsIntact) {
     EXPECT_TRUE(log.stopped.empty()) << log.stopped;
     ASSERT_EQ(log.records.size(), records.size());
     expectSame(log.records.back(), records[0]);
-    std::filesystem::remove(path);
+    for (const std::string& p : {path, taken, aside})
+        std::filesystem::remove(p);
 }
 
 // [SECTION] a recorded session
@@ -462,6 +536,134 @@ TEST(SessionLog, AResumedSessionKeepsAppendingAndReplaysToItsSave) {
     std::filesystem::remove(second.log);
     std::filesystem::remove(second.saved);
     std::filesystem::remove(again);
+}
+
+namespace {
+
+// Where each record of the log `bytes` starts, by walking the frames' lengths (the header first).
+std::vector<size_t> recordStarts(const std::vector<uint8_t>& bytes) {
+    std::vector<size_t> starts;
+    size_t at = kLogPreambleBytes;
+    for (bool header = true; at + kLogFrameBytes <= bytes.size(); header = false) {
+        if (!header)
+            starts.push_back(at);
+        const uint32_t length = uint32_t(bytes[at]) | uint32_t(bytes[at + 1]) << 8 |
+                                uint32_t(bytes[at + 2]) << 16 | uint32_t(bytes[at + 3]) << 24;
+        at += kLogFrameBytes + length;
+    }
+    return starts;
+}
+
+void writeFile(const std::string& path, const std::vector<uint8_t>& bytes) {
+    std::ofstream(path, std::ios::binary | std::ios::trunc)
+        .write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+}
+
+} // namespace
+
+TEST(SessionLog, ResumingALogDamagedMidwayKeepsItAsideWholeAndGoesOnFromEveryIntactRecord) {
+    std::string logPath;
+    {
+        RecordedSession first("mid-a");
+        logPath = first.log;
+        ASSERT_TRUE(first.joined());
+        first.stroke(first.ada, 10);
+        first.stroke(first.ben, -20);
+        first.server.stop();
+    }
+    const LogContents clean = readSessionLog(logPath);
+    ASSERT_TRUE(clean.stopped.empty()) << clean.stopped;
+    // A byte flipped in the payload of a tool state in the middle of Ben's stroke.
+    std::vector<uint8_t> bytes = fileBytes(logPath);
+    const std::vector<size_t> starts = recordStarts(bytes);
+    ASSERT_EQ(starts.size(), clean.records.size());
+    size_t hit = 0, tools = 0;
+    for (size_t i = 0; i < clean.records.size() && tools < 15; ++i)
+        if (clean.records[i].kind == LogRecord::Kind::Tool && ++tools == 15)
+            hit = i;
+    ASSERT_GT(hit, 0u);
+    bytes[starts[hit] + 20] ^= 0x10;
+    writeFile(logPath, bytes);
+    std::vector<LogRecord> intact = clean.records;
+    intact.erase(intact.begin() + ptrdiff_t(hit));
+
+    ServerConfig c = loopbackServerConfig("ignored");
+    const Resumed resumed = resumeSession(logPath, c, loadVolume, 2);
+    EXPECT_NE(resumed.stopped.find("skipped " + std::to_string(starts[hit + 1] - starts[hit]) +
+                                   " damaged bytes at byte " + std::to_string(starts[hit]) +
+                                   " (1 record, corrupt"),
+              std::string::npos)
+        << resumed.stopped;
+    EXPECT_NE(
+        resumed.stopped.find("kept " + std::to_string(intact.size() - hit) + " records after it"),
+        std::string::npos)
+        << resumed.stopped;
+    EXPECT_EQ(resumed.records, intact.size());
+    EXPECT_EQ(resumed.keptAside, logPath + ".damaged-1");
+    EXPECT_TRUE(fileBytes(resumed.keptAside) == bytes) << "the damaged log, byte for byte";
+    // The resumed server starts from every intact record: the volume a replay of them gives.
+    SessionReplay expected(clean.header, logStartVolume(clean.header, loadVolume));
+    expected.applyAll(intact);
+    EXPECT_TRUE(std::equal(expected.volume().densityData(),
+                           expected.volume().densityData() + expected.volume().voxelCount(),
+                           resumed.volume.densityData()));
+
+    RecordedSession second("mid-b", c, resumed.volume);
+    ASSERT_TRUE(second.joined());
+    second.stroke(second.ada, 30);
+    second.server.stop();
+    ASSERT_EQ(second.server.savedTo(), second.saved);
+    c.recorder.reset();
+    // The log now reads whole: the intact records, the Resume and what came after it.
+    const LogContents after = readSessionLog(logPath);
+    EXPECT_TRUE(after.stopped.empty()) << after.stopped;
+    ASSERT_GT(after.records.size(), intact.size());
+    for (size_t i = 0; i < intact.size(); ++i)
+        expectSame(after.records[i], intact[i]);
+    EXPECT_EQ(after.records[intact.size()].kind, LogRecord::Kind::Resume);
+    const std::string again = tempPath("mid-replayed.nrrd");
+    saveVolume(replayed(logPath), again);
+    EXPECT_TRUE(fileBytes(second.saved) == fileBytes(again))
+        << "the repaired log, across the resume, replays to the resumed server's save";
+    for (const std::string& p : {logPath, resumed.keptAside, second.log, second.saved, again})
+        std::filesystem::remove(p);
+}
+
+TEST(SessionLog, ASessionReplaysWithAnyOneOfItsRecordsLost) {
+    // What a skipped record leaves behind (a tool state of someone whose join was lost, a hold of
+    // a trainee never greeted, a leave of no one) replays without failing.
+    RecordedSession s("lose-one");
+    ASSERT_TRUE(s.joined());
+    const uint16_t ada = s.ada.welcome().clientId;
+    s.stroke(s.ada, 0, 4);
+    Annotate mark;
+    mark.position = {0, 0, 24};
+    mark.label = "entry";
+    s.cho.annotate(mark);
+    s.cho.takeOver(ada);
+    ASSERT_TRUE(pumpUntil(s.all, [&] {
+        return s.ada.annotations().size() == 1 &&
+               s.ada.participants().at(ada).takenOverBy == s.cho.welcome().clientId;
+    }));
+    s.stroke(s.cho, -30, 4);
+    s.cho.takeOver(0);
+    s.ben.requestSync(Sync::Volume);
+    ASSERT_TRUE(pumpUntil(s.all, [&] { return s.ben.sync() == Sync::Volume; }));
+    s.stroke(s.ben, 60, 4);
+    s.server.stop();
+    const LogContents log = readSessionLog(s.log);
+    ASSERT_TRUE(log.stopped.empty()) << log.stopped;
+    const Volume start = logStartVolume(log.header, loadVolume);
+    for (size_t lost = 0; lost < log.records.size(); ++lost) {
+        std::vector<LogRecord> rest = log.records;
+        rest.erase(rest.begin() + ptrdiff_t(lost));
+        SessionReplay replay(log.header, start);
+        replay.applyAll(rest);
+        EXPECT_LE(replay.toolStatesApplied(), s.server.toolStatesApplied()) << "lost " << lost;
+        EXPECT_NO_THROW(replayReportText(replay, log, s.log)) << "lost " << lost;
+    }
+    for (const std::string& p : {s.log, s.saved})
+        std::filesystem::remove(p);
 }
 
 // [SECTION] the assessment, replayed

@@ -1,7 +1,8 @@
 // The session log (`trephine server --record FILE`): an append-only file of everything that
 // changed the session, in the order the server applied it, so a session can be replayed bit for
 // bit (net/session_replay.h), resumed after a crash, or exported. Each record is framed with its
-// length and a CRC-32; a torn or corrupt tail is found, reported in one line and dropped.
+// length and a CRC-32; a damaged stretch is skipped (the records after it are kept), a torn tail
+// dropped, each said in one line.
 // docs/recording.md is the format's reference (versioned: kLogVersion).
 #pragma once
 
@@ -154,8 +155,9 @@ public:
     // A new log at `path` (refused when something is there) starting with `header`, synced.
     static std::unique_ptr<SessionRecorder> create(const std::string& path, LogHeader header,
                                                    int syncIntervalMs = kDefaultSyncIntervalMs);
-    // An existing log to append to: cut back to `intactBytes` first (its torn tail, if any).
-    // Its records are written in the file's format `version`, so an older log stays one format.
+    // An existing log to append to, which must be `intactBytes` long: all intact (a damaged one
+    // is made so by repairSessionLog first; nothing here cuts a file). Its records are written in
+    // the file's format `version`, so an older log stays one format.
     static std::unique_ptr<SessionRecorder> append(const std::string& path, uint64_t intactBytes,
                                                    uint32_t version = kLogVersion,
                                                    int syncIntervalMs = kDefaultSyncIntervalMs);
@@ -196,19 +198,40 @@ private:
 
 // [SECTION] reading
 
+// A stretch of a log that holds no intact record: from a damaged frame to the next intact one,
+// or to the end (a torn or corrupt tail).
+struct LogDamage {
+    uint64_t offset = 0, bytes = 0;
+    size_t recordsBefore = 0; // intact records before it
+    size_t records = 0;       // records in it, as their own lengths chain through it (0: unknown)
+    std::string why;          // its first frame's problem: "torn: ..." or "corrupt: ..."
+    bool tail = false;        // nothing intact after it
+};
+
 struct LogContents {
     LogHeader header;
     uint32_t version = 0;
-    std::vector<LogRecord> records;
-    uint64_t intactBytes = 0; // up to the end of the last intact record
+    std::vector<LogRecord> records; // every intact one, in file order
+    std::vector<LogDamage> damage;  // in file order; empty: the file is whole
+    uint64_t intactBytes = 0;       // the file's bytes less its damage
     uint64_t fileBytes = 0;
-    std::string stopped; // empty: read to the end; else where and why it stopped, one line
+    // The damage said, a line a stretch ('\n' between): where, how many bytes, why, and how
+    // many records were kept after it. Empty: the file is whole.
+    std::string stopped;
 };
 
-// Reads a log; a torn or corrupt record ends it (`stopped` says where and why; the records
-// before it are kept). Throws Error (one line naming `name`) when not even the header is intact.
+// Reads a log. At a damaged frame it scans on byte by byte to the next offset where a frame
+// checks (its length fits, its payload reads as a record, its CRC matches) and goes on from
+// there. Throws Error (one line naming `name`) when not even the header is intact.
 LogContents parseSessionLog(std::span<const uint8_t> bytes, const std::string& name);
+// The same for the file at `path`; refused (Error) when it is no regular file: a FIFO would block.
 LogContents readSessionLog(const std::string& path);
+
+// Makes the damaged log at `path`, as `log` read it, fit to append to: first keeps it aside whole,
+// byte for byte, as PATH.damaged-N (the first N with no file there), then replaces `path` with its
+// intact frames only (log.intactBytes). Returns the name kept aside; "" when `log` had no damage
+// (nothing done). Throws Error (one line) when the file changed since or cannot be written.
+std::string repairSessionLog(const std::string& path, const LogContents& log);
 
 // [SECTION] record fields
 

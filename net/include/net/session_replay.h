@@ -95,11 +95,13 @@ std::string replayReportText(SessionReplay& replay, const LogContents& log,
 
 // A server's start from the log at `path` (`trephine server --resume`): the volume its server
 // held, and in `config` the scene, marks, volume name and drilling settings it had, with a
-// recorder appending to the log (its torn tail cut off) that has written the Resume record.
-// `open` regenerates a volume from its spec. Throws Error (one line) on a log it cannot use.
+// recorder appending to the log that has written the Resume record. A damaged log is first kept
+// aside whole and replaced by its intact records (repairSessionLog). `open` regenerates a volume
+// from its spec. Throws Error (one line) on a log it cannot use.
 struct Resumed {
     Volume volume;
-    std::string stopped; // the log's torn or corrupt tail, said in one line (empty: none)
+    std::string stopped;   // the log's damage, a line a stretch (empty: none)
+    std::string keptAside; // where the damaged log was kept whole ("": it was whole)
     size_t records = 0;
     uint64_t toolStates = 0;
 };
