@@ -277,20 +277,28 @@ int runHeadlessTrainee(const TraineeOptions& o, std::vector<Sample> script) {
     net::ClientThread& client = core.client();
     net::HeadlessView view(o.size);
     core.connect();
+    // The client ended the session over a malformed message of the server's: its reason names
+    // the server and the message ("HOST sent a malformed scene (...)").
+    auto faulted = [&] { return view.snap()->fault.has_value(); };
     if (!view.waitFor(client, 15.0, [&] { return view.connected(); })) {
         const std::string& reason = view.snap()->closeReason;
-        if (reason.rfind("no answer", 0) == 0 || reason.empty())
+        if (reason.empty())
             throw Error("trainee: no answer from " + o.connect +
                         " (is `trephine server` running?)");
+        if (faulted() || reason.rfind("no answer", 0) == 0)
+            throw Error("trainee: " + reason);
         throw Error("trainee: " + o.connect + " refused us: " + reason);
     }
     const net::Welcome welcome = *view.snap()->welcome;
     // The scene follows the welcome on the same reliable channel: presets and the burr site come
     // from the server, so the trainee needs its address only (it never opens a volume).
-    if (!view.waitFor(client, 10.0, [&] { return view.snap()->scene != nullptr; }))
+    if (!view.waitFor(client, 10.0, [&] { return view.snap()->scene != nullptr; })) {
+        if (faulted())
+            throw Error("trainee: " + view.snap()->closeReason);
         throw Error(
             "trainee: " + o.connect + " sent no scene after its welcome" +
             (view.snap()->closeReason.empty() ? std::string() : ": " + view.snap()->closeReason));
+    }
     const std::shared_ptr<const net::ReceivedScene> scene = view.snap()->scene;
     const std::optional<Camera> preset =
         net::presetCamera(scene->scene, o.camera, {o.size, o.size});
@@ -305,8 +313,18 @@ int runHeadlessTrainee(const TraineeOptions& o, std::vector<Sample> script) {
                     std::to_string(o.size) + " asks for " +
                     std::to_string(int64_t(o.size) * o.size) + ": give a smaller --size");
     client.requestView(net::toViewSpec(camera));
-    if (!view.waitFor(client, 30.0, [&] { return view.hasPicture(); }))
-        throw Error("trainee: no image from " + o.connect + ": " + view.snap()->closeReason);
+    if (!view.waitFor(client, 30.0, [&] { return view.hasPicture(); })) {
+        const net::ClientSnapshot& s = *view.snap();
+        if (faulted())
+            throw Error("trainee: " + s.closeReason);
+        if (!s.closeReason.empty())
+            throw Error("trainee: no image from " + o.connect + ": " + s.closeReason);
+        if (s.malformedImages > 0)
+            throw Error("trainee: no image from " + o.connect +
+                        ": the server's images were malformed (" +
+                        std::to_string(s.malformedImages) + " dropped)");
+        throw Error("trainee: no image from " + o.connect + " in 30 s");
+    }
 
     if (o.script == "burrhole") {
         const net::SceneSite* site = net::findSite(scene->scene, net::kDefaultSiteName);

@@ -277,6 +277,7 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
     auto s = std::make_shared<ClientSnapshot>();
     s->state = m_state;
     s->closeReason = m_closeReason;
+    s->fault = m_fault;
     s->attempts = m_attempts;
     s->volumeRefusals = m_volumeRefusals;
     s->publishedUs = nowUs;
@@ -320,6 +321,7 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
         s->packetLoss = st.packetLoss;
         s->packetsLost = st.packetsLost;
         s->malformed = st.malformed();
+        s->malformedImages = c->malformedImages();
         s->rttUs = m_lastRttUs;
         s->rttP50Us = st.rttUs.size() ? st.rttUs.percentile(50) : -1;
         s->hapticRoundTripP50Us =
@@ -380,10 +382,11 @@ std::unique_ptr<SessionClient> ClientThread::connectClient(const ClientConfig& c
     try {
         auto client = std::make_unique<SessionClient>(cc);
         client->continueToolSequence(m_toolSequence);
-        client->connect(parseAddress(m_config.address));
+        client->connect(parseAddress(m_config.address), m_config.address);
         return client;
     } catch (const std::exception& e) {
         m_closeReason = e.what();
+        m_fault.reset();
         return nullptr;
     }
 }
@@ -401,10 +404,11 @@ void ClientThread::runConnection(SessionClient& client, const ClientConfig& cc) 
     try {
         installCallbacks(*cp, cc.renderLocally);
         pollUntilClosed(*cp, cc);
-        if (cp->closed())
+        if (cp->closed()) {
             m_closeReason =
                 cp->closeReason().empty() ? "the connection was lost" : cp->closeReason();
-        else if (m_stop)
+            m_fault = cp->fault();
+        } else if (m_stop)
             cp->disconnect();
         // The server cannot send its whole volume: the next connection asks for DBI (it
         // asked for the volume again at every reconnect, each refusal costing the server a
@@ -415,6 +419,7 @@ void ClientThread::runConnection(SessionClient& client, const ClientConfig& cc) 
         }
     } catch (const std::exception& e) {
         m_closeReason = std::string("the connection failed: ") + e.what();
+        m_fault.reset();
     }
     {
         std::unique_lock lock(m_volumeRw);
@@ -473,13 +478,23 @@ void ClientThread::pollUntilClosed(SessionClient& client, const ClientConfig& cc
         uint64_t now = steadyNowUs();
         if (!cp->welcomed()) {
             if (now - start > uint64_t(m_config.connectTimeoutS * 1e6)) {
-                m_closeReason =
-                    "no answer from " + m_config.address + " (is `trephine server` running?)";
+                // Something came that did not decode or open (a damaged welcome, forgeries):
+                // say so, rather than suggest that nothing listens.
+                const uint64_t unread = cp->stats().malformed();
+                const std::string unreadText =
+                    std::to_string(unread) +
+                    " malformed or forged messages (a faulty network, an on-path attacker, or no "
+                    "Trephine server at that address)";
+                m_closeReason = "no answer from " + m_config.address +
+                                (unread == 0 ? " (is `trephine server` running?)"
+                                             : " that this client could read: " + unreadText);
+                m_fault.reset();
                 break;
             }
         } else if (m_state != LinkState::Connected) {
             m_state = LinkState::Connected;
             m_closeReason.clear();
+            m_fault.reset();
             // A view asked for while connecting, which the welcome shows too large (the
             // client dropped it): not for the next hello either.
             if (m_wantedView &&

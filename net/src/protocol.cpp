@@ -12,7 +12,10 @@ std::string refuseReasonText(uint32_t disconnectData) {
                " and this client version " + std::to_string(kProtocolVersion) +
                ": use the same Trephine build on both ends";
     case RefuseReason::Malformed:
-        return "the server dropped us for sending malformed messages";
+        // The server counts what failed to decode or to open: on a sealed connection mostly
+        // datagrams damaged or forged on the way, which this client never sent.
+        return "the server received malformed or forged datagrams on this connection (a faulty "
+               "network or an on-path attacker) and closed it";
     case RefuseReason::ServerFull:
         return "the server is full";
     case RefuseReason::Shutdown:

@@ -13,6 +13,27 @@
 
 namespace trephine::net {
 
+std::string serverFaultText(const std::string& server, const ServerFault& fault) {
+    const char* what = "message";
+    switch (fault.type) {
+    case MessageType::Welcome:
+        what = "welcome";
+        break;
+    case MessageType::Scene:
+        what = "scene";
+        break;
+    case MessageType::ImageUpdate:
+        what = "image";
+        break;
+    case MessageType::VolumeUpdate:
+        what = "volume";
+        break;
+    default:
+        break;
+    }
+    return server + " sent a malformed " + what + " (" + fault.detail + ")";
+}
+
 SessionClient::SessionClient(ClientConfig config)
     : m_config(std::move(config)), m_host(Host::client()), m_view(m_config.view),
       m_dbi(m_config.view.width, m_config.view.height), m_sync(m_config.sync),
@@ -26,7 +47,8 @@ SessionClient::~SessionClient() {
         disconnect(50);
 }
 
-void SessionClient::connect(const ENetAddress& address) {
+void SessionClient::connect(const ENetAddress& address, std::string serverName) {
+    m_serverName = serverName.empty() ? formatAddress(address) : std::move(serverName);
     m_peer = m_host.connect(address, m_config.protocolVersion);
     m_lastHeardUs = steadyNowUs();
     if (!m_peer)
@@ -154,23 +176,70 @@ void SessionClient::sayHello() {
 }
 
 void SessionClient::onReceive(Channel channel, std::span<const uint8_t> data, uint64_t nowUs) {
+    m_dropped = {};
     if (m_secure) {
         std::vector<uint8_t> plain;
         if (m_secure->open(channel, data, plain) != SecureChannel::Opened::Ok) {
+            // Forged or damaged on the way: nothing the server said, so nothing to end on.
             ++m_sealedDropped;
             m_stats.countMalformed();
         } else if (!handleMessage(plain, nowUs)) {
-            m_stats.countMalformed();
+            dropMalformed(peekMessageType(plain), plain.size());
         }
         return;
     }
-    bool ok = false;
-    if (peekMessageType(data) == uint8_t(MessageType::Handshake))
-        ok = onHandshake(data);
-    else if (m_code.empty()) // an open session
-        ok = handleMessage(data, nowUs);
-    if (!ok)
+    // In the clear: the handshake, or in an open session everything. With a code anything else
+    // is dropped; it cannot be the server's.
+    if (peekMessageType(data) == uint8_t(MessageType::Handshake)) {
+        if (!onHandshake(data))
+            m_stats.countMalformed();
+    } else if (!m_code.empty()) {
         m_stats.countMalformed();
+    } else if (!handleMessage(data, nowUs)) {
+        dropMalformed(peekMessageType(data), data.size());
+    }
+}
+
+std::optional<MessageType> SessionClient::essential(uint8_t type) const {
+    switch (MessageType(type)) {
+    case MessageType::Welcome:
+    case MessageType::Scene: // sent once: no presets, sites or field without it
+        return MessageType(type);
+    case MessageType::ImageUpdate:
+        // The full image the picture waits for; before the first picture, one that does not
+        // decode may be it. A bad rectangle of a picture shown is dropped and nothing more.
+        if (m_dropped.full ? *m_dropped.full && waitingForImage()
+                           : m_wantSync == Sync::Dbi && !m_hasFull)
+            return MessageType::ImageUpdate;
+        return std::nullopt;
+    case MessageType::VolumeUpdate:
+        if (waitingForVolume() && m_dropped.full.value_or(true))
+            return MessageType::VolumeUpdate;
+        return std::nullopt;
+    default:
+        // Of another type, or of none (a damaged type byte: even a welcome's), it names nothing
+        // to end on; before the welcome, ClientThread's timeout says how many there were.
+        return std::nullopt;
+    }
+}
+
+void SessionClient::dropMalformed(uint8_t type, size_t bytes) {
+    m_stats.countMalformed();
+    if (type == uint8_t(MessageType::ImageUpdate))
+        ++m_malformedImages;
+    const std::optional<MessageType> lost = essential(type);
+    if (!lost || m_fault || !m_peer)
+        return;
+    m_fault =
+        ServerFault{*lost, m_dropped.why ? std::string(m_dropped.why)
+                                         : std::to_string(bytes) + " bytes that do not decode"};
+    // At once, and without waiting for the server's acknowledgement: waiting on would only end
+    // in a timeout that names nothing (the headless trainee's "no image" after 30 s).
+    enet_peer_disconnect_now(m_peer, 0);
+    m_peer = nullptr;
+    m_connected = false;
+    m_closed = true;
+    m_closeReason = serverFaultText(m_serverName, *m_fault);
 }
 
 bool SessionClient::onHandshake(std::span<const uint8_t> data) {
@@ -280,11 +349,14 @@ bool SessionClient::onWelcome(std::span<const uint8_t> data, uint64_t nowUs) {
     if (m_requestedViewId != m_viewId && !m_requested.contains(m_requestedViewId))
         m_requestedViewId = m_requested.empty() ? m_viewId : m_requested.rbegin()->first;
     // Voxels that overtook the welcome on their own channel: place them now, in order.
-    for (VolumeUpdate& early : std::exchange(m_earlyVolume, {}))
+    for (VolumeUpdate& early : std::exchange(m_earlyVolume, {})) {
+        m_dropped = {.full = early.full};
         if (!applyVolume(early, nowUs)) {
             ++m_rejected;
-            m_stats.countMalformed();
+            dropMalformed(uint8_t(MessageType::VolumeUpdate), early.payload.size());
         }
+    }
+    m_dropped = {};
     m_earlyVolumeBytes = 0;
     return true;
 }
@@ -294,9 +366,11 @@ bool SessionClient::onScene(std::span<const uint8_t> data) {
     if (!decodeScene(data, received->scene, &received->field))
         return false;
     // The scene of the welcome's volume, or none: another's dims would misplace everything.
-    if (!m_welcome || received->scene.dims != m_welcome->volumeDims ||
+    if (!m_welcome)
+        return reject("it came before the welcome");
+    if (received->scene.dims != m_welcome->volumeDims ||
         received->scene.spacing != m_welcome->spacing)
-        return false;
+        return reject("its volume's dims or spacing differ from the welcome's");
     m_scene = std::move(received);
     ++m_scenes;
     return true;
@@ -359,6 +433,7 @@ bool SessionClient::onImageUpdate(std::span<const uint8_t> data, uint64_t nowUs)
     ImageUpdate u;
     if (!decodeMessage(data, u))
         return false;
+    m_dropped.full = u.full;
     if (!applyImage(u, nowUs)) {
         ++m_rejected;
         return false;
@@ -370,13 +445,14 @@ bool SessionClient::onVolumeUpdate(std::span<const uint8_t> data, uint64_t nowUs
     VolumeUpdate u;
     if (!decodeMessage(data, u))
         return false;
+    m_dropped.full = u.full;
     if (!m_welcome) {
         // The volume channel is not ordered with the control channel: under loss a join's
         // full volume can arrive before the welcome that gives its dims. Keep a few until
         // the welcome comes (bounded: a server that floods them before welcoming is wrong).
         if (m_earlyVolume.size() >= kMaxEarlyVolumeUpdates ||
             m_earlyVolumeBytes + u.payload.size() > kMaxEarlyVolumeBytes)
-            return false;
+            return reject("more volume updates before the welcome than a client holds");
         m_earlyVolumeBytes += u.payload.size();
         m_earlyVolume.push_back(std::move(u));
         return true;
@@ -485,13 +561,13 @@ bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
     uint64_t start = steadyNowUs();
     double gridUs = -1; // the renderer's brick-grid update, part of the apply
     if (!m_welcome)
-        return false; // voxels before the welcome: we cannot place them
+        return reject("it came before the welcome"); // we cannot place its voxels
     const glm::ivec3 dims = m_welcome->volumeDims;
     const Box3i box{{u.x, u.y, u.z}, {u.x + u.sizeX, u.y + u.sizeY, u.z + u.sizeZ}};
     if (box.hi.x > dims.x || box.hi.y > dims.y || box.hi.z > dims.z)
-        return false; // outside the volume of the welcome
+        return reject("its box leaves the welcome's volume");
     if (u.full && !(box == Box3i{glm::ivec3(0), dims}))
-        return false;
+        return reject("a full volume that is not the welcome's whole volume");
     // Not wanted (a DBI client, or one that switched away): stale, not malformed.
     if (m_wantSync != Sync::Volume)
         return true;
@@ -504,7 +580,7 @@ bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
     if (u.full) {
         Volume v;
         if (!decodeVolumeFull(u.payload, u.rawBytes, u.codec, dims, m_welcome->spacing, v))
-            return false;
+            return reject("its voxels do not decode");
         std::unique_lock<std::shared_mutex> lock;
         if (m_volumeMutex)
             lock = std::unique_lock(*m_volumeMutex);
@@ -526,7 +602,7 @@ bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
     } else {
         std::vector<uint8_t> voxels;
         if (!decompressBytes(u.payload, u.codec, u.rawBytes, voxels))
-            return false;
+            return reject("its voxels do not decode");
         const size_t n = size_t(box.count());
         std::span<const uint8_t> densities(voxels.data(), n), materials;
         if (u.materials)
@@ -535,7 +611,7 @@ bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
         if (m_volumeMutex)
             lock = std::unique_lock(*m_volumeMutex);
         if (!applyVolumeBox(*m_volume, box, densities, materials))
-            return false;
+            return reject("its voxels do not fill its box");
         lock = {};
         if (m_renderer) {
             const uint64_t g0 = steadyNowUs();
@@ -626,9 +702,9 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
         return true;
     }
     if (u.x + u.width > view->width || u.y + u.height > view->height)
-        return false; // outside the window
+        return reject("its rectangle leaves the view");
     if (u.full && (u.x != 0 || u.y != 0 || u.width != view->width || u.height != view->height))
-        return false;
+        return reject("a full image that is not the whole view");
     Camera camera = toCamera(*view);
     Dbi patch;
     if (u.predicted) {
@@ -640,7 +716,7 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
         PredictedStatus st = decodePredicted(u.payload, u.rawBytes, u.codec, u.baseHash,
                                              DepthQuantizer(camera), patch);
         if (st == PredictedStatus::Malformed)
-            return false;
+            return reject("its pixels do not decode");
         if (st == PredictedStatus::Ok)
             ++m_predicted;
         if (st == PredictedStatus::BaseMismatch) {
@@ -658,7 +734,7 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
             return true;
         }
     } else if (!decodeImage(u.payload, u.rawBytes, u.codec, u.width, u.height, camera, patch)) {
-        return false;
+        return reject("its pixels do not decode");
     }
     if (switching) {
         m_view = *view;

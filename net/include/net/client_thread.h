@@ -78,7 +78,10 @@ struct ModeFigures {
 struct ClientSnapshot {
     LinkState state = LinkState::Connecting;
     std::string closeReason; // why the last connection ended, empty if none did
-    int attempts = 0;        // connection attempts so far
+    // Set when this client ended it over a malformed message of the server's (closeReason is
+    // serverFaultText of it), not the server or the network.
+    std::optional<ServerFault> fault;
+    int attempts = 0; // connection attempts so far
     // Times the server refused the volume design (its whole volume does not fit a message,
     // RefuseReason::VolumeTooLarge): the thread then asks for DBI on the next connection instead
     // of reconnecting into the same refusal for good.
@@ -119,7 +122,8 @@ struct ClientSnapshot {
     // Statistics.
     uint64_t updatesApplied = 0, fullUpdates = 0, updatesRejected = 0, toolStatesSent = 0,
              relaysReceived = 0, malformed = 0;
-    uint64_t viewsRefused = 0; // views asked for that the server does not serve (too large)
+    uint64_t malformedImages = 0; // image updates among the malformed (SessionClient's)
+    uint64_t viewsRefused = 0;    // views asked for that the server does not serve (too large)
     double rttUs = -1, rttP50Us = -1;
     double hapticRoundTripP50Us = -1, hapticRoundTripP99Us = -1; // tool state -> its force model
     uint64_t lastHeardUs = 0; // steadyNowUs() of the last datagram from the server (0: none yet)
@@ -264,6 +268,7 @@ private:
     // Network-thread state.
     LinkState m_state = LinkState::Connecting;
     std::string m_closeReason;
+    std::optional<ServerFault> m_fault; // of the last connection, as m_closeReason
     int m_attempts = 0;
     int m_volumeRefusals = 0;
     uint32_t m_toolSequence = 0; // carried from one connection to the next (run() only)

@@ -56,6 +56,15 @@ struct ClientConfig {
     std::string code;
 };
 
+// Why a client ended its session itself: a message of the server's that it cannot go without (its
+// welcome, its scene, the full image or volume its picture waits for) was malformed.
+struct ServerFault {
+    MessageType type = MessageType::Welcome;
+    std::string detail; // what was wrong with it, e.g. "37 bytes that do not decode"
+};
+// "HOST sent a malformed scene (DETAIL)": the session's failure text, the one place it is made.
+std::string serverFaultText(const std::string& server, const ServerFault& fault);
+
 class SessionClient {
 public:
     explicit SessionClient(ClientConfig config);
@@ -64,7 +73,8 @@ public:
     SessionClient& operator=(const SessionClient&) = delete;
 
     // Starts connecting; progress happens in poll(). The hello goes out once connected.
-    void connect(const ENetAddress& address);
+    // `serverName` names the server in failure texts (empty: the address).
+    void connect(const ENetAddress& address, std::string serverName = {});
     // Services the network for up to timeoutMs, handles every pending event, flushes sends.
     // Returns the number of events handled.
     int poll(uint32_t timeoutMs);
@@ -74,8 +84,14 @@ public:
     bool connected() const { return m_peer && m_connected; }
     bool welcomed() const { return m_welcome.has_value(); }
     bool closed() const { return m_closed; }
-    // Why the server closed the connection (refuseReasonText), empty while connected.
+    // Why the connection closed (refuseReasonText, or serverFaultText of fault()), empty while
+    // connected.
     const std::string& closeReason() const { return m_closeReason; }
+    // The first malformed message the session could not go without: the client then closed the
+    // connection at once, rather than wait for what would not come. None otherwise.
+    const std::optional<ServerFault>& fault() const { return m_fault; }
+    // Image updates dropped as malformed; one after the first picture costs a rectangle only.
+    uint64_t malformedImages() const { return m_malformedImages; }
     // The disconnect's data (a RefuseReason when the server closed the connection), 0 while open.
     uint32_t closeCode() const { return m_closeCode; }
     const Welcome& welcome() const { return *m_welcome; }
@@ -250,6 +266,26 @@ private:
     void onEvent(const ENetEvent& ev);
     void onReceive(Channel channel, std::span<const uint8_t> data, uint64_t nowUs);
     bool handleMessage(std::span<const uint8_t> data, uint64_t nowUs);
+    // Every server message that could not be used ends here: counted, and when the session cannot
+    // go without it (essential), the connection closes at once with serverFaultText.
+    void dropMalformed(uint8_t type, size_t bytes);
+    std::optional<MessageType> essential(uint8_t type) const;
+    // What a handler knew of the message it dropped (reset before each message).
+    struct Dropped {
+        const char* why = nullptr; // what was wrong; null: it did not decode
+        std::optional<bool> full;  // [image, volume] it decoded: whether it was a full one
+    };
+    bool reject(const char* why) {
+        m_dropped.why = why;
+        return false;
+    }
+    // Whether the picture waits for a full image (a view, a switch to DBI) or a full volume.
+    bool waitingForImage() const {
+        return m_wantSync == Sync::Dbi && (m_sync != Sync::Dbi || !hasFullImage());
+    }
+    bool waitingForVolume() const {
+        return m_wantSync == Sync::Volume && (m_sync != Sync::Volume || !m_volume);
+    }
     // The handshake's steps (docs/security.md), then the hello once it may go.
     bool onHandshake(std::span<const uint8_t> data);
     void sayHello();
@@ -287,6 +323,10 @@ private:
     uint64_t m_lastHeardUs = 0;
     uint32_t m_lastReceiveTime = 0; // ENet's stamp of the peer's last datagram (ms, its clock)
     std::string m_closeReason;
+    std::string m_serverName; // how failure texts name the server
+    std::optional<ServerFault> m_fault;
+    Dropped m_dropped;
+    uint64_t m_malformedImages = 0;
     std::optional<Welcome> m_welcome;
     std::shared_ptr<const ReceivedScene> m_scene;
     uint64_t m_scenes = 0;
