@@ -87,6 +87,13 @@ bool SessionGate::mayAnswer(const Peer& p, uint64_t now) {
     }
     if (now < b.nextExcessUs)
         return false;
+    m_excessTokens = std::min(AttemptLimit::kExcessInAllPerS,
+                              m_excessTokens + double(now - std::min(now, m_excessAtUs)) * 1e-6 *
+                                                   AttemptLimit::kExcessInAllPerS);
+    m_excessAtUs = now;
+    if (m_excessTokens < 1.0)
+        return false;
+    m_excessTokens -= 1.0;
     b.nextExcessUs = now + uint64_t(AttemptLimit::kExcessS * 1e6);
     return true;
 }

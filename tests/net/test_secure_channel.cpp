@@ -372,6 +372,49 @@ TEST(SessionGate, WrongCodesFromOneAddressAreBoundedAndTheRightCodeWaitsItsTurn)
     EXPECT_GT(book.read([](const ServerReport& r) { return r.security; }).attemptsLimited, 3000u);
 }
 
+// Many addresses guessing at once share the slow lanes' budget: in all they test no more than
+// each address's burst and refill plus kExcessInAllPerS a second.
+TEST(SessionGate, ManyAddressesGuessingTogetherStayWithinTheBoundInAll) {
+    ReportBook book;
+    SessionGate gate(codedConfig(), book);
+    constexpr int kAddresses = 40;
+    std::vector<GateClient> guessers;
+    for (int a = 0; a < kAddresses; ++a)
+        guessers.emplace_back("GUESS" + std::to_string(7000 + a));
+    std::map<uint16_t, int> held; // connection -> its guesser
+    uint16_t id = 1;
+    int answered = 0;
+    const uint64_t start = 1000;
+    uint64_t now = start;
+    for (; now < start + 60'000'000; now += 100'000) { // every address tries every 0.1 s
+        for (int a = 0; a < kAddresses; ++a) {
+            const uint16_t cid = id++;
+            const SessionGate::Result r =
+                join(gate, cid, uint32_t(100 + a), guessers[size_t(a)], now);
+            answered += r.refuse == uint32_t(RefuseReason::WrongCode);
+            if (r.kind == SessionGate::Result::Kind::Held)
+                held[cid] = a;
+            else
+                gate.leave(cid);
+        }
+        for (auto& [hid, answer] : gate.release(now)) {
+            answered += gate.receive(hid, Channel::Control,
+                                     guessers[size_t(held.at(hid))].confirm(answer), now)
+                            .kind == SessionGate::Result::Kind::Refuse;
+            gate.leave(hid);
+            held.erase(hid);
+        }
+    }
+    const double t = double(now - start) * 1e-6;
+    const int bound = int(kAddresses * (AttemptLimit::kBurst + t / AttemptLimit::kRefillS) +
+                          AttemptLimit::kExcessInAllPerS * t) +
+                      1;
+    EXPECT_LE(answered, bound);
+    EXPECT_GT(answered, int(AttemptLimit::kExcessInAllPerS * t) / 2) << "the slow lanes serve";
+    std::printf("[ wrong codes ] %d addresses tested %d guesses in %.0f s (bound in all: %d)\n",
+                kAddresses, answered, t, bound);
+}
+
 // The probe that kept a classroom out: one address guesses a wrong code every 2 s while 30
 // participants with the right codes join from the same address (a NAT), all at once.
 TEST(SessionGate, ThirtyParticipantsBehindAGuessersAddressEachJoinWithinFiveSeconds) {

@@ -26,13 +26,16 @@ namespace trephine::net {
 // seconds; a code proven gives its attempt back. Past them an offer waits, never refused: the
 // address's waiting offers are answered in arrival order, one every kExcessS, and each code
 // proven lets the next one through at once. So participants behind one address (a classroom's
-// NAT) join while a guesser there waits its turn, and each answer is one guess tested: at most
-// kBurst + t / kRefillS + t / kExcessS + (codes proven there) in t seconds per address
-// (3,730 in the first hour), with every address held to that bound apart.
+// NAT) join while a guesser there waits its turn. Every answer is one guess tested, so in t
+// seconds an address tests at most kBurst + t / kRefillS + t / kExcessS guesses (3,730 in the
+// first hour), plus one per code proven there; the slow lanes of all addresses together answer
+// at most kExcessInAllPerS a second, so A addresses test at most A (kBurst + t / kRefillS) +
+// kExcessInAllPerS t (docs/security.md).
 struct AttemptLimit {
     static constexpr double kBurst = 10.0;
     static constexpr double kRefillS = 30.0;
     static constexpr double kExcessS = 1.0;
+    static constexpr double kExcessInAllPerS = 8.0;
 };
 
 class SessionGate {
@@ -119,6 +122,9 @@ private:
     std::vector<uint8_t> m_plain;                  // the last message opened
     std::vector<uint8_t> m_reply;
     uint64_t m_nextTurn = 1;
+    // The slow lanes' shared budget (AttemptLimit::kExcessInAllPerS).
+    double m_excessTokens = AttemptLimit::kExcessInAllPerS;
+    uint64_t m_excessAtUs = 0;
 };
 
 } // namespace trephine::net
