@@ -39,7 +39,8 @@ LinkMessage linkMessage(net::LinkState state, int attempts, int attemptsWhenConn
                              closeReason, attempts);
     else
         m.text = fmt::format("Connecting to {} (attempt {})...", address, attempts);
-    if (failures >= kHintAfterFailures)
+    // The hints are for a server that may not be there: a busy one answered.
+    if (failures >= kHintAfterFailures && closeReason.find("is busy") == std::string::npos)
         m.text += hints(address, failures, lost);
     m.dim = havePicture;
     return m;

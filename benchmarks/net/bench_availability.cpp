@@ -12,13 +12,17 @@
 #include "libsim/skull.h"
 #include "libsim/stats.h"
 #include "net/session_client.h"
+#include "net/session_gate.h"
 #include "net/session_server.h"
 #include "net/view.h"
 
 #include <benchmark/benchmark.h>
+#include <fmt/format.h>
 #include <glm/gtx/quaternion.hpp>
 #include <nlohmann/json.hpp>
 
+#include <algorithm>
+#include <cmath>
 #include <cstdlib>
 #include <fstream>
 #include <memory>
@@ -181,12 +185,16 @@ void underAttack(benchmark::State& state, Hostile kind) {
         SessionServer server(skull, config);
         server.start();
         std::optional<testing::HalfOpenFlood> flood;
-        std::optional<testing::Reconnectors> reconnecting;
         std::optional<GreedyPeer> greedy;
+        // The probe's shapes (issue 35): 64 addresses, ~5000 CONNECTs a second in all; 17
+        // addresses x 32 ENet peers that stay silent and reconnect after the hello timeout.
         if (kind == Hostile::HalfOpen)
-            flood.emplace(server.port(), 8, 4, 5000); // ~6400 CONNECTs a second
+            flood.emplace(server.port(), 64, 1, 12800);
+        std::vector<std::unique_ptr<testing::Reconnectors>> reconnecting;
         if (kind == Hostile::Reconnecting)
-            reconnecting.emplace(server.port(), 32, 3, kProtocolVersion);
+            for (uint8_t a = 2; a < 19; ++a)
+                reconnecting.push_back(std::make_unique<testing::Reconnectors>(server.port(), 32, a,
+                                                                               kProtocolVersion));
         if (kind == Hostile::Greedy || kind == Hostile::Holding) {
             greedy.emplace(server.port(), skull, 2048, kind == Hostile::Greedy ? 5000 : 0);
             while (!greedy->welcomed())
@@ -195,8 +203,9 @@ void underAttack(benchmark::State& state, Hostile kind) {
         std::this_thread::sleep_for(std::chrono::milliseconds(500)); // the attack under way
         f = traineeRun(server, skull);
         const nlohmann::json a = nlohmann::json::parse(server.reportJson()).at("availability");
-        for (const char* k : {"connects_rate_limited", "connects_address_busy",
-                              "connects_pool_full", "handshakes_reset", "views_deferred"})
+        for (const char* k :
+             {"connects_rate_limited", "connects_address_busy", "connects_pool_full",
+              "connects_displaced", "handshakes_reset", "views_deferred"})
             state.counters[k] = a.at(k).get<double>();
         state.counters["hello_timeouts"] = double(server.helloTimeouts());
     }
@@ -258,6 +267,100 @@ void memoryBound(benchmark::State& state) {
     }
 }
 
+// 30 participants with the trainee code join at once from the address of a guesser that has
+// spent the address's burst of attempts and tries a wrong code every 2 s (issue 35's probe):
+// each participant's join time (connect -> welcome) beside the 5 s target, and the guesses the
+// server answered beside the bound it states (AttemptLimit, docs/security.md).
+void classroomBehindAGuesser(benchmark::State& state) {
+    const Volume skull = makeSkull(48);
+    constexpr int kClass = 30;
+    for (auto _ : state) {
+        ServerConfig config;
+        config.port = 0;
+        config.volumeName = "skull:48";
+        config.traineeCode = "TRAINEE42";
+        config.instructorCode = "TEACH3R99";
+        config.maxClients = kClass + 4;
+        SessionServer server(skull, config);
+        server.start();
+        const ENetAddress at = parseAddress("127.0.0.1:" + std::to_string(server.port()));
+        const auto clientConfig = [&](const std::string& name, const std::string& code) {
+            ClientConfig cc;
+            cc.name = name;
+            cc.code = code;
+            cc.view = toViewSpec(cameraPreset("paper", skull, {64, 64}));
+            return cc;
+        };
+        std::vector<std::unique_ptr<SessionClient>> guessers;
+        int guessed = 0;
+        uint64_t nextGuess = 0;
+        const auto pumpGuesser = [&](uint64_t now) {
+            if (now >= nextGuess) {
+                guessers.push_back(std::make_unique<SessionClient>(
+                    clientConfig("guesser", fmt::format("GUESS{}", 1000 + guessed))));
+                guessers.back()->connect(at);
+                // The burst (and one more) at once, then every 2 s.
+                nextGuess = now + (++guessed <= int(AttemptLimit::kBurst) + 1 ? 0 : 2000000);
+            }
+            for (auto& g : guessers)
+                g->poll(0);
+            std::erase_if(guessers, [](const auto& g) { return g->closed(); });
+        };
+        const uint64_t start = steadyNowUs();
+        while (steadyNowUs() - start < 6000000) {
+            pumpGuesser(steadyNowUs());
+            std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        }
+        std::vector<std::unique_ptr<SessionClient>> joiners;
+        std::vector<double> joinS(kClass, -1.0);
+        const uint64_t classStart = steadyNowUs();
+        for (int i = 0; i < kClass; ++i) {
+            joiners.push_back(
+                std::make_unique<SessionClient>(clientConfig(fmt::format("p{}", i), "TRAINEE42")));
+            joiners.back()->connect(at);
+        }
+        int joined = 0, failed = 0;
+        std::string failure;
+        while (joined + failed < kClass && steadyNowUs() - classStart < 30000000) {
+            const uint64_t now = steadyNowUs();
+            pumpGuesser(now);
+            for (int i = 0; i < kClass; ++i) {
+                if (joinS[size_t(i)] >= 0)
+                    continue;
+                joiners[size_t(i)]->poll(0);
+                if (joiners[size_t(i)]->welcomed()) {
+                    joinS[size_t(i)] = double(steadyNowUs() - classStart) * 1e-6;
+                    ++joined;
+                } else if (joiners[size_t(i)]->closed()) {
+                    joinS[size_t(i)] = 1e9;
+                    failure = joiners[size_t(i)]->closeReason();
+                    ++failed;
+                }
+            }
+            std::this_thread::sleep_for(std::chrono::milliseconds(1));
+        }
+        const double elapsedS = double(steadyNowUs() - start) * 1e-6;
+        const nlohmann::json sec = nlohmann::json::parse(server.reportJson()).at("security");
+        std::vector<double> sorted = joinS;
+        std::sort(sorted.begin(), sorted.end());
+        state.counters["joined"] = joined;
+        state.counters["join_p50_s"] = sorted[kClass / 2];
+        state.counters["join_max_s"] = sorted.back();
+        state.counters["target_join_s"] = 5.0;
+        state.counters["guesses_answered"] = sec.at("codes_refused").get<double>();
+        state.counters["offers_waited"] = sec.at("attempts_limited").get<double>();
+        state.counters["guess_bound"] =
+            std::floor(AttemptLimit::kBurst + elapsedS / AttemptLimit::kRefillS +
+                       elapsedS / AttemptLimit::kExcessS) +
+            joined;
+        if (failed)
+            state.SetLabel(std::to_string(failed) + " refused: " + failure);
+        joiners.clear();
+        guessers.clear();
+        server.stop();
+    }
+}
+
 } // namespace
 
 BENCHMARK_CAPTURE(underAttack, quiet, Hostile::None)->Iterations(1)->UseRealTime();
@@ -265,4 +368,5 @@ BENCHMARK_CAPTURE(underAttack, half_open_flood, Hostile::HalfOpen)->Iterations(1
 BENCHMARK_CAPTURE(underAttack, reconnecting, Hostile::Reconnecting)->Iterations(1)->UseRealTime();
 BENCHMARK_CAPTURE(underAttack, greedy_views, Hostile::Greedy)->Iterations(1)->UseRealTime();
 BENCHMARK_CAPTURE(underAttack, holding_large_view, Hostile::Holding)->Iterations(1)->UseRealTime();
+BENCHMARK(classroomBehindAGuesser)->Iterations(1)->UseRealTime()->Unit(benchmark::kSecond);
 BENCHMARK(memoryBound)->Iterations(1)->UseRealTime()->Unit(benchmark::kMillisecond);

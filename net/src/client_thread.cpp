@@ -485,9 +485,13 @@ void ClientThread::pollUntilClosed(SessionClient& client, const ClientConfig& cc
                     std::to_string(unread) +
                     " malformed or forged messages (a faulty network, an on-path attacker, or no "
                     "Trephine server at that address)";
-                m_closeReason = "no answer from " + m_config.address +
-                                (unread == 0 ? " (is `trephine server` running?)"
-                                             : " that this client could read: " + unreadText);
+                m_closeReason =
+                    cp->busyRefusals() > 0
+                        ? m_config.address + " is busy: " + cp->closeReason() + " (" +
+                              std::to_string(cp->busyRefusals()) + " tries)"
+                        : "no answer from " + m_config.address +
+                              (unread == 0 ? " (is `trephine server` running?)"
+                                           : " that this client could read: " + unreadText);
                 m_fault.reset();
                 break;
             }

@@ -43,7 +43,7 @@ std::string refuseReasonText(uint32_t disconnectData) {
         return "too many wrong codes from this address: try again in " + std::to_string(version) +
                " s";
     case RefuseReason::Busy:
-        return "the server has too many connections waiting to join: try again in a few seconds";
+        return "the server is busy: every place for joining is taken (retrying)";
     case RefuseReason::Idle:
         return "the server dropped us for saying nothing for too long";
     case RefuseReason::ViewsFull:

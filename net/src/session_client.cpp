@@ -7,6 +7,8 @@
 #include "net/image_delta.h"
 #include "net/view.h"
 
+#include <sodium.h>
+
 #include <cstdlib>
 #include <mutex>
 #include <utility>
@@ -49,6 +51,7 @@ SessionClient::~SessionClient() {
 
 void SessionClient::connect(const ENetAddress& address, std::string serverName) {
     m_serverName = serverName.empty() ? formatAddress(address) : std::move(serverName);
+    m_address = address;
     m_peer = m_host.connect(address, m_config.protocolVersion);
     m_lastHeardUs = steadyNowUs();
     if (!m_peer)
@@ -90,6 +93,11 @@ bool SessionClient::sendRaw(Channel channel, std::span<const uint8_t> bytes) {
 }
 
 int SessionClient::poll(uint32_t timeoutMs) {
+    if (m_retryAtUs && steadyNowUs() >= m_retryAtUs) {
+        m_retryAtUs = 0;
+        m_peer = m_host.connect(m_address, m_config.protocolVersion);
+        m_lastHeardUs = steadyNowUs();
+    }
     int n = m_host.service(timeoutMs, [this](const ENetEvent& ev) { onEvent(ev); });
     if (m_peer && m_connected) {
         // Any datagram counts as heard, a fragment of a large update too: ENet stamps the peer
@@ -135,6 +143,19 @@ void SessionClient::onEvent(const ENetEvent& ev) {
         return;
     }
     case ENET_EVENT_TYPE_DISCONNECT:
+        if (!m_welcome && !m_localRefusal && (ev.data & 0xff) == uint32_t(RefuseReason::Busy)) {
+            // Not joined yet, and told to wait: a fresh connection (and handshake) after a
+            // wait, with jitter so a class refused together does not come back together.
+            m_connected = false;
+            m_peer = nullptr;
+            m_spake.reset();
+            m_secure.reset();
+            m_closeReason = refuseReasonText(ev.data);
+            const uint32_t waitUs = std::min(2000000u, 250000u << std::min(m_busyRefusals, 3u));
+            ++m_busyRefusals;
+            m_retryAtUs = steadyNowUs() + waitUs / 2 + randombytes_uniform(waitUs / 2);
+            return;
+        }
         m_connected = false;
         m_closed = true;
         m_closeCode = m_localRefusal ? m_localRefusal : ev.data;

@@ -381,7 +381,7 @@ TEST(AvailabilityPolicy, TooManyWaitingConnectionsAreRefusedBusy) {
     EXPECT_EQ(rig.p().connect(kProtocolVersion, rig.now, out), 0);
     EXPECT_TRUE(disconnected(out, 0, RefuseReason::Busy));
     EXPECT_EQ(rig.availability().refusedBusy, 1u);
-    EXPECT_NE(refuseReasonText(uint32_t(RefuseReason::Busy)).find("try again"), std::string::npos);
+    EXPECT_NE(refuseReasonText(uint32_t(RefuseReason::Busy)).find("retrying"), std::string::npos);
 }
 
 TEST(AvailabilityPolicy, AParticipantSilentForTheIdleTimeoutIsSentAway) {

@@ -3,6 +3,8 @@
 #include "ui/layout.h"
 #include "ui/link_message.h"
 
+#include "net/protocol.h"
+
 #include <gtest/gtest.h>
 
 using namespace trephine;
@@ -34,6 +36,11 @@ TEST(LinkMessage, AWrongAddressOrPortGetsItsLikelyCausesAfterAFewAttempts) {
     EXPECT_TRUE(has(m.text, "wrong address")) << m.text;
     EXPECT_TRUE(has(m.text, "UDP port 7778")) << m.text;
     EXPECT_TRUE(linkMessage(LinkState::Connected, 3, -1, "", addr, true).text.empty());
+    // A server that said it is busy is there: no hints that it is not.
+    const std::string busy = net::refuseReasonText(uint32_t(net::RefuseReason::Busy));
+    m = linkMessage(LinkState::Retrying, 5, -1, addr + " is busy: " + busy, addr, false);
+    EXPECT_TRUE(has(m.text, "every place for joining is taken")) << m.text;
+    EXPECT_FALSE(has(m.text, "Likely causes")) << m.text;
 }
 
 TEST(LinkMessage, ALostServerDimsThePictureAndSaysSo) {

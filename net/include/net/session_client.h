@@ -94,6 +94,9 @@ public:
     uint64_t malformedImages() const { return m_malformedImages; }
     // The disconnect's data (a RefuseReason when the server closed the connection), 0 while open.
     uint32_t closeCode() const { return m_closeCode; }
+    // Refusals with Busy before the welcome: the server is there but its places for joining are
+    // taken, so the client connects again by itself after a wait of 0.25 s doubling to 2 s.
+    uint32_t busyRefusals() const { return m_busyRefusals; }
     const Welcome& welcome() const { return *m_welcome; }
     // The server's scene (net/scene.h: extent, camera presets, sites, landmarks, the surgical
     // field), null until it arrives right after the welcome. Immutable: a reconnect's new client
@@ -323,6 +326,9 @@ private:
     uint64_t m_lastHeardUs = 0;
     uint32_t m_lastReceiveTime = 0; // ENet's stamp of the peer's last datagram (ms, its clock)
     std::string m_closeReason;
+    ENetAddress m_address{}; // the server's, for a retry after Busy
+    uint32_t m_busyRefusals = 0;
+    uint64_t m_retryAtUs = 0; // when to connect again after Busy (0: not waiting)
     std::string m_serverName; // how failure texts name the server
     std::optional<ServerFault> m_fault;
     Dropped m_dropped;
