@@ -1,6 +1,9 @@
 #include "net/admission.h"
 
 #include "net/protocol.h"
+#include "net/secure_channel.h"
+
+#include <sodium.h>
 
 #include <enet/protocol.h>
 
@@ -85,6 +88,30 @@ std::vector<uint8_t> refusalDatagram(std::span<const uint8_t> d, uint32_t data) 
 
 // [SECTION] rules
 
+ConnectCookies::ConnectCookies() {
+    initSodium();
+    randombytes_buf(m_key.data(), m_key.size());
+}
+
+uint32_t ConnectCookies::at(const ENetAddress& from, uint64_t epoch) const {
+    uint8_t in[14];
+    std::memcpy(in, &from.host, 4);
+    std::memcpy(in + 4, &from.port, 2);
+    std::memcpy(in + 6, &epoch, 8);
+    uint8_t out[crypto_shorthash_BYTES];
+    crypto_shorthash(out, in, sizeof in, m_key.data());
+    return uint32_t(out[0]) | uint32_t(out[1]) << 8 | uint32_t(out[2]) << 16;
+}
+
+uint32_t ConnectCookies::cookie(const ENetAddress& from, uint64_t nowUs) const {
+    return at(from, nowUs / kEpochUs);
+}
+
+bool ConnectCookies::valid(uint32_t connectId, const ENetAddress& from, uint64_t nowUs) const {
+    const uint64_t epoch = nowUs / kEpochUs;
+    return connectId == at(from, epoch) || (epoch > 0 && connectId == at(from, epoch - 1));
+}
+
 ConnectBuckets::ConnectBuckets(double perS, double burst, uint64_t salt)
     : m_perS(perS), m_burst(burst), m_salt(salt) {}
 
@@ -165,7 +192,8 @@ AdmissionGate::AdmissionGate(ENetHost* host, const AdmissionLimits& limits, Admi
                              OnReset onReset)
     : m_host(host), m_limits(limits), m_admitted(std::move(admitted)),
       m_onReset(std::move(onReset)), m_buckets(limits.connectsPerS, limits.connectBurst),
-      m_refusals(2.0, 2.0), m_timer(host->peerCount), m_occupant(host->peerCount, {0, 0}) {}
+      m_refusals(2.0, 2.0), m_cookieReplies(16.0, 32.0), m_timer(host->peerCount),
+      m_occupant(host->peerCount, {0, 0}) {}
 
 uint64_t AdmissionGate::occupiedSince(size_t index) {
     auto& [connectId, since] = m_occupant.at(index);
@@ -206,6 +234,13 @@ int AdmissionGate::judge() {
         m_waiting.push_back({p.address.host, occupiedSince(i)});
         m_waitingPeers.push_back(&p);
     }
+    // ENet copies the connect ID as it is (the client's byte order, x86's on both ends).
+    if (m_waiting.size() >= m_limits.cookiesFrom && !m_cookies.valid(connectId, from, m_nowUs)) {
+        ++m_counts.cookieless;
+        answer(m_cookieReplies, uint32_t(RefuseReason::Retry) | m_cookies.cookie(from, m_nowUs)
+                                                                    << 8);
+        return 1;
+    }
     const ConnectDecision decision =
         judgeConnect(m_limits, m_buckets, from.host, m_waiting, m_nowUs);
     switch (decision.verdict) {
@@ -225,12 +260,18 @@ int AdmissionGate::judge() {
         ++m_counts.poolFull;
         break;
     }
-    if (m_refusals.take(from.host, m_nowUs)) {
-        const std::vector<uint8_t> refusal = refusalDatagram(d, uint32_t(RefuseReason::Busy));
-        ENetBuffer b{const_cast<uint8_t*>(refusal.data()), refusal.size()};
-        enet_socket_send(m_host->socket, &from, &b, 1);
-    }
+    answer(m_refusals, uint32_t(RefuseReason::Busy));
     return 1;
+}
+
+void AdmissionGate::answer(ConnectBuckets& budget, uint32_t data) {
+    const ENetAddress& from = m_host->receivedAddress;
+    if (!budget.take(from.host, m_nowUs))
+        return;
+    const std::vector<uint8_t> refusal =
+        refusalDatagram({m_host->receivedData, m_host->receivedDataLength}, data);
+    ENetBuffer b{const_cast<uint8_t*>(refusal.data()), refusal.size()};
+    enet_socket_send(m_host->socket, &from, &b, 1);
 }
 
 void AdmissionGate::reap(uint64_t nowUs) {

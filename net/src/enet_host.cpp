@@ -129,8 +129,18 @@ Host::~Host() {
         enet_host_destroy(m_host);
 }
 
-ENetPeer* Host::connect(const ENetAddress& address, uint32_t connectData) {
-    return enet_host_connect(m_host, &address, size_t(Channel::Count), connectData);
+ENetPeer* Host::connect(const ENetAddress& address, uint32_t connectData,
+                        std::optional<uint32_t> connectId) {
+    // ENet 1.3.17 draws a connection's ID as ++randomSeed; a build that draws it otherwise
+    // cannot return a cookie, which the check below catches (test_enet_host guards it too).
+    if (connectId)
+        m_host->randomSeed = *connectId - 1;
+    ENetPeer* peer = enet_host_connect(m_host, &address, size_t(Channel::Count), connectData);
+    if (peer && connectId && peer->connectID != *connectId) {
+        enet_peer_reset(peer);
+        return nullptr;
+    }
+    return peer;
 }
 
 int Host::service(uint32_t timeoutMs, const EventHandler& handler) {

@@ -46,6 +46,9 @@ std::string refuseReasonText(uint32_t disconnectData) {
         return "the server is busy: every place for joining is taken (retrying)";
     case RefuseReason::Idle:
         return "the server dropped us for saying nothing for too long";
+    case RefuseReason::Retry:
+        return "the server asked this client to connect again with a cookie, and did not take it "
+               "(does the address change between tries?)";
     case RefuseReason::ViewsFull:
         return "the server serves as many view pixels as it can: try a smaller window";
     }

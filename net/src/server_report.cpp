@@ -34,6 +34,7 @@ Json availability(const AvailabilityCounters& a) {
             {"connects_pool_full", a.admission.poolFull},
             {"handshakes_reset", a.admission.handshakesReset},
             {"connects_displaced", a.admission.displaced},
+            {"connects_cookieless", a.admission.cookieless},
             {"refused_busy", a.refusedBusy},
             {"idle_timeouts", a.idleTimeouts},
             {"views_deferred", a.viewsDeferred},

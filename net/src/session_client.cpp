@@ -143,19 +143,8 @@ void SessionClient::onEvent(const ENetEvent& ev) {
         return;
     }
     case ENET_EVENT_TYPE_DISCONNECT:
-        if (!m_welcome && !m_localRefusal && (ev.data & 0xff) == uint32_t(RefuseReason::Busy)) {
-            // Not joined yet, and told to wait: a fresh connection (and handshake) after a
-            // wait, with jitter so a class refused together does not come back together.
-            m_connected = false;
-            m_peer = nullptr;
-            m_spake.reset();
-            m_secure.reset();
-            m_closeReason = refuseReasonText(ev.data);
-            const uint32_t waitUs = std::min(2000000u, 250000u << std::min(m_busyRefusals, 3u));
-            ++m_busyRefusals;
-            m_retryAtUs = steadyNowUs() + waitUs / 2 + randombytes_uniform(waitUs / 2);
+        if (!m_welcome && !m_localRefusal && retryAfter(ev.data))
             return;
-        }
         m_connected = false;
         m_closed = true;
         m_closeCode = m_localRefusal ? m_localRefusal : ev.data;
@@ -175,6 +164,37 @@ void SessionClient::onEvent(const ENetEvent& ev) {
     default:
         return;
     }
+}
+
+bool SessionClient::retryAfter(uint32_t disconnectData) {
+    const auto reason = RefuseReason(disconnectData & 0xff);
+    // A Retry more than a few times in a row is a cookie that does not hold: ended as refused.
+    if (reason != RefuseReason::Busy && (reason != RefuseReason::Retry || m_cookieRetries >= 3))
+        return false;
+    // Not joined yet, and told to come back: a fresh connection (and handshake).
+    m_connected = false;
+    m_peer = nullptr;
+    m_spake.reset();
+    m_secure.reset();
+    m_closeReason = refuseReasonText(disconnectData);
+    if (reason == RefuseReason::Retry) {
+        ++m_cookieRetries;
+        m_peer = m_host.connect(m_address, m_config.protocolVersion, disconnectData >> 8);
+        m_lastHeardUs = steadyNowUs();
+        if (!m_peer) {
+            m_closed = true;
+            m_closeCode = disconnectData;
+            m_closeReason = "the server asks for an admission cookie that this client's ENet "
+                            "cannot send (it chooses connect IDs itself)";
+        }
+        return true;
+    }
+    // Busy: after a wait, with jitter so a class refused together does not come back together.
+    m_cookieRetries = 0;
+    const uint32_t waitUs = std::min(2000000u, 250000u << std::min(m_busyRefusals, 3u));
+    ++m_busyRefusals;
+    m_retryAtUs = steadyNowUs() + waitUs / 2 + randombytes_uniform(waitUs / 2);
+    return true;
 }
 
 void SessionClient::sayHello() {

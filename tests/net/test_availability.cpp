@@ -239,6 +239,25 @@ TEST(Admission, SixteenFloodingAddressesCannotKeepANewcomerOut) {
               1);
 }
 
+TEST(Admission, ACookieHoldsForItsAddressAndPortForOneEpochMore) {
+    const ConnectCookies cookies;
+    ENetAddress a{};
+    a.host = 0x0100007f;
+    a.port = 40000;
+    const uint64_t t = 5 * ConnectCookies::kEpochUs + 1;
+    const uint32_t c = cookies.cookie(a, t);
+    EXPECT_LT(c, 1u << 24) << "it travels in a disconnect's data, above the reason's byte";
+    EXPECT_TRUE(cookies.valid(c, a, t));
+    EXPECT_TRUE(cookies.valid(c, a, t + ConnectCookies::kEpochUs)) << "the next epoch too";
+    EXPECT_FALSE(cookies.valid(c, a, t + 2 * ConnectCookies::kEpochUs)) << "then it expires";
+    ENetAddress otherPort = a, otherHost = a;
+    otherPort.port = 40001;
+    otherHost.host = 0x0200007f;
+    EXPECT_FALSE(cookies.valid(c, otherPort, t));
+    EXPECT_FALSE(cookies.valid(c, otherHost, t));
+    EXPECT_NE(ConnectCookies().cookie(a, t), c) << "a key of its own per server run";
+}
+
 // A refused CONNECT is answered with a DISCONNECT to the connecting peer, carrying the reason.
 TEST(Admission, ARefusalAnswersTheConnectingPeerByItsOwnId) {
     std::vector<uint8_t> connect = connectDatagram();

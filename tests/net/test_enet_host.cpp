@@ -1,6 +1,7 @@
 #include "net/enet_host.h"
 
 #include "libsim/error.h"
+#include "net/protocol.h"
 
 #include <gtest/gtest.h>
 
@@ -67,4 +68,14 @@ TEST(EnetHost, LoopbackConnectDeliversConnectDataAndMessagesPerChannel) {
             EXPECT_EQ(text, "pose");
         }
     }
+}
+
+// Admission cookies travel as the connect ID (net/admission.h): this ENet must carry the one
+// asked for.
+TEST(EnetHost, AConnectionCarriesTheConnectIdAskedFor) {
+    Host client = Host::client();
+    const ENetAddress to = parseAddress("127.0.0.1:9");
+    ENetPeer* peer = client.connect(to, kProtocolVersion, 0xabcdefu);
+    ASSERT_NE(peer, nullptr);
+    EXPECT_EQ(peer->connectID, 0xabcdefu);
 }

@@ -8,6 +8,7 @@
 
 #include "gate_client.h"
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <map>
@@ -380,7 +381,7 @@ TEST(SessionGate, ManyAddressesGuessingTogetherStayWithinTheBoundInAll) {
     constexpr int kAddresses = 40;
     std::vector<GateClient> guessers;
     for (int a = 0; a < kAddresses; ++a)
-        guessers.emplace_back("GUESS" + std::to_string(7000 + a));
+        guessers.emplace_back(fmt::format("GUESS{}", 7000 + a));
     std::map<uint16_t, int> held; // connection -> its guesser
     uint16_t id = 1;
     int answered = 0;

@@ -44,7 +44,8 @@ TEST(SessionAvailability, AHalfOpenFloodDoesNotLockATraineeOut) {
         << trainee.closeReason();
     const nlohmann::json a = availabilityOf(server);
     EXPECT_GT(a.at("connects_rate_limited").get<uint64_t>() +
-                  a.at("connects_address_busy").get<uint64_t>(),
+                  a.at("connects_address_busy").get<uint64_t>() +
+                  a.at("connects_cookieless").get<uint64_t>(),
               0u)
         << a.dump();
     EXPECT_GT(a.at("handshakes_reset").get<uint64_t>(), 0u) << "half-open slots reclaimed";
@@ -133,4 +134,25 @@ TEST(SessionAvailability, ARefusedConnectionHearsTheServerIsBusyAndJoinsOnceTher
     ASSERT_TRUE(pumpUntil(
         {&trainee}, [&] { return trainee.hasFullImage(); }, 20.0))
         << trainee.closeReason();
+}
+
+// With cookies asked for from the first connection, a client returns the server's cookie and
+// joins; spoofed CONNECTs (a flood that never reads its answers) take no slot at all.
+TEST(SessionAvailability, AFloodThatCannotReceiveSpendsNoSlotWhenCookiesAreAskedFor) {
+    const Volume sphere = makeSphere(24);
+    ServerConfig sc = loopbackServerConfig("sphere:24");
+    sc.admission.cookiesFrom = 0;
+    SessionServer server(sphere, sc);
+    server.start();
+    HalfOpenFlood flood(server.port(), 8, 4, 5000);
+    ASSERT_TRUE(waitFor([&] { return flood.sent() >= 2000; }, 20.0));
+    SessionClient trainee(trephine::testing::namedClientConfig(sphere, "ada", Role::Trainee, 32));
+    trainee.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil(
+        {&trainee}, [&] { return trainee.hasFullImage(); }, 20.0))
+        << trainee.closeReason();
+    const nlohmann::json a = availabilityOf(server);
+    EXPECT_GE(a.at("connects_cookieless").get<uint64_t>(), 2000u) << a.dump();
+    EXPECT_EQ(a.at("handshakes_reset").get<uint64_t>(), 0u) << "no half-open slot was spent";
+    EXPECT_EQ(a.at("connects_pool_full").get<uint64_t>(), 0u);
 }

@@ -5,6 +5,8 @@
 // tells them from the trainee at 127.0.0.1.
 #pragma once
 
+#include "net/protocol.h"
+
 #include <arpa/inet.h>
 #include <enet/enet.h>
 #include <enet/protocol.h>
@@ -89,7 +91,8 @@ private:
 };
 
 // `count` ENet clients on 127.0.0.<address> that connect, never say hello, and reconnect at once
-// whenever they are dropped, until destroyed.
+// whenever they are dropped, until destroyed. They know the protocol: asked for an admission
+// cookie (RefuseReason::Retry), they connect again with it, as a client does.
 class Reconnectors {
 public:
     Reconnectors(uint16_t port, int count, uint8_t address, uint32_t connectData)
@@ -123,6 +126,11 @@ private:
                         ++m_connects;
                     else if (ev.type == ENET_EVENT_TYPE_RECEIVE)
                         enet_packet_destroy(ev.packet);
+                    else if (ev.type == ENET_EVENT_TYPE_DISCONNECT &&
+                             (ev.data & 0xff) == uint32_t(net::RefuseReason::Retry)) {
+                        h->randomSeed = (ev.data >> 8) - 1; // ENet's connect ID: ++randomSeed
+                        enet_host_connect(h, &server, 5, m_connectData);
+                    }
                 }
                 // Dropped (or refused): straight back.
                 if (h->peers[0].state == ENET_PEER_STATE_DISCONNECTED)

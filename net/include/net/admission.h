@@ -29,6 +29,24 @@ bool isEnetConnect(std::span<const uint8_t> datagram);
 // without the server keeping any state for it. Empty when `connect` is not a CONNECT.
 std::vector<uint8_t> refusalDatagram(std::span<const uint8_t> connect, uint32_t data);
 
+// Return-routability under pressure: a cookie is a keyed hash (SipHash, a random key per server
+// run) of a CONNECT's source address and port and the time in 10 s epochs, 24 bits. While the
+// waiting slots are filling, a CONNECT must carry its cookie as its connect ID; one without is
+// answered statelessly with a Retry refusal carrying the cookie (refusalDatagram), and the client
+// connects again with it. A source that cannot receive, a spoofed one, then spends no slot.
+class ConnectCookies {
+public:
+    ConnectCookies();
+    uint32_t cookie(const ENetAddress& from, uint64_t nowUs) const;
+    // The cookie of this epoch or the last (a client's retries keep working across a boundary).
+    bool valid(uint32_t connectId, const ENetAddress& from, uint64_t nowUs) const;
+    static constexpr uint64_t kEpochUs = 10'000'000;
+
+private:
+    uint32_t at(const ENetAddress& from, uint64_t epoch) const;
+    std::array<uint8_t, 16> m_key{};
+};
+
 // New connections per source address: a bucket of `burst` tokens refilled at `perS` a second.
 // Addresses hash into a fixed table, so spoofed sources cannot grow it: two addresses that share
 // a bucket share its tokens (a stricter limit for both, never a looser one).
@@ -66,6 +84,8 @@ struct AdmissionLimits {
     double connectsPerS = 8.0;     // new connections a second per address, after...
     double connectBurst = 24.0;    // ...a burst of this many
     uint64_t handshakeTimeoutUs = 3000000; // ENet handshake or goodbye unfinished: slot reset
+    // Cookies are asked for once this many connections wait (0: always; ConnectCookies).
+    size_t cookiesFrom = 64;
 };
 
 // A connection not yet admitted: its source address and since when it has held its slot.
@@ -103,6 +123,7 @@ private:
 // Figures of refused and reclaimed connections (read into the server's report).
 struct AdmissionCounts {
     uint64_t rateLimited = 0, addressBusy = 0, poolFull = 0, handshakesReset = 0, displaced = 0;
+    uint64_t cookieless = 0; // CONNECTs without a valid cookie while cookies were asked for
     bool operator==(const AdmissionCounts&) const = default;
 };
 
@@ -127,6 +148,8 @@ public:
 
     // Sets the time the intercept judges by (the network thread's `now` of this pass).
     void setNow(uint64_t nowUs) { m_nowUs = nowUs; }
+    // Answers the CONNECT just received with a refusal carrying `data`, if `budget` allows.
+    void answer(ConnectBuckets& budget, uint32_t data);
     // Resets every slot whose handshake or goodbye has outlasted the limit.
     void reap(uint64_t nowUs);
     const AdmissionCounts& counts() const { return m_counts; }
@@ -141,7 +164,9 @@ private:
     Admitted m_admitted;
     OnReset m_onReset;
     ConnectBuckets m_buckets;
-    ConnectBuckets m_refusals; // refusals answered per address: no flood is reflected 1:1
+    ConnectBuckets m_refusals;      // refusals answered per address: no flood is reflected 1:1
+    ConnectBuckets m_cookieReplies; // cookies sent per address (a class behind a NAT needs many)
+    ConnectCookies m_cookies;
     SlotTimer m_timer;
     std::vector<std::pair<uint32_t, uint64_t>> m_occupant; // per slot: connect ID, since
     std::vector<WaitingPeer> m_waiting;                    // judge()'s scratch

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 
@@ -68,8 +69,11 @@ public:
     ENetHost* get() const { return m_host; }
     uint16_t port() const { return m_host ? m_host->address.port : 0; }
 
-    // Starts connecting; the protocol version travels in the connect data.
-    ENetPeer* connect(const ENetAddress& address, uint32_t connectData);
+    // Starts connecting; the protocol version travels in the connect data. With `connectId`
+    // (an admission cookie, net/admission.h) the connection carries that connect ID: null when
+    // this ENet cannot be made to.
+    ENetPeer* connect(const ENetAddress& address, uint32_t connectData,
+                      std::optional<uint32_t> connectId = std::nullopt);
 
     // Waits up to timeoutMs for the first event, then drains every event already pending and
     // flushes queued sends. Packets in receive events are destroyed after the handler returns.

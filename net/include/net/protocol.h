@@ -37,8 +37,9 @@ namespace trephine::net {
 // SPAKE2, then every message sealed: docs/security.md) and Remove; refusals WrongCode, Removed,
 // TooManyAttempts; refusals Busy, Idle, ViewsFull (docs/session.md, "Availability").
 // 10: ReplayState and ReplayControl (a replay's timeline: net/replay_protocol.h); Codes (type
-// 26: an instructor issues a new role code while the server runs).
-inline constexpr uint32_t kProtocolVersion = 10;
+// 26: an instructor issues a new role code while the server runs). 11: admission cookies
+// (refusal Retry); Busy before the welcome means "connect again" (docs/session.md).
+inline constexpr uint32_t kProtocolVersion = 11;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
 enum class RefuseReason : uint32_t {
@@ -58,6 +59,9 @@ enum class RefuseReason : uint32_t {
     Busy = 10,      // too many connections wait to be admitted (from this address, or in all)
     Idle = 11,      // said nothing for ServerConfig::idleTimeoutS
     ViewsFull = 12, // the views served together would pass ServerConfig::maxTotalViewPixels
+    // Admission under pressure (net/admission.h): connect again with the cookie in bits 8 and up
+    // as the connect ID. A client not yet welcomed does so at once.
+    Retry = 13,
 };
 enum class CodeRefusal : uint32_t {
     Wrong = 0,               // the code proved none of the session's

@@ -267,6 +267,8 @@ public:
 
 private:
     void onEvent(const ENetEvent& ev);
+    // Before the welcome, a Busy or Retry refusal connects again (true) instead of closing.
+    bool retryAfter(uint32_t disconnectData);
     void onReceive(Channel channel, std::span<const uint8_t> data, uint64_t nowUs);
     bool handleMessage(std::span<const uint8_t> data, uint64_t nowUs);
     // Every server message that could not be used ends here: counted, and when the session cannot
@@ -328,8 +330,9 @@ private:
     std::string m_closeReason;
     ENetAddress m_address{}; // the server's, for a retry after Busy
     uint32_t m_busyRefusals = 0;
-    uint64_t m_retryAtUs = 0; // when to connect again after Busy (0: not waiting)
-    std::string m_serverName; // how failure texts name the server
+    uint32_t m_cookieRetries = 0; // connections again with the server's cookie (Retry)
+    uint64_t m_retryAtUs = 0;     // when to connect again after Busy (0: not waiting)
+    std::string m_serverName;     // how failure texts name the server
     std::optional<ServerFault> m_fault;
     Dropped m_dropped;
     uint64_t m_malformedImages = 0;
