@@ -1,9 +1,10 @@
 // Availability under hostile peers, over loopback (docs/session.md, "Availability"): a trainee's
 // join time and update latency (tool state arrival -> rectangle applied) while (a) nobody else
 // is there, (b) a flood of half-open CONNECTs runs from 64 addresses (~5000 a second), (c) 17
-// addresses x 32 silent peers reconnect as soon as they are dropped, (d) a greedy peer sends the most expensive view requests its
-// budget allows (the largest view, a new camera every 5 ms), (e) a peer holds the largest view
-// of the trainee's site (every change is rendered for it too). Each prints beside its target: join
+// addresses x 32 silent peers reconnect as soon as they are dropped, (d) a greedy peer sends the
+// most expensive view requests its budget allows (the largest view, a new camera every 5 ms), (e) a
+// peer holds the largest view of the trainee's site (every change is rendered for it too). Each
+// prints beside its target: join
 // <= 2 s; p99 <= 2x the figure without hostile peers (run (a) first, in the same process). The
 // memory run holds 15 peers asking for distinct 2048^2 views and prints the process's peak
 // resident memory growth beside the bound the server states. The classroom run: 30 participants
@@ -210,7 +211,7 @@ void underAttack(benchmark::State& state, Hostile kind) {
         const nlohmann::json a = nlohmann::json::parse(server.reportJson()).at("availability");
         for (const char* k :
              {"connects_rate_limited", "connects_address_busy", "connects_pool_full",
-              "connects_displaced", "handshakes_reset", "views_deferred"})
+              "connects_displaced", "connects_cookieless", "handshakes_reset", "views_deferred"})
             state.counters[k] = a.at(k).get<double>();
         state.counters["hello_timeouts"] = double(server.helloTimeouts());
     }

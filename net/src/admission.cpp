@@ -140,9 +140,14 @@ ConnectDecision judgeConnect(const AdmissionLimits& limits, ConnectBuckets& buck
                              uint32_t address, std::span<const WaitingPeer> waiting,
                              uint64_t nowUs) {
     ConnectDecision d;
+    // Waiting peers per address, counted once: the pool is full at every CONNECT of a flood.
+    std::vector<uint32_t> addresses(waiting.size());
+    std::transform(waiting.begin(), waiting.end(), addresses.begin(),
+                   [](const WaitingPeer& w) { return w.address; });
+    std::sort(addresses.begin(), addresses.end());
     const auto held = [&](uint32_t a) {
-        return size_t(std::count_if(waiting.begin(), waiting.end(),
-                                    [&](const WaitingPeer& w) { return w.address == a; }));
+        const auto [lo, hi] = std::equal_range(addresses.begin(), addresses.end(), a);
+        return size_t(hi - lo);
     };
     const size_t mine = held(address);
     // Refusals that spend no token come first, so a client that retries once the slots free
@@ -222,6 +227,12 @@ int AdmissionGate::judge() {
         return 0;
     const ENetAddress& from = m_host->receivedAddress;
     const uint32_t connectId = connectIdOf(d);
+    // ENet copies the connect ID as it is (the client's byte order, x86's on both ends).
+    const bool cookie = m_cookies.valid(connectId, from, m_nowUs);
+    // Under pressure a CONNECT without its cookie is answered before any look at the slots: a
+    // flood of them costs a hash each (the count is the last CONNECT's or reap's).
+    if (!cookie && m_lastWaiting >= m_limits.cookiesFrom)
+        return askForCookie();
     m_waiting.clear();
     m_waitingPeers.clear();
     for (size_t i = 0; i < m_host->peerCount; ++i) {
@@ -234,13 +245,9 @@ int AdmissionGate::judge() {
         m_waiting.push_back({p.address.host, occupiedSince(i)});
         m_waitingPeers.push_back(&p);
     }
-    // ENet copies the connect ID as it is (the client's byte order, x86's on both ends).
-    if (m_waiting.size() >= m_limits.cookiesFrom && !m_cookies.valid(connectId, from, m_nowUs)) {
-        ++m_counts.cookieless;
-        answer(m_cookieReplies, uint32_t(RefuseReason::Retry) | m_cookies.cookie(from, m_nowUs)
-                                                                    << 8);
-        return 1;
-    }
+    m_lastWaiting = m_waiting.size();
+    if (!cookie && m_waiting.size() >= m_limits.cookiesFrom)
+        return askForCookie();
     const ConnectDecision decision =
         judgeConnect(m_limits, m_buckets, from.host, m_waiting, m_nowUs);
     switch (decision.verdict) {
@@ -264,6 +271,13 @@ int AdmissionGate::judge() {
     return 1;
 }
 
+int AdmissionGate::askForCookie() {
+    ++m_counts.cookieless;
+    const ENetAddress& from = m_host->receivedAddress;
+    answer(m_cookieReplies, uint32_t(RefuseReason::Retry) | m_cookies.cookie(from, m_nowUs) << 8);
+    return 1;
+}
+
 void AdmissionGate::answer(ConnectBuckets& budget, uint32_t data) {
     const ENetAddress& from = m_host->receivedAddress;
     if (!budget.take(from.host, m_nowUs))
@@ -275,8 +289,10 @@ void AdmissionGate::answer(ConnectBuckets& budget, uint32_t data) {
 }
 
 void AdmissionGate::reap(uint64_t nowUs) {
+    m_lastWaiting = 0;
     for (size_t i = 0; i < m_host->peerCount; ++i) {
         ENetPeer* p = &m_host->peers[i];
+        m_lastWaiting += p->state != ENET_PEER_STATE_DISCONNECTED && !m_admitted(p);
         if (!m_timer.expired(i, transient(ENetPeerState(p->state)), nowUs,
                              m_limits.handshakeTimeoutUs))
             continue;

@@ -17,6 +17,7 @@
 
 #include "loopback.h"
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
 #include <zlib.h>
@@ -491,7 +492,7 @@ TEST(SessionLog, TwoTraineesMarksAndATakeOverReplayToTheSavedVolumeByteForByte) 
     EXPECT_EQ(std::count(csv.begin(), csv.end(), '\n'), 32);
     EXPECT_NE(csv.find(",0,burr:5\n"), std::string::npos) << "paused states cut nothing";
     EXPECT_EQ(trajectoryFileName(byName["Dr. Cho"]),
-              "0" + std::to_string(byName["Dr. Cho"].ordinal) + "-Dr__Cho-instructor.csv");
+              fmt::format("0{}-Dr__Cho-instructor.csv", byName["Dr. Cho"].ordinal));
     for (const std::string& p : {s.log, s.saved, again})
         std::filesystem::remove(p);
 }

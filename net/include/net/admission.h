@@ -148,6 +148,7 @@ public:
 
     // Sets the time the intercept judges by (the network thread's `now` of this pass).
     void setNow(uint64_t nowUs) { m_nowUs = nowUs; }
+    int askForCookie(); // drops the CONNECT just received, answering with its cookie
     // Answers the CONNECT just received with a refusal carrying `data`, if `budget` allows.
     void answer(ConnectBuckets& budget, uint32_t data);
     // Resets every slot whose handshake or goodbye has outlasted the limit.
@@ -171,6 +172,7 @@ private:
     std::vector<std::pair<uint32_t, uint64_t>> m_occupant; // per slot: connect ID, since
     std::vector<WaitingPeer> m_waiting;                    // judge()'s scratch
     std::vector<ENetPeer*> m_waitingPeers;
+    size_t m_lastWaiting = 0; // connections waiting, as last counted
     AdmissionCounts m_counts;
     uint64_t m_nowUs = 0;
 };
