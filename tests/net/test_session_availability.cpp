@@ -23,33 +23,40 @@ nlohmann::json availabilityOf(const SessionServer& server) {
     return nlohmann::json::parse(server.reportJson()).at("availability");
 }
 
+// A trainee joins a server of `sc` while 8 addresses x 4 sockets send half-open CONNECTs (200 a
+// second each); the server's availability figures once the trainee has its first image.
+nlohmann::json joinUnderHalfOpenFlood(const ServerConfig& sc) {
+    const Volume sphere = makeSphere(24);
+    SessionServer server(sphere, sc);
+    server.start();
+    HalfOpenFlood flood(server.port(), 8, 4, 5000);
+    EXPECT_EQ(flood.sockets(), 32u);
+    EXPECT_TRUE(waitFor([&] { return flood.sent() >= 2000; }, 20.0));
+    SessionClient trainee(trephine::testing::namedClientConfig(sphere, "ada", Role::Trainee, 32));
+    trainee.connect(loopback(server.port()));
+    EXPECT_TRUE(pumpUntil(
+        {&trainee}, [&] { return trainee.hasFullImage(); }, 20.0))
+        << trainee.closeReason();
+    nlohmann::json a = availabilityOf(server);
+    a["refused_server_full"] = server.refusedFull();
+    return a;
+}
+
 } // namespace
 
 // Without admission, a few dozen CONNECTs filled ENet's maxClients + 4 slots for ~30 s.
 TEST(SessionAvailability, AHalfOpenFloodDoesNotLockATraineeOut) {
-    const Volume sphere = makeSphere(24);
     ServerConfig sc = loopbackServerConfig("sphere:24");
     sc.maxClients = 2;
     sc.admission.handshakeTimeoutUs = 300000;
-    SessionServer server(sphere, sc);
-    server.start();
-    HalfOpenFlood flood(server.port(), 8, 4, 5000); // 8 addresses x 4 sockets, 200/s each
-    ASSERT_EQ(flood.sockets(), 32u);
-    while (flood.sent() < 2000)
-        std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    SessionClient trainee(trephine::testing::namedClientConfig(sphere, "ada", Role::Trainee, 32));
-    trainee.connect(loopback(server.port()));
-    ASSERT_TRUE(pumpUntil(
-        {&trainee}, [&] { return trainee.hasFullImage(); }, 20.0))
-        << trainee.closeReason();
-    const nlohmann::json a = availabilityOf(server);
+    const nlohmann::json a = joinUnderHalfOpenFlood(sc);
     EXPECT_GT(a.at("connects_rate_limited").get<uint64_t>() +
                   a.at("connects_address_busy").get<uint64_t>() +
                   a.at("connects_cookieless").get<uint64_t>(),
               0u)
         << a.dump();
     EXPECT_GT(a.at("handshakes_reset").get<uint64_t>(), 0u) << "half-open slots reclaimed";
-    EXPECT_EQ(server.refusedFull(), 0u);
+    EXPECT_EQ(a.at("refused_server_full").get<uint64_t>(), 0u);
 }
 
 // Peers that complete ENet's handshake but never say hello, reconnecting whenever dropped, hold
@@ -139,19 +146,9 @@ TEST(SessionAvailability, ARefusedConnectionHearsTheServerIsBusyAndJoinsOnceTher
 // With cookies asked for from the first connection, a client returns the server's cookie and
 // joins; spoofed CONNECTs (a flood that never reads its answers) take no slot at all.
 TEST(SessionAvailability, AFloodThatCannotReceiveSpendsNoSlotWhenCookiesAreAskedFor) {
-    const Volume sphere = makeSphere(24);
     ServerConfig sc = loopbackServerConfig("sphere:24");
     sc.admission.cookiesFrom = 0;
-    SessionServer server(sphere, sc);
-    server.start();
-    HalfOpenFlood flood(server.port(), 8, 4, 5000);
-    ASSERT_TRUE(waitFor([&] { return flood.sent() >= 2000; }, 20.0));
-    SessionClient trainee(trephine::testing::namedClientConfig(sphere, "ada", Role::Trainee, 32));
-    trainee.connect(loopback(server.port()));
-    ASSERT_TRUE(pumpUntil(
-        {&trainee}, [&] { return trainee.hasFullImage(); }, 20.0))
-        << trainee.closeReason();
-    const nlohmann::json a = availabilityOf(server);
+    const nlohmann::json a = joinUnderHalfOpenFlood(sc);
     EXPECT_GE(a.at("connects_cookieless").get<uint64_t>(), 2000u) << a.dump();
     EXPECT_EQ(a.at("handshakes_reset").get<uint64_t>(), 0u) << "no half-open slot was spent";
     EXPECT_EQ(a.at("connects_pool_full").get<uint64_t>(), 0u);
