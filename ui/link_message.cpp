@@ -38,7 +38,10 @@ LinkMessage linkMessage(net::LinkState state, int attempts, int attemptsWhenConn
         m.text = fmt::format("Not connected to {}: {}\nRetrying (attempt {})...", address,
                              closeReason, attempts);
     else
-        m.text = fmt::format("Connecting to {} (attempt {})...", address, attempts);
+        // While connecting, the reason is the last attempt's, or what the server said of this
+        // one (busy: the client tries again by itself).
+        m.text = fmt::format("Connecting to {} (attempt {})...{}{}", address, attempts,
+                             closeReason.empty() ? "" : "\n", closeReason);
     // The hints are for a server that may not be there: a busy one answered.
     if (failures >= kHintAfterFailures && closeReason.find("is busy") == std::string::npos)
         m.text += hints(address, failures, lost);

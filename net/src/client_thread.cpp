@@ -477,6 +477,8 @@ void ClientThread::pollUntilClosed(SessionClient& client, const ClientConfig& cc
         cp->poll(1);
         uint64_t now = steadyNowUs();
         if (!cp->welcomed()) {
+            if (cp->busyRefusals() > 0)
+                m_closeReason = cp->closeReason(); // the server is there: the window says so
             if (now - start > uint64_t(m_config.connectTimeoutS * 1e6)) {
                 // Something came that did not decode or open (a damaged welcome, forgeries):
                 // say so, rather than suggest that nothing listens.

@@ -36,8 +36,11 @@ TEST(LinkMessage, AWrongAddressOrPortGetsItsLikelyCausesAfterAFewAttempts) {
     EXPECT_TRUE(has(m.text, "wrong address")) << m.text;
     EXPECT_TRUE(has(m.text, "UDP port 7778")) << m.text;
     EXPECT_TRUE(linkMessage(LinkState::Connected, 3, -1, "", addr, true).text.empty());
-    // A server that said it is busy is there: no hints that it is not.
     const std::string busy = net::refuseReasonText(uint32_t(net::RefuseReason::Busy));
+    // Told busy while connecting (the client tries again by itself): said at once.
+    m = linkMessage(LinkState::Connecting, 1, -1, busy, addr, false);
+    EXPECT_EQ(m.text, "Connecting to 10.0.0.7:7778 (attempt 1)...\n" + busy);
+    // A server that said it is busy is there: no hints that it is not.
     m = linkMessage(LinkState::Retrying, 5, -1, addr + " is busy: " + busy, addr, false);
     EXPECT_TRUE(has(m.text, "every place for joining is taken")) << m.text;
     EXPECT_FALSE(has(m.text, "Likely causes")) << m.text;
