@@ -14,7 +14,7 @@
 #include "libsim/error.h"
 #include "libsim/haptics.h"
 #include "libsim/skull.h"
-#include "libsim/tool.h"
+#include "libsim/tool_catalogue.h"
 #include "libsim_devices/devices.h"
 #include "libsim_image/dbi_io.h"
 #include "libsim_image/volume_slices.h"
@@ -65,7 +65,7 @@ std::vector<net::ScriptSample> feedScript(const SurfaceSite& site, float feed, d
         net::ScriptSample s;
         s.t = i / 100.0;
         s.tool.toolKind = uint8_t(ToolKind::Perforator);
-        s.tool.diameterMm = kPerforatorDiameterMm;
+        s.tool.diameterMm = toolType(ToolKind::Perforator).defaultDiameterMm;
         s.tool.position = site.position - site.normal * (-1.0f + feed * float(s.t));
         s.tool.orientation = glm::rotation(glm::vec3(0, 0, 1), site.normal);
         s.tool.speed = 1.0f;

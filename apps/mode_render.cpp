@@ -9,7 +9,7 @@
 #include "libsim/error.h"
 #include "libsim/renderer.h"
 #include "libsim/thread_pool.h"
-#include "libsim/tool.h"
+#include "libsim/tool_catalogue.h"
 #include "libsim/volume_io.h"
 #include "libsim_image/dbi_io.h"
 #include "libsim_image/volume_slices.h"
@@ -105,10 +105,11 @@ DrillAt parseDrill(const std::string& text) {
               float(v[3]), text};
     if (d.depthMm < 0.0f || d.depthMm > 100.0f)
         throw Error("--drill-at " + text + ": depth must be 0 to 100 mm");
-    if (!(d.diameterMm >= kBurrMinDiameterMm && d.diameterMm <= kBurrMaxDiameterMm))
+    const ToolType& burr = toolType(ToolKind::Burr);
+    if (!(d.diameterMm >= burr.minDiameterMm && d.diameterMm <= burr.maxDiameterMm))
         throw Error("--drill-at " + text + ": the burr diameter must be " +
-                    std::to_string(int(kBurrMinDiameterMm)) + " to " +
-                    std::to_string(int(kBurrMaxDiameterMm)) + " mm");
+                    std::to_string(int(burr.minDiameterMm)) + " to " +
+                    std::to_string(int(burr.maxDiameterMm)) + " mm");
     return d;
 }
 

@@ -9,7 +9,7 @@
 #include "libsim/error.h"
 #include "libsim/haptics.h"
 #include "libsim/skull.h"
-#include "libsim/tool.h"
+#include "libsim/tool_catalogue.h"
 #include "libsim_devices/devices.h"
 #include "libsim_image/dbi_io.h"
 #include "net/client_model.h"
@@ -197,14 +197,15 @@ std::vector<Sample> csvScript(const std::string& path) {
             return float(d);
         };
         try {
-            if (tool.rfind("burr:", 0) == 0)
-                shape = ToolShape::burr(diameter(5));
-            else if (tool == "perforator")
-                shape = ToolShape::perforator();
-            else if (tool.rfind("perforator:", 0) == 0)
-                shape = ToolShape::perforator(diameter(11));
-            else
-                throw fail("tool must be burr:D or perforator[:D], not '" + tool + "'");
+            // NAME:D, or NAME alone for the tool's usual size (ToolType::name).
+            const size_t colon = tool.find(':');
+            const std::optional<ToolKind> kind = toolKindNamed(tool.substr(0, colon));
+            if (!kind)
+                throw fail("tool must be NAME:D or NAME (burr, perforator, diamond), not '" + tool +
+                           "'");
+            shape =
+                ToolShape::of(*kind, colon == std::string::npos ? toolType(*kind).defaultDiameterMm
+                                                                : diameter(colon + 1));
         } catch (const Error& e) {
             if (std::string(e.what()).rfind("script ", 0) == 0)
                 throw;

@@ -1,5 +1,7 @@
 #include "ui/mesh.h"
 
+#include "libsim/tool_catalogue.h"
+
 #include <cmath>
 #include <glm/geometric.hpp>
 #include <glm/gtc/constants.hpp>
@@ -8,22 +10,22 @@ namespace trephine::ui {
 
 namespace {
 constexpr glm::vec4 kSteel{0.72f, 0.74f, 0.78f, 1.0f};
-constexpr glm::vec4 kBurr{0.86f, 0.74f, 0.42f, 1.0f};
 constexpr glm::vec4 kOwner{0.0f, 0.0f, 0.0f, 0.0f}; // alpha 0: the owner's colour
 } // namespace
 
 MeshData makeToolMesh(const ToolShape& shape) {
     MeshData m;
     const float r = shape.diameterMm * 0.5f;
+    const glm::vec4 head(toolType(shape.kind).colour, 1.0f);
     float top; // where the shaft meets the handpiece's nose
-    if (shape.kind == ToolKind::Perforator) {
+    if (!shape.sphere()) {
         const float tip = shape.tipLengthMm, cut = shape.cutLengthMm;
-        m.addLathe({{0.0f, 0.0f}, {r * 0.35f, tip * 0.4f}, {r, tip}}, kBurr);
+        m.addLathe({{0.0f, 0.0f}, {r * 0.35f, tip * 0.4f}, {r, tip}}, head);
         m.addLathe({{r, tip}, {r, tip + cut}, {2.5f, tip + cut + 2.0f}}, kSteel);
         m.addLathe({{2.5f, tip + cut + 2.0f}, {2.5f, tip + cut + 14.0f}}, kSteel);
         top = tip + cut + 14.0f;
     } else {
-        m.addSphere({0, 0, 0}, r, kBurr);
+        m.addSphere({0, 0, 0}, r, head);
         const float shaft = std::min(0.8f, r * 0.6f);
         m.addLathe({{shaft, 0.0f}, {shaft, 26.0f}}, kSteel);
         top = 26.0f;

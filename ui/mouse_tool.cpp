@@ -39,7 +39,7 @@ std::optional<glm::vec3> rayOnPlane(const Camera& camera, int px, int py, glm::v
 
 ToolPose toolPoseAt(glm::vec3 surface, const Camera& camera, const ToolShape& shape, float pushMm) {
     const glm::vec3 axis = glm::normalize(camera.eye - surface);
-    const float out = shape.kind == ToolKind::Burr ? shape.diameterMm * 0.5f : 0.0f;
+    const float out = shape.sphere() ? shape.diameterMm * 0.5f : 0.0f;
     ToolPose pose;
     pose.position = surface + axis * (out - pushMm);
     pose.orientation = glm::rotation(glm::vec3(0, 0, 1), axis);
@@ -62,7 +62,7 @@ std::optional<glm::vec3> surfaceNormal(const Dbi& dbi, const Camera& camera, int
 }
 
 ToolPose toolPoseAlong(glm::vec3 surface, glm::vec3 axis, const ToolShape& shape, float pushMm) {
-    const float out = shape.kind == ToolKind::Burr ? shape.diameterMm * 0.5f : 0.0f;
+    const float out = shape.sphere() ? shape.diameterMm * 0.5f : 0.0f;
     return ToolPose::fromAxis(surface + axis * (out - pushMm), axis);
 }
 

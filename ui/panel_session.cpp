@@ -1,7 +1,7 @@
 // [Session] panel: who is here, which tool, and the connection.
 #include "ui/panels.h"
 
-#include "libsim/tool.h"
+#include "libsim/tool_catalogue.h"
 
 #include <algorithm>
 #include <cstdio>
@@ -21,25 +21,30 @@ float clampOrLowest(float v, float lo, float hi) {
 
 } // namespace
 
+std::array<float, kToolKindCount> ToolControls::defaultDiameters() {
+    std::array<float, kToolKindCount> d{};
+    for (const ToolType* t : toolTypes())
+        d[size_t(t->kind)] = t->defaultDiameterMm;
+    return d;
+}
+
 ToolKind selectedKind(const ToolControls& c) {
-    return c.kind == 1 ? ToolKind::Perforator : ToolKind::Burr;
+    return c.kind >= 0 && c.kind < kToolKindCount ? ToolKind(c.kind) : ToolKind::Burr;
 }
 
 float selectedDiameter(const ToolControls& c) {
     const SizeRange r = sizeRange(selectedKind(c));
-    return clampOrLowest(selectedKind(c) == ToolKind::Perforator ? c.perforatorMm : c.burrMm,
-                         r.minMm, r.maxMm);
+    return clampOrLowest(c.diameter(selectedKind(c)), r.minMm, r.maxMm);
 }
 
 SizeRange sizeRange(ToolKind kind) {
-    if (kind == ToolKind::Perforator)
-        return {kPerforatorMinDiameterMm, kPerforatorMaxDiameterMm, 1.0f};
-    return {kBurrMinDiameterMm, kBurrMaxDiameterMm, 0.5f};
+    const ToolType& t = toolType(kind);
+    return {t.minDiameterMm, t.maxDiameterMm, t.stepMm};
 }
 
 void stepToolSize(ToolControls& c, int steps) {
     const SizeRange r = sizeRange(selectedKind(c));
-    float& mm = selectedKind(c) == ToolKind::Perforator ? c.perforatorMm : c.burrMm;
+    float& mm = c.diameter(selectedKind(c));
     mm =
         std::clamp(clampOrLowest(mm, r.minMm, r.maxMm) + float(steps) * r.stepMm, r.minMm, r.maxMm);
 }
@@ -50,9 +55,9 @@ void itemTip(const char* text) {
 }
 
 ToolControls withinRanges(ToolControls c) {
-    c.burrMm = clampOrLowest(c.burrMm, kBurrMinDiameterMm, kBurrMaxDiameterMm);
-    c.perforatorMm =
-        clampOrLowest(c.perforatorMm, kPerforatorMinDiameterMm, kPerforatorMaxDiameterMm);
+    for (const ToolType* t : toolTypes())
+        c.diameter(t->kind) =
+            clampOrLowest(c.diameter(t->kind), t->minDiameterMm, t->maxDiameterMm);
     c.speed = clampOrLowest(c.speed, 0.0f, 1.0f);
     c.pushMm = clampOrLowest(c.pushMm, kPushMinMm, kPushMaxMm);
     return c;
@@ -107,24 +112,26 @@ ViewAsControls::due(int attempt, uint16_t self,
 
 namespace {
 
-// The tool's rows: which tool, its size (the selected tool's range), speed and depth.
+// The tool's rows: which tool (one button per catalogue entry), its size (the selected tool's
+// range), speed and depth.
 void toolRows(ToolControls& tool) {
-    ImGui::RadioButton("burr [B]", &tool.kind, 0);
-    itemTip("A spherical burr, 1-6 mm: thins and widens a hole.");
-    ImGui::SameLine();
-    ImGui::RadioButton("perforator [P]", &tool.kind, 1);
-    itemTip("The cranial perforator, 6-16 mm: opens a burr hole and stops at the inner table.");
+    for (const ToolType* t : toolTypes()) {
+        if (t != toolTypes().front())
+            ImGui::SameLine();
+        const std::string label = std::string(t->name) + " [" + t->key + "]";
+        ImGui::RadioButton(label.c_str(), &tool.kind, int(t->kind));
+        itemTip(t->tip);
+    }
     // AlwaysClamp: a value typed in (Ctrl+click) stays in the range too (the window clamps again).
     // The sliders leave room for the longest label, so no label is cut off.
     const ImGuiSliderFlags clamp = ImGuiSliderFlags_AlwaysClamp;
     ImGui::PushItemWidth(
         -(ImGui::CalcTextSize("perforator mm [ ]").x + ImGui::GetStyle().ItemInnerSpacing.x));
-    const SizeRange range = sizeRange(selectedKind(tool));
-    if (selectedKind(tool) == ToolKind::Perforator)
-        ImGui::SliderFloat("perforator mm [ ]", &tool.perforatorMm, range.minMm, range.maxMm,
-                           "%.0f", clamp);
-    else
-        ImGui::SliderFloat("burr mm [ ]", &tool.burrMm, range.minMm, range.maxMm, "%.1f", clamp);
+    const ToolType& type = toolType(selectedKind(tool));
+    const SizeRange range = sizeRange(type.kind);
+    const std::string label = std::string(type.name) + " mm [ ]";
+    ImGui::SliderFloat(label.c_str(), &tool.diameter(type.kind), range.minMm, range.maxMm,
+                       range.stepMm < 1.0f ? "%.1f" : "%.0f", clamp);
     itemTip("The selected tool's diameter; [ and ] step it.");
     ImGui::SliderFloat("speed", &tool.speed, 0.0f, 1.0f, "%.2f", clamp);
     itemTip("Spindle speed, 0-1: faster cuts faster.");
@@ -239,8 +246,7 @@ void participantRow(const net::ClientSnapshot& snap, uint16_t id, const net::Par
     if (t != snap.others.end()) {
         ImGui::SameLine();
         ImGui::TextColored(ImVec4(c.r, c.g, c.b, 1), " %s %.0f mm%s",
-                           t->second.toolKind == uint8_t(ToolKind::Perforator) ? "perforator"
-                                                                               : "burr",
+                           toolType(ToolKind(t->second.toolKind)).name,
                            double(t->second.diameterMm), t->second.drilling ? " drilling" : "");
     }
     drawZoneBadge(snap, id); // the assessment's zone of its tool (instructors hear of all)
@@ -328,8 +334,8 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
         if (snap.participants.count(id))
             continue;
         ImGui::TextDisabled("client %u: %s %.0f mm%s", unsigned(id),
-                            t.toolKind == uint8_t(ToolKind::Perforator) ? "perforator" : "burr",
-                            double(t.diameterMm), t.drilling ? " drilling" : "");
+                            toolType(ToolKind(t.toolKind)).name, double(t.diameterMm),
+                            t.drilling ? " drilling" : "");
     }
     // Marks: everyone sees the list; an instructor removes them.
     const glm::vec4 mc = markColor();

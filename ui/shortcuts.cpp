@@ -5,19 +5,20 @@
 #include <imgui.h>
 
 #include <algorithm>
+#include <vector>
 
 namespace trephine::ui {
 
 namespace {
 
-// One table: the F1 overlay lists it, and docs/ui.md says the same.
+// One table: the F1 overlay lists it, and docs/ui.md says the same. The tools' keys come from
+// the tool catalogue, after the first three rows.
+constexpr size_t kToolRowsAt = 3;
 constexpr Shortcut kShortcuts[] = {
     {"left button (over the bone)", "drill while held"},
     {"wheel up / Up", "push the tool deeper (0.25 mm a step)"},
     {"wheel down / Down", "draw the tool back"},
-    {"B", "burr"},
-    {"P", "perforator"},
-    {"[  ]", "smaller / larger tool (burr 0.5 mm, perforator 1 mm a step)"},
+    {"[  ]", "smaller / larger tool (burrs 0.5 mm, the perforator 1 mm a step)"},
     {"M", "instructor: mark the bone under the pointer (with the label typed)"},
     {"Enter (in the label field)", "place the labelled mark at the last bone pointed at"},
     {"Escape", "leave a text field; close this list"},
@@ -30,7 +31,14 @@ constexpr Shortcut kShortcuts[] = {
 } // namespace
 
 std::span<const Shortcut> shortcuts() {
-    return kShortcuts;
+    static const std::vector<Shortcut> all = [] {
+        std::vector<Shortcut> rows(std::begin(kShortcuts), std::begin(kShortcuts) + kToolRowsAt);
+        for (const ToolType* t : toolTypes())
+            rows.push_back({t->key, t->name});
+        rows.insert(rows.end(), std::begin(kShortcuts) + kToolRowsAt, std::end(kShortcuts));
+        return rows;
+    }();
+    return all;
 }
 
 KeyActions applyKeys(const std::vector<KeyPress>& presses, bool textField, bool labelField,
@@ -65,13 +73,11 @@ KeyActions applyKeys(const std::vector<KeyPress>& presses, bool textField, bool 
         if (widgetHeld)
             continue;
         const ToolControls before = tool;
+        // A tool's key (its catalogue entry's letter) selects it.
+        for (const ToolType* t : toolTypes())
+            if (k.key == GLFW_KEY_A + (t->key[0] - 'A'))
+                tool.kind = int(t->kind);
         switch (k.key) {
-        case GLFW_KEY_B:
-            tool.kind = 0;
-            break;
-        case GLFW_KEY_P:
-            tool.kind = 1;
-            break;
         case GLFW_KEY_LEFT_BRACKET:
             stepToolSize(tool, -1);
             break;
@@ -96,8 +102,8 @@ KeyActions applyKeys(const std::vector<KeyPress>& presses, bool textField, bool 
         default:
             break;
         }
-        a.toolChanged = a.toolChanged || tool.kind != before.kind || tool.burrMm != before.burrMm ||
-                        tool.perforatorMm != before.perforatorMm || tool.pushMm != before.pushMm;
+        a.toolChanged = a.toolChanged || tool.kind != before.kind ||
+                        tool.diameterMm != before.diameterMm || tool.pushMm != before.pushMm;
     }
     return a;
 }

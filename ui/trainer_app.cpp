@@ -905,9 +905,8 @@ void TrainerWindow::mouseTool(const FrameState& f) {
     lastToolAt = f.now;
     if (overView)
         viewGestures(in, delta);
-    const ToolShape shape = selectedKind(toolControls) == ToolKind::Perforator
-                                ? ToolShape::perforator(selectedDiameter(toolControls))
-                                : ToolShape::burr(selectedDiameter(toolControls));
+    const ToolShape shape =
+        ToolShape::of(selectedKind(toolControls), selectedDiameter(toolControls));
     const int px = int(in.x), py = viewSize.y - 1 - int(in.y);
     // Unprojected with the camera cpuDbi was made with: in volume mode its depth is read back
     // after this pick, so for one frame after a view change (or a switch from DBI) it is still

@@ -239,9 +239,9 @@ float StructureFields::closestApproach(size_t i, const ToolShape& shape,
                                        const ToolPose& pose) const {
     const DistanceField& f = m_fields[i];
     const float r = 0.5f * shape.diameterMm;
-    if (shape.kind == ToolKind::Burr)
+    if (shape.sphere())
         return f.at(pose.position) - r;
-    // Perforator: axis points from the apex up the cutting length, half a millimetre apart, each
+    // A tipped cylinder: axis points from the apex up the cutting length, half a millimetre apart, each
     // less the cutter's largest radius within a quarter millimetre of it plus that quarter: every
     // point of the cutter lies within that of a sample, so this is a lower bound.
     const float t = shape.tipLengthMm, h = shape.tipLengthMm + shape.cutLengthMm;

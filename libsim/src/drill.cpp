@@ -5,6 +5,8 @@
 // [SECTION] Driller        — rates, carry, clutch state machine
 #include "libsim/drill.h"
 
+#include "libsim/tool_catalogue.h"
+
 #include <algorithm>
 #include <cassert>
 #include <climits>
@@ -29,7 +31,7 @@ int erosionFactor(Material m) {
 }
 
 double erosionRate(ToolKind kind) {
-    return kind == ToolKind::Perforator ? kPerforatorErosionRate : kBurrErosionRate;
+    return toolType(kind).erosionRate;
 }
 
 namespace {
@@ -356,7 +358,7 @@ Nearby perforatorNearby(const Volume& volume, const ToolPose& pose, const Frame&
 } // namespace
 
 void Driller::observe(const Volume& volume, const ToolPose& rawPose) {
-    if (m_shape.kind != ToolKind::Perforator || !m_clutchDisengaged)
+    if (!toolType(m_shape.kind).clutch || !m_clutchDisengaged)
         return;
     if (const std::optional<ToolPose> pose = usablePose(volume, rawPose)) {
         if (!perforatorNearby(volume, *pose, makeFrame(volume, *pose), m_shape).bone)
@@ -373,11 +375,11 @@ DrillResult Driller::drill(Volume& volume, const ToolPose& rawPose, float speed,
     const ToolPose& pose = *usable;
     speed = speed > 0.0f ? std::min(speed, 1.0f) : 0.0f; // also maps NaN to 0
     const Frame frame = makeFrame(volume, pose);
-    const bool perforator = m_shape.kind == ToolKind::Perforator;
+    const bool clutch = toolType(m_shape.kind).clutch;
     const float r = 0.5f * m_shape.diameterMm;
     const float top = m_shape.tipLengthMm + m_shape.cutLengthMm;
 
-    if (perforator) {
+    if (clutch) {
         const float margin = perforatorClutchMarginMm(volume.spacing());
         const Nearby around = perforatorNearby(volume, pose, frame, m_shape);
         if (m_clutchDisengaged && !around.bone)
@@ -405,14 +407,14 @@ DrillResult Driller::drill(Volume& volume, const ToolPose& rawPose, float speed,
     // like one long one. The epsilon absorbs float rounding of dt and speed (0.01f x 1700 is
     // 16.9999996), so 10 x 1 ms and 1 x 10 ms floor alike.
     int decrement = 0;
-    if (speed > 0.0f && dt > 0.0f && !(perforator && m_clutchDisengaged)) {
+    if (speed > 0.0f && dt > 0.0f && !(clutch && m_clutchDisengaged)) {
         double budget = m_carry + erosionRate(m_shape.kind) * double(speed) * double(dt);
         double whole = std::floor(budget + kCarryEpsilon);
         m_carry = std::max(0.0, budget - whole);
         decrement = int(std::min(whole, 255.0)); // 255 clears any voxel in one step
     }
 
-    if (perforator) {
+    if (!m_shape.sphere()) {
         Box3i box = voxelBox(volume, pose, glm::vec3(-r, -r, 0.0f), glm::vec3(r, r, top));
         float t = m_shape.tipLengthMm;
         erodePass(volume, frame, box, CylinderClip(frame.dx, r, 0.0f, top),

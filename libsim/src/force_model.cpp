@@ -14,7 +14,7 @@ constexpr double kPi = std::numbers::pi;
 float autoSpacing(const ToolShape& shape) {
     // About 12 points across a burr's diameter; the perforator is coarser per mm but has more
     // area. Both stay well under a voxel of the 256^3 skull (0.78 mm).
-    if (shape.kind == ToolKind::Burr)
+    if (shape.sphere())
         return std::clamp(shape.diameterMm / 12.0f, 0.08f, 0.5f);
     return std::clamp(shape.diameterMm / 16.0f, 0.2f, 1.0f);
 }
@@ -82,7 +82,7 @@ std::vector<ShellPoint> makeShell(const ToolShape& shape, float pointSpacingMm) 
     const float r = 0.5f * shape.diameterMm;
     const float crossSection = float(kPi) * r * r;
     std::vector<ShellPoint> out;
-    if (shape.kind == ToolKind::Burr) {
+    if (shape.sphere()) {
         // A Fibonacci sphere: near-uniform points, equal areas.
         const double area = 4.0 * kPi * r * r;
         const int n = std::max(32, int(std::ceil(area / (h * h))));

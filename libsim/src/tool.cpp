@@ -1,6 +1,7 @@
 #include "libsim/tool.h"
 
 #include "libsim/error.h"
+#include "libsim/tool_catalogue.h"
 
 #include <algorithm>
 #include <cmath>
@@ -26,52 +27,53 @@ float segmentDistance(glm::vec2 p, glm::vec2 a, glm::vec2 b) {
 
 } // namespace
 
-ToolShape ToolShape::burr(float diameterMm) {
+ToolShape ToolShape::of(ToolKind kind, float diameterMm) {
+    if (uint8_t(kind) >= kToolKindCount)
+        throw Error("unknown tool kind " + std::to_string(int(kind)));
+    const ToolType& type = toolType(kind);
     ToolShape s;
-    s.kind = ToolKind::Burr;
+    s.kind = kind;
     s.diameterMm = diameterMm;
+    if (type.cutter == Cutter::TippedCylinder) {
+        s.tipLengthMm = s.diameterMm * type.tipLengthPerDiameter;
+        s.cutLengthMm = type.cutLengthMm;
+    }
     s.validate();
     return s;
 }
 
 ToolShape ToolShape::perforator(float diameterMm) {
-    ToolShape s;
-    s.kind = ToolKind::Perforator;
-    s.diameterMm = diameterMm;
-    s.tipLengthMm = diameterMm * (kPerforatorTipLengthMm / kPerforatorDiameterMm);
-    s.cutLengthMm = kPerforatorCutLengthMm;
-    s.validate();
-    return s;
+    return of(ToolKind::Perforator, diameterMm);
+}
+
+ToolShape ToolShape::perforator() {
+    return of(ToolKind::Perforator, toolType(ToolKind::Perforator).defaultDiameterMm);
+}
+
+bool ToolShape::sphere() const {
+    return toolType(kind).cutter == Cutter::Sphere;
 }
 
 void ToolShape::validate() const {
+    if (uint8_t(kind) >= kToolKindCount)
+        throw Error("unknown tool kind " + std::to_string(int(kind)));
+    const ToolType& type = toolType(kind);
     // Written as !(in range) so that NaN is refused too.
-    switch (kind) {
-    case ToolKind::Burr:
-        if (!(diameterMm >= kBurrMinDiameterMm && diameterMm <= kBurrMaxDiameterMm))
-            throw Error("burr diameter " + formatMm(diameterMm) +
-                        " mm is out of range: burrs are " + formatMm(kBurrMinDiameterMm) + " to " +
-                        formatMm(kBurrMaxDiameterMm) + " mm");
-        return;
-    case ToolKind::Perforator:
-        if (!(diameterMm >= kPerforatorMinDiameterMm && diameterMm <= kPerforatorMaxDiameterMm))
-            throw Error("perforator diameter " + formatMm(diameterMm) +
-                        " mm is out of range: perforators are " +
-                        formatMm(kPerforatorMinDiameterMm) + " to " +
-                        formatMm(kPerforatorMaxDiameterMm) + " mm");
-        if (!(tipLengthMm >= 0.0f && tipLengthMm <= diameterMm) ||
-            !(cutLengthMm > 0.0f && cutLengthMm <= 50.0f))
-            throw Error("perforator tip length " + formatMm(tipLengthMm) + " mm / cutting length " +
-                        formatMm(cutLengthMm) + " mm is out of range");
-        return;
-    }
-    throw Error("unknown tool kind " + std::to_string(int(kind)) + ": use burr or perforator");
+    if (!(diameterMm >= type.minDiameterMm && diameterMm <= type.maxDiameterMm))
+        throw Error(fmt::format("{} diameter {} mm is out of range: the {} is {} to {} mm",
+                                type.name, formatMm(diameterMm), type.name,
+                                formatMm(type.minDiameterMm), formatMm(type.maxDiameterMm)));
+    if (type.cutter == Cutter::TippedCylinder &&
+        (!(tipLengthMm >= 0.0f && tipLengthMm <= diameterMm) ||
+         !(cutLengthMm > 0.0f && cutLengthMm <= 50.0f)))
+        throw Error(fmt::format("{} tip length {} mm / cutting length {} mm is out of range",
+                                type.name, formatMm(tipLengthMm), formatMm(cutLengthMm)));
 }
 
 float ToolShape::signedDistance(glm::vec3 local) const {
-    if (kind == ToolKind::Burr)
+    if (sphere())
         return glm::length(local) - 0.5f * diameterMm;
-    // The perforator is a solid of revolution whose half cross-section in (rho, z) is the convex
+    // A tipped cylinder is a solid of revolution whose half cross-section in (rho, z) is the convex
     // quadrilateral apex (0,0), shoulder (R,T), rim (R,H), axis top (0,H); its exact distance is
     // the 2D distance to that polygon's three outer edges.
     const float r = 0.5f * diameterMm, t = tipLengthMm, h = tipLengthMm + cutLengthMm;
@@ -84,14 +86,14 @@ float ToolShape::signedDistance(glm::vec3 local) const {
 }
 
 float ToolShape::boundingRadius() const {
-    if (kind == ToolKind::Burr)
+    if (sphere())
         return 0.5f * diameterMm;
     float r = 0.5f * diameterMm, h = tipLengthMm + cutLengthMm;
     return std::sqrt(r * r + h * h);
 }
 
 std::string ToolShape::describe() const {
-    return (kind == ToolKind::Burr ? "burr " : "perforator ") + formatMm(diameterMm) + " mm";
+    return std::string(toolType(kind).name) + " " + formatMm(diameterMm) + " mm";
 }
 
 ToolPose ToolPose::fromAxis(glm::vec3 position, glm::vec3 shaftAxis) {

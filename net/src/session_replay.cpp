@@ -1,7 +1,7 @@
 #include "net/session_replay.h"
 
 #include "libsim/error.h"
-#include "libsim/tool.h"
+#include "libsim/tool_catalogue.h"
 #include "net/net_stats.h"
 #include "net/scene.h"
 
@@ -251,7 +251,7 @@ std::string trajectoryCsv(const Trajectory& t) {
         // A script's times must not decrease; a client's clock does not either.
         last = std::max(last, s.clientTimeUs);
         const double time = double(last - t0) * 1e-6;
-        const char* kind = s.toolKind == uint8_t(ToolKind::Perforator) ? "perforator" : "burr";
+        const char* kind = toolType(ToolKind(s.toolKind)).name; // in range: the log decoded
         csv +=
             fmt::format("{:.6f},{},{},{},{},{},{},{},{},{}:{}\n", time, s.position.x, s.position.y,
                         s.position.z, s.orientation.w, s.orientation.x, s.orientation.y,

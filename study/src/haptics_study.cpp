@@ -75,7 +75,7 @@ HapticsCaseResult runHapticsCase(const Volume& volume, const SurfaceSite& site,
         glm::cross(n, std::abs(n.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0));
     tangent = glm::normalize(tangent);
     // Reference point to lowest point of the cutter along -axis.
-    const double tipOffset = cfg.shape.kind == ToolKind::Burr ? 0.5 * cfg.shape.diameterMm : 0.0;
+    const double tipOffset = cfg.shape.sphere() ? 0.5 * cfg.shape.diameterMm : 0.0;
     const glm::dvec3 surface(site.position);
     auto penetration = [&](glm::dvec3 x) { return glm::dot(surface - x, n) + tipOffset; };
     ToolPose pose = ToolPose::fromAxis(site.position, site.normal);

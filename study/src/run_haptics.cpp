@@ -31,7 +31,7 @@ ForceTiming timeForceModel(const char* name, const Volume& v, const SurfaceSite&
     using Clock = std::chrono::steady_clock;
     ForceModel model(shape);
     // The cutter's lowest point depthMm into the bone.
-    const float lift = (shape.kind == ToolKind::Burr ? 0.5f * shape.diameterMm : 0.0f) - depthMm;
+    const float lift = (shape.sphere() ? 0.5f * shape.diameterMm : 0.0f) - depthMm;
     ToolPose pose = ToolPose::fromAxis(site.position + site.normal * lift, site.normal);
     SampleWindow ms{size_t(reps)};
     volatile float sink = 0.0f; // keeps the calls

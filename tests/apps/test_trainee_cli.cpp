@@ -44,15 +44,18 @@ void expectRefused(const TempDir& dir, std::initializer_list<RowCase> cases) {
 TEST(TraineeCli, AScriptWithValuesTheTraineeCannotUseIsRefusedWithItsLine) {
     TempDir dir;
     expectRefused(
-        dir, {
-                 {"nan,0,0,50,1,0,0,0,0,burr:5\n", "line 2: column 1 is not a finite number"},
-                 {"1,inf,0,50,1,0,0,0,0,burr:5\n", "line 2: column 2 is not a finite number"},
-                 {"1,1e39,0,50,1,0,0,0,0,burr:5\n", "line 2: column 2 is not a finite number"},
-                 {"1e300,0,0,50,1,0,0,0,0,burr:5\n", "line 2: column 1 is not a finite number"},
-                 {"100000,0,0,50,1,0,0,0,0,burr:5\n", "line 2: time must be from 0 to 86400 s"},
-                 {"1,0,0,50,0,0,0,0,0,burr:5\n", "line 2: the orientation quaternion is zero"},
-                 {"1,0,0,50,1,0,0,0,0,burr:-3\n", "line 2: burr diameter -3 mm is out of range"},
-             });
+        dir,
+        {
+            {"nan,0,0,50,1,0,0,0,0,burr:5\n", "line 2: column 1 is not a finite number"},
+            {"1,inf,0,50,1,0,0,0,0,burr:5\n", "line 2: column 2 is not a finite number"},
+            {"1,1e39,0,50,1,0,0,0,0,burr:5\n", "line 2: column 2 is not a finite number"},
+            {"1e300,0,0,50,1,0,0,0,0,burr:5\n", "line 2: column 1 is not a finite number"},
+            {"100000,0,0,50,1,0,0,0,0,burr:5\n", "line 2: time must be from 0 to 86400 s"},
+            {"1,0,0,50,0,0,0,0,0,burr:5\n", "line 2: the orientation quaternion is zero"},
+            {"1,0,0,50,1,0,0,0,0,burr:-3\n", "line 2: burr diameter -3 mm is out of range"},
+            {"1,0,0,50,1,0,0,0,0,diamond:5\n", "line 2: diamond diameter 5 mm is out of range"},
+            {"1,0,0,50,1,0,0,0,0,drill:5\n", "line 2: tool must be NAME:D or NAME"},
+        });
 }
 
 // CLI::Range lets NaN through (every comparison with it is false): floating-point options use a

@@ -1,10 +1,12 @@
 #include "net/protocol.h"
+#include "net/tool_model.h"
 
 #include <gtest/gtest.h>
 
 #include <cstring>
 #include <random>
 
+using namespace trephine;
 using namespace trephine::net;
 
 TEST(Protocol, MessagesRoundTrip) {
@@ -72,6 +74,24 @@ TEST(Protocol, RejectsOutOfRangeRectanglesAndTrailingBytes) {
     float nan = std::nanf("");
     std::memcpy(&tb[1 + 17], &nan, 4);
     EXPECT_FALSE(decodeMessage(tb, tBack));
+}
+
+// The wire carries every kind the tool catalogue has, and no other.
+TEST(Protocol, EveryCatalogueToolKindTravelsAndNoOther) {
+    for (const ToolType* type : toolTypes()) {
+        ToolState t;
+        t.toolKind = uint8_t(type->kind);
+        t.diameterMm = type->defaultDiameterMm;
+        ToolState back;
+        ASSERT_TRUE(decodeMessage(encodeMessage(t), back)) << type->name;
+        EXPECT_EQ(back.toolKind, uint8_t(type->kind));
+        EXPECT_NO_THROW(shapeOf(back)) << type->name;
+    }
+    ToolState t;
+    std::vector<uint8_t> bytes = encodeMessage(t);
+    bytes[1 + 12] = kToolKindCount; // kind after seq(4)+time(8)
+    ToolState back;
+    EXPECT_FALSE(decodeMessage(bytes, back));
 }
 
 TEST(Protocol, TruncatedAndRandomPacketsNeverDecode) {

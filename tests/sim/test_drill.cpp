@@ -4,7 +4,7 @@
 
 #include "libsim/error.h"
 #include "libsim/skull.h"
-#include "libsim/tool.h"
+#include "libsim/tool_catalogue.h"
 
 #include <algorithm>
 #include <cmath>
@@ -13,6 +13,8 @@
 #include <glm/gtx/quaternion.hpp>
 #include <gtest/gtest.h>
 #include <limits>
+#include <set>
+#include <string>
 
 using namespace trephine;
 
@@ -119,6 +121,54 @@ TEST(Tool, PerforatorDistanceMatchesBruteForceOverItsSurface) {
             best = std::min(best, glm::length(m - b));
         EXPECT_NEAR(std::fabs(p.signedDistance(q)), best, 0.03f);
     }
+}
+
+// The catalogue: one entry per id, in order; names and keys tell them apart; every size in range
+// makes a tool and none outside does; the clutch rule is the tipped cylinder's.
+TEST(ToolCatalogue, EachKindHasOneEntryWhoseSizesMakeItsTool) {
+    ASSERT_EQ(toolTypes().size(), size_t(kToolKindCount));
+    std::set<std::string> names, keys;
+    for (size_t i = 0; i < toolTypes().size(); ++i) {
+        const ToolType& t = *toolTypes()[i];
+        SCOPED_TRACE(t.name);
+        EXPECT_EQ(size_t(t.kind), i);
+        EXPECT_EQ(&toolType(t.kind), &t);
+        EXPECT_EQ(toolKindNamed(t.name), t.kind);
+        EXPECT_TRUE(names.insert(t.name).second);
+        EXPECT_TRUE(keys.insert(t.key).second);
+        ASSERT_EQ(std::string(t.key).size(), 1u);
+        EXPECT_TRUE(t.key[0] >= 'A' && t.key[0] <= 'Z');
+        EXPECT_LE(t.minDiameterMm, t.defaultDiameterMm);
+        EXPECT_LE(t.defaultDiameterMm, t.maxDiameterMm);
+        EXPECT_GT(t.erosionRate, 0.0);
+        EXPECT_TRUE(!t.clutch || t.cutter == Cutter::TippedCylinder);
+        for (float d : {t.minDiameterMm, t.defaultDiameterMm, t.maxDiameterMm}) {
+            const ToolShape s = ToolShape::of(t.kind, d);
+            EXPECT_EQ(s.sphere(), t.cutter == Cutter::Sphere);
+            EXPECT_EQ(s.describe().rfind(t.name, 0), 0u);
+        }
+        EXPECT_THROW(ToolShape::of(t.kind, t.minDiameterMm - 0.1f), Error);
+        EXPECT_THROW(ToolShape::of(t.kind, t.maxDiameterMm + 0.1f), Error);
+    }
+    EXPECT_FALSE(toolKindNamed("drill"));
+    EXPECT_THROW(ToolShape::of(ToolKind(kToolKindCount), 4.0f), Error);
+}
+
+// The diamond burr: a 2 mm sphere by default that removes a third of what a fluted burr of its
+// size removes in the same time.
+TEST(ToolCatalogue, TheDiamondBurrCutsAThirdAsFastAsABurrOfItsSize) {
+    const ToolShape diamond = ToolShape::of(ToolKind::DiamondBurr, 2.0f);
+    EXPECT_TRUE(diamond.sphere());
+    EXPECT_EQ(toolType(ToolKind::DiamondBurr).defaultDiameterMm, 2.0f);
+    EXPECT_EQ(diamond.describe(), "diamond 2 mm");
+    const Volume original = makeBox(32);
+    Volume byBurr = original, byDiamond = original;
+    Driller burr(ToolShape::burr(2.0f)), fine(diamond);
+    const DrillResult b = burr.drill(byBurr, ToolPose{}, 1.0f, 0.03f);
+    const DrillResult d = fine.drill(byDiamond, ToolPose{}, 1.0f, 0.03f);
+    EXPECT_EQ(d.voxelsTouched, b.voxelsTouched) << "the same sphere";
+    EXPECT_GT(d.densityRemoved, 0);
+    EXPECT_NEAR(double(d.densityRemoved) / double(b.densityRemoved), 1.0 / 3.0, 0.02);
 }
 
 TEST(Tool, PoseFromAxisPointsTheShaftAlongTheAxis) {
@@ -247,7 +297,8 @@ TEST(Drill, SplittingDtGivesTheSameResult) {
         EXPECT_EQ(box, r1.changed);
         // The whole units removed are the floor of rate x speed x time.
         EXPECT_EQ(r1.densityRemoved,
-                  r1.voxelsTouched * int64_t(std::floor(kBurrErosionRate * speed * 0.010 + 1e-4)));
+                  r1.voxelsTouched *
+                      int64_t(std::floor(erosionRate(ToolKind::Burr) * speed * 0.010 + 1e-4)));
     }
 }
 
@@ -294,7 +345,7 @@ TEST(Drill, CorticalErodesSlowerThanDiploe) {
     EXPECT_GT(cortical, 0);
     EXPECT_GT(diploe, 0);
     // Full-speed burr: solid cortical (255) in about 0.15 s.
-    EXPECT_NEAR(255.0 / kBurrErosionRate, 0.15, 0.01);
+    EXPECT_NEAR(255.0 / erosionRate(ToolKind::Burr), 0.15, 0.01);
 }
 
 TEST(Drill, DuraContactIsReportedAndDuraIsNeverRemoved) {

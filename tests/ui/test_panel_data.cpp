@@ -306,27 +306,28 @@ TEST(ToolControls, PushStepsStayInTheSlidersRange) {
 // every tool state malformed and the server kicked the window.
 TEST(ToolControls, TypedValuesAreKeptWithinTheSlidersRanges) {
     ToolControls c;
-    c.burrMm = 9.0f;
+    c.diameter(ToolKind::Burr) = 9.0f;
     c.speed = 4.0f;
     c.pushMm = 50.0f;
     ToolControls k = withinRanges(c);
-    EXPECT_EQ(k.burrMm, kBurrMaxDiameterMm);
+    EXPECT_EQ(k.diameter(ToolKind::Burr), toolType(ToolKind::Burr).maxDiameterMm);
     EXPECT_EQ(k.speed, 1.0f);
     EXPECT_EQ(k.pushMm, kPushMaxMm);
-    EXPECT_NO_THROW(ToolShape::burr(k.burrMm).validate()) << "what the server checks";
-    c.burrMm = std::nanf("");
+    EXPECT_NO_THROW(ToolShape::burr(k.diameter(ToolKind::Burr)).validate())
+        << "what the server checks";
+    c.diameter(ToolKind::Burr) = std::nanf("");
     c.speed = -1.0f;
     c.pushMm = -std::numeric_limits<float>::infinity();
     k = withinRanges(c);
-    EXPECT_EQ(k.burrMm, kBurrMinDiameterMm);
+    EXPECT_EQ(k.diameter(ToolKind::Burr), toolType(ToolKind::Burr).minDiameterMm);
     EXPECT_EQ(k.speed, 0.0f);
     EXPECT_EQ(k.pushMm, kPushMinMm);
     c = ToolControls{};
-    c.burrMm = 4.5f;
+    c.diameter(ToolKind::Burr) = 4.5f;
     c.speed = 0.5f;
     c.pushMm = 2.0f;
     k = withinRanges(c);
-    EXPECT_EQ(k.burrMm, 4.5f);
+    EXPECT_EQ(k.diameter(ToolKind::Burr), 4.5f);
     EXPECT_EQ(k.speed, 0.5f);
     EXPECT_EQ(k.pushMm, 2.0f);
 }

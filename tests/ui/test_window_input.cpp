@@ -57,7 +57,7 @@ TEST(WindowInput, KeyTapsInsideOneFrameChangeTheTool) {
     const TrainerReport perf =
         run({GLFW_KEY_P, GLFW_KEY_RIGHT_BRACKET, GLFW_KEY_RIGHT_BRACKET, GLFW_KEY_RIGHT_BRACKET});
     EXPECT_EQ(perf.toolKind, int(ToolKind::Perforator));
-    EXPECT_FLOAT_EQ(perf.toolDiameterMm, kPerforatorMaxDiameterMm);
+    EXPECT_FLOAT_EQ(perf.toolDiameterMm, toolType(ToolKind::Perforator).maxDiameterMm);
     server.stop();
 }
 
@@ -66,24 +66,32 @@ TEST(Shortcuts, ToolKeysFollowTheSelectedTool) {
     WindowToggles w;
     applyKeys(keys({GLFW_KEY_RIGHT_BRACKET, GLFW_KEY_RIGHT_BRACKET, GLFW_KEY_RIGHT_BRACKET}), false,
               false, false, t, w);
-    EXPECT_FLOAT_EQ(t.burrMm, kBurrMaxDiameterMm) << "5 + 0.5 + 0.5, then held at 6";
+    EXPECT_FLOAT_EQ(t.diameter(ToolKind::Burr), toolType(ToolKind::Burr).maxDiameterMm)
+        << "5 + 0.5 + 0.5, then held at 6";
     EXPECT_EQ(selectedKind(t), ToolKind::Burr);
     applyKeys(keys({GLFW_KEY_P, GLFW_KEY_LEFT_BRACKET}), false, false, false, t, w);
     EXPECT_EQ(selectedKind(t), ToolKind::Perforator);
-    EXPECT_FLOAT_EQ(selectedDiameter(t), kPerforatorDiameterMm - 1.0f);
-    EXPECT_FLOAT_EQ(t.burrMm, kBurrMaxDiameterMm) << "the burr's size is kept";
+    EXPECT_FLOAT_EQ(selectedDiameter(t), toolType(ToolKind::Perforator).defaultDiameterMm - 1.0f);
+    EXPECT_FLOAT_EQ(t.diameter(ToolKind::Burr), toolType(ToolKind::Burr).maxDiameterMm)
+        << "the burr's size is kept";
     for (int i = 0; i < 20; ++i)
         stepToolSize(t, -1);
-    EXPECT_FLOAT_EQ(selectedDiameter(t), kPerforatorMinDiameterMm);
+    EXPECT_FLOAT_EQ(selectedDiameter(t), toolType(ToolKind::Perforator).minDiameterMm);
     applyKeys(keys({GLFW_KEY_B}), false, false, false, t, w);
-    EXPECT_FLOAT_EQ(selectedDiameter(t), kBurrMaxDiameterMm);
+    EXPECT_FLOAT_EQ(selectedDiameter(t), toolType(ToolKind::Burr).maxDiameterMm);
+    // D: the diamond burr, 2 mm, in 0.5 mm steps of its own.
+    applyKeys(keys({GLFW_KEY_D, GLFW_KEY_RIGHT_BRACKET}), false, false, false, t, w);
+    EXPECT_EQ(selectedKind(t), ToolKind::DiamondBurr);
+    EXPECT_FLOAT_EQ(selectedDiameter(t), 2.5f);
+    EXPECT_FLOAT_EQ(t.diameter(ToolKind::Burr), toolType(ToolKind::Burr).maxDiameterMm);
+    applyKeys(keys({GLFW_KEY_B}), false, false, false, t, w);
     // Up and Down: deeper and shallower, as the wheel's up and down.
     applyKeys(keys({GLFW_KEY_UP, GLFW_KEY_UP, GLFW_KEY_DOWN}), false, false, false, t, w);
     EXPECT_FLOAT_EQ(t.pushMm, steppedPush(0.0f, 1.0f));
     // A slider held: its keys do not fight it.
     const ToolControls held = t;
     applyKeys(keys({GLFW_KEY_B, GLFW_KEY_LEFT_BRACKET}), false, false, true, t, w);
-    EXPECT_EQ(t.burrMm, held.burrMm);
+    EXPECT_EQ(t.diameter(ToolKind::Burr), held.diameter(ToolKind::Burr));
 }
 
 TEST(Shortcuts, EnterAndEscapeLeaveATextFieldAndEnterPlacesTheLabelledMark) {
@@ -95,7 +103,7 @@ TEST(Shortcuts, EnterAndEscapeLeaveATextFieldAndEnterPlacesTheLabelledMark) {
     EXPECT_FALSE(a.markAtPointer);
     EXPECT_FALSE(a.leaveTextField);
     EXPECT_EQ(t.kind, 0);
-    EXPECT_FLOAT_EQ(t.burrMm, 5.0f);
+    EXPECT_FLOAT_EQ(t.diameter(ToolKind::Burr), 5.0f);
     a = applyKeys(keys({GLFW_KEY_ENTER}), true, true, false, t, w);
     EXPECT_TRUE(a.leaveTextField);
     EXPECT_TRUE(a.labelledMark);
@@ -125,6 +133,6 @@ TEST(Shortcuts, F1ListsEveryShortcutAndHHidesThePanels) {
     std::string all;
     for (const Shortcut& s : shortcuts())
         all += std::string(s.keys) + "\n";
-    for (const char* k : {"F1", "B", "P", "[", "]", "M", "Up", "Down", "Enter", "Escape", "H"})
+    for (const char* k : {"F1", "B", "P", "D", "[", "]", "M", "Up", "Down", "Enter", "Escape", "H"})
         EXPECT_NE(all.find(k), std::string::npos) << k;
 }

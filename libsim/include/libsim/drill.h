@@ -13,11 +13,10 @@
 
 namespace trephine {
 
-// Erosion rates at full speed (speed 1), in density units per second, for cortical bone: every
-// voxel whose centre lies inside the cutter loses this much density. Diploe erodes
-// kDiploeErosionFactor times faster; dura and brain never erode. See docs/simulation.md.
-inline constexpr double kBurrErosionRate = 1700.0;      // solid cortical (255) in 0.15 s
-inline constexpr double kPerforatorErosionRate = 425.0; // solid cortical in 0.6 s
+// Each tool's erosion rate at full speed (speed 1), in density units per second for cortical
+// bone, is its catalogue entry's (ToolType::erosionRate): every voxel whose centre lies inside the
+// cutter loses that much density. Diploe erodes kDiploeErosionFactor times faster; dura and brain
+// never erode. See docs/simulation.md.
 inline constexpr int kDiploeErosionFactor = 3;
 
 // Perforator clutch rule. Before each step the perforator looks a margin beyond its cutting
@@ -38,7 +37,7 @@ inline float perforatorClutchMarginMm(glm::vec3 spacing) {
 
 // Density units removed from a voxel of material m per unit of cortical erosion (0: never eroded).
 int erosionFactor(Material m);
-// Cortical erosion rate of a tool at full speed, density units per second.
+// Cortical erosion rate of a tool at full speed, density units per second (its catalogue's).
 double erosionRate(ToolKind kind);
 
 struct DrillResult {

@@ -1,5 +1,6 @@
-// Cutting tools: spherical burrs and the cranial perforator. A tool is a cutter shape on a shaft
-// with a pose; drilling and haptics query the shape in the tool's local frame.
+// Cutting tools: a cutter shape on a shaft with a pose; drilling and haptics query the shape in
+// the tool's local frame. What each kind of tool is (its cutter, sizes, cutting rule) is in the
+// catalogue (libsim/tool_catalogue.h).
 #pragma once
 
 #include <cstdint>
@@ -9,32 +10,27 @@
 
 namespace trephine {
 
-enum class ToolKind : uint8_t { Burr = 0, Perforator = 1 };
-
-// Sizes a factory accepts (mm). The perforator's proportions follow a 14 mm adult perforator and
-// scale with its diameter: a blunt conical tip 4 mm long under a 12 mm cutting cylinder.
-inline constexpr float kBurrMinDiameterMm = 1.0f;
-inline constexpr float kBurrMaxDiameterMm = 6.0f;
-inline constexpr float kPerforatorDiameterMm = 14.0f;
-inline constexpr float kPerforatorMinDiameterMm = 6.0f;
-inline constexpr float kPerforatorMaxDiameterMm = 16.0f;
-inline constexpr float kPerforatorTipLengthMm = 4.0f; // at 14 mm diameter
-inline constexpr float kPerforatorCutLengthMm = 12.0f;
+// The catalogue's ids (libsim/tool_catalogue.h), which the wire and session logs carry.
+enum class ToolKind : uint8_t { Burr = 0, Perforator = 1, DiamondBurr = 2 };
 
 // Tool-local frame: the cutter's reference point is the origin and the shaft runs along +z (away
-// from the bone when drilling straight down). For a burr the origin is the sphere's centre; for the
-// perforator it is the apex of the conical tip.
+// from the bone when drilling straight down). For a sphere the origin is its centre; for a tipped
+// cylinder (the perforator) it is the apex of the conical tip.
 struct ToolShape {
     ToolKind kind = ToolKind::Burr;
-    float diameterMm = 4.0f;  // burr: sphere diameter (1-6 mm); perforator: cylinder diameter
-    float tipLengthMm = 0.0f; // perforator: length of the conical tip along the axis
-    float cutLengthMm = 0.0f; // perforator: cutting length of the cylinder above the tip
+    float diameterMm = 4.0f;  // the sphere's, or the cylinder's
+    float tipLengthMm = 0.0f; // tipped cylinder: length of the conical tip along the axis
+    float cutLengthMm = 0.0f; // tipped cylinder: cutting length of the cylinder above the tip
 
-    // Factories: throw Error for a diameter out of range (burr 1-6 mm, perforator 6-16 mm).
-    static ToolShape burr(float diameterMm);
-    static ToolShape perforator(float diameterMm = kPerforatorDiameterMm);
+    // The tool of `kind` at `diameterMm`: throws Error for a kind not in the catalogue or a
+    // diameter out of the kind's range.
+    static ToolShape of(ToolKind kind, float diameterMm);
+    static ToolShape burr(float diameterMm) { return of(ToolKind::Burr, diameterMm); }
+    static ToolShape perforator(float diameterMm);
+    static ToolShape perforator(); // at its default diameter (14 mm)
     // Throws Error when the shape is not one the factories make (e.g. read from a message).
     void validate() const;
+    bool sphere() const; // a sphere about the origin (else a tipped cylinder)
 
     // Signed distance (mm) from a tool-local point to the cutter surface: negative inside. Exact
     // for both shapes (the perforator's is the 2D distance in its meridian plane).

@@ -6,6 +6,7 @@
 #include "net/participant_colours.h"
 #include "net/serialize.h"
 
+#include "libsim/tool_catalogue.h"
 #include "libsim/volume_io.h"
 
 #include <glm/gtc/quaternion.hpp>
@@ -38,7 +39,8 @@ namespace trephine::net {
 // TooManyAttempts; refusals Busy, Idle, ViewsFull (docs/session.md, "Availability").
 // 10: ReplayState and ReplayControl (a replay's timeline: net/replay_protocol.h); Codes (type
 // 26: an instructor issues a new role code while the server runs). 11: admission cookies
-// (refusal Retry); Busy before the welcome means "connect again" (docs/session.md).
+// (refusal Retry); Busy before the welcome means "connect again" (docs/session.md); ToolState's
+// kind 2, the diamond burr (libsim/tool_catalogue.h).
 inline constexpr uint32_t kProtocolVersion = 11;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
@@ -314,9 +316,9 @@ struct ToolState {
     template <typename S>
     bool serialize(S& s) {
         return s.integer(sequence) && s.integer(clientTimeUs) &&
-               s.ranged(toolKind, uint8_t(0), uint8_t(1)) && serializeFinite(s, diameterMm) &&
-               diameterMm > 0.0f && diameterMm <= 20.0f && serializeVec3(s, position) &&
-               std::abs(position.x) <= kMaxToolDistanceMm &&
+               s.ranged(toolKind, uint8_t(0), uint8_t(kToolKindCount - 1)) &&
+               serializeFinite(s, diameterMm) && diameterMm > 0.0f && diameterMm <= 20.0f &&
+               serializeVec3(s, position) && std::abs(position.x) <= kMaxToolDistanceMm &&
                std::abs(position.y) <= kMaxToolDistanceMm &&
                std::abs(position.z) <= kMaxToolDistanceMm && serializeQuat(s, orientation) &&
                glm::dot(orientation, orientation) >= 0.25f &&

@@ -9,11 +9,10 @@
 
 namespace trephine::net {
 
-// The cutter a tool of `kind` and `diameterMm` is (ToolShape's factories: throws Error for a
-// diameter they refuse).
+// The cutter a tool of `kind` and `diameterMm` is (ToolShape::of: throws Error for a diameter
+// the kind refuses).
 inline ToolShape toolShape(ToolKind kind, float diameterMm) {
-    return kind == ToolKind::Perforator ? ToolShape::perforator(diameterMm)
-                                        : ToolShape::burr(diameterMm);
+    return ToolShape::of(kind, diameterMm);
 }
 
 inline ToolShape shapeOf(const ToolState& t) {

@@ -3,11 +3,12 @@
 // struct declared beside it here.
 #pragma once
 
-#include "libsim/tool.h"
+#include "libsim/tool_catalogue.h"
 #include "net/client_thread.h"
 #include "ui/layout.h"
 #include "ui/panel_data.h"
 
+#include <array>
 #include <map>
 #include <optional>
 #include <string>
@@ -37,12 +38,15 @@ void drawForcesPanel(const ForceHistory& forces, double loopRateHz, double now,
                      const ParticipantForces* participants = nullptr,
                      const std::map<uint16_t, net::ParticipantInfo>* roster = nullptr);
 
-// [Session] role, participants, tool, burr size, speed, connection state.
+// [Session] role, participants, tool, its size, speed, connection state.
 struct ToolControls {
-    int kind = 0;                               // 0 burr, 1 perforator
-    float burrMm = 5.0f;                        // burr diameter
-    float perforatorMm = kPerforatorDiameterMm; // the perforator's (6-16 mm)
-    float speed = 1.0f;                         // [0, 1]
+    int kind = 0; // the selected ToolKind
+    // Each kind's size, kept while another is selected: the catalogue's defaults to start.
+    std::array<float, kToolKindCount> diameterMm = defaultDiameters();
+    float& diameter(ToolKind k) { return diameterMm.at(size_t(k)); }
+    float diameter(ToolKind k) const { return diameterMm.at(size_t(k)); }
+    static std::array<float, kToolKindCount> defaultDiameters();
+    float speed = 1.0f;    // [0, 1]
     float pushMm = 0.0f;   // how far the tip is pushed below the surface under the cursor
     bool drilling = false; // mouse button held (or the script drills)
     bool canDrill = true;  // a trainee nobody holds, or an instructor holding one (TakeOver)
@@ -53,8 +57,8 @@ constexpr float kPushMinMm = -5.0f, kPushMaxMm = 10.0f, kPushStepMm = 0.25f;
 // shallower), kept in the range so that a held arrow key cannot drive the tip through the inner
 // table.
 float steppedPush(float pushMm, float steps);
-// The selected tool, its diameter, and that diameter's range and one step of `[` / `]`: the burr
-// 1-6 mm by 0.5 mm, the perforator 6-16 mm by 1 mm (libsim/tool.h).
+// The selected tool, its diameter, and that diameter's range and one step of `[` / `]`, as the
+// tool catalogue gives them (libsim/tool_catalogue.h).
 ToolKind selectedKind(const ToolControls& c);
 float selectedDiameter(const ToolControls& c);
 struct SizeRange {
@@ -63,7 +67,7 @@ struct SizeRange {
 SizeRange sizeRange(ToolKind kind);
 // The selected tool's size moved by `steps` steps, kept in its range.
 void stepToolSize(ToolControls& c, int steps);
-// `c` with the burr and perforator sizes, speed and push depth within their sliders' ranges, NaN to
+// `c` with every tool's size, speed and push depth within their sliders' ranges, NaN to
 // the lowest: the server counts an out-of-range tool state as malformed and disconnects a client
 // sending many.
 ToolControls withinRanges(ToolControls c);
