@@ -126,15 +126,43 @@ bool unblind(const Bytes32& share, const Bytes32& w, const Bytes32& blindPoint, 
     return crypto_scalarmult_ristretto255(k.data(), s.data(), t.data()) == 0;
 }
 
-// A fresh ephemeral scalar and its share s G + w B.
-void blindedShare(const Bytes32& w, const Bytes32& blindPoint, Bytes32& s, Bytes32& share) {
+// The share s G + w B of an ephemeral scalar s; false when s is zero.
+bool shareOf(const Bytes32& w, const Bytes32& blindPoint, const Bytes32& s, Bytes32& share) {
     Bytes32 sg, wb;
-    do {
-        crypto_core_ristretto255_scalar_random(s.data());
-    } while (crypto_scalarmult_ristretto255_base(sg.data(), s.data()) != 0);
+    if (crypto_scalarmult_ristretto255_base(sg.data(), s.data()) != 0)
+        return false;
     if (crypto_scalarmult_ristretto255(wb.data(), w.data(), blindPoint.data()) != 0 ||
         crypto_core_ristretto255_add(share.data(), sg.data(), wb.data()) != 0)
         throw Error("the code's scalar is zero"); // a 2^-252 chance
+    return true;
+}
+
+// A fresh ephemeral scalar and its share s G + w B.
+void blindedShare(const Bytes32& w, const Bytes32& blindPoint, Bytes32& s, Bytes32& share) {
+    do {
+        crypto_core_ristretto255_scalar_random(s.data());
+    } while (!shareOf(w, blindPoint, s, share));
+}
+
+std::optional<SpakeServerAnswer> answerWith(const Bytes32& w, const Salt& salt, Role wanted,
+                                            Role entryRole, const Bytes32& clientShare,
+                                            const Bytes32* givenY) {
+    SpakeServerAnswer a;
+    Bytes32 y, k;
+    if (sodium_is_zero(clientShare.data(), clientShare.size()) ||
+        !crypto_core_ristretto255_is_valid_point(clientShare.data()))
+        return std::nullopt;
+    if (givenY) {
+        y = *givenY;
+        if (!shareOf(w, blinding().n, y, a.share))
+            return std::nullopt;
+    } else {
+        blindedShare(w, blinding().n, y, a.share);
+    }
+    if (!unblind(clientShare, w, blinding().m, y, k))
+        return std::nullopt;
+    a.keys = deriveKeys(salt, wanted, entryRole, clientShare, a.share, k, w);
+    return a;
 }
 
 } // namespace
@@ -156,6 +184,12 @@ SpakeClient::SpakeClient(const Bytes32& w, const Salt& salt, Role role)
     blindedShare(m_w, blinding().m, m_x, m_share);
 }
 
+SpakeClient::SpakeClient(const Bytes32& w, const Salt& salt, Role role, const Bytes32& x)
+    : m_w(w), m_x(x), m_salt(salt), m_role(role) {
+    if (!shareOf(m_w, blinding().m, m_x, m_share))
+        throw Error("SpakeClient: the given scalar x is zero");
+}
+
 std::optional<SessionKeys> SpakeClient::keys(const Bytes32& serverShare, Role entryRole) const {
     Bytes32 k;
     if (!unblind(serverShare, m_w, blinding().n, m_x, k))
@@ -165,16 +199,13 @@ std::optional<SessionKeys> SpakeClient::keys(const Bytes32& serverShare, Role en
 
 std::optional<SpakeServerAnswer> spakeAnswer(const Bytes32& w, const Salt& salt, Role wanted,
                                              Role entryRole, const Bytes32& clientShare) {
-    SpakeServerAnswer a;
-    Bytes32 y, k;
-    if (sodium_is_zero(clientShare.data(), clientShare.size()) ||
-        !crypto_core_ristretto255_is_valid_point(clientShare.data()))
-        return std::nullopt;
-    blindedShare(w, blinding().n, y, a.share);
-    if (!unblind(clientShare, w, blinding().m, y, k))
-        return std::nullopt;
-    a.keys = deriveKeys(salt, wanted, entryRole, clientShare, a.share, k, w);
-    return a;
+    return answerWith(w, salt, wanted, entryRole, clientShare, nullptr);
+}
+
+std::optional<SpakeServerAnswer> spakeAnswer(const Bytes32& w, const Salt& salt, Role wanted,
+                                             Role entryRole, const Bytes32& clientShare,
+                                             const Bytes32& y) {
+    return answerWith(w, salt, wanted, entryRole, clientShare, &y);
 }
 
 bool sameMac(const Bytes32& a, const Bytes32& b) {

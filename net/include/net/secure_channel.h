@@ -54,6 +54,8 @@ struct SessionKeys {
 class SpakeClient {
 public:
     SpakeClient(const Bytes32& w, const Salt& salt, Role role);
+    // With the ephemeral scalar x given, not drawn: for docs/security.md's test vector only.
+    SpakeClient(const Bytes32& w, const Salt& salt, Role role, const Bytes32& x);
     const Bytes32& share() const { return m_share; }
     // The keys for the server's share made with the code of `entryRole`, or none when the share
     // is not a valid point.
@@ -73,6 +75,10 @@ struct SpakeServerAnswer {
 };
 std::optional<SpakeServerAnswer> spakeAnswer(const Bytes32& w, const Salt& salt, Role wanted,
                                              Role entryRole, const Bytes32& clientShare);
+// With the ephemeral scalar y given, not drawn: for docs/security.md's test vector only.
+std::optional<SpakeServerAnswer> spakeAnswer(const Bytes32& w, const Salt& salt, Role wanted,
+                                             Role entryRole, const Bytes32& clientShare,
+                                             const Bytes32& y);
 
 // Constant-time comparison of two MACs.
 bool sameMac(const Bytes32& a, const Bytes32& b);
