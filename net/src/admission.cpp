@@ -40,6 +40,15 @@ uint32_t connectIdOf(std::span<const uint8_t> d) {
     return id;
 }
 
+// Whether ENet would take the CONNECT (isEnetConnect): its channel count in ENet's range.
+bool acceptableChannels(std::span<const uint8_t> d) {
+    ENetProtocolConnect c;
+    std::memcpy(&c, d.data() + firstCommand(d), sizeof c);
+    const uint32_t channels = ENET_NET_TO_HOST_32(c.channelCount);
+    return channels >= ENET_PROTOCOL_MINIMUM_CHANNEL_COUNT &&
+           channels <= ENET_PROTOCOL_MAXIMUM_CHANNEL_COUNT;
+}
+
 // ENet states a server-side slot passes through on its way in or out; a peer that stops
 // answering leaves it in one for ENet's full timeout (~30 s).
 bool transient(ENetPeerState s) {
@@ -115,10 +124,14 @@ bool ConnectCookies::valid(uint32_t connectId, const ENetAddress& from, uint64_t
 ConnectBuckets::ConnectBuckets(double perS, double burst, uint64_t salt)
     : m_perS(perS), m_burst(burst), m_salt(salt) {}
 
-bool ConnectBuckets::take(uint32_t address, uint64_t nowUs) {
+ConnectBuckets::Bucket& ConnectBuckets::slot(uint32_t address) {
     uint64_t h = (uint64_t(address) ^ m_salt) * 0xff51afd7ed558ccdull;
     h ^= h >> 33;
-    Bucket& b = m_table[h % kBuckets];
+    return m_table[h % kBuckets];
+}
+
+bool ConnectBuckets::take(uint32_t address, uint64_t nowUs) {
+    Bucket& b = slot(address);
     if (!b.used || b.address != address) {
         // A new address in this bucket starts from whatever the last one left (never more than
         // a full bucket): an attacker cycling addresses gains nothing by colliding.
@@ -134,6 +147,13 @@ bool ConnectBuckets::take(uint32_t address, uint64_t nowUs) {
         return false;
     b.tokens -= 1.0;
     return true;
+}
+
+bool ConnectBuckets::has(uint32_t address, uint64_t nowUs) {
+    const Bucket saved = slot(address);
+    const bool token = take(address, nowUs);
+    slot(address) = saved;
+    return token;
 }
 
 ConnectDecision judgeConnect(const AdmissionLimits& limits, ConnectBuckets& buckets,
@@ -157,18 +177,23 @@ ConnectDecision judgeConnect(const AdmissionLimits& limits, ConnectBuckets& buck
         return d;
     }
     if (waiting.size() >= limits.waitingSlots) {
-        // The address holding the most (ties: the one with the oldest peer), and its oldest.
+        // The address holding the most (ties: the one whose candidate ranks first), and its
+        // candidate: silent before under way, then the oldest.
+        const auto before = [](const WaitingPeer& a, const WaitingPeer& b) {
+            return a.progressing != b.progressing ? !a.progressing : a.sinceUs < b.sinceUs;
+        };
         size_t most = 0;
         std::optional<size_t> victim;
         for (size_t i = 0; i < waiting.size(); ++i) {
             const size_t n = held(waiting[i].address);
-            if (n > most ||
-                (n == most && victim && waiting[i].sinceUs < waiting[*victim].sinceUs)) {
+            if (n > most || (n == most && victim && before(waiting[i], waiting[*victim]))) {
                 most = n;
                 victim = i;
             }
         }
-        if (!victim || most <= mine) {
+        // Only a share that is larger by two gives one up: addresses one apart would take
+        // slots from each other for ever, and keep every slot too young to give up.
+        if (!victim || most <= mine + 1) {
             d.verdict = ConnectVerdict::PoolFull;
             return d;
         }
@@ -227,22 +252,38 @@ int AdmissionGate::judge() {
         return 0;
     const ENetAddress& from = m_host->receivedAddress;
     const uint32_t connectId = connectIdOf(d);
+    for (size_t i = 0; i < m_host->peerCount; ++i) {
+        const ENetPeer& p = m_host->peers[i];
+        // ENet answers a repeated CONNECT of a handshake under way itself: not a new connection.
+        if (p.state != ENET_PEER_STATE_DISCONNECTED && p.address.host == from.host &&
+            p.address.port == from.port && p.connectID == connectId)
+            return 0;
+    }
+    // One ENet refuses (no channel, or too many) takes no one's slot: ENet drops it.
+    if (!acceptableChannels(d))
+        return 0;
     // ENet copies the connect ID as it is (the client's byte order, x86's on both ends).
     const bool cookie = m_cookies.valid(connectId, from, m_nowUs);
-    // Under pressure a CONNECT without its cookie is answered before any look at the slots: a
-    // flood of them costs a hash each (the count is the last CONNECT's or reap's).
+    // Under pressure a CONNECT without its cookie, or from an address over its rate, is answered
+    // before any look at the slots: a flood of them costs a hash each (the count of waiting
+    // peers is the last CONNECT's or reap's).
     if (!cookie && m_lastWaiting >= m_limits.cookiesFrom)
         return askForCookie();
+    if (!m_buckets.has(from.host, m_nowUs)) {
+        ++m_counts.rateLimited;
+        answer(m_refusals, uint32_t(RefuseReason::Busy));
+        return 1;
+    }
     m_waiting.clear();
     m_waitingPeers.clear();
     for (size_t i = 0; i < m_host->peerCount; ++i) {
         ENetPeer& p = m_host->peers[i];
-        if (p.state == ENET_PEER_STATE_DISCONNECTED || m_admitted(&p))
+        if (p.state == ENET_PEER_STATE_DISCONNECTED)
             continue;
-        // ENet answers a repeated CONNECT of a handshake under way itself: not a new connection.
-        if (p.address.host == from.host && p.address.port == from.port && p.connectID == connectId)
-            return 0;
-        m_waiting.push_back({p.address.host, occupiedSince(i)});
+        const Standing standing = m_admitted(&p);
+        if (standing == Standing::Admitted)
+            continue;
+        m_waiting.push_back({p.address.host, occupiedSince(i), standing == Standing::Progressing});
         m_waitingPeers.push_back(&p);
     }
     m_lastWaiting = m_waiting.size();
@@ -292,7 +333,8 @@ void AdmissionGate::reap(uint64_t nowUs) {
     m_lastWaiting = 0;
     for (size_t i = 0; i < m_host->peerCount; ++i) {
         ENetPeer* p = &m_host->peers[i];
-        m_lastWaiting += p->state != ENET_PEER_STATE_DISCONNECTED && !m_admitted(p);
+        m_lastWaiting +=
+            p->state != ENET_PEER_STATE_DISCONNECTED && m_admitted(p) != Standing::Admitted;
         if (!m_timer.expired(i, transient(ENetPeerState(p->state)), nowUs,
                              m_limits.handshakeTimeoutUs))
             continue;

@@ -479,7 +479,11 @@ void ClientThread::pollUntilClosed(SessionClient& client, const ClientConfig& cc
         if (!cp->welcomed()) {
             if (cp->busyRefusals() > 0)
                 m_closeReason = cp->closeReason(); // the server is there: the window says so
-            if (now - start > uint64_t(m_config.connectTimeoutS * 1e6)) {
+            // An offer the server holds for its turn is an answer on its way.
+            const double limitS = cp->offerPending() ? std::max(m_config.connectTimeoutS,
+                                                                SessionClient::kMaxOfferWaitS)
+                                                     : m_config.connectTimeoutS;
+            if (now - start > uint64_t(limitS * 1e6)) {
                 // Something came that did not decode or open (a damaged welcome, forgeries):
                 // say so, rather than suggest that nothing listens.
                 const uint64_t unread = cp->stats().malformed();

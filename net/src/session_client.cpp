@@ -115,6 +115,10 @@ int SessionClient::poll(uint32_t timeoutMs) {
 }
 
 void SessionClient::disconnect(uint32_t timeoutMs) {
+    if (m_retryAtUs) { // waiting to connect again after Busy: it does not
+        m_retryAtUs = 0;
+        m_closed = true;
+    }
     if (!m_peer)
         return;
     if (m_connected) {

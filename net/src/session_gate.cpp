@@ -118,6 +118,20 @@ bool SessionGate::answer(Peer& p) {
     return true;
 }
 
+std::vector<uint16_t> SessionGate::held() const {
+    std::vector<uint16_t> ids;
+    for (const auto& [id, p] : m_peers)
+        if (p.stage == Peer::Stage::Waiting)
+            ids.push_back(id);
+    return ids;
+}
+
+bool SessionGate::progressing(uint16_t id) const {
+    auto it = m_peers.find(id);
+    return it != m_peers.end() && it->second.stage != Peer::Stage::Connected &&
+           it->second.stage != Peer::Stage::Refused;
+}
+
 std::vector<std::pair<uint16_t, std::vector<uint8_t>>> SessionGate::release(uint64_t now) {
     std::vector<std::pair<uint16_t, std::vector<uint8_t>>> out;
     std::vector<std::pair<uint64_t, uint16_t>> waiting;

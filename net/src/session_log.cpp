@@ -599,6 +599,20 @@ bool writeNewFile(const std::string& path, std::span<const uint8_t> bytes) {
 
 } // namespace
 
+namespace {
+
+// Makes the names in `file`'s folder (a new file, a rename) durable.
+void syncFolderOf(const std::string& file) {
+    const std::filesystem::path folder = std::filesystem::path(file).parent_path();
+    const int dir = ::open(folder.empty() ? "." : folder.c_str(), O_RDONLY | O_DIRECTORY);
+    if (dir >= 0) {
+        ::fsync(dir);
+        ::close(dir);
+    }
+}
+
+} // namespace
+
 std::string repairSessionLog(const std::string& path, const LogContents& log) {
     if (log.damage.empty())
         return {};
@@ -624,6 +638,7 @@ std::string repairSessionLog(const std::string& path, const LogContents& log) {
             throw Error("--resume " + path + ": cannot keep the damaged log aside as " + aside +
                         ": " + errnoText());
     }
+    syncFolderOf(target); // the copy's name, durable before the log's name moves
     // Then its intact frames, put in its place by a rename: at every moment the log's name holds
     // the damaged file or the repaired one, and the damaged one is kept.
     std::vector<uint8_t> intact;
@@ -646,12 +661,7 @@ std::string repairSessionLog(const std::string& path, const LogContents& log) {
                     "kept whole as " +
                     aside + "): " + why);
     }
-    const std::filesystem::path folder = std::filesystem::path(target).parent_path();
-    const int dir = ::open(folder.empty() ? "." : folder.c_str(), O_RDONLY | O_DIRECTORY);
-    if (dir >= 0) {
-        ::fsync(dir); // the rename, durable before anything is appended
-        ::close(dir);
-    }
+    syncFolderOf(target); // the rename, durable before anything is appended
     return aside;
 }
 

@@ -132,6 +132,11 @@ Host::InFlight SessionPolicy::inFlight(uint16_t id) const {
     return it == m_peers.end() ? Host::InFlight{} : it->second.inFlight;
 }
 
+void SessionPolicy::holdHelloClock(uint16_t id, uint64_t now) {
+    if (auto it = m_peers.find(id); it != m_peers.end() && !it->second.hello)
+        it->second.connectedUs = now;
+}
+
 // [SECTION] time
 
 void SessionPolicy::update(uint64_t now, PolicyOutput& out) {

@@ -64,8 +64,11 @@ struct SessionServer::Impl {
           admission(
               host.get(), c.admission,
               [this](const ENetPeer* p) {
+                  using Standing = AdmissionGate::Standing;
                   const auto id = uint16_t(reinterpret_cast<uintptr_t>(p->data));
-                  return id && policy.admitted(id);
+                  if (id && policy.admitted(id))
+                      return Standing::Admitted;
+                  return id && gate.progressing(id) ? Standing::Progressing : Standing::Waiting;
               },
               [this](ENetPeer* p) { forgetPeer(p, steadyNowUs()); }),
           control(c.controlBudgetBytes), recorder(c.recorder) {
@@ -558,6 +561,8 @@ void SessionServer::Impl::guard(uint64_t now) {
     admission.reap(now);
     for (const auto& [id, answer] : gate.release(now))
         sendTo(id, Channel::Control, answer);
+    for (uint16_t id : gate.held())
+        policy.holdHelloClock(id, now);
     auto heldBy = [&](uint16_t id) {
         auto it = controlHeld.find(id);
         return it == controlHeld.end() ? int64_t(0) : it->second->load(std::memory_order_relaxed);

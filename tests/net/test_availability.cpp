@@ -23,6 +23,7 @@ using namespace trephine::net;
 namespace {
 
 constexpr uint64_t kStartUs = 1'000'000;
+constexpr uint64_t kLater = kStartUs + 2'000'000; // every peer of kStartUs's old enough to displace
 
 // An ENet CONNECT datagram as a client sends it (header with sent time, then the command).
 std::vector<uint8_t> connectDatagram(uint32_t connectId = 0x1234) {
@@ -166,9 +167,8 @@ TEST(Admission, AConnectIsJudgedByAddressThenSlotsThenRate) {
               ConnectVerdict::AddressBusy);
     EXPECT_EQ(judgeConnect(limits, buckets, 7, even, kStartUs).verdict, ConnectVerdict::PoolFull)
         << "every address holds one: 7 holds no fewer than any";
-    const ConnectDecision newcomer = judgeConnect(limits, buckets, 11, even, kStartUs);
-    EXPECT_EQ(newcomer.verdict, ConnectVerdict::Displace) << "a newcomer holds none";
-    EXPECT_EQ(newcomer.displace, 0u) << "the oldest of those holding the most";
+    EXPECT_EQ(judgeConnect(limits, buckets, 11, even, kLater).verdict, ConnectVerdict::PoolFull)
+        << "every address holds one: a newcomer's share would be no smaller";
     EXPECT_EQ(judgeConnect(limits, buckets, 7, some, kStartUs).verdict, ConnectVerdict::Accept);
     EXPECT_EQ(judgeConnect(limits, buckets, 7, some, kStartUs).verdict,
               ConnectVerdict::RateLimited);
@@ -183,17 +183,33 @@ TEST(Admission, ANewcomerDisplacesTheOldestPeerOfTheAddressHoldingTheMost) {
     limits.waitingPerAddress = 4;
     ConnectBuckets buckets(limits.connectsPerS, limits.connectBurst);
     const std::vector<WaitingPeer> pool{{7, 50}, {8, 10}, {7, 30}, {7, 40}, {9, 5}};
-    const ConnectDecision d = judgeConnect(limits, buckets, 11, pool, kStartUs);
+    const ConnectDecision d = judgeConnect(limits, buckets, 11, pool, kLater);
     EXPECT_EQ(d.verdict, ConnectVerdict::Displace);
     EXPECT_EQ(d.displace, 2u) << "address 7 holds three; its oldest is at index 2";
-    EXPECT_EQ(judgeConnect(limits, buckets, 8, pool, kStartUs).verdict, ConnectVerdict::Displace)
-        << "8 holds one, fewer than 7's three";
-    EXPECT_EQ(judgeConnect(limits, buckets, 7, pool, kStartUs).verdict, ConnectVerdict::PoolFull)
+    EXPECT_EQ(judgeConnect(limits, buckets, 8, pool, kLater).verdict, ConnectVerdict::Displace)
+        << "8 holds one, two fewer than 7's three";
+    EXPECT_EQ(judgeConnect(limits, buckets, 7, pool, kLater).verdict, ConnectVerdict::PoolFull)
         << "the address holding the most takes no one's slot";
     ConnectBuckets empty(1.0, 1.0);
-    ASSERT_TRUE(empty.take(11, kStartUs));
-    EXPECT_EQ(judgeConnect(limits, empty, 11, pool, kStartUs).verdict, ConnectVerdict::RateLimited)
+    ASSERT_TRUE(empty.take(11, kLater));
+    EXPECT_EQ(judgeConnect(limits, empty, 11, pool, kLater).verdict, ConnectVerdict::RateLimited)
         << "a newcomer over its rate displaces no one";
+}
+
+// Among the slots of the address holding the most, a silent one goes before one whose peer is
+// under way (it has made its code offer).
+TEST(Admission, ASilentSlotGoesBeforeAJoinerUnderWay) {
+    AdmissionLimits limits;
+    limits.waitingSlots = 4;
+    ConnectBuckets buckets(limits.connectsPerS, limits.connectBurst);
+    std::vector<WaitingPeer> pool{{7, 10, true}, {7, 30, false}, {7, 40, false}, {8, 5}};
+    ConnectDecision d = judgeConnect(limits, buckets, 11, pool, kLater);
+    ASSERT_EQ(d.verdict, ConnectVerdict::Displace);
+    EXPECT_EQ(d.displace, 1u) << "the oldest silent one, though the one under way is older";
+    pool[1].progressing = pool[2].progressing = true;
+    d = judgeConnect(limits, buckets, 11, pool, kLater);
+    ASSERT_EQ(d.verdict, ConnectVerdict::Displace);
+    EXPECT_EQ(d.displace, 0u) << "all under way: the oldest";
 }
 
 // The probe that locked every newcomer out: 16 addresses each sending 1000 half-open CONNECTs a
@@ -401,6 +417,30 @@ TEST(AvailabilityPolicy, TooManyWaitingConnectionsAreRefusedBusy) {
     EXPECT_TRUE(disconnected(out, 0, RefuseReason::Busy));
     EXPECT_EQ(rig.availability().refusedBusy, 1u);
     EXPECT_NE(refuseReasonText(uint32_t(RefuseReason::Busy)).find("retrying"), std::string::npos);
+}
+
+// A code offer the gate holds for its turn is no late hello: the hello timeout counts from the
+// last time the gate held it.
+TEST(AvailabilityPolicy, AConnectionWhoseOfferIsHeldIsNotTimedOutForItsHello) {
+    ServerConfig c;
+    c.helloTimeoutS = 1.0f;
+    PolicyRig rig(c);
+    const uint16_t held = rig.connect(), silent = rig.connect();
+    bool silentSent = false, heldSent = false;
+    for (int i = 0; i < 30; ++i) { // 3 s, the gate holding `held`'s offer all along
+        rig.now += 100000;
+        rig.p().holdHelloClock(held, rig.now);
+        PolicyOutput out;
+        rig.p().update(rig.now, out);
+        silentSent = silentSent || disconnected(out, silent, RefuseReason::BadHello);
+        heldSent = heldSent || disconnected(out, held, RefuseReason::BadHello);
+    }
+    EXPECT_TRUE(silentSent);
+    EXPECT_FALSE(heldSent);
+    PolicyOutput out;
+    rig.now += 1100000; // answered, then silent for longer than the timeout
+    rig.p().update(rig.now, out);
+    EXPECT_TRUE(disconnected(out, held, RefuseReason::BadHello));
 }
 
 TEST(AvailabilityPolicy, AParticipantSilentForTheIdleTimeoutIsSentAway) {

@@ -55,6 +55,8 @@ public:
     ConnectBuckets(double perS, double burst, uint64_t salt = 0x9e3779b97f4a7c15ull);
     // Takes a token for a connection from `address` at `nowUs`; false when none is left.
     bool take(uint32_t address, uint64_t nowUs);
+    // Whether `address` has a token at `nowUs`, taking none.
+    bool has(uint32_t address, uint64_t nowUs);
 
 private:
     struct Bucket {
@@ -63,6 +65,7 @@ private:
         uint64_t lastUs = 0;
         bool used = false;
     };
+    Bucket& slot(uint32_t address);
     static constexpr size_t kBuckets = 4096;
     double m_perS, m_burst;
     uint64_t m_salt;
@@ -88,10 +91,12 @@ struct AdmissionLimits {
     size_t cookiesFrom = 64;
 };
 
-// A connection not yet admitted: its source address and since when it has held its slot.
+// A connection not yet admitted: its source address, since when it has held its slot, and
+// whether it is under way (it has made its code offer) rather than silent or half-open.
 struct WaitingPeer {
     uint32_t address = 0;
     uint64_t sinceUs = 0;
+    bool progressing = false;
 };
 
 struct ConnectDecision {
@@ -100,8 +105,10 @@ struct ConnectDecision {
 };
 
 // The decision for one CONNECT from `address`, given every peer still waiting. With the pool
-// full, the slots are shared max-min fairly: a newcomer whose address holds fewer waiting peers
-// than the address holding the most takes the oldest of that address's slots.
+// full, the slots are shared max-min fairly: a newcomer whose address holds at least two fewer
+// waiting peers than the address holding the most takes one of that address's slots: a silent
+// one before one under way, the oldest first. A lone joiner, whose address holds one, is so
+// never displaced while any address holds fewer than three.
 ConnectDecision judgeConnect(const AdmissionLimits& limits, ConnectBuckets& buckets,
                              uint32_t address, std::span<const WaitingPeer> waiting,
                              uint64_t nowUs);
@@ -131,7 +138,10 @@ struct AdmissionCounts {
 // admitted into the session (its slot is then the session's, not the gate's).
 class AdmissionGate {
 public:
-    using Admitted = std::function<bool(const ENetPeer*)>;
+    // Where a peer's connection stands in the session: admitted (its slot is the session's), or
+    // waiting, under way (Progressing) or not.
+    enum class Standing { Waiting, Progressing, Admitted };
+    using Admitted = std::function<Standing(const ENetPeer*)>;
     // Called before a slot is reset with the peer it held (the server forgets it: ENet reports no
     // disconnect for a reset peer).
     using OnReset = std::function<void(ENetPeer*)>;

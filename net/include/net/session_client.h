@@ -97,6 +97,10 @@ public:
     // Refusals with Busy before the welcome: the server is there but its places for joining are
     // taken, so the client connects again by itself after a wait of 0.25 s doubling to 2 s.
     uint32_t busyRefusals() const { return m_busyRefusals; }
+    // Its code offer sent and not answered yet: the server may hold it for its turn
+    // (docs/security.md, "Guessing online"), up to about kMaxOfferWaitS.
+    bool offerPending() const { return m_spake.has_value(); }
+    static constexpr double kMaxOfferWaitS = 30.0;
     const Welcome& welcome() const { return *m_welcome; }
     // The server's scene (net/scene.h: extent, camera presets, sites, landmarks, the surgical
     // field), null until it arrives right after the welcome. Immutable: a reconnect's new client

@@ -83,6 +83,11 @@ public:
     size_t removedCount() const { return m_removed.size(); }
     // The answers due at `now` to offers that waited (AttemptLimit), for the peers named.
     std::vector<std::pair<uint16_t, std::vector<uint8_t>>> release(uint64_t now);
+    // The peers whose offers wait for their turn now.
+    std::vector<uint16_t> held() const;
+    // `id` has made an offer (waiting, answered or proven): a joiner under way, not a silent
+    // connection (the admission gate displaces silent ones first).
+    bool progressing(uint16_t id) const;
 
 private:
     struct Codes {

@@ -146,6 +146,9 @@ public:
     // Admitted into the session (its hello accepted) and not sent away: it holds one of the
     // maxClients places; until then it holds one of the admission's waiting slots.
     bool admitted(uint16_t id) const;
+    // The gate holds `id`'s code offer for its turn (SessionGate::held): its hello is not late,
+    // and the hello timeout counts from `now` on.
+    void holdHelloClock(uint16_t id, uint64_t now);
     size_t peerCount() const { return m_peers.size(); }
     // Bytes of client `id`'s updates that ENet still holds (Host::send counts into it).
     Host::InFlight inFlight(uint16_t id) const;
