@@ -308,6 +308,7 @@ int runDemo(DemoOptions& o) {
     std::printf("demo: server on %s (%s), trainee window connected; an instructor joins with "
                 "--code %s\n",
                 o.window.connect.c_str(), o.volume.c_str(), config.instructorCode.c_str());
+    std::fflush(stdout); // read while the window runs, where stdout is a pipe or file
     int rc = runWindowedClient(o.window);
     server.stop();
     return rc;
