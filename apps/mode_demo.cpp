@@ -6,6 +6,7 @@
 #include "modes.h"
 
 #include "mode_window.h"
+#include "net/scripts.h"
 #include "net/secure_channel.h"
 #include "net/session_server.h"
 
@@ -54,25 +55,6 @@ std::vector<int64_t> removedByMaterial(const Volume& before, const Volume& after
         if (mb[i] != ma[i] && ma[i] == uint8_t(Material::Air) && mb[i] < kMaterialCount)
             removed[mb[i]]++;
     return removed;
-}
-
-// The perforator 1 mm above the site fed in along its normal at `feed` mm/s, drilling, tool
-// states at 100 Hz, for `seconds`.
-std::vector<net::ScriptSample> feedScript(const SurfaceSite& site, float feed, double seconds) {
-    std::vector<net::ScriptSample> out;
-    const int n = int(seconds * 100.0);
-    for (int i = 0; i <= n; ++i) {
-        net::ScriptSample s;
-        s.t = i / 100.0;
-        s.tool.toolKind = uint8_t(ToolKind::Perforator);
-        s.tool.diameterMm = toolType(ToolKind::Perforator).defaultDiameterMm;
-        s.tool.position = site.position - site.normal * (-1.0f + feed * float(s.t));
-        s.tool.orientation = glm::rotation(glm::vec3(0, 0, 1), site.normal);
-        s.tool.speed = 1.0f;
-        s.tool.drilling = true;
-        out.push_back(s);
-    }
-    return out;
 }
 
 // What the trainee saw while drilling: the clutch (cutting stopped while the feed went on) and
@@ -224,7 +206,7 @@ int runHeadlessDemo(const DemoOptions& o) {
                 firstBytes * 1e-3);
 
     std::vector<Waypoint> waypoints;
-    const std::vector<net::ScriptSample> script = feedScript(site, o.feedMmPerS, o.maxSeconds);
+    const std::vector<net::ScriptSample> script = net::feedScript(site, o.feedMmPerS, o.maxSeconds);
     for (const net::ScriptSample& s : script)
         waypoints.push_back({s.t, ToolPose{s.tool.position, s.tool.orientation}, 0});
     device = std::make_unique<ScriptedDevice>(std::move(waypoints));

@@ -15,6 +15,7 @@
 #include "net/client_model.h"
 #include "net/codec.h"
 #include "net/scene.h"
+#include "net/scripts.h"
 #include "net/trainee_core.h"
 #include "net/view.h"
 
@@ -68,159 +69,6 @@ struct TraineeOptions {
 };
 
 using Sample = net::ScriptSample;
-
-// The built-in burr hole: a 5 mm burr starts 1 mm above the server's burr site (its scene's) and
-// feeds in along the normal at 1 mm/s, tool states at 100 Hz, then lifts (drilling off).
-std::vector<Sample> burrholeScript(const net::SceneSite& site, double durationS) {
-    std::vector<Sample> out;
-    int n = int(durationS * 100.0);
-    for (int i = 0; i <= n; ++i) {
-        Sample s;
-        s.t = i / 100.0;
-        s.tool.toolKind = uint8_t(ToolKind::Burr);
-        s.tool.diameterMm = 5.0f;
-        float depth = -1.0f + float(s.t);
-        s.tool.position = site.position - site.normal * depth;
-        s.tool.orientation = glm::rotation(glm::vec3(0, 0, 1), site.normal);
-        s.tool.speed = i < n ? 1.0f : 0.0f;
-        s.tool.drilling = i < n;
-        out.push_back(s);
-    }
-    return out;
-}
-
-// A whole cell as a decimal number (spaces around it allowed): stod read "0x10" as hex 16 and
-// "5mm" or "1.5.2" as their leading number, so a mistyped cell drilled somewhere else.
-bool parseNumberCell(const std::string& cell, double& v) {
-    const char* p = cell.data();
-    const char* end = p + cell.size();
-    while (p < end && std::isspace(uint8_t(*p)))
-        ++p;
-    while (end > p && std::isspace(uint8_t(end[-1])))
-        --end;
-    if (p < end && *p == '+')
-        ++p;
-    auto [ptr, ec] = std::from_chars(p, end, v);
-    return p < end && ec == std::errc() && ptr == end;
-}
-
-// time_s,x,y,z,qw,qx,qy,qz,speed,tool with tool `burr:D` or `perforator[:D]`; '#' comments and
-// a header line are skipped.
-std::vector<Sample> csvScript(const std::string& path) {
-    std::error_code ec;
-    if (std::filesystem::is_directory(path, ec))
-        throw Error("script " + path + ": a folder, not a CSV file (use `burrhole` or a CSV file)");
-    std::ifstream in(path);
-    if (!in)
-        throw Error("script " + path + ": cannot open it (use `burrhole` or a CSV file)");
-    std::vector<Sample> out;
-    std::string line;
-    int lineNo = 0;
-    auto fail = [&](const std::string& what) {
-        return Error("script " + path + " line " + std::to_string(lineNo) + ": " + what);
-    };
-    // Lines of at most kMaxLine characters: std::getline on a file with no newline (/dev/zero, a
-    // binary file) grew one line until memory ran out.
-    constexpr size_t kMaxLine = 4096;
-    auto readLine = [&] {
-        ++lineNo;
-        line.clear();
-        for (int c; (c = in.get()) != std::char_traits<char>::eof();) {
-            if (c == '\n')
-                return true;
-            if (line.size() == kMaxLine)
-                throw fail("longer than " + std::to_string(kMaxLine) +
-                           " characters: not a CSV trajectory");
-            line += char(c);
-        }
-        return !line.empty();
-    };
-    while (readLine()) {
-        if (!line.empty() && line.back() == '\r')
-            line.pop_back();
-        // A UTF-8 byte order mark (spreadsheets write one) is no part of the first cell: kept, it
-        // made a first sample unreadable, skipped as a header and lost.
-        if (lineNo == 1 && line.rfind("\xEF\xBB\xBF", 0) == 0)
-            line.erase(0, 3);
-        // Line 1 is a header when its first cell is not a number (" 5.0" and "+5.0" are numbers:
-        // judged by the first character, they were skipped as a header and the sample lost).
-        double firstCell = 0.0;
-        if (line.empty() || line[0] == '#' ||
-            (lineNo == 1 && !parseNumberCell(line.substr(0, line.find(',')), firstCell)))
-            continue;
-        // Every cell, an empty last one too: "...,burr:5," has 11 columns, not 10.
-        std::vector<std::string> cells;
-        for (size_t at = 0;;) {
-            const size_t comma = line.find(',', at);
-            cells.push_back(line.substr(at, comma - at));
-            if (comma == std::string::npos)
-                break;
-            at = comma + 1;
-        }
-        if (cells.size() != 10)
-            throw fail("expected 10 columns time_s,x,y,z,qw,qx,qy,qz,speed,tool, found " +
-                       std::to_string(cells.size()));
-        double v[9];
-        for (int i = 0; i < 9; ++i)
-            if (!parseNumberCell(cells[size_t(i)], v[i]))
-                throw fail("column " + std::to_string(i + 1) + " is not a number");
-        // A number takes nan and inf, and a double beyond a float's range becomes inf as one: a NaN
-        // time never ended the run, a huge one overflowed the end time.
-        for (int i = 0; i < 9; ++i)
-            if (!std::isfinite(float(v[i])))
-                throw fail("column " + std::to_string(i + 1) + " is not a finite number");
-        if (!(v[0] >= 0.0 && v[0] <= 86400.0))
-            throw fail("time must be from 0 to 86400 s");
-        if (!(std::abs(v[1]) <= net::kMaxToolDistanceMm &&
-              std::abs(v[2]) <= net::kMaxToolDistanceMm &&
-              std::abs(v[3]) <= net::kMaxToolDistanceMm))
-            throw fail("position beyond 100 m of the volume's centre");
-        const glm::quat q = glm::quat(float(v[4]), float(v[5]), float(v[6]), float(v[7]));
-        if (!(glm::dot(q, q) > 1e-6f))
-            throw fail("the orientation quaternion is zero");
-        Sample s;
-        s.t = v[0];
-        s.tool.position = {float(v[1]), float(v[2]), float(v[3])};
-        s.tool.orientation = glm::normalize(q);
-        if (!(v[8] >= 0.0 && v[8] <= 1.0))
-            throw fail("speed must be in [0, 1]");
-        s.tool.speed = float(v[8]);
-        s.tool.drilling = v[8] > 0.0;
-        std::string tool = cells[9];
-        while (!tool.empty() && std::isspace(uint8_t(tool.back())))
-            tool.pop_back();
-        ToolShape shape;
-        auto diameter = [&](size_t from) {
-            double d = 0.0;
-            if (!parseNumberCell(tool.substr(from), d))
-                throw fail("tool diameter in '" + tool + "' is not a number");
-            return float(d);
-        };
-        try {
-            // NAME:D, or NAME alone for the tool's usual size (ToolType::name).
-            const size_t colon = tool.find(':');
-            const std::optional<ToolKind> kind = toolKindNamed(tool.substr(0, colon));
-            if (!kind)
-                throw fail("tool must be NAME:D or NAME (burr, perforator, diamond), not '" + tool +
-                           "'");
-            shape =
-                ToolShape::of(*kind, colon == std::string::npos ? toolType(*kind).defaultDiameterMm
-                                                                : diameter(colon + 1));
-        } catch (const Error& e) {
-            if (std::string(e.what()).rfind("script ", 0) == 0)
-                throw;
-            throw fail(e.what()); // the tool's own complaint, with the file and line
-        }
-        s.tool.toolKind = uint8_t(shape.kind);
-        s.tool.diameterMm = shape.diameterMm;
-        if (!out.empty() && s.t < out.back().t)
-            throw fail("times must not decrease");
-        out.push_back(s);
-    }
-    if (out.empty())
-        throw Error("script " + path + ": no samples");
-    return out;
-}
 
 // The figures of the session so far, on stdout (the report has them all).
 void printFigures(const net::ClientModel& model, const net::TraineeCore& core, bool volume) {
@@ -331,7 +179,8 @@ int runHeadlessTrainee(const TraineeOptions& o, std::vector<Sample> script) {
         const net::SceneSite* site = net::findSite(scene->scene, net::kDefaultSiteName);
         if (!site)
             throw Error("trainee: the server's scene has no burr site for the burrhole script");
-        script = burrholeScript(*site, o.durationS > 0 ? o.durationS : 4.0);
+        script = net::burrholeScript({site->position, site->normal},
+                                     o.durationS > 0 ? o.durationS : net::kBurrholeSeconds);
     }
     std::printf("trainee: %s as client %u, view %s (%s), sync %s, codec %s, %zu script samples\n",
                 o.connect.c_str(), unsigned(welcome.clientId), o.camera.c_str(),
@@ -467,7 +316,7 @@ int runTrainee(const TraineeOptions& o) {
     // A CSV script is read first, so a bad file fails before anything connects.
     std::vector<Sample> script;
     if (o.script != "burrhole")
-        script = csvScript(o.script);
+        script = net::csvScript(o.script);
     return runHeadlessTrainee(o, std::move(script));
 }
 

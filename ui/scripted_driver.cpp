@@ -55,10 +55,10 @@ bool ScriptedDriver::ignoresPointer() const {
     return !m_screenshot.empty() && m_burrhole;
 }
 
-ScriptPose ScriptedDriver::tool(const SurfaceSite& site, double now) {
+net::ScriptPose ScriptedDriver::tool(const SurfaceSite& site, double now) {
     if (m_scriptStart < 0)
         m_scriptStart = now;
-    const ScriptPose p = burrholePose(site, now - m_scriptStart);
+    const net::ScriptPose p = net::burrholePose(site, now - m_scriptStart);
     if (p.done && !m_scriptDone) {
         m_scriptDone = true;
         m_justDone = true;

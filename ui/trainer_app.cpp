@@ -839,8 +839,9 @@ void TrainerWindow::updateTool(FrameState& f) {
     const std::vector<HapticSample> ticks = core.hapticSamples();
     hapticForce = ticks.empty() ? glm::vec3(0.0f) : ticks.back().force;
     if (scene && f.havePicture && script.drivesTool()) {
-        const ScriptPose p = script.tool(scene->site, f.now);
-        toolControls.kind = 0;
+        const net::ScriptPose p = script.tool(scene->site, f.now);
+        toolControls.kind = int(ToolKind::Burr); // the script's burr, as in every shell
+        toolControls.diameter(ToolKind::Burr) = net::kBurrholeDiameterMm;
         toolPos = p.position;
         toolRot = glm::rotation(glm::vec3(0, 0, 1), p.axis);
         toolControls.drilling = p.drilling;

@@ -1,6 +1,7 @@
 // The handpiece's feed without GL or a network: the mouse's stroke against the server's own
 // drilling (Driller, swept as the simulation step sweeps) and force model, compared with the
 // burrhole scripts on the server's default volume (skull:128).
+#include "net/scripts.h"
 #include "ui/mouse_tool.h"
 
 #include "libsim/drill.h"
@@ -16,6 +17,8 @@
 
 using namespace trephine;
 using namespace trephine::ui;
+using trephine::net::burrholePose;
+using trephine::net::ScriptPose;
 
 namespace {
 
@@ -111,24 +114,25 @@ TEST(Feed, SlidingFollowsThePointerAtTheStrokesDepth) {
 }
 
 // The target: holding the button for 3 s over the bone with the default burr removes at
-// least as much bone as the burrhole script (docs/scripts.md) in 3 s. Both run against the
-// server's drilling on its default volume; the figures are printed beside the target.
+// least as much bone as a steady 1 mm/s feed (the headless burrhole script when the target was
+// set) in 3 s. Both run against the server's drilling on its default volume; the figures are
+// printed beside the target, with the burrhole script's (a plunge and a widening spiral).
 TEST(Feed, HoldingStillThreeSecondsRemovesAtLeastTheBurrholeScriptsBone) {
     const SurfaceSite site = defaultBurrSite(makeSkull(128));
     MouseStroke stroke(site);
     const int64_t mouse = removedBy(3.0, std::ref(stroke));
-    // trephine trainee --headless --script burrhole: 1 mm above the site, in at 1 mm/s.
+    // 1 mm above the site, in at 1 mm/s.
     const int64_t script = removedBy(3.0, [&](double t, const Volume&) {
         return std::pair{
             ToolPose::fromAxis(site.position - site.normal * float(t - 1.0), site.normal), true};
     });
-    // The window's --script burrhole: plunge, then a widening spiral (ui/mouse_tool.h).
+    // --script burrhole, in every shell: plunge, then a widening spiral (net/scripts.h).
     const int64_t spiral = removedBy(3.0, [&](double t, const Volume&) {
         const ScriptPose p = burrholePose(site, t);
         return std::pair{ToolPose::fromAxis(p.position, p.axis), p.drilling};
     });
     std::printf("feed: 3 s held still, default burr 5 mm, skull:128: %lld voxels removed "
-                "(target >= %lld, the headless burrhole script's; the window's spiral script: "
+                "(target >= %lld, a 1 mm/s feed's; the burrhole script's plunge and spiral: "
                 "%lld); stroke depth %.1f mm\n",
                 (long long)mouse, (long long)script, (long long)spiral,
                 double(stroke.feed.depthMm()));

@@ -1,5 +1,6 @@
 // The mouse device's geometry without GL: picking the bone under the cursor from DBI depth, and
 // the tool pose placed there.
+#include "net/scripts.h"
 #include "ui/mouse_tool.h"
 
 #include <glm/geometric.hpp>
@@ -7,6 +8,8 @@
 
 using namespace trephine;
 using namespace trephine::ui;
+using trephine::net::burrholePose;
+using trephine::net::ScriptPose;
 
 namespace {
 // A bone plane z = 0 seen from +z: every pixel's depth is the window depth of its plane point.

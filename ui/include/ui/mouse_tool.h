@@ -98,18 +98,6 @@ std::optional<HoleReading> readHole(const Dbi& dbi, const Camera& camera, glm::i
 HoleFloor floorOfColor(uint8_t r, uint8_t g, uint8_t b);
 const char* holeFloorName(HoleFloor f);
 
-// The scripted burr hole (`--script burrhole`) at time t (s): plunge at the site, widen in a
-// spiral, lift out along the hole's axis and rest the drill to one side. The tool moves
-// continuously, as a hand would (at most about 40 mm/s), so forces extrapolated along it are
-// ones a hand could meet.
-struct ScriptPose {
-    glm::vec3 position;
-    glm::vec3 axis;
-    bool drilling;
-    bool done;
-};
-ScriptPose burrholePose(const SurfaceSite& site, double t);
-
 // The window's tool as the haptic loop's device: the UI thread sets the pose each frame, the
 // 1 kHz loop reads it, extrapolates the force there and sends tool states at 100 Hz.
 class WindowDevice : public Device {

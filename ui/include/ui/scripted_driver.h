@@ -4,6 +4,8 @@
 // it decides when a scripted run is over and with what exit code.
 #pragma once
 
+#include "net/scripts.h"
+
 #include "libsim/dbi.h"
 #include "libsim/skull.h"
 #include "net/client_model.h"
@@ -32,7 +34,7 @@ public:
     bool ignoresPointer() const;
     bool drivesTool() const { return m_burrhole; }
     // [--script burrhole] The tool at `now` (s): the script starts at its first call.
-    ScriptPose tool(const SurfaceSite& site, double now);
+    net::ScriptPose tool(const SurfaceSite& site, double now);
     // True once, on the frame the script ended (the view settles from then on).
     bool toolJustDone();
 
