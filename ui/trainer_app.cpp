@@ -742,9 +742,12 @@ void TrainerWindow::takeScene(const FrameState& f) {
 // volume makes the DBI the picture again (a switch back has completed).
 void TrainerWindow::applyRects(const FrameState& f) {
     for (net::AppliedRect& r : client.drainRects()) {
-        if (r.full) {
-            if (r.pixels.width() != viewSize.x || r.pixels.height() != viewSize.y)
-                continue; // the placeholder view before ours
+        const std::optional<net::HeldPicture> held =
+            haveImage
+                ? std::optional(net::HeldPicture{imageViewId, {imageView.width, imageView.height}})
+                : std::nullopt;
+        const net::PicturePart part = net::picturePart(r, viewSize, held);
+        if (part == net::PicturePart::Whole) {
             if (local.have && r.appliedUs < designs.pictureSinceUs)
                 continue; // older than the volume that replaced the DBI
             comp.uploadFull(r.pixels);
@@ -756,7 +759,7 @@ void TrainerWindow::applyRects(const FrameState& f) {
             cpuDbiCamera = net::toCamera(r.view);
             if (o.onPicture)
                 o.onPicture(cpuDbiCamera);
-        } else if (haveImage && r.viewId == imageViewId) {
+        } else if (part == net::PicturePart::Rect) {
             comp.uploadRect(r.rect, r.pixels);
             if (designs.picture == SyncDesign::Dbi && cpuDbi.bounds().contains(r.rect))
                 cpuDbi.apply(r.pixels, r.rect.x, r.rect.y);

@@ -13,6 +13,18 @@
 
 namespace trephine::net {
 
+PicturePart picturePart(const AppliedRect& r, glm::ivec2 viewSize,
+                        const std::optional<HeldPicture>& held) {
+    if (r.full)
+        return r.pixels.width() == viewSize.x && r.pixels.height() == viewSize.y
+                   ? PicturePart::Whole
+                   : PicturePart::None;
+    return held && r.viewId == held->viewId &&
+                   PixelRect{0, 0, held->size.x, held->size.y}.contains(r.rect)
+               ? PicturePart::Rect
+               : PicturePart::None;
+}
+
 const char* linkStateName(LinkState s) {
     switch (s) {
     case LinkState::Connecting:

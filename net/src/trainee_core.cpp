@@ -151,15 +151,17 @@ void HeadlessView::take(ClientThread& client, uint64_t hapticTicks) {
     m_snap = client.snapshot();
     model.addSnapshot(m_snap, now);
     for (AppliedRect& r : client.drainRects()) {
-        // A whole picture of our view (a full image, or a volume client's own render), or a
-        // rectangle of the one held; anything else is the placeholder view's.
-        if (r.rect.w == m_size && r.rect.h == m_size && r.pixels.width() == m_size &&
-            r.pixels.height() == m_size) {
+        const std::optional<HeldPicture> held =
+            hasPicture() ? std::optional(HeldPicture{m_viewId, {m_size, m_size}}) : std::nullopt;
+        switch (picturePart(r, {m_size, m_size}, held)) {
+        case PicturePart::Whole:
             m_dbi = r.pixels;
             m_viewId = r.viewId;
-        } else if (hasPicture() && r.viewId == m_viewId && m_dbi.bounds().contains(r.rect)) {
+            break;
+        case PicturePart::Rect:
             m_dbi.apply(r.pixels, r.rect.x, r.rect.y);
-        } else {
+            break;
+        case PicturePart::None:
             continue;
         }
         model.addRect(r, now);

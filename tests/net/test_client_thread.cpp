@@ -553,3 +553,36 @@ TEST(ClientThread, AnExceptionOnTheClientThreadEndsTheConnectionNotTheProgram) {
     client.stop();
     server.stop();
 }
+
+// One picture rule for the window and the headless trainee: a full image of the view's size is
+// the whole picture; a rectangle counts only for the picture held, of its view and inside it.
+TEST(PictureRule, AFullImageOfTheViewIsWholeAndARectCountsOnlyForThePictureHeld) {
+    const glm::ivec2 view{64, 48};
+    AppliedRect full;
+    full.full = true;
+    full.viewId = 3;
+    full.rect = {0, 0, 64, 48};
+    full.pixels = Dbi(64, 48);
+    EXPECT_EQ(picturePart(full, view, std::nullopt), PicturePart::Whole);
+    AppliedRect placeholder = full;
+    placeholder.pixels = Dbi(1, 1);
+    placeholder.rect = {0, 0, 1, 1};
+    EXPECT_EQ(picturePart(placeholder, view, std::nullopt), PicturePart::None)
+        << "the hello's 1 x 1 view";
+    AppliedRect rect;
+    rect.viewId = 3;
+    rect.rect = {10, 10, 8, 8};
+    rect.pixels = Dbi(8, 8);
+    const HeldPicture held{3, view};
+    EXPECT_EQ(picturePart(rect, view, held), PicturePart::Rect);
+    EXPECT_EQ(picturePart(rect, view, std::nullopt), PicturePart::None) << "no picture yet";
+    rect.viewId = 2;
+    EXPECT_EQ(picturePart(rect, view, held), PicturePart::None) << "a view left behind";
+    rect.viewId = 3;
+    rect.rect = {60, 40, 8, 8};
+    EXPECT_EQ(picturePart(rect, view, held), PicturePart::None) << "outside the picture";
+    rect.rect = {0, 0, 64, 48};
+    rect.pixels = Dbi(64, 48);
+    EXPECT_EQ(picturePart(rect, view, held), PicturePart::Rect)
+        << "a change as large as the view is still a change of the picture held";
+}

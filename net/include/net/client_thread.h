@@ -49,6 +49,18 @@ struct AppliedRect {
     uint64_t appliedUs = 0;
 };
 
+// What an applied rectangle is to the picture a client shows, one rule for every shell (the
+// window, the headless trainee): the whole picture of a view of `viewSize` (a full image), a
+// rectangle of the picture held (of its view, inside it), or nothing of it (the placeholder
+// view's, or a view left behind).
+enum class PicturePart { Whole, Rect, None };
+struct HeldPicture {
+    uint32_t viewId = 0;
+    glm::ivec2 size{0};
+};
+PicturePart picturePart(const AppliedRect& r, glm::ivec2 viewSize,
+                        const std::optional<HeldPicture>& held);
+
 // One volume update as a window needs it (volume mode, renderLocally off): the box and its voxels
 // after applying, or the whole volume on a full update.
 struct AppliedVolumeBox {
