@@ -11,6 +11,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <optional>
 
 namespace trephine::net {
@@ -113,6 +114,74 @@ bool parseNumberCell(const std::string& cell, double& v) {
     return p < end && ec == std::errc() && ptr == end;
 }
 
+// One row's cells as a tool state; `fail` makes the error naming the file and line.
+ScriptSample csvRow(const std::string& line, const std::function<Error(const std::string&)>& fail) {
+    // Every cell, an empty last one too: "...,burr:5," has 11 columns, not 10.
+    std::vector<std::string> cells;
+    for (size_t at = 0;;) {
+        const size_t comma = line.find(',', at);
+        cells.push_back(line.substr(at, comma - at));
+        if (comma == std::string::npos)
+            break;
+        at = comma + 1;
+    }
+    if (cells.size() != 10)
+        throw fail("expected 10 columns time_s,x,y,z,qw,qx,qy,qz,speed,tool, found " +
+                   std::to_string(cells.size()));
+    double v[9];
+    for (int i = 0; i < 9; ++i)
+        if (!parseNumberCell(cells[size_t(i)], v[i]))
+            throw fail("column " + std::to_string(i + 1) + " is not a number");
+    // A number takes nan and inf, and a double beyond a float's range becomes inf as one: a NaN
+    // time never ended the run, a huge one overflowed the end time.
+    for (int i = 0; i < 9; ++i)
+        if (!std::isfinite(float(v[i])))
+            throw fail("column " + std::to_string(i + 1) + " is not a finite number");
+    if (!(v[0] >= 0.0 && v[0] <= 86400.0))
+        throw fail("time must be from 0 to 86400 s");
+    if (!(std::abs(v[1]) <= kMaxToolDistanceMm && std::abs(v[2]) <= kMaxToolDistanceMm &&
+          std::abs(v[3]) <= kMaxToolDistanceMm))
+        throw fail("position beyond 100 m of the volume's centre");
+    const glm::quat q = glm::quat(float(v[4]), float(v[5]), float(v[6]), float(v[7]));
+    if (!(glm::dot(q, q) > 1e-6f))
+        throw fail("the orientation quaternion is zero");
+    ScriptSample s;
+    s.t = v[0];
+    s.tool.position = {float(v[1]), float(v[2]), float(v[3])};
+    s.tool.orientation = glm::normalize(q);
+    if (!(v[8] >= 0.0 && v[8] <= 1.0))
+        throw fail("speed must be in [0, 1]");
+    s.tool.speed = float(v[8]);
+    s.tool.drilling = v[8] > 0.0;
+    std::string tool = cells[9];
+    while (!tool.empty() && std::isspace(uint8_t(tool.back())))
+        tool.pop_back();
+    ToolShape shape;
+    auto diameter = [&](size_t from) {
+        double d = 0.0;
+        if (!parseNumberCell(tool.substr(from), d))
+            throw fail("tool diameter in '" + tool + "' is not a number");
+        return float(d);
+    };
+    try {
+        // NAME:D, or NAME alone for the tool's usual size (ToolType::name).
+        const size_t colon = tool.find(':');
+        const std::optional<ToolKind> kind = toolKindNamed(tool.substr(0, colon));
+        if (!kind)
+            throw fail("tool must be NAME:D or NAME (burr, perforator, diamond), not '" + tool +
+                       "'");
+        shape = ToolShape::of(*kind, colon == std::string::npos ? toolType(*kind).defaultDiameterMm
+                                                                : diameter(colon + 1));
+    } catch (const Error& e) {
+        if (std::string(e.what()).rfind("script ", 0) == 0)
+            throw;
+        throw fail(e.what()); // the tool's own complaint, with the file and line
+    }
+    s.tool.toolKind = uint8_t(shape.kind);
+    s.tool.diameterMm = shape.diameterMm;
+    return s;
+}
+
 } // namespace
 
 std::vector<ScriptSample> csvScript(const std::string& path) {
@@ -157,70 +226,7 @@ std::vector<ScriptSample> csvScript(const std::string& path) {
         if (line.empty() || line[0] == '#' ||
             (lineNo == 1 && !parseNumberCell(line.substr(0, line.find(',')), firstCell)))
             continue;
-        // Every cell, an empty last one too: "...,burr:5," has 11 columns, not 10.
-        std::vector<std::string> cells;
-        for (size_t at = 0;;) {
-            const size_t comma = line.find(',', at);
-            cells.push_back(line.substr(at, comma - at));
-            if (comma == std::string::npos)
-                break;
-            at = comma + 1;
-        }
-        if (cells.size() != 10)
-            throw fail("expected 10 columns time_s,x,y,z,qw,qx,qy,qz,speed,tool, found " +
-                       std::to_string(cells.size()));
-        double v[9];
-        for (int i = 0; i < 9; ++i)
-            if (!parseNumberCell(cells[size_t(i)], v[i]))
-                throw fail("column " + std::to_string(i + 1) + " is not a number");
-        // A number takes nan and inf, and a double beyond a float's range becomes inf as one: a NaN
-        // time never ended the run, a huge one overflowed the end time.
-        for (int i = 0; i < 9; ++i)
-            if (!std::isfinite(float(v[i])))
-                throw fail("column " + std::to_string(i + 1) + " is not a finite number");
-        if (!(v[0] >= 0.0 && v[0] <= 86400.0))
-            throw fail("time must be from 0 to 86400 s");
-        if (!(std::abs(v[1]) <= kMaxToolDistanceMm && std::abs(v[2]) <= kMaxToolDistanceMm &&
-              std::abs(v[3]) <= kMaxToolDistanceMm))
-            throw fail("position beyond 100 m of the volume's centre");
-        const glm::quat q = glm::quat(float(v[4]), float(v[5]), float(v[6]), float(v[7]));
-        if (!(glm::dot(q, q) > 1e-6f))
-            throw fail("the orientation quaternion is zero");
-        ScriptSample s;
-        s.t = v[0];
-        s.tool.position = {float(v[1]), float(v[2]), float(v[3])};
-        s.tool.orientation = glm::normalize(q);
-        if (!(v[8] >= 0.0 && v[8] <= 1.0))
-            throw fail("speed must be in [0, 1]");
-        s.tool.speed = float(v[8]);
-        s.tool.drilling = v[8] > 0.0;
-        std::string tool = cells[9];
-        while (!tool.empty() && std::isspace(uint8_t(tool.back())))
-            tool.pop_back();
-        ToolShape shape;
-        auto diameter = [&](size_t from) {
-            double d = 0.0;
-            if (!parseNumberCell(tool.substr(from), d))
-                throw fail("tool diameter in '" + tool + "' is not a number");
-            return float(d);
-        };
-        try {
-            // NAME:D, or NAME alone for the tool's usual size (ToolType::name).
-            const size_t colon = tool.find(':');
-            const std::optional<ToolKind> kind = toolKindNamed(tool.substr(0, colon));
-            if (!kind)
-                throw fail("tool must be NAME:D or NAME (burr, perforator, diamond), not '" + tool +
-                           "'");
-            shape =
-                ToolShape::of(*kind, colon == std::string::npos ? toolType(*kind).defaultDiameterMm
-                                                                : diameter(colon + 1));
-        } catch (const Error& e) {
-            if (std::string(e.what()).rfind("script ", 0) == 0)
-                throw;
-            throw fail(e.what()); // the tool's own complaint, with the file and line
-        }
-        s.tool.toolKind = uint8_t(shape.kind);
-        s.tool.diameterMm = shape.diameterMm;
+        const ScriptSample s = csvRow(line, fail);
         if (!out.empty() && s.t < out.back().t)
             throw fail("times must not decrease");
         out.push_back(s);
