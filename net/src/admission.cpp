@@ -192,7 +192,7 @@ ConnectDecision judgeConnect(const AdmissionLimits& limits, ConnectBuckets& buck
             }
         }
         // Only a share that is larger by two gives one up: addresses one apart would take
-        // slots from each other for ever, and keep every slot too young to give up.
+        // slots from each other for ever.
         if (!victim || most <= mine + 1) {
             d.verdict = ConnectVerdict::PoolFull;
             return d;

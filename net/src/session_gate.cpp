@@ -76,10 +76,14 @@ SessionGate::Bucket& SessionGate::bucket(uint32_t host, uint64_t now) {
     return b;
 }
 
-bool SessionGate::mayAnswer(const Peer& p, uint64_t now) {
+bool SessionGate::firstInLine(const Peer& p) const {
     for (const auto& [id, q] : m_peers)
         if (q.stage == Peer::Stage::Waiting && q.host == p.host && q.turn < p.turn)
-            return false; // an earlier offer from the address goes first
+            return false;
+    return true;
+}
+
+bool SessionGate::mayAnswer(const Peer& p, uint64_t now) {
     Bucket& b = bucket(p.host, now);
     if (b.tokens >= 1.0) {
         b.tokens -= 1.0; // given back when the code is proven
@@ -139,9 +143,11 @@ std::vector<std::pair<uint16_t, std::vector<uint8_t>>> SessionGate::release(uint
         if (p.stage == Peer::Stage::Waiting)
             waiting.push_back({p.turn, id});
     std::sort(waiting.begin(), waiting.end());
+    // In arrival order, each address's first waiting offer only: the others wait behind it.
+    std::set<uint32_t> seen;
     for (const auto& [turn, id] : waiting) {
         Peer& p = m_peers.at(id);
-        if (!mayAnswer(p, now))
+        if (!seen.insert(p.host).second || !mayAnswer(p, now))
             continue;
         if (answer(p))
             out.push_back({id, m_reply});
@@ -205,7 +211,7 @@ SessionGate::Result SessionGate::handshake(Peer& p, std::span<const uint8_t> dat
         p.share = m.share;
         p.stage = Peer::Stage::Waiting;
         p.turn = m_nextTurn++;
-        if (!mayAnswer(p, now)) {
+        if (!firstInLine(p) || !mayAnswer(p, now)) {
             count(&SecurityCounters::attemptsLimited);
             r.kind = Result::Kind::Held;
             return r;

@@ -111,8 +111,10 @@ private:
 
     Result refuse(Peer& p, RefuseReason why, uint32_t detail, uint64_t SecurityCounters::*counter);
     Result handshake(Peer& p, std::span<const uint8_t> data, uint64_t now);
-    // Whether `p`'s waiting offer may be answered at `now` (its turn, and a token or the slow
-    // lane); spends what answering it costs.
+    // No earlier offer from `p`'s address waits (offers are answered in arrival order).
+    bool firstInLine(const Peer& p) const;
+    // Whether `p`'s address may have an offer answered at `now` (a token, or the slow lane's
+    // turn); spends what answering it costs.
     bool mayAnswer(const Peer& p, uint64_t now);
     bool answer(Peer& p); // answers the waiting offer into m_reply; false: not a group point
     Result openSealed(Peer& p, Channel channel, std::span<const uint8_t> data);
