@@ -1,6 +1,6 @@
 #include "net/budgets.h"
 
-#include "net/protocol.h"
+#include "net/messages.h"
 
 #include <algorithm>
 #include <cmath>
@@ -51,17 +51,10 @@ bool RateBudget::take(double amount, uint64_t nowUs) {
 
 namespace {
 
-// Messages whose newest copy says all an older one said.
+// Control messages whose newest copy says all an older one said (the list's newest wins).
 bool latestState(uint8_t type) {
-    switch (MessageType(type)) {
-    case MessageType::Participants:
-    case MessageType::Annotations:
-    case MessageType::ParticipantView:
-    case MessageType::Codes:
-        return true;
-    default:
-        return false;
-    }
+    const MessageInfo* m = messageInfo(type);
+    return m && m->newestWins && m->channel == Channel::Control;
 }
 
 } // namespace

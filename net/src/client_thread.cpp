@@ -2,6 +2,7 @@
 
 #include "libsim/error.h"
 #include "net/codec.h"
+#include "net/messages.h"
 
 #include <algorithm>
 #include <chrono>
@@ -551,47 +552,37 @@ void ClientThread::runCommands(SessionClient& client, bool renderLocally) {
         std::lock_guard lock(m_cmdMutex);
         cmds.swap(m_commands);
     }
-    for (auto& c : cmds) {
-        if (auto* t = std::get_if<ToolState>(&c)) {
-            if (cp->welcomed())
-                cp->sendToolState(*t);
-        } else if (auto* v = std::get_if<ViewCmd>(&c)) {
-            // SessionClient holds a view or switch asked for before its connection
-            // is up and makes it then (with the hello, or right after it). A view
-            // it refused (larger than the server serves) is not wanted again: in
-            // the next hello it had every reconnect refused.
-            if (cp->requestView(v->view) != 0) {
-                m_wantedView = v->view;
-                // Rendered here at once (volume design, renderLocally): the new
-                // view's picture is published whole, as a DBI's full image is.
+    // SessionClient holds a view or switch asked for before its connection is up and makes it
+    // then (with the hello, or right after it); anything else waits for the welcome.
+    const bool welcomed = cp->welcomed();
+    const auto run = Handlers{
+        [&](const ViewCmd& v) {
+            // A view it refused (larger than the server serves) is not wanted again: in the next
+            // hello it had every reconnect refused.
+            if (cp->requestView(v.view) != 0) {
+                m_wantedView = v.view;
+                // Rendered here at once (volume design, renderLocally): the new view's picture
+                // is published whole, as a DBI's full image is.
                 if (renderLocally && cp->sync() == Sync::Volume)
                     m_needFull = true;
             }
-        } else if (auto* y = std::get_if<SyncCmd>(&c)) {
-            m_wantedSync = y->sync;
-            cp->requestSync(y->sync);
-        } else if (auto* a = std::get_if<Annotate>(&c)) {
-            if (cp->welcomed())
-                cp->annotate(*a);
-        } else if (auto* k = std::get_if<TakeOver>(&c)) {
-            if (cp->welcomed())
-                cp->takeOver(k->trainee);
-        } else if (auto* as = std::get_if<ViewAs>(&c)) {
-            if (cp->welcomed())
-                cp->viewAs(as->clientId);
-        } else if (auto* r = std::get_if<Remove>(&c)) {
-            if (cp->welcomed())
-                cp->remove(*r);
-        } else if (auto* rc = std::get_if<ReplayControl>(&c)) {
-            if (cp->welcomed())
-                cp->controlReplay(*rc);
-        } else if (auto* k = std::get_if<Codes>(&c)) {
-            if (cp->welcomed())
-                cp->newCode(k->role);
-        } else if (cp->welcomed()) {
-            cp->sendPing();
-        }
-    }
+        },
+        [&](const SyncCmd& y) {
+            m_wantedSync = y.sync;
+            cp->requestSync(y.sync);
+        },
+        [&](const PingCmd&) { cp->sendPing(); },
+        [&](const ToolState& t) { cp->sendToolState(t); },
+        [&](const Annotate& a) { cp->annotate(a); },
+        [&](const TakeOver& k) { cp->takeOver(k.trainee); },
+        [&](const ViewAs& as) { cp->viewAs(as.clientId); },
+        [&](const Remove& r) { cp->remove(r); },
+        [&](const ReplayControl& rc) { cp->controlReplay(rc); },
+        [&](const Codes& k) { cp->newCode(k.role); },
+    };
+    for (const Command& c : cmds)
+        if (welcomed || std::holds_alternative<ViewCmd>(c) || std::holds_alternative<SyncCmd>(c))
+            std::visit(run, c);
 }
 
 void ClientThread::publishFullCopies(const SessionClient& c, uint64_t nowUs) {

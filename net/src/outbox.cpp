@@ -3,12 +3,7 @@
 #include "net/codec.h"
 #include "net/image_delta.h"
 
-#include <sys/resource.h>
-#include <sys/syscall.h>
-#include <unistd.h>
-
 #include <algorithm>
-#include <pthread.h>
 #include <utility>
 
 namespace trephine::net {
@@ -19,7 +14,7 @@ Outbox::Outbox(int64_t maxInFlightBytes, ReportBook& book, ServerClock clock,
       m_wake(std::move(wake)) {}
 
 Outbox::~Outbox() {
-    stopCoder();
+    m_coder->cancel(); // a job runs `wake` and fills this outbox's images
 }
 
 // [SECTION] clients
@@ -64,7 +59,7 @@ void Outbox::modeChanged(uint16_t id, Sync mode, Codec volumeCodec) {
 }
 
 void Outbox::clear() {
-    stopCoder(); // it may call `wake`, whose target goes when the server does
+    m_coder->cancel(); // a job may call `wake`, whose target goes when the server does
     for (auto& [id, c] : m_clients)
         c.noted.reset();
     countNoted();
@@ -244,8 +239,8 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
         m_wake();
 }
 
-// The full image waits, being coded, at the end of the client's images; the coder thread fills
-// in its message, and the network takes nothing of the client's from it on until then.
+// The full image waits, being coded, at the end of the client's images; the coder fills in its
+// message, and the network takes nothing of the client's from it on until then.
 void Outbox::codeApart(uint16_t id, CodingJob job) {
     PendingImage p;
     p.viewId = job.update.viewId;
@@ -258,41 +253,27 @@ void Outbox::codeApart(uint16_t id, CodingJob job) {
         std::lock_guard lock(m_mutex);
         p.ticket = job.ticket = ++m_tickets;
         m_images[id].push_back(std::move(p));
-        m_jobs.push_back(std::move(job));
-        if (!m_coder.joinable())
-            m_coder = std::thread([this] { coderLoop(); });
     }
-    m_coderCv.notify_all();
+    auto shared = std::make_shared<CodingJob>(std::move(job));
+    m_coder->post([this, shared] { code(std::move(*shared)); });
 }
 
-void Outbox::coderLoop() {
-    pthread_setname_np(pthread_self(), "trephine-coder");
-    // It takes what the simulation and network threads leave of the CPU (Linux: a thread's own
-    // nice value).
-    setpriority(PRIO_PROCESS, id_t(syscall(SYS_gettid)), 10);
-    std::unique_lock lock(m_mutex);
-    for (;;) {
-        m_coderCv.wait(lock, [&] { return m_stopCoder || !m_jobs.empty(); });
-        if (m_stopCoder)
-            return;
-        CodingJob job = std::move(m_jobs.front());
-        m_jobs.pop_front();
-        ++m_jobsRunning;
-        lock.unlock();
-        ImageUpdate& u = job.update;
-        const uint64_t e0 = m_clock();
-        EncodedImage e = encodeImage(job.pixels, u.codec, job.camera);
-        u.rawBytes = e.rawBytes;
-        u.payload = std::move(e.payload);
-        u.sentServerUs = m_clock();
-        u.encodeUs = uint32_t(u.sentServerUs - e0);
-        m_book.record(
-            [&](ServerReport& r) { r.modes[size_t(Sync::Dbi)].encodeUs.add(double(u.encodeUs)); });
-        std::vector<uint8_t> message = encodeMessage(u);
-        bool done = false;
-        lock.lock();
+// [Coder] Codes a full image posted apart and hands its message to the waiting image.
+void Outbox::code(CodingJob job) {
+    ImageUpdate& u = job.update;
+    const uint64_t e0 = m_clock();
+    EncodedImage e = encodeImage(job.pixels, u.codec, job.camera);
+    u.rawBytes = e.rawBytes;
+    u.payload = std::move(e.payload);
+    u.sentServerUs = m_clock();
+    u.encodeUs = uint32_t(u.sentServerUs - e0);
+    m_book.record(
+        [&](ServerReport& r) { r.modes[size_t(Sync::Dbi)].encodeUs.add(double(u.encodeUs)); });
+    std::vector<uint8_t> message = encodeMessage(u);
+    bool done = false;
+    {
+        std::lock_guard lock(m_mutex);
         m_spare = std::move(job.pixels);
-        --m_jobsRunning;
         if (auto it = m_images.find(job.client); it != m_images.end())
             for (PendingImage& p : it->second)
                 if (p.ticket == job.ticket && p.coding) {
@@ -302,31 +283,13 @@ void Outbox::coderLoop() {
                     p.coding = false;
                     done = true;
                 }
-        m_coderCv.notify_all();
-        if (done && m_wake) {
-            lock.unlock();
-            m_wake();
-            lock.lock();
-        }
     }
+    if (done && m_wake)
+        m_wake();
 }
 
 void Outbox::finishCoding() {
-    std::unique_lock lock(m_mutex);
-    m_coderCv.wait(lock, [&] { return m_stopCoder || (m_jobs.empty() && m_jobsRunning == 0); });
-}
-
-void Outbox::stopCoder() {
-    {
-        std::lock_guard lock(m_mutex);
-        m_stopCoder = true;
-        m_jobs.clear();
-    }
-    m_coderCv.notify_all();
-    if (m_coder.joinable())
-        m_coder.join();
-    std::lock_guard lock(m_mutex);
-    m_stopCoder = false;
+    m_coder->drain();
 }
 
 // [SECTION] volumes

@@ -5,6 +5,7 @@
 #include "libsim/thread_pool.h"
 #include "net/codec.h"
 #include "net/image_delta.h"
+#include "net/messages.h"
 #include "net/view.h"
 
 #include <sodium.h>
@@ -339,40 +340,29 @@ bool SessionClient::onHandshake(std::span<const uint8_t> data) {
 }
 
 bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs) {
-    switch (MessageType(peekMessageType(data))) {
-    case MessageType::Welcome:
-        return onWelcome(data, nowUs);
-    case MessageType::Scene:
-        return onScene(data);
-    case MessageType::ParticipantView:
-        return onParticipantView(data);
-    case MessageType::Participants:
-        return onParticipants(data);
-    case MessageType::Annotations:
-        return onAnnotations(data);
-    case MessageType::ToolRelay:
-        return onToolRelay(data);
-    case MessageType::ImageUpdate:
-        return onImageUpdate(data, nowUs);
-    case MessageType::VolumeUpdate:
-        return onVolumeUpdate(data, nowUs);
-    case MessageType::HapticModel:
-        return onHapticModel(data, nowUs);
-    case MessageType::HapticRelay:
-        return onHapticRelay(data, nowUs);
-    case MessageType::Pong:
-        return onPong(data, nowUs);
-    case MessageType::SafetyWarning:
-        return onSafetyWarning(data);
-    case MessageType::AssessmentSnapshot:
-        return onAssessmentSnapshot(data);
-    case MessageType::ReplayState:
-        return onReplayState(data, nowUs);
-    case MessageType::Codes:
-        return onCodes(data);
-    default:
-        return false;
-    }
+    // A message only clients send, or of no type, is malformed (the table's direction).
+    return dispatchReceived<Side::Client>(
+        peekMessageType(data),
+        Handlers{
+            [&](MessageTag<Welcome>) { return onWelcome(data, nowUs); },
+            [&](MessageTag<Scene>) { return onScene(data); },
+            [&](MessageTag<ParticipantView>) { return onParticipantView(data); },
+            [&](MessageTag<Participants>) { return onParticipants(data); },
+            [&](MessageTag<Annotations>) { return onAnnotations(data); },
+            [&](MessageTag<ToolRelay>) { return onToolRelay(data); },
+            [&](MessageTag<ImageUpdate>) { return onImageUpdate(data, nowUs); },
+            [&](MessageTag<VolumeUpdate>) { return onVolumeUpdate(data, nowUs); },
+            [&](MessageTag<HapticModel>) { return onHapticModel(data, nowUs); },
+            [&](MessageTag<HapticRelay>) { return onHapticRelay(data, nowUs); },
+            [&](MessageTag<Pong>) { return onPong(data, nowUs); },
+            [&](MessageTag<SafetyWarning>) { return onSafetyWarning(data); },
+            [&](MessageTag<AssessmentSnapshot>) { return onAssessmentSnapshot(data); },
+            [&](MessageTag<ReplayState>) { return onReplayState(data, nowUs); },
+            [&](MessageTag<Codes>) { return onCodes(data); },
+            // Only in the clear, before the channel is sealed (onReceive).
+            [](MessageTag<Handshake>) { return false; },
+        },
+        false);
 }
 
 bool SessionClient::onWelcome(std::span<const uint8_t> data, uint64_t nowUs) {

@@ -1,6 +1,7 @@
 #include "net/session_policy.h"
 
 #include "libsim/error.h"
+#include "net/messages.h"
 #include "net/tool_model.h"
 #include "net/view.h"
 
@@ -199,67 +200,64 @@ void SessionPolicy::authenticate(uint16_t id, Role role) {
 // False for a malformed message.
 bool SessionPolicy::handle(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,
                            PolicyOutput& out) {
-    const uint8_t type = peekMessageType(data);
     if (!p.hello)
         return hello(id, p, data, now, out);
-    switch (MessageType(type)) {
-    case MessageType::ViewRequest: {
-        ViewRequest r;
-        if (!decodeMessage(data, r))
-            return false;
-        if (viewTooLarge(r.view)) { // well-formed, but more than we serve: dropped and counted
-            m_book.record([&](ServerReport& rep) {
-                ++rep.counters.viewsRefused;
-                ++rep.peers[id].viewsRefused;
-            });
-            return true;
-        }
-        return viewRequest(id, p, r, now, out);
-    }
-    case MessageType::ViewAs: { // net/view_follow.h
-        ViewAs m;
-        if (!decodeMessage(data, m))
-            return false;
-        if (p.helloMsg.role == Role::Instructor)
-            if (const auto view = m_follow.follow(id, m.clientId)) {
-                ParticipantView seen{m.clientId, *view};
-                out.messages.push_back({{id}, Channel::Control, encodeMessage(seen)});
-            }
-        return true;
-    }
-    case MessageType::ToolState:
-        return toolState(id, p, data, now, out);
-    case MessageType::SyncMode:
-        return syncMode(id, p, data, now, out);
-    case MessageType::Annotate:
-        return annotate(id, p, data, now, out);
-    case MessageType::TakeOver:
-        return takeOver(id, p, data, now, out);
-    case MessageType::Remove:
-        return remove(id, p, data, now, out);
-    case MessageType::Codes:
-        return codes(id, p, data, out);
-    case MessageType::ReplayControl: {
-        ReplayControl c;
-        if (!decodeMessage(data, c))
-            return false;
-        if (m_config.replay)
-            out.replayControls.push_back(c);
-        else
-            m_book.count(&ServerCounters::replayControlsRefused);
-        return true;
-    }
-    case MessageType::Ping: {
-        Ping ping;
-        if (!decodeMessage(data, ping))
-            return false;
-        Pong pong{ping.clientTimeUs, now};
-        out.messages.push_back({{id}, Channel::Control, encodeMessage(pong)});
-        return true;
-    }
-    default:
-        return false; // unknown, or a message only the server sends
-    }
+    // A message only the server sends, or of no type, is malformed (the table's direction).
+    return dispatchReceived<Side::Server>(
+        peekMessageType(data),
+        Handlers{
+            [](MessageTag<Hello>) { return false; },     // a second hello
+            [](MessageTag<Handshake>) { return false; }, // the gate's, before the hello
+            [&](MessageTag<ViewRequest>) {
+                ViewRequest r;
+                if (!decodeMessage(data, r))
+                    return false;
+                if (viewTooLarge(r.view)) { // well-formed, but more than we serve: counted
+                    m_book.record([&](ServerReport& rep) {
+                        ++rep.counters.viewsRefused;
+                        ++rep.peers[id].viewsRefused;
+                    });
+                    return true;
+                }
+                return viewRequest(id, p, r, now, out);
+            },
+            [&](MessageTag<ViewAs>) { // net/view_follow.h
+                ViewAs m;
+                if (!decodeMessage(data, m))
+                    return false;
+                if (p.helloMsg.role == Role::Instructor)
+                    if (const auto view = m_follow.follow(id, m.clientId)) {
+                        ParticipantView seen{m.clientId, *view};
+                        out.messages.push_back({{id}, Channel::Control, encodeMessage(seen)});
+                    }
+                return true;
+            },
+            [&](MessageTag<ToolState>) { return toolState(id, p, data, now, out); },
+            [&](MessageTag<SyncMode>) { return syncMode(id, p, data, now, out); },
+            [&](MessageTag<Annotate>) { return annotate(id, p, data, now, out); },
+            [&](MessageTag<TakeOver>) { return takeOver(id, p, data, now, out); },
+            [&](MessageTag<Remove>) { return remove(id, p, data, now, out); },
+            [&](MessageTag<Codes>) { return codes(id, p, data, out); },
+            [&](MessageTag<ReplayControl>) {
+                ReplayControl c;
+                if (!decodeMessage(data, c))
+                    return false;
+                if (m_config.replay)
+                    out.replayControls.push_back(c);
+                else
+                    m_book.count(&ServerCounters::replayControlsRefused);
+                return true;
+            },
+            [&](MessageTag<Ping>) {
+                Ping ping;
+                if (!decodeMessage(data, ping))
+                    return false;
+                Pong pong{ping.clientTimeUs, now};
+                out.messages.push_back({{id}, Channel::Control, encodeMessage(pong)});
+                return true;
+            },
+        },
+        false);
 }
 
 bool SessionPolicy::hello(uint16_t id, Peer& p, std::span<const uint8_t> data, uint64_t now,

@@ -40,6 +40,9 @@ ServerConfig withScene(ServerConfig c, const Volume& volume) {
     return c;
 }
 
+// Admission and the foreign-address rule on raw datagrams (defined with the network pass).
+int ENET_CALLBACK screenDatagram(ENetHost* host, ENetEvent*);
+
 StepConfig stepConfig(const ServerConfig& c, std::function<bool()> yield) {
     StepConfig s{c.maxStepS, c.maxSweepMm, c.renderThreads, {}};
     s.yield = std::move(yield);
@@ -54,10 +57,11 @@ StepConfig stepConfig(const ServerConfig& c, std::function<bool()> yield) {
 struct SessionServer::Impl {
     Impl(Volume v, const ServerConfig& c)
         : host(Host::listen(c.port, c.maxClients + c.admission.waitingSlots)),
-          wakeFd(eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)),
-          outbox(c.maxInFlightBytes, book, steadyNowUs, [this] { wakeNetwork(); }),
+          wakeFd(eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)), pumpedUs(steadyNowUs()),
+          outbox(
+              c.maxInFlightBytes, book, [this] { return clock(); }, [this] { wakeNetwork(); }),
           step(std::move(v), stepConfig(c, [this] { return eventsWaiting(); }), outbox, book,
-               steadyNowUs),
+               [this] { return clock(); }),
           policy(withScene(c, step.volume()), step.volume().dims(), step.volume().spacing(), book,
                  [this](const ToolState& t, glm::vec3 velocity) { return force(t, velocity); }),
           gate(c, book), maxQueuedToolStates(c.maxQueuedToolStates),
@@ -70,11 +74,12 @@ struct SessionServer::Impl {
                       return Standing::Admitted;
                   return id && gate.progressing(id) ? Standing::Progressing : Standing::Waiting;
               },
-              [this](ENetPeer* p) { forgetPeer(p, steadyNowUs()); }),
+              [this](ENetPeer* p) { forgetPeer(p, clock()); }),
           control(c.controlBudgetBytes), recorder(c.recorder) {
         // The full image of a view larger than a slice is coded apart, as its rows are rendered
         // in chunks: the simulation thread never stops for a whole large frame.
-        outbox.codeFullImagesApart(StepConfig{}.slicePixels + 1);
+        outbox.codeFullImagesApart(apartPixels, inlineCoder);
+        host.get()->intercept = screenDatagram;
         book.record([&](ServerReport& r) {
             r.port = host.port();
             r.volume = c.volumeName;
@@ -95,6 +100,14 @@ struct SessionServer::Impl {
     // out at once instead of after the rest of a 1 ms wait (-1: no eventfd; the network thread
     // then waits out its timeout).
     int wakeFd = -1;
+    // The time: the last one pump() was given, or the steady clock once start()'s threads run.
+    std::atomic<uint64_t> pumpedUs;
+    std::atomic<bool> threaded{false};
+    uint64_t clock() const { return threaded.load() ? steadyNowUs() : pumpedUs.load(); }
+    // Where full images are coded apart: inline when pumped, a worker beside the threads.
+    const int64_t apartPixels = StepConfig{}.slicePixels + 1;
+    InlineExecutor inlineCoder;
+    WorkerExecutor workerCoder{"trephine-coder", 10};
     Outbox outbox;
     // The simulation step under stepMutex: the simulation thread per batch, inspection
     // (renderView, volumeSnapshot) between batches.
@@ -105,6 +118,7 @@ struct SessionServer::Impl {
     SessionGate gate;                    // network thread only: codes, sealing (docs/security.md)
     std::map<uint16_t, ENetPeer*> links; // policy ids -> ENet peers (network thread only)
     int64_t peakInFlight = 0;            // network thread's copy of the report's peak
+    uint64_t nextTickUs = 0;             // the channel statistics' next tick
 
     // Network -> simulation.
     std::mutex inMutex;
@@ -127,7 +141,15 @@ struct SessionServer::Impl {
     std::map<uint16_t, Host::InFlight> controlHeld; // control bytes ENet holds, per peer
     AvailabilityCounters reported;                  // what the report has of the two above
 
-    // [Network thread]
+    // [Network thread] A pass: receive() takes every datagram waiting and what the replay has
+    // due; send() sends what the outbox lets go and what the policy has due by `now`.
+    void receive(uint64_t now);
+    void send(uint64_t now);
+    // [Simulation thread] One batch: the events waiting, the next slice of a large view, or the
+    // changes noted for held-back clients and the assessment's tick.
+    void simulate(uint64_t now);
+    // [Simulation thread] Applies what is still queued, then ends the assessment.
+    void finishSimulation();
     SessionPolicy::ForceAnswer force(const ToolState& t, glm::vec3 velocity);
     void onEvent(const ENetEvent& ev);
     void apply(PolicyOutput& out, bool mayDrop = true);
@@ -187,7 +209,7 @@ void SessionServer::Impl::push(std::vector<SimEvent>& events, const std::vector<
         const size_t queued = inbox.size();
         // Every event carries its time, and its record the same, so a replay of the log times
         // the assessment's joins and leaves as this server does (net/sim_step.cpp, eventTime).
-        const uint64_t now = steadyNowUs();
+        const uint64_t now = clock();
         for (SimEvent& ev : events) {
             if (!ev.arrivedUs)
                 ev.arrivedUs = now;
@@ -296,6 +318,8 @@ void SessionServer::start() {
     // Once stopped, a server stays stopped: threads started then would end at once, unjoined.
     if (m_stop.load() || m_started.exchange(true))
         return;
+    m_impl->threaded = true;
+    m_impl->outbox.codeFullImagesApart(m_impl->apartPixels, m_impl->workerCoder);
     m_netThread = std::thread([this] { networkLoop(); });
     m_simThread = std::thread([this] { simulationLoop(); });
 }
@@ -310,8 +334,12 @@ void SessionServer::stop() {
         m_impl->stopSim = true;
     }
     m_impl->inCv.notify_all();
-    if (m_simThread.joinable())
+    if (m_simThread.joinable()) {
         m_simThread.join();
+    } else { // pumped: this thread does what the two would do at the end
+        m_impl->sayGoodbye();
+        m_impl->finishSimulation();
+    }
     // What the simulation posted after the network thread's last pass will never be sent: a
     // stopped server is idle.
     m_impl->outbox.clear();
@@ -327,7 +355,7 @@ void SessionServer::writeDebriefs() {
     try {
         const Assessment& a = m_impl->step.assessment();
         m_debriefs =
-            net::writeDebriefs(m_config.debriefDir, a, a.metrics(steadyNowUs()), a.timelines());
+            net::writeDebriefs(m_config.debriefDir, a, a.metrics(m_impl->clock()), a.timelines());
     } catch (const std::exception& e) {
         std::fprintf(stderr, "trephine server: no debrief: %s\n", e.what());
     }
@@ -387,7 +415,7 @@ void SessionServer::saveSession() {
 void SessionServer::submitBoxCut(const Box3i& box) {
     std::vector<SimEvent> events{SimEvent::of(SimEvent::Kind::Cut, 0)};
     events[0].box = box;
-    events[0].arrivedUs = steadyNowUs();
+    events[0].arrivedUs = m_impl->clock();
     m_impl->push(events);
 }
 
@@ -405,14 +433,14 @@ void SessionServer::submitVoxels(const Box3i& box, std::vector<uint8_t> density,
     events[0].box = box;
     events[0].density = std::move(density);
     events[0].material = std::move(material);
-    events[0].arrivedUs = steadyNowUs();
+    events[0].arrivedUs = m_impl->clock();
     m_impl->push(events);
 }
 
 void SessionServer::serveLog(std::vector<LogRecord> records, double speed, bool playing) {
     if (m_netThread.joinable())
         throw Error("serveLog: call it before start()");
-    m_impl->player.emplace(std::move(records), speed, playing, steadyNowUs());
+    m_impl->player.emplace(std::move(records), speed, playing, m_impl->clock());
     m_impl->replayStart = m_impl->step.volume();
 }
 
@@ -487,14 +515,14 @@ std::string SessionServer::reportJson() const {
 
 SessionPolicy::ForceAnswer SessionServer::Impl::force(const ToolState& t, glm::vec3 velocity) {
     const ForceModel& model = forceModels.get(shapeOf(t));
-    const uint64_t c0 = steadyNowUs();
+    const uint64_t c0 = clock();
     SessionPolicy::ForceAnswer a;
     {
         std::shared_lock lock(step.voxelMutex());
         a.force = model.compute(step.volume(), ToolPose{t.position, t.orientation},
                                 t.drilling ? t.speed : 0.0f, velocity);
     }
-    a.doneUs = steadyNowUs();
+    a.doneUs = clock();
     a.computeUs = a.doneUs - c0;
     return a;
 }
@@ -620,7 +648,7 @@ void SessionServer::Impl::apply(PolicyOutput& out, bool mayDrop) {
 }
 
 void SessionServer::Impl::onEvent(const ENetEvent& ev) {
-    const uint64_t now = steadyNowUs();
+    const uint64_t now = clock();
     PolicyOutput out;
     switch (ev.type) {
     case ENET_EVENT_TYPE_CONNECT: {
@@ -690,7 +718,7 @@ void SessionServer::Impl::onEvent(const ENetEvent& ev) {
 void SessionServer::Impl::playReplayed() {
     if (!player)
         return;
-    const uint64_t now = steadyNowUs();
+    const uint64_t now = clock();
     bool changed = false;
     {
         std::lock_guard lock(replayMutex);
@@ -736,7 +764,7 @@ void SessionServer::Impl::sendUpdates() {
                      "trephine server: client %u: the whole volume does not fit a message in "
                      "its volume codec; disconnected (volume sync refused)\n",
                      unsigned(id));
-        policy.refuseVolume(id, steadyNowUs(), out);
+        policy.refuseVolume(id, clock(), out);
     }
     apply(out);
     for (Outbox::Ready& u : taken.updates) {
@@ -775,8 +803,9 @@ void SessionServer::Impl::sendNotices() {
 // connecting meanwhile is told the server is shutting down.
 void SessionServer::Impl::sayGoodbye() {
     PolicyOutput out;
-    policy.goodbye(steadyNowUs(), out);
+    policy.goodbye(clock(), out);
     apply(out);
+    // A real wait on the socket, pumped or not.
     const uint64_t deadline = steadyNowUs() + 200000;
     while (policy.peerCount() > 0 && steadyNowUs() < deadline)
         host.service(5, [&](const ENetEvent& ev) {
@@ -786,7 +815,7 @@ void SessionServer::Impl::sayGoodbye() {
                 if (!id)
                     return;
                 PolicyOutput left;
-                policy.disconnect(id, steadyNowUs(), left);
+                policy.disconnect(id, clock(), left);
                 links.erase(id);
                 push(left.events, left.log);
             } else if (ev.type == ENET_EVENT_TYPE_CONNECT) {
@@ -798,7 +827,7 @@ void SessionServer::Impl::sayGoodbye() {
     for (const auto& [id, peer] : std::map<uint16_t, ENetPeer*>(links)) {
         peer->data = nullptr;
         PolicyOutput left;
-        policy.disconnect(id, steadyNowUs(), left);
+        policy.disconnect(id, clock(), left);
         links.erase(id);
         push(left.events, left.log);
     }
@@ -841,73 +870,107 @@ int ENET_CALLBACK screenDatagram(ENetHost* host, ENetEvent*) {
 
 } // namespace
 
+void SessionServer::Impl::receive(uint64_t now) {
+    t_admission = &admission;
+    t_book = &book;
+    admission.setNow(now);
+    host.service(0, [&](const ENetEvent& ev) { onEvent(ev); });
+    playReplayed();
+}
+
+void SessionServer::Impl::send(uint64_t now) {
+    sendUpdates();
+    sendNotices();
+    guard(now);
+    PolicyOutput out;
+    policy.update(now, out);
+    apply(out);
+    if (now >= nextTickUs) {
+        stats.tick(now);
+        nextTickUs = now + 1000000;
+    }
+}
+
+void SessionServer::Impl::simulate(uint64_t now) {
+    std::vector<SimEvent> batch;
+    {
+        std::lock_guard lock(inMutex);
+        batch.swap(inbox);
+        inboxTools = 0;
+        busy = !batch.empty() || step.rendering();
+    }
+    {
+        std::lock_guard stepLock(stepMutex);
+        if (batch.empty() && !step.rendering()) {
+            step.offerNoted();
+            step.assessment().tick(now);
+        } else {
+            step.step(batch, now);
+        }
+    }
+    std::lock_guard lock(inMutex);
+    busy = false;
+}
+
+void SessionServer::Impl::finishSimulation() {
+    for (;;) {
+        {
+            std::lock_guard lock(inMutex);
+            if (inbox.empty())
+                break;
+        }
+        simulate(clock());
+    }
+    std::lock_guard stepLock(stepMutex);
+    step.assessment().finish(clock());
+}
+
+void SessionServer::pump(uint64_t nowUs) {
+    if (m_started.load() || m_stop.load())
+        return;
+    Impl& s = *m_impl;
+    s.pumpedUs = std::max(s.pumpedUs.load(), nowUs);
+    const uint64_t now = s.pumpedUs.load();
+    s.receive(now);
+    s.simulate(now);
+    s.send(now);
+}
+
+// [SECTION] the runner: two threads and the steady clock
+
 void SessionServer::networkLoop() {
     nameThread("trephine-net");
     Impl& s = *m_impl;
-    t_admission = &s.admission;
-    t_book = &s.book;
-    s.host.get()->intercept = screenDatagram;
-    uint64_t nextTick = 0;
     while (!m_stop.load()) {
         // Wait on the socket and the wake-up together, then handle everything pending.
         s.waitNetwork(1);
-        s.admission.setNow(steadyNowUs());
-        s.host.service(0, [&](const ENetEvent& ev) { s.onEvent(ev); });
-        s.playReplayed();
-        s.sendUpdates();
-        s.sendNotices();
-        const uint64_t now = steadyNowUs();
-        s.guard(now);
-        PolicyOutput out;
-        s.policy.update(now, out);
-        s.apply(out);
-        if (now >= nextTick) {
-            s.stats.tick(now);
-            nextTick = now + 1000000;
-        }
+        s.receive(s.clock());
+        s.send(s.clock());
     }
     s.sayGoodbye();
 }
 
-// [SECTION] simulation thread
-
 void SessionServer::simulationLoop() {
     nameThread("trephine-sim");
     Impl& s = *m_impl;
-    std::vector<SimEvent> batch;
     for (;;) {
         {
             std::unique_lock lock(s.inMutex);
             // A view partly rendered is work: its next slice goes without waiting, or once
             // the large views' render budget is due.
             const bool slices = s.step.rendering();
-            const uint64_t now = steadyNowUs(), due = s.step.renderDueUs();
+            const uint64_t now = s.clock(), due = s.step.renderDueUs();
             const uint64_t waitUs = !slices     ? 10000
                                     : due > now ? std::min<uint64_t>(due - now, 10000)
                                                 : 0;
             s.inCv.wait_for(lock, std::chrono::microseconds(waitUs),
                             [&] { return !s.inbox.empty() || s.stopSim; });
-            if (s.inbox.empty() && s.stopSim) {
-                std::lock_guard stepLock(s.stepMutex);
-                s.step.assessment().finish(steadyNowUs());
-                return;
-            }
-            batch.clear();
-            batch.swap(s.inbox);
-            s.inboxTools = 0;
-            s.busy = !batch.empty() || slices;
+            if (s.inbox.empty() && s.stopSim)
+                break;
         }
-        {
-            std::lock_guard stepLock(s.stepMutex);
-            if (batch.empty() && !s.step.rendering()) {
-                s.step.offerNoted();
-                s.step.assessment().tick(steadyNowUs());
-            } else
-                s.step.step(batch, steadyNowUs());
-        }
-        std::lock_guard lock(s.inMutex);
-        s.busy = false;
+        s.simulate(s.clock());
     }
+    s.finishSimulation();
 }
 
 } // namespace trephine::net

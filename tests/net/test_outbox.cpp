@@ -317,14 +317,15 @@ TEST(Outbox, AHeldBackVolumeClientsChangesAreCodedOnceNotAtEveryBatch) {
 
 namespace {
 
-// An outbox coding full images over 64 x 64 on its coder thread, with client 1 joined (lz4) on a
-// 128 x 128 view.
+// An outbox coding full images over 64 x 64 on a coder thread, as the threaded server does, with
+// client 1 joined (lz4) on a 128 x 128 view.
 struct CodedApart {
     ReportBook book;
+    WorkerExecutor coder{"test-coder", 10};
     Outbox outbox{1 << 20, book, steadyNowUs};
     const Camera cam = cameraFor(128, 128);
     CodedApart() {
-        outbox.codeFullImagesApart(64 * 64);
+        outbox.codeFullImagesApart(64 * 64, coder);
         outbox.join(1, inFlight(), Codec::Lz4, Codec::Lz4);
     }
 };

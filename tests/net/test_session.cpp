@@ -1,5 +1,6 @@
-// The networked session over loopback: a SessionServer (its own threads) and poll-driven
-// SessionClients in one process. Deadlines only guard against hangs; nothing asserts wall time.
+// The networked session over loopback: a SessionServer and poll-driven SessionClients pumped in
+// the test's thread (one test keeps the server's own threads). Deadlines only guard against hangs;
+// nothing asserts wall time.
 #include "net/marks_file.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
@@ -34,6 +35,8 @@ namespace {
 
 using trephine::testing::burrState;
 using trephine::testing::loopback;
+using trephine::testing::pollAll;
+using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
 using trephine::testing::sphereTop;
 
@@ -84,8 +87,7 @@ void drill(SessionClient& driller, std::vector<SessionClient*> all, const Surfac
         ToolState t = burrState(site, i, count, baseUs);
         t.sequence += uint32_t(firstSequence);
         driller.sendToolState(t);
-        for (SessionClient* c : all)
-            c->poll(1);
+        pollAll(all);
     }
 }
 
@@ -136,7 +138,7 @@ TEST(Session, RawClientConvergesBitForBitAfterBurrHoleOnSkull) {
     SurfaceSite site = defaultBurrSite(skull);
     ViewSpec view = presetView(skull, "working");
     SessionServer server(skull, testConfig("skull:64"));
-    server.start();
+    Pumped pumped(server);
     ClientConfig cc;
     cc.codec = Codec::Raw;
     cc.view = view;
@@ -157,7 +159,7 @@ TEST(Session, QuantisedCodecsConvergeWithinTheDocumentedDepthError) {
     Volume sphere = makeSphere(48);
     ViewSpec view = presetView(sphere, "top");
     SessionServer server(sphere, testConfig("sphere:48"));
-    server.start();
+    Pumped pumped(server);
     std::vector<std::unique_ptr<SessionClient>> clients;
     for (Codec codec : {Codec::Lz4, Codec::Zstd}) {
         ClientConfig cc;
@@ -188,7 +190,7 @@ TEST(Session, QuantisedCodecsConvergeWithinTheDocumentedDepthError) {
 TEST(Session, TwoViewsLateJoinerAndViewChangeConverge) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, testConfig("sphere:48"));
-    server.start();
+    Pumped pumped(server);
     ClientConfig a;
     a.codec = Codec::Raw;
     a.view = presetView(sphere, "top");
@@ -228,7 +230,7 @@ TEST(Session, TwoViewsLateJoinerAndViewChangeConverge) {
 TEST(Session, EveryToolPoseReachesTheOtherClients) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, testConfig("sphere:32"));
-    server.start();
+    Pumped pumped(server);
     ClientConfig cfg = topViewClient(sphere, 32);
     SessionClient a(cfg), b(cfg), c(cfg);
     for (SessionClient* x : {&a, &b, &c})
@@ -244,8 +246,7 @@ TEST(Session, EveryToolPoseReachesTheOtherClients) {
         ToolState t = burrState(site, i, 50, 1000);
         t.drilling = false;
         a.sendToolState(t);
-        for (SessionClient* x : {&a, &b, &c})
-            x->poll(1);
+        pollAll({&a, &b, &c});
     }
     ASSERT_TRUE(pumpUntil({&a, &b, &c},
                           [&] { return b.relaysReceived() == 50 && c.relaysReceived() == 50; }));
@@ -260,7 +261,7 @@ TEST(Session, EveryToolPoseReachesTheOtherClients) {
 TEST(Session, ARawClientOfTheLargestViewGetsItsPictureCoded) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, testConfig("sphere:48"));
-    server.start();
+    Pumped pumped(server);
     ClientConfig cfg;
     cfg.codec = Codec::Raw;
     cfg.view = toViewSpec(cameraPreset("top", sphere, {2048, 2048}));
@@ -292,7 +293,7 @@ TEST(Session, AServerRefusesToServeViewsTooLargeForOneMessage) {
 TEST(Session, MalformedInputIsDroppedCountedAndAPersistentOffenderDisconnected) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, testConfig("sphere:48"));
-    server.start();
+    Pumped pumped(server);
     ClientConfig cfg;
     cfg.codec = Codec::Raw;
     cfg.view = presetView(sphere, "top");
@@ -333,7 +334,7 @@ TEST(Session, MalformedInputIsDroppedCountedAndAPersistentOffenderDisconnected) 
 
     for (int i = 0; i < 60 && bad.connected(); ++i) {
         bad.sendRaw(Channel::Control, unknown);
-        bad.poll(1);
+        pollAll({&bad});
     }
     ASSERT_TRUE(pumpUntil({&good, &bad}, [&] { return bad.closed(); }));
     EXPECT_NE(bad.closeReason().find("malformed"), std::string::npos) << bad.closeReason();
@@ -385,17 +386,19 @@ TEST(Session, ClientRejectsOutOfWindowRectanglesAndCorruptPayloads) {
 TEST(Session, ProtocolVersionMismatchIsRefusedWithAReadableReason) {
     Volume sphere = makeSphere(16);
     SessionServer server(sphere, testConfig("sphere:16"));
-    server.start();
+    Pumped pumped(server);
     Host raw = Host::client();
     ENetPeer* peer = raw.connect(loopback(server.port()), kProtocolVersion + 1);
     ASSERT_NE(peer, nullptr);
     std::string reason;
     auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
-    while (reason.empty() && std::chrono::steady_clock::now() < deadline)
-        raw.service(5, [&](const ENetEvent& e) {
+    while (reason.empty() && std::chrono::steady_clock::now() < deadline) {
+        Pumped::pumpAll();
+        raw.service(1, [&](const ENetEvent& e) {
             if (e.type == ENET_EVENT_TYPE_DISCONNECT)
                 reason = refuseReasonText(e.data);
         });
+    }
     EXPECT_NE(reason.find("protocol version " + std::to_string(kProtocolVersion)),
               std::string::npos)
         << reason;
@@ -415,7 +418,7 @@ TEST(Session, StopWritesSaveOnExitWithEveryAppliedDrilling) {
     ServerConfig config = testConfig("sphere:48");
     config.saveOnExit = path;
     auto server = std::make_unique<SessionServer>(sphere, config);
-    server->start();
+    Pumped pumped(*server);
     ClientConfig cfg = topViewClient(sphere, 64);
     SessionClient client(cfg);
     client.connect(loopback(server->port()));
@@ -492,12 +495,9 @@ TEST(Session, ASaveOnExitThatCannotBeWrittenIsRefusedAtOnceOrSavedElsewhere) {
     std::filesystem::create_directories(folder);
     config.saveOnExit = (folder / "final.nrrd").string();
     auto server = std::make_unique<SessionServer>(sphere, config);
-    server->start();
+    Pumped pumped(*server);
     server->submitBoxCut(surfaceBox(sphere, 6));
-    const auto guard = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-    while (!server->idle() && std::chrono::steady_clock::now() < guard)
-        std::this_thread::sleep_for(std::chrono::milliseconds(5));
-    ASSERT_TRUE(server->idle());
+    ASSERT_TRUE(pumpUntil({}, [&] { return server->idle(); }));
     std::filesystem::remove_all(folder);
     server->stop();
     EXPECT_NE(server->saveError().find("final.nrrd"), std::string::npos) << server->saveError();
@@ -547,7 +547,7 @@ TEST(Session, AClientArrivingDuringTheGoodbyesIsToldTheServerIsShuttingDown) {
 TEST(Session, TheReportAfterAStopListsNoClientAsConnected) {
     Volume sphere = makeSphere(24);
     SessionServer server(sphere, trephine::testing::loopbackServerConfig("sphere:24"));
-    server.start();
+    Pumped pumped(server);
     ClientConfig cc;
     cc.view = toViewSpec(cameraPreset("top", sphere, {32, 32}));
     SessionClient client(cc);

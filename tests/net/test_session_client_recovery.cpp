@@ -36,15 +36,9 @@ using trephine::testing::waitFor;
 
 namespace {
 
-// Waits (without polling the client) until the server has sent everything it had.
+// Pumps the server (without polling the client) until it has sent everything it had.
 bool waitServerIdle(SessionServer& server) {
-    auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(30);
-    while (!server.idle())
-        if (std::chrono::steady_clock::now() > deadline)
-            return false;
-        else
-            std::this_thread::sleep_for(std::chrono::milliseconds(2));
-    return true;
+    return waitFor([&] { return server.idle(); });
 }
 
 // The predicted-coding session, and a second view to ask for.

@@ -7,6 +7,7 @@
 #include "net/client_thread.h"
 #include "net/codec.h"
 #include "net/enet_host.h"
+#include "net/net_stats.h"
 #include "net/session_client.h"
 #include "net/session_server.h"
 #include "net/view.h"
@@ -49,14 +50,52 @@ inline ENetAddress loopback(uint16_t port) {
     return net::parseAddress("127.0.0.1:" + std::to_string(port));
 }
 
-// Polls every client (1 ms each) until pred() holds; false once the guard deadline passes. The
-// guard only stops a hung test: tests never assert on how long this takes.
+// A server the test pumps on its own thread instead of starting the server's threads: while it
+// lives, every wait below (pumpUntil, pollAll, waitFor, drillThrough) pumps it, with the steady
+// clock plus the time the test has skipped. One thread runs the whole session, so nothing races
+// and a timeout is reached by skipping time, not by sleeping.
+class Pumped {
+public:
+    explicit Pumped(net::SessionServer& server) : m_server(&server) { all().push_back(this); }
+    ~Pumped() { std::erase(all(), this); }
+    Pumped(const Pumped&) = delete;
+    Pumped& operator=(const Pumped&) = delete;
+
+    // The server's clock jumps `seconds` ahead (its next pass sees the time passed).
+    void skip(double seconds) { m_skippedUs += uint64_t(seconds * 1e6); }
+    uint64_t now() const { return net::steadyNowUs() + m_skippedUs; }
+    void pump() { m_server->pump(now()); }
+
+    // One pass of every server this thread pumps.
+    static void pumpAll() {
+        for (Pumped* p : all())
+            p->pump();
+    }
+
+private:
+    static std::vector<Pumped*>& all() {
+        thread_local std::vector<Pumped*> pumped;
+        return pumped;
+    }
+    net::SessionServer* m_server;
+    uint64_t m_skippedUs = 0;
+};
+
+// One round: every pumped server passes once, then every client polls (1 ms each).
+inline void pollAll(const std::vector<net::SessionClient*>& clients) {
+    Pumped::pumpAll();
+    for (net::SessionClient* c : clients)
+        c->poll(1);
+}
+
+// Polls every client (1 ms each), and pumps every pumped server, until pred() holds; false once
+// the guard deadline passes. The guard only stops a hung test: tests never assert on how long
+// this takes.
 inline bool pumpUntil(const std::vector<net::SessionClient*>& clients,
                       const std::function<bool()>& pred, double guardS = 60.0) {
     auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(guardS);
     while (std::chrono::steady_clock::now() < deadline) {
-        for (net::SessionClient* c : clients)
-            c->poll(1);
+        pollAll(clients);
         if (pred())
             return true;
     }
@@ -137,13 +176,14 @@ struct PaperZstdSession {
     Volume volume = makeSkull(64);
     net::ViewSpec view;
     std::unique_ptr<net::SessionServer> server;
+    std::unique_ptr<Pumped> pumped;
     std::unique_ptr<net::SessionClient> client;
 
     PaperZstdSession() {
         volume.setSpacing(glm::vec3(paperSpacingMm(64)));
         view = net::toViewSpec(cameraPreset("paper", volume, {160, 160}));
         server = std::make_unique<net::SessionServer>(volume, loopbackServerConfig("skull:64", 2));
-        server->start();
+        pumped = std::make_unique<Pumped>(*server);
         net::ClientConfig cc;
         cc.codec = net::Codec::Zstd;
         cc.view = view;
@@ -151,7 +191,10 @@ struct PaperZstdSession {
         client->connect(loopback(server->port()));
         EXPECT_TRUE(pumpUntil({client.get()}, [&] { return client->hasFullImage(); }));
     }
-    ~PaperZstdSession() { server->stop(); }
+    ~PaperZstdSession() {
+        server->stop();
+        pumped.reset();
+    }
 };
 
 // The top of makeSphere(n), facing +z.
@@ -159,17 +202,28 @@ inline SurfaceSite sphereTop(int n) {
     return {{0.0f, 0.0f, sphereRadiusMm(n)}, {0.0f, 0.0f, 1.0f}};
 }
 
-// Polls `pred` every 5 ms until it holds (true) or `seconds` pass (pred's last answer): for
-// clients on their own thread (ClientThread), which need no pumping.
+// Checks `pred` every millisecond until it holds (true) or `seconds` pass (pred's last answer),
+// pumping the pumped servers meanwhile: for clients on their own thread (ClientThread).
 template <class F>
 bool waitFor(F pred, double seconds = 30.0) {
     auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
     while (std::chrono::steady_clock::now() < end) {
+        Pumped::pumpAll();
         if (pred())
             return true;
-        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
     }
     return pred();
+}
+
+// Pumps the pumped servers for `seconds` of the steady clock: a client thread's pace (tool
+// states 10 ms apart), not a wait for anything.
+inline void pumpFor(double seconds) {
+    auto end = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+    do {
+        Pumped::pumpAll();
+        std::this_thread::sleep_for(std::chrono::microseconds(500));
+    } while (std::chrono::steady_clock::now() < end);
 }
 
 // Drills at `site` through a ClientThread: `states` 5 mm burr tool states 10 ms apart, 0.08 mm
@@ -184,7 +238,7 @@ inline void drillThrough(net::ClientThread& client, const SurfaceSite& site, int
         t.speed = 1.0f;
         t.drilling = true;
         EXPECT_TRUE(client.sendToolState(t));
-        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        pumpFor(0.010);
     }
 }
 

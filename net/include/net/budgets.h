@@ -37,9 +37,10 @@ private:
 };
 
 // The control channel (reliable) of each peer holds at most `budgetBytes` in ENet's hands. Past
-// it, a message that is a latest state (roster, marks, a followed view, the codes) waits as the
-// newest of its kind and goes once the backlog drains; a pong is dropped (the client pings again);
-// anything else (a welcome, a scene: once per join) is sent: the session cannot go on without it.
+// it, a message that is a latest state (newest wins in net/protocol.h's list: roster, marks, a
+// followed view, the codes) waits as the newest of its kind and goes once the backlog drains; a
+// pong is dropped (the client pings again); anything else (a welcome, a scene: once per join) is
+// sent: the session cannot go on without it.
 class ControlBudget {
 public:
     enum class Action { Send, Hold, Drop };

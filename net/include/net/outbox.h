@@ -13,18 +13,16 @@
 #include "libsim/dirty_rect.h"
 #include "libsim/volume.h"
 #include "net/enet_host.h"
+#include "net/executor.h"
 #include "net/protocol.h"
 #include "net/server_report.h"
 
 #include <atomic>
-#include <condition_variable>
 #include <cstdint>
-#include <deque>
 #include <functional>
 #include <map>
 #include <mutex>
 #include <optional>
-#include <thread>
 #include <vector>
 
 namespace trephine::net {
@@ -70,11 +68,15 @@ public:
     Outbox& operator=(const Outbox&) = delete;
 
     // [Posting thread, before any post] Full images of at least `minPixels` (0: none) are coded
-    // on a coder thread of low priority, from a copy taken at the post, so the posting thread
-    // does not stop for the whole frame's coding (a 2048 x 2048 view: ~140 ms on the 2-core VM).
-    // A change posted meanwhile waits behind that image as a rectangle of its own.
-    void codeFullImagesApart(int64_t minPixels) { m_apartPixels = minPixels; }
-    // [Posting thread] Waits until the coder thread has coded everything posted so far.
+    // on `coder` (the server's runner gives a worker thread of low priority), from a copy taken
+    // at the post, so the posting thread does not stop for the whole frame's coding (a 2048 x
+    // 2048 view: ~140 ms on the 2-core VM). A change posted meanwhile waits behind that image as
+    // a rectangle of its own. Until this is called, images are coded inline.
+    void codeFullImagesApart(int64_t minPixels, Executor& coder) {
+        m_apartPixels = minPixels;
+        m_coder = &coder;
+    }
+    // [Posting thread] Waits until the coder has coded everything posted so far.
     void finishCoding();
 
     // [Posting thread] A client joins with the counter of its bytes ENet holds (Host::send),
@@ -167,8 +169,7 @@ private:
                             const VolumeChange& change);
     void countNoted();
     void codeApart(uint16_t id, CodingJob job);
-    void coderLoop();
-    void stopCoder();
+    void code(CodingJob job);
 
     int64_t m_maxInFlightBytes;
     ReportBook& m_book;
@@ -185,15 +186,12 @@ private:
     std::map<uint16_t, PendingVolume> m_volumes;
     std::vector<uint16_t> m_refused;
 
-    // The coder thread (started at the first image coded apart) and its jobs, under m_mutex.
+    // Where full images are coded apart; the tickets and the spare buffer are under m_mutex.
     int64_t m_apartPixels = 0;
+    InlineExecutor m_inline;
+    Executor* m_coder = &m_inline;
     uint64_t m_tickets = 0;
-    std::deque<CodingJob> m_jobs;
     Dbi m_spare; // the pixels of the last job, a buffer for the next
-    int m_jobsRunning = 0;
-    bool m_stopCoder = false;
-    std::condition_variable m_coderCv;
-    std::thread m_coder;
 };
 
 } // namespace trephine::net

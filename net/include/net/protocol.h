@@ -23,24 +23,8 @@
 
 namespace trephine::net {
 
-// Travels in ENet's connect data; the server refuses other versions with kRefuseVersion.
-// 2: SyncMode and VolumeUpdate (the replicated-volume baseline); stage times in ImageUpdate;
-// the volume codec in the hello. 3: Participants (who is in the session, by name and role);
-// Annotate and Annotations (an instructor's marks on the skull). 4: the predicted image form's
-// base hash is four 64-bit FNV-1a lanes, a word a pixel (image_delta.cpp); TakeOver, and who
-// holds a trainee in Participants. 5: the predicted form's mask of exactly predicted pixels.
-// 6: ImageUpdate's grid time. 7: the largest view the server serves, in the welcome. 8: Scene
-// after the welcome (extent, camera presets, sites, landmarks, the surgical field's mesh:
-// net/scene.h); the welcome's volume name is a label a client never opens; ViewAs and
-// ParticipantView (an instructor watches through a participant's camera).
-// 9: SafetyWarning and AssessmentSnapshot (net/assessment_protocol.h); Participants' colour (the
-// server gives each participant one; every window draws it); Handshake (role codes proven by
-// SPAKE2, then every message sealed: docs/security.md) and Remove; refusals WrongCode, Removed,
-// TooManyAttempts; refusals Busy, Idle, ViewsFull (docs/session.md, "Availability").
-// 10: ReplayState and ReplayControl (a replay's timeline: net/replay_protocol.h); Codes (type
-// 26: an instructor issues a new role code while the server runs). 11: admission cookies
-// (refusal Retry); Busy before the welcome means "connect again" (docs/session.md); ToolState's
-// kind 2, the diamond burr (libsim/tool_catalogue.h).
+// Travels in ENet's connect data; the server refuses other versions with kRefuseVersion. What
+// each version changed: docs/protocol.md, "Versions".
 inline constexpr uint32_t kProtocolVersion = 11;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
@@ -119,35 +103,59 @@ inline bool fitsVolumeUpdate(glm::ivec3 size, bool materials) {
                kMaxVolumeRawBytes;
 }
 
+// Every message, once: X(name, type byte, direction, channel, newest wins, version it came in).
+// The name is also its struct's (here, net/scene.h, net/assessment_protocol.h,
+// net/replay_protocol.h). The enum below and net/messages.h (the table, the type list and the
+// dispatch a receiver's handlers go through) come from it; docs/protocol.md's message list is
+// checked against it (tests/net/test_message_table.cpp). Newest wins: a newer one says all an
+// older one said (unsequenced on the tool and haptic channels; held as the newest of its kind by
+// the control budget, net/budgets.h). Append new types; a type byte is never reused.
+#define TREPHINE_MESSAGES(X)                                                                       \
+    X(Hello, 1, ClientToServer, Control, false, 1)                                                 \
+    X(Welcome, 2, ServerToClient, Control, false, 1)                                               \
+    X(ViewRequest, 3, ClientToServer, Control, false, 1)                                           \
+    X(ToolState, 4, ClientToServer, ToolState, true, 1)                                            \
+    X(ToolRelay, 5, ServerToClient, ToolState, true, 1)                                            \
+    X(HapticModel, 6, ServerToClient, Haptic, true, 1)                                             \
+    X(ImageUpdate, 7, ServerToClient, Image, false, 1)                                             \
+    X(VolumeUpdate, 8, ServerToClient, Volume, false, 2)                                           \
+    X(Ping, 9, ClientToServer, Control, false, 1)                                                  \
+    X(Pong, 10, ServerToClient, Control, false, 1)                                                 \
+    X(Participants, 11, ServerToClient, Control, true, 3)                                          \
+    X(SyncMode, 12, ClientToServer, Control, false, 2)                                             \
+    X(HapticRelay, 13, ServerToClient, Haptic, true, 1)                                            \
+    X(Annotate, 14, ClientToServer, Control, false, 3)                                             \
+    X(Annotations, 15, ServerToClient, Control, true, 3)                                           \
+    X(TakeOver, 16, ClientToServer, Control, false, 4)                                             \
+    X(Scene, 17, ServerToClient, Control, false, 8)                                                \
+    X(ViewAs, 18, ClientToServer, Control, false, 8)                                               \
+    X(ParticipantView, 19, ServerToClient, Control, true, 8)                                       \
+    X(SafetyWarning, 20, ServerToClient, Control, false, 9)                                        \
+    X(AssessmentSnapshot, 21, ServerToClient, Control, false, 9)                                   \
+    X(ReplayState, 22, ServerToClient, Control, false, 10)                                         \
+    X(ReplayControl, 23, ClientToServer, Control, false, 10)                                       \
+    X(Handshake, 24, Both, Control, false, 9)                                                      \
+    X(Remove, 25, ClientToServer, Control, false, 9)                                               \
+    X(Codes, 26, Both, Control, true, 10)
+
 enum class MessageType : uint8_t {
-    Hello = 1,
-    Welcome = 2,
-    ViewRequest = 3,
-    ToolState = 4,
-    ToolRelay = 5,
-    HapticModel = 6,
-    ImageUpdate = 7,
-    VolumeUpdate = 8,
-    Ping = 9,
-    Pong = 10,
-    Participants = 11,
-    SyncMode = 12,
-    HapticRelay = 13,
-    Annotate = 14,
-    Annotations = 15,
-    TakeOver = 16,
-    Scene = 17, // net/scene.h
-    ViewAs = 18,
-    ParticipantView = 19,
-    SafetyWarning = 20,      // net/assessment_protocol.h
-    AssessmentSnapshot = 21, // net/assessment_protocol.h
-    ReplayState = 22,        // net/replay_protocol.h
-    ReplayControl = 23,      // net/replay_protocol.h
-    Handshake = 24,          // docs/security.md
-    Remove = 25,
-    Codes = 26, // docs/security.md
+#define TREPHINE_MESSAGE_ENUM(name, id, direction, channel, newestWins, since) name = id,
+    TREPHINE_MESSAGES(TREPHINE_MESSAGE_ENUM)
+#undef TREPHINE_MESSAGE_ENUM
 };
-inline constexpr uint8_t kMessageTypeCount = 27; // one past the largest type
+
+namespace detail {
+// One past the largest type byte of the list.
+constexpr uint8_t messageTypeEnd() {
+    uint8_t end = 1;
+#define TREPHINE_MESSAGE_END(name, id, direction, channel, newestWins, since)                      \
+    end = std::max<uint8_t>(end, uint8_t(id + 1));
+    TREPHINE_MESSAGES(TREPHINE_MESSAGE_END)
+#undef TREPHINE_MESSAGE_END
+    return end;
+}
+} // namespace detail
+inline constexpr uint8_t kMessageTypeCount = detail::messageTypeEnd(); // one past the largest
 
 enum class Role : uint8_t { Trainee = 0, Instructor = 1 };
 enum class Codec : uint8_t { Raw = 0, Lz4 = 1, Zstd = 2 };

@@ -1,11 +1,12 @@
-// The session server: it owns the ENet host, two threads and the queues between them, and pumps
-// its parts with the time. The network thread ("trephine-net") feeds every connection, message
-// and tick to the session policy (net/session_policy.h) and sends what it answers; the
-// simulation thread ("trephine-sim") hands each batch of events to the simulation step
-// (net/sim_step.h), which drills, renders and posts to the outbox (net/outbox.h), from which the
-// network thread sends. Every figure goes to one report (net/server_report.h). Each client syncs
-// by DBI (rectangles of its view) or by volume (the replicated-volume baseline), chosen in its
-// hello and switched live. docs/session.md describes the parts, threads and queues.
+// The session server: it owns the ENet host and the queues between its parts, and is a pump: each
+// pass feeds every connection, message and tick to the session policy (net/session_policy.h) and
+// sends what it answers, hands each batch of events to the simulation step (net/sim_step.h),
+// which drills, renders and posts to the outbox (net/outbox.h), and sends what the outbox lets
+// go. Tests pump it with their own time (pump()); start() runs the network pass and the
+// simulation pass on two threads ("trephine-net", "trephine-sim") with the steady clock. Every
+// figure goes to one report (net/server_report.h). Each client syncs by DBI (rectangles of its
+// view) or by volume (the replicated-volume baseline), chosen in its hello and switched live.
+// docs/session.md describes the parts, threads and queues.
 #pragma once
 
 #include "libsim/box.h"
@@ -39,10 +40,17 @@ public:
     SessionServer& operator=(const SessionServer&) = delete;
 
     uint16_t port() const;
-    // Starts the named threads "trephine-net" and "trephine-sim".
+    // The runner: starts the named threads "trephine-net" and "trephine-sim", which pump the
+    // session with the steady clock (and a worker thread that codes large full images apart).
     void start();
-    // Stops both threads: the network thread disconnects peers (RefuseReason::Shutdown), the
-    // simulation thread applies every queued tool state, then saveOnExit is written. Idempotent.
+    // One pass of the whole session at `nowUs` on the caller's thread, instead of start(): take
+    // every datagram waiting and what the replay has due, apply one batch of what arrived (or
+    // one slice of a large view), then send what the outbox lets go and what the policy has due.
+    // Time is only what is passed in (it never goes back); the server starts at the steady
+    // clock's time of its construction. Does nothing once started or stopped.
+    void pump(uint64_t nowUs);
+    // Stops: peers are disconnected (RefuseReason::Shutdown), every queued tool state is applied,
+    // then saveOnExit is written. Idempotent; the threads end first when start() ran.
     void stop();
 
     // Cuts a box of voxels (volume indices) to air on the simulation thread, exactly like a tool
