@@ -9,6 +9,7 @@
 #include "net/scripts.h"
 #include "net/secure_channel.h"
 #include "net/session_server.h"
+#include "scripted_device.h"
 
 #include "libsim/camera.h"
 #include "libsim/drill.h"
@@ -19,7 +20,7 @@
 #include "libsim_devices/devices.h"
 #include "libsim_image/dbi_io.h"
 #include "libsim_image/volume_slices.h"
-#include "net/trainee_core.h"
+#include "net/trainee_session.h"
 #include "net/view.h"
 
 #include <algorithm>
@@ -73,24 +74,20 @@ bool throughInnerTable(net::SessionServer& server, const ToolPose& pose) {
     return probe.drill(v, pose, 1.0f, 1e-3f).clutchDisengaged;
 }
 
-DemoRun drillOverLoopback(net::TraineeCore& core, net::HeadlessView& view,
-                          net::SessionServer& server, const SurfaceSite& site,
-                          const DemoOptions& o) {
-    using Clock = std::chrono::steady_clock;
+// The session's drill with the demo's watch on it: a line every 2 s, the peak forces, and the
+// clutch asked about when the cutting stops.
+DemoRun drillOverLoopback(net::TraineeSession& session, net::SessionServer& server,
+                          const SurfaceSite& site, const DemoOptions& o) {
     DemoRun run;
-    const auto start = Clock::now();
     double nextReport = 0, lastCutAt = -1, nextForces = 0, nextProbe = 0;
     uint64_t cuts = 0;
-    for (;;) {
-        const double t = std::chrono::duration<double>(Clock::now() - start).count();
-        const HapticLoopStats h = core.hapticStats();
-        view.take(core.client(), h.ticks);
-        const net::ClientSnapshot& s = *view.snap();
+    session.drill([&](double t) {
+        const net::ClientSnapshot& s = session.snap();
         run.lastDepth = -1.0 + o.feedMmPerS * t;
         if (s.hapticModel)
             run.peakModelN = std::max(run.peakModelN, glm::length(s.hapticModel->force));
         if (t >= nextForces) { // the recorder holds the last 4 s of ticks
-            for (const HapticSample& x : core.hapticSamples())
+            for (const HapticSample& x : session.core().hapticSamples())
                 run.peakForceN = std::max(run.peakForceN, x.forceN);
             nextForces = t + 1.0;
         }
@@ -114,22 +111,20 @@ DemoRun drillOverLoopback(net::TraineeCore& core, net::HeadlessView& view,
                                 glm::rotation(glm::vec3(0, 0, 1), site.normal)};
             if (throughInnerTable(server, pose)) {
                 run.clutchDepth = -1.0 + o.feedMmPerS * lastCutAt;
-                break;
+                return false;
             }
             nextProbe = t + 0.5;
         }
-        if (t >= o.maxSeconds || !view.connected())
-            break;
-        std::this_thread::sleep_for(std::chrono::milliseconds(2));
-    }
+        return true;
+    });
     return run;
 }
 
-void printSession(const net::HeadlessView& view, const net::TraineeCore& core) {
+void printSession(const net::TraineeSession& session) {
+    const net::ClientModel& m = session.model();
     const net::ClientSnapshot none;
-    const net::ClientSnapshot& s = view.model.session() ? *view.model.session() : none;
-    const HapticLoopStats h = core.hapticStats();
-    const net::ClientModel& m = view.model;
+    const net::ClientSnapshot& s = m.session() ? *m.session() : none;
+    const HapticLoopStats h = session.core().hapticStats();
     std::printf(
         "updates  %llu image updates (%llu full), latency p50 %.0f us p99 %.0f us, "
         "%.0f bytes each (raw %.0f, %.1fx), round trip p50 %.0f us\n",
@@ -164,73 +159,37 @@ net::ServerConfig demoServerConfig(const std::string& volume) {
     return config;
 }
 
-int runHeadlessDemo(const DemoOptions& o) {
-    std::printf("Trephine demo: an embedded server and a headless trainee over loopback: a burr "
-                "hole with the cranial perforator\n");
-    Volume skull = openVolume(o.volume);
-    const Volume original = skull;
-    const glm::vec3 spacing = skull.spacing();
-    std::printf("volume   %s: %d x %d x %d voxels, %.3g mm spacing\n", o.volume.c_str(),
-                skull.dims().x, skull.dims().y, skull.dims().z, spacing.x);
-    const SurfaceSite site = defaultBurrSite(skull);
-    std::printf("site     (%.1f, %.1f, %.1f) mm, normal (%.2f, %.2f, %.2f)\n", site.position.x,
-                site.position.y, site.position.z, site.normal.x, site.normal.y, site.normal.z);
-    const int size = o.pictureSize;
-    const Camera camera =
-        cameraLookingAt(site.position, site.normal, 120.0f, 45.0f, {size, size}, original);
+// The demo's trainee: the embedded server's address and trainee code, and the view of `camera`
+// in its hello (the demo knows the volume, so it needs no preset from the scene).
+net::TraineeSessionConfig demoSessionConfig(uint16_t port, const net::ServerConfig& server,
+                                            const Camera& camera) {
+    net::TraineeSessionConfig c;
+    c.address = "127.0.0.1:" + std::to_string(port);
+    c.client.name = "demo";
+    c.client.code = server.traineeCode;
+    c.client.view = net::toViewSpec(camera);
+    c.size = camera.width;
+    c.who = "demo";
+    return c;
+}
 
-    // The server owns the only volume; the trainee holds the DBI of its view and feels the
-    // server's force models, as a remote one would.
-    net::ServerConfig config = demoServerConfig(o.volume);
-    net::SessionServer server(std::move(skull), config);
-    server.start();
-    net::TraineeCoreConfig cc;
-    cc.client.address = "127.0.0.1:" + std::to_string(server.port());
-    cc.client.client.name = "demo";
-    cc.client.client.code = config.traineeCode;
-    cc.client.client.view = net::toViewSpec(camera);
-    cc.client.retryS = 3600.0; // one connection: a lost link ends the demo
-    // The script's device and tool source outlive the core, whose haptic loop reads them.
-    std::unique_ptr<ScriptedDevice> device;
-    std::unique_ptr<net::ScriptToolSource> tools;
-    net::TraineeCore core(cc);
-    net::HeadlessView view(size);
-    core.connect();
-    if (!view.waitFor(core.client(), 30.0, [&] { return view.hasPicture(); }))
-        throw Error("demo: no picture from the embedded server: " + view.snap()->closeReason);
+// Joins and waits for the whole picture of the hello's view; says so, with its size on the wire.
+void joinDemo(net::TraineeSession& session) {
+    session.connect();
+    if (!session.waitFor(30.0, [&] { return session.view().hasPicture(); }))
+        throw Error("demo: no picture from the embedded server: " + session.snap().closeReason);
     double firstBytes = 0; // the full image of the view, as it came over the wire
-    for (const net::NetworkHistory::Update& u : view.model.network.updates)
+    for (const net::NetworkHistory::Update& u : session.model().network.updates)
         firstBytes += u.full ? u.bytes : 0;
+    const int size = session.config().size;
     std::printf("session  server on %s; trainee joined as client %u, its %dx%d DBI in %.0f KB\n",
-                cc.client.address.c_str(), unsigned(view.snap()->welcome->clientId), size, size,
-                firstBytes * 1e-3);
+                session.config().address.c_str(), unsigned(session.snap().welcome->clientId), size,
+                size, firstBytes * 1e-3);
+}
 
-    std::vector<Waypoint> waypoints;
-    const std::vector<net::ScriptSample> script = net::feedScript(site, o.feedMmPerS, o.maxSeconds);
-    for (const net::ScriptSample& s : script)
-        waypoints.push_back({s.t, ToolPose{s.tool.position, s.tool.orientation}, 0});
-    device = std::make_unique<ScriptedDevice>(std::move(waypoints));
-    tools = std::make_unique<net::ScriptToolSource>(*device, script, o.maxSeconds);
-    core.startHaptics(*tools);
-    const DemoRun run = drillOverLoopback(core, view, server, site, o);
-    core.stopHaptics();
-    net::ToolState lift = script.back().tool;
-    lift.speed = 0.0f;
-    lift.drilling = false;
-    core.client().sendToolState(lift);
-    // The last updates: until 0.3 s pass without one (2 s at most).
-    for (auto until = std::chrono::steady_clock::now() + std::chrono::seconds(2),
-              quiet = std::chrono::steady_clock::now() + std::chrono::milliseconds(300);
-         std::chrono::steady_clock::now() < std::min(until, quiet);) {
-        const uint64_t before = view.snap()->updatesApplied;
-        std::this_thread::sleep_for(std::chrono::milliseconds(5));
-        view.take(core.client(), core.hapticStats().ticks);
-        if (view.snap()->updatesApplied != before)
-            quiet = std::chrono::steady_clock::now() + std::chrono::milliseconds(300);
-    }
-    core.stop();
-    server.stop();
-
+// Whether the clutch stopped the drill, and the voxels of each material it removed.
+void printResult(const DemoRun& run, const DemoOptions& o, const Volume& before,
+                 const Volume& after) {
     std::printf("result   ");
     if (run.clutchDepth >= 0)
         std::printf("the drill stopped cutting at %.1f mm while still fed: the perforator's clutch "
@@ -239,7 +198,8 @@ int runHeadlessDemo(const DemoOptions& o) {
     else
         std::printf("stopped after %.1f s at %.1f mm without breaking through\n", o.maxSeconds,
                     run.lastDepth);
-    const auto removed = removedByMaterial(original, server.volumeSnapshot());
+    const auto removed = removedByMaterial(before, after);
+    const glm::vec3 spacing = before.spacing();
     const double voxelMm3 = double(spacing.x) * spacing.y * spacing.z;
     std::printf("removed  ");
     for (int m = 1; m < kMaterialCount; ++m)
@@ -248,13 +208,44 @@ int runHeadlessDemo(const DemoOptions& o) {
                         std::string(materialName(Material(m))).c_str(),
                         (long long)removed[size_t(m)], double(removed[size_t(m)]) * voxelMm3);
     std::printf("\n");
-    printSession(view, core);
+}
+
+int runHeadlessDemo(const DemoOptions& o) {
+    std::printf("Trephine demo: an embedded server and a headless trainee over loopback: a burr "
+                "hole with the cranial perforator\n");
+    Volume skull = openVolume(o.volume);
+    const Volume original = skull;
+    std::printf("volume   %s: %d x %d x %d voxels, %.3g mm spacing\n", o.volume.c_str(),
+                skull.dims().x, skull.dims().y, skull.dims().z, skull.spacing().x);
+    const SurfaceSite site = defaultBurrSite(skull);
+    std::printf("site     (%.1f, %.1f, %.1f) mm, normal (%.2f, %.2f, %.2f)\n", site.position.x,
+                site.position.y, site.position.z, site.normal.x, site.normal.y, site.normal.z);
+    const Camera camera = cameraLookingAt(site.position, site.normal, 120.0f, 45.0f,
+                                          {o.pictureSize, o.pictureSize}, original);
+    // The server owns the only volume; the trainee holds the DBI of its view and feels the
+    // server's force models, as a remote one would.
+    const net::ServerConfig config = demoServerConfig(o.volume);
+    net::SessionServer server(std::move(skull), config);
+    server.start();
+    net::TraineeSession session(demoSessionConfig(server.port(), config, camera));
+    joinDemo(session);
+    std::vector<net::ScriptSample> script = net::feedScript(site, o.feedMmPerS, o.maxSeconds);
+    std::unique_ptr<Device> device = scriptedDevice(script);
+    session.play(std::move(script), o.maxSeconds, std::move(device));
+    const DemoRun run = drillOverLoopback(session, server, site, o);
+    session.liftAndDrain(0.3);
+    session.finish();
+    server.stop();
+
+    printResult(run, o, original, server.volumeSnapshot());
+    printSession(session);
     std::printf("forces   peak |F| felt %.2f N, peak server model %.2f N\n", run.peakForceN,
                 run.peakModelN);
     if (!o.picture.empty()) {
-        writeColorPng(o.picture, view.dbi());
+        const Dbi& picture = session.view().dbi();
+        writeColorPng(o.picture, picture);
         std::printf("picture  %s (%dx%d, the trainee's DBI at the end)\n", o.picture.c_str(),
-                    view.dbi().width(), view.dbi().height());
+                    picture.width(), picture.height());
     }
     // A failure is said on stderr too, where scripts look (stdout has the whole summary).
     if (run.clutchDepth < 0)

@@ -4,6 +4,7 @@
 // runs the replicated-volume baseline: the client holds the volume and renders its view itself.
 #include "mode_window.h"
 #include "modes.h"
+#include "scripted_device.h"
 
 #include "libsim/camera.h"
 #include "libsim/error.h"
@@ -17,6 +18,7 @@
 #include "net/scene.h"
 #include "net/scripts.h"
 #include "net/trainee_core.h"
+#include "net/trainee_session.h"
 #include "net/view.h"
 
 #include <glm/gtx/quaternion.hpp>
@@ -35,9 +37,6 @@
 namespace trephine::app {
 
 namespace {
-
-// [Headless] Silence after which the server counts as lost (it answers pings within ms).
-constexpr uint64_t kServerSilenceUs = 3000000;
 
 std::atomic<bool> g_traineeStop{false};
 
@@ -103,179 +102,74 @@ void printFigures(const net::ClientModel& model, const net::TraineeCore& core, b
                     core.localForceTools(), core.localForceTools() == 1 ? "" : "s");
 }
 
-// [Headless] The trainee core with a script as its tool: join, open the view, drill, drain, then
-// the figures, the report and the picture.
-int runHeadlessTrainee(const TraineeOptions& o, std::vector<Sample> script) {
-    net::TraineeCoreConfig coreConfig;
-    net::ClientConfig& config = coreConfig.client.client;
-    config.name = o.name;
-    config.code = o.code;
-    config.codec = net::parseCodec(o.codec);
-    config.sync = o.sync == "volume" ? net::Sync::Volume : net::Sync::Dbi;
-    config.volumeCodec = net::parseCodec(o.volumeCodec);
+net::TraineeSessionConfig sessionConfigFor(const TraineeOptions& o) {
+    net::TraineeSessionConfig c;
+    c.address = o.connect;
+    c.client.name = o.name;
+    c.client.code = o.code;
+    c.client.codec = net::parseCodec(o.codec);
+    c.client.sync = o.sync == "volume" ? net::Sync::Volume : net::Sync::Dbi;
+    c.client.volumeCodec = net::parseCodec(o.volumeCodec);
     // A 1x1 placeholder view: the preset comes in the server's scene, after the welcome.
-    config.view.width = config.view.height = 1;
-    coreConfig.client.address = o.connect;
-    coreConfig.client.connectTimeoutS = 10.0;
-    coreConfig.client.retryS = 3600.0; // a headless run does not reconnect: a lost link ends it
-    coreConfig.haptics.sendRateHz = o.toolRateHz;
-    // The script's device and tool source outlive the core, whose haptic loop reads them.
-    std::unique_ptr<ScriptedDevice> device;
-    std::unique_ptr<net::ScriptToolSource> tools;
-    net::TraineeCore core(coreConfig);
-    net::ClientThread& client = core.client();
-    net::HeadlessView view(o.size);
-    core.connect();
-    // The client ended the session over a malformed message of the server's: its reason names
-    // the server and the message ("HOST sent a malformed scene (...)").
-    auto faulted = [&] { return view.snap()->fault.has_value(); };
-    if (!view.waitFor(client, 15.0, [&] { return view.connected(); })) {
-        const std::string& reason = view.snap()->closeReason;
-        if (reason.empty())
-            throw Error("trainee: no answer from " + o.connect +
-                        " (is `trephine server` running?)");
-        if (faulted() || reason.rfind("no answer", 0) == 0)
-            throw Error("trainee: " + reason);
-        throw Error("trainee: " + o.connect + " refused us: " + reason);
-    }
-    const net::Welcome welcome = *view.snap()->welcome;
-    // The scene follows the welcome on the same reliable channel: presets and the burr site come
-    // from the server, so the trainee needs its address only (it never opens a volume).
-    if (!view.waitFor(client, 10.0, [&] { return view.snap()->scene != nullptr; })) {
-        if (faulted())
-            throw Error("trainee: " + view.snap()->closeReason);
-        throw Error(
-            "trainee: " + o.connect + " sent no scene after its welcome" +
-            (view.snap()->closeReason.empty() ? std::string() : ": " + view.snap()->closeReason));
-    }
-    const std::shared_ptr<const net::ReceivedScene> scene = view.snap()->scene;
-    const std::optional<Camera> preset =
-        net::presetCamera(scene->scene, o.camera, {o.size, o.size});
-    if (!preset)
-        throw Error("trainee: the server's scene has no camera preset '" + o.camera + "'");
-    const Camera camera = *preset;
-    // Refused (larger than the server serves): it would run on and report the 1x1 placeholder as
-    // its picture.
-    if (int64_t(o.size) * o.size > welcome.maxViewPixels)
-        throw Error("trainee: the server serves views of at most " +
-                    std::to_string(welcome.maxViewPixels) + " pixels; --size " +
-                    std::to_string(o.size) + " asks for " +
-                    std::to_string(int64_t(o.size) * o.size) + ": give a smaller --size");
-    client.requestView(net::toViewSpec(camera));
-    if (!view.waitFor(client, 30.0, [&] { return view.hasPicture(); })) {
-        const net::ClientSnapshot& s = *view.snap();
-        if (faulted())
-            throw Error("trainee: " + s.closeReason);
-        if (!s.closeReason.empty())
-            throw Error("trainee: no image from " + o.connect + ": " + s.closeReason);
-        if (s.malformedImages > 0)
-            throw Error("trainee: no image from " + o.connect +
-                        ": the server's images were malformed (" +
-                        std::to_string(s.malformedImages) + " dropped)");
-        throw Error("trainee: no image from " + o.connect + " in 30 s");
-    }
+    c.client.view.width = c.client.view.height = 1;
+    c.size = o.size;
+    c.toolRateHz = o.toolRateHz;
+    return c;
+}
 
-    if (o.script == "burrhole") {
-        const net::SceneSite* site = net::findSite(scene->scene, net::kDefaultSiteName);
-        if (!site)
-            throw Error("trainee: the server's scene has no burr site for the burrhole script");
-        script = net::burrholeScript({site->position, site->normal},
-                                     o.durationS > 0 ? o.durationS : net::kBurrholeSeconds);
-    }
+// --report: the figures of the session as JSON, with what it was asked to do.
+void writeReport(const TraineeOptions& o, const net::TraineeSession& session, const Camera& camera,
+                 double elapsedS) {
+    net::ClientReportExtras x = session.core().reportExtras();
+    x.durationS = elapsedS;
+    const net::ClientModel& model = session.model();
+    const bool volumeAtEnd = model.session() && model.session()->sync == net::Sync::Volume;
+    x.session = {{"server", o.connect}, {"name", o.name},
+                 {"codec", o.codec},    {"sync", volumeAtEnd ? "volume" : "dbi"},
+                 {"view", o.camera},    {"camera", describe(camera)},
+                 {"script", o.script}};
+    if (!writeReplacing(
+            o.report,
+            model.report(x).dump(2, ' ', false, nlohmann::json::error_handler_t::replace) + "\n"))
+        throw Error("--report " + o.report + ": cannot write it");
+}
+
+// [Headless] A trainee session with a script as its tool: join, open the view, drill, lift and
+// drain, then the figures, the report and the picture.
+int runHeadlessTrainee(const TraineeOptions& o, std::vector<Sample> script) {
+    net::TraineeSession session(sessionConfigFor(o));
+    const net::Welcome welcome = session.join();
+    session.awaitScene();
+    const Camera camera = session.openPreset(o.camera);
+    if (o.script == "burrhole")
+        script = session.burrhole(o.durationS > 0 ? o.durationS : net::kBurrholeSeconds);
     std::printf("trainee: %s as client %u, view %s (%s), sync %s, codec %s, %zu script samples\n",
                 o.connect.c_str(), unsigned(welcome.clientId), o.camera.c_str(),
                 describe(camera).c_str(), o.sync.c_str(), o.codec.c_str(), script.size());
     std::fflush(stdout); // shown now, not when the script ends, where stdout is a pipe or file
-    // The core's haptic loop (its own thread, 1 kHz) reads a device that follows the script's
-    // poses, feels the server's force models (or, in the volume design, the local volume) and
-    // sends tool states at --tool-rate through the client thread.
-    std::vector<Waypoint> waypoints;
-    for (const Sample& s : script)
-        waypoints.push_back({s.t, ToolPose{s.tool.position, s.tool.orientation}, 0});
-    device = std::make_unique<ScriptedDevice>(std::move(waypoints));
-    double scriptEnd = script.back().t;
-    if (o.durationS > 0)
-        scriptEnd = std::min(scriptEnd, o.durationS);
-    tools = std::make_unique<net::ScriptToolSource>(*device, script, scriptEnd);
+    const double scriptEnd =
+        o.durationS > 0 ? std::min(script.back().t, o.durationS) : script.back().t;
     // Ctrl-C (or kill, or a closed terminal) ends the script early; the figures so far are still
     // printed and --report / --save-dbi still written.
     g_traineeStop = false;
     handleStopSignals(onTraineeStopSignal);
-    core.startHaptics(*tools);
-    const uint64_t start = net::steadyNowUs();
-    const uint64_t end = start + uint64_t(scriptEnd * 1e6);
-    // A server killed, crashed or cut off sends no goodbye, and ENet gives up on it only after 5
-    // to 30 s: past a short script. The client thread's pings are answered within milliseconds,
-    // so seconds of silence mean it is gone. Counted from the script's start at the earliest.
-    auto serverLost = [&] {
-        return view.connected() &&
-               net::steadyNowUs() - std::max(view.snap()->lastHeardUs, start) > kServerSilenceUs;
-    };
-    auto closed = [&] { return !view.connected(); };
-    while (net::steadyNowUs() < end && !closed() && !serverLost() && !g_traineeStop) {
-        view.take(client, core.hapticStats().ticks);
-        std::this_thread::sleep_for(std::chrono::milliseconds(2));
-    }
-    core.stopHaptics();
-    if (!closed() && !serverLost()) {
-        net::ToolState last = script.back().tool; // lift: drilling off
-        last.speed = 0.0f;
-        last.drilling = false;
-        client.sendToolState(last);
-    }
-    // Let the last updates arrive: stop after 0.5 s without one, and 2 s after the script at the
-    // latest (others drilling on kept it waiting for as long as they drilled).
-    const uint64_t drainUntil = net::steadyNowUs() + 2000000;
-    uint64_t lastCount = view.snap()->updatesApplied, quietSince = net::steadyNowUs();
-    while (!closed() && !serverLost() && net::steadyNowUs() - quietSince < 500000 &&
-           net::steadyNowUs() < drainUntil) {
-        std::this_thread::sleep_for(std::chrono::milliseconds(5));
-        view.take(client, core.hapticStats().ticks);
-        if (view.snap()->updatesApplied != lastCount) {
-            lastCount = view.snap()->updatesApplied;
-            quietSince = net::steadyNowUs();
-        }
-    }
-    const double elapsed = double(net::steadyNowUs() - start) * 1e-6;
-    const bool refused = closed();
-    const bool lost = serverLost();
-    const bool interrupted = g_traineeStop;
-    const std::string reason = view.snap()->closeReason;
-    core.stop();
+    // The core's haptic loop (1 kHz) plays the script, feels the server's force models (or, in
+    // the volume design, the local volume) and sends tool states at --tool-rate.
+    std::unique_ptr<Device> device = scriptedDevice(script);
+    session.play(std::move(script), scriptEnd, std::move(device));
+    session.drill([](double) { return !g_traineeStop; });
+    session.liftAndDrain();
+    const net::SessionEnd end = session.finish();
 
-    printFigures(view.model, core, config.sync == net::Sync::Volume);
-    if (!o.report.empty()) {
-        net::ClientReportExtras x = core.reportExtras();
-        x.durationS = elapsed;
-        const bool volumeAtEnd =
-            view.model.session() && view.model.session()->sync == net::Sync::Volume;
-        x.session = {{"server", o.connect}, {"name", o.name},
-                     {"codec", o.codec},    {"sync", volumeAtEnd ? "volume" : "dbi"},
-                     {"view", o.camera},    {"camera", describe(camera)},
-                     {"script", o.script}};
-        if (!writeReplacing(o.report, view.model.report(x).dump(
-                                          2, ' ', false, nlohmann::json::error_handler_t::replace) +
-                                          "\n"))
-            throw Error("--report " + o.report + ": cannot write it");
-    }
+    printFigures(session.model(), session.core(), o.sync == "volume");
+    if (!o.report.empty())
+        writeReport(o, session, camera, end.elapsedS);
     if (!o.saveDbi.empty())
-        writeDbiExr(o.saveDbi, view.dbi());
-    if (refused) {
-        std::fprintf(stderr, "trainee: the server closed the session: %s\n", reason.c_str());
-        return 1;
-    }
-    if (lost) {
-        std::fprintf(stderr,
-                     "trainee: lost the server %s: nothing heard for %.0f s (killed, "
-                     "crashed or cut off), %.1f s into the script\n",
-                     o.connect.c_str(), double(kServerSilenceUs) * 1e-6, elapsed);
-        return 1;
-    }
-    if (interrupted) {
-        std::fprintf(stderr, "trainee: stopped by a signal %.1f s into the script\n", elapsed);
-        return 1;
-    }
-    return 0;
+        writeDbiExr(o.saveDbi, session.view().dbi());
+    if (end.how == net::SessionEnd::How::ScriptDone)
+        return 0;
+    std::fprintf(stderr, "%s\n", session.endText(end).c_str());
+    return 1;
 }
 
 int runTrainee(const TraineeOptions& o) {
