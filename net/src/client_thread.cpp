@@ -257,34 +257,130 @@ void ClientThread::pushRect(AppliedRect r) {
 
 namespace {
 
-// A replay's timeline as a window draws it: a playing cursor moves on by itself.
-bool sameTimeline(const std::optional<ReplayState>& a, const std::optional<ReplayState>& b) {
-    if (!a || !b)
-        return a.has_value() == b.has_value();
-    return a->playing == b->playing && a->seeks == b->seeks && a->speed == b->speed &&
-           a->durationUs == b->durationUs && (a->playing || a->positionUs == b->positionUs);
+// [SECTION] snapshot equality
+
+// The same value: a message of the server's by its wire bytes (and whether it encodes: values
+// off the wire always do), containers element by element, the rest by its operator==. All
+// declared first, so each finds the others whatever the order of their definitions.
+template <typename T>
+bool same(const T& a, const T& b);
+template <typename T>
+bool same(const std::optional<T>& a, const std::optional<T>& b);
+template <typename K, typename V>
+bool same(const std::map<K, V>& a, const std::map<K, V>& b);
+template <typename T, size_t N>
+bool same(const std::array<T, N>& a, const std::array<T, N>& b);
+template <typename T>
+bool same(const std::vector<T>& a, const std::vector<T>& b);
+template <typename T>
+bool same(const std::deque<T>& a, const std::deque<T>& b);
+bool same(const ChannelRates& a, const ChannelRates& b);
+bool same(const ServerFault& a, const ServerFault& b);
+
+template <typename M>
+std::vector<uint8_t> wireBytes(M m) {
+    std::vector<uint8_t> out;
+    WriteStream w(out);
+    out.push_back(uint8_t(m.serialize(w)));
+    return out;
 }
 
-// What a window draws from a snapshot, apart from the rectangles and boxes (ClientThread::onNews):
-// equal here, a redraw would show the same picture.
-bool drawsTheSame(const ClientSnapshot& a, const ClientSnapshot& b) {
-    auto sameTool = [](const auto& x, const auto& y) {
-        return x.first == y.first && x.second.position == y.second.position &&
-               x.second.orientation == y.second.orientation &&
-               x.second.drilling == y.second.drilling && x.second.toolKind == y.second.toolKind &&
-               x.second.diameterMm == y.second.diameterMm;
-    };
-    return a.state == b.state && a.closeReason == b.closeReason && a.attempts == b.attempts &&
-           a.scene == b.scene && a.welcome.has_value() == b.welcome.has_value() &&
-           a.viewingAs == b.viewingAs && a.view == b.view && a.viewId == b.viewId &&
-           a.waitingForView == b.waitingForView && a.sync == b.sync &&
-           a.requestedSync == b.requestedSync && a.participants == b.participants &&
-           a.annotations == b.annotations && sameTimeline(a.replay, b.replay) &&
-           a.codes == b.codes &&
-           std::equal(a.others.begin(), a.others.end(), b.others.begin(), b.others.end(), sameTool);
+template <typename T>
+bool same(const std::optional<T>& a, const std::optional<T>& b) {
+    return a.has_value() == b.has_value() && (!a || same(*a, *b));
+}
+
+template <typename K, typename V>
+bool same(const std::map<K, V>& a, const std::map<K, V>& b) {
+    return std::equal(a.begin(), a.end(), b.begin(), b.end(), [](const auto& x, const auto& y) {
+        return x.first == y.first && same(x.second, y.second);
+    });
+}
+
+template <typename R>
+bool sameRange(const R& a, const R& b) {
+    return std::equal(a.begin(), a.end(), b.begin(), b.end(),
+                      [](const auto& x, const auto& y) { return same(x, y); });
+}
+template <typename T, size_t N>
+bool same(const std::array<T, N>& a, const std::array<T, N>& b) {
+    return sameRange(a, b);
+}
+template <typename T>
+bool same(const std::vector<T>& a, const std::vector<T>& b) {
+    return sameRange(a, b);
+}
+template <typename T>
+bool same(const std::deque<T>& a, const std::deque<T>& b) {
+    return sameRange(a, b);
+}
+
+bool same(const ChannelRates& a, const ChannelRates& b) {
+    return a.bytesInPerS == b.bytesInPerS && a.bytesOutPerS == b.bytesOutPerS &&
+           a.messagesInPerS == b.messagesInPerS && a.messagesOutPerS == b.messagesOutPerS;
+}
+
+bool same(const ServerFault& a, const ServerFault& b) {
+    return a.type == b.type && a.detail == b.detail;
+}
+
+template <typename T>
+bool same(const T& a, const T& b) {
+    if constexpr (requires(T & m, WriteStream & w) { m.serialize(w); } &&
+                  !std::equality_comparable<T>)
+        return wireBytes(a) == wireBytes(b);
+    else
+        return a == b;
+}
+
+// The snapshot's fields, one binding each: a field added to ClientSnapshot does not compile here
+// until it is bound, and so compared.
+auto fieldsOf(const ClientSnapshot& s) {
+    const auto& [f0, f1, f2, f3, f4, f5, f6, f7, f8, f9, f10, f11, f12, f13, f14, f15, f16, f17,
+                 f18, f19, f20, f21, f22, f23, f24, f25, f26, f27, f28, f29, f30, f31, f32, f33,
+                 f34, f35, f36, f37, f38, f39, f40, f41, f42, f43, f44, f45, f46, f47, f48, f49] =
+        s;
+    return std::tie(f0, f1, f2, f3, f4, f5, f6, f7, f8, f9, f10, f11, f12, f13, f14, f15, f16, f17,
+                    f18, f19, f20, f21, f22, f23, f24, f25, f26, f27, f28, f29, f30, f31, f32, f33,
+                    f34, f35, f36, f37, f38, f39, f40, f41, f42, f43, f44, f45, f46, f47, f48, f49);
+}
+
+template <typename Tuple, size_t... I>
+bool sameFields(const Tuple& a, const Tuple& b, std::index_sequence<I...>) {
+    return (same(std::get<I>(a), std::get<I>(b)) && ...);
 }
 
 } // namespace
+
+bool ClientSnapshot::operator==(const ClientSnapshot& o) const {
+    const auto a = fieldsOf(*this), b = fieldsOf(o);
+    return sameFields(a, b, std::make_index_sequence<std::tuple_size_v<decltype(a)>>());
+}
+
+DrawnPart drawnPart(const ClientSnapshot& s) {
+    DrawnPart d;
+    d.state = s.state;
+    d.closeReason = s.closeReason;
+    d.attempts = s.attempts;
+    d.scene = s.scene;
+    d.welcomed = s.welcome.has_value();
+    d.viewingAs = s.viewingAs;
+    d.view = s.view;
+    d.viewId = s.viewId;
+    d.waitingForView = s.waitingForView;
+    d.sync = s.sync;
+    d.requestedSync = s.requestedSync;
+    d.participants = s.participants;
+    d.annotations = s.annotations;
+    if (s.replay)
+        d.replay =
+            DrawnPart::Timeline{s.replay->playing, s.replay->seeks, s.replay->speed,
+                                s.replay->durationUs, s.replay->playing ? 0 : s.replay->positionUs};
+    d.codes = s.codes;
+    for (const auto& [id, t] : s.others)
+        d.others[id] = {t.position, t.orientation, t.drilling, t.toolKind, t.diameterMm};
+    return d;
+}
 
 void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
     auto s = std::make_shared<ClientSnapshot>();
@@ -359,7 +455,7 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
         std::lock_guard lock(m_snapMutex);
         last = std::exchange(m_snapshot, std::move(s));
     }
-    if (m_config.onNews && (!last || !drawsTheSame(*last, *now)))
+    if (m_config.onNews && (!last || drawnPart(*last) != drawnPart(*now)))
         m_config.onNews();
 }
 

@@ -84,6 +84,7 @@ struct ModeFigures {
     double applyP50Us = -1, clientRenderP50Us = -1;
     // The server's stages and the transmission (p50, us; -1: none measured).
     double erodeP50Us = -1, serverRenderP50Us = -1, encodeP50Us = -1, transmitP50Us = -1;
+    bool operator==(const ModeFigures&) const = default;
 };
 
 // What the UI reads each frame. Immutable once published.
@@ -148,7 +149,48 @@ struct ClientSnapshot {
     std::array<ModeFigures, 2> modes; // by Sync
     std::array<ChannelRates, size_t(Channel::Count)> rates{}; // latest 1 s tick
     std::deque<std::array<ChannelRates, size_t(Channel::Count)>> rateHistory;
+
+    // Every field equal: the scene by identity (immutable, one object per arrival), the server's
+    // messages by their wire bytes (one encoding per value), the rest by value.
+    bool operator==(const ClientSnapshot& o) const;
 };
+
+// What a window draws from a snapshot, apart from the rectangles and boxes: equal, a redraw shows
+// the same picture, so ClientThread's onNews stays quiet (figures and statistics are left out).
+struct DrawnPart {
+    struct Tool { // others' tools as drawn: no sequence, time or speed
+        glm::vec3 position{0};
+        glm::quat orientation{1, 0, 0, 0};
+        bool drilling = false;
+        uint8_t toolKind = 0;
+        float diameterMm = 0;
+        bool operator==(const Tool&) const = default;
+    };
+    struct Timeline { // a replay's, whose cursor moves by itself while it plays
+        bool playing = false;
+        uint32_t seeks = 0;
+        float speed = 1.0f;
+        uint64_t durationUs = 0, positionUs = 0; // positionUs: 0 while playing
+        bool operator==(const Timeline&) const = default;
+    };
+    LinkState state = LinkState::Connecting;
+    std::string closeReason;
+    int attempts = 0;
+    std::shared_ptr<const ReceivedScene> scene;
+    bool welcomed = false;
+    uint16_t viewingAs = 0;
+    ViewSpec view;
+    uint32_t viewId = 0;
+    bool waitingForView = false;
+    Sync sync = Sync::Dbi, requestedSync = Sync::Dbi;
+    std::map<uint16_t, ParticipantInfo> participants;
+    std::vector<AnnotationInfo> annotations;
+    std::optional<Timeline> replay;
+    std::optional<Codes> codes;
+    std::map<uint16_t, Tool> others;
+    bool operator==(const DrawnPart&) const = default;
+};
+DrawnPart drawnPart(const ClientSnapshot& s);
 
 struct ClientThreadConfig {
     ClientConfig client;
