@@ -159,25 +159,31 @@ Box3i drillHole(Volume& volume, const RayHit& hit, const DrillAt& d, bool& touch
     return changed;
 }
 
-void run(const RenderOptionsCli& o) {
-    const glm::ivec2 size = parseSize(o.size);
+// The flags that need the window's size, read and checked before any work: the drills, the
+// rectangle (top-left origin) and the outputs' names and folders (a wrong --png or a missing
+// folder fails before the render and before --out is written).
+struct RenderJob {
+    glm::ivec2 size{0};
     std::vector<DrillAt> drills;
-    for (const std::string& t : o.drills)
-        drills.push_back(parseDrill(t));
     PixelRect rectTop{};
+};
+
+RenderJob checkedJob(const RenderOptionsCli& o) {
+    RenderJob job;
+    job.size = parseSize(o.size);
+    for (const std::string& t : o.drills)
+        job.drills.push_back(parseDrill(t));
     if (!o.rect.empty()) {
         std::vector<double> v = parseNumbers("--rect", o.rect, 4,
                                              "X,Y,W,H in pixels from the top-left, e.g. 0,0,64,64");
-        rectTop = {asInt("--rect", o.rect, v[0]), asInt("--rect", o.rect, v[1]),
-                   asInt("--rect", o.rect, v[2]), asInt("--rect", o.rect, v[3])};
-        if (rectTop.empty() || !PixelRect{0, 0, size.x, size.y}.contains(rectTop))
+        job.rectTop = {asInt("--rect", o.rect, v[0]), asInt("--rect", o.rect, v[1]),
+                       asInt("--rect", o.rect, v[2]), asInt("--rect", o.rect, v[3])};
+        if (job.rectTop.empty() || !PixelRect{0, 0, job.size.x, job.size.y}.contains(job.rectTop))
             throw Error("--rect " + o.rect + ": must be a non-empty rectangle inside the " +
                         o.size + " window");
     }
     if (o.out.empty() && o.png.empty())
         std::printf("note: no --out or --png given; rendering for timing only\n");
-    // The files' names and folders are checked before any work, so a wrong --png or a missing
-    // folder fails before the render and before --out is written.
     if (!o.out.empty()) {
         checkDbiExrPath(o.out);
         checkOutputFolder("--out", o.out);
@@ -186,8 +192,12 @@ void run(const RenderOptionsCli& o) {
         checkColorPngPath(o.png);
         checkOutputFolder("--png", o.png);
     }
+    return job;
+}
 
-    auto t0 = std::chrono::steady_clock::now();
+// The volume, with the paper's spacing for `--camera paper`.
+Volume openForRender(const RenderOptionsCli& o, glm::ivec2 size) {
+    const auto t0 = std::chrono::steady_clock::now();
     Volume volume = openVolume(o.volume);
     const glm::ivec3 dims = volume.dims();
     std::printf("volume %s: %d x %d x %d voxels, spacing %g mm (loaded in %.0f ms)\n",
@@ -201,6 +211,35 @@ void run(const RenderOptionsCli& o) {
                     s, n, kPaperProjectedPx * size.y / kPaperWindowPx, kPaperDistanceMm,
                     kPaperFovYDeg);
     }
+    return volume;
+}
+
+// --eye, --target, --up and --fov over the preset's camera.
+void applyCustomCamera(const RenderOptionsCli& o, const Volume& volume, Camera& camera) {
+    bool custom = false;
+    if (!o.eye.empty())
+        camera.eye = parseVec3("--eye", o.eye), custom = true;
+    if (!o.target.empty())
+        camera.target = parseVec3("--target", o.target), custom = true;
+    if (!o.up.empty())
+        camera.up = parseVec3("--up", o.up), custom = true;
+    if (o.fov != 0.0f) {
+        if (!(o.fov > 0.5f && o.fov < 170.0f))
+            throw Error("--fov " + std::to_string(o.fov) + ": must be between 0.5 and 170 degrees");
+        camera.fovYDeg = o.fov;
+        custom = true;
+    }
+    if (!custom)
+        return;
+    glm::vec3 forward = camera.target - camera.eye;
+    if (glm::length(forward) < 1e-3f)
+        throw Error("--eye and --target must differ");
+    if (glm::length(glm::cross(forward, camera.up)) < 1e-6f * glm::length(forward))
+        throw Error("--up must not be parallel to the view direction");
+    fitNearFar(camera, glm::vec3(0.0f), 0.5f * glm::length(volume.extentMm()));
+}
+
+Camera renderCamera(const RenderOptionsCli& o, const Volume& volume, glm::ivec2 size) {
     Camera camera = cameraPreset(o.camera, volume, size);
     // A saved session's scene beside the volume: its presets, as the server computed them before
     // the save (the drilled skull's site has moved; the view a preset names has not). Not `paper`,
@@ -215,41 +254,20 @@ void run(const RenderOptionsCli& o) {
             std::printf("camera %s: from the saved scene %s\n", o.camera.c_str(),
                         net::scenePathFor(volumeFile).c_str());
         }
-    bool custom = false;
-    if (!o.eye.empty())
-        camera.eye = parseVec3("--eye", o.eye), custom = true;
-    if (!o.target.empty())
-        camera.target = parseVec3("--target", o.target), custom = true;
-    if (!o.up.empty())
-        camera.up = parseVec3("--up", o.up), custom = true;
-    if (o.fov != 0.0f) {
-        if (!(o.fov > 0.5f && o.fov < 170.0f))
-            throw Error("--fov " + std::to_string(o.fov) + ": must be between 0.5 and 170 degrees");
-        camera.fovYDeg = o.fov;
-        custom = true;
-    }
-    if (custom) {
-        glm::vec3 forward = camera.target - camera.eye;
-        if (glm::length(forward) < 1e-3f)
-            throw Error("--eye and --target must differ");
-        if (glm::length(glm::cross(forward, camera.up)) < 1e-6f * glm::length(forward))
-            throw Error("--up must not be parallel to the view direction");
-        fitNearFar(camera, glm::vec3(0.0f), 0.5f * glm::length(volume.extentMm()));
-    }
+    applyCustomCamera(o, volume, camera);
     std::printf("camera %s: %s\n", o.camera.c_str(), describe(camera).c_str());
+    return camera;
+}
 
-    ThreadPool pool(o.threads);
-    t0 = std::chrono::steady_clock::now();
-    Renderer renderer(volume, &pool);
-    std::printf("brick grid: %d x %d x %d bricks in %.1f ms\n", renderer.bricks().dims().x,
-                renderer.bricks().dims().y, renderer.bricks().dims().z, msSince(t0));
-
+// Every --drill-at in turn, each at the bone under its pixel now: BB_volume of them all.
+Box3i drillAll(const RenderOptionsCli& o, const RenderJob& job, const Camera& camera,
+               Volume& volume, Renderer& renderer) {
     Box3i bbVolume;
-    for (size_t i = 0; i < drills.size(); ++i) {
-        const DrillAt& d = drills[i];
-        if (d.px < 0 || d.py < 0 || d.px >= size.x || d.py >= size.y)
+    for (size_t i = 0; i < job.drills.size(); ++i) {
+        const DrillAt& d = job.drills[i];
+        if (d.px < 0 || d.py < 0 || d.px >= job.size.x || d.py >= job.size.y)
             throw Error("--drill-at " + d.text + ": pixel outside the " + o.size + " window");
-        RayHit hit = renderer.castRay(camera, d.px, size.y - 1 - d.py);
+        RayHit hit = renderer.castRay(camera, d.px, job.size.y - 1 - d.py);
         if (!hit.hit)
             throw Error("--drill-at " + d.text + ": no bone under pixel (" + std::to_string(d.px) +
                         ", " + std::to_string(d.py) + "); pick a pixel that shows bone");
@@ -262,17 +280,33 @@ void run(const RenderOptionsCli& o) {
                     i + 1, d.diameterMm, d.px, d.py, hit.position.x, hit.position.y, hit.position.z,
                     d.depthMm, dura ? " (stopped at dura)" : "", describeBox(changed).c_str());
     }
+    return bbVolume;
+}
+
+void run(const RenderOptionsCli& o) {
+    const RenderJob job = checkedJob(o);
+    const glm::ivec2 size = job.size;
+    Volume volume = openForRender(o, size);
+    const Camera camera = renderCamera(o, volume, size);
+
+    ThreadPool pool(o.threads);
+    auto t0 = std::chrono::steady_clock::now();
+    Renderer renderer(volume, &pool);
+    std::printf("brick grid: %d x %d x %d bricks in %.1f ms\n", renderer.bricks().dims().x,
+                renderer.bricks().dims().y, renderer.bricks().dims().z, msSince(t0));
+    const Box3i bbVolume = drillAll(o, job, camera, volume, renderer);
 
     const bool partial = !o.rect.empty();
-    const PixelRect rect = partial ? flipRows(rectTop, size.y) : PixelRect{0, 0, size.x, size.y};
+    const PixelRect rect =
+        partial ? flipRows(job.rectTop, size.y) : PixelRect{0, 0, size.x, size.y};
     t0 = std::chrono::steady_clock::now();
     Dbi image = renderer.renderRect(camera, rect);
     double ms = msSince(t0);
-    std::string where = partial ? " (rect " + describe(rectTop) + ", top-left origin)" : "";
+    std::string where = partial ? " (rect " + describe(job.rectTop) + ", top-left origin)" : "";
     std::printf("render %dx%d%s in %.2f ms on %d threads\n", rect.w, rect.h, where.c_str(), ms,
                 pool.size());
 
-    if (!drills.empty()) {
+    if (!job.drills.empty()) {
         PixelRect screen = dirtyScreenRect(camera, volume, bbVolume);
         std::printf("BB_volume %s\n", describeBox(bbVolume).c_str());
         std::printf("BB_screen %s\n", describe(flipRows(screen, size.y)).c_str());

@@ -105,7 +105,21 @@ double sessionSeconds(const std::vector<net::LogRecord>& records) {
     return records.empty() ? 0.0 : double(net::sessionTimesUs(records).back()) * 1e-6;
 }
 
-int runReplay(const ReplayOptions& o) {
+// --trajectories: one CSV per tool of the session.
+void writeTrajectories(const ReplayOptions& o, const net::LogContents& log) {
+    const std::vector<net::Trajectory> paths = net::trajectoriesOf(log.records);
+    for (const net::Trajectory& t : paths) {
+        const std::string file =
+            (std::filesystem::path(o.trajectories) / net::trajectoryFileName(t)).string();
+        if (!writeReplacing(file, net::trajectoryCsv(t)))
+            throw Error("--trajectories: cannot write " + file);
+    }
+    std::printf("trephine replay: wrote %zu trajector%s into %s\n", paths.size(),
+                paths.size() == 1 ? "y" : "ies", o.trajectories.c_str());
+}
+
+// The outputs, checked before the log is read: their folders, and none on another or on the log.
+void checkReplayOutputs(const ReplayOptions& o) {
     if (!o.save.empty()) {
         checkSaveTarget(o.save);
         if (!savesMaterials(o.save))
@@ -126,6 +140,10 @@ int runReplay(const ReplayOptions& o) {
         if (!o.save.empty() && samePath(o.report, o.save))
             throw Error("--report and --save name one file " + o.report + ": give each its own");
     }
+}
+
+int runReplay(const ReplayOptions& o) {
+    checkReplayOutputs(o);
     const auto t0 = std::chrono::steady_clock::now();
     net::LogContents log = net::readSessionLog(o.log);
     std::istringstream damage(log.stopped);
@@ -154,17 +172,8 @@ int runReplay(const ReplayOptions& o) {
         saveVolume(replay.volume(), o.save);
         std::printf("trephine replay: wrote %s\n", o.save.c_str());
     }
-    if (!o.trajectories.empty()) {
-        const std::vector<net::Trajectory> paths = net::trajectoriesOf(log.records);
-        for (const net::Trajectory& t : paths) {
-            const std::string file =
-                (std::filesystem::path(o.trajectories) / net::trajectoryFileName(t)).string();
-            if (!writeReplacing(file, net::trajectoryCsv(t)))
-                throw Error("--trajectories: cannot write " + file);
-        }
-        std::printf("trephine replay: wrote %zu trajector%s into %s\n", paths.size(),
-                    paths.size() == 1 ? "y" : "ies", o.trajectories.c_str());
-    }
+    if (!o.trajectories.empty())
+        writeTrajectories(o, log);
     if (!o.report.empty()) {
         if (!writeReplacing(o.report, net::replayReportText(replay, log, o.log)))
             throw Error("--report " + o.report + ": cannot write it");

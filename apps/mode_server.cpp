@@ -100,7 +100,86 @@ uint64_t unixNowUs() {
                         .count());
 }
 
-int runServer(const ServerOptions& o) {
+// The lines once the port is known: where to join from, the codes, the recording.
+void printStarted(const ServerOptions& o, const net::ServerConfig& config,
+                  const net::SessionServer& server, glm::ivec3 d) {
+    std::printf("trephine server: %s (%d x %d x %d) on port %u; Ctrl-C stops\n",
+                config.volumeName.c_str(), d.x, d.y, d.z, unsigned(server.port()));
+    printCodes(o, config, server.port());
+    // Where to join from, and whether the session outlives the server (saved, or recorded).
+    const bool keeps = !o.saveOnExit.empty() || config.recorder;
+    for (const std::string& line :
+         net::serverStartLines(server.port(), net::localAddresses(), keeps, config.traineeCode))
+        std::printf("trephine server: %s\n", line.c_str());
+    if (config.recorder)
+        std::printf("trephine server: recording to %s (written back every %d ms, synced every %d "
+                    "ms)\n",
+                    config.recorder->path().c_str(), net::SessionRecorder::kWritebackIntervalMs,
+                    net::SessionRecorder::kDefaultSyncIntervalMs);
+}
+
+// What the stopped server wrote: the saved session, the debriefs, the report.
+void printWritten(const ServerOptions& o, const net::SessionServer& server) {
+    // A failed --save-on-exit was said by stop(), with the emergency copy it made instead.
+    if (!o.saveOnExit.empty() && server.saveError().empty())
+        std::printf("trephine server: wrote %s, %s and %s\n", o.saveOnExit.c_str(),
+                    net::marksPathFor(o.saveOnExit).c_str(),
+                    net::scenePathFor(o.saveOnExit).c_str());
+    for (const std::string& d : server.debriefs())
+        std::printf("trephine server: wrote %s\n", d.c_str());
+    if (!o.report.empty()) {
+        if (!writeReplacing(o.report, server.reportJson()))
+            throw Error("--report " + o.report + ": cannot write it");
+        std::printf("trephine server: wrote %s\n", o.report.c_str());
+    }
+}
+
+// --resume: the log played to where its server stopped; what it found said on stdout.
+Volume resumedVolume(const ServerOptions& o, net::ServerConfig& config) {
+    net::Resumed resumed = net::resumeSession(o.resume, config, openVolume, unixNowUs());
+    std::istringstream damage(resumed.stopped);
+    for (std::string line; std::getline(damage, line);)
+        std::printf("trephine server: %s\n", line.c_str());
+    if (!resumed.keptAside.empty())
+        std::printf("trephine server: kept the damaged log whole as %s; %s now holds its %zu "
+                    "intact records, and goes on from them\n",
+                    resumed.keptAside.c_str(), o.resume.c_str(), resumed.records);
+    std::printf("trephine server: resumed %s: %zu records, %llu tool states applied, %zu "
+                "mark%s\n",
+                o.resume.c_str(), resumed.records, (unsigned long long)resumed.toolStates,
+                config.marks.size(), config.marks.size() == 1 ? "" : "s");
+    return std::move(resumed.volume);
+}
+
+// The volume, with the marks and the scene a --save-on-exit left beside it, and the recorder.
+Volume startingVolume(const ServerOptions& o, net::ServerConfig& config) {
+    Volume volume = openVolume(o.volume);
+    // A session saved by --save-on-exit left its marks beside the volume: they come back too.
+    const std::string volumeFile = volumeFileOf(o.volume);
+    const std::string marks = net::marksPathFor(volumeFile);
+    std::error_code ec;
+    if (!volumeFile.empty() && std::filesystem::is_regular_file(marks, ec)) {
+        config.marks = net::readMarksFile(marks);
+        std::printf("trephine server: %zu mark%s from %s\n", config.marks.size(),
+                    config.marks.size() == 1 ? "" : "s", marks.c_str());
+    }
+    // And its scene (presets, sites, the surgical field), so every preset names the view it
+    // named before the save, however the skull was drilled since; otherwise built from the
+    // volume.
+    config.scene = std::make_shared<const net::Scene>(net::sceneForVolume(volume, volumeFile));
+    if (!volumeFile.empty() && std::filesystem::is_regular_file(net::scenePathFor(volumeFile), ec))
+        std::printf("trephine server: the scene from %s\n", net::scenePathFor(volumeFile).c_str());
+    config.volumeName = o.volume;
+    if (!o.record.empty())
+        config.recorder = net::SessionRecorder::create(
+            o.record,
+            net::makeLogHeader(volume, config, o.volume, !regenerates(o.volume), unixNowUs()));
+    return volume;
+}
+
+// The outputs written when the session ends, checked before it starts: none may land on another
+// or on the log, and their folders must be there.
+void checkServerOutputs(const ServerOptions& o) {
     // Written when the session ends: a folder that is not there would lose its statistics.
     if (!o.report.empty()) {
         checkOutputFolder("--report", o.report);
@@ -133,6 +212,10 @@ int runServer(const ServerOptions& o) {
         if (!std::filesystem::is_directory(o.debrief))
             throw Error("--debrief " + o.debrief + ": not a folder that can be made");
     }
+}
+
+int runServer(const ServerOptions& o) {
+    checkServerOutputs(o);
     net::ServerConfig config;
     config.cautionMm = o.cautionMm;
     config.dangerMm = o.dangerMm;
@@ -142,46 +225,7 @@ int runServer(const ServerOptions& o) {
     config.renderThreads = o.renderThreads;
     config.maxClients = o.maxClients;
     chooseCodes(o, config);
-    Volume volume;
-    if (!o.resume.empty()) {
-        net::Resumed resumed = net::resumeSession(o.resume, config, openVolume, unixNowUs());
-        std::istringstream damage(resumed.stopped);
-        for (std::string line; std::getline(damage, line);)
-            std::printf("trephine server: %s\n", line.c_str());
-        if (!resumed.keptAside.empty())
-            std::printf("trephine server: kept the damaged log whole as %s; %s now holds its %zu "
-                        "intact records, and goes on from them\n",
-                        resumed.keptAside.c_str(), o.resume.c_str(), resumed.records);
-        std::printf("trephine server: resumed %s: %zu records, %llu tool states applied, %zu "
-                    "mark%s\n",
-                    o.resume.c_str(), resumed.records, (unsigned long long)resumed.toolStates,
-                    config.marks.size(), config.marks.size() == 1 ? "" : "s");
-        volume = std::move(resumed.volume);
-    } else {
-        volume = openVolume(o.volume);
-        // A session saved by --save-on-exit left its marks beside the volume: they come back too.
-        const std::string volumeFile = volumeFileOf(o.volume);
-        const std::string marks = net::marksPathFor(volumeFile);
-        std::error_code ec;
-        if (!volumeFile.empty() && std::filesystem::is_regular_file(marks, ec)) {
-            config.marks = net::readMarksFile(marks);
-            std::printf("trephine server: %zu mark%s from %s\n", config.marks.size(),
-                        config.marks.size() == 1 ? "" : "s", marks.c_str());
-        }
-        // And its scene (presets, sites, the surgical field), so every preset names the view it
-        // named before the save, however the skull was drilled since; otherwise built from the
-        // volume.
-        config.scene = std::make_shared<const net::Scene>(net::sceneForVolume(volume, volumeFile));
-        if (!volumeFile.empty() &&
-            std::filesystem::is_regular_file(net::scenePathFor(volumeFile), ec))
-            std::printf("trephine server: the scene from %s\n",
-                        net::scenePathFor(volumeFile).c_str());
-        config.volumeName = o.volume;
-        if (!o.record.empty())
-            config.recorder = net::SessionRecorder::create(
-                o.record,
-                net::makeLogHeader(volume, config, o.volume, !regenerates(o.volume), unixNowUs()));
-    }
+    Volume volume = o.resume.empty() ? startingVolume(o, config) : resumedVolume(o, config);
     glm::ivec3 d = volume.dims();
     net::SessionServer server(std::move(volume), config);
     // Every way a session is ended from outside saves it. Output gone (a `| tee` ended first) must
@@ -189,19 +233,7 @@ int runServer(const ServerOptions& o) {
     handleStopSignals(onStopSignal);
     std::signal(SIGPIPE, SIG_IGN);
     server.start();
-    std::printf("trephine server: %s (%d x %d x %d) on port %u; Ctrl-C stops\n",
-                config.volumeName.c_str(), d.x, d.y, d.z, unsigned(server.port()));
-    printCodes(o, config, server.port());
-    // Where to join from, and whether the session outlives the server (saved, or recorded).
-    const bool keeps = !o.saveOnExit.empty() || config.recorder;
-    for (const std::string& line :
-         net::serverStartLines(server.port(), net::localAddresses(), keeps, config.traineeCode))
-        std::printf("trephine server: %s\n", line.c_str());
-    if (config.recorder)
-        std::printf("trephine server: recording to %s (written back every %d ms, synced every %d "
-                    "ms)\n",
-                    config.recorder->path().c_str(), net::SessionRecorder::kWritebackIntervalMs,
-                    net::SessionRecorder::kDefaultSyncIntervalMs);
+    printStarted(o, config, server, d);
     std::fflush(stdout);
     while (!g_stopRequested.load())
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
@@ -209,18 +241,7 @@ int runServer(const ServerOptions& o) {
                 (unsigned long long)server.toolStatesApplied(),
                 (unsigned long long)server.malformedTotal());
     server.stop();
-    // A failed --save-on-exit was said by stop(), with the emergency copy it made instead.
-    if (!o.saveOnExit.empty() && server.saveError().empty())
-        std::printf("trephine server: wrote %s, %s and %s\n", o.saveOnExit.c_str(),
-                    net::marksPathFor(o.saveOnExit).c_str(),
-                    net::scenePathFor(o.saveOnExit).c_str());
-    for (const std::string& d : server.debriefs())
-        std::printf("trephine server: wrote %s\n", d.c_str());
-    if (!o.report.empty()) {
-        if (!writeReplacing(o.report, server.reportJson()))
-            throw Error("--report " + o.report + ": cannot write it");
-        std::printf("trephine server: wrote %s\n", o.report.c_str());
-    }
+    printWritten(o, server);
     return server.saveError().empty() ? 0 : 1;
 }
 

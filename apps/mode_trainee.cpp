@@ -214,6 +214,35 @@ int runTrainee(const TraineeOptions& o) {
     return runHeadlessTrainee(o, std::move(script));
 }
 
+// Options only a --headless trainee uses: listed under their own heading, and refused by the
+// window (runTrainee) rather than ignored.
+const std::string kHeadlessOnly = "Headless only (with --headless)";
+
+void addHeadlessOnlyOptions(CLI::App* sub, TraineeOptions& o) {
+    sub->add_option("--script", o.script, "burrhole, or a CSV trajectory (docs/scripts.md)")
+        ->capture_default_str()
+        ->group(kHeadlessOnly);
+    // Checked as the command line is read: an unknown preset was refused only once connected.
+    sub->add_option("--camera", o.camera, "View preset, as in `trephine render`")
+        ->check(CLI::IsMember(cameraPresetNames()))
+        ->capture_default_str()
+        ->group(kHeadlessOnly);
+    sub->add_option("--duration", o.durationS, "Seconds of script to run (burrhole: its length)")
+        ->check(finiteRange(0.0, 3600.0))
+        ->group(kHeadlessOnly);
+    sub->add_option("--report", o.report, "Write statistics as JSON here")
+        ->check(outputFile())
+        ->group(kHeadlessOnly);
+    sub->add_option("--save-dbi", o.saveDbi, "Write the final DBI as OpenEXR here")
+        ->check(outputFile())
+        ->group(kHeadlessOnly);
+    sub->add_option("--tool-rate", o.toolRateHz,
+                    "Tool states per second sent by the haptic loop (20-1000)")
+        ->check(finiteRange(20.0, 1000.0))
+        ->capture_default_str()
+        ->group(kHeadlessOnly);
+}
+
 } // namespace
 
 void addTraineeMode(CLI::App& root, int& exitCode) {
@@ -224,17 +253,6 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
         ->check(serverAddress())
         ->required();
     sub->add_flag("--headless", o->headless, "No window: run a script and report statistics");
-    // Options only a --headless trainee uses: listed under their own heading, and refused by the
-    // window (runTrainee) rather than ignored.
-    static const std::string kHeadlessOnly = "Headless only (with --headless)";
-    sub->add_option("--script", o->script, "burrhole, or a CSV trajectory (docs/scripts.md)")
-        ->capture_default_str()
-        ->group(kHeadlessOnly);
-    // Checked as the command line is read: an unknown preset was refused only once connected.
-    sub->add_option("--camera", o->camera, "View preset, as in `trephine render`")
-        ->check(CLI::IsMember(cameraPresetNames()))
-        ->capture_default_str()
-        ->group(kHeadlessOnly);
     sub->add_option("--codec", o->codec, "Image codec: raw, lz4 or zstd")
         ->check(CLI::IsMember({"raw", "lz4", "zstd"}))
         ->capture_default_str();
@@ -252,15 +270,6 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
     sub->add_option("--size", o->size, "Window size in pixels (square)")
         ->check(CLI::Range(16, 4096))
         ->capture_default_str();
-    sub->add_option("--duration", o->durationS, "Seconds of script to run (burrhole: its length)")
-        ->check(finiteRange(0.0, 3600.0))
-        ->group(kHeadlessOnly);
-    sub->add_option("--report", o->report, "Write statistics as JSON here")
-        ->check(outputFile())
-        ->group(kHeadlessOnly);
-    sub->add_option("--save-dbi", o->saveDbi, "Write the final DBI as OpenEXR here")
-        ->check(outputFile())
-        ->group(kHeadlessOnly);
     sub->add_option("--name", o->name, "Name shown to others")
         ->check(participantName())
         ->capture_default_str();
@@ -276,11 +285,7 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
     sub->add_option("--timeout", o->timeoutS, "Window, with --screenshot: give up after this long")
         ->check(finiteRange(1.0, 3600.0))
         ->capture_default_str();
-    sub->add_option("--tool-rate", o->toolRateHz,
-                    "Tool states per second sent by the haptic loop (20-1000)")
-        ->check(finiteRange(20.0, 1000.0))
-        ->capture_default_str()
-        ->group(kHeadlessOnly);
+    addHeadlessOnlyOptions(sub, *o);
     sub->callback([o, sub, &exitCode] {
         for (const CLI::Option* opt : sub->get_options())
             if (o->headlessOnly.empty() && opt->get_group() == kHeadlessOnly && opt->count())

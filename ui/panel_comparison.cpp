@@ -25,17 +25,13 @@ void cell(bool measured, bool active, const char* fmt, double a, double b = 0) {
         ImGui::TextDisabled("%s", text);
 }
 
-} // namespace
+using Series = ComparisonHistory::Series;
+constexpr SyncDesign kOrder[kSyncDesignCount] = {SyncDesign::Dbi, SyncDesign::Volume};
 
-bool drawComparisonPanel(SyncDesign& wanted, SyncDesign live, const ComparisonHistory& history,
-                         double now) {
-    if (!ImGui::Begin("Comparison")) {
-        ImGui::End();
-        return false;
-    }
+// One toggle; the label names the design in use first, or the switch under way. "###" keeps its
+// ID across labels. True when clicked.
+bool designToggle(SyncDesign& wanted, SyncDesign live) {
     const SyncDesign other = wanted == SyncDesign::Dbi ? SyncDesign::Volume : SyncDesign::Dbi;
-    // One toggle; the label names the design in use first, or the switch under way. "###" keeps
-    // its ID across labels.
     char label[128];
     if (wanted == live)
         std::snprintf(label, sizeof label, "%s  |  switch to %s###design", syncDesignName(live),
@@ -50,9 +46,64 @@ bool drawComparisonPanel(SyncDesign& wanted, SyncDesign live, const ComparisonHi
         ImGui::SetTooltip("DBI: the server renders and sends screen rectangles.\n"
                           "Volume: this client holds the volume, receives changed voxels and "
                           "renders locally.");
+    return flipped;
+}
 
-    using S = ComparisonHistory::Series;
-    const SyncDesign order[kSyncDesignCount] = {SyncDesign::Dbi, SyncDesign::Volume};
+// The table's first row: whether each design's figures are live, and how old they are if not.
+void measuredRow(SyncDesign wanted, SyncDesign live, const ComparisonHistory& history, double now) {
+    ImGui::TableNextRow();
+    ImGui::TableNextColumn();
+    ImGui::TextUnformatted("measured");
+    for (SyncDesign d : kOrder) {
+        ImGui::TableNextColumn();
+        if (d == live)
+            ImGui::TextUnformatted(history.measured(d) ? "live" : "waiting");
+        else if (d == wanted)
+            ImGui::TextDisabled("switching...");
+        else if (history.measured(d))
+            ImGui::TextDisabled("%.0f s ago", history.ageS(d, now));
+        else
+            ImGui::TextDisabled("never");
+    }
+}
+
+// Live plots of one figure: DBI on the left, volume on the right. The caption is the table's
+// figure, "-" where none was measured yet.
+void plotPair(const ComparisonHistory& history, SyncDesign live, const char* name,
+              std::vector<float> Series::*series, double ComparisonFigures::*figure,
+              const char* unit) {
+    const float w = (ImGui::GetContentRegionAvail().x - ImGui::GetStyle().ItemSpacing.x) * 0.5f;
+    for (int i = 0; i < kSyncDesignCount; ++i) {
+        SyncDesign d = kOrder[i];
+        const std::vector<float>& v = history.series(d).*series;
+        const double value = history.series(d).last.*figure;
+        char overlay[64], id[64];
+        if (history.measured(d) && value >= 0)
+            std::snprintf(overlay, sizeof overlay, "%s %s: %.1f %s",
+                          d == SyncDesign::Dbi ? "DBI" : "Vol", name, value, unit);
+        else
+            std::snprintf(overlay, sizeof overlay, "%s %s: -", d == SyncDesign::Dbi ? "DBI" : "Vol",
+                          name);
+        std::snprintf(id, sizeof id, "##%s%d", name, i);
+        if (i > 0)
+            ImGui::SameLine();
+        ImGui::PushStyleVar(ImGuiStyleVar_Alpha, d == live ? 1.0f : kInactiveAlpha);
+        ImGui::PlotLines(id, v.data(), int(v.size()), 0, overlay, 0.0f, FLT_MAX, ImVec2(w, 36));
+        ImGui::PopStyleVar();
+    }
+}
+
+} // namespace
+
+bool drawComparisonPanel(SyncDesign& wanted, SyncDesign live, const ComparisonHistory& history,
+                         double now) {
+    if (!ImGui::Begin("Comparison")) {
+        ImGui::End();
+        return false;
+    }
+    const bool flipped = designToggle(wanted, live);
+
+    using S = Series;
     // Fixed-width figure columns, wide enough for the widest figure: a column that sized itself
     // to its text jumped whenever a figure gained a digit.
     const float figureW = ImGui::CalcTextSize("0000 (raw 00000)").x;
@@ -66,25 +117,12 @@ bool drawComparisonPanel(SyncDesign& wanted, SyncDesign live, const ComparisonHi
             ImGui::TableNextColumn();
             ImGui::TextUnformatted(name);
             itemTip(tip);
-            for (SyncDesign d : order) {
+            for (SyncDesign d : kOrder) {
                 ImGui::TableNextColumn();
                 draw(history.series(d), history.measured(d), d == live);
             }
         };
-        ImGui::TableNextRow();
-        ImGui::TableNextColumn();
-        ImGui::TextUnformatted("measured");
-        for (SyncDesign d : order) {
-            ImGui::TableNextColumn();
-            if (d == live)
-                ImGui::TextUnformatted(history.measured(d) ? "live" : "waiting");
-            else if (d == wanted)
-                ImGui::TextDisabled("switching...");
-            else if (history.measured(d))
-                ImGui::TextDisabled("%.0f s ago", history.ageS(d, now));
-            else
-                ImGui::TextDisabled("never");
-        }
+        measuredRow(wanted, live, history, now);
         row("updates /s", "Updates drawn per second, over the last second.",
             [](const S& s, bool m, bool a) { cell(m, a, "%.1f", s.last.updatesPerS); });
         row("bytes / update",
@@ -107,37 +145,13 @@ bool drawComparisonPanel(SyncDesign& wanted, SyncDesign live, const ComparisonHi
         ImGui::EndTable();
     }
 
-    // Live plots: one row per figure, DBI on the left, volume on the right.
-    // The caption is the table's figure, "-" where none was measured yet.
-    auto plots = [&](const char* name, std::vector<float> S::*series,
-                     double ComparisonFigures::*figure, const char* unit) {
-        const float w = (ImGui::GetContentRegionAvail().x - ImGui::GetStyle().ItemSpacing.x) * 0.5f;
-        for (int i = 0; i < kSyncDesignCount; ++i) {
-            SyncDesign d = order[i];
-            const std::vector<float>& v = history.series(d).*series;
-            const double value = history.series(d).last.*figure;
-            char overlay[64], id[64];
-            if (history.measured(d) && value >= 0)
-                std::snprintf(overlay, sizeof overlay, "%s %s: %.1f %s",
-                              d == SyncDesign::Dbi ? "DBI" : "Vol", name, value, unit);
-            else
-                std::snprintf(overlay, sizeof overlay, "%s %s: -",
-                              d == SyncDesign::Dbi ? "DBI" : "Vol", name);
-            std::snprintf(id, sizeof id, "##%s%d", name, i);
-            if (i > 0)
-                ImGui::SameLine();
-            ImGui::PushStyleVar(ImGuiStyleVar_Alpha, d == live ? 1.0f : kInactiveAlpha);
-            ImGui::PlotLines(id, v.data(), int(v.size()), 0, overlay, 0.0f, FLT_MAX, ImVec2(w, 36));
-            ImGui::PopStyleVar();
-        }
-    };
     using F = ComparisonFigures;
-    plots("updates", &S::updatesPerS, &F::updatesPerS, "/s");
-    plots("bytes", &S::bytesPerUpdate, &F::bytesPerUpdate, "B");
-    plots("latency p50", &S::latencyP50Ms, &F::latencyP50Ms, "ms");
-    plots("latency p99", &S::latencyP99Ms, &F::latencyP99Ms, "ms");
-    plots("frame", &S::frameMs, &F::frameMs, "ms");
-    plots("haptic", &S::hapticHz, &F::hapticHz, "Hz");
+    plotPair(history, live, "updates", &S::updatesPerS, &F::updatesPerS, "/s");
+    plotPair(history, live, "bytes", &S::bytesPerUpdate, &F::bytesPerUpdate, "B");
+    plotPair(history, live, "latency p50", &S::latencyP50Ms, &F::latencyP50Ms, "ms");
+    plotPair(history, live, "latency p99", &S::latencyP99Ms, &F::latencyP99Ms, "ms");
+    plotPair(history, live, "frame", &S::frameMs, &F::frameMs, "ms");
+    plotPair(history, live, "haptic", &S::hapticHz, &F::hapticHz, "Hz");
     ImGui::End();
     return flipped;
 }

@@ -116,22 +116,172 @@ void checkUpdateStudy(const Volume& volume, const UpdateStudyConfig& config) {
     }
 }
 
-std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStudyConfig& config) {
-    checkUpdateStudy(volume, config);
-    const Camera camera = cameraPreset(config.camera, volume, {config.window, config.window});
+namespace {
 
+// Per size: the box, its BB_screen and its voxels as they are now, put back after every measured
+// cut (so every round starts from the same bone).
+struct Size {
+    int n = 0;
+    Box3i box;
+    PixelRect screen;
+    std::vector<uint8_t> density, material;
+};
+
+// The samples of one (method, size), pooled over the rounds.
+struct Samples {
+    explicit Samples(size_t capacity)
+        : latency(capacity), bytes(capacity), erode(capacity), render(capacity), encode(capacity),
+          transmit(capacity), apply(capacity), clientRender(capacity), grid(capacity) {}
+    SampleWindow latency, bytes, erode, render, encode, transmit, apply, clientRender, grid;
+};
+
+// A sealed study's codes (the handshake's cost is part of what --sealed measures).
+constexpr const char* kTraineeCode = "study-trainee";
+
+ServerConfig studyServerConfig(const Volume& volume, const UpdateStudyConfig& config) {
     ServerConfig sc;
     sc.port = 0;
     sc.volumeName = config.volumeName;
     sc.hapticModels = false;
     if (config.sealed) {
-        sc.traineeCode = "study-trainee";
+        sc.traineeCode = kTraineeCode;
         sc.instructorCode = "study-instructor";
     }
     if (!config.record.empty())
         sc.recorder = SessionRecorder::create(
             config.record, makeLogHeader(volume, sc, config.volumeName, false, 0));
-    SessionServer server(volume, sc);
+    return sc;
+}
+
+std::vector<Method> chosenMethods(const UpdateStudyConfig& config) {
+    std::vector<Method> methods = methodsFor(config.codec);
+    if (!config.methods.empty()) {
+        std::erase_if(methods, [&](const Method& m) {
+            return std::find(config.methods.begin(), config.methods.end(), m.name) ==
+                   config.methods.end();
+        });
+    }
+    return methods;
+}
+
+std::vector<Size> studySizes(const Volume& volume, const Volume& now, const Camera& camera,
+                             const UpdateStudyConfig& config) {
+    std::vector<Size> sizes;
+    for (int n : config.sizes) {
+        Size z;
+        z.n = n;
+        z.box = surfaceBox(volume, n);
+        z.screen = dirtyScreenRect(camera, volume, z.box);
+        now.copyBox(z.box, z.density, z.material);
+        sizes.push_back(std::move(z));
+    }
+    return sizes;
+}
+
+// One method's client for one round: joins, waits for its picture (or volume), then cuts and
+// restores each size's box warmup + cycles times, sampling every cut's update.
+struct Round {
+    int index = 0, cycles = 0;
+    int* step = nullptr; // progress so far, of `total`
+    int total = 0;
+};
+
+void measureMethod(SessionServer& server, const ENetAddress& address, const Method& method,
+                   const Camera& camera, const std::vector<Size>& sizes,
+                   std::vector<Samples>& samples, const UpdateStudyConfig& config,
+                   const Round& round) {
+    server.setFullRenderUpdates(method.fullRender);
+    ClientConfig cc;
+    cc.name = "study-" + method.name;
+    cc.code = config.sealed ? kTraineeCode : "";
+    cc.codec = config.codec;
+    cc.sync = method.sync;
+    cc.volumeCodec = method.volumeCodec;
+    cc.view = toViewSpec(camera);
+    cc.recordCapacity = size_t(round.cycles + config.warmup) * 4 + 16;
+    SessionClient client(cc);
+    std::optional<UpdateRecord> last;
+    client.setRecordCallback([&](const UpdateRecord& r) {
+        if (!r.full && r.mode == method.sync)
+            last = r;
+    });
+    client.connect(address);
+    const bool ready = pumpUntil(client, 60.0, [&] {
+        return method.sync == Sync::Dbi
+                   ? client.hasFullImage()
+                   : client.sync() == Sync::Volume && client.localVolume() != nullptr &&
+                         client.hasFullImage();
+    });
+    if (!ready)
+        throw Error("update study: the " + method.name + " client never received its " +
+                    (method.sync == Sync::Dbi ? "first image" : "volume") +
+                    (client.closeReason().empty() ? "" : " (" + client.closeReason() + ")"));
+
+    for (size_t si = 0; si < sizes.size(); ++si) {
+        const Size& z = sizes[si];
+        if (config.progress) {
+            std::string label = method.name + " " + std::to_string(z.n) + "^3";
+            if (config.rounds > 1)
+                label += " (round " + std::to_string(round.index + 1) + "/" +
+                         std::to_string(config.rounds) + ")";
+            config.progress(label, *round.step, round.total);
+        }
+        ++*round.step;
+        Samples& out = samples[si];
+        auto waitOne = [&](const char* what) {
+            last.reset();
+            if (!pumpUntil(client, config.cycleTimeoutS, [&] { return last.has_value(); }))
+                throw Error("update study: " + method.name + " " + std::to_string(z.n) + "^3: no " +
+                            what + " update within " + std::to_string(int(config.cycleTimeoutS)) +
+                            " s");
+            return *last;
+        };
+        for (int c = 0; c < config.warmup + round.cycles; ++c) {
+            server.submitBoxCut(z.box);
+            const UpdateRecord r = waitOne("cut");
+            server.submitVoxels(z.box, z.density, z.material);
+            waitOne("restore");
+            if (c < config.warmup)
+                continue;
+            put(out.latency, r.latencyUs);
+            out.bytes.add(double(r.bytes));
+            put(out.erode, r.erodeUs);
+            put(out.render, r.serverRenderUs);
+            put(out.encode, r.encodeUs);
+            put(out.transmit, r.transmitUs);
+            put(out.apply, r.applyUs);
+            put(out.clientRender, r.clientRenderUs);
+            put(out.grid, r.gridUs);
+        }
+    }
+    client.disconnect(100);
+}
+
+UpdateStudyRow rowOf(const Method& method, const Size& z, const Samples& s) {
+    UpdateStudyRow row;
+    row.method = method.name;
+    row.box = z.n;
+    row.bbScreenW = z.screen.w;
+    row.bbScreenH = z.screen.h;
+    row.bytesPerUpdate = s.bytes.mean();
+    row.rawBytesPerUpdate =
+        method.sync == Sync::Dbi ? 5.0 * z.screen.w * z.screen.h : double(z.box.count());
+    row.latencyP50Ms = median(s.latency);
+    row.latencyP99Ms = s.latency.size() ? s.latency.percentile(99) : 0.0;
+    row.updatesPerS = row.latencyP50Ms > 0 ? 1000.0 / row.latencyP50Ms : 0.0;
+    row.stages = {median(s.erode),    median(s.render), median(s.encode),
+                  median(s.transmit), median(s.apply),  median(s.clientRender)};
+    row.stages.grid = median(s.grid);
+    row.cycles = int(s.latency.size());
+    return row;
+}
+
+} // namespace
+
+std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStudyConfig& config) {
+    checkUpdateStudy(volume, config);
+    const Camera camera = cameraPreset(config.camera, volume, {config.window, config.window});
+    SessionServer server(volume, studyServerConfig(volume, config));
     server.start();
     const ENetAddress serverAddress = parseAddress("127.0.0.1:" + std::to_string(server.port()));
     // With a link to emulate, every client talks to the server through the relay.
@@ -141,42 +291,8 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
     const ENetAddress address =
         link ? parseAddress("127.0.0.1:" + std::to_string(link->port())) : serverAddress;
 
-    std::vector<Method> methods = methodsFor(config.codec);
-    if (!config.methods.empty()) {
-        std::erase_if(methods, [&](const Method& m) {
-            return std::find(config.methods.begin(), config.methods.end(), m.name) ==
-                   config.methods.end();
-        });
-    }
-
-    // Per size: the box, its BB_screen and its voxels as they are now, put back after every
-    // measured cut (so every round starts from the same bone).
-    struct Size {
-        int n = 0;
-        Box3i box;
-        PixelRect screen;
-        std::vector<uint8_t> density, material;
-    };
-    std::vector<Size> sizes;
-    {
-        const Volume now = server.volumeSnapshot();
-        for (int n : config.sizes) {
-            Size z;
-            z.n = n;
-            z.box = surfaceBox(volume, n);
-            z.screen = dirtyScreenRect(camera, volume, z.box);
-            now.copyBox(z.box, z.density, z.material);
-            sizes.push_back(std::move(z));
-        }
-    }
-    // The samples of each (method, size), pooled over the rounds.
-    struct Samples {
-        explicit Samples(size_t capacity)
-            : latency(capacity), bytes(capacity), erode(capacity), render(capacity),
-              encode(capacity), transmit(capacity), apply(capacity), clientRender(capacity),
-              grid(capacity) {}
-        SampleWindow latency, bytes, erode, render, encode, transmit, apply, clientRender, grid;
-    };
+    const std::vector<Method> methods = chosenMethods(config);
+    const std::vector<Size> sizes = studySizes(volume, server.volumeSnapshot(), camera, config);
     std::vector<std::vector<Samples>> samples(methods.size());
     for (auto& perMethod : samples)
         perMethod.assign(sizes.size(), Samples(size_t(config.cycles)));
@@ -186,100 +302,15 @@ std::vector<UpdateStudyRow> runUpdateStudy(const Volume& volume, const UpdateStu
     for (int round = 0; round < config.rounds; ++round) {
         // This round's share of the cycles; the first rounds take the remainder.
         const int cycles = config.cycles / config.rounds + (round < config.cycles % config.rounds);
-        for (size_t mi = 0; mi < methods.size(); ++mi) {
-            const Method& method = methods[mi];
-            server.setFullRenderUpdates(method.fullRender);
-            ClientConfig cc;
-            cc.name = "study-" + method.name;
-            cc.code = sc.traineeCode;
-            cc.codec = config.codec;
-            cc.sync = method.sync;
-            cc.volumeCodec = method.volumeCodec;
-            cc.view = toViewSpec(camera);
-            cc.recordCapacity = size_t(cycles + config.warmup) * 4 + 16;
-            SessionClient client(cc);
-            std::optional<UpdateRecord> last;
-            client.setRecordCallback([&](const UpdateRecord& r) {
-                if (!r.full && r.mode == method.sync)
-                    last = r;
-            });
-            client.connect(address);
-            const bool ready = pumpUntil(client, 60.0, [&] {
-                return method.sync == Sync::Dbi
-                           ? client.hasFullImage()
-                           : client.sync() == Sync::Volume && client.localVolume() != nullptr &&
-                                 client.hasFullImage();
-            });
-            if (!ready)
-                throw Error(
-                    "update study: the " + method.name + " client never received its " +
-                    (method.sync == Sync::Dbi ? "first image" : "volume") +
-                    (client.closeReason().empty() ? "" : " (" + client.closeReason() + ")"));
-
-            for (size_t si = 0; si < sizes.size(); ++si) {
-                const Size& z = sizes[si];
-                if (config.progress) {
-                    std::string label = method.name + " " + std::to_string(z.n) + "^3";
-                    if (config.rounds > 1)
-                        label += " (round " + std::to_string(round + 1) + "/" +
-                                 std::to_string(config.rounds) + ")";
-                    config.progress(label, step, total);
-                }
-                ++step;
-                Samples& out = samples[mi][si];
-                auto waitOne = [&](const char* what) {
-                    last.reset();
-                    if (!pumpUntil(client, config.cycleTimeoutS, [&] { return last.has_value(); }))
-                        throw Error("update study: " + method.name + " " + std::to_string(z.n) +
-                                    "^3: no " + what + " update within " +
-                                    std::to_string(int(config.cycleTimeoutS)) + " s");
-                    return *last;
-                };
-                for (int c = 0; c < config.warmup + cycles; ++c) {
-                    server.submitBoxCut(z.box);
-                    const UpdateRecord r = waitOne("cut");
-                    server.submitVoxels(z.box, z.density, z.material);
-                    waitOne("restore");
-                    if (c < config.warmup)
-                        continue;
-                    put(out.latency, r.latencyUs);
-                    out.bytes.add(double(r.bytes));
-                    put(out.erode, r.erodeUs);
-                    put(out.render, r.serverRenderUs);
-                    put(out.encode, r.encodeUs);
-                    put(out.transmit, r.transmitUs);
-                    put(out.apply, r.applyUs);
-                    put(out.clientRender, r.clientRenderUs);
-                    put(out.grid, r.gridUs);
-                }
-            }
-            client.disconnect(100);
-        }
+        for (size_t mi = 0; mi < methods.size(); ++mi)
+            measureMethod(server, address, methods[mi], camera, sizes, samples[mi], config,
+                          {round, cycles, &step, total});
     }
 
     std::vector<UpdateStudyRow> rows;
     for (size_t mi = 0; mi < methods.size(); ++mi)
-        for (size_t si = 0; si < sizes.size(); ++si) {
-            const Method& method = methods[mi];
-            const Size& z = sizes[si];
-            const Samples& s = samples[mi][si];
-            UpdateStudyRow row;
-            row.method = method.name;
-            row.box = z.n;
-            row.bbScreenW = z.screen.w;
-            row.bbScreenH = z.screen.h;
-            row.bytesPerUpdate = s.bytes.mean();
-            row.rawBytesPerUpdate =
-                method.sync == Sync::Dbi ? 5.0 * z.screen.w * z.screen.h : double(z.box.count());
-            row.latencyP50Ms = median(s.latency);
-            row.latencyP99Ms = s.latency.size() ? s.latency.percentile(99) : 0.0;
-            row.updatesPerS = row.latencyP50Ms > 0 ? 1000.0 / row.latencyP50Ms : 0.0;
-            row.stages = {median(s.erode),    median(s.render), median(s.encode),
-                          median(s.transmit), median(s.apply),  median(s.clientRender)};
-            row.stages.grid = median(s.grid);
-            row.cycles = int(s.latency.size());
-            rows.push_back(row);
-        }
+        for (size_t si = 0; si < sizes.size(); ++si)
+            rows.push_back(rowOf(methods[mi], sizes[si], samples[mi][si]));
     server.stop();
     if (config.progress)
         config.progress("done", total, total);
