@@ -19,6 +19,7 @@
 
 using namespace trephine;
 using namespace trephine::net;
+using trephine::testing::Pumped;
 
 namespace {
 
@@ -198,7 +199,7 @@ TEST(ScriptToolSource, RowsHoldAndDrillingStopsAtTheEnd) {
 TEST(TraineeCore, SendsToolStatesAndFeelsTheForceInEitherDesign) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, trephine::testing::loopbackServerConfig("sphere:32"));
-    server.start();
+    Pumped pumped(server);
     for (Sync design : {Sync::Dbi, Sync::Volume}) {
         SCOPED_TRACE(design == Sync::Dbi ? "dbi" : "volume");
         TraineeCoreConfig cc;

@@ -25,14 +25,30 @@ using namespace trephine::net;
 
 using trephine::testing::drillThrough;
 using trephine::testing::loopbackServerConfig;
+using trephine::testing::Pumped;
 using trephine::testing::waitFor;
+
+namespace {
+
+// Pumps until the server has sent everything and the client thread has applied (or rejected)
+// every update the server sent (one client).
+bool caughtUp(SessionServer& server, ClientThread& client) {
+    return waitFor([&] {
+        const uint64_t sent =
+            server.modeTotals(Sync::Dbi).updates + server.modeTotals(Sync::Volume).updates;
+        auto s = client.snapshot();
+        return server.idle() && s->updatesApplied + s->updatesRejected >= sent;
+    });
+}
+
+} // namespace
 
 TEST(ClientThread, PublishesSnapshotsAndDrilledRectangles) {
     Volume skull = makeSkull(64);
     SurfaceSite site = defaultBurrSite(skull);
     ServerConfig sc = loopbackServerConfig("skull:64");
     SessionServer server(skull, sc);
-    server.start();
+    Pumped pumped(server);
 
     ClientThreadConfig cc;
     cc.address = "127.0.0.1:" + std::to_string(server.port());
@@ -65,7 +81,7 @@ TEST(ClientThread, PublishesSnapshotsAndDrilledRectangles) {
     // Drill in at the site for 0.5 s of tool states.
     drillThrough(client, site, 50);
     ASSERT_TRUE(waitFor([&] { return client.rectsPublished() > 1 && server.idle(); }, 20.0));
-    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    ASSERT_TRUE(caughtUp(server, client));
     drain();
     EXPECT_FALSE(compare(first, mirror).identical()) << "drilling changed the image";
     // The mirror built from rectangles matches a fresh render of the drilled volume.
@@ -98,7 +114,7 @@ TEST(ClientThread, ViewChangeWaitsThenDeliversAFullImage) {
     Volume skull = makeSkull(64);
     ServerConfig sc = loopbackServerConfig("skull:64");
     SessionServer server(skull, sc);
-    server.start();
+    Pumped pumped(server);
     ClientThreadConfig cc;
     cc.address = "127.0.0.1:" + std::to_string(server.port());
     cc.client.view = toViewSpec(cameraPreset("top", skull, {96, 96}));
@@ -143,7 +159,7 @@ TEST(ClientThread, ReconnectsToANewServerOnTheSamePort) {
     ServerConfig sc = loopbackServerConfig("skull:64");
     auto server = std::make_unique<SessionServer>(skull, sc);
     const uint16_t port = server->port();
-    server->start();
+    auto pumped = std::make_unique<Pumped>(*server);
 
     ClientThreadConfig cc = reconnectingClient(skull, port);
     ClientThread client(cc);
@@ -155,6 +171,7 @@ TEST(ClientThread, ReconnectsToANewServerOnTheSamePort) {
 
     // The server goes away: the thread says why and retries.
     server->stop();
+    pumped.reset();
     server.reset();
     std::shared_ptr<const ClientSnapshot> dropped;
     ASSERT_TRUE(waitFor(
@@ -173,7 +190,7 @@ TEST(ClientThread, ReconnectsToANewServerOnTheSamePort) {
     // A new server on the same port: the thread reconnects and gets a whole image again.
     sc.port = port;
     server = std::make_unique<SessionServer>(skull, sc);
-    server->start();
+    pumped = std::make_unique<Pumped>(*server);
     ASSERT_TRUE(waitFor(
         [&] {
             auto s = client.snapshot();
@@ -202,7 +219,7 @@ TEST(ClientThread, AnInstructorSeesTheCodesAndReconnectsWithTheNewOneItIssued) {
     sc.instructorCode = "HW2R-9PZE";
     auto server = std::make_unique<SessionServer>(skull, sc);
     const uint16_t port = server->port();
-    server->start();
+    auto pumped = std::make_unique<Pumped>(*server);
     ClientThreadConfig cc = reconnectingClient(skull, port);
     cc.client.role = Role::Instructor;
     cc.client.code = sc.instructorCode;
@@ -218,12 +235,13 @@ TEST(ClientThread, AnInstructorSeesTheCodesAndReconnectsWithTheNewOneItIssued) {
 
     // A server on the same port that knows only the new code: the thread joins it with that.
     server->stop();
+    pumped.reset();
     server.reset();
     ASSERT_TRUE(waitFor([&] { return client.snapshot()->state != LinkState::Connected; }, 10.0));
     sc.port = port;
     sc.instructorCode = fresh;
     server = std::make_unique<SessionServer>(skull, sc);
-    server->start();
+    pumped = std::make_unique<Pumped>(*server);
     ASSERT_TRUE(waitFor(
         [&] {
             auto s = client.snapshot();
@@ -243,7 +261,7 @@ TEST(ClientThread, ASwitchAndAViewAskedWhileDisconnectedAreMadeOnReconnect) {
     ServerConfig sc = loopbackServerConfig("skull:64");
     auto server = std::make_unique<SessionServer>(skull, sc);
     const uint16_t port = server->port();
-    server->start();
+    auto pumped = std::make_unique<Pumped>(*server);
 
     ClientThreadConfig cc = reconnectingClient(skull, port);
     cc.client.renderLocally = false;
@@ -252,6 +270,7 @@ TEST(ClientThread, ASwitchAndAViewAskedWhileDisconnectedAreMadeOnReconnect) {
     ASSERT_TRUE(waitFor([&] { return client.snapshot()->hasFullImage; }, 20.0));
 
     server->stop();
+    pumped.reset();
     server.reset();
     ASSERT_TRUE(waitFor([&] { return client.snapshot()->state == LinkState::Retrying; }, 10.0));
     const ViewSpec side = toViewSpec(cameraPreset("working", skull, {64, 64}));
@@ -261,7 +280,7 @@ TEST(ClientThread, ASwitchAndAViewAskedWhileDisconnectedAreMadeOnReconnect) {
 
     sc.port = port;
     server = std::make_unique<SessionServer>(skull, sc);
-    server->start();
+    pumped = std::make_unique<Pumped>(*server);
     std::shared_ptr<const ClientSnapshot> s;
     ASSERT_TRUE(waitFor(
         [&] {
@@ -297,7 +316,7 @@ void drillThrough(ClientThread& client, const SurfaceSite& site, int states, flo
         t.speed = 1.0f;
         t.drilling = true;
         EXPECT_TRUE(client.sendToolState(t));
-        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+        trephine::testing::pumpFor(0.010);
     }
 }
 
@@ -348,7 +367,7 @@ TEST(ClientThread, RequestSyncDrainsVolumeBoxesAndKeepsPerModeFigures) {
     SurfaceSite site = defaultBurrSite(skull);
     ServerConfig sc = loopbackServerConfig("skull:64");
     SessionServer server(skull, sc);
-    server.start();
+    Pumped pumped(server);
 
     ClientThreadConfig cc;
     cc.address = "127.0.0.1:" + std::to_string(server.port());
@@ -387,7 +406,7 @@ TEST(ClientThread, RequestSyncDrainsVolumeBoxesAndKeepsPerModeFigures) {
         << client.snapshot()->modes[1].updatesApplied << ", sync " << int(client.snapshot()->sync)
         << " tool states " << client.snapshot()->toolStatesSent << " server volume updates "
         << server.modeTotals(Sync::Volume).updates;
-    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    ASSERT_TRUE(caughtUp(server, client));
     for (const AppliedVolumeBox& b : client.drainVolumeBoxes())
         mirror.apply(b);
     EXPECT_GT(mirror.boxes, 0) << "drilling in volume mode sends boxes";
@@ -435,7 +454,7 @@ TEST(ClientThread, StartsInVolumeModeAndOverflowBecomesOneFullCopy) {
     SurfaceSite site = defaultBurrSite(skull);
     ServerConfig sc = loopbackServerConfig("skull:64");
     SessionServer server(skull, sc);
-    server.start();
+    Pumped pumped(server);
     ClientThreadConfig cc;
     cc.address = "127.0.0.1:" + std::to_string(server.port());
     cc.client.view = toViewSpec(cameraPreset("top", skull, {64, 64}));
@@ -453,7 +472,7 @@ TEST(ClientThread, StartsInVolumeModeAndOverflowBecomesOneFullCopy) {
     // Drill without draining: more boxes than the queue holds.
     drillThrough(client, site, 40, -1.0f);
     ASSERT_TRUE(waitFor([&] { return client.volumeBoxesPublished() > 4 && server.idle(); }, 20.0));
-    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    ASSERT_TRUE(caughtUp(server, client));
     VolumeMirror mirror;
     for (const AppliedVolumeBox& b : client.drainVolumeBoxes())
         mirror.apply(b);
@@ -487,7 +506,7 @@ TEST(ClientThread, AWholeListOfMarksFitsTheCommandQueueInOneFrame) {
 TEST(ClientThread, AVolumeDesignTheServerRefusesIsNotAskedForAgain) {
     const Volume noise = trephine::testing::incompressibleVolume();
     SessionServer server(noise, loopbackServerConfig("noise", 2));
-    server.start();
+    Pumped pumped(server);
     ClientThreadConfig cc = reconnectingClient(noise, server.port());
     cc.client.sync = Sync::Volume;
     cc.client.volumeCodec = Codec::Zstd;
@@ -503,7 +522,7 @@ TEST(ClientThread, AVolumeDesignTheServerRefusesIsNotAskedForAgain) {
         },
         30.0))
         << "a DBI picture after the refusal";
-    std::this_thread::sleep_for(std::chrono::seconds(1));
+    trephine::testing::pumpFor(1.0); // a second to see that it does not ask again
     auto s = client.snapshot();
     EXPECT_EQ(s->volumeRefusals, 1);
     EXPECT_EQ(s->attempts, 2);
@@ -521,7 +540,7 @@ TEST(ClientThread, AVolumeDesignTheServerRefusesIsNotAskedForAgain) {
 TEST(ClientThread, AnExceptionOnTheClientThreadEndsTheConnectionNotTheProgram) {
     Volume skull = makeSkull(64);
     SessionServer server(skull, loopbackServerConfig("skull:64"));
-    server.start();
+    Pumped pumped(server);
     ClientThreadConfig cc = reconnectingClient(skull, server.port());
     std::atomic<int> thrown{0};
     cc.onHapticModel = [&](const HapticModel&) {

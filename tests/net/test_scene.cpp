@@ -26,6 +26,7 @@
 
 using namespace trephine;
 using namespace trephine::net;
+using trephine::testing::Pumped;
 
 namespace {
 
@@ -120,7 +121,7 @@ TEST(Scene, ADamagedSceneIsRefusedNeverApplied) {
 TEST(Scene, AClientGetsTheServersSceneAfterTheWelcome) {
     const Volume skull = makeSkull(64);
     SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64"));
-    server.start();
+    Pumped pumped(server);
     ClientConfig cc;
     cc.view.width = cc.view.height = 1;
     SessionClient client(cc);
@@ -149,13 +150,12 @@ TEST(Scene, APresetNamesTheSameCameraAfterASaveAndRestart) {
     sc.saveOnExit = saved;
     {
         SessionServer server(skull, sc);
-        server.start();
+        Pumped pumped(server);
         // A hole at the burr site, through the outer table.
         const SceneSite& site = *findSite(before, kDefaultSiteName);
         const glm::ivec3 v = glm::ivec3(skull.toVoxel(site.position));
         server.submitBoxCut(Box3i{v - glm::ivec3(3, 3, 4), v + glm::ivec3(4, 4, 2)});
-        while (!server.idle())
-            std::this_thread::sleep_for(std::chrono::milliseconds(5));
+        ASSERT_TRUE(trephine::testing::waitFor([&] { return server.idle(); }));
         server.stop();
     }
     ASSERT_TRUE(std::filesystem::is_regular_file(scenePathFor(saved)));
@@ -172,7 +172,7 @@ TEST(Scene, APresetNamesTheSameCameraAfterASaveAndRestart) {
         c.scene = std::make_shared<const Scene>(after);
         return c;
     }());
-    restarted.start();
+    Pumped pumpedRestarted(restarted);
     ClientConfig cc;
     cc.view.width = cc.view.height = 1;
     SessionClient client(cc);
@@ -218,7 +218,7 @@ TEST(Scene, AHeadlessTraineeNeverOpensThePathTheServerNames) {
     ASSERT_GE(fd, 0);
     ASSERT_GE(inotify_add_watch(fd, named.c_str(), IN_OPEN), 0);
     SessionServer server(makeSkull(48), trephine::testing::loopbackServerConfig(named));
-    server.start();
+    server.start(); // its threads serve the trainee processes the test waits for
     for (const char* sync : {"dbi", "volume"}) {
         const trephine::testing::CommandResult r = trephine::testing::runTrephine(
             empty, "trainee --headless --connect 127.0.0.1:" + std::to_string(server.port()) +

@@ -24,6 +24,7 @@ using namespace trephine::net;
 using trephine::testing::loopback;
 using trephine::testing::loopbackServerConfig;
 using trephine::testing::namedClientConfig;
+using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
 
 namespace {
@@ -69,7 +70,7 @@ TEST(Annotations, MessagesRoundTripAndRejectBadFields) {
 TEST(Annotations, InstructorsMarksReachEveryoneAndTraineesAreRefused) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, loopbackServerConfig("sphere:32"));
-    server.start();
+    Pumped pumped(server);
     SessionClient cho(namedClientConfig(sphere, "Dr. Cho", Role::Instructor, 32));
     SessionClient ada(namedClientConfig(sphere, "Ada", Role::Trainee, 32));
     std::vector<SessionClient*> all = {&cho, &ada};
@@ -128,7 +129,7 @@ TEST(Annotations, InstructorsMarksReachEveryoneAndTraineesAreRefused) {
 TEST(Annotations, ALongLabelIsCutAtACharacterBoundary) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, loopbackServerConfig("sphere:32"));
-    server.start();
+    Pumped pumped(server);
     SessionClient cho(namedClientConfig(sphere, "Dr. Cho", Role::Instructor, 32));
     cho.connect(loopback(server.port()));
     ASSERT_TRUE(pumpUntil({&cho}, [&] { return cho.welcomed(); }));
@@ -150,7 +151,7 @@ TEST(Annotations, MarksSavedOnExitComeBackInTheNextSession) {
     config.saveOnExit = saved;
     {
         SessionServer server(sphere, config);
-        server.start();
+        Pumped pumped(server);
         SessionClient cho(namedClientConfig(sphere, "Dr. Cho", Role::Instructor, 32));
         cho.connect(loopback(server.port()));
         ASSERT_TRUE(pumpUntil({&cho}, [&] { return cho.welcomed(); }));
@@ -176,7 +177,7 @@ TEST(Annotations, MarksSavedOnExitComeBackInTheNextSession) {
     ServerConfig next = loopbackServerConfig("session.nrrd");
     next.marks = marks;
     SessionServer server(loadVolume(saved), next);
-    server.start();
+    Pumped pumped(server);
     SessionClient ben(namedClientConfig(sphere, "Ben", Role::Trainee, 32));
     ben.connect(loopback(server.port()));
     ASSERT_TRUE(pumpUntil({&ben}, [&] { return ben.annotations().size() == 2; }));
@@ -246,7 +247,7 @@ TEST(Annotations, AFailedMarksWriteLeavesNoOlderMarksBesideTheNewVolume) {
     std::string copy;
     {
         SessionServer server(sphere, config);
-        server.start();
+        Pumped pumped(server);
         std::filesystem::create_directories(marksPathFor(saved) + ".trephine-" +
                                             std::to_string(::getpid()) + ".tmp");
         server.stop();

@@ -13,6 +13,7 @@ using namespace trephine::net;
 using trephine::testing::HalfOpenFlood;
 using trephine::testing::loopback;
 using trephine::testing::loopbackServerConfig;
+using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
 using trephine::testing::Reconnectors;
 using trephine::testing::waitFor;
@@ -28,7 +29,7 @@ nlohmann::json availabilityOf(const SessionServer& server) {
 nlohmann::json joinUnderHalfOpenFlood(const ServerConfig& sc) {
     const Volume sphere = makeSphere(24);
     SessionServer server(sphere, sc);
-    server.start();
+    Pumped pumped(server);
     HalfOpenFlood flood(server.port(), 8, 4, 5000);
     EXPECT_EQ(flood.sockets(), 32u);
     EXPECT_TRUE(waitFor([&] { return flood.sent() >= 2000; }, 20.0));
@@ -67,10 +68,9 @@ TEST(SessionAvailability, ReconnectingSilentPeersDoNotKeepTheServerFull) {
     sc.maxClients = 2;
     sc.helloTimeoutS = 0.2f;
     SessionServer server(sphere, sc);
-    server.start();
+    Pumped pumped(server);
     Reconnectors silent(server.port(), 6, 3, kProtocolVersion);
-    while (silent.connects() < 6)
-        std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    ASSERT_TRUE(trephine::testing::waitFor([&] { return silent.connects() >= 6; }));
     SessionClient a(trephine::testing::namedClientConfig(sphere, "ada", Role::Trainee, 32));
     SessionClient b(trephine::testing::namedClientConfig(sphere, "ada", Role::Trainee, 32));
     a.connect(loopback(server.port()));
@@ -104,7 +104,7 @@ TEST(SessionAvailability, AFewAddressesHoldingEveryWaitingSlotDoNotKeepANewcomer
     sc.admission.waitingSlots = 12;
     sc.admission.waitingPerAddress = 6;
     SessionServer server(sphere, sc);
-    server.start();
+    Pumped pumped(server);
     std::vector<std::unique_ptr<Reconnectors>> silent;
     for (uint8_t a = 2; a < 5; ++a) // 3 addresses x 6 peers: 18 for 12 slots
         silent.push_back(std::make_unique<Reconnectors>(server.port(), 6, a, kProtocolVersion));
@@ -127,7 +127,7 @@ TEST(SessionAvailability, ARefusedConnectionHearsTheServerIsBusyAndJoinsOnceTher
     sc.helloTimeoutS = 1.0f;
     sc.admission.waitingPerAddress = 2;
     SessionServer server(sphere, sc);
-    server.start();
+    Pumped pumped(server);
     auto silent = std::make_unique<Reconnectors>(server.port(), 2, 1, kProtocolVersion);
     ASSERT_TRUE(waitFor([&] { return silent->connects() >= 2; }, 20.0));
     SessionClient trainee(trephine::testing::namedClientConfig(sphere, "ada", Role::Trainee, 32));

@@ -29,6 +29,7 @@ using namespace trephine::net;
 using trephine::testing::FakeServer;
 using trephine::testing::loopback;
 using trephine::testing::loopbackServerConfig;
+using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
 using trephine::testing::waitFor;
 
@@ -296,7 +297,7 @@ TEST(SessionClientFaults, AClientDroppedForForgedTrafficIsToldItWasTheNetworkOrA
     sc.traineeCode = "QX7M-4KTD";
     sc.instructorCode = "HW2R-9PZE";
     SessionServer server(ball, sc);
-    server.start();
+    Pumped pumped(server);
     ClientConfig cc = trephine::testing::namedClientConfig(ball, "Ada", Role::Trainee, 32);
     cc.code = sc.traineeCode;
     SessionClient ada(cc);

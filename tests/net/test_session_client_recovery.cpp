@@ -30,6 +30,7 @@ using namespace trephine::net;
 using trephine::testing::drillThrough;
 using trephine::testing::loopback;
 using trephine::testing::loopbackServerConfig;
+using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
 using trephine::testing::quantised;
 using trephine::testing::waitFor;
@@ -118,7 +119,7 @@ TEST(SessionClientRecovery, TheFullImageAfterVolumeModeCarriesNoLatency) {
     Volume skull = makeSkull(64);
     const SurfaceSite site = defaultBurrSite(skull);
     SessionServer server(skull, loopbackServerConfig("skull:64"));
-    server.start();
+    Pumped pumped(server);
     ClientThreadConfig cc;
     cc.address = "127.0.0.1:" + std::to_string(server.port());
     cc.client.view =
@@ -172,7 +173,7 @@ TEST(SessionClientRecovery, TheFullImageAfterVolumeModeCarriesNoLatency) {
 TEST(SessionClientRecovery, TheStatisticsTickRestartsAfterAStall) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, loopbackServerConfig("sphere:32"));
-    server.start();
+    Pumped pumped(server);
     std::atomic<bool> stallArmed{false};
     std::atomic<uint64_t> stallEndUs{0};
     ClientThreadConfig cc;
@@ -220,7 +221,7 @@ TEST(SessionClientRecovery, AViewLargerThanTheServerServesIsRefusedAndASwitchToD
     ServerConfig sc = loopbackServerConfig("sphere:32");
     sc.maxViewPixels = 64 * 64;
     SessionServer server(sphere, sc);
-    server.start();
+    Pumped pumped(server);
     ClientConfig cc;
     cc.view = toViewSpec(cameraPreset("top", sphere, {64, 64}));
     cc.sync = Sync::Volume;
@@ -259,7 +260,7 @@ TEST(SessionClientRecovery, ATooLargeViewAskedBeforeTheWelcomeIsDroppedThen) {
     ServerConfig sc = loopbackServerConfig("sphere:32");
     sc.maxViewPixels = 100 * 100;
     SessionServer server(sphere, sc);
-    server.start();
+    Pumped pumped(server);
     ClientConfig cc;
     cc.view = toViewSpec(cameraPreset("top", sphere, {64, 64}));
     SessionClient client(cc);
@@ -287,7 +288,7 @@ TEST(SessionClientRecovery, ARefusedViewDoesNotBreakTheNextConnection) {
     sc.maxViewPixels = 100 * 100;
     auto server = std::make_unique<SessionServer>(sphere, sc);
     const uint16_t port = server->port();
-    server->start();
+    auto pumped = std::make_unique<Pumped>(*server);
     ClientThreadConfig cc;
     cc.address = "127.0.0.1:" + std::to_string(port);
     cc.client.view = toViewSpec(cameraPreset("top", sphere, {64, 64}));
@@ -298,11 +299,12 @@ TEST(SessionClientRecovery, ARefusedViewDoesNotBreakTheNextConnection) {
     client.requestView(toViewSpec(cameraPreset("left", sphere, {200, 200})));
     ASSERT_TRUE(waitFor([&] { return client.snapshot()->viewsRefused == 1; }));
     server->stop();
+    pumped.reset();
     server.reset();
     ASSERT_TRUE(waitFor([&] { return client.snapshot()->state != LinkState::Connected; }));
     sc.port = port;
     server = std::make_unique<SessionServer>(sphere, sc);
-    server->start();
+    pumped = std::make_unique<Pumped>(*server);
     EXPECT_TRUE(waitFor([&] {
         auto s = client.snapshot();
         return s->state == LinkState::Connected && s->hasFullImage;
@@ -321,7 +323,7 @@ TEST(SessionClientRecovery, AReconnectedClientCarriesItsToolSequenceOn) {
     Volume sphere = makeSphere(32);
     auto server = std::make_unique<SessionServer>(sphere, loopbackServerConfig("sphere:32"));
     const uint16_t port = server->port();
-    server->start();
+    auto pumped = std::make_unique<Pumped>(*server);
     std::mutex mutex;
     std::vector<uint32_t> answered;
     ClientThreadConfig cc;
@@ -350,12 +352,13 @@ TEST(SessionClientRecovery, AReconnectedClientCarriesItsToolSequenceOn) {
     const uint32_t lastBefore = answered.back();
 
     server->stop();
+    pumped.reset();
     server.reset();
     ASSERT_TRUE(waitFor([&] { return client.snapshot()->state != LinkState::Connected; }));
     ServerConfig again = loopbackServerConfig("sphere:32");
     again.port = port;
     server = std::make_unique<SessionServer>(sphere, again);
-    server->start();
+    pumped = std::make_unique<Pumped>(*server);
     ASSERT_TRUE(waitFor([&] {
         return client.snapshot()->state == LinkState::Connected && client.snapshot()->hasFullImage;
     }));

@@ -27,6 +27,7 @@ using namespace trephine::net;
 namespace {
 
 using trephine::testing::loopback;
+using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
 
 ServerConfig testConfig() {
@@ -67,7 +68,7 @@ public:
 TEST(SessionHaptics, EachToolStateIsAnsweredWithTheServersForceModel) {
     Volume sphere = makeSphere(40);
     SessionServer server(sphere, testConfig());
-    server.start();
+    Pumped pumped(server);
     ClientConfig cc;
     cc.view = topView(sphere);
     SessionClient client(cc);
@@ -124,7 +125,7 @@ TEST(SessionHaptics, ADrillingToolFeelsTheResistanceToItsMotion) {
     v.fill(v.bounds(), 0, Material::Air);
     v.fill(Box3i{{0, 0, 0}, {40, 40, 20}}, 255, Material::Dura); // a dura floor at z = 0
     SessionServer server(v, testConfig());
-    server.start();
+    Pumped pumped(server);
     ClientConfig cc;
     cc.view = topView(v);
     SessionClient client(cc);
@@ -161,7 +162,7 @@ TEST(SessionHaptics, ADrillingToolFeelsTheResistanceToItsMotion) {
 TEST(SessionHaptics, HapticLoopOverLoopbackGetsModelsAndMeasuresTheRoundTrip) {
     Volume sphere = makeSphere(40);
     SessionServer server(sphere, testConfig());
-    server.start();
+    Pumped pumped(server);
     ClientConfig cc;
     cc.view = topView(sphere);
     SessionClient client(cc);
@@ -211,7 +212,7 @@ TEST(SessionHaptics, HapticLoopOverLoopbackGetsModelsAndMeasuresTheRoundTrip) {
 TEST(SessionHaptics, ForceRoundTripHelperMeasuresAgainstARealServer) {
     Volume sphere = makeSphere(40);
     SessionServer server(sphere, testConfig());
-    server.start();
+    server.start(); // the helper blocks: the server runs on its own threads
     ForceRoundTripConfig fc;
     ToolState t = burrAt(40, 1.0f);
     fc.shape = ToolShape::burr(4.0f);
@@ -230,7 +231,7 @@ TEST(SessionHaptics, ForceRoundTripHelperMeasuresAgainstARealServer) {
 TEST(SessionHaptics, UpdateCallbackReportsEachAppliedRectangle) {
     Volume sphere = makeSphere(40);
     SessionServer server(sphere, testConfig());
-    server.start();
+    Pumped pumped(server);
     ClientConfig cc;
     cc.codec = Codec::Raw;
     cc.view = topView(sphere);
@@ -277,7 +278,7 @@ TEST(SessionLimits, OneClientTooManyIsRefusedServerFull) {
     ServerConfig sc = testConfig();
     sc.maxClients = 2;
     SessionServer server(sphere, sc);
-    server.start();
+    Pumped pumped(server);
     std::vector<std::unique_ptr<SessionClient>> clients;
     std::vector<SessionClient*> all;
     for (int i = 0; i < 3; ++i) {
@@ -311,7 +312,7 @@ TEST(SessionLimits, OversizedViewsAreRefused) {
     ServerConfig sc = testConfig();
     sc.maxViewPixels = 64 * 64;
     SessionServer server(sphere, sc);
-    server.start();
+    Pumped pumped(server);
     // A hello with too large a view: refused BadHello.
     ClientConfig big;
     big.view = topView(sphere, 65);
@@ -329,7 +330,8 @@ TEST(SessionLimits, OversizedViewsAreRefused) {
     ASSERT_TRUE(pumpUntil({&client}, [&] { return client.hasFullImage(); }));
     EXPECT_EQ(client.requestView(topView(sphere, 100)), 0u);
     EXPECT_EQ(client.viewsRefused(), 1u);
-    client.poll(50);
+    for (int i = 0; i < 50; ++i)
+        trephine::testing::pollAll({&client});
     EXPECT_FALSE(client.closed());
     EXPECT_EQ(client.view().width, 32);
     EXPECT_EQ(server.malformedTotal(), 0u);
@@ -339,7 +341,7 @@ TEST(SessionLimits, OversizedViewsAreRefused) {
 TEST(SessionLimits, ServerReportCountsMalformedPerPeer) {
     Volume sphere = makeSphere(24);
     SessionServer server(sphere, testConfig());
-    server.start();
+    Pumped pumped(server);
     ClientConfig cc;
     cc.name = "noisy";
     cc.view = topView(sphere, 16);
@@ -367,7 +369,7 @@ TEST(SessionHaptics, APerforatorReleasedAndLiftedCutsTheNextHole) {
     ServerConfig sc = testConfig();
     sc.volumeName = "box:48";
     SessionServer server(box, sc);
-    server.start();
+    Pumped pumped(server);
     ClientConfig cc;
     cc.view = topView(box);
     SessionClient client(cc);

@@ -26,6 +26,7 @@ using namespace trephine::net;
 using trephine::testing::burrState;
 using trephine::testing::loopback;
 using trephine::testing::loopbackServerConfig;
+using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
 using trephine::testing::sphereTop;
 
@@ -72,7 +73,8 @@ struct RawPeer {
                       double guardS = 20.0) {
         auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(guardS);
         while (std::chrono::steady_clock::now() < deadline) {
-            host.service(2, [&](const ENetEvent& e) {
+            Pumped::pumpAll();
+            host.service(1, [&](const ENetEvent& e) {
                 if (extra)
                     extra(e);
                 if (e.type == ENET_EVENT_TYPE_DISCONNECT) {
@@ -110,7 +112,7 @@ struct RawPeer {
 TEST(SessionHostile, AToolStateWithAScaledRotationFeelsTheUnitRotationsForce) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, loopbackServerConfig("sphere:48"));
-    server.start();
+    Pumped pumped(server);
     ClientConfig cc = trephine::testing::namedClientConfig(sphere, "t", Role::Trainee, 64);
     SessionClient client(cc);
     std::vector<HapticModel> models;
@@ -154,7 +156,7 @@ TEST(SessionHostile, AViewRequestOverTheLimitIsDroppedAndCounted) {
     ServerConfig sc = loopbackServerConfig("sphere:24");
     sc.maxViewPixels = 64 * 64;
     SessionServer server(sphere, sc);
-    server.start();
+    Pumped pumped(server);
     RawPeer c;
     ASSERT_TRUE(c.join(server.port(), "pushy", toViewSpec(cameraPreset("top", sphere, {32, 32}))));
     ViewRequest r;
@@ -181,7 +183,7 @@ TEST(SessionHostile, ToolStatesBeyondTheQueueBoundAreDroppedAndCounted) {
     sc.maxQueuedToolStates = 4;
     sc.hapticModels = false;
     SessionServer server(sphere, sc);
-    server.start();
+    Pumped pumped(server);
     ClientConfig cc = trephine::testing::namedClientConfig(sphere, "flood", Role::Trainee, 256);
     SessionClient client(cc);
     client.connect(loopback(server.port()));
@@ -218,7 +220,7 @@ TEST(SessionHostile, ToolStatesBeyondTheQueueBoundAreDroppedAndCounted) {
 TEST(SessionHostile, AServerWithAPacedModeSwitchWaitingIsNotIdle) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, loopbackServerConfig("sphere:32"));
-    server.start();
+    Pumped pumped(server);
     RawPeer c;
     ASSERT_TRUE(
         c.join(server.port(), "switcher", toViewSpec(cameraPreset("top", sphere, {32, 32}))));

@@ -21,13 +21,14 @@ using trephine::testing::burrState;
 using trephine::testing::loopback;
 using trephine::testing::loopbackServerConfig;
 using trephine::testing::namedClientConfig;
+using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
 using trephine::testing::sphereTop;
 
 TEST(SessionLossy, ClientsOfBothDesignsConvergeOverASlowLossyLink) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, loopbackServerConfig("sphere:32"));
-    server.start();
+    Pumped pumped(server);
     const ENetAddress target = loopback(server.port());
     const LinkConditions link = LinkConditions::parse("latency=100,jitter=10,loss=20");
     LinkEmulator dbiLink(0, target, link), volumeLink(0, target, link);
@@ -82,7 +83,7 @@ TEST(SessionLossy, ASlowClientsBacklogStaysBoundedAndItCatchesUp) {
     ServerConfig sc = loopbackServerConfig("skull:64");
     sc.maxInFlightBytes = 16 * 1024;
     SessionServer server(skull, sc);
-    server.start();
+    Pumped pumped(server);
     const ENetAddress target = loopback(server.port());
     LinkEmulator slow(0, target, LinkConditions::parse("rate=1")); // 1 Mbit/s: ~125 kB/s
     ClientConfig cc = namedClientConfig(skull, "slow", Role::Trainee, 128);
@@ -99,7 +100,7 @@ TEST(SessionLossy, ASlowClientsBacklogStaysBoundedAndItCatchesUp) {
     for (int i = 0; i < kCuts; ++i) {
         const Box3i box = surfaceBox(skull, 10 + (i % 8) * 2);
         server.submitBoxCut(Box3i{box.lo + glm::ivec3(i % 5), box.hi + glm::ivec3(i % 5)});
-        client.poll(2);
+        trephine::testing::pollAll({&client});
     }
     ASSERT_TRUE(pumpUntil(
         {&client},

@@ -23,6 +23,7 @@ using namespace trephine::net;
 namespace {
 
 using trephine::testing::loopbackServerConfig;
+using trephine::testing::Pumped;
 
 using trephine::testing::pumpUntil;
 
@@ -46,7 +47,7 @@ TEST(SessionRelay, InstructorReceivesTheTraineesForceModels) {
     Volume sphere = makeSphere(40);
     ServerConfig sc = loopbackServerConfig("sphere:40");
     SessionServer server(sphere, sc);
-    server.start();
+    Pumped pumped(server);
     const ENetAddress at = parseAddress("127.0.0.1:" + std::to_string(server.port()));
 
     SessionClient trainee(clientConfig(sphere, "trainee", Role::Trainee));

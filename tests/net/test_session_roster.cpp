@@ -20,6 +20,7 @@ namespace {
 using trephine::testing::burrState;
 using trephine::testing::loopback;
 using trephine::testing::loopbackServerConfig;
+using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
 using trephine::testing::sphereTop;
 
@@ -42,7 +43,7 @@ std::vector<std::string> describe(const SessionClient& c) {
 TEST(SessionRoster, EveryoneLearnsNamesRolesAndLeavers) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, loopbackServerConfig("sphere:32"));
-    server.start();
+    Pumped pumped(server);
     SessionClient ada(named(sphere, "Ada", Role::Trainee));
     SessionClient ben(named(sphere, "Ben", Role::Trainee));
     SessionClient cho(named(sphere, "Dr. Cho", Role::Instructor));

@@ -34,6 +34,7 @@ using namespace trephine::net;
 using trephine::testing::burrState;
 using trephine::testing::loopback;
 using trephine::testing::loopbackServerConfig;
+using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
 using trephine::testing::sphereTop;
 
@@ -220,7 +221,7 @@ private:
 TEST(SessionSecurity, TheRightCodesJoinInTheirRolesAndTheSessionIsSealed) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, codedServerConfig());
-    server.start();
+    Pumped pumped(server);
     SessionClient ada(member(sphere, "Ada", Role::Trainee, "qx7m 4ktd")); // as read out
     SessionClient cho(member(sphere, "Dr. Cho", Role::Instructor, kInstructorCode));
     std::vector<SessionClient*> all = {&ada, &cho};
@@ -259,7 +260,7 @@ TEST(SessionSecurity, TheRightCodesJoinInTheirRolesAndTheSessionIsSealed) {
 TEST(SessionSecurity, StrangersAreRefusedInOneLineNamingTheReasonAndGetNothing) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, codedServerConfig());
-    server.start();
+    Pumped pumped(server);
     // A session in full swing: a trainee drilling, an instructor's mark.
     SessionClient ada(member(sphere, "Ada", Role::Trainee, kTraineeCode));
     SessionClient cho(member(sphere, "Dr. Cho", Role::Instructor, kInstructorCode));
@@ -323,7 +324,7 @@ TEST(SessionSecurity, StrangersAreRefusedInOneLineNamingTheReasonAndGetNothing) 
 TEST(SessionSecurity, AClientWithACodeWillNotJoinAnOpenSession) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, loopbackServerConfig("sphere:32"));
-    server.start();
+    Pumped pumped(server);
     SessionClient c(member(sphere, "Ada", Role::Trainee, kTraineeCode));
     c.connect(loopback(server.port()));
     ASSERT_TRUE(pumpUntil({&c}, [&] { return c.closed(); }));
@@ -338,7 +339,7 @@ TEST(SessionSecurity, AClientWithACodeWillNotJoinAnOpenSession) {
 TEST(SessionSecurity, ReplayedTamperedAndForeignDatagramsAreDroppedAndCountedAndTheSessionGoesOn) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, codedServerConfig());
-    server.start();
+    Pumped pumped(server);
     Relay relay(server.port());
     SessionClient ada(member(sphere, "Ada", Role::Trainee, kTraineeCode));
     ada.connect(loopback(relay.port()));
@@ -401,11 +402,11 @@ TEST(SessionSecurity, ReplayedTamperedAndForeignDatagramsAreDroppedAndCountedAnd
 struct AdaAndCho {
     Volume sphere = makeSphere(32);
     SessionServer server{sphere, codedServerConfig()};
+    Pumped pumped{server};
     SessionClient ada{member(sphere, "Ada", Role::Trainee, kTraineeCode)};
     SessionClient cho{member(sphere, "Dr. Cho", Role::Instructor, kInstructorCode)};
     std::vector<SessionClient*> both{&ada, &cho};
     AdaAndCho() {
-        server.start();
         for (SessionClient* c : both)
             c->connect(loopback(server.port()));
     }
@@ -491,7 +492,7 @@ TEST(SessionSecurity, AnInstructorIssuesANewTraineeCodeThatLetsTheRemovedBack) {
 TEST(SessionSecurity, RandomDatagramsDuringAHandshakeDoNotStopIt) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, codedServerConfig());
-    server.start();
+    Pumped pumped(server);
     EnetLibrary lib;
     ENetSocket noise = enet_socket_create(ENET_SOCKET_TYPE_DATAGRAM);
     const ENetAddress target = loopback(server.port());
@@ -530,7 +531,7 @@ TEST(SessionSecurity, NothingOfTheCodeOrTheMessagesTravelsInTheClear) {
     const std::string name = "Ada Lovelace of Ockham";
     auto wireOf = [&](const ServerConfig& sc, const std::string& code) {
         SessionServer server(sphere, sc);
-        server.start();
+        Pumped pumped(server);
         SessionClient ada(member(sphere, name, Role::Trainee, code));
         std::vector<std::vector<uint8_t>> wire;
         ada.setSendTapForTest([&](Channel, std::span<const uint8_t> bytes) {

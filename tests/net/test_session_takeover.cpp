@@ -44,6 +44,7 @@ SurfaceSite sphereSite(float degrees) {
 struct Session {
     Volume sphere = makeSphere(kN);
     SessionServer server{sphere, loopbackServerConfig("sphere:48")};
+    trephine::testing::Pumped pumped{server};
     SessionClient ada{namedClientConfig(sphere, "Ada", Role::Trainee, 32)};
     SessionClient cho{namedClientConfig(sphere, "Dr. Cho", Role::Instructor, 32)};
     SessionClient lee{namedClientConfig(sphere, "Dr. Lee", Role::Instructor, 32)};
@@ -72,8 +73,7 @@ struct Session {
             ToolState t = burrState(site, i, kStates, 1000000 + statesSent * 10000);
             t.sequence = ++sequence[&who]; // a client's states only count in increasing sequence
             who.sendToolState(t);
-            for (SessionClient* c : all)
-                c->poll(1);
+            trephine::testing::pollAll(all);
         }
         statesSent += kStates;
         EXPECT_TRUE(pumpUntil(all, [&] { return server.toolStatesApplied() >= statesSent; }));
@@ -103,7 +103,6 @@ TEST(TakeOver, MessageAndRosterFieldRoundTrip) {
 
 TEST(TakeOver, TheInstructorsDrillCutsWhileTheTraineesIsPaused) {
     Session s;
-    s.server.start();
     for (SessionClient* c : s.all)
         c->connect(loopback(s.server.port()));
     ASSERT_TRUE(pumpUntil(s.all, [&] {

@@ -28,6 +28,7 @@ namespace {
 using trephine::testing::burrState;
 using trephine::testing::loopback;
 using trephine::testing::loopbackServerConfig;
+using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
 using trephine::testing::sphereTop;
 
@@ -42,8 +43,7 @@ void drill(SessionClient& driller, const std::vector<SessionClient*>& all, const
            int first, int count, int total) {
     for (int i = first; i < first + count; ++i) {
         driller.sendToolState(burrState(site, i, total, 1000000));
-        for (SessionClient* c : all)
-            c->poll(1);
+        trephine::testing::pollAll(all);
     }
 }
 
@@ -99,7 +99,7 @@ Box3i topBox(int lo = 19) {
 TEST(SessionVolume, VolumeClientRendersBitForBitAfterBoxCutsAndDrilling) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
-    server.start();
+    Pumped pumped(server);
     SessionClient client(clientConfig(presetView(sphere, "top"), Sync::Volume));
     client.connect(loopback(server.port()));
     ASSERT_TRUE(connectAll({&client}));
@@ -137,7 +137,7 @@ TEST(SessionVolume, VolumeClientRendersBitForBitAfterBoxCutsAndDrilling) {
 TEST(SessionVolume, RawBoxPayloadIsOneBytePerVoxelAndTheCompressedVariantIsReportedApart) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
-    server.start();
+    Pumped pumped(server);
     ViewSpec view = presetView(sphere, "top");
     SessionClient raw(clientConfig(view, Sync::Volume, Codec::Raw));
     SessionClient packed(clientConfig(view, Sync::Volume, Codec::Lz4));
@@ -167,7 +167,7 @@ TEST(SessionVolume, RawBoxPayloadIsOneBytePerVoxelAndTheCompressedVariantIsRepor
 TEST(SessionVolume, DbiAndVolumeClientsOnOneServerBothConverge) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
-    server.start();
+    Pumped pumped(server);
     SessionClient dbi(clientConfig(presetView(sphere, "top"), Sync::Dbi));
     SessionClient vol(clientConfig(presetView(sphere, "front"), Sync::Volume, Codec::Zstd));
     dbi.connect(loopback(server.port()));
@@ -195,7 +195,7 @@ TEST(SessionVolume, DbiAndVolumeClientsOnOneServerBothConverge) {
 TEST(SessionVolume, ASwitchAndAViewAskedBeforeConnectingAreMade) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
-    server.start();
+    Pumped pumped(server);
     SessionClient client(clientConfig(presetView(sphere, "top"), Sync::Dbi));
     client.requestSync(Sync::Volume);
     client.requestView(presetView(sphere, "front"));
@@ -217,7 +217,7 @@ TEST(SessionVolume, ASwitchAndAViewAskedBeforeConnectingAreMade) {
 TEST(SessionVolume, ARepeatedSyncModeIsANoOp) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
-    server.start();
+    Pumped pumped(server);
     SessionClient vol(clientConfig(presetView(sphere, "top"), Sync::Volume, Codec::Zstd));
     vol.connect(loopback(server.port()));
     ASSERT_TRUE(connectAll({&vol}));
@@ -245,7 +245,7 @@ TEST(SessionVolume, ARepeatedSyncModeIsANoOp) {
 TEST(SessionVolume, AnUpdateTooLargeForOneMessageGoesAsTheWholeVolume) {
     const Volume sphere = makeSphere(256);
     SessionServer server(sphere, loopbackServerConfig("sphere:256", 2));
-    server.start();
+    Pumped pumped(server);
     SessionClient vol(clientConfig(presetView(sphere, "top"), Sync::Volume, Codec::Raw));
     vol.connect(loopback(server.port()));
     ASSERT_TRUE(pumpUntil({&vol}, [&] { return vol.localVolume() != nullptr || vol.closed(); }))
@@ -268,7 +268,7 @@ TEST(SessionVolume, AnUpdateTooLargeForOneMessageGoesAsTheWholeVolume) {
 TEST(SessionVolume, AWholeVolumeTooLargeForAMessageRefusesVolumeSyncWithAReason) {
     const Volume noise = trephine::testing::incompressibleVolume();
     SessionServer server(noise, loopbackServerConfig("noise", 2));
-    server.start();
+    Pumped pumped(server);
     SessionClient vol(clientConfig(presetView(noise, "top"), Sync::Volume, Codec::Zstd));
     vol.connect(loopback(server.port()));
     ASSERT_TRUE(pumpUntil({&vol}, [&] { return vol.closed(); }));
@@ -283,7 +283,7 @@ TEST(SessionVolume, AWholeVolumeTooLargeForAMessageRefusesVolumeSyncWithAReason)
 TEST(SessionVolume, VoxelsPutBackRestartTheVolumeClientsHitCache) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
-    server.start();
+    Pumped pumped(server);
     SessionClient vol(clientConfig(presetView(sphere, "top"), Sync::Volume));
     vol.connect(loopback(server.port()));
     ASSERT_TRUE(connectAll({&vol}));
@@ -308,7 +308,7 @@ TEST(SessionVolume, VoxelsPutBackRestartTheVolumeClientsHitCache) {
 TEST(SessionVolume, AServerWithoutDbiClientsCatchesItsRenderingDataUpOnAJoin) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
-    server.start();
+    Pumped pumped(server);
     SessionClient vol(clientConfig(presetView(sphere, "front"), Sync::Volume));
     vol.connect(loopback(server.port()));
     ASSERT_TRUE(connectAll({&vol}));
@@ -337,7 +337,7 @@ TEST(SessionVolume, AServerWithoutDbiClientsCatchesItsRenderingDataUpOnAJoin) {
 TEST(SessionVolume, SwitchingLiveWhileDrillingKeepsTheSessionConsistent) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
-    server.start();
+    Pumped pumped(server);
     SessionClient client(clientConfig(presetView(sphere, "top"), Sync::Dbi));
     SessionClient watcher(clientConfig(presetView(sphere, "front"), Sync::Dbi));
     client.connect(loopback(server.port()));
@@ -376,7 +376,7 @@ TEST(SessionVolume, SwitchingLiveWhileDrillingKeepsTheSessionConsistent) {
 TEST(SessionVolume, MalformedSyncModeIsDroppedAndCountedByTheServer) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, loopbackServerConfig("sphere:32", 1));
-    server.start();
+    Pumped pumped(server);
     ViewSpec view = presetView(sphere, "top");
     SessionClient client(clientConfig(view, Sync::Dbi));
     client.connect(loopback(server.port()));

@@ -16,6 +16,7 @@
 using namespace trephine;
 using namespace trephine::net;
 using trephine::testing::loopback;
+using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
 
 namespace {
@@ -51,7 +52,7 @@ TEST(ViewFollowers, AFollowerGetsTheTargetsViewNowAndOnEveryChangeUntilItStops) 
 TEST(ViewAs, AnInstructorSeesThroughATraineesCameraAndFollowsItsChanges) {
     const Volume skull = makeSkull(48);
     SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:48"));
-    server.start();
+    Pumped pumped(server);
     ClientConfig tc = trephine::testing::namedClientConfig(skull, "alex", Role::Trainee, 64);
     ClientConfig ic = trephine::testing::namedClientConfig(skull, "ines", Role::Instructor, 80);
     ic.view = toViewSpec(cameraPreset("front", skull, {80, 80}));
