@@ -30,17 +30,14 @@ std::string logPath(const char* name) {
 }
 
 LogRecord toolRecord(uint32_t i) {
-    LogRecord r;
-    r.kind = LogRecord::Kind::Tool;
-    r.timeUs = 1000 + i * 10000ull;
-    r.client = 1;
-    r.tool.sequence = i + 1;
-    r.tool.clientTimeUs = r.timeUs;
-    r.tool.diameterMm = 5.0f;
-    r.tool.position = {0.0f, 0.0f, 20.0f - 0.001f * float(i % 1000)};
-    r.tool.speed = 1.0f;
-    r.tool.drilling = true;
-    return r;
+    ToolEvent e{1, {}};
+    e.tool.sequence = i + 1;
+    e.tool.clientTimeUs = 1000 + i * 10000ull;
+    e.tool.diameterMm = 5.0f;
+    e.tool.position = {0.0f, 0.0f, 20.0f - 0.001f * float(i % 1000)};
+    e.tool.speed = 1.0f;
+    e.tool.drilling = true;
+    return {e.tool.clientTimeUs, e};
 }
 
 void BM_RecordOneToolState(benchmark::State& state) {
@@ -72,18 +69,15 @@ std::vector<LogRecord> drillingLog(const Volume& skull, int seconds) {
     const glm::vec3 u = glm::normalize(
         glm::cross(n, std::abs(n.x) < 0.9f ? glm::vec3(1, 0, 0) : glm::vec3(0, 1, 0)));
     const glm::vec3 v = glm::cross(n, u);
-    std::vector<LogRecord> records(2);
-    records[0].kind = LogRecord::Kind::Hello;
-    records[0].client = 1;
-    records[0].name = "Ada";
-    records[1].kind = LogRecord::Kind::Join;
-    records[1].client = 1;
+    std::vector<LogRecord> records{{0, HelloEvent{1, Role::Trainee, "Ada"}},
+                                   {0, JoinEvent{.client = 1}}};
     const int states = seconds * 100;
     for (int i = 0; i < states; ++i) {
         LogRecord r = toolRecord(uint32_t(i));
         const float a = float(i) * 0.01f, f = float(i) / float(states);
-        r.tool.position = site.position + (1.0f + 3.0f * f) * (std::cos(a) * u + std::sin(a) * v) -
-                          n * (1.0f + 5.0f * f);
+        r.as<ToolEvent>()->tool.position = site.position +
+                                           (1.0f + 3.0f * f) * (std::cos(a) * u + std::sin(a) * v) -
+                                           n * (1.0f + 5.0f * f);
         records.push_back(r);
     }
     return records;

@@ -17,7 +17,7 @@ std::vector<uint64_t> sessionTimesUs(std::span<const LogRecord> records) {
     uint64_t offset = 0, start = 0, last = 0;
     bool open = false;
     for (const LogRecord& r : records) {
-        if (!open || r.kind == LogRecord::Kind::Resume) {
+        if (!open || r.is<ResumeEvent>()) {
             offset += open ? last - start : 0;
             start = last = r.timeUs;
             open = true;
@@ -156,7 +156,7 @@ void SessionPolicy::replayed(std::span<const LogRecord> records, uint64_t now, P
 // Every recorded participant leaves the simulation and the roster, its take-overs handed back.
 void SessionPolicy::replayedLeave(PolicyOutput& out) {
     for (uint16_t joined : m_replayJoined)
-        out.events.push_back(SimEvent::of(SimEvent::Kind::Leave, joined));
+        out.events.push_back({0, LeaveEvent{joined}});
     m_replayJoined.clear();
     for (const auto& [gone, p] : m_replayed)
         releaseTakeOvers(gone);
@@ -189,97 +189,93 @@ void SessionPolicy::replayState(ReplayState state, PolicyOutput& out) {
 
 void SessionPolicy::replayOne(const LogRecord& r, uint64_t now, PolicyOutput& out,
                               std::map<uint16_t, ToolState>& tools) {
-    const uint16_t id = replayedId(r.client);
-    auto event = [&](uint16_t client) {
-        SimEvent ev = simEventOf(r);
-        ev.client = client;
-        ev.arrivedUs = now;
-        return ev;
+    const uint16_t id = replayedId(clientOf(r.event));
+    // What the simulation applies goes to it as the recorded participant's, arriving now.
+    auto simulate = [&](auto e) {
+        if constexpr (requires { e.client; })
+            e.client = id;
+        out.events.push_back({now, std::move(e)});
     };
-    switch (r.kind) {
-    case LogRecord::Kind::Join: {
-        // Nobody receives its pictures: a DBI (not the whole volume a volume client is sent)
-        // keeps the simulation's work for it small.
-        SimEvent ev = event(id);
-        ev.sync = Sync::Dbi;
-        if (auto p = m_replayed.find(id); p != m_replayed.end()) { // the assessment names it
-            ev.name = p->second.name;
-            ev.role = p->second.role;
+    std::visit(Overloaded{
+                   [&](JoinEvent e) {
+                       // Nobody receives its pictures: a DBI (not the whole volume a volume
+                       // client is sent) keeps the simulation's work for it small.
+                       e.sync = Sync::Dbi;
+                       if (auto p = m_replayed.find(id); p != m_replayed.end()) {
+                           e.name = p->second.name; // the assessment names it
+                           e.role = p->second.role;
+                       }
+                       simulate(std::move(e));
+                       m_replayJoined.insert(id);
+                   },
+                   [&](const SyncEvent& e) {
+                       if (auto p = m_replayed.find(id); p != m_replayed.end()) {
+                           p->second.sync = e.sync;
+                           m_roster.mark();
+                       }
+                   },
+                   [&](const ToolEvent& e) {
+                       simulate(e);
+                       tools[id] = e.tool;
+                   },
+                   [&](const LeaveEvent& e) {
+                       simulate(e);
+                       tools.erase(id);
+                       m_replayJoined.erase(id);
+                       if (m_replayed.erase(id))
+                           m_roster.mark(true);
+                       if (releaseTakeOvers(id))
+                           m_roster.mark();
+                   },
+                   [&](const HelloEvent& e) {
+                       m_replayed[id] = {e.role, e.name, Sync::Dbi};
+                       m_roster.mark(true);
+                   },
+                   [&](const MarkEvent& e) { replayMark(e); },
+                   [&](const HoldEvent& e) {
+                       releaseTakeOvers(id);
+                       m_takenOver[replayedId(e.trainee)] = id;
+                       m_roster.mark();
+                   },
+                   [&](const ReleaseEvent&) {
+                       releaseTakeOvers(id);
+                       m_roster.mark();
+                   },
+                   [&](const ResumeEvent&) { replayResume(out); },
+                   [&](const auto& e) { simulate(e); }, // a view, a cut, voxels
+               },
+               r.event);
+}
+
+void SessionPolicy::replayMark(const MarkEvent& e) {
+    if (e.op == Annotate::Op::Add) {
+        if (m_marks.size() >= kMaxAnnotations || m_nextMarkId == 0)
+            return;
+        const uint32_t mark = m_nextMarkId++;
+        m_marks[mark] = {mark, replayedId(e.mark.author), e.mark.position, e.mark.label};
+        m_replayMarks[e.mark.id] = mark;
+    } else if (e.op == Annotate::Op::Remove) {
+        if (auto m = m_replayMarks.find(e.mark.id); m != m_replayMarks.end()) {
+            m_marks.erase(m->second);
+            m_replayMarks.erase(m);
         }
-        out.events.push_back(std::move(ev));
-        m_replayJoined.insert(id);
-        break;
+    } else {
+        m_marks.clear();
+        m_replayMarks.clear();
     }
-    case LogRecord::Kind::View:
-        out.events.push_back(event(id));
-        break;
-    case LogRecord::Kind::Sync:
-        if (auto p = m_replayed.find(id); p != m_replayed.end()) {
-            p->second.sync = r.sync;
-            m_roster.mark();
-        }
-        break;
-    case LogRecord::Kind::Tool:
-        out.events.push_back(event(id));
-        tools[id] = r.tool;
-        break;
-    case LogRecord::Kind::Leave:
-        out.events.push_back(event(id));
-        tools.erase(id);
-        m_replayJoined.erase(id);
-        if (m_replayed.erase(id))
-            m_roster.mark(true);
-        if (releaseTakeOvers(id))
-            m_roster.mark();
-        break;
-    case LogRecord::Kind::Cut:
-    case LogRecord::Kind::Voxels:
-        out.events.push_back(event(0));
-        break;
-    case LogRecord::Kind::Hello:
-        m_replayed[id] = {r.role, r.name, Sync::Dbi};
-        m_roster.mark(true);
-        break;
-    case LogRecord::Kind::Mark:
-        if (r.op == Annotate::Op::Add) {
-            if (m_marks.size() >= kMaxAnnotations || m_nextMarkId == 0)
-                break;
-            const uint32_t mark = m_nextMarkId++;
-            m_marks[mark] = {mark, replayedId(r.mark.author), r.mark.position, r.mark.label};
-            m_replayMarks[r.mark.id] = mark;
-        } else if (r.op == Annotate::Op::Remove) {
-            if (auto m = m_replayMarks.find(r.mark.id); m != m_replayMarks.end()) {
-                m_marks.erase(m->second);
-                m_replayMarks.erase(m);
-            }
-        } else {
-            m_marks.clear();
-            m_replayMarks.clear();
-        }
-        m_marksOut.mark();
-        break;
-    case LogRecord::Kind::Hold:
-        releaseTakeOvers(id);
-        m_takenOver[replayedId(r.trainee)] = id;
-        m_roster.mark();
-        break;
-    case LogRecord::Kind::Release:
-        releaseTakeOvers(id);
-        m_roster.mark();
-        break;
-    case LogRecord::Kind::Resume: {
-        // The recorded server was killed: its clients were gone, and the resumed one numbered
-        // the marks left 1..n in the order of their ids.
-        replayedLeave(out);
-        std::map<uint32_t, uint32_t> renumbered;
-        uint32_t recorded = 1;
-        for (const auto& [old, mark] : m_replayMarks)
-            if (m_marks.count(mark))
-                renumbered[recorded++] = mark;
-        m_replayMarks = std::move(renumbered);
-        break;
-    }
-    }
+    m_marksOut.mark();
+}
+
+// The recorded server was killed: its clients were gone, and the resumed one numbered the marks
+// left 1..n in the order of their ids.
+void SessionPolicy::replayResume(PolicyOutput& out) {
+    replayedLeave(out);
+    std::map<uint32_t, uint32_t> renumbered;
+    uint32_t recorded = 1;
+    for (const auto& [old, mark] : m_replayMarks)
+        if (m_marks.count(mark))
+            renumbered[recorded++] = mark;
+    m_replayMarks = std::move(renumbered);
 }
 
 } // namespace trephine::net

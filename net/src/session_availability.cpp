@@ -63,10 +63,7 @@ bool SessionPolicy::viewRequest(uint16_t id, Peer& p, const ViewRequest& r, uint
 
 void SessionPolicy::applyView(uint16_t id, Peer& p, const ViewRequest& r, PolicyOutput& out) {
     p.pixels = pixelsOf(r.view);
-    SimEvent ev = SimEvent::of(SimEvent::Kind::View, id);
-    ev.camera = toCamera(r.view);
-    ev.viewId = r.requestId;
-    out.events.push_back(std::move(ev));
+    out.events.push_back({0, ViewEvent{id, r.view, r.requestId}});
     ParticipantView seen{id, r.view};
     const std::vector<uint16_t> followers = m_follow.setView(id, r.view);
     if (!followers.empty()) // instructors viewing as this one

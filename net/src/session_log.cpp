@@ -5,8 +5,6 @@
 #include "libsim/replacing_file.h"
 #include "net/scene.h"
 #include "net/server_config.h"
-#include "net/sim_step.h"
-#include "net/view.h"
 
 #include <fmt/format.h>
 #include <zlib.h>
@@ -14,8 +12,8 @@
 
 #include <atomic>
 #include <cassert>
-#include <cerrno>
 #include <chrono>
+#include <cerrno>
 #include <cstdio>
 #include <cstring>
 #include <fcntl.h>
@@ -70,109 +68,6 @@ std::string errnoText() {
 }
 
 } // namespace
-
-// [SECTION] conversions
-
-LogRecord logRecordOf(const SimEvent& ev, uint64_t timeUs) {
-    LogRecord r;
-    r.timeUs = timeUs;
-    r.client = ev.client;
-    switch (ev.kind) {
-    case SimEvent::Kind::Join:
-        r.kind = LogRecord::Kind::Join;
-        r.view = toViewSpec(ev.camera);
-        r.codec = ev.codec;
-        r.sync = ev.sync;
-        r.volumeCodec = ev.volumeCodec;
-        break;
-    case SimEvent::Kind::View:
-        r.kind = LogRecord::Kind::View;
-        r.view = toViewSpec(ev.camera);
-        r.viewId = ev.viewId;
-        break;
-    case SimEvent::Kind::Tool:
-        r.kind = LogRecord::Kind::Tool;
-        r.tool = ev.tool;
-        r.forceN = ev.forceN;
-        break;
-    case SimEvent::Kind::Leave:
-        r.kind = LogRecord::Kind::Leave;
-        break;
-    case SimEvent::Kind::Cut:
-        r.kind = LogRecord::Kind::Cut;
-        r.box = ev.box;
-        break;
-    case SimEvent::Kind::Sync:
-        r.kind = LogRecord::Kind::Sync;
-        r.sync = ev.sync;
-        r.volumeCodec = ev.volumeCodec;
-        break;
-    case SimEvent::Kind::Voxels:
-        r.kind = LogRecord::Kind::Voxels;
-        r.box = ev.box;
-        r.density = ev.density;
-        r.material = ev.material;
-        break;
-    }
-    return r;
-}
-
-SimEvent simEventOf(const LogRecord& r) {
-    SimEvent ev;
-    ev.client = r.client;
-    ev.arrivedUs = r.timeUs;
-    switch (r.kind) {
-    case LogRecord::Kind::Join:
-        ev.kind = SimEvent::Kind::Join;
-        ev.camera = toCamera(r.view);
-        ev.codec = r.codec;
-        ev.sync = r.sync;
-        ev.volumeCodec = r.volumeCodec;
-        ev.inFlight = std::make_shared<std::atomic<int64_t>>(0);
-        break;
-    case LogRecord::Kind::View:
-        ev.kind = SimEvent::Kind::View;
-        ev.camera = toCamera(r.view);
-        ev.viewId = r.viewId;
-        break;
-    case LogRecord::Kind::Tool:
-        ev.kind = SimEvent::Kind::Tool;
-        ev.tool = r.tool;
-        ev.forceN = r.forceN;
-        break;
-    case LogRecord::Kind::Leave:
-        ev.kind = SimEvent::Kind::Leave;
-        break;
-    case LogRecord::Kind::Cut:
-        ev.kind = SimEvent::Kind::Cut;
-        ev.box = r.box;
-        break;
-    case LogRecord::Kind::Sync:
-        ev.kind = SimEvent::Kind::Sync;
-        ev.sync = r.sync;
-        ev.volumeCodec = r.volumeCodec;
-        break;
-    case LogRecord::Kind::Voxels:
-        ev.kind = SimEvent::Kind::Voxels;
-        ev.box = r.box;
-        ev.density = r.density;
-        ev.material = r.material;
-        break;
-    default:
-        assert(false && "simEventOf: not a simulation record (check isSimulation())");
-    }
-    return ev;
-}
-
-LogRecord helloRecord(uint16_t client, Role role, const std::string& name, uint64_t now) {
-    LogRecord r;
-    r.kind = LogRecord::Kind::Hello;
-    r.timeUs = now;
-    r.client = client;
-    r.role = role;
-    r.name = name;
-    return r;
-}
 
 // [SECTION] the starting volume
 
@@ -331,7 +226,7 @@ bool SessionRecorder::write(std::span<const LogRecord> records) {
     for (const LogRecord& r : records) {
         LogRecord copy = r; // serialize is one function for write and read: not const
         if (!appendFrame(m_buffer, copy, m_version) && m_error.empty())
-            m_error = fmt::format("a record of kind {} does not fit the format", int(r.kind));
+            m_error = fmt::format("a record of kind {} does not fit the format", int(r.kind()));
     }
     // A record that did not fit is a programmer mistake; the others still go.
     if (!writeAll(m_buffer.data(), m_buffer.size())) {

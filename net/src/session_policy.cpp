@@ -72,7 +72,7 @@ void SessionPolicy::disconnect(uint16_t id, uint64_t now, PolicyOutput& out) {
     countSwitches(); // it left: nothing to switch
     releaseTakeOvers(id);
     m_follow.leave(id);
-    out.events.push_back(SimEvent::of(SimEvent::Kind::Leave, id));
+    out.events.push_back({0, LeaveEvent{id}});
     m_book.record([&](ServerReport& r) {
         PeerReport& p = r.peers[id];
         if (p.disconnectedUs == 0)
@@ -98,13 +98,8 @@ void SessionPolicy::kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& o
     p.kicked = true;
     m_book.peer(id, [](PeerReport& r) { r.kicked = true; });
     out.disconnects.push_back({id, uint32_t(why)});
-    if (releaseTakeOvers(id)) {
-        LogRecord logged;
-        logged.kind = LogRecord::Kind::Release;
-        logged.timeUs = now;
-        logged.client = id;
-        out.log.push_back(logged);
-    }
+    if (releaseTakeOvers(id))
+        out.log.push_back({now, ReleaseEvent{id}});
     if (p.hello)
         m_roster.mark(true);
 }
@@ -301,18 +296,11 @@ bool SessionPolicy::hello(uint16_t id, Peer& p, std::span<const uint8_t> data, u
         return true;
     }
     p.pixels = int64_t(h.view.width) * int64_t(h.view.height);
-    out.log.push_back(helloRecord(id, h.role, h.name, now));
+    out.log.push_back({now, HelloEvent{id, h.role, h.name}});
     welcome(id, now, out);
     m_follow.setView(id, h.view);
-    SimEvent ev = SimEvent::of(SimEvent::Kind::Join, id);
-    ev.inFlight = p.inFlight;
-    ev.camera = toCamera(h.view);
-    ev.codec = h.codec;
-    ev.sync = h.sync;
-    ev.volumeCodec = h.volumeCodec;
-    ev.role = h.role;
-    ev.name = h.name;
-    out.events.push_back(std::move(ev));
+    out.events.push_back(
+        {0, JoinEvent{id, h.view, h.codec, h.sync, h.volumeCodec, h.role, h.name, p.inFlight}});
     return true;
 }
 
@@ -359,11 +347,7 @@ bool SessionPolicy::toolState(uint16_t id, Peer& p, std::span<const uint8_t> dat
     float forceN = -1.0f;
     if (m_config.hapticModels)
         forceN = answerHaptic(id, p, t, now, out);
-    SimEvent ev = SimEvent::of(SimEvent::Kind::Tool, id);
-    ev.forceN = forceN; // the assessment's force figures
-    ev.tool = t;
-    ev.arrivedUs = now;
-    out.events.push_back(std::move(ev));
+    out.events.push_back({now, ToolEvent{id, t, forceN}}); // the force: the assessment's figures
     const std::vector<uint16_t> others = participants(id);
     if (!others.empty()) {
         ToolRelay relay{id, t};
@@ -434,11 +418,7 @@ bool SessionPolicy::syncMode(uint16_t id, Peer& p, std::span<const uint8_t> data
 }
 
 void SessionPolicy::pushSwitch(uint16_t id, Peer& p, uint64_t now, PolicyOutput& out) {
-    SimEvent ev = SimEvent::of(SimEvent::Kind::Sync, id);
-    ev.sync = p.sync;
-    ev.volumeCodec = p.volumeCodec;
-    ev.arrivedUs = now;
-    out.events.push_back(std::move(ev));
+    out.events.push_back({now, SyncEvent{id, p.sync, p.volumeCodec}});
 }
 
 // Well-formed but not allowed: counted, not applied (and not malformed).
@@ -453,11 +433,7 @@ bool SessionPolicy::annotate(uint16_t id, const Peer& p, std::span<const uint8_t
     };
     if (p.helloMsg.role != Role::Instructor)
         return refuse();
-    LogRecord logged;
-    logged.kind = LogRecord::Kind::Mark;
-    logged.timeUs = now;
-    logged.client = id;
-    logged.op = a.op;
+    MarkEvent logged{a.op, {}};
     switch (a.op) {
     case Annotate::Op::Add:
         if (m_marks.size() >= kMaxAnnotations || m_nextMarkId == 0)
@@ -477,7 +453,7 @@ bool SessionPolicy::annotate(uint16_t id, const Peer& p, std::span<const uint8_t
         m_marks.clear();
         break;
     }
-    out.log.push_back(logged);
+    out.log.push_back({now, logged});
     m_marksOut.mark();
     return true;
 }
@@ -493,13 +469,9 @@ bool SessionPolicy::takeOver(uint16_t id, const Peer& p, std::span<const uint8_t
     };
     if (p.helloMsg.role != Role::Instructor)
         return refuse();
-    LogRecord logged;
-    logged.timeUs = now;
-    logged.client = id;
     if (m.trainee == 0) {
         if (releaseTakeOvers(id)) {
-            logged.kind = LogRecord::Kind::Release;
-            out.log.push_back(logged);
+            out.log.push_back({now, ReleaseEvent{id}});
             m_roster.mark();
         }
         return true;
@@ -513,9 +485,7 @@ bool SessionPolicy::takeOver(uint16_t id, const Peer& p, std::span<const uint8_t
         return held->second == id ? true : refuse(); // another instructor's: handed back first
     releaseTakeOvers(id);                            // one trainee at a time
     m_takenOver[m.trainee] = id;
-    logged.kind = LogRecord::Kind::Hold;
-    logged.trainee = m.trainee;
-    out.log.push_back(logged);
+    out.log.push_back({now, HoldEvent{id, m.trainee}});
     m_roster.mark();
     return true;
 }

@@ -3,7 +3,9 @@
 #include "libsim/error.h"
 #include "libsim/tool_catalogue.h"
 #include "net/net_stats.h"
+#include "net/outbox.h"
 #include "net/scene.h"
+#include "net/sim_step.h"
 
 #include <fmt/format.h>
 
@@ -31,9 +33,16 @@ StepConfig replayStepConfig(const LogHeader& header, int renderThreads) {
 
 } // namespace
 
+struct SessionReplay::Simulation {
+    Outbox outbox;
+    SimulationStep step;
+    Simulation(ReportBook& book, const LogHeader& header, Volume start, int renderThreads)
+        : outbox(0, book, noClock),
+          step(std::move(start), replayStepConfig(header, renderThreads), outbox, book, noClock) {}
+};
+
 SessionReplay::SessionReplay(const LogHeader& header, Volume start, int renderThreads)
-    : m_outbox(0, m_book, noClock),
-      m_step(std::move(start), replayStepConfig(header, renderThreads), m_outbox, m_book, noClock),
+    : m_sim(std::make_unique<Simulation>(m_book, header, std::move(start), renderThreads)),
       m_earlier(nlohmann::ordered_json::array()) {
     // A server numbers its starting marks 1..n, author 0 (SessionPolicy's constructor).
     uint32_t id = 1;
@@ -43,85 +52,118 @@ SessionReplay::SessionReplay(const LogHeader& header, Volume start, int renderTh
     }
 }
 
+SessionReplay::~SessionReplay() = default;
+
+const Volume& SessionReplay::volume() const {
+    return m_sim->step.volume();
+}
+
+Dbi SessionReplay::render(const Camera& camera) {
+    return m_sim->step.render(camera);
+}
+
 void SessionReplay::apply(const LogRecord& r) {
     ++m_applied;
-    if (r.kind != LogRecord::Kind::Resume)
+    if (!r.is<ResumeEvent>())
         m_lastUs = std::max(m_lastUs, r.timeUs);
-    if (r.isSimulation()) {
-        SimEvent ev = simEventOf(r);
-        if (r.kind == LogRecord::Kind::Join) {
-            m_joined.insert(r.client);
-            m_stretch.insert(r.client);
-            // The assessment lists it by its hello's name and role, as the policy's Join does.
-            if (auto p = m_participants.find(r.client); p != m_participants.end()) {
-                ev.name = p->second.name;
-                ev.role = p->second.role;
-            }
-        }
-        if (r.kind == LogRecord::Kind::Leave) {
-            m_joined.erase(r.client);
-            m_participants.erase(r.client);
-            // The policy hands back whatever a leaving client held or was held by.
-            for (auto& [id, p] : m_participants)
-                if (p.takenOverBy == r.client)
-                    p.takenOverBy = 0;
-        }
-        if (r.kind == LogRecord::Kind::Sync)
-            if (auto p = m_participants.find(r.client); p != m_participants.end())
-                p->second.sync = r.sync;
-        m_step.step({ev}, r.timeUs);
-        return;
+    std::visit(Overloaded{
+                   [&](const JoinEvent& e) { join(e, r.timeUs); },
+                   [&](const LeaveEvent& e) {
+                       leave(e.client);
+                       simulate(r);
+                   },
+                   [&](const SyncEvent& e) {
+                       if (auto p = m_participants.find(e.client); p != m_participants.end())
+                           p->second.sync = e.sync;
+                       simulate(r);
+                   },
+                   [&](const ResumeEvent&) { resume(r.timeUs); },
+                   [&](const auto&) {
+                       if (isSimulation(r.event))
+                           simulate(r);
+                       else
+                           policy(r.event);
+                   },
+               },
+               r.event);
+}
+
+void SessionReplay::simulate(const LogRecord& r) {
+    m_sim->step.step({&r, 1}, r.timeUs);
+}
+
+void SessionReplay::join(const JoinEvent& e, uint64_t timeUs) {
+    m_joined.insert(e.client);
+    m_stretch.insert(e.client);
+    // The assessment lists it by its hello's name and role, as the policy's Join does.
+    LogRecord named{timeUs, e};
+    if (auto p = m_participants.find(e.client); p != m_participants.end()) {
+        named.as<JoinEvent>()->name = p->second.name;
+        named.as<JoinEvent>()->role = p->second.role;
     }
-    switch (r.kind) {
-    case LogRecord::Kind::Hello:
-        m_participants[r.client] = {r.client, ++m_hellos, r.role, r.name, Sync::Dbi, 0};
-        break;
-    case LogRecord::Kind::Mark:
-        if (r.op == Annotate::Op::Add)
-            m_marks[r.mark.id] = r.mark;
-        else if (r.op == Annotate::Op::Remove)
-            m_marks.erase(r.mark.id);
-        else
-            m_marks.clear();
-        break;
-    case LogRecord::Kind::Hold:
+    simulate(named);
+}
+
+void SessionReplay::leave(uint16_t client) {
+    m_joined.erase(client);
+    m_participants.erase(client);
+    // The policy hands back whatever a leaving client held or was held by.
+    for (auto& [id, p] : m_participants)
+        if (p.takenOverBy == client)
+            p.takenOverBy = 0;
+}
+
+// Who is in the session, their marks and take-overs.
+void SessionReplay::policy(const Event& e) {
+    auto release = [&](uint16_t client) {
         for (auto& [id, p] : m_participants)
-            if (p.takenOverBy == r.client)
+            if (p.takenOverBy == client)
                 p.takenOverBy = 0;
-        if (auto p = m_participants.find(r.trainee); p != m_participants.end())
-            p->second.takenOverBy = r.client;
-        break;
-    case LogRecord::Kind::Release:
-        for (auto& [id, p] : m_participants)
-            if (p.takenOverBy == r.client || id == r.client)
-                p.takenOverBy = 0;
-        break;
-    case LogRecord::Kind::Resume: {
-        // The killed server's clients are gone: the simulation forgets them as it would their
-        // leaves, and the resumed server numbers the marks afresh. They left at the killed
-        // server's last record, on its clock (the Resume's is the new server's).
-        for (uint16_t id : std::set<uint16_t>(m_joined)) {
-            LogRecord leave;
-            leave.kind = LogRecord::Kind::Leave;
-            leave.timeUs = m_lastUs;
-            leave.client = id;
-            m_step.step({simEventOf(leave)}, m_lastUs);
-        }
-        m_joined.clear();
-        for (nlohmann::ordered_json& p : toJson(stretchMetrics()))
-            m_earlier.push_back(std::move(p));
-        m_stretch.clear();
-        m_lastUs = r.timeUs;
-        m_participants.clear();
-        const std::vector<AnnotationInfo> kept = marksList();
-        m_marks.clear();
-        for (const AnnotationInfo& m : kept)
-            m_marks[m.id] = m;
-        break;
-    }
-    default:
-        break;
-    }
+    };
+    std::visit(Overloaded{
+                   [&](const HelloEvent& h) {
+                       m_participants[h.client] = {h.client, ++m_hellos, h.role,
+                                                   h.name,   Sync::Dbi,  0};
+                   },
+                   [&](const MarkEvent& m) {
+                       if (m.op == Annotate::Op::Add)
+                           m_marks[m.mark.id] = m.mark;
+                       else if (m.op == Annotate::Op::Remove)
+                           m_marks.erase(m.mark.id);
+                       else
+                           m_marks.clear();
+                   },
+                   [&](const HoldEvent& h) {
+                       release(h.client);
+                       if (auto p = m_participants.find(h.trainee); p != m_participants.end())
+                           p->second.takenOverBy = h.client;
+                   },
+                   [&](const ReleaseEvent& rel) {
+                       release(rel.client);
+                       if (auto p = m_participants.find(rel.client); p != m_participants.end())
+                           p->second.takenOverBy = 0;
+                   },
+                   [](const auto&) {},
+               },
+               e);
+}
+
+// The killed server's clients are gone: the simulation forgets them as it would their leaves,
+// and the resumed server numbers the marks afresh. They left at the killed server's last record,
+// on its clock (the Resume's is the new server's).
+void SessionReplay::resume(uint64_t timeUs) {
+    for (uint16_t id : std::set<uint16_t>(m_joined))
+        simulate({m_lastUs, LeaveEvent{id}});
+    m_joined.clear();
+    for (nlohmann::ordered_json& p : toJson(stretchMetrics()))
+        m_earlier.push_back(std::move(p));
+    m_stretch.clear();
+    m_lastUs = timeUs;
+    m_participants.clear();
+    const std::vector<AnnotationInfo> kept = marksList();
+    m_marks.clear();
+    for (const AnnotationInfo& m : kept)
+        m_marks[m.id] = m;
 }
 
 std::vector<AnnotationInfo> SessionReplay::marksList() const {
@@ -135,7 +177,7 @@ std::vector<AnnotationInfo> SessionReplay::marksList() const {
 // [SECTION] the assessment
 
 std::map<uint16_t, ParticipantMetrics> SessionReplay::stretchMetrics() {
-    std::map<uint16_t, ParticipantMetrics> all = m_step.assessment().metrics(m_lastUs);
+    std::map<uint16_t, ParticipantMetrics> all = m_sim->step.assessment().metrics(m_lastUs);
     std::erase_if(all, [&](const auto& p) { return !m_stretch.count(p.first); });
     return all;
 }
@@ -184,10 +226,7 @@ Resumed resumeSession(const std::string& path, ServerConfig& config,
     // intact records become the log appended to.
     const std::string keptAside = repairSessionLog(path, log);
     config.recorder = SessionRecorder::append(path, log.intactBytes, log.version);
-    LogRecord resumed;
-    resumed.kind = LogRecord::Kind::Resume;
-    resumed.timeUs = steadyNowUs();
-    resumed.unixUs = unixNowUs;
+    const LogRecord resumed{steadyNowUs(), ResumeEvent{unixNowUs}};
     if (!config.recorder->write({&resumed, 1}))
         throw Error("--resume " + path + ": " + config.recorder->error());
     return {replay.volume(), log.stopped, keptAside, log.records.size(),
@@ -201,39 +240,35 @@ std::vector<Trajectory> trajectoriesOf(std::span<const LogRecord> records) {
     std::map<uint16_t, size_t> current; // client id -> its trajectory now
     std::map<uint16_t, uint32_t> lastSequence;
     for (const LogRecord& r : records) {
-        switch (r.kind) {
-        case LogRecord::Kind::Hello: {
-            Trajectory t;
-            t.ordinal = uint32_t(out.size() + 1);
-            t.client = r.client;
-            t.role = r.role;
-            t.name = r.name;
-            current[r.client] = out.size();
-            lastSequence.erase(r.client);
-            out.push_back(std::move(t));
-            break;
-        }
-        case LogRecord::Kind::Leave:
-            current.erase(r.client);
-            break;
-        case LogRecord::Kind::Resume:
-            current.clear();
-            break;
-        case LogRecord::Kind::Tool: {
-            auto it = current.find(r.client);
-            if (it == current.end())
-                break;
-            // As the simulation applies them: an older sequence arriving late is dropped.
-            auto last = lastSequence.find(r.client);
-            if (last != lastSequence.end() && int32_t(r.tool.sequence - last->second) <= 0)
-                break;
-            lastSequence[r.client] = r.tool.sequence;
-            out[it->second].states.push_back(r.tool);
-            break;
-        }
-        default:
-            break;
-        }
+        std::visit(Overloaded{
+                       [&](const HelloEvent& h) {
+                           Trajectory t;
+                           t.ordinal = uint32_t(out.size() + 1);
+                           t.client = h.client;
+                           t.role = h.role;
+                           t.name = h.name;
+                           current[h.client] = out.size();
+                           lastSequence.erase(h.client);
+                           out.push_back(std::move(t));
+                       },
+                       [&](const LeaveEvent& l) { current.erase(l.client); },
+                       [&](const ResumeEvent&) { current.clear(); },
+                       [&](const ToolEvent& e) {
+                           auto it = current.find(e.client);
+                           if (it == current.end())
+                               return;
+                           // As the simulation applies them: an older sequence arriving late is
+                           // dropped.
+                           auto last = lastSequence.find(e.client);
+                           if (last != lastSequence.end() &&
+                               int32_t(e.tool.sequence - last->second) <= 0)
+                               return;
+                           lastSequence[e.client] = e.tool.sequence;
+                           out[it->second].states.push_back(e.tool);
+                       },
+                       [](const auto&) {},
+                   },
+                   r.event);
     }
     std::erase_if(out, [](const Trajectory& t) { return t.states.empty(); });
     return out;

@@ -123,7 +123,7 @@ struct SessionServer::Impl {
     // Network -> simulation.
     std::mutex inMutex;
     std::condition_variable inCv;
-    std::vector<SimEvent> inbox;
+    std::vector<LogRecord> inbox;
     size_t inboxTools = 0; // Tool events in the inbox (ServerConfig::maxQueuedToolStates)
     size_t maxQueuedToolStates;
     bool busy = false; // the simulation thread is applying a batch (under inMutex)
@@ -176,7 +176,7 @@ struct SessionServer::Impl {
     // [Any thread] Events for the simulation; tool states beyond maxQueuedToolStates are dropped
     // and counted, as a lossy link would drop them. With a recorder, the policy's `log` and the
     // events queued are written to the session log first, in the order the simulation gets them.
-    void push(std::vector<SimEvent>& events, const std::vector<LogRecord>& log = {},
+    void push(std::vector<LogRecord>& events, const std::vector<LogRecord>& log = {},
               bool mayDrop = true);
     std::shared_ptr<SessionRecorder> recorder;
     std::vector<LogRecord> logged; // push's records (under inMutex)
@@ -199,7 +199,7 @@ void SessionServer::Impl::waitNetwork(int timeoutMs) {
     }
 }
 
-void SessionServer::Impl::push(std::vector<SimEvent>& events, const std::vector<LogRecord>& log,
+void SessionServer::Impl::push(std::vector<LogRecord>& events, const std::vector<LogRecord>& log,
                                bool mayDrop) {
     if (events.empty() && (log.empty() || !recorder))
         return;
@@ -208,12 +208,12 @@ void SessionServer::Impl::push(std::vector<SimEvent>& events, const std::vector<
         std::lock_guard lock(inMutex);
         const size_t queued = inbox.size();
         // Every event carries its time, and its record the same, so a replay of the log times
-        // the assessment's joins and leaves as this server does (net/sim_step.cpp, eventTime).
+        // the assessment's joins and leaves as this server does (SimulationStep::step).
         const uint64_t now = clock();
-        for (SimEvent& ev : events) {
-            if (!ev.arrivedUs)
-                ev.arrivedUs = now;
-            if (ev.kind == SimEvent::Kind::Tool) {
+        for (LogRecord& ev : events) {
+            if (!ev.timeUs)
+                ev.timeUs = now;
+            if (ev.is<ToolEvent>()) {
                 if (mayDrop && inboxTools >= maxQueuedToolStates) {
                     ++dropped;
                     continue;
@@ -226,8 +226,7 @@ void SessionServer::Impl::push(std::vector<SimEvent>& events, const std::vector<
         // they caused: nothing a client sees is missing from the log after a crash.
         if (recorder) {
             logged.assign(log.begin(), log.end());
-            for (size_t i = queued; i < inbox.size(); ++i)
-                logged.push_back(logRecordOf(inbox[i], inbox[i].arrivedUs));
+            logged.insert(logged.end(), inbox.begin() + ptrdiff_t(queued), inbox.end());
             recorder->write(logged);
         }
     }
@@ -413,9 +412,7 @@ void SessionServer::saveSession() {
 // [SECTION] inspection
 
 void SessionServer::submitBoxCut(const Box3i& box) {
-    std::vector<SimEvent> events{SimEvent::of(SimEvent::Kind::Cut, 0)};
-    events[0].box = box;
-    events[0].arrivedUs = m_impl->clock();
+    std::vector<LogRecord> events{{m_impl->clock(), CutEvent{box}}};
     m_impl->push(events);
 }
 
@@ -429,11 +426,9 @@ void SessionServer::submitVoxels(const Box3i& box, std::vector<uint8_t> density,
     for (uint8_t m : material)
         if (m >= uint8_t(kMaterialCount))
             throw Error("submitVoxels: unknown material label " + std::to_string(m));
-    std::vector<SimEvent> events{SimEvent::of(SimEvent::Kind::Voxels, 0)};
-    events[0].box = box;
-    events[0].density = std::move(density);
-    events[0].material = std::move(material);
-    events[0].arrivedUs = m_impl->clock();
+    std::vector<LogRecord> events;
+    events.push_back(
+        {m_impl->clock(), VoxelsEvent{box, std::move(density), std::move(material)}});
     m_impl->push(events);
 }
 
@@ -732,11 +727,9 @@ void SessionServer::Impl::playReplayed() {
     PolicyOutput out;
     if (due.rewind) {
         policy.rewindReplay(out);
-        SimEvent start = SimEvent::of(SimEvent::Kind::Voxels, 0);
-        start.box = replayStart.bounds();
+        VoxelsEvent start{replayStart.bounds(), {}, {}};
         replayStart.copyBox(start.box, start.density, start.material);
-        start.arrivedUs = now;
-        out.events.push_back(std::move(start));
+        out.events.push_back({now, std::move(start)});
     }
     if (!due.records.empty())
         policy.replayed(due.records, now, out);
@@ -892,7 +885,7 @@ void SessionServer::Impl::send(uint64_t now) {
 }
 
 void SessionServer::Impl::simulate(uint64_t now) {
-    std::vector<SimEvent> batch;
+    std::vector<LogRecord> batch;
     {
         std::lock_guard lock(inMutex);
         batch.swap(inbox);

@@ -3,6 +3,7 @@
 #include "libsim/dirty_rect.h"
 #include "libsim/tool.h"
 #include "net/tool_model.h"
+#include "net/view.h"
 
 #include <algorithm>
 #include <cstring>
@@ -26,13 +27,6 @@ int64_t pixelsOf(const Dbi& frame) {
     return int64_t(frame.width()) * frame.height();
 }
 
-// The assessment's time for an event: when it arrived (the server stamps every event it queues,
-// and a log records that time), else the step's. So a replay of the log times joins, leaves and
-// samples as the live server did, whenever each was stepped.
-uint64_t eventTime(const SimEvent& ev, uint64_t now) {
-    return ev.arrivedUs ? ev.arrivedUs : now;
-}
-
 AssessmentConfig withSweep(const StepConfig& c) {
     AssessmentConfig a = c.assessment;
     a.maxSweepMm = c.maxSweepMm;
@@ -53,27 +47,25 @@ void SimulationStep::Batch::changedBy(const Box3i& box, uint64_t arrivedUs) {
     causeUs = causeUs ? std::min(causeUs, arrivedUs) : arrivedUs;
 }
 
-void SimulationStep::step(const std::vector<SimEvent>& batch, uint64_t now) {
+void SimulationStep::step(std::span<const LogRecord> batch, uint64_t now) {
     m_nowUs = now;
     Batch b;
-    for (const SimEvent& ev : batch) {
-        switch (ev.kind) {
-        case SimEvent::Kind::Join:
-        case SimEvent::Kind::View:
-        case SimEvent::Kind::Sync:
-        case SimEvent::Kind::Leave:
-            applyClientEvent(ev, b, now);
-            break;
-        case SimEvent::Kind::Cut:
-            applyCut(ev, b);
-            break;
-        case SimEvent::Kind::Voxels:
-            applyVoxels(ev, b);
-            break;
-        case SimEvent::Kind::Tool:
-            applyTool(ev, b, now);
-            break;
-        }
+    for (const LogRecord& r : batch) {
+        // The assessment's time: when the event arrived (the server stamps every event it
+        // queues, and the log keeps that time), else the step's. So a replay of the log times
+        // joins, leaves and samples as the live server did, whenever each was stepped.
+        const uint64_t at = r.timeUs ? r.timeUs : now;
+        std::visit(Overloaded{
+                       [&](const JoinEvent& e) { applyJoin(e, at, b, now); },
+                       [&](const ViewEvent& e) { applyView(e, b, now); },
+                       [&](const SyncEvent& e) { applySync(e, b, now); },
+                       [&](const LeaveEvent& e) { applyLeave(e, at, b); },
+                       [&](const CutEvent& e) { applyCut(e, r.timeUs, b); },
+                       [&](const VoxelsEvent& e) { applyVoxels(e, r.timeUs, b); },
+                       [&](const ToolEvent& e) { applyTool(e, r.timeUs, at, b); },
+                       [](const auto&) {}, // the policy's decisions
+                   },
+                   r.event);
     }
     if (!m_config.publish) {
         // The brick grid takes the change before the next render.
@@ -92,57 +84,54 @@ void SimulationStep::step(const std::vector<SimEvent>& batch, uint64_t now) {
 
 // [SECTION] events
 
-void SimulationStep::applyClientEvent(const SimEvent& ev, Batch& b, uint64_t now) {
-    switch (ev.kind) {
-    case SimEvent::Kind::Join:
-    case SimEvent::Kind::View: {
-        Client& c = m_clients[ev.client];
-        c.camera = ev.camera;
-        if (ev.kind == SimEvent::Kind::Join) {
-            m_assessment.join(ev.client, ev.name, ev.role, eventTime(ev, now));
-            c.sync = ev.sync;
-            m_outbox.join(ev.client, ev.inFlight, ev.codec, ev.volumeCodec);
-            if (c.sync == Sync::Volume)
-                b.needVolume[ev.client] = now;
-        } else {
-            m_outbox.viewChanged(ev.client, ev.viewId);
-        }
-        // A volume client renders its views itself; the server only keeps the camera for a
-        // later switch to DBI. A DBI client's waiting image belonged to the view it left (maybe
-        // another size, even under the same id): the full image of the new view replaces it.
-        if (c.sync == Sync::Dbi)
-            b.needFull[ev.client] = now;
-        break;
-    }
-    case SimEvent::Kind::Sync: {
-        auto it = m_clients.find(ev.client);
-        if (it == m_clients.end())
-            break;
-        it->second.sync = ev.sync;
-        m_outbox.modeChanged(ev.client, ev.sync, ev.volumeCodec);
-        if (ev.sync == Sync::Volume) {
-            b.needFull.erase(ev.client);
-            it->second.fullCauseUs = 0;
-            b.needVolume[ev.client] = now;
-        } else {
-            b.needVolume.erase(ev.client);
-            b.needFull[ev.client] = now;
-        }
-        break;
-    }
-    case SimEvent::Kind::Leave:
-        m_assessment.leave(ev.client, eventTime(ev, now));
-        m_clients.erase(ev.client);
-        m_outbox.leave(ev.client);
+void SimulationStep::applyJoin(const JoinEvent& ev, uint64_t at, Batch& b, uint64_t now) {
+    Client& c = m_clients[ev.client];
+    c.camera = toCamera(ev.view);
+    m_assessment.join(ev.client, ev.name, ev.role, at);
+    c.sync = ev.sync;
+    m_outbox.join(ev.client, ev.inFlight, ev.codec, ev.volumeCodec);
+    if (c.sync == Sync::Volume)
+        b.needVolume[ev.client] = now;
+    else
+        b.needFull[ev.client] = now;
+}
+
+void SimulationStep::applyView(const ViewEvent& ev, Batch& b, uint64_t now) {
+    Client& c = m_clients[ev.client];
+    c.camera = toCamera(ev.view);
+    m_outbox.viewChanged(ev.client, ev.viewId);
+    // A volume client renders its views itself; the server only keeps the camera for a later
+    // switch to DBI. A DBI client's waiting image belonged to the view it left (maybe another
+    // size, even under the same id): the full image of the new view replaces it.
+    if (c.sync == Sync::Dbi)
+        b.needFull[ev.client] = now;
+}
+
+void SimulationStep::applySync(const SyncEvent& ev, Batch& b, uint64_t now) {
+    auto it = m_clients.find(ev.client);
+    if (it == m_clients.end())
+        return;
+    it->second.sync = ev.sync;
+    m_outbox.modeChanged(ev.client, ev.sync, ev.volumeCodec);
+    if (ev.sync == Sync::Volume) {
         b.needFull.erase(ev.client);
+        it->second.fullCauseUs = 0;
+        b.needVolume[ev.client] = now;
+    } else {
         b.needVolume.erase(ev.client);
-        break;
-    default:
-        break;
+        b.needFull[ev.client] = now;
     }
 }
 
-void SimulationStep::applyCut(const SimEvent& ev, Batch& b) {
+void SimulationStep::applyLeave(const LeaveEvent& ev, uint64_t at, Batch& b) {
+    m_assessment.leave(ev.client, at);
+    m_clients.erase(ev.client);
+    m_outbox.leave(ev.client);
+    b.needFull.erase(ev.client);
+    b.needVolume.erase(ev.client);
+}
+
+void SimulationStep::applyCut(const CutEvent& ev, uint64_t arrivedUs, Batch& b) {
     const Box3i box = ev.box.intersect(m_volume.bounds());
     if (box.empty())
         return;
@@ -152,10 +141,10 @@ void SimulationStep::applyCut(const SimEvent& ev, Batch& b) {
         m_volume.fill(box, 0, Material::Air);
     }
     b.erodeUs += m_clock() - e0;
-    b.changedBy(box, ev.arrivedUs);
+    b.changedBy(box, arrivedUs);
 }
 
-void SimulationStep::applyVoxels(const SimEvent& ev, Batch& b) {
+void SimulationStep::applyVoxels(const VoxelsEvent& ev, uint64_t arrivedUs, Batch& b) {
     const Box3i& box = ev.box; // checked by SessionServer::submitVoxels
     const uint64_t e0 = m_clock();
     {
@@ -167,11 +156,11 @@ void SimulationStep::applyVoxels(const SimEvent& ev, Batch& b) {
                     m_volume.set(x, y, z, ev.density[i], Material(ev.material[i]));
     }
     b.erodeUs += m_clock() - e0;
-    b.changedBy(box, ev.arrivedUs);
+    b.changedBy(box, arrivedUs);
     b.materials = true;
 }
 
-void SimulationStep::applyTool(const SimEvent& ev, Batch& b, uint64_t now) {
+void SimulationStep::applyTool(const ToolEvent& ev, uint64_t arrivedUs, uint64_t at, Batch& b) {
     auto it = m_clients.find(ev.client);
     if (it == m_clients.end())
         return;
@@ -200,16 +189,16 @@ void SimulationStep::applyTool(const SimEvent& ev, Batch& b, uint64_t now) {
     c.lastPose = pose;
     c.lastDrilling = t.drilling && t.speed > 0.0f;
     AppliedTool applied{ev.client, shape,     pose,       c.lastDrilling,
-                        dt,        ev.forceN, t.sequence, ev.arrivedUs};
+                        dt,        ev.forceN, t.sequence, arrivedUs};
     if (!t.drilling || t.speed <= 0.0f) {
         // Lifted clear of bone between holes, the perforator's clutch re-engages (this is the
         // volume's only writer: reading it needs no lock).
         c.driller->observe(m_volume, pose);
-        m_assessment.apply(applied, eventTime(ev, now));
+        m_assessment.apply(applied, at);
         return;
     }
     if (dt <= 0.0f) {
-        m_assessment.apply(applied, eventTime(ev, now));
+        m_assessment.apply(applied, at);
         return;
     }
     // The cutter moved from the last drilling pose to this one during dt: it sweeps the path (a
@@ -238,8 +227,8 @@ void SimulationStep::applyTool(const SimEvent& ev, Batch& b, uint64_t now) {
     }
     b.erodeUs += m_clock() - e0;
     if (!changed.empty())
-        b.changedBy(changed, ev.arrivedUs);
-    m_assessment.apply(applied, eventTime(ev, now));
+        b.changedBy(changed, arrivedUs);
+    m_assessment.apply(applied, at);
 }
 
 // [SECTION] posting

@@ -9,6 +9,7 @@
 #include "net/session_client.h"
 #include "net/session_server.h"
 #include "net/sim_step.h"
+#include "net/view.h"
 
 #include "loopback.h"
 
@@ -53,18 +54,16 @@ struct Rig {
         : step(std::move(v), StepConfig{0.05f, 10.0f, 1, a}, outbox, book, steadyNowUs) {}
 
     void join(uint16_t id, const std::string& name, Role role) {
-        SimEvent ev = SimEvent::of(SimEvent::Kind::Join, id);
-        ev.camera = cameraPreset("top", step.volume(), {32, 32});
-        ev.sync = Sync::Volume; // nothing to render
-        ev.volumeCodec = Codec::Lz4;
-        ev.inFlight = std::make_shared<std::atomic<int64_t>>(0);
-        ev.name = name;
-        ev.role = role;
-        step.step({ev}, now);
+        // A volume client: nothing to render.
+        const LogRecord ev{0,
+                           JoinEvent{id, toViewSpec(cameraPreset("top", step.volume(), {32, 32})),
+                                     Codec::Raw, Sync::Volume, Codec::Lz4, role, name,
+                                     std::make_shared<std::atomic<int64_t>>(0)}};
+        step.step({&ev, 1}, now);
     }
-    SimEvent tool(uint16_t id, glm::vec3 pos, bool drilling, float forceN = 1.0f,
-                  float diameter = 3.0f) {
-        SimEvent ev = SimEvent::of(SimEvent::Kind::Tool, id);
+    LogRecord tool(uint16_t id, glm::vec3 pos, bool drilling, float forceN = 1.0f,
+                   float diameter = 3.0f) {
+        ToolEvent ev{id, {}, forceN};
         ev.tool.sequence = ++sequence[id];
         clientUs[id] += 1000; // 1 kHz
         ev.tool.clientTimeUs = clientUs[id];
@@ -73,11 +72,9 @@ struct Rig {
         ev.tool.position = pos;
         ev.tool.speed = drilling ? 1.0f : 0.0f;
         ev.tool.drilling = drilling;
-        ev.arrivedUs = now;
-        ev.forceN = forceN;
-        return ev;
+        return {now, ev};
     }
-    void run(std::vector<SimEvent> batch) {
+    void run(std::vector<LogRecord> batch) {
         now += 1000 * batch.size();
         step.step(batch, now);
     }
@@ -104,7 +101,7 @@ TEST(Assessment, DangerWarningPrecedesTheFirstContactAtDrillingSpeed) {
     int contactBatch = -1, violationBatch = -1;
     float z = 6.0f;
     for (int batch = 0; batch < 300 && contactBatch < 0; ++batch) {
-        std::vector<SimEvent> events;
+        std::vector<LogRecord> events;
         for (int i = 0; i < 10; ++i, z -= 0.004f)
             events.push_back(rig.tool(1, {0.2f, -0.3f, z}, true));
         rig.run(events);
@@ -139,7 +136,7 @@ TEST(Assessment, AToolOutsideTheCautionZoneGetsNoWarning) {
     // Drilling the outer table and sweeping over it: the burr's bottom stays above z = -0.5 mm,
     // more than 3 mm from the sinus (top centres at -4.25 mm).
     for (int batch = 0; batch < 60; ++batch) {
-        std::vector<SimEvent> events;
+        std::vector<LogRecord> events;
         for (int i = 0; i < 10; ++i) {
             const float t = float(batch * 10 + i) * 0.01f;
             events.push_back(rig.tool(1, {5.0f * std::sin(t), 4.0f * std::cos(t), 1.0f}, true));
@@ -164,7 +161,7 @@ TEST(Assessment, WarningsReachTheOwnerAndInstructorsAndNoOtherTrainee) {
     std::vector<std::pair<SafetyWarning, std::vector<uint16_t>>> seen;
     // Ben stays clear; Ada goes (not drilling) straight down into the sinus.
     for (int batch = 0; batch < 40; ++batch) {
-        std::vector<SimEvent> events;
+        std::vector<LogRecord> events;
         events.push_back(rig.tool(2, {8.0f, 8.0f, 8.0f}, false));
         events.push_back(rig.tool(1, {0.0f, 0.0f, 6.0f - 0.3f * float(batch)}, false));
         rig.run(events);
@@ -210,7 +207,7 @@ TEST(Assessment, BoneRemovedPerMaterialIsTheVolumesDifferenceAndEachIsCreditedOw
     // reach across the midline (x = 0).
     auto drill = [&](uint16_t id, float x, float fromZ, float toZ, float diameter, int dwell) {
         for (float z = fromZ; z > toZ; z -= 0.05f) {
-            std::vector<SimEvent> events;
+            std::vector<LogRecord> events;
             for (int i = 0; i < dwell; ++i)
                 events.push_back(rig.tool(id, {x, 0.0f, z}, true, 2.0f, diameter));
             rig.run(events);
@@ -313,7 +310,7 @@ TEST(Assessment, ReportAndDebriefHoldEveryParticipant) {
     rig.join(1, "ada <lee>", Role::Trainee);
     rig.join(2, "iris", Role::Instructor);
     for (int batch = 0; batch < 40; ++batch) {
-        std::vector<SimEvent> dwell; // 40 ms at each depth: the cortical table erodes through
+        std::vector<LogRecord> dwell; // 40 ms at each depth: the cortical table erodes through
         for (int i = 0; i < 40; ++i)
             dwell.push_back(rig.tool(1, {0.0f, 0.0f, 6.0f - 0.25f * float(batch)}, true, 0.5f));
         rig.run(dwell);
@@ -494,7 +491,7 @@ TEST(Assessment, OnTheSkullTheDangerWarningPrecedesContactWithTheSinus) {
     bool contact = false;
     glm::vec3 p = top + glm::vec3(0.0f, 0.0f, 4.0f);
     for (int batch = 0; batch < 1000 && !contact && p.z > sinus.z - 3.0f; ++batch) {
-        std::vector<SimEvent> events;
+        std::vector<LogRecord> events;
         for (int i = 0; i < 10; ++i, p.z -= 0.004f)
             events.push_back(rig.tool(1, p, true));
         rig.run(events);

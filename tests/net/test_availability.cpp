@@ -46,9 +46,10 @@ bool disconnected(const PolicyOutput& out, uint16_t id, RefuseReason why) {
                        [&](const auto& d) { return d.client == id && d.data == uint32_t(why); });
 }
 
-size_t eventsOf(const PolicyOutput& out, SimEvent::Kind kind) {
+template <typename E>
+size_t eventsOf(const PolicyOutput& out) {
     return size_t(std::count_if(out.events.begin(), out.events.end(),
-                                [&](const SimEvent& e) { return e.kind == kind; }));
+                                [&](const LogRecord& e) { return e.is<E>(); }));
 }
 
 ViewSpec viewOf(int w, int h) {
@@ -475,23 +476,22 @@ TEST(AvailabilityPolicy, ViewRequestsBeyondTheRenderBudgetWaitAndTheNewestWins) 
         r.requestId = i;
         r.view = viewOf(100, 100);
         r.view.eye.x += float(i);
-        applied += eventsOf(rig.send(id, r), SimEvent::Kind::View);
+        applied += eventsOf<ViewEvent>(rig.send(id, r));
     }
     EXPECT_EQ(applied, 2u) << "the saved-up budget";
     const AvailabilityCounters a = rig.availability();
     EXPECT_EQ(a.viewsDeferred, 3u);
     EXPECT_EQ(a.viewsCoalesced, 2u);
     rig.now += 500'000;
-    EXPECT_EQ(eventsOf(rig.update(), SimEvent::Kind::View), 0u) << "half a view's budget";
+    EXPECT_EQ(eventsOf<ViewEvent>(rig.update()), 0u) << "half a view's budget";
     rig.now += 500'000;
     PolicyOutput out = rig.update();
-    ASSERT_EQ(eventsOf(out, SimEvent::Kind::View), 1u);
-    const SimEvent& ev = *std::find_if(out.events.begin(), out.events.end(), [](const auto& e) {
-        return e.kind == SimEvent::Kind::View;
-    });
-    EXPECT_EQ(ev.viewId, 5u) << "the newest request";
+    ASSERT_EQ(eventsOf<ViewEvent>(out), 1u);
+    const LogRecord& ev = *std::find_if(out.events.begin(), out.events.end(),
+                                        [](const auto& e) { return e.template is<ViewEvent>(); });
+    EXPECT_EQ(ev.as<ViewEvent>()->viewId, 5u) << "the newest request";
     rig.now += 10'000'000;
-    EXPECT_EQ(eventsOf(rig.update(), SimEvent::Kind::View), 0u) << "nothing left waiting";
+    EXPECT_EQ(eventsOf<ViewEvent>(rig.update()), 0u) << "nothing left waiting";
 }
 
 TEST(AvailabilityPolicy, AllViewsTogetherStayUnderThePixelTotal) {
@@ -509,13 +509,13 @@ TEST(AvailabilityPolicy, AllViewsTogetherStayUnderThePixelTotal) {
     EXPECT_TRUE(rig.p().admitted(small));
     ViewRequest grow;
     grow.view = viewOf(50, 50);
-    EXPECT_EQ(eventsOf(rig.send(small, grow), SimEvent::Kind::View), 0u);
+    EXPECT_EQ(eventsOf<ViewEvent>(rig.send(small, grow)), 0u);
     EXPECT_EQ(rig.availability().viewsOverTotal, 1u);
     // A view that shrinks frees pixels for the others.
     ViewRequest shrink;
     shrink.view = viewOf(10, 10);
-    EXPECT_EQ(eventsOf(rig.send(a, shrink), SimEvent::Kind::View), 1u);
-    EXPECT_EQ(eventsOf(rig.send(small, grow), SimEvent::Kind::View), 1u);
+    EXPECT_EQ(eventsOf<ViewEvent>(rig.send(a, shrink)), 1u);
+    EXPECT_EQ(eventsOf<ViewEvent>(rig.send(small, grow)), 1u);
 }
 
 TEST(AvailabilityPolicy, NamesInTheRosterAreValidAndUnique) {
@@ -565,15 +565,12 @@ struct SliceRig {
                                   return eventsWait;
                               }},
                outbox, book, steadyNowUs) {}
-    SimEvent join(uint16_t id, const Camera& camera) {
-        SimEvent ev = SimEvent::of(SimEvent::Kind::Join, id);
-        ev.camera = camera;
-        ev.codec = Codec::Raw;
-        ev.volumeCodec = Codec::Lz4;
+    LogRecord join(uint16_t id, const Camera& camera) {
+        JoinEvent ev{.client = id, .view = toViewSpec(camera), .volumeCodec = Codec::Lz4};
         ev.inFlight = std::make_shared<std::atomic<int64_t>>(0);
-        return ev;
+        return {0, ev};
     }
-    std::vector<Outbox::Ready> run(std::vector<SimEvent> batch, uint64_t advanceUs = 10000) {
+    std::vector<Outbox::Ready> run(std::vector<LogRecord> batch, uint64_t advanceUs = 10000) {
         now += advanceUs;
         step.step(batch, now);
         outbox.finishCoding(); // full images of views larger than a slice are coded apart
@@ -604,10 +601,7 @@ TEST(AvailabilitySlices, ALargeNewViewRendersInSlicesWhileOthersGetTheirUpdates)
     Box3i box{skull.dims() / 2 - glm::ivec3(3), skull.dims() / 2 + glm::ivec3(3)};
     box.lo.z = skull.dims().z - 12;
     box.hi.z = skull.dims().z;
-    SimEvent cut = SimEvent::of(SimEvent::Kind::Cut, 0);
-    cut.box = box;
-    cut.arrivedUs = rig.now;
-    auto during = rig.run({cut});
+    auto during = rig.run({{rig.now, CutEvent{box}}});
     ++steps;
     EXPECT_TRUE(has(during, 1, false)) << "the small view's rectangle does not wait";
     EXPECT_FALSE(has(during, 2, true));
@@ -631,14 +625,11 @@ TEST(AvailabilitySlices, ALargeNewViewRendersInSlicesWhileOthersGetTheirUpdates)
 namespace {
 
 // A cut of bone in the middle of the skull's top, seen by the `top` and `paper` cameras.
-SimEvent topCut(const Volume& skull, uint64_t now) {
+LogRecord topCut(const Volume& skull, uint64_t now) {
     Box3i box{skull.dims() / 2 - glm::ivec3(6), skull.dims() / 2 + glm::ivec3(6)};
     box.lo.z = skull.dims().z - 12;
     box.hi.z = skull.dims().z;
-    SimEvent cut = SimEvent::of(SimEvent::Kind::Cut, 0);
-    cut.box = box;
-    cut.arrivedUs = now;
-    return cut;
+    return {now, CutEvent{box}};
 }
 
 // The decoded pixels of client `id`'s update in `updates`, written over `into`.
@@ -664,8 +655,8 @@ bool applyUpdate(const std::vector<Outbox::Ready>& updates, uint16_t id, const C
 // picture `largeSeen` takes it) both go in the step, and the large one shows the render.
 void deeperCutGoesInTheStep(SliceRig& rig, const Volume& skull, const Camera& large,
                             Dbi& largeSeen) {
-    SimEvent again = topCut(skull, rig.now);
-    again.box.lo.z -= 4;
+    LogRecord again = topCut(skull, rig.now);
+    again.as<CutEvent>()->box.lo.z -= 4;
     auto at = rig.run({again});
     EXPECT_TRUE(has(at, 1, false));
     ASSERT_TRUE(applyUpdate(at, 2, large, largeSeen));
@@ -731,11 +722,8 @@ TEST(AvailabilitySlices, ANewLargeViewRendersAChunkAStepWhileEventsWait) {
     rig.eventsWait = false;
     steps = 0;
     const Camera other = cameraPreset("top", skull, {256, 256});
-    SimEvent view = SimEvent::of(SimEvent::Kind::View, 2);
-    view.camera = other;
-    view.viewId = 1;
     rig.outbox.viewChanged(2, 1);
-    done = rig.run({view});
+    done = rig.run({{0, ViewEvent{2, toViewSpec(other), 1}}});
     for (++steps; !has(done, 2, true) && steps < 100; ++steps)
         done = rig.run({});
     EXPECT_EQ(steps, 256 / 64) << "64 rows a step";

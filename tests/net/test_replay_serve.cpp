@@ -49,14 +49,6 @@ using trephine::testing::pumpUntil;
 
 namespace {
 
-LogRecord record(LogRecord::Kind kind, uint64_t timeUs, uint16_t client = 0) {
-    LogRecord r;
-    r.kind = kind;
-    r.timeUs = timeUs;
-    r.client = client;
-    return r;
-}
-
 // A live session's policy on the 32^3 sphere, driven without sockets.
 struct SpherePolicy {
     Volume sphere = makeSphere(32);
@@ -74,11 +66,12 @@ struct SpherePolicy {
 } // namespace
 
 TEST(ReplayPlayer, GivesEachRecordWhenItsTimeComesRoundAtTheSpeed) {
-    std::vector<LogRecord> records{
-        record(LogRecord::Kind::Hello, 5'000'000, 1), record(LogRecord::Kind::Tool, 5'100'000, 1),
-        record(LogRecord::Kind::Tool, 6'000'000, 1),
-        // A resumed server's clock starts afresh: the session goes on.
-        record(LogRecord::Kind::Resume, 200, 0), record(LogRecord::Kind::Tool, 500'200, 1)};
+    std::vector<LogRecord> records{{5'000'000, HelloEvent{.client = 1}},
+                                   {5'100'000, ToolEvent{.client = 1}},
+                                   {6'000'000, ToolEvent{.client = 1}},
+                                   // A resumed server's clock starts afresh: the session goes on.
+                                   {200, ResumeEvent{}},
+                                   {500'200, ToolEvent{.client = 1}}};
     EXPECT_EQ(sessionTimesUs(records),
               (std::vector<uint64_t>{0, 100'000, 1'000'000, 1'000'000, 1'500'000}));
     const uint64_t t0 = 7'000'000; // wall time: the player takes any origin
@@ -89,7 +82,7 @@ TEST(ReplayPlayer, GivesEachRecordWhenItsTimeComesRoundAtTheSpeed) {
     EXPECT_EQ(player.advance(t0 + 50'000).records.size(), 1u);
     const ReplayPlayer::Due next = player.advance(t0 + 700'000);
     ASSERT_EQ(next.records.size(), 2u) << "the stroke's end and the resume, not the state after";
-    EXPECT_EQ(next.records[1].kind, LogRecord::Kind::Resume);
+    EXPECT_TRUE(next.records[1].is<ResumeEvent>());
     EXPECT_FALSE(next.rewind);
     EXPECT_FALSE(player.done());
     EXPECT_TRUE(player.playing());
@@ -106,7 +99,7 @@ TEST(ReplayPlayer, GivesEachRecordWhenItsTimeComesRoundAtTheSpeed) {
 TEST(ReplayPlayer, PausesSeeksAndChangesSpeedAtTheTimesGiven) {
     std::vector<LogRecord> records;
     for (uint64_t s = 0; s <= 10; ++s)
-        records.push_back(record(LogRecord::Kind::Tool, s * 1'000'000, 1));
+        records.push_back({s * 1'000'000, ToolEvent{.client = 1}});
     uint64_t now = 100;
     ReplayPlayer player(records, 1.0, false, now);
     EXPECT_FALSE(player.playing());
@@ -175,9 +168,7 @@ TEST(SessionPolicyReplay, RecordedParticipantsAreListedRelayedDrilledAndLeave) {
         policy.replayed({&r, 1}, now, o);
         return o;
     };
-    LogRecord hello = record(LogRecord::Kind::Hello, 0, 1);
-    hello.name = "Ada";
-    hello.role = Role::Trainee;
+    const LogRecord hello{0, HelloEvent{1, Role::Trainee, "Ada"}};
     play(hello);
     now += 1'000'000;
     PolicyOutput paced;
@@ -190,45 +181,44 @@ TEST(SessionPolicyReplay, RecordedParticipantsAreListedRelayedDrilledAndLeave) {
     EXPECT_EQ(rosters[0].list[1].name, "Ada");
     EXPECT_EQ(rosters[0].list[1].role, Role::Trainee);
 
-    LogRecord join = record(LogRecord::Kind::Join, 0, 1);
+    JoinEvent join{.client = 1};
     join.sync = Sync::Volume;
-    PolicyOutput joined = play(join);
+    PolicyOutput joined = play({0, join});
     ASSERT_EQ(joined.events.size(), 1u);
-    EXPECT_EQ(joined.events[0].kind, SimEvent::Kind::Join);
-    EXPECT_EQ(joined.events[0].client, SessionPolicy::replayedId(1));
-    EXPECT_EQ(joined.events[0].sync, Sync::Dbi) << "nobody takes a replayed client's volume";
+    ASSERT_TRUE(joined.events[0].is<JoinEvent>());
+    EXPECT_EQ(joined.events[0].as<JoinEvent>()->client, SessionPolicy::replayedId(1));
+    EXPECT_EQ(joined.events[0].as<JoinEvent>()->sync, Sync::Dbi)
+        << "nobody takes a replayed client's volume";
 
-    LogRecord tool = record(LogRecord::Kind::Tool, 0, 1);
+    ToolEvent tool{.client = 1};
     tool.tool.sequence = 7;
     tool.tool.position = glm::vec3(1, 2, 3);
     tool.tool.drilling = true;
-    PolicyOutput drilled = play(tool);
+    PolicyOutput drilled = play({0, tool});
     ASSERT_EQ(drilled.events.size(), 1u);
-    EXPECT_EQ(drilled.events[0].kind, SimEvent::Kind::Tool);
-    EXPECT_EQ(drilled.events[0].client, SessionPolicy::replayedId(1));
-    EXPECT_EQ(drilled.events[0].tool.sequence, 7u);
-    EXPECT_EQ(drilled.events[0].arrivedUs, now);
+    ASSERT_TRUE(drilled.events[0].is<ToolEvent>());
+    EXPECT_EQ(drilled.events[0].as<ToolEvent>()->client, SessionPolicy::replayedId(1));
+    EXPECT_EQ(drilled.events[0].as<ToolEvent>()->tool.sequence, 7u);
+    EXPECT_EQ(drilled.events[0].timeUs, now);
     const auto relays = sentTo<ToolRelay>(drilled, watcher);
     ASSERT_EQ(relays.size(), 1u);
     EXPECT_EQ(relays[0].clientId, SessionPolicy::replayedId(1));
     EXPECT_EQ(relays[0].tool.position, glm::vec3(1, 2, 3));
 
     // A recorded instructor's mark, then its removal by the log's id.
-    LogRecord mark = record(LogRecord::Kind::Mark, 0, 2);
-    mark.op = Annotate::Op::Add;
-    mark.mark = {41, 2, glm::vec3(4, 5, 6), "here"};
-    play(mark);
+    MarkEvent mark{Annotate::Op::Add, {41, 2, glm::vec3(4, 5, 6), "here"}};
+    play({0, mark});
     ASSERT_EQ(policy.marks().size(), 1u);
     EXPECT_EQ(policy.marks().begin()->second.label, "here");
     EXPECT_EQ(policy.marks().begin()->second.author, SessionPolicy::replayedId(2));
     mark.op = Annotate::Op::Remove;
     mark.mark.id = 41;
-    play(mark);
+    play({0, mark});
     EXPECT_TRUE(policy.marks().empty());
 
-    PolicyOutput left = play(record(LogRecord::Kind::Leave, 0, 1));
+    PolicyOutput left = play({0, LeaveEvent{1}});
     ASSERT_EQ(left.events.size(), 1u);
-    EXPECT_EQ(left.events[0].kind, SimEvent::Kind::Leave);
+    EXPECT_TRUE(left.events[0].is<LeaveEvent>());
     now += 1'000'000;
     PolicyOutput after;
     policy.update(now, after);
@@ -278,8 +268,8 @@ TEST(ReplayServeCli, AWatcherSeesTheRecordedSessionsFinalPictureAndItsTrainee) {
     ASSERT_FALSE(expected == start) << "the recorded session drilled nothing";
     uint16_t adaId = 0;
     for (const LogRecord& r : contents.records)
-        if (r.kind == LogRecord::Kind::Hello && r.name == "Ada")
-            adaId = r.client;
+        if (const HelloEvent* h = r.as<HelloEvent>(); h && h->name == "Ada")
+            adaId = h->client;
     ASSERT_NE(adaId, 0);
 
     Child served({"replay", log, "--serve", "--port", "0", "--speed", "4", "--render-threads", "1",
@@ -318,7 +308,7 @@ TEST(ReplayServe, WindowsSeekBackAndForthAndTheVolumeIsTheLogsAtThatTimeBitForBi
     size_t tools = 0;
     uint64_t between = 0;
     for (size_t i = 0; i < log.records.size(); ++i)
-        if (log.records[i].kind == LogRecord::Kind::Tool && ++tools == 12)
+        if (log.records[i].is<ToolEvent>() && ++tools == 12)
             between = times[i];
     ASSERT_EQ(tools, 24u);
     const Volume start = logStartVolume(log.header, loadVolume);

@@ -58,44 +58,41 @@ std::vector<uint8_t> fileBytes(const std::string& path) {
 // One record of every kind, with fields that differ from the defaults.
 std::vector<LogRecord> everyKind() {
     std::vector<LogRecord> list;
-    auto add = [&](LogRecord::Kind kind) -> LogRecord& {
-        LogRecord& r = list.emplace_back();
-        r.kind = kind;
-        r.timeUs = 1000 + list.size() * 17;
-        r.client = uint16_t(list.size());
-        return r;
+    auto add = [&](Event e) -> Event& {
+        const uint16_t n = uint16_t(list.size() + 1);
+        LogRecord& r = list.emplace_back(LogRecord{1000 + n * 17u, std::move(e)});
+        std::visit(
+            [&](auto& v) {
+                if constexpr (requires { v.client; })
+                    v.client = n;
+            },
+            r.event);
+        return r.event;
     };
-    add(LogRecord::Kind::Hello).name = "Ada";
-    LogRecord& join = add(LogRecord::Kind::Join);
+    add(HelloEvent{0, Role::Trainee, "Ada"});
+    JoinEvent join{.codec = Codec::Zstd, .sync = Sync::Volume, .volumeCodec = Codec::Lz4};
     join.view.eye = {1, 2, 300};
     join.view.width = 77;
-    join.codec = Codec::Zstd;
-    join.sync = Sync::Volume;
-    join.volumeCodec = Codec::Lz4;
-    LogRecord& view = add(LogRecord::Kind::View);
-    view.viewId = 9;
+    add(join);
+    ViewEvent view{0, {}, 9};
     view.view.fovYDeg = 33.0f;
-    LogRecord& tool = add(LogRecord::Kind::Tool);
+    add(view);
+    ToolEvent tool;
     tool.tool.sequence = 42;
     tool.tool.clientTimeUs = 123456789;
     tool.tool.position = {1.5f, -2.25f, 30.0f};
     tool.tool.speed = 0.75f;
     tool.tool.drilling = true;
-    add(LogRecord::Kind::Leave);
-    add(LogRecord::Kind::Cut).box = Box3i::fromMinMax({1, 2, 3}, {4, 5, 6});
-    LogRecord& sync = add(LogRecord::Kind::Sync);
-    sync.sync = Sync::Volume;
-    sync.volumeCodec = Codec::Zstd;
-    LogRecord& voxels = add(LogRecord::Kind::Voxels);
-    voxels.box = Box3i::fromMinMax({0, 0, 0}, {2, 1, 1});
-    voxels.density = {200, 0};
-    voxels.material = {1, 0};
-    LogRecord& mark = add(LogRecord::Kind::Mark);
-    mark.mark = {3, 2, {1, 2, 3}, "here"};
-    add(LogRecord::Kind::Mark).op = Annotate::Op::Clear;
-    add(LogRecord::Kind::Hold).trainee = 1;
-    add(LogRecord::Kind::Release);
-    add(LogRecord::Kind::Resume).unixUs = 1700000000000000ull;
+    add(tool);
+    add(LeaveEvent{});
+    add(CutEvent{Box3i::fromMinMax({1, 2, 3}, {4, 5, 6})});
+    add(SyncEvent{0, Sync::Volume, Codec::Zstd});
+    add(VoxelsEvent{Box3i::fromMinMax({0, 0, 0}, {2, 1, 1}), {200, 0}, {1, 0}});
+    add(MarkEvent{Annotate::Op::Add, {3, 2, {1, 2, 3}, "here"}});
+    add(MarkEvent{Annotate::Op::Clear, {}});
+    add(HoldEvent{0, 1});
+    add(ReleaseEvent{});
+    add(ResumeEvent{1700000000000000ull});
     return list;
 }
 
@@ -125,7 +122,7 @@ void expectSame(const LogRecord& a, const LogRecord& b) {
     WriteStream wa(ea), wb(eb);
     ASSERT_TRUE(x.serialize(wa));
     ASSERT_TRUE(y.serialize(wb));
-    EXPECT_EQ(ea, eb) << "kind " << int(a.kind);
+    EXPECT_EQ(ea, eb) << "kind " << int(a.kind());
 }
 
 } // namespace
@@ -144,7 +141,8 @@ TEST(SessionLog, EveryKindOfRecordRoundTrips) {
     ASSERT_EQ(log.records.size(), records.size());
     for (size_t i = 0; i < records.size(); ++i)
         expectSame(log.records[i], records[i]);
-    EXPECT_EQ(log.records[3].tool.position, records[3].tool.position);
+    EXPECT_EQ(log.records[3].as<ToolEvent>()->tool.position,
+              records[3].as<ToolEvent>()->tool.position);
     EXPECT_EQ(log.header.volumeSpec, "sphere:48");
     ASSERT_EQ(log.header.marks.size(), 1u);
     EXPECT_EQ(log.header.marks[0].label, "start");
@@ -152,6 +150,105 @@ TEST(SessionLog, EveryKindOfRecordRoundTrips) {
     const Volume v = logStartVolume(log.header, loadVolume);
     EXPECT_EQ(v.dims(), glm::ivec3(kN));
     std::filesystem::remove(path);
+}
+
+// The bytes each kind of record had before the events were types of their own (formats 2 and 1:
+// a v1 Tool has no force). A log written by any earlier Trephine reads the same.
+TEST(SessionLog, EveryKindOfRecordKeepsTheBytesItHadInBothFormats) {
+    std::vector<LogRecord> list;
+    auto add = [&](Event e) {
+        const uint16_t n = uint16_t(list.size() + 1);
+        LogRecord& r = list.emplace_back(LogRecord{1000 + n * 17u, std::move(e)});
+        std::visit(
+            [&](auto& v) {
+                if constexpr (requires { v.client; })
+                    v.client = n;
+            },
+            r.event);
+    };
+    add(HelloEvent{0, Role::Trainee, "Ada"});
+    JoinEvent join{.codec = Codec::Zstd, .sync = Sync::Volume, .volumeCodec = Codec::Lz4};
+    join.view.eye = {1, 2, 300};
+    join.view.width = 77;
+    join.name = "not logged"; // the hello's
+    add(join);
+    ViewEvent view{0, {}, 9};
+    view.view.fovYDeg = 33.0f;
+    add(view);
+    ToolEvent tool{0, {}, 2.5f};
+    tool.tool.sequence = 42;
+    tool.tool.clientTimeUs = 123456789;
+    tool.tool.position = {1.5f, -2.25f, 30.0f};
+    tool.tool.speed = 0.75f;
+    tool.tool.drilling = true;
+    add(tool);
+    add(LeaveEvent{});
+    add(CutEvent{Box3i::fromMinMax({1, 2, 3}, {4, 5, 6})});
+    add(SyncEvent{0, Sync::Volume, Codec::Zstd});
+    add(VoxelsEvent{Box3i::fromMinMax({0, 0, 0}, {2, 1, 1}), {200, 0}, {1, 0}});
+    add(MarkEvent{Annotate::Op::Add, {3, 2, {1, 2, 3}, "here"}});
+    MarkEvent removed{Annotate::Op::Remove, {}};
+    removed.mark.id = 3;
+    add(removed);
+    add(MarkEvent{Annotate::Op::Clear, {}});
+    add(HelloEvent{0, Role::Instructor, "Ben"});
+    add(HoldEvent{0, 1});
+    add(ReleaseEvent{});
+    add(ResumeEvent{1700000000000000ull});
+    const std::vector<std::string> v2 = {
+        "08f9030000000000000100000300416461",
+        "010a0400000000000002000000803f0000004000009643000000000000000000000000000000000000803f0000"
+        "0000000070420000204100007a444d00f401020101",
+        "021b040000000000000300000000000000000000009643000000000000000000000000000000000000803f0000"
+        "0000000004420000204100007a44f401f40109000000",
+        "032c0400000000000004002a00000015cd5b070000000000000080400000c03f000010c00000f0410000803f00"
+        "00000000000000000000000000403f0100002040",
+        "043d040000000000000500",
+        "054e04000000000000010000000200000003000000040000000500000006000000",
+        "065f0400000000000007000102",
+        "07700400000000000000000000000000000000000002000000010000000100000002000000c80002000000010"
+        "0",
+        "098104000000000000000300000002000000803f0000004000004040040068657265",
+        "099204000000000000010300000000000000000000000000000000000000",
+        "09a30400000000000002",
+        "08b4040000000000000c0001030042656e",
+        "0ac5040000000000000d000100",
+        "0bd6040000000000000e00",
+        "0ce70400000000000000401e18240a0600",
+    };
+    ASSERT_EQ(list.size(), v2.size());
+    auto hex = [](std::vector<uint8_t> bytes) {
+        std::string h;
+        for (uint8_t b : bytes)
+            h += fmt::format("{:02x}", b);
+        return h;
+    };
+    for (size_t i = 0; i < list.size(); ++i) {
+        for (uint32_t version : {2u, 1u}) {
+            LogRecord r = list[i];
+            std::vector<uint8_t> bytes;
+            WriteStream w(bytes);
+            ASSERT_TRUE(r.serialize(w, version));
+            std::string expected = v2[i];
+            if (version == 1 && r.is<ToolEvent>())
+                expected.resize(expected.size() - 8); // no force
+            EXPECT_EQ(hex(bytes), expected) << "record " << i << ", format " << version;
+            LogRecord back;
+            ReadStream in(bytes);
+            ASSERT_TRUE(back.serialize(in, version));
+            EXPECT_TRUE(in.atEnd());
+            EXPECT_EQ(back.kind(), r.kind());
+            EXPECT_EQ(back.timeUs, r.timeUs);
+        }
+    }
+    // A kind past the last one, or none, reads as nothing.
+    for (uint8_t kind : {uint8_t(0), uint8_t(13)}) {
+        std::vector<uint8_t> bytes(11, 0);
+        bytes[0] = kind;
+        ReadStream in(bytes);
+        LogRecord r;
+        EXPECT_FALSE(r.serialize(in)) << int(kind);
+    }
 }
 
 TEST(SessionLog, AVolumeNoSpecRegeneratesTravelsInTheLogAndAWrongOneIsRefused) {
@@ -456,10 +553,10 @@ TEST(SessionLog, TwoTraineesMarksAndATakeOverReplayToTheSavedVolumeByteForByte) 
     // Everyone left as the server stopped; the log said who they were.
     size_t hellos = 0, holds = 0, releases = 0, syncs = 0;
     for (const LogRecord& r : log.records) {
-        hellos += r.kind == LogRecord::Kind::Hello;
-        holds += r.kind == LogRecord::Kind::Hold;
-        releases += r.kind == LogRecord::Kind::Release;
-        syncs += r.kind == LogRecord::Kind::Sync;
+        hellos += r.is<HelloEvent>();
+        holds += r.is<HoldEvent>();
+        releases += r.is<ReleaseEvent>();
+        syncs += r.is<SyncEvent>();
     }
     EXPECT_EQ(hellos, 3u);
     EXPECT_EQ(holds, 1u);
@@ -580,7 +677,7 @@ TEST(SessionLog, ResumingALogDamagedMidwayKeepsItAsideWholeAndGoesOnFromEveryInt
     ASSERT_EQ(starts.size(), clean.records.size());
     size_t hit = 0, tools = 0;
     for (size_t i = 0; i < clean.records.size() && tools < 15; ++i)
-        if (clean.records[i].kind == LogRecord::Kind::Tool && ++tools == 15)
+        if (clean.records[i].is<ToolEvent>() && ++tools == 15)
             hit = i;
     ASSERT_GT(hit, 0u);
     bytes[starts[hit] + 20] ^= 0x10;
@@ -621,7 +718,7 @@ TEST(SessionLog, ResumingALogDamagedMidwayKeepsItAsideWholeAndGoesOnFromEveryInt
     ASSERT_GT(after.records.size(), intact.size());
     for (size_t i = 0; i < intact.size(); ++i)
         expectSame(after.records[i], intact[i]);
-    EXPECT_EQ(after.records[intact.size()].kind, LogRecord::Kind::Resume);
+    EXPECT_TRUE(after.records[intact.size()].is<ResumeEvent>());
     const std::string again = tempPath("mid-replayed.nrrd");
     saveVolume(replayed(logPath), again);
     EXPECT_TRUE(fileBytes(second.saved) == fileBytes(again))
@@ -795,22 +892,14 @@ TEST(SessionLog, AFormat1LogReadsWithTheDefaultZonesAndNoForces) {
     };
     frame(header);
     std::vector<LogRecord> records;
-    records.push_back(helloRecord(1, Role::Trainee, "Ada", 100));
-    LogRecord join;
-    join.kind = LogRecord::Kind::Join;
-    join.timeUs = 100;
-    join.client = 1;
-    join.view = toViewSpec(cameraPreset("top", sphere, {32, 32}));
-    records.push_back(join);
+    records.push_back({100, HelloEvent{1, Role::Trainee, "Ada"}});
+    records.push_back(
+        {100, JoinEvent{.client = 1, .view = toViewSpec(cameraPreset("top", sphere, {32, 32}))}});
     const SurfaceSite site = trephine::testing::sphereTop(kN);
     for (int i = 0; i < 10; ++i) {
-        LogRecord tool;
-        tool.kind = LogRecord::Kind::Tool;
-        tool.timeUs = 200 + uint64_t(i) * 10000;
-        tool.client = 1;
-        tool.tool = burrState(site, i, 10, 1000000);
-        tool.forceN = 3.0f; // not written in v1
-        records.push_back(tool);
+        // The force is not written in v1.
+        records.push_back(
+            {200 + uint64_t(i) * 10000, ToolEvent{1, burrState(site, i, 10, 1000000), 3.0f}});
     }
     for (LogRecord& r : records)
         frame(r);
@@ -821,10 +910,7 @@ TEST(SessionLog, AFormat1LogReadsWithTheDefaultZonesAndNoForces) {
     // Resuming it goes on in format 1.
     {
         auto recorder = SessionRecorder::append(path, bytes.size(), 1);
-        LogRecord leave;
-        leave.kind = LogRecord::Kind::Leave;
-        leave.timeUs = 500000;
-        leave.client = 1;
+        const LogRecord leave{500000, LeaveEvent{1}};
         ASSERT_TRUE(recorder->write({&leave, 1}));
     }
     const LogContents log = readSessionLog(path);
@@ -833,8 +919,8 @@ TEST(SessionLog, AFormat1LogReadsWithTheDefaultZonesAndNoForces) {
     ASSERT_EQ(log.records.size(), 13u);
     EXPECT_EQ(log.header.cautionMm, 3.0f);
     EXPECT_EQ(log.header.dangerMm, 1.0f);
-    EXPECT_EQ(log.records[2].forceN, -1.0f);
-    EXPECT_EQ(log.records.back().kind, LogRecord::Kind::Leave);
+    EXPECT_EQ(log.records[2].as<ToolEvent>()->forceN, -1.0f);
+    EXPECT_TRUE(log.records.back().is<LeaveEvent>());
 
     SessionReplay replay(log.header, logStartVolume(log.header, loadVolume));
     replay.applyAll(log.records);

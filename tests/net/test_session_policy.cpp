@@ -22,9 +22,10 @@ namespace {
 
 constexpr uint64_t kStartUs = 1'000'000;
 
-size_t eventsOf(const PolicyOutput& out, SimEvent::Kind kind) {
+template <typename E>
+size_t eventsOf(const PolicyOutput& out) {
     return size_t(std::count_if(out.events.begin(), out.events.end(),
-                                [&](const SimEvent& e) { return e.kind == kind; }));
+                                [&](const LogRecord& e) { return e.is<E>(); }));
 }
 
 bool disconnected(const PolicyOutput& out, uint16_t id, RefuseReason why) {
@@ -123,8 +124,9 @@ TEST(SessionPolicy, AHelloIsWelcomedListedAndJoinsTheSimulation) {
     const auto scene = sentTo<Scene>(hello, ada);
     ASSERT_EQ(scene.size(), 1u) << "the scene follows the welcome";
     EXPECT_EQ(scene[0], *rig.config.scene);
-    ASSERT_EQ(eventsOf(hello, SimEvent::Kind::Join), 1u);
-    EXPECT_EQ(hello.events[0].inFlight, rig.p().inFlight(ada)) << "the outbox counts its bytes";
+    ASSERT_EQ(eventsOf<JoinEvent>(hello), 1u);
+    EXPECT_EQ(hello.events[0].as<JoinEvent>()->inFlight, rig.p().inFlight(ada))
+        << "the outbox counts its bytes";
     EXPECT_TRUE(sentTo<Annotations>(hello, ada).empty()) << "no marks, no list";
 
     // The roster goes at the next pass, at once for a join, to everyone listed.
@@ -176,7 +178,7 @@ TEST(SessionPolicy, AConnectionThatNeverSaysHelloIsClosedAndFreesItsSlot) {
     EXPECT_FALSE(rig.p().live(silent));
     out = {};
     rig.p().disconnect(silent, rig.now, out);
-    EXPECT_EQ(eventsOf(out, SimEvent::Kind::Leave), 1u);
+    EXPECT_EQ(eventsOf<LeaveEvent>(out), 1u);
     out = {};
     EXPECT_NE(rig.p().connect(kProtocolVersion, rig.now, out), 0) << "the slot is free";
     EXPECT_EQ(rig.counters().refusedFull, 0u);
@@ -243,9 +245,9 @@ TEST(SessionPolicy, AToolStateIsAnsweredRelayedAndQueued) {
     for (uint16_t id : {bob, cho, lee})
         EXPECT_EQ(sentTo<ToolRelay>(out, id).size(), 1u) << id;
     EXPECT_TRUE(sentTo<ToolRelay>(out, ada).empty()) << "not its own tool";
-    ASSERT_EQ(eventsOf(out, SimEvent::Kind::Tool), 1u);
-    EXPECT_EQ(out.events[0].arrivedUs, rig.now);
-    EXPECT_FLOAT_EQ(glm::length(out.events[0].tool.orientation), 1.0f);
+    ASSERT_EQ(eventsOf<ToolEvent>(out), 1u);
+    EXPECT_EQ(out.events[0].timeUs, rig.now);
+    EXPECT_FLOAT_EQ(glm::length(out.events[0].as<ToolEvent>()->tool.orientation), 1.0f);
     const ServerCounters c = rig.counters();
     EXPECT_EQ(c.hapticModelsSent, 1u);
     EXPECT_EQ(c.hapticRelaysSent, 2u);
@@ -265,7 +267,7 @@ TEST(SessionPolicy, AToolStateIsAnsweredRelayedAndQueued) {
     const uint16_t solo = off.join("solo", Role::Trainee);
     const PolicyOutput none = off.send(solo, t);
     EXPECT_TRUE(sentTo<HapticModel>(none, solo).empty());
-    EXPECT_EQ(eventsOf(none, SimEvent::Kind::Tool), 1u);
+    EXPECT_EQ(eventsOf<ToolEvent>(none), 1u);
     EXPECT_EQ(off.forces, 0);
 }
 
@@ -280,7 +282,7 @@ TEST(SessionPolicy, TakeOversPauseTheRightDrillsAndAreListed) {
     uint32_t sequence = 0;
     auto drills = [&](uint16_t id) {
         const PolicyOutput out = rig.send(id, toolAt({0, 0, 0}, ++sequence));
-        return out.events.at(0).tool.drilling;
+        return out.events.at(0).as<ToolEvent>()->tool.drilling;
     };
     EXPECT_TRUE(drills(ada));
     EXPECT_FALSE(drills(lee)) << "an instructor holding nobody points only";
@@ -388,11 +390,12 @@ TEST(SessionPolicy, ModeSwitchesAsFastAsTheyComeArePaced) {
     const uint64_t t0 = rig.now;
     size_t switches = 0, rosters = 0;
     std::optional<Participants> lastRoster;
-    std::optional<SimEvent> lastSwitch;
+    std::optional<SyncEvent> lastSwitch;
     auto take = [&](const PolicyOutput& out) {
-        switches += eventsOf(out, SimEvent::Kind::Sync);
-        for (const SimEvent& e : out.events)
-            lastSwitch = e;
+        switches += eventsOf<SyncEvent>(out);
+        for (const LogRecord& e : out.events)
+            if (const SyncEvent* s = e.as<SyncEvent>())
+                lastSwitch = *s;
         const auto r = sentTo<Participants>(out, listener);
         rosters += r.size();
         if (!r.empty())
@@ -458,8 +461,8 @@ TEST(SessionPolicy, ViewsOverTheLimitAreRefused) {
     EXPECT_EQ(rig.peer(ok).viewsRefused, 1u);
     r.view.width = r.view.height = 64;
     out = rig.send(ok, r);
-    ASSERT_EQ(eventsOf(out, SimEvent::Kind::View), 1u);
-    EXPECT_EQ(out.events[0].viewId, 1u);
+    ASSERT_EQ(eventsOf<ViewEvent>(out), 1u);
+    EXPECT_EQ(out.events[0].as<ViewEvent>()->viewId, 1u);
     EXPECT_TRUE(rig.p().live(ok));
 }
 

@@ -124,8 +124,7 @@ TEST(SessionRecordingCli, ASigkilledServersLogHoldsEveryChangeItsClientHadSeen) 
         size_t matchedAt = 0;
         for (size_t i = 0; i < contents.records.size(); ++i) {
             replay.apply(contents.records[i]);
-            if (contents.records[i].kind == LogRecord::Kind::Tool &&
-                replay.render(camera) == seen) {
+            if (contents.records[i].is<ToolEvent>() && replay.render(camera) == seen) {
                 matched = true;
                 matchedAt = i + 1;
             }
@@ -336,9 +335,9 @@ TEST(SessionRecordingCli, ALogDamagedMidwayReplaysAndResumesFromEveryIntactRecor
     size_t hello = 0, tool = 0, tools = 0;
     for (size_t i = 0; i < clean.records.size(); ++i) {
         const LogRecord& r = clean.records[i];
-        if (r.kind == LogRecord::Kind::Hello && r.name == "Ben")
+        if (const HelloEvent* h = r.as<HelloEvent>(); h && h->name == "Ben")
             hello = i;
-        if (r.kind == LogRecord::Kind::Tool && ++tools == 10)
+        if (r.is<ToolEvent>() && ++tools == 10)
             tool = i;
     }
     ASSERT_GT(hello, tool) << "Ben's hello comes after Ada's 10th tool state";
@@ -409,10 +408,10 @@ TEST(SessionRecordingCli, ALogDamagedMidwayReplaysAndResumesFromEveryIntactRecor
     EXPECT_TRUE(after.stopped.empty()) << after.stopped;
     ASSERT_EQ(after.records.size(), intact.size() + 1);
     for (size_t i = 0; i < intact.size(); ++i) {
-        EXPECT_EQ(after.records[i].kind, intact[i].kind) << i;
+        EXPECT_EQ(after.records[i].kind(), intact[i].kind()) << i;
         EXPECT_EQ(after.records[i].timeUs, intact[i].timeUs) << i;
     }
-    EXPECT_EQ(after.records.back().kind, LogRecord::Kind::Resume);
+    EXPECT_TRUE(after.records.back().is<ResumeEvent>());
     out = trephine("replay " + shellQuote(toolLog) + " --save " + shellQuote(dir / "again.nrrd"));
     EXPECT_EQ(out.find("skipped"), std::string::npos) << out;
     EXPECT_EQ(slurp(dir / "again.nrrd"), slurp(dir / "resumed.nrrd"));

@@ -29,25 +29,20 @@ struct StepRig {
     explicit StepRig(Volume v)
         : original(v), step(std::move(v), StepConfig{0.05f, 10.0f, 1}, outbox, book, steadyNowUs) {}
 
-    void run(std::vector<SimEvent> batch) {
+    void run(std::vector<LogRecord> batch) {
         now += 10000;
         step.step(batch, now);
     }
-    SimEvent join(uint16_t id, const Camera& camera, Codec codec, Sync sync = Sync::Dbi) {
-        SimEvent ev = SimEvent::of(SimEvent::Kind::Join, id);
-        ev.camera = camera;
-        ev.codec = codec;
-        ev.sync = sync;
-        ev.volumeCodec = Codec::Lz4;
+    LogRecord join(uint16_t id, const Camera& camera, Codec codec, Sync sync = Sync::Dbi) {
+        JoinEvent ev{.client = id,
+                     .view = toViewSpec(camera),
+                     .codec = codec,
+                     .sync = sync,
+                     .volumeCodec = Codec::Lz4};
         ev.inFlight = std::make_shared<std::atomic<int64_t>>(0);
-        return ev;
+        return {0, ev};
     }
-    SimEvent cut(const Box3i& box) {
-        SimEvent ev = SimEvent::of(SimEvent::Kind::Cut, 0);
-        ev.box = box;
-        ev.arrivedUs = now;
-        return ev;
-    }
+    LogRecord cut(const Box3i& box) { return {now, CutEvent{box}}; }
     uint64_t applied() const {
         return book.read([](const ServerReport& r) { return r.counters.toolStatesApplied; });
     }
@@ -113,19 +108,14 @@ TEST(SimulationStep, JoinsGetTheWholeViewOrVolumeAndCutsOnlyWhatChanged) {
     EXPECT_FALSE(rig.step.volume() == rig.original);
 
     // A switch to DBI: the volume client now gets the whole view, sharing the frame.
-    SimEvent sw = SimEvent::of(SimEvent::Kind::Sync, 2);
-    sw.sync = Sync::Dbi;
-    rig.run({sw});
+    rig.run({{0, SyncEvent{2, Sync::Dbi}}});
     t = rig.outbox.take(live);
     ASSERT_EQ(t.updates.size(), 1u);
     EXPECT_EQ(t.updates[0].client, 2);
     EXPECT_TRUE(t.updates[0].full);
     EXPECT_EQ(rig.step.viewCount(), 1u);
     // A view change to a smaller window: the full image of the new view, and nothing outside it.
-    SimEvent view = SimEvent::of(SimEvent::Kind::View, 1);
-    view.viewId = 3;
-    view.camera = cameraPreset("top", rig.original, {24, 16});
-    rig.run({view});
+    rig.run({{0, ViewEvent{1, toViewSpec(cameraPreset("top", rig.original, {24, 16})), 3}}});
     t = rig.outbox.take(live);
     ASSERT_EQ(t.updates.size(), 1u);
     ASSERT_TRUE(decodeMessage(t.updates[0].message, u));
@@ -135,7 +125,7 @@ TEST(SimulationStep, JoinsGetTheWholeViewOrVolumeAndCutsOnlyWhatChanged) {
     EXPECT_EQ(u.height, 16);
     EXPECT_EQ(rig.step.viewCount(), 2u) << "client 2 keeps the first view";
     // A leave: nothing more for it.
-    rig.run({SimEvent::of(SimEvent::Kind::Leave, 2), rig.cut(surfaceBox(rig.original, 8))});
+    rig.run({{0, LeaveEvent{2}}, rig.cut(surfaceBox(rig.original, 8))});
     t = rig.outbox.take(live);
     ASSERT_EQ(t.updates.size(), 1u);
     EXPECT_EQ(t.updates[0].client, 1);
@@ -151,7 +141,7 @@ TEST(SimulationStep, TheCutterSweepsBetweenDrillingToolStates) {
     rig.run({rig.join(1, cameraPreset("top", sphere, {32, 32}), Codec::Raw)});
     const float top = sphereRadiusMm(48);
     auto state = [&](uint32_t seq, float x, float y, bool drilling) {
-        SimEvent ev = SimEvent::of(SimEvent::Kind::Tool, 1);
+        ToolEvent ev{1, {}};
         ev.tool.sequence = seq;
         ev.tool.clientTimeUs = 1000000 + uint64_t(seq) * 20000;
         ev.tool.toolKind = uint8_t(ToolKind::Burr);
@@ -159,8 +149,7 @@ TEST(SimulationStep, TheCutterSweepsBetweenDrillingToolStates) {
         ev.tool.position = {x, y, top - 1.0f};
         ev.tool.speed = 1.0f;
         ev.tool.drilling = drilling;
-        ev.arrivedUs = rig.now;
-        return ev;
+        return LogRecord{rig.now, ev};
     };
     auto cutAt = [&](float x, float y) {
         const glm::ivec3 v = glm::ivec3(glm::round(sphere.toVoxel({x, y, top - 1.0f})));

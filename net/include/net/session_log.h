@@ -9,6 +9,7 @@
 #include "libsim/box.h"
 #include "libsim/distance_field.h"
 #include "libsim/volume.h"
+#include "net/events.h"
 #include "net/protocol.h"
 
 #include <condition_variable>
@@ -24,14 +25,9 @@
 namespace trephine::net {
 
 struct ServerConfig;
-struct SimEvent;
 
 inline constexpr uint8_t kLogMagic[8] = {'T', 'R', 'E', 'P', 'H', 'L', 'O', 'G'};
-// 1: the first format (docs/recording.md). 2: the header's assessment zones, each Tool record's
-// haptic force (what `trephine replay --report` needs to recompute the live metrics).
-inline constexpr uint32_t kLogVersion = 2;
-// A frame's payload is at most this long (a Voxels record of the largest volume fits).
-inline constexpr uint32_t kMaxLogRecordBytes = 1u << 30;
+// The format (kLogVersion) and each record (LogRecord: a time and an event) are net/events.h's.
 // The file's fixed start (magic, version) and each record's frame (length, CRC-32).
 inline constexpr size_t kLogPreambleBytes = 12, kLogFrameBytes = 8;
 
@@ -75,58 +71,6 @@ struct LogHeader {
                                serializeFinite(s, clampMm));
     }
 };
-
-// One change to the session. Which fields count depends on the kind (see each).
-struct LogRecord {
-    enum class Kind : uint8_t {
-        // What the simulation applies (SimEvent), in the order it applies it.
-        Join = 1,   // client, view, codec, sync, volumeCodec
-        View = 2,   // client, view, viewId
-        Tool = 3,   // client, tool (as the simulation gets it: drilling cleared when paused), force
-        Leave = 4,  // client
-        Cut = 5,    // box
-        Sync = 6,   // client, sync, volumeCodec: a design switch
-        Voxels = 7, // box, density, material
-        // What the session policy decided.
-        Hello = 8,    // client, role, name: a participant, listed from here on
-        Mark = 9,     // op; Add: mark (id and author as the server gave them); Remove: mark.id
-        Hold = 10,    // client (an instructor) takes over trainee
-        Release = 11, // client hands back whoever it held or was held by
-        // A server resumed this log (`--resume`): everyone before it had gone; the marks were
-        // renumbered 1..n, author 0, as a server starting with them does.
-        Resume = 12,
-    };
-    Kind kind = Kind::Tool;
-    uint64_t timeUs = 0; // server time (the recording process's steady clock; Resume restarts it)
-    uint16_t client = 0;
-    ViewSpec view;
-    uint32_t viewId = 0;
-    Codec codec = Codec::Raw, volumeCodec = Codec::Raw;
-    Sync sync = Sync::Dbi;
-    ToolState tool;
-    float forceN = -1.0f; // Tool: the haptic answer's force magnitude (< 0: none; v1: none)
-    Box3i box;
-    std::vector<uint8_t> density, material;
-    Role role = Role::Trainee;
-    std::string name;
-    Annotate::Op op = Annotate::Op::Add;
-    AnnotationInfo mark;
-    uint16_t trainee = 0;
-    uint64_t unixUs = 0; // Resume: wall clock
-
-    bool isSimulation() const { return kind >= Kind::Join && kind <= Kind::Voxels; }
-
-    template <typename S>
-    bool serialize(S& s, uint32_t version = kLogVersion);
-};
-
-// [SECTION] conversions
-
-// The record of what the simulation is handed (Join's camera as the ViewSpec it came from).
-LogRecord logRecordOf(const SimEvent& ev, uint64_t timeUs);
-// The event a replay hands the simulation (Join's in-flight counter a fresh one).
-SimEvent simEventOf(const LogRecord& r);
-LogRecord helloRecord(uint16_t client, Role role, const std::string& name, uint64_t now);
 
 // [SECTION] the starting volume
 
@@ -232,50 +176,5 @@ LogContents readSessionLog(const std::string& path);
 // intact frames only (log.intactBytes). Returns the name kept aside; "" when `log` had no damage
 // (nothing done). Throws Error (one line) when the file changed since or cannot be written.
 std::string repairSessionLog(const std::string& path, const LogContents& log);
-
-// [SECTION] record fields
-
-template <typename S>
-bool LogRecord::serialize(S& s, uint32_t version) {
-    if (!(s.ranged(kind, Kind::Join, Kind::Resume) && s.integer(timeUs)))
-        return false;
-    auto boxed = [&] {
-        return s.integer(box.lo.x) && s.integer(box.lo.y) && s.integer(box.lo.z) &&
-               s.integer(box.hi.x) && s.integer(box.hi.y) && s.integer(box.hi.z);
-    };
-    switch (kind) {
-    case Kind::Join:
-        return s.integer(client) && view.serialize(s) && s.ranged(codec, Codec::Raw, Codec::Zstd) &&
-               s.ranged(sync, Sync::Dbi, Sync::Volume) &&
-               s.ranged(volumeCodec, Codec::Raw, Codec::Zstd);
-    case Kind::View:
-        return s.integer(client) && view.serialize(s) && s.integer(viewId);
-    case Kind::Tool:
-        return s.integer(client) && tool.serialize(s) &&
-               (version < 2 || serializeFinite(s, forceN));
-    case Kind::Leave:
-    case Kind::Release:
-        return s.integer(client);
-    case Kind::Cut:
-        return boxed();
-    case Kind::Sync:
-        return s.integer(client) && s.ranged(sync, Sync::Dbi, Sync::Volume) &&
-               s.ranged(volumeCodec, Codec::Raw, Codec::Zstd);
-    case Kind::Voxels:
-        return boxed() && s.blob(density, kMaxLogRecordBytes / 2) &&
-               s.blob(material, kMaxLogRecordBytes / 2) && density.size() == material.size();
-    case Kind::Hello:
-        return s.integer(client) && s.ranged(role, Role::Trainee, Role::Instructor) &&
-               s.string(name, kMaxNameLength);
-    case Kind::Mark:
-        return s.ranged(op, Annotate::Op::Add, Annotate::Op::Clear) &&
-               (op == Annotate::Op::Clear || mark.serialize(s));
-    case Kind::Hold:
-        return s.integer(client) && s.integer(trainee);
-    case Kind::Resume:
-        return s.integer(unixUs);
-    }
-    return false;
-}
 
 } // namespace trephine::net

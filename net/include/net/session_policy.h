@@ -10,13 +10,12 @@
 #include "libsim/volume.h"
 #include "net/budgets.h"
 #include "net/enet_host.h"
+#include "net/events.h"
 #include "net/protocol.h"
 #include "net/replay_protocol.h"
 #include "net/server_config.h"
 #include "net/server_report.h"
 #include "net/session_codes.h"
-#include "net/session_log.h"
-#include "net/sim_step.h"
 #include "net/view_follow.h"
 
 #include <atomic>
@@ -71,7 +70,8 @@ struct PolicyOutput {
     };
     std::vector<Message> messages;
     std::vector<Disconnect> disconnects;
-    std::vector<SimEvent> events; // for the simulation, in order
+    // For the simulation, in order (time 0: stamped when the server queues them).
+    std::vector<LogRecord> events;
     // What the policy decided (names and roles, marks, take-overs), for the session log: the
     // server writes it, and the events, before it sends the messages (net/session_log.h).
     std::vector<LogRecord> log;
@@ -196,6 +196,8 @@ private:
     void kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& out, uint64_t now);
     void replayOne(const LogRecord& r, uint64_t now, PolicyOutput& out,
                    std::map<uint16_t, ToolState>& tools);
+    void replayMark(const MarkEvent& e);
+    void replayResume(PolicyOutput& out);
     void replayedLeave(PolicyOutput& out);
     bool remove(uint16_t id, const Peer& p, std::span<const uint8_t> data, uint64_t now,
                 PolicyOutput& out);

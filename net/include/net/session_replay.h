@@ -9,14 +9,13 @@
 #include "libsim/camera.h"
 #include "libsim/dbi.h"
 #include "libsim/volume.h"
-#include "net/outbox.h"
 #include "net/server_config.h"
 #include "net/server_report.h"
 #include "net/session_log.h"
-#include "net/sim_step.h"
 
 #include <functional>
 #include <map>
+#include <memory>
 #include <set>
 #include <span>
 #include <string>
@@ -39,6 +38,7 @@ public:
 
     // `start` is logStartVolume(header, ...).
     SessionReplay(const LogHeader& header, Volume start, int renderThreads = 1);
+    ~SessionReplay();
 
     // Applies the next record (records in the log's order).
     void apply(const LogRecord& r);
@@ -47,9 +47,9 @@ public:
             apply(r);
     }
 
-    const Volume& volume() const { return m_step.volume(); }
+    const Volume& volume() const;
     // A full render of the volume now (what a converged client at that view holds).
-    Dbi render(const Camera& camera) { return m_step.render(camera); }
+    Dbi render(const Camera& camera);
     // Participants listed now (said hello, not left), by client id.
     const std::map<uint16_t, Participant>& participants() const { return m_participants; }
     const std::map<uint32_t, AnnotationInfo>& marks() const { return m_marks; }
@@ -71,10 +71,16 @@ public:
 private:
     // The participants (by client id) of the server that wrote the log since its last Resume.
     std::map<uint16_t, ParticipantMetrics> stretchMetrics();
+    void simulate(const LogRecord& r);
+    void join(const JoinEvent& e, uint64_t timeUs);
+    void leave(uint16_t client);
+    void policy(const Event& e);
+    void resume(uint64_t timeUs);
 
     ReportBook m_book;
-    Outbox m_outbox;
-    SimulationStep m_step;
+    // The server's own simulation step (net/sim_step.h), which only drills here, and its outbox.
+    struct Simulation;
+    std::unique_ptr<Simulation> m_sim;
     std::map<uint16_t, Participant> m_participants;
     std::set<uint16_t> m_joined; // clients the simulation holds (joined, not left)
     std::map<uint32_t, AnnotationInfo> m_marks;

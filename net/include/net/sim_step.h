@@ -14,7 +14,7 @@
 #include "libsim/volume.h"
 #include "net/assessment.h"
 #include "net/budgets.h"
-#include "net/enet_host.h"
+#include "net/events.h"
 #include "net/outbox.h"
 #include "net/protocol.h"
 #include "net/server_report.h"
@@ -25,35 +25,10 @@
 #include <map>
 #include <optional>
 #include <shared_mutex>
+#include <span>
 #include <vector>
 
 namespace trephine::net {
-
-// What the network side hands the simulation, in arrival order.
-struct SimEvent {
-    enum class Kind { Join, View, Tool, Leave, Cut, Sync, Voxels } kind = Kind::Tool;
-    uint16_t client = 0;
-    Camera camera;                  // Join, View
-    uint32_t viewId = 0;            // View
-    Codec codec = Codec::Raw;       // Join
-    Sync sync = Sync::Dbi;          // Join, Sync
-    Codec volumeCodec = Codec::Raw; // Join, Sync
-    ToolState tool;
-    Box3i box;                              // Cut, Voxels
-    std::vector<uint8_t> density, material; // Voxels
-    uint64_t arrivedUs = 0;                 // Tool, Cut, Voxels: the cause time of what they change
-    Role role = Role::Trainee;              // Join
-    std::string name;                       // Join
-    float forceN = -1.0f;    // Tool: the haptic answer's force magnitude (< 0: none computed)
-    Host::InFlight inFlight; // Join: the peer's bytes held by ENet (the outbox holds it back)
-
-    static SimEvent of(Kind kind, uint16_t client) {
-        SimEvent ev;
-        ev.kind = kind;
-        ev.client = client;
-        return ev;
-    }
-};
 
 struct StepConfig {
     float maxStepS = 0.05f;        // ServerConfig::maxStepS
@@ -88,10 +63,12 @@ public:
     SimulationStep(Volume volume, const StepConfig& config, Outbox& outbox, ReportBook& book,
                    ServerClock clock);
 
-    // Applies `batch` in arrival order at server time `now` (the cause time of the full updates a
-    // join or a switch needs), then posts: the changed voxels (or the whole volume) to volume
-    // clients first, then BB_screen, rendered once per distinct view, to DBI clients.
-    void step(const std::vector<SimEvent>& batch, uint64_t now);
+    // Applies the events of `batch` in arrival order at server time `now` (the cause time of the
+    // full updates a join or a switch needs; a record's time is when its event arrived, 0: now),
+    // then posts: the changed voxels (or the whole volume) to volume clients first, then
+    // BB_screen, rendered once per distinct view, to DBI clients. The policy's decisions in it
+    // (hellos, marks, take-overs) are not the simulation's: it skips them.
+    void step(std::span<const LogRecord> batch, uint64_t now);
     // With nothing to apply: held-back volume clients' noted changes go once they can.
     void offerNoted() { m_outbox.offerNoted(m_volume); }
     // The assessment of every applied tool state (its notices go out on the network thread).
@@ -157,10 +134,14 @@ private:
         void changedBy(const Box3i& box, uint64_t arrivedUs);
     };
 
-    void applyClientEvent(const SimEvent& ev, Batch& b, uint64_t now);
-    void applyCut(const SimEvent& ev, Batch& b);
-    void applyVoxels(const SimEvent& ev, Batch& b);
-    void applyTool(const SimEvent& ev, Batch& b, uint64_t now);
+    // `at`: the event's time (its record's, else the step's), for the assessment.
+    void applyJoin(const JoinEvent& ev, uint64_t at, Batch& b, uint64_t now);
+    void applyView(const ViewEvent& ev, Batch& b, uint64_t now);
+    void applySync(const SyncEvent& ev, Batch& b, uint64_t now);
+    void applyLeave(const LeaveEvent& ev, uint64_t at, Batch& b);
+    void applyCut(const CutEvent& ev, uint64_t arrivedUs, Batch& b);
+    void applyVoxels(const VoxelsEvent& ev, uint64_t arrivedUs, Batch& b);
+    void applyTool(const ToolEvent& ev, uint64_t arrivedUs, uint64_t at, Batch& b);
     void postVolumes(const Batch& b);
     uint32_t updateGrid(const Batch& b);
     void renderViews(const Batch& b, uint32_t gridUs);
