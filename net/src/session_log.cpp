@@ -12,7 +12,6 @@
 
 #include <atomic>
 #include <cassert>
-#include <chrono>
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
@@ -141,14 +140,15 @@ Volume logStartVolume(const LogHeader& h, const std::function<Volume(const std::
 // [SECTION] writing
 
 SessionRecorder::SessionRecorder(std::string path, int fd, uint64_t bytes, int syncIntervalMs,
-                                 uint32_t version)
-    : m_path(std::move(path)), m_fd(fd), m_syncIntervalMs(std::max(1, syncIntervalMs)),
-      m_version(version), m_bytes(bytes), m_synced(bytes), m_writtenBack(bytes & ~uint64_t(4095)) {
-    m_syncer = std::thread([this] { syncLoop(); });
-}
+                                 uint32_t version, std::unique_ptr<Executor> syncer)
+    : m_path(std::move(path)), m_fd(fd),
+      m_syncIntervalUs(uint64_t(std::max(1, syncIntervalMs)) * 1000), m_version(version),
+      m_bytes(bytes), m_synced(bytes), m_writtenBack(bytes & ~uint64_t(4095)),
+      m_syncer(syncer ? std::move(syncer) : std::make_unique<WorkerExecutor>("trephine-sync", 0)) {}
 
 std::unique_ptr<SessionRecorder> SessionRecorder::create(const std::string& path, LogHeader header,
-                                                         int syncIntervalMs) {
+                                                         int syncIntervalMs,
+                                                         std::unique_ptr<Executor> syncer) {
     std::vector<uint8_t> start(kLogMagic, kLogMagic + 8);
     start.resize(kLogPreambleBytes);
     putU32(start, 8, kLogVersion);
@@ -162,7 +162,7 @@ std::unique_ptr<SessionRecorder> SessionRecorder::create(const std::string& path
                                                    "log; give a new name to start one)")
                                      : "cannot create it: " + errnoText()));
     std::unique_ptr<SessionRecorder> r(
-        new SessionRecorder(path, fd, 0, syncIntervalMs, kLogVersion));
+        new SessionRecorder(path, fd, 0, syncIntervalMs, kLogVersion, std::move(syncer)));
     if (!r->writeAll(start.data(), start.size()) || ::fdatasync(fd) != 0)
         throw Error("--record " + path + ": cannot write it: " + errnoText());
     r->m_bytes = r->m_synced = start.size();
@@ -171,7 +171,8 @@ std::unique_ptr<SessionRecorder> SessionRecorder::create(const std::string& path
 
 std::unique_ptr<SessionRecorder> SessionRecorder::append(const std::string& path,
                                                          uint64_t intactBytes, uint32_t version,
-                                                         int syncIntervalMs) {
+                                                         int syncIntervalMs,
+                                                         std::unique_ptr<Executor> syncer) {
     if (version == 0 || version > kLogVersion)
         throw Error(fmt::format("--resume {}: cannot append to a log of format {}", path, version));
     const int fd = ::open(path.c_str(), O_WRONLY | O_APPEND | O_CLOEXEC);
@@ -186,17 +187,11 @@ std::unique_ptr<SessionRecorder> SessionRecorder::append(const std::string& path
                                 path, uint64_t(st.st_size), intactBytes));
     }
     return std::unique_ptr<SessionRecorder>(
-        new SessionRecorder(path, fd, intactBytes, syncIntervalMs, version));
+        new SessionRecorder(path, fd, intactBytes, syncIntervalMs, version, std::move(syncer)));
 }
 
 SessionRecorder::~SessionRecorder() {
-    {
-        std::lock_guard lock(m_mutex);
-        m_stop = true;
-    }
-    m_cv.notify_all();
-    if (m_syncer.joinable())
-        m_syncer.join();
+    m_syncer->cancel(); // nothing posted touches the file once it closes
     if (m_fd >= 0) {
         ::fdatasync(m_fd);
         ::close(m_fd);
@@ -260,30 +255,42 @@ void SessionRecorder::writeBack(uint64_t written) {
         return;
     if (::sync_file_range(m_fd, off_t(m_writtenBack), off_t(end - m_writtenBack),
                           SYNC_FILE_RANGE_WAIT_BEFORE | SYNC_FILE_RANGE_WRITE |
-                              SYNC_FILE_RANGE_WAIT_AFTER) == 0)
+                              SYNC_FILE_RANGE_WAIT_AFTER) == 0) {
         m_writtenBack = end;
+        std::lock_guard lock(m_mutex);
+        ++m_writebacks;
+    }
 }
 
-void SessionRecorder::syncLoop() {
-    using Clock = std::chrono::steady_clock;
-    const auto interval = std::chrono::milliseconds(m_syncIntervalMs);
-    auto nextSync = Clock::now() + interval;
-    std::unique_lock lock(m_mutex);
-    while (!m_stop) {
-        m_cv.wait_for(lock,
-                      std::chrono::milliseconds(std::min(kWritebackIntervalMs, m_syncIntervalMs)));
-        if (m_stop || m_bytes == m_synced)
-            continue;
-        const uint64_t written = m_bytes;
-        lock.unlock(); // off the lock: writers go on while the disk works
-        if (Clock::now() >= nextSync) {
-            sync();
-            nextSync = Clock::now() + interval;
-        } else {
-            writeBack(written);
-        }
-        lock.lock();
+void SessionRecorder::tick(uint64_t nowUs) {
+    if (m_nextSyncUs == 0) {
+        m_nextSyncUs = nowUs + m_syncIntervalUs;
+        m_nextWritebackUs = nowUs + uint64_t(kWritebackIntervalMs) * 1000;
+        return;
     }
+    if (nowUs < m_nextWritebackUs && nowUs < m_nextSyncUs)
+        return;
+    uint64_t written;
+    {
+        std::lock_guard lock(m_mutex);
+        if (m_bytes == m_synced)
+            return;
+        written = m_bytes;
+    }
+    // One task at a time: a disk slower than the cadence gets the next one when it is done.
+    if (m_posted.exchange(true))
+        return;
+    const bool syncNow = nowUs >= m_nextSyncUs;
+    if (syncNow)
+        m_nextSyncUs = nowUs + m_syncIntervalUs;
+    m_nextWritebackUs = nowUs + uint64_t(kWritebackIntervalMs) * 1000;
+    m_syncer->post([this, syncNow, written] {
+        if (syncNow)
+            sync();
+        else
+            writeBack(written);
+        m_posted.store(false);
+    });
 }
 
 std::string SessionRecorder::error() const {
@@ -304,6 +311,11 @@ uint64_t SessionRecorder::records() const {
 uint64_t SessionRecorder::syncs() const {
     std::lock_guard lock(m_mutex);
     return m_syncs;
+}
+
+uint64_t SessionRecorder::writebacks() const {
+    std::lock_guard lock(m_mutex);
+    return m_writebacks;
 }
 
 // [SECTION] reading

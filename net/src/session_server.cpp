@@ -939,6 +939,8 @@ void SessionServer::networkLoop() {
         s.waitNetwork(1);
         s.receive(s.clock());
         s.send(s.clock());
+        if (s.recorder)
+            s.recorder->tick(s.clock()); // its syncs run on its own executor
     }
     s.sayGoodbye();
 }

@@ -7,6 +7,8 @@
 #include "net/session_log.h"
 #include "net/session_replay.h"
 
+#include "net/executor.h"
+
 #include "net/session_client.h"
 #include "net/session_server.h"
 #include "net/view.h"
@@ -442,6 +444,88 @@ TEST(SessionLog, ResumingATornLogKeepsItAsideWholeAndAppendsAfterItsIntactRecord
     expectSame(log.records.back(), records[0]);
     for (const std::string& p : {path, taken, aside})
         std::filesystem::remove(p);
+}
+
+// [SECTION] the recorder's syncs
+
+namespace {
+
+// Holds what is posted until the test runs it: a sync still under way. The tasks outlive it.
+struct HeldExecutor final : Executor {
+    using Tasks = std::vector<std::function<void()>>;
+    std::shared_ptr<Tasks> tasks = std::make_shared<Tasks>();
+    void post(std::function<void()> task) override { tasks->push_back(std::move(task)); }
+    void cancel() override { tasks->clear(); }
+    void drain() override {
+        for (auto& t : std::exchange(*tasks, {}))
+            t();
+    }
+};
+
+// Enough voxels that the record fills whole pages (a writeback covers full pages only).
+LogRecord pageOfVoxels(uint64_t timeUs) {
+    const Box3i box = Box3i::fromMinMax({0, 0, 0}, {32, 32, 8});
+    const size_t n = size_t(box.count());
+    return {timeUs, VoxelsEvent{box, std::vector<uint8_t>(n, 7), std::vector<uint8_t>(n, 1)}};
+}
+
+} // namespace
+
+TEST(SessionRecorder, TickWritesBackEvery100MsAndSyncsEverySecondWhenSomethingWasWritten) {
+    const std::string path = tempPath("tick.log");
+    auto recorder = SessionRecorder::create(path, sphereHeader(makeSphere(kN)),
+                                            SessionRecorder::kDefaultSyncIntervalMs,
+                                            std::make_unique<InlineExecutor>());
+    const uint64_t t0 = 5'000'000;
+    recorder->tick(t0); // the cadence starts
+    const LogRecord voxels = pageOfVoxels(1);
+    ASSERT_TRUE(recorder->write({&voxels, 1}));
+    recorder->tick(t0 + 99'999);
+    EXPECT_EQ(recorder->writebacks(), 0u);
+    EXPECT_EQ(recorder->syncs(), 0u);
+    recorder->tick(t0 + 100'000);
+    EXPECT_EQ(recorder->writebacks(), 1u) << "the full pages, without a journal commit";
+    EXPECT_EQ(recorder->syncs(), 0u);
+    recorder->tick(t0 + 150'000);
+    EXPECT_EQ(recorder->writebacks(), 1u) << "not due again yet";
+    recorder->tick(t0 + 1'000'000);
+    EXPECT_EQ(recorder->syncs(), 1u) << "a second after the start";
+    recorder->tick(t0 + 1'500'000);
+    recorder->tick(t0 + 2'000'000);
+    EXPECT_EQ(recorder->syncs(), 1u) << "nothing written since";
+    EXPECT_EQ(recorder->writebacks(), 1u);
+    ASSERT_TRUE(recorder->write({&voxels, 1}));
+    recorder->tick(t0 + 2'000'001);
+    EXPECT_EQ(recorder->syncs(), 2u) << "the sync was due: the next tick after a write does it";
+    recorder.reset();
+    const LogContents log = readSessionLog(path);
+    EXPECT_EQ(log.records.size(), 2u);
+    std::filesystem::remove(path);
+}
+
+TEST(SessionRecorder, ASyncStillUnderWayIsNotPostedAgainAndCancelledOnesNeverRun) {
+    const std::string path = tempPath("held.log");
+    auto held = std::make_unique<HeldExecutor>();
+    HeldExecutor& executor = *held;
+    const std::shared_ptr<HeldExecutor::Tasks> tasks = held->tasks;
+    auto recorder =
+        SessionRecorder::create(path, sphereHeader(makeSphere(kN)), 1000, std::move(held));
+    recorder->tick(0);
+    const LogRecord voxels = pageOfVoxels(1);
+    ASSERT_TRUE(recorder->write({&voxels, 1}));
+    recorder->tick(1'000'000);
+    ASSERT_EQ(tasks->size(), 1u);
+    recorder->tick(2'000'000);
+    recorder->tick(3'000'000);
+    EXPECT_EQ(tasks->size(), 1u) << "the disk is slow: the one posted is enough";
+    executor.drain();
+    EXPECT_EQ(recorder->syncs(), 1u);
+    ASSERT_TRUE(recorder->write({&voxels, 1}));
+    recorder->tick(4'000'000);
+    EXPECT_EQ(tasks->size(), 1u);
+    recorder.reset(); // cancels the one waiting: nothing runs on a closed file
+    EXPECT_TRUE(tasks->empty());
+    std::filesystem::remove(path);
 }
 
 // [SECTION] a recorded session

@@ -10,16 +10,16 @@
 #include "libsim/distance_field.h"
 #include "libsim/volume.h"
 #include "net/events.h"
+#include "net/executor.h"
 #include "net/protocol.h"
 
-#include <condition_variable>
+#include <atomic>
 #include <cstdint>
 #include <functional>
 #include <memory>
 #include <mutex>
 #include <span>
 #include <string>
-#include <thread>
 #include <vector>
 
 namespace trephine::net {
@@ -86,58 +86,67 @@ Volume logStartVolume(const LogHeader& header,
 // [SECTION] writing
 
 // Appends framed records with one write(2) a call, so a record is in the file (the page cache)
-// before the caller goes on to send what it caused. A thread of its own fdatasyncs what was
-// written every `syncIntervalMs`, and in between writes back the full pages every
-// kWritebackIntervalMs without a journal commit (an fdatasync's commit makes concurrent appends
-// wait for milliseconds; docs/recording.md), so the simulation and network threads never wait
-// for the disk.
+// before the caller goes on to send what it caused. Its owner calls tick() with the time: every
+// `syncIntervalMs` it posts an fdatasync of what was written to the executor, and in between,
+// every kWritebackIntervalMs, a writeback of the full pages without a journal commit (an
+// fdatasync's commit makes concurrent appends wait for milliseconds; docs/recording.md), so the
+// simulation and network threads never wait for the disk.
 class SessionRecorder {
 public:
     static constexpr int kDefaultSyncIntervalMs = 1000;
     static constexpr int kWritebackIntervalMs = 100;
 
-    // A new log at `path` (refused when something is there) starting with `header`, synced.
+    // A new log at `path` (refused when something is there) starting with `header`, synced. The
+    // syncs run on `syncer` (none: a WorkerExecutor "trephine-sync" of its own).
     static std::unique_ptr<SessionRecorder> create(const std::string& path, LogHeader header,
-                                                   int syncIntervalMs = kDefaultSyncIntervalMs);
+                                                   int syncIntervalMs = kDefaultSyncIntervalMs,
+                                                   std::unique_ptr<Executor> syncer = {});
     // An existing log to append to, which must be `intactBytes` long: all intact (a damaged one
     // is made so by repairSessionLog first; nothing here cuts a file). Its records are written in
     // the file's format `version`, so an older log stays one format.
     static std::unique_ptr<SessionRecorder> append(const std::string& path, uint64_t intactBytes,
                                                    uint32_t version = kLogVersion,
-                                                   int syncIntervalMs = kDefaultSyncIntervalMs);
+                                                   int syncIntervalMs = kDefaultSyncIntervalMs,
+                                                   std::unique_ptr<Executor> syncer = {});
     ~SessionRecorder();
     SessionRecorder(const SessionRecorder&) = delete;
     SessionRecorder& operator=(const SessionRecorder&) = delete;
 
-    // Appends the records in one write(2). After a failed write nothing more is written: false,
-    // and error() says why (the session goes on unrecorded; said once on stderr).
+    // [Any thread] Appends the records in one write(2). After a failed write nothing more is
+    // written: false, and error() says why (the session goes on unrecorded; said once on stderr).
     bool write(std::span<const LogRecord> records);
-    // fdatasync now (the cadence does it anyway).
+    // [The owner's thread] Time passes: posts a sync or a writeback when one is due and
+    // something was written since (none while the last one posted still runs). The first call
+    // starts the cadence.
+    void tick(uint64_t nowUs);
+    // fdatasync now, on the caller's thread.
     void sync();
     std::string error() const;
     uint64_t bytes() const;
     uint64_t records() const;
     uint64_t syncs() const;
+    uint64_t writebacks() const; // writebacks of full pages done
     const std::string& path() const { return m_path; }
 
 private:
-    SessionRecorder(std::string path, int fd, uint64_t bytes, int syncIntervalMs, uint32_t version);
+    SessionRecorder(std::string path, int fd, uint64_t bytes, int syncIntervalMs, uint32_t version,
+                    std::unique_ptr<Executor> syncer);
     bool writeAll(const uint8_t* data, size_t n);
-    void syncLoop();
     void writeBack(uint64_t written);
 
     std::string m_path;
     int m_fd = -1;
-    int m_syncIntervalMs;
+    uint64_t m_syncIntervalUs;
     uint32_t m_version; // the format its records are written in
     mutable std::mutex m_mutex;
     std::vector<uint8_t> m_buffer;
-    uint64_t m_bytes = 0, m_records = 0, m_synced = 0, m_syncs = 0;
-    uint64_t m_writtenBack = 0; // the syncer's own: full pages handed to writeback
+    uint64_t m_bytes = 0, m_records = 0, m_synced = 0, m_syncs = 0, m_writebacks = 0;
+    uint64_t m_writtenBack = 0; // the posted tasks' own: full pages handed to writeback
     std::string m_error;
-    std::condition_variable m_cv;
-    bool m_stop = false;
-    std::thread m_syncer;
+    // tick()'s: when the next sync and writeback are due (0: not started).
+    uint64_t m_nextSyncUs = 0, m_nextWritebackUs = 0;
+    std::atomic<bool> m_posted{false};  // a posted sync or writeback has not finished
+    std::unique_ptr<Executor> m_syncer; // last: its tasks go before the members they use
 };
 
 // [SECTION] reading
