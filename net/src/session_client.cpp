@@ -611,71 +611,10 @@ bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
         return true; // from an earlier volume period; the switch waits for its full volume
     if (!u.full && !m_volume)
         return true;
-
-    if (u.full) {
-        Volume v;
-        if (!decodeVolumeFull(u.payload, u.rawBytes, u.codec, dims, m_welcome->spacing, v))
-            return reject("its voxels do not decode");
-        std::unique_lock<std::shared_mutex> lock;
-        if (m_volumeMutex)
-            lock = std::unique_lock(*m_volumeMutex);
-        if (m_volume)
-            *m_volume = std::move(v); // same address: the renderer keeps pointing at it
-        else
-            m_volume = std::make_unique<Volume>(std::move(v));
-        // The renderer only reads the volume, and this thread is its only writer: its brick
-        // grid is built after the exclusive lock is let go, so a haptic thread reading the
-        // volume waits for the copy only (a 256^3 grid build took 8.7 ms, eight haptic ticks).
-        lock = {};
-        if (m_renderer)
-            m_renderer->rebuild();
-        if (!m_renderer && m_config.renderLocally) {
-            if (!m_pool)
-                m_pool = std::make_unique<ThreadPool>(m_config.renderThreads);
-            m_renderer = std::make_unique<Renderer>(*m_volume, m_pool.get());
-        }
-    } else {
-        std::vector<uint8_t> voxels;
-        if (!decompressBytes(u.payload, u.codec, u.rawBytes, voxels))
-            return reject("its voxels do not decode");
-        const size_t n = size_t(box.count());
-        std::span<const uint8_t> densities(voxels.data(), n), materials;
-        if (u.materials)
-            materials = std::span<const uint8_t>(voxels.data() + n, n);
-        std::unique_lock<std::shared_mutex> lock;
-        if (m_volumeMutex)
-            lock = std::unique_lock(*m_volumeMutex);
-        if (!applyVolumeBox(*m_volume, box, densities, materials))
-            return reject("its voxels do not fill its box");
-        lock = {};
-        if (m_renderer) {
-            const uint64_t g0 = steadyNowUs();
-            // Boxes with their materials are voxels the server wrote wholesale (submitVoxels),
-            // which may raise densities: the hit cache's indices may then be too deep, so the
-            // renderer starts afresh, as the server's does. Drilling (densities only fall) keeps
-            // the cache.
-            if (u.materials)
-                m_renderer->rebuild();
-            else
-                m_renderer->volumeChanged(box);
-            gridUs = double(steadyNowUs() - g0);
-        }
-    }
-    if (switching || u.full) {
-        m_sync = Sync::Volume;
-        // A view asked for while the DBI was shown is ours at once now: we render it.
-        if (!m_requested.empty()) {
-            m_view = m_requested.rbegin()->second;
-            m_viewId = m_requested.rbegin()->first;
-            m_requested.clear();
-        }
-        m_requestedViewId = m_viewId;
-        m_resyncRequestId.reset(); // the next DBI is a full one
-        if (!m_config.renderLocally &&
-            (m_dbi.width() != m_view.width || m_dbi.height() != m_view.height))
-            m_dbi = Dbi(m_view.width, m_view.height);
-        m_hasFull = true;
-    }
+    if (u.full ? !placeFullVolume(u) : !placeVolumeBox(u, box, gridUs))
+        return false;
+    if (switching || u.full)
+        enterVolumeSync();
     const uint64_t applied = steadyNowUs();
     renderLocal();
     const uint64_t done = steadyNowUs();
@@ -715,6 +654,77 @@ bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
     return true;
 }
 
+bool SessionClient::placeFullVolume(const VolumeUpdate& u) {
+    Volume v;
+    if (!decodeVolumeFull(u.payload, u.rawBytes, u.codec, m_welcome->volumeDims, m_welcome->spacing,
+                          v))
+        return reject("its voxels do not decode");
+    std::unique_lock<std::shared_mutex> lock;
+    if (m_volumeMutex)
+        lock = std::unique_lock(*m_volumeMutex);
+    if (m_volume)
+        *m_volume = std::move(v); // same address: the renderer keeps pointing at it
+    else
+        m_volume = std::make_unique<Volume>(std::move(v));
+    // The renderer only reads the volume, and this thread is its only writer: its brick
+    // grid is built after the exclusive lock is let go, so a haptic thread reading the
+    // volume waits for the copy only (a 256^3 grid build took 8.7 ms, eight haptic ticks).
+    lock = {};
+    if (m_renderer)
+        m_renderer->rebuild();
+    if (!m_renderer && m_config.renderLocally) {
+        if (!m_pool)
+            m_pool = std::make_unique<ThreadPool>(m_config.renderThreads);
+        m_renderer = std::make_unique<Renderer>(*m_volume, m_pool.get());
+    }
+    return true;
+}
+
+bool SessionClient::placeVolumeBox(const VolumeUpdate& u, const Box3i& box, double& gridUs) {
+    std::vector<uint8_t> voxels;
+    if (!decompressBytes(u.payload, u.codec, u.rawBytes, voxels))
+        return reject("its voxels do not decode");
+    const size_t n = size_t(box.count());
+    std::span<const uint8_t> densities(voxels.data(), n), materials;
+    if (u.materials)
+        materials = std::span<const uint8_t>(voxels.data() + n, n);
+    std::unique_lock<std::shared_mutex> lock;
+    if (m_volumeMutex)
+        lock = std::unique_lock(*m_volumeMutex);
+    if (!applyVolumeBox(*m_volume, box, densities, materials))
+        return reject("its voxels do not fill its box");
+    lock = {};
+    if (m_renderer) {
+        const uint64_t g0 = steadyNowUs();
+        // Boxes with their materials are voxels the server wrote wholesale (submitVoxels),
+        // which may raise densities: the hit cache's indices may then be too deep, so the
+        // renderer starts afresh, as the server's does. Drilling (densities only fall) keeps
+        // the cache.
+        if (u.materials)
+            m_renderer->rebuild();
+        else
+            m_renderer->volumeChanged(box);
+        gridUs = double(steadyNowUs() - g0);
+    }
+    return true;
+}
+
+void SessionClient::enterVolumeSync() {
+    m_sync = Sync::Volume;
+    // A view asked for while the DBI was shown is ours at once now: we render it.
+    if (!m_requested.empty()) {
+        m_view = m_requested.rbegin()->second;
+        m_viewId = m_requested.rbegin()->first;
+        m_requested.clear();
+    }
+    m_requestedViewId = m_viewId;
+    m_resyncRequestId.reset(); // the next DBI is a full one
+    if (!m_config.renderLocally &&
+        (m_dbi.width() != m_view.width || m_dbi.height() != m_view.height))
+        m_dbi = Dbi(m_view.width, m_view.height);
+    m_hasFull = true;
+}
+
 bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
     uint64_t start = steadyNowUs();
     // In volume mode images are stale, unless we are switching back and this is the full image
@@ -740,37 +750,12 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
         return reject("its rectangle leaves the view");
     if (u.full && (u.x != 0 || u.y != 0 || u.width != view->width || u.height != view->height))
         return reject("a full image that is not the whole view");
-    Camera camera = toCamera(*view);
     Dbi patch;
-    if (u.predicted) {
-        // Coded against the pixels we hold there: only for the view we show, never a switch.
-        if (switching || m_dbi.width() != view->width || m_dbi.height() != view->height)
-            return true; // stale: a full image of the right view is on its way
-        const PixelRect rect{u.x, u.y, u.width, u.height};
-        patch = m_dbi.extract(rect);
-        PredictedStatus st = decodePredicted(u.payload, u.rawBytes, u.codec, u.baseHash,
-                                             DepthQuantizer(camera), patch);
-        if (st == PredictedStatus::Malformed)
-            return reject("its pixels do not decode");
-        if (st == PredictedStatus::Ok)
-            ++m_predicted;
-        if (st == PredictedStatus::BaseMismatch) {
-            // Our copy is not what the server coded against: never show a wrong picture; ask
-            // for the whole view again (the server answers with a full image). While a view
-            // change is pending, its full image is already on its way and replaces our copy:
-            // wait for that one (a request for the old view would supersede it and bring the old
-            // view back; one for the pending view again would cost a second full image). Once
-            // asked, the updates coded against the same stale copy until that full image comes
-            // need no request of their own.
-            ++m_resyncs;
-            if (!m_resyncRequestId)
-                m_resyncRequestId =
-                    m_requested.empty() ? requestView(m_view) : m_requested.rbegin()->first;
-            return true;
-        }
-    } else if (!decodeImage(u.payload, u.rawBytes, u.codec, u.width, u.height, camera, patch)) {
-        return reject("its pixels do not decode");
-    }
+    bool stale = false;
+    if (!decodeImagePatch(u, *view, switching, patch, stale))
+        return false;
+    if (stale)
+        return true;
     if (switching) {
         m_view = *view;
         m_viewId = u.viewId;
@@ -799,10 +784,54 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
         if (m_resyncRequestId && int32_t(u.viewId - *m_resyncRequestId) >= 0)
             m_resyncRequestId.reset();
     }
+    recordImage(u, start, nowUs);
+    if (m_updateCallback)
+        m_updateCallback(u, PixelRect{u.x, u.y, u.width, u.height}, u.full);
+    return true;
+}
+
+bool SessionClient::decodeImagePatch(const ImageUpdate& u, const ViewSpec& view, bool switching,
+                                     Dbi& patch, bool& stale) {
+    const Camera camera = toCamera(view);
+    if (!u.predicted) {
+        if (!decodeImage(u.payload, u.rawBytes, u.codec, u.width, u.height, camera, patch))
+            return reject("its pixels do not decode");
+        return true;
+    }
+    // Coded against the pixels we hold there: only for the view we show, never a switch.
+    stale = switching || m_dbi.width() != view.width || m_dbi.height() != view.height;
+    if (stale)
+        return true; // a full image of the right view is on its way
+    const PixelRect rect{u.x, u.y, u.width, u.height};
+    patch = m_dbi.extract(rect);
+    PredictedStatus st =
+        decodePredicted(u.payload, u.rawBytes, u.codec, u.baseHash, DepthQuantizer(camera), patch);
+    if (st == PredictedStatus::Malformed)
+        return reject("its pixels do not decode");
+    if (st == PredictedStatus::Ok)
+        ++m_predicted;
+    if (st == PredictedStatus::BaseMismatch) {
+        // Our copy is not what the server coded against: never show a wrong picture; ask for the
+        // whole view again (the server answers with a full image). While a view change is
+        // pending, its full image is already on its way and replaces our copy: wait for that
+        // one (a request for the old view would supersede it and bring the old view back; one
+        // for the pending view again would cost a second full image). Once asked, the updates
+        // coded against the same stale copy until that full image comes need no request of
+        // their own.
+        ++m_resyncs;
+        if (!m_resyncRequestId)
+            m_resyncRequestId =
+                m_requested.empty() ? requestView(m_view) : m_requested.rbegin()->first;
+        stale = true;
+    }
+    return true;
+}
+
+void SessionClient::recordImage(const ImageUpdate& u, uint64_t startUs, uint64_t nowUs) {
     m_stats.updateBytes.add(double(u.payload.size()));
     m_stats.updateRawBytes.add(double(u.rawBytes));
     uint64_t applied = steadyNowUs();
-    m_stats.applyUs.add(double(applied - start));
+    m_stats.applyUs.add(double(applied - startUs));
     // Server clock -> ours with the ping offset (0 on one machine: one monotonic clock).
     int64_t causeLocal = int64_t(u.causeServerUs) - m_stats.clockOffsetUs;
     if (!u.full && causeLocal > 0 && int64_t(applied) >= causeLocal)
@@ -819,15 +848,12 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
     r.gridUs = u.full ? -1 : double(u.gridUs);
     r.encodeUs = double(u.encodeUs);
     r.transmitUs = transmitUs(u.sentServerUs, nowUs);
-    r.applyUs = double(applied - start);
+    r.applyUs = double(applied - startUs);
     r.clientRenderUs = 0; // the rectangle is the picture: nothing to render
     if (causeLocal > 0 && int64_t(applied) >= causeLocal)
         r.latencyUs = double(int64_t(applied) - causeLocal);
     r.appliedUs = applied;
     record(r);
-    if (m_updateCallback)
-        m_updateCallback(u, PixelRect{u.x, u.y, u.width, u.height}, u.full);
-    return true;
 }
 
 uint32_t SessionClient::sendToolState(ToolState state) {

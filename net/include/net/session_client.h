@@ -316,7 +316,19 @@ private:
     bool onReplayState(std::span<const uint8_t> data, uint64_t nowUs); // session_client_replay.cpp
     bool onCodes(std::span<const uint8_t> data);                       // session_client_codes.cpp
     bool applyImage(const ImageUpdate& u, uint64_t nowUs);
+    // u's pixels into `patch`; false when they do not decode. `stale`: nothing to show (a
+    // predicted update coded against pixels other than ours: asks for the whole view again).
+    bool decodeImagePatch(const ImageUpdate& u, const ViewSpec& view, bool switching, Dbi& patch,
+                          bool& stale);
+    // An applied image's figures (statistics, its UpdateRecord).
+    void recordImage(const ImageUpdate& u, uint64_t startUs, uint64_t nowUs);
     bool applyVolume(const VolumeUpdate& u, uint64_t nowUs);
+    // A full update's volume in place of ours (the renderer keeps its address); a box's voxels
+    // into ours, gridUs the renderer's brick-grid update. False when they do not decode.
+    bool placeFullVolume(const VolumeUpdate& u);
+    bool placeVolumeBox(const VolumeUpdate& u, const Box3i& box, double& gridUs);
+    // Volume sync from the full volume (or the switch's) on: a view asked for is ours at once.
+    void enterVolumeSync();
     // Volume mode: the whole view rendered from the local volume into m_dbi.
     void renderLocal();
     void record(UpdateRecord r);
