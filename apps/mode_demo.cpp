@@ -15,6 +15,7 @@
 #include "libsim/drill.h"
 #include "libsim/error.h"
 #include "libsim/haptics.h"
+#include "libsim/hole.h"
 #include "libsim/skull.h"
 #include "libsim/tool_catalogue.h"
 #include "libsim_devices/devices.h"
@@ -46,17 +47,6 @@ struct DemoOptions {
     int pictureSize = 400;
     WindowedOptions window;
 };
-
-// Voxel counts per material of voxels that were bone before and are air now.
-std::vector<int64_t> removedByMaterial(const Volume& before, const Volume& after) {
-    std::vector<int64_t> removed(kMaterialCount, 0);
-    const uint8_t* mb = before.materialData();
-    const uint8_t* ma = after.materialData();
-    for (size_t i = 0; i < before.voxelCount(); ++i)
-        if (mb[i] != ma[i] && ma[i] == uint8_t(Material::Air) && mb[i] < kMaterialCount)
-            removed[mb[i]]++;
-    return removed;
-}
 
 // What the trainee saw while drilling: the clutch (cutting stopped while the feed went on) and
 // the forces it felt.

@@ -5,8 +5,8 @@
 
 #include "libsim/camera.h"
 #include "libsim/dirty_rect.h"
-#include "libsim/drill.h"
 #include "libsim/error.h"
+#include "libsim/hole.h"
 #include "libsim/renderer.h"
 #include "libsim/thread_pool.h"
 #include "libsim/tool_catalogue.h"
@@ -21,7 +21,6 @@
 #include <cmath>
 #include <cstdio>
 #include <fmt/format.h>
-#include <glm/gtx/quaternion.hpp>
 #include <memory>
 #include <string>
 #include <vector>
@@ -121,42 +120,6 @@ std::string describeBox(const Box3i& b) {
     if (b.empty())
         return "empty";
     return fmt::format("{} {} {} {} {} {}", b.lo.x, b.lo.y, b.lo.z, b.hi.x, b.hi.y, b.hi.z);
-}
-
-// Drills a burr hole whose deepest point is depthMm below the surface point `hit`, along the
-// view ray: the burr's centre moves from one radius above the surface to (depth - radius) below
-// it in steps of a quarter voxel, and at each step the burr drills at full speed until nothing
-// more changes. Dura never erodes; touching it ends the hole there.
-Box3i drillHole(Volume& volume, const RayHit& hit, const DrillAt& d, bool& touchedDura) {
-    Driller driller(ToolShape::burr(d.diameterMm));
-    const float radius = 0.5f * d.diameterMm;
-    const glm::vec3 dir = glm::normalize(hit.direction);
-    ToolPose pose;
-    pose.orientation = glm::rotation(glm::vec3(0, 0, 1), -dir); // shaft back towards the eye
-    const glm::vec3 s = volume.spacing();
-    const float step = 0.25f * std::min({s.x, s.y, s.z});
-    const glm::vec3 surface(hit.position);
-    Box3i changed;
-    touchedDura = false;
-    const float end = d.depthMm - radius;
-    // Counted steps (u from the count, not accumulated, which stops moving once the step falls
-    // under half u's ulp), the last at `end`.
-    const int64_t steps = std::max<int64_t>(1, int64_t(std::ceil((end + radius) / step)));
-    for (int64_t k = 0;; ++k) {
-        const float u = k >= steps ? end : std::min(-radius + float(k) * step, end);
-        pose.position = surface + dir * u;
-        for (int i = 0; i < 1000; ++i) { // at most 20 s of drilling at one place
-            DrillResult r = driller.drill(volume, pose, 1.0f, 0.02f);
-            changed.merge(r.changed);
-            if (r.duraContact)
-                touchedDura = true;
-            if (r.voxelsChanged == 0 || r.duraContact)
-                break;
-        }
-        if (touchedDura || u >= end)
-            break;
-    }
-    return changed;
 }
 
 // The flags that need the window's size, read and checked before any work: the drills, the
@@ -271,8 +234,10 @@ Box3i drillAll(const RenderOptionsCli& o, const RenderJob& job, const Camera& ca
         if (!hit.hit)
             throw Error("--drill-at " + d.text + ": no bone under pixel (" + std::to_string(d.px) +
                         ", " + std::to_string(d.py) + "); pick a pixel that shows bone");
-        bool dura = false;
-        Box3i changed = drillHole(volume, hit, d, dura);
+        const HoleResult hole =
+            drillHoleAlong(volume, glm::vec3(hit.position), hit.direction, d.depthMm, d.diameterMm);
+        const bool dura = hole.touchedDura;
+        const Box3i& changed = hole.changed;
         renderer.volumeChanged(changed);
         bbVolume.merge(changed);
         std::printf("drill %zu: burr %g mm at pixel (%d, %d), surface (%.2f, %.2f, %.2f) mm, "

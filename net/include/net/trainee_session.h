@@ -29,8 +29,9 @@ struct TraineeSessionConfig {
     std::string who = "trainee"; // each failure's line starts "WHO: "
 };
 
-// How a session ended: the script ran out, the caller stopped it, the server closed it or went
-// silent. elapsedS runs from the script's start to the end of the drain.
+// How a session ended: the script ran out, the caller's go() stopped it (the headless trainee's:
+// a signal), the server closed it or went silent. elapsedS runs from the script's start to the
+// end of the drain.
 struct SessionEnd {
     enum class How { ScriptDone, Stopped, Closed, Lost };
     How how = How::ScriptDone;
