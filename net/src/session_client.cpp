@@ -41,6 +41,8 @@ SessionClient::SessionClient(ClientConfig config)
     : m_config(std::move(config)), m_host(Host::client()), m_view(m_config.view),
       m_dbi(m_config.view.width, m_config.view.height), m_sync(m_config.sync),
       m_wantSync(m_config.sync) {
+    if (!m_config.clock)
+        m_config.clock = steadyNowUs;
     if (!m_config.code.empty())
         m_code = normaliseCode(m_config.code, "--code");
 }
@@ -54,7 +56,7 @@ void SessionClient::connect(const ENetAddress& address, std::string serverName) 
     m_serverName = serverName.empty() ? formatAddress(address) : std::move(serverName);
     m_address = address;
     m_peer = m_host.connect(address, m_config.protocolVersion);
-    m_lastHeardUs = steadyNowUs();
+    m_lastHeardUs = m_config.clock();
     if (!m_peer)
         throw Error("cannot connect to " + formatAddress(address) + ": no free ENet peer");
 }
@@ -94,10 +96,10 @@ bool SessionClient::sendRaw(Channel channel, std::span<const uint8_t> bytes) {
 }
 
 int SessionClient::poll(uint32_t timeoutMs) {
-    if (m_retryAtUs && steadyNowUs() >= m_retryAtUs) {
+    if (m_retryAtUs && m_config.clock() >= m_retryAtUs) {
         m_retryAtUs = 0;
         m_peer = m_host.connect(m_address, m_config.protocolVersion);
-        m_lastHeardUs = steadyNowUs();
+        m_lastHeardUs = m_config.clock();
     }
     int n = m_host.service(timeoutMs, [this](const ENetEvent& ev) { onEvent(ev); });
     if (m_peer && m_connected) {
@@ -105,13 +107,13 @@ int SessionClient::poll(uint32_t timeoutMs) {
         // whenever it receives (a whole message may take seconds on a slow link).
         if (m_peer->lastReceiveTime != m_lastReceiveTime) {
             m_lastReceiveTime = m_peer->lastReceiveTime;
-            m_lastHeardUs = steadyNowUs();
+            m_lastHeardUs = m_config.clock();
         }
         // ENet's own estimate, refreshed about every ENET_PEER_PACKET_LOSS_INTERVAL (10 s).
         m_stats.packetLoss = double(m_peer->packetLoss) / double(ENET_PEER_PACKET_LOSS_SCALE);
         m_stats.packetsLost = m_peer->packetsLost;
     }
-    m_stats.tick(steadyNowUs());
+    m_stats.tick(m_config.clock());
     return n;
 }
 
@@ -124,8 +126,8 @@ void SessionClient::disconnect(uint32_t timeoutMs) {
         return;
     if (m_connected) {
         enet_peer_disconnect(m_peer, 0);
-        uint64_t deadline = steadyNowUs() + uint64_t(timeoutMs) * 1000;
-        while (m_connected && steadyNowUs() < deadline)
+        uint64_t deadline = m_config.clock() + uint64_t(timeoutMs) * 1000;
+        while (m_connected && m_config.clock() < deadline)
             poll(5);
     }
     if (m_connected)
@@ -139,7 +141,7 @@ void SessionClient::onEvent(const ENetEvent& ev) {
     switch (ev.type) {
     case ENET_EVENT_TYPE_CONNECT: {
         m_connected = true;
-        m_lastHeardUs = m_connectedUs = steadyNowUs();
+        m_lastHeardUs = m_connectedUs = m_config.clock();
         disableThrottle(m_peer);
         // Without a code the hello goes at once (an open session); with one, it goes sealed
         // after the handshake that the server's Challenge starts.
@@ -157,13 +159,13 @@ void SessionClient::onEvent(const ENetEvent& ev) {
         m_peer = nullptr;
         return;
     case ENET_EVENT_TYPE_RECEIVE: {
-        m_lastHeardUs = steadyNowUs();
+        m_lastHeardUs = m_config.clock();
         const auto channel = Channel(std::min<int>(ev.channelID, int(Channel::Count) - 1));
         m_stats.countIn(channel, ev.packet->dataLength);
-        onReceive(channel, {ev.packet->data, ev.packet->dataLength}, steadyNowUs());
+        onReceive(channel, {ev.packet->data, ev.packet->dataLength}, m_config.clock());
         // And once handled: applying a large update (a whole volume, its first render) takes
         // long, and that is no silence of the server's.
-        m_lastHeardUs = steadyNowUs();
+        m_lastHeardUs = m_config.clock();
         return;
     }
     default:
@@ -185,7 +187,7 @@ bool SessionClient::retryAfter(uint32_t disconnectData) {
     if (reason == RefuseReason::Retry) {
         ++m_cookieRetries;
         m_peer = m_host.connect(m_address, m_config.protocolVersion, disconnectData >> 8);
-        m_lastHeardUs = steadyNowUs();
+        m_lastHeardUs = m_config.clock();
         if (!m_peer) {
             m_closed = true;
             m_closeCode = disconnectData;
@@ -198,7 +200,7 @@ bool SessionClient::retryAfter(uint32_t disconnectData) {
     m_cookieRetries = 0;
     const uint32_t waitUs = std::min(2000000u, 250000u << std::min(m_busyRefusals, 3u));
     ++m_busyRefusals;
-    m_retryAtUs = steadyNowUs() + waitUs / 2 + randombytes_uniform(waitUs / 2);
+    m_retryAtUs = m_config.clock() + waitUs / 2 + randombytes_uniform(waitUs / 2);
     return true;
 }
 
@@ -333,7 +335,7 @@ bool SessionClient::onHandshake(std::span<const uint8_t> data) {
     m_spake.reset();
     if (proven) {
         m_secure.emplace(*proven, false);
-        m_handshakeUs = steadyNowUs() - m_connectedUs;
+        m_handshakeUs = m_config.clock() - m_connectedUs;
         sayHello();
     }
     return true;
@@ -593,7 +595,7 @@ bool notNewer(uint32_t sequence, std::optional<uint32_t> last) {
 } // namespace
 
 bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
-    uint64_t start = steadyNowUs();
+    uint64_t start = m_config.clock();
     double gridUs = -1; // the renderer's brick-grid update, part of the apply
     if (!m_welcome)
         return reject("it came before the welcome"); // we cannot place its voxels
@@ -615,9 +617,9 @@ bool SessionClient::applyVolume(const VolumeUpdate& u, uint64_t nowUs) {
         return false;
     if (switching || u.full)
         enterVolumeSync();
-    const uint64_t applied = steadyNowUs();
+    const uint64_t applied = m_config.clock();
     renderLocal();
-    const uint64_t done = steadyNowUs();
+    const uint64_t done = m_config.clock();
 
     m_lastVolumeSeq = u.sequence;
     m_lastSequence = u.sequence;
@@ -695,7 +697,7 @@ bool SessionClient::placeVolumeBox(const VolumeUpdate& u, const Box3i& box, doub
         return reject("its voxels do not fill its box");
     lock = {};
     if (m_renderer) {
-        const uint64_t g0 = steadyNowUs();
+        const uint64_t g0 = m_config.clock();
         // Boxes with their materials are voxels the server wrote wholesale (submitVoxels),
         // which may raise densities: the hit cache's indices may then be too deep, so the
         // renderer starts afresh, as the server's does. Drilling (densities only fall) keeps
@@ -704,7 +706,7 @@ bool SessionClient::placeVolumeBox(const VolumeUpdate& u, const Box3i& box, doub
             m_renderer->rebuild();
         else
             m_renderer->volumeChanged(box);
-        gridUs = double(steadyNowUs() - g0);
+        gridUs = double(m_config.clock() - g0);
     }
     return true;
 }
@@ -726,7 +728,7 @@ void SessionClient::enterVolumeSync() {
 }
 
 bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
-    uint64_t start = steadyNowUs();
+    uint64_t start = m_config.clock();
     // In volume mode images are stale, unless we are switching back and this is the full image
     // the server sent after the switch (newer than every volume update applied).
     const bool leavingVolume = m_sync == Sync::Volume;
@@ -830,7 +832,7 @@ bool SessionClient::decodeImagePatch(const ImageUpdate& u, const ViewSpec& view,
 void SessionClient::recordImage(const ImageUpdate& u, uint64_t startUs, uint64_t nowUs) {
     m_stats.updateBytes.add(double(u.payload.size()));
     m_stats.updateRawBytes.add(double(u.rawBytes));
-    uint64_t applied = steadyNowUs();
+    uint64_t applied = m_config.clock();
     m_stats.applyUs.add(double(applied - startUs));
     // Server clock -> ours with the ping offset (0 on one machine: one monotonic clock).
     int64_t causeLocal = int64_t(u.causeServerUs) - m_stats.clockOffsetUs;
@@ -860,7 +862,7 @@ uint32_t SessionClient::sendToolState(ToolState state) {
     if (state.sequence == 0)
         state.sequence = ++m_toolSequence;
     if (state.clientTimeUs == 0)
-        state.clientTimeUs = steadyNowUs();
+        state.clientTimeUs = m_config.clock();
     send(Channel::ToolState, encodeMessage(state));
     ++m_toolSent;
     return state.sequence;
@@ -901,7 +903,7 @@ uint32_t SessionClient::requestView(const ViewSpec& view) {
 }
 
 void SessionClient::sendPing() {
-    Ping p{steadyNowUs()};
+    Ping p{m_config.clock()};
     send(Channel::Control, encodeMessage(p));
 }
 

@@ -54,6 +54,9 @@ struct ClientConfig {
     // message is sealed; a client with a code will not join an open session. Empty: join an open
     // session (a session with codes refuses it: "this session needs a code").
     std::string code;
+    // The client's time in microseconds: its runner's clock (the steady clock when empty). Tests
+    // pass their own to reach a retry or a timeout without waiting.
+    std::function<uint64_t()> clock;
 };
 
 // Why a client ended its session itself: a message of the server's that it cannot go without (its
