@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <memory>
 #include <string>
+#include <type_traits>
 #include <utility>
 #include <variant>
 #include <vector>
@@ -213,6 +214,10 @@ Event eventAt(size_t index, std::index_sequence<I...>) {
 template <typename T>
 inline constexpr uint8_t kEventKind =
     uint8_t(detail::eventIndex<T>(std::make_index_sequence<std::variant_size_v<Event>>()) + 1);
+
+// The kinds on disk (docs/recording.md): a new event goes at the end.
+static_assert(kEventKind<JoinEvent> == 1 && kEventKind<VoxelsEvent> == 7 &&
+              kEventKind<HelloEvent> == 8 && kEventKind<ResumeEvent> == 12);
 
 // True for what the simulation applies; the policy's decisions it has nothing to do with.
 inline bool isSimulation(const Event& e) {
