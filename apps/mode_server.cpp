@@ -12,6 +12,7 @@
 #include "net/scene.h"
 #include "net/secure_channel.h"
 #include "net/server_banner.h"
+#include "net/replay_feed.h"
 #include "net/session_log.h"
 #include "net/session_replay.h"
 #include "net/session_server.h"

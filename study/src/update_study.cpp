@@ -7,6 +7,7 @@
 #include "libsim/stats.h"
 #include "net/codec.h"
 #include "net/link_emulator.h"
+#include "net/replay_feed.h"
 #include "net/session_client.h"
 #include "net/session_log.h"
 #include "net/session_server.h"

@@ -4,6 +4,7 @@
 // take-over, a design switch) replays to the server's own --save-on-exit byte for byte, and so
 // does one resumed from its log; trajectories export what the simulation applied; the
 // participants' assessment metrics recomputed from the log equal the live report's.
+#include "net/replay_feed.h"
 #include "net/session_log.h"
 #include "net/session_replay.h"
 

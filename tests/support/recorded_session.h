@@ -3,6 +3,7 @@
 #pragma once
 
 #include "net/session_client.h"
+#include "net/replay_feed.h"
 #include "net/session_log.h"
 #include "net/session_server.h"
 

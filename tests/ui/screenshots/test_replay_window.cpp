@@ -7,6 +7,7 @@
 #include "libsim/skull.h"
 #include "net/scene.h"
 #include "net/session_client.h"
+#include "net/replay_feed.h"
 #include "net/session_log.h"
 #include "net/session_server.h"
 

@@ -71,6 +71,10 @@ private:
     uint32_t m_seeks = 0;
 };
 
+// The header of a session on `volume` served with `config` (logHeaderOf, with the server's
+// volume name, drilling and assessment settings, scene and starting marks).
+LogHeader makeLogHeader(const Volume& volume, const ServerConfig& config,
+                        const std::string& volumeSpec, bool embed, uint64_t startUnixUs);
 // The server's settings for serving a log's session: its scene, starting marks, volume name
 // and drilling settings, no recorder. Throws Error when the scene in the header does not read.
 ServerConfig replayServerConfig(const LogHeader& header, ServerConfig base);

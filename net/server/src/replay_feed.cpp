@@ -1,5 +1,6 @@
 #include "net/replay_feed.h"
 
+#include "libsim/distance_field.h"
 #include "libsim/error.h"
 #include "net/scene.h"
 #include "net/session_policy.h"
@@ -119,6 +120,25 @@ bool ReplayPlayer::control(const ReplayControl& c, uint64_t nowUs) {
 
 ReplayState ReplayPlayer::state(uint64_t nowUs) const {
     return {positionUs(nowUs), durationUs(), float(m_speed), m_playing, m_seeks};
+}
+
+LogHeader makeLogHeader(const Volume& volume, const ServerConfig& config,
+                        const std::string& volumeSpec, bool embed, uint64_t startUnixUs) {
+    LogHeader h = logHeaderOf(volume, volumeSpec, embed, startUnixUs);
+    h.volumeName = config.volumeName;
+    h.maxStepS = config.maxStepS;
+    h.maxSweepMm = config.maxSweepMm;
+    h.cautionMm = config.cautionMm;
+    h.dangerMm = config.dangerMm;
+    h.clampMm = DistanceField::kDefaultClampMm; // the server's (AssessmentConfig's default)
+    // The scene the server serves: the one given, or the one it builds from the volume.
+    Scene scene = config.scene ? *config.scene : buildScene(volume);
+    h.scene = encodeMessage(scene);
+    // Numbered as the server numbers its starting marks.
+    uint32_t id = 1;
+    for (const AnnotationInfo& m : config.marks)
+        h.marks.push_back({id++, 0, m.position, m.label});
+    return h;
 }
 
 ServerConfig replayServerConfig(const LogHeader& header, ServerConfig c) {

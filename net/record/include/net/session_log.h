@@ -24,8 +24,6 @@
 
 namespace trephine::net {
 
-struct ServerConfig;
-
 inline constexpr uint8_t kLogMagic[8] = {'T', 'R', 'E', 'P', 'H', 'L', 'O', 'G'};
 // The format (kLogVersion) and each record (LogRecord: a time and an event) are net/events.h's.
 // The file's fixed start (magic, version) and each record's frame (length, CRC-32).
@@ -74,10 +72,11 @@ struct LogHeader {
 
 // [SECTION] the starting volume
 
-// The header of a session on `volume` served with `config`: with `embed`, the voxels travel in
-// the log (a file or a resumed session, which no spec regenerates); else only their hash does.
-LogHeader makeLogHeader(const Volume& volume, const ServerConfig& config,
-                        const std::string& volumeSpec, bool embed, uint64_t startUnixUs);
+// The header's volume part for a session on `volume`: with `embed`, the voxels travel in the log
+// (a file or a resumed session, which no spec regenerates); else only their hash does. The
+// server's settings are added by makeLogHeader (net/replay_feed.h).
+LogHeader logHeaderOf(const Volume& volume, const std::string& volumeSpec, bool embed,
+                      uint64_t startUnixUs);
 // The starting volume: the embedded voxels, or `open(volumeSpec)` checked against the hash.
 // Throws Error (one line) when they are not the recorded ones.
 Volume logStartVolume(const LogHeader& header,

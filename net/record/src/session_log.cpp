@@ -4,7 +4,6 @@
 #include "libsim/regular_file.h"
 #include "libsim/replacing_file.h"
 #include "net/scene.h"
-#include "net/server_config.h"
 
 #include <fmt/format.h>
 #include <zlib.h>
@@ -70,12 +69,11 @@ std::string errnoText() {
 
 // [SECTION] the starting volume
 
-LogHeader makeLogHeader(const Volume& volume, const ServerConfig& config,
-                        const std::string& volumeSpec, bool embed, uint64_t startUnixUs) {
+LogHeader logHeaderOf(const Volume& volume, const std::string& volumeSpec, bool embed,
+                      uint64_t startUnixUs) {
     LogHeader h;
     h.startUnixUs = startUnixUs;
     h.volumeSpec = volumeSpec;
-    h.volumeName = config.volumeName;
     h.dims = volume.dims();
     h.spacing = volume.spacing();
     h.densityCrc = crcOf(volume.densityData(), volume.voxelCount());
@@ -94,18 +92,6 @@ LogHeader makeLogHeader(const Volume& volume, const ServerConfig& config,
         if (h.embedded.size() > kMaxLogRecordBytes / 2)
             throw Error("session log: the volume does not fit a log record even compressed");
     }
-    h.maxStepS = config.maxStepS;
-    h.maxSweepMm = config.maxSweepMm;
-    h.cautionMm = config.cautionMm;
-    h.dangerMm = config.dangerMm;
-    h.clampMm = DistanceField::kDefaultClampMm; // the server's (AssessmentConfig's default)
-    // The scene the server serves: the one given, or the one it builds from the volume.
-    Scene scene = config.scene ? *config.scene : buildScene(volume);
-    h.scene = encodeMessage(scene);
-    // Numbered as the server numbers its starting marks.
-    uint32_t id = 1;
-    for (const AnnotationInfo& m : config.marks)
-        h.marks.push_back({id++, 0, m.position, m.label});
     return h;
 }
 
