@@ -427,8 +427,7 @@ void SessionServer::submitVoxels(const Box3i& box, std::vector<uint8_t> density,
         if (m >= uint8_t(kMaterialCount))
             throw Error("submitVoxels: unknown material label " + std::to_string(m));
     std::vector<LogRecord> events;
-    events.push_back(
-        {m_impl->clock(), VoxelsEvent{box, std::move(density), std::move(material)}});
+    events.push_back({m_impl->clock(), VoxelsEvent{box, std::move(density), std::move(material)}});
     m_impl->push(events);
 }
 
@@ -882,6 +881,8 @@ void SessionServer::Impl::send(uint64_t now) {
         stats.tick(now);
         nextTickUs = now + 1000000;
     }
+    if (recorder)
+        recorder->tick(now); // its syncs run on its own executor
 }
 
 void SessionServer::Impl::simulate(uint64_t now) {
@@ -939,8 +940,6 @@ void SessionServer::networkLoop() {
         s.waitNetwork(1);
         s.receive(s.clock());
         s.send(s.clock());
-        if (s.recorder)
-            s.recorder->tick(s.clock()); // its syncs run on its own executor
     }
     s.sayGoodbye();
 }

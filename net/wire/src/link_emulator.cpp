@@ -129,6 +129,25 @@ ENetSocket makeSocket(uint16_t port) {
     return s;
 }
 
+// Waits until a datagram arrives or the next queued one is due, at most 1 ms (the relay's loop
+// sees its stop then). ppoll, not select: whole milliseconds would make a relay with datagrams
+// queued spin a core until they are due, taking it from the peers it serves.
+void waitForTraffic(ENetSocket front, const std::map<uint64_t, std::unique_ptr<Client>>& clients,
+                    std::vector<pollfd>& fds) {
+    fds.assign(1, pollfd{front, POLLIN, 0});
+    Clock::time_point wake = Clock::now() + std::chrono::milliseconds(1);
+    for (const auto& [key, cl] : clients) {
+        fds.push_back({cl->back, POLLIN, 0});
+        for (const Lane* lane : {&cl->up, &cl->down})
+            if (!lane->queue.empty())
+                wake = std::min(wake, lane->queue.front().due);
+    }
+    const auto wait = std::max(Clock::duration::zero(), wake - Clock::now());
+    const auto ns = std::chrono::duration_cast<std::chrono::nanoseconds>(wait).count();
+    const timespec timeout{time_t(ns / 1000000000), long(ns % 1000000000)};
+    ppoll(fds.data(), nfds_t(fds.size()), &timeout, nullptr);
+}
+
 } // namespace
 
 LinkEmulator::LinkEmulator(uint16_t listenPort, const ENetAddress& target,
@@ -211,21 +230,7 @@ void LinkEmulator::run() {
             seededWith = c.seed;
         }
 
-        // Wait until a datagram arrives or the next queued one is due, at most 1 ms (to see
-        // m_stop). ppoll, not select: whole milliseconds would make a relay with datagrams queued
-        // spin a core until they are due, taking it from the peers it serves.
-        fds.assign(1, pollfd{m_front, POLLIN, 0});
-        Clock::time_point wake = Clock::now() + std::chrono::milliseconds(1);
-        for (auto& [key, cl] : clients) {
-            fds.push_back({cl->back, POLLIN, 0});
-            for (const Lane* lane : {&cl->up, &cl->down})
-                if (!lane->queue.empty())
-                    wake = std::min(wake, lane->queue.front().due);
-        }
-        const auto wait = std::max(Clock::duration::zero(), wake - Clock::now());
-        const auto ns = std::chrono::duration_cast<std::chrono::nanoseconds>(wait).count();
-        const timespec timeout{time_t(ns / 1000000000), long(ns % 1000000000)};
-        ppoll(fds.data(), nfds_t(fds.size()), &timeout, nullptr);
+        waitForTraffic(m_front, clients, fds);
 
         // From clients to the target.
         for (;;) {
