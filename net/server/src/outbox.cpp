@@ -115,30 +115,7 @@ Dbi Outbox::buffer(int width, int height) {
 void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect, bool full,
                   uint64_t causeUs, ImageTiming timing, Dbi* owned) {
     Client& c = m_clients[id];
-    std::optional<PendingImage> old;
-    {
-        std::lock_guard lock(m_mutex);
-        auto it = m_images.find(id);
-        if (it != m_images.end()) {
-            std::vector<PendingImage>& waiting = it->second;
-            if (full) {
-                // The whole frame says all they said (a job coding one of them is dropped).
-                for (const PendingImage& w : waiting)
-                    if (w.viewId == c.viewId)
-                        causeUs = std::min(causeUs, w.causeUs);
-                waiting.clear();
-            } else if (!waiting.empty() && waiting.back().viewId != c.viewId) {
-                waiting.clear();
-            } else if (!waiting.empty() && !waiting.back().ticket) {
-                // The newest merges unless it is a full image coded apart: that one is never
-                // coded again, and this rectangle waits behind it.
-                old = std::move(waiting.back());
-                waiting.pop_back();
-            }
-            if (waiting.empty())
-                m_images.erase(it);
-        }
-    }
+    std::optional<PendingImage> old = takeMergeable(id, c.viewId, full, causeUs);
     // Not of this frame (a view change drops waiting images; this is the safety net): the
     // client's pixels are unknown, so it gets the whole frame.
     const bool merge = old && frame.bounds().contains(old->rect);
@@ -184,23 +161,7 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
     }
     const uint64_t e0 = m_clock();
     const Dbi pixels = frame.extract(rect);
-    Dbi undo;
-    // Predicted updates trade ~4 ns a pixel more coding at each end than the planar form for
-    // about half its bytes (benchmark_net 'predicted|planar'): worth it with zstd (the codec
-    // chosen for bytes), not with lz4 (chosen for latency).
-    if (!full && c.codec == Codec::Zstd && c.shadow.width() == frame.width() &&
-        c.shadow.height() == frame.height()) {
-        undo = c.shadow.extract(rect);
-        PredictedImage p = encodePredicted(pixels, undo, c.codec, DepthQuantizer(camera));
-        u.predicted = true;
-        u.baseHash = p.baseHash;
-        u.rawBytes = p.rawBytes;
-        u.payload = std::move(p.payload);
-    } else {
-        EncodedImage e = encodeImage(pixels, u.codec, camera);
-        u.rawBytes = e.rawBytes;
-        u.payload = std::move(e.payload);
-    }
+    Dbi undo = encodeInto(u, c, frame, pixels, camera);
     // Only zstd clients get predicted updates, so only they need the copy (a whole frame:
     // 33.5 MB for 2048 x 2048).
     if (c.codec != Codec::Zstd)
@@ -237,6 +198,58 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
     }
     if (m_wake)
         m_wake();
+}
+
+// [Posting thread] Takes the client's newest waiting image when the new one merges with it; a full
+// image clears them all (keeping their oldest cause), an image of an older view is dropped.
+std::optional<Outbox::PendingImage> Outbox::takeMergeable(uint16_t id, uint32_t viewId, bool full,
+                                                          uint64_t& causeUs) {
+    std::lock_guard lock(m_mutex);
+    auto it = m_images.find(id);
+    if (it == m_images.end())
+        return std::nullopt;
+    std::optional<PendingImage> old;
+    std::vector<PendingImage>& waiting = it->second;
+    if (full) {
+        // The whole frame says all they said (a job coding one of them is dropped).
+        for (const PendingImage& w : waiting)
+            if (w.viewId == viewId)
+                causeUs = std::min(causeUs, w.causeUs);
+        waiting.clear();
+    } else if (!waiting.empty() && waiting.back().viewId != viewId) {
+        waiting.clear();
+    } else if (!waiting.empty() && !waiting.back().ticket) {
+        // The newest merges unless it is a full image coded apart: that one is never coded
+        // again, and this rectangle waits behind it.
+        old = std::move(waiting.back());
+        waiting.pop_back();
+    }
+    if (waiting.empty())
+        m_images.erase(it);
+    return old;
+}
+
+// Codes `pixels` (the update's rectangle of `frame`) into `u`: predicted against the client's
+// copy for zstd clients, planar otherwise. Gives the copy's pixels it replaces (empty if planar).
+Dbi Outbox::encodeInto(ImageUpdate& u, const Client& c, const Dbi& frame, const Dbi& pixels,
+                       const Camera& camera) {
+    // Predicted updates trade ~4 ns a pixel more coding at each end than the planar form for
+    // about half its bytes (benchmark_net 'predicted|planar'): worth it with zstd (the codec
+    // chosen for bytes), not with lz4 (chosen for latency).
+    if (!u.full && c.codec == Codec::Zstd && c.shadow.width() == frame.width() &&
+        c.shadow.height() == frame.height()) {
+        Dbi undo = c.shadow.extract({int(u.x), int(u.y), int(u.width), int(u.height)});
+        PredictedImage p = encodePredicted(pixels, undo, c.codec, DepthQuantizer(camera));
+        u.predicted = true;
+        u.baseHash = p.baseHash;
+        u.rawBytes = p.rawBytes;
+        u.payload = std::move(p.payload);
+        return undo;
+    }
+    EncodedImage e = encodeImage(pixels, u.codec, camera);
+    u.rawBytes = e.rawBytes;
+    u.payload = std::move(e.payload);
+    return Dbi();
 }
 
 // The full image waits, being coded, at the end of the client's images; the coder fills in its

@@ -168,6 +168,10 @@ private:
     void postVolumeOrRefuse(uint16_t id, const Client& c, const Volume& volume,
                             const VolumeChange& change);
     void countNoted();
+    std::optional<PendingImage> takeMergeable(uint16_t id, uint32_t viewId, bool full,
+                                              uint64_t& causeUs);
+    Dbi encodeInto(ImageUpdate& u, const Client& c, const Dbi& frame, const Dbi& pixels,
+                   const Camera& camera);
     void codeApart(uint16_t id, CodingJob job);
     void code(CodingJob job);
 
