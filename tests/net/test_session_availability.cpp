@@ -130,7 +130,9 @@ TEST(SessionAvailability, ARefusedConnectionHearsTheServerIsBusyAndJoinsOnceTher
     Pumped pumped(server);
     auto silent = std::make_unique<Reconnectors>(server.port(), 2, 1, kProtocolVersion);
     ASSERT_TRUE(waitFor([&] { return silent->connects() >= 2; }, 20.0));
-    SessionClient trainee(trephine::testing::namedClientConfig(sphere, "ada", Role::Trainee, 32));
+    ClientConfig cc = trephine::testing::namedClientConfig(sphere, "ada", Role::Trainee, 32);
+    cc.clock = [&] { return pumped.now(); }; // the server's time: skipping moves both
+    SessionClient trainee(cc);
     trainee.connect(loopback(server.port())); // from 127.0.0.1, whose two places are taken
     ASSERT_TRUE(pumpUntil(
         {&trainee}, [&] { return trainee.busyRefusals() > 0; }, 20.0));
@@ -146,7 +148,8 @@ TEST(SessionAvailability, ARefusedConnectionHearsTheServerIsBusyAndJoinsOnceTher
         },
         5.0))
         << availabilityOf(server).dump();
-    silent.reset(); // their places free at the hello timeout
+    silent.reset(); // their places free at the hello timeout (1 s), and the trainee's retry
+    pumped.skip(2.5); // waits at most 2 s: time skipped, not slept
     ASSERT_TRUE(pumpUntil(
         {&trainee}, [&] { return trainee.hasFullImage(); }, 20.0))
         << trainee.closeReason();
