@@ -408,7 +408,7 @@ TEST(AssessmentSession, WarningsAndSnapshotsReachWhomTheyShould) {
     using namespace trephine::testing;
     const Volume v = sinusUnderBone();
     SessionServer server(v, loopbackServerConfig("sinus"));
-    server.start();
+    Pumped pumped(server);
     SessionClient ada(namedClientConfig(v, "ada", Role::Trainee, 32));
     SessionClient ben(namedClientConfig(v, "ben", Role::Trainee, 32));
     SessionClient iris(namedClientConfig(v, "iris", Role::Instructor, 32));

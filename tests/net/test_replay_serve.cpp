@@ -324,7 +324,7 @@ TEST(ReplayServe, WindowsSeekBackAndForthAndTheVolumeIsTheLogsAtThatTimeBitForBi
     ServerConfig base = trephine::testing::loopbackServerConfig("sphere:48");
     SessionServer server(start, replayServerConfig(log.header, base));
     server.serveLog(log.records, 1.0, false);
-    server.start();
+    trephine::testing::Pumped pumped(server);
     ClientConfig config = namedClientConfig(start, "Watcher", Role::Instructor, 40);
     config.codec = Codec::Raw; // the DBI's depth is then the server's floats, bit for bit
     SessionClient watcher(config);
@@ -342,7 +342,7 @@ TEST(ReplayServe, WindowsSeekBackAndForthAndTheVolumeIsTheLogsAtThatTimeBitForBi
     const SurfaceSite top{glm::vec3(0.0f, 0.0f, sphereRadiusMm(48)), glm::vec3(0, 0, 1)};
     for (int i = 0; i < 12; ++i) {
         trainee.sendToolState(burrState(top, i, 12, 2000000));
-        trainee.poll(1);
+        trephine::testing::pollAll({&trainee});
     }
     const Camera camera = toCamera(config.view);
     auto shows = [&](const Volume& v, uint32_t seeks) {

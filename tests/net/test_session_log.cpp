@@ -39,6 +39,8 @@ using trephine::testing::burrState;
 using trephine::testing::loopback;
 using trephine::testing::loopbackServerConfig;
 using trephine::testing::namedClientConfig;
+using trephine::testing::pollAll;
+using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
 
 namespace {
@@ -533,12 +535,13 @@ TEST(SessionRecorder, ASyncStillUnderWayIsNotPostedAgainAndCancelledOnesNeverRun
 
 namespace {
 
-// Two trainees and an instructor on a 48^3 sphere, recorded; strokes are waited for until the
-// server has applied them.
+// Two trainees and an instructor on a 48^3 sphere, recorded, the server pumped by the test's
+// thread; strokes are waited for until the server has applied them.
 struct RecordedSession {
     Volume sphere = makeSphere(kN);
     std::string log, saved;
     SessionServer server;
+    Pumped pumped{server};
     SessionClient ada{namedClientConfig(sphere, "Ada", Role::Trainee, 32)};
     SessionClient ben{namedClientConfig(sphere, "Ben", Role::Trainee, 40)};
     SessionClient cho{namedClientConfig(sphere, "Dr. Cho", Role::Instructor, 32)};
@@ -560,7 +563,6 @@ struct RecordedSession {
                  config(start.empty() ? sphere : start, log, saved, std::move(c))) {}
 
     bool joined() {
-        server.start();
         for (SessionClient* c : all)
             c->connect(loopback(server.port()));
         return pumpUntil(all, [&] {
@@ -577,8 +579,7 @@ struct RecordedSession {
             ToolState t = burrState(site, i, states, 1000000 + applied * 10000);
             t.sequence = ++sequence[&who];
             who.sendToolState(t);
-            for (SessionClient* c : all)
-                c->poll(1);
+            pollAll(all);
         }
         applied += uint64_t(states);
         EXPECT_TRUE(pumpUntil(all, [&] { return server.toolStatesApplied() >= applied; }));

@@ -1,8 +1,9 @@
 // Multi-rate haptics across the network (issue 5): the haptics study's simulated hand, but every
 // force model it feels is a real SessionServer's answer over loopback ENet. The hand is integrated
 // on simulated time at 1 kHz; every 50 ms of simulated time (20 Hz) the client sends its tool state
-// and the run waits (wall time, deadline-guarded) for the HapticModel answering it. Deterministic:
-// the wire only carries the models, and nothing asserts wall time.
+// and the test's thread pumps the server (wall time, deadline-guarded) until the HapticModel
+// answering it arrives. Deterministic: the wire only carries the models, and nothing asserts wall
+// time.
 #include "net/session_client.h"
 #include "net/session_server.h"
 
@@ -27,6 +28,7 @@ namespace {
 
 using trephine::testing::loopback;
 using trephine::testing::loopbackServerConfig;
+using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
 
 // A HapticModelSource that asks the server: sends the sampled pose as a (non-drilling) tool state
@@ -82,7 +84,7 @@ TEST(HapticsLoopback, MultirateStableAt20HzOverLoopbackWhereZeroOrderHoldIsNot) 
     ASSERT_EQ(config.shape.kind, ToolKind::Burr);
 
     SessionServer server(box, loopbackServerConfig("box:48"));
-    server.start();
+    Pumped pumped(server);
     ClientConfig cc;
     cc.view = toViewSpec(cameraPreset("top", box, {16, 16}));
     SessionClient client(cc);

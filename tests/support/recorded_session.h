@@ -1,9 +1,10 @@
 // A session recorded in-process for the replay tests: a server with a recorder on the 48^3
-// sphere, and a trainee, Ada, drilling two strokes of 12 tool states, one after the other.
+// sphere, pumped by the caller's thread, and a trainee, Ada, drilling two strokes of 12 tool
+// states, one after the other.
 #pragma once
 
-#include "net/session_client.h"
 #include "net/replay_feed.h"
+#include "net/session_client.h"
 #include "net/session_log.h"
 #include "net/session_server.h"
 
@@ -25,7 +26,7 @@ inline net::LogContents recordTwoStrokes(const std::string& log) {
     c.recorder = SessionRecorder::create(log, makeLogHeader(sphere, c, "sphere:48", false, 1));
     {
         SessionServer server(sphere, c);
-        server.start();
+        Pumped pumped(server);
         SessionClient ada(namedClientConfig(sphere, "Ada", Role::Trainee, 40));
         ada.connect(loopback(server.port()));
         EXPECT_TRUE(pumpUntil({&ada}, [&] { return ada.hasFullImage(); }));
@@ -38,7 +39,7 @@ inline net::LogContents recordTwoStrokes(const std::string& log) {
                 net::ToolState t = burrState(site, i, 12, 1000000 + sent * 10000);
                 t.sequence = uint32_t(sent + 1); // the server applies newer sequences only
                 ada.sendToolState(t);
-                ada.poll(1);
+                pollAll({&ada});
             }
             EXPECT_TRUE(pumpUntil({&ada}, [&] { return server.toolStatesApplied() >= sent; }));
         }
