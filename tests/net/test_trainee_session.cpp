@@ -1,5 +1,6 @@
 // The trainee session against a loopback server: the steps from join to the drain in order, and
-// the one line each step's failure says.
+// the one line each step's failure says. The session blocks its caller, so its steps run on a
+// thread of the test while the test's own thread pumps the server.
 #include "net/trainee_session.h"
 
 #include "libsim/error.h"
@@ -10,10 +11,15 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
+#include <exception>
+#include <functional>
 #include <string>
+#include <thread>
 
 using namespace trephine;
 using namespace trephine::net;
+using trephine::testing::Pumped;
 
 namespace {
 
@@ -59,13 +65,37 @@ std::string failure(F f) {
     return {};
 }
 
+// Runs `steps` on a thread of the test while this thread pumps the server until they return, and
+// after each pass runs `between` (what must happen on the pumping thread, such as a stop). The
+// session's own timeouts end a step the server never answers; what the steps throw is thrown here.
+void pumpWhile(const std::function<void()>& steps, const std::function<void()>& between = {}) {
+    std::atomic<bool> done = false;
+    std::exception_ptr thrown;
+    std::thread session([&] {
+        try {
+            steps();
+        } catch (...) {
+            thrown = std::current_exception();
+        }
+        done = true;
+    });
+    while (!done) {
+        trephine::testing::pumpFor(0.001);
+        if (between)
+            between();
+    }
+    session.join();
+    if (thrown)
+        std::rethrow_exception(thrown);
+}
+
 class TraineeSessionTest : public ::testing::Test {
 protected:
-    void SetUp() override { server.start(); }
     void TearDown() override { server.stop(); }
 
     Volume sphere = makeSphere(32);
     SessionServer server{sphere, trephine::testing::loopbackServerConfig("sphere:32")};
+    Pumped pumped{server};
 };
 
 } // namespace
@@ -75,21 +105,27 @@ protected:
 // answer to the lift.
 TEST_F(TraineeSessionTest, RunsAScriptFromJoinToTheDrain) {
     TraineeSession session(configFor(server.port()));
-    const Welcome welcome = session.join();
-    EXPECT_GT(welcome.clientId, 0u);
-    const ReceivedScene& scene = session.awaitScene();
-    EXPECT_NE(findSite(scene.scene, kDefaultSiteName), nullptr);
-    const Camera camera = session.openPreset("working");
-    EXPECT_EQ(camera.width, 32);
-    EXPECT_TRUE(session.view().hasPicture());
+    Camera camera;
+    uint64_t liftSentAfter = 0;
+    SessionEnd end;
+    pumpWhile([&] {
+        const Welcome welcome = session.join();
+        EXPECT_GT(welcome.clientId, 0u);
+        const ReceivedScene& scene = session.awaitScene();
+        EXPECT_NE(findSite(scene.scene, kDefaultSiteName), nullptr);
+        camera = session.openPreset("working");
+        EXPECT_EQ(camera.width, 32);
+        EXPECT_TRUE(session.view().hasPicture());
 
-    std::vector<ScriptSample> script = session.burrhole(1.0); // the plunge
-    ASSERT_FALSE(script.empty());
-    const uint64_t liftSentAfter = steadyNowUs() + 1'000'000;
-    play(session, std::move(script), 1.0);
-    session.drill();
-    session.liftAndDrain();
-    const SessionEnd end = session.finish();
+        std::vector<ScriptSample> script = session.burrhole(1.0); // the plunge
+        ASSERT_FALSE(script.empty());
+        liftSentAfter = steadyNowUs() + 1'000'000;
+        play(session, std::move(script), 1.0);
+        session.drill();
+        session.liftAndDrain();
+        end = session.finish();
+    });
+    ASSERT_FALSE(HasFatalFailure());
     EXPECT_EQ(end.how, SessionEnd::How::ScriptDone);
     EXPECT_EQ(session.endText(end), "");
     EXPECT_GE(end.elapsedS, 1.0);
@@ -105,13 +141,16 @@ TEST_F(TraineeSessionTest, RunsAScriptFromJoinToTheDrain) {
 // The caller's stop ends the script early; the session says how far it got.
 TEST_F(TraineeSessionTest, TheCallersStopEndsItEarly) {
     TraineeSession session(configFor(server.port()));
-    session.join();
-    session.awaitScene();
-    session.openPreset("top");
-    play(session, session.burrhole(kBurrholeSeconds), kBurrholeSeconds);
-    session.drill([](double t) { return t < 0.2; });
-    session.liftAndDrain(0.1);
-    const SessionEnd end = session.finish();
+    SessionEnd end;
+    pumpWhile([&] {
+        session.join();
+        session.awaitScene();
+        session.openPreset("top");
+        play(session, session.burrhole(kBurrholeSeconds), kBurrholeSeconds);
+        session.drill([](double t) { return t < 0.2; });
+        session.liftAndDrain(0.1);
+        end = session.finish();
+    });
     EXPECT_EQ(end.how, SessionEnd::How::Stopped);
     EXPECT_LT(end.elapsedS, kBurrholeSeconds);
     EXPECT_EQ(session.endText(end).rfind("trainee: stopped by a signal ", 0), 0u)
@@ -121,17 +160,26 @@ TEST_F(TraineeSessionTest, TheCallersStopEndsItEarly) {
 // The server going away mid-script ends the session as closed (its goodbye) or lost (silence).
 TEST_F(TraineeSessionTest, AServerThatGoesEndsTheSession) {
     TraineeSession session(configFor(server.port()));
-    session.join();
-    session.awaitScene();
-    session.openPreset("top");
-    play(session, session.burrhole(kBurrholeSeconds), kBurrholeSeconds);
-    session.drill([&](double t) {
-        if (t > 0.2)
-            server.stop();
-        return true;
-    });
-    session.liftAndDrain();
-    const SessionEnd end = session.finish();
+    std::atomic<bool> goAway = false; // the pumping thread stops the server it pumps
+    SessionEnd end;
+    pumpWhile(
+        [&] {
+            session.join();
+            session.awaitScene();
+            session.openPreset("top");
+            play(session, session.burrhole(kBurrholeSeconds), kBurrholeSeconds);
+            session.drill([&](double t) {
+                if (t > 0.2)
+                    goAway = true;
+                return true;
+            });
+            session.liftAndDrain();
+            end = session.finish();
+        },
+        [&] {
+            if (goAway)
+                server.stop();
+        });
     EXPECT_TRUE(end.how == SessionEnd::How::Closed || end.how == SessionEnd::How::Lost)
         << session.endText(end);
     EXPECT_FALSE(session.endText(end).empty());
@@ -140,10 +188,13 @@ TEST_F(TraineeSessionTest, AServerThatGoesEndsTheSession) {
 
 TEST_F(TraineeSessionTest, APresetTheSceneLacksIsOneLine) {
     TraineeSession session(configFor(server.port()));
-    session.join();
-    session.awaitScene();
-    EXPECT_EQ(failure([&] { session.openPreset("nowhere"); }),
-              "trainee: the server's scene has no camera preset 'nowhere'");
+    std::string what;
+    pumpWhile([&] {
+        session.join();
+        session.awaitScene();
+        what = failure([&] { session.openPreset("nowhere"); });
+    });
+    EXPECT_EQ(what, "trainee: the server's scene has no camera preset 'nowhere'");
 }
 
 TEST(TraineeSession, AViewLargerThanTheServerServesIsRefusedBeforeItIsAsked) {
@@ -151,11 +202,15 @@ TEST(TraineeSession, AViewLargerThanTheServerServesIsRefusedBeforeItIsAsked) {
     ServerConfig sc = trephine::testing::loopbackServerConfig("sphere:32");
     sc.maxViewPixels = 32 * 32;
     SessionServer server(sphere, sc);
-    server.start();
+    Pumped pumped(server);
     TraineeSession session(configFor(server.port(), 64));
-    session.join();
-    session.awaitScene();
-    EXPECT_EQ(failure([&] { session.openPreset("top"); }),
+    std::string what;
+    pumpWhile([&] {
+        session.join();
+        session.awaitScene();
+        what = failure([&] { session.openPreset("top"); });
+    });
+    EXPECT_EQ(what,
               "trainee: the server serves views of at most 1024 pixels; --size 64 asks for 4096: "
               "give a smaller --size");
     server.stop();
