@@ -400,9 +400,17 @@ TEST(SessionCli, UnderNohupAHangupLeavesTheServerRunning) {
     ServerProcess server(
         {"--port", "0", "--volume", "sphere:16", "--render-threads", "1", "--save-on-exit", path},
         "server", true);
-    ASSERT_GT(portIn(server.line()), 0);
+    const int port = portIn(server.line());
+    ASSERT_GT(port, 0);
     kill(server.pid, SIGHUP);
-    std::this_thread::sleep_for(std::chrono::milliseconds(500));
+    // Still serving after the hang-up: a client joins (the server ran since the signal came).
+    SessionClient client(
+        trephine::testing::namedClientConfig(makeSphere(16), "after", Role::Trainee, 16));
+    client.connect(trephine::testing::loopback(uint16_t(port)));
+    EXPECT_TRUE(trephine::testing::pumpUntil(
+        {&client}, [&] { return client.welcomed(); }, 20.0))
+        << client.closeReason();
+    client.disconnect();
     int status = 0;
     EXPECT_EQ(waitpid(server.pid, &status, WNOHANG), 0) << "the hang-up stopped it";
     EXPECT_EQ(server.stop(), 0);
@@ -483,7 +491,8 @@ TEST(SessionCli, CtrlCOfAHeadlessTraineeStillWritesItsReport) {
             break;
     }
     ASSERT_NE(text.find("script samples"), std::string::npos) << text;
-    std::this_thread::sleep_for(std::chrono::milliseconds(300));
+    // Interrupted mid-script: once its tool states reach the server.
+    ASSERT_TRUE(trephine::testing::waitFor([&] { return server.toolStatesApplied() > 0; }));
     EXPECT_EQ(trainee.stop(SIGINT), 1);
     server.stop();
     const nlohmann::json json = readJson(dir / "r.json");
