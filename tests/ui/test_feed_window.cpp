@@ -45,7 +45,7 @@ TEST(FeedWindow, HoldingTheButtonOverBoneDrillsAHoleTheScreenshotShowsUncovered)
     const Volume skull = makeSkull(128);
     const int64_t before = boneVoxels(skull);
     net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:128", 2));
-    server.start();
+    trephine::testing::Pumped pumped(server);
     trephine::testing::TempDir dir;
     const std::string shot = dir / "held.png";
     constexpr int kSize = 256;
@@ -71,7 +71,7 @@ TEST(FeedWindow, HoldingTheButtonOverBoneDrillsAHoleTheScreenshotShowsUncovered)
         p.done = t > 1.0 + kHoldS;
         return p;
     };
-    ASSERT_EQ(runTrainerWindow(o), 0);
+    ASSERT_EQ(trephine::testing::whilePumping([&] { return runTrainerWindow(o); }), 0);
     const int64_t removed = before - boneVoxels(server.volumeSnapshot());
     server.stop();
     std::printf("feed window: %.0f s held still at the site, skull:128: %lld bone voxels "
@@ -115,7 +115,7 @@ TEST(FeedWindow, AResizedWindowsViewFillsTheFreeAreaAtItsNewSize) {
     TREPHINE_NEED_DISPLAY("the trainee window");
     net::SessionServer server(makeSkull(128),
                               trephine::testing::loopbackServerConfig("skull:128", 2));
-    server.start();
+    trephine::testing::Pumped pumped(server);
     trephine::testing::TempDir dir;
     const std::string shot = dir / "resized.png";
     constexpr int kWidth = 1120, kHeight = 830; // from 980 x 760 at --size 200
@@ -138,7 +138,7 @@ TEST(FeedWindow, AResizedWindowsViewFillsTheFreeAreaAtItsNewSize) {
         in.done = t > 1.0;
         return in;
     };
-    ASSERT_EQ(runTrainerWindow(o), 0);
+    ASSERT_EQ(trephine::testing::whilePumping([&] { return runTrainerWindow(o); }), 0);
     server.stop();
     const glm::ivec2 want(kWidth - int(panelsWidth(kWidth, false)), kHeight - 400);
     EXPECT_EQ(report.view.width(), want.x);
@@ -166,7 +166,7 @@ TEST(FeedWindow, ARightDragOrbitsAndCtrlWheelZooms) {
     TREPHINE_NEED_DISPLAY("the trainee window");
     const Volume skull = makeSkull(128);
     net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:128", 2));
-    server.start();
+    trephine::testing::Pumped pumped(server);
     trephine::testing::TempDir dir;
     TrainerReport report;
     TrainerOptions o;
@@ -196,7 +196,7 @@ TEST(FeedWindow, ARightDragOrbitsAndCtrlWheelZooms) {
         in.done = t > 1.6;
         return in;
     };
-    ASSERT_EQ(runTrainerWindow(o), 0);
+    ASSERT_EQ(trephine::testing::whilePumping([&] { return runTrainerWindow(o); }), 0);
     server.stop();
     ASSERT_TRUE(zoomed);
     const SurfaceSite site = defaultBurrSite(skull);

@@ -106,7 +106,7 @@ TEST(Layout, AWindowOf900By650DrawsEveryPanelInsideIt) {
     TREPHINE_NEED_DISPLAY("the trainee window");
     const Volume skull = makeSkull(64);
     net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64"));
-    server.start();
+    trephine::testing::Pumped pumped(server);
     TrainerReport report;
     TrainerOptions o;
     o.address = "127.0.0.1:" + std::to_string(server.port());
@@ -118,7 +118,7 @@ TEST(Layout, AWindowOf900By650DrawsEveryPanelInsideIt) {
     o.timeoutS = 60.0;
     o.visible = false;
     o.report = &report;
-    ASSERT_EQ(runTrainerWindow(o), 0);
+    ASSERT_EQ(trephine::testing::whilePumping([&] { return runTrainerWindow(o); }), 0);
     server.stop();
     const WindowLayout want = windowLayout(900, 650, 500, 500, false);
     ASSERT_EQ(report.panels.size(), 7u) << "every panel drawn";

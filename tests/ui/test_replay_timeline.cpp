@@ -58,7 +58,7 @@ TEST(ReplayTimeline, SpaceInAWindowPlaysTheServedLogAndRightSeeksIt) {
         net::ServerConfig base = trephine::testing::loopbackServerConfig("sphere:48");
         net::SessionServer server(start, net::replayServerConfig(log.header, base));
         server.serveLog(log.records, 0.01, false); // slow: a hundredth of the pace
-        server.start();
+        trephine::testing::Pumped pumped(server);
         TrainerOptions o;
         o.address = "127.0.0.1:" + std::to_string(server.port());
         o.instructor = true;
@@ -67,7 +67,7 @@ TEST(ReplayTimeline, SpaceInAWindowPlaysTheServedLogAndRightSeeksIt) {
         o.timeoutS = 60.0;
         o.visible = false;
         o.tapKeys = std::move(taps);
-        EXPECT_EQ(runTrainerWindow(o), 0);
+        EXPECT_EQ(trephine::testing::whilePumping([&] { return runTrainerWindow(o); }), 0);
         // The window's last control reaches the server's next pass.
         std::optional<net::ReplayState> s;
         EXPECT_TRUE(trephine::testing::pumpUntil({}, [&] {

@@ -135,7 +135,7 @@ TEST(ThinClients, EveryClientKindInBothDesignsJoinsWithTheAddressAlone) {
     OpenWatch watch(file);
     ASSERT_GE(watch.opens(), 0) << "inotify";
     net::SessionServer server(skull, trephine::testing::loopbackServerConfig(file, 2));
-    server.start();
+    trephine::testing::Pumped pumped(server);
     const std::string address = "127.0.0.1:" + std::to_string(server.port());
     const net::Scene scene = net::buildScene(skull);
     const float voxelMm = skull.spacing().x;
@@ -158,7 +158,8 @@ TEST(ThinClients, EveryClientKindInBothDesignsJoinsWithTheAddressAlone) {
             o.timeoutS = 100.0;
             o.visible = false;
             o.report = &report;
-            ASSERT_EQ(runTrainerWindow(o), 0) << who;
+            ASSERT_EQ(trephine::testing::whilePumping([&] { return runTrainerWindow(o); }), 0)
+                << who;
             const Camera want = *net::presetCamera(scene, "working", {kView, kView});
             EXPECT_LT(glm::length(report.camera.eye - want.eye), 1e-3f) << who;
             EXPECT_EQ(report.camera.target, want.target) << who;
@@ -170,10 +171,11 @@ TEST(ThinClients, EveryClientKindInBothDesignsJoinsWithTheAddressAlone) {
     // server's render of the drilled skull.
     for (const std::string sync : {"dbi", "volume"}) {
         const std::string exr = clientDir / ("headless-" + sync + ".exr");
-        const trephine::testing::CommandResult r = trephine::testing::runTrephine(
-            clientDir, "trainee --headless --connect " + address + " --sync " + sync +
-                           " --camera working --size " + std::to_string(kView) +
-                           " --duration 1 --save-dbi " + shellQuote(exr));
+        const std::string args = "trainee --headless --connect " + address + " --sync " + sync +
+                                 " --camera working --size " + std::to_string(kView) +
+                                 " --duration 1 --save-dbi " + shellQuote(exr);
+        const trephine::testing::CommandResult r = trephine::testing::whilePumping(
+            [&] { return trephine::testing::runTrephine(clientDir, args); });
         ASSERT_EQ(r.exitCode, 0) << r.err;
         const Camera camera = *net::presetCamera(scene, "working", {kView, kView});
         expectSamePicture(readDbiExr(exr).image, server.renderView(net::toViewSpec(camera)), camera,
@@ -195,7 +197,7 @@ TEST(ThinClients, EveryClientKindInBothDesignsJoinsWithTheAddressAlone) {
 TEST(ThinClients, PickingOnTheDbiFindsTheVolumesSurfaceWithinAVoxel) {
     const Volume skull = makeSkull(64);
     net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64"));
-    server.start();
+    trephine::testing::Pumped pumped(server);
     net::ClientConfig cc;
     cc.view.width = cc.view.height = 1;
     cc.codec = net::Codec::Lz4;
@@ -228,7 +230,7 @@ TEST(ThinClients, AnInstructorViewsAsATraineeThroughItsCamera) {
     TREPHINE_NEED_DISPLAY("the instructor window");
     const Volume skull = makeSkull(64);
     net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64", 2));
-    server.start();
+    trephine::testing::Pumped pumped(server);
     net::ClientConfig tc =
         trephine::testing::namedClientConfig(skull, "alex", net::Role::Trainee, 80);
     tc.view = net::toViewSpec(cameraPreset("left", skull, {80, 80}));
@@ -254,7 +256,7 @@ TEST(ThinClients, AnInstructorViewsAsATraineeThroughItsCamera) {
     o.timeoutS = 100.0;
     o.visible = false;
     o.report = &report;
-    const int rc = runTrainerWindow(o);
+    const int rc = trephine::testing::whilePumping([&] { return runTrainerWindow(o); });
     stop = true;
     pump.join();
     ASSERT_EQ(rc, 0);

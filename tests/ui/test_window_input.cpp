@@ -33,7 +33,7 @@ TEST(WindowInput, KeyTapsInsideOneFrameChangeTheTool) {
     TREPHINE_NEED_DISPLAY("the trainee window");
     const Volume skull = makeSkull(64);
     net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64"));
-    server.start();
+    trephine::testing::Pumped pumped(server);
     auto run = [&](std::vector<int> taps) {
         TrainerReport report;
         TrainerOptions o;
@@ -45,7 +45,7 @@ TEST(WindowInput, KeyTapsInsideOneFrameChangeTheTool) {
         o.visible = false;
         o.tapKeys = std::move(taps);
         o.report = &report;
-        EXPECT_EQ(runTrainerWindow(o), 0);
+        EXPECT_EQ(trephine::testing::whilePumping([&] { return runTrainerWindow(o); }), 0);
         return report;
     };
     // The burr starts at 5 mm: two taps of [ make it 4 mm, Up pushes it one step deeper.
