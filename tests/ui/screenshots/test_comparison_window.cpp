@@ -37,8 +37,10 @@ using namespace trephine::ui;
 namespace {
 
 using trephine::testing::Image;
+using trephine::testing::Pumped;
 using trephine::testing::readPng;
 using trephine::testing::TempDir;
+using trephine::testing::whilePumping;
 
 constexpr int kView = 256; // small: llvmpipe ray casts on the CPU
 
@@ -50,23 +52,35 @@ int maxChannelDiff(const uint8_t* a, const uint8_t* b) {
     return std::max({std::abs(a[0] - b[0]), std::abs(a[1] - b[1]), std::abs(a[2] - b[2])});
 }
 
-// Waits for `pred` up to `seconds` (a guard against hangs, not a timing assertion).
+// Waits for `pred` up to `seconds`, pumping the pumped server meanwhile (a guard against hangs,
+// not a timing assertion).
 bool waitFor(const std::function<bool()>& pred, double seconds = 60.0) {
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
-    while (!pred() && std::chrono::steady_clock::now() < deadline)
-        std::this_thread::sleep_for(std::chrono::milliseconds(20));
-    return pred();
+    return trephine::testing::waitFor(pred, seconds);
 }
 
-// A started server of `volume` named `name`, on `port` (0: any free one).
-std::unique_ptr<net::SessionServer> startedServer(const Volume& volume, const std::string& name,
-                                                  uint16_t port = 0) {
-    net::ServerConfig sc = trephine::testing::loopbackServerConfig(name);
-    sc.port = port;
-    auto server = std::make_unique<net::SessionServer>(volume, sc);
-    server->start();
-    return server;
-}
+// A server of `volume` named `name`, on `port` (0: any free one), pumped by the test.
+struct PumpedServer {
+    std::unique_ptr<net::SessionServer> server;
+    std::unique_ptr<Pumped> pumped;
+
+    PumpedServer(const Volume& volume, const std::string& name, uint16_t port = 0) {
+        net::ServerConfig sc = trephine::testing::loopbackServerConfig(name);
+        sc.port = port;
+        server = std::make_unique<net::SessionServer>(volume, sc);
+        pumped = std::make_unique<Pumped>(*server);
+    }
+    ~PumpedServer() { stop(); }
+    PumpedServer(const PumpedServer&) = delete;
+    PumpedServer& operator=(const PumpedServer&) = delete;
+    net::SessionServer* operator->() { return server.get(); }
+    // Gone from its port (idempotent).
+    void stop() {
+        if (server)
+            server->stop();
+        pumped.reset();
+        server.reset();
+    }
+};
 
 // A hidden 128-pixel window of the top view on 127.0.0.1:`port`.
 TrainerOptions hiddenTopWindow(uint16_t port) {
@@ -154,11 +168,12 @@ TEST(ComparisonWindow, VolumeModeShowsTheSkullAndTheDrilledHole) {
     TREPHINE_NEED_DISPLAY("the window");
     const Volume skull = makeSkull(64);
     net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64", 2));
-    server.start();
+    Pumped pumped(server);
     TempDir dir;
     TrainerReport report;
     const std::string shot = dir / "volume.png";
-    ASSERT_EQ(runTrainerWindow(windowOptions(server.port(), "volume", shot, &report)), 0);
+    const TrainerOptions o = windowOptions(server.port(), "volume", shot, &report);
+    ASSERT_EQ(whilePumping([&] { return runTrainerWindow(o); }), 0);
 
     EXPECT_EQ(report.picture, SyncDesign::Volume);
     EXPECT_GE(report.volumeUploads, 1u) << "the whole volume at join";
@@ -215,7 +230,7 @@ TEST(ComparisonWindow, LiveSwitchDbiVolumeDbiLosesNoDrillingAndFillsBothFigures)
     TREPHINE_NEED_DISPLAY("the window");
     const Volume skull = makeSkull(64);
     net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64", 2));
-    server.start();
+    Pumped pumped(server);
     TempDir dir;
     TrainerReport report;
     TrainerOptions o = windowOptions(server.port(), "dbi", dir / "switch.png", &report);
@@ -224,7 +239,7 @@ TEST(ComparisonWindow, LiveSwitchDbiVolumeDbiLosesNoDrillingAndFillsBothFigures)
     // picture for 2.4 s: at least two of the window's 1 s ticks, one of them clear of a switch
     // (no Comparison point is taken while a switch is under way).
     o.switchSyncAtS = {1.0, 3.4};
-    ASSERT_EQ(runTrainerWindow(o), 0);
+    ASSERT_EQ(whilePumping([&] { return runTrainerWindow(o); }), 0);
 
     EXPECT_EQ(report.switchesRequested, 2);
     EXPECT_EQ(report.switchesCompleted, 2);
@@ -274,10 +289,10 @@ TEST(ComparisonWindow, AnUnwritableScreenshotEndsTheWindowWithItsError) {
     TREPHINE_NEED_DISPLAY("the window");
     const Volume skull = makeSkull(64);
     net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64", 2));
-    server.start();
+    Pumped pumped(server);
     TrainerOptions o = windowOptions(server.port(), "volume", "/nonexistent-dir/shot.png", nullptr);
     try {
-        runTrainerWindow(o);
+        whilePumping([&] { return runTrainerWindow(o); });
         FAIL() << "expected the screenshot's error";
     } catch (const std::exception& e) {
         EXPECT_NE(std::string(e.what()).find("/nonexistent-dir/shot.png"), std::string::npos)
@@ -296,7 +311,7 @@ TEST(ComparisonWindow, AReconnectToAnotherVolumeRebuildsTheScene) {
     const float boxTop = distance(cameraPreset("top", second, {128, 128}));
     const float sphereTop = distance(cameraPreset("top", first, {128, 128}));
     ASSERT_GT(std::abs(boxTop - sphereTop), 5.0f) << "the two volumes' views differ";
-    auto server = startedServer(first, "sphere:32");
+    PumpedServer server(first, "sphere:32");
     const uint16_t port = server->port();
     WindowThread window(hiddenTopWindow(port));
     // The window shows its own view of the sphere (not the hello's placeholder); then the server
@@ -304,18 +319,15 @@ TEST(ComparisonWindow, AReconnectToAnotherVolumeRebuildsTheScene) {
     // not tell: a view asked for before the placeholder was rendered replaces it unrendered.
     auto showing = [&](float d) { return std::abs(window.pictureDistance - d) < 0.5f; };
     const bool joined = waitFor([&] { return showing(sphereTop); });
-    server->stop();
-    server.reset();
-    server = startedServer(second, "box:48", port);
+    server.stop();
+    PumpedServer box(second, "box:48", port);
     // Rejoined, with the scene and camera rebuilt for the box and its picture shown.
     const bool rejoined = waitFor([&] { return showing(boxTop); });
-    const int rc = window.close();
+    const int rc = whilePumping([&] { return window.close(); });
     ASSERT_TRUE(joined);
     ASSERT_TRUE(rejoined);
     ASSERT_EQ(rc, 0);
     EXPECT_NEAR(distance(window.report.camera), boxTop, 0.5f) << "the new volume's camera";
-
-    server->stop();
 }
 
 // A volume the server names that this machine does not have: the window never opens it (the scene
@@ -325,7 +337,7 @@ TEST(ComparisonWindow, AReconnectToAnotherVolumeRebuildsTheScene) {
 TEST(ComparisonWindow, AVolumeNamedButNotOnThisMachineStillGivesThePictureAfterReconnects) {
     TREPHINE_NEED_DISPLAY("the window");
     const Volume sphere = makeSphere(32);
-    auto server = startedServer(sphere, "/nonexistent/scan.nrrd");
+    PumpedServer server(sphere, "/nonexistent/scan.nrrd");
     const uint16_t port = server->port();
     WindowThread window(hiddenTopWindow(port));
     const bool joined = waitFor([&] { return server->clientCount() >= 1; });
@@ -333,15 +345,14 @@ TEST(ComparisonWindow, AVolumeNamedButNotOnThisMachineStillGivesThePictureAfterR
     const float top = glm::length(cameraPreset("top", sphere, {128, 128}).eye -
                                   cameraPreset("top", sphere, {128, 128}).target);
     const bool pictured = waitFor([&] { return std::abs(window.pictureDistance - top) < 0.5f; });
-    server->stop();
-    server.reset();
+    server.stop();
     const int before = window.pictures;
-    server = startedServer(sphere, "sphere:32", port);
+    PumpedServer again(sphere, "sphere:32", port);
     const bool viewed = waitFor([&] {
-        return server->clientCount() >= 1 && server->rendersDone() >= 1 && window.pictures > before;
+        return again->clientCount() >= 1 && again->rendersDone() >= 1 && window.pictures > before;
     });
-    const int rc = window.close();
-    server->stop();
+    const int rc = whilePumping([&] { return window.close(); });
+    again.stop();
     ASSERT_TRUE(joined);
     EXPECT_TRUE(pictured) << "no view asked of a server whose volume file is not here";
     EXPECT_TRUE(viewed) << "no view asked of the restarted server";
@@ -354,14 +365,14 @@ TEST(ComparisonWindow, AVolumeNamedButNotOnThisMachineStillGivesThePictureAfterR
 TEST(ComparisonWindow, AFramesRunWhoseServerGoesAwayFails) {
     TREPHINE_NEED_DISPLAY("the window");
     const Volume sphere = makeSphere(32);
-    auto server = startedServer(sphere, "sphere:32");
+    PumpedServer server(sphere, "sphere:32");
     TrainerOptions o = hiddenTopWindow(server->port());
     o.frames = 1000000; // hours of frames: the run ends by failing, or not at all
     o.timeoutS = 5.0;
     WindowThread window(o);
     const bool pictured = waitFor([&] { return window.pictures >= 1; });
-    std::this_thread::sleep_for(std::chrono::milliseconds(300));
-    server->stop();
+    trephine::testing::pumpFor(0.3); // frames counted while connected, before the server goes
+    server.stop();
     const bool ended = waitFor([&] { return window.done.load(); }, 30.0);
     const int rc = window.close(); // the guard, were it still running
     ASSERT_TRUE(pictured);
@@ -390,12 +401,12 @@ TEST(ComparisonWindow, AViewLargerThanTheServerServesIsSaid) {
     net::ServerConfig sc = trephine::testing::loopbackServerConfig("sphere:32");
     sc.maxViewPixels = 100 * 100;
     net::SessionServer server(sphere, sc);
-    server.start();
+    Pumped pumped(server);
     TrainerOptions o = hiddenTopWindow(server.port());
     o.frames = 5;
     o.timeoutS = 60.0;
     ::testing::internal::CaptureStderr();
-    const int rc = runTrainerWindow(o);
+    const int rc = whilePumping([&] { return runTrainerWindow(o); });
     const std::string err = ::testing::internal::GetCapturedStderr();
     server.stop();
     EXPECT_EQ(rc, 1);
@@ -411,7 +422,10 @@ TEST(ComparisonWindow, AViewLargerThanTheServerServesIsSaid) {
 TEST(ComparisonWindow, TheWindowAndTheHeadlessTraineeReportTheSameFigures) {
     TREPHINE_NEED_DISPLAY("the window");
     const Volume sphere = makeSphere(32);
-    auto server = startedServer(sphere, "sphere:32");
+    // Stays threaded: the window's last frames cannot be seen from here, so the end is a wait.
+    auto server = std::make_unique<net::SessionServer>(
+        sphere, trephine::testing::loopbackServerConfig("sphere:32"));
+    server->start();
     TrainerOptions wo = hiddenTopWindow(server->port());
     wo.codec = "raw"; // bytes follow the rectangles alone
     WindowThread window(wo);
