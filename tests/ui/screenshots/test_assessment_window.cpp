@@ -10,6 +10,7 @@
 #include "net/session_client.h"
 #include "net/session_server.h"
 
+#include "loopback.h"
 #include "screenshot.h"
 #include "test_support.h"
 
@@ -49,7 +50,7 @@ TEST(AssessmentWindow, TheInstructorSeesTheViolationInTheBannerAndThePanel) {
     sc.volumeName = "skull:64";
     sc.renderThreads = 1;
     net::SessionServer server(skull, sc);
-    server.start();
+    trephine::testing::Pumped pumped(server);
     const std::string address = "127.0.0.1:" + std::to_string(server.port());
 
     net::ClientConfig tc;
@@ -81,7 +82,7 @@ TEST(AssessmentWindow, TheInstructorSeesTheViolationInTheBannerAndThePanel) {
     const std::string cmd = shellQuote(TREPHINE_BIN) + " instructor --connect " + address +
                             " --name Cho --window-size 500 --screenshot " + shellQuote(out) +
                             " --frames 90 --timeout 80 > " + shellQuote(out + ".log") + " 2>&1";
-    const int rc = std::system(cmd.c_str());
+    const int rc = trephine::testing::whilePumping([&] { return std::system(cmd.c_str()); });
     stop = true;
     trainee.join();
     server.stop();

@@ -36,8 +36,11 @@ using namespace trephine;
 namespace {
 
 using trephine::testing::Image;
+using trephine::testing::Pumped;
 using trephine::testing::readPng;
 using trephine::testing::shellQuote;
+using trephine::testing::waitFor;
+using trephine::testing::whilePumping;
 
 // A lit pixel of `colour`'s hue: the compositor scales the base colour by its headlight term.
 bool hasHue(const uint8_t* p, glm::vec4 colour) {
@@ -76,7 +79,7 @@ TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
     sc.volumeName = "skull:128";
     sc.renderThreads = 1;
     net::SessionServer server(skull, sc);
-    server.start();
+    Pumped pumped(server);
     const std::string address = "127.0.0.1:" + std::to_string(server.port());
 
     // The trainee's burr rests 10 mm to one side of the site, its handpiece leaning outwards.
@@ -121,9 +124,7 @@ TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
         }
         trainee.disconnect();
     });
-    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
-    while (traineeId == 0 && std::chrono::steady_clock::now() < deadline)
-        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    waitFor([&] { return traineeId != 0; }, 20.0);
 
     const std::string out =
         (std::filesystem::temp_directory_path() / "trephine_instructor.png").string();
@@ -140,10 +141,9 @@ TEST(InstructorWindow, ShowsTheTraineesToolInItsColourWhereItIs) {
     const std::string cmd = shellQuote(TREPHINE_BIN) + " instructor --connect " + address + mark +
                             " --window-size 500 --tilt 0 --screenshot " + shellQuote(out) +
                             " --frames 3 --timeout 80 > " + shellQuote(out + ".log") + " 2>&1";
-    const int rc = std::system(cmd.c_str());
+    const int rc = whilePumping([&] { return std::system(cmd.c_str()); });
     const uint64_t relays = server.hapticRelaysSent();
-    for (int i = 0; i < 200 && traineeMarks == 0; ++i) // the list reaches the trainee too
-        std::this_thread::sleep_for(std::chrono::milliseconds(10));
+    waitFor([&] { return traineeMarks >= 2; }, 10.0); // the list reaches the trainee too
     stop = true;
     traineeThread.join();
     server.stop();
@@ -230,7 +230,7 @@ TEST(InstructorWindow, AMarkOutsideTheViewIsNotDrawnOverThePanels) {
     const Volume skull = makeSkull(64);
     const SurfaceSite site = defaultBurrSite(skull);
     net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64"));
-    server.start();
+    Pumped pumped(server);
     constexpr int kView = 256;
     const Camera cam =
         cameraLookingAt(site.position, site.normal, 170.0f, 45.0f, {kView, kView}, skull);
@@ -262,7 +262,7 @@ TEST(InstructorWindow, AMarkOutsideTheViewIsNotDrawnOverThePanels) {
     o.frames = 2;
     o.timeoutS = 60.0;
     o.visible = false;
-    ASSERT_EQ(ui::runTrainerWindow(o), 0);
+    ASSERT_EQ(whilePumping([&] { return ui::runTrainerWindow(o); }), 0);
     server.stop();
 
     const Image img = readPng(o.screenshot);
@@ -280,11 +280,12 @@ TEST(InstructorWindow, AViewTooLargeNamesTheInstructorsOwnOption) {
     net::ServerConfig sc = trephine::testing::loopbackServerConfig("sphere:32");
     sc.maxViewPixels = 100 * 100;
     net::SessionServer server(sphere, sc);
-    server.start();
+    Pumped pumped(server);
     trephine::testing::TempDir dir;
-    const trephine::testing::CommandResult r = trephine::testing::runTrephine(
-        dir, "instructor --connect 127.0.0.1:" + std::to_string(server.port()) +
-                 " --window-size 128 --frames 5 --timeout 60");
+    const std::string args = "instructor --connect 127.0.0.1:" + std::to_string(server.port()) +
+                             " --window-size 128 --frames 5 --timeout 60";
+    const trephine::testing::CommandResult r =
+        whilePumping([&] { return trephine::testing::runTrephine(dir, args); });
     server.stop();
     EXPECT_EQ(r.exitCode, 1);
     EXPECT_NE(r.err.find("this view is 128 x 128: restart with --window-size 100 or less"),

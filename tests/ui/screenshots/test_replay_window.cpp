@@ -1,13 +1,13 @@
-// An instructor window watching `trephine replay --serve` of a recorded session: its screenshot
-// at the end shows the view the same, pixel for pixel, as a window on the original session after
-// its trainee had drilled and left, with the replay's timeline over the view's bottom, at its
-// end. Needs a display (xvfb-run).
+// An instructor window watching a recorded session served as a replay (SessionServer::serveLog,
+// as `trephine replay --serve` serves it): its screenshot at the end shows the view the same, pixel
+// for pixel, as a window on the original session after its trainee had drilled and left, with the
+// replay's timeline over the view's bottom, at its end. Needs a display (xvfb-run).
 #include "gl_window_test.h"
 
 #include "libsim/skull.h"
+#include "net/replay_feed.h"
 #include "net/scene.h"
 #include "net/session_client.h"
-#include "net/replay_feed.h"
 #include "net/session_log.h"
 #include "net/session_server.h"
 
@@ -17,14 +17,12 @@
 
 #include <gtest/gtest.h>
 
-#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <filesystem>
+#include <optional>
 #include <string>
-#include <sys/wait.h>
-#include <unistd.h>
 #include <vector>
 
 using namespace trephine;
@@ -32,52 +30,10 @@ using namespace trephine;
 namespace {
 
 using trephine::testing::Image;
+using trephine::testing::Pumped;
 using trephine::testing::readPng;
 using trephine::testing::shellQuote;
-
-// `trephine replay LOG --serve ...` in the background; port() reads its "on port N" line.
-struct ServedReplay {
-    pid_t pid = -1;
-    FILE* out = nullptr;
-    explicit ServedReplay(const std::string& log) {
-        int fds[2];
-        if (pipe(fds) != 0)
-            return;
-        pid = fork();
-        if (pid == 0) {
-            dup2(fds[1], 1);
-            close(fds[0]);
-            execl(TREPHINE_BIN, TREPHINE_BIN, "replay", log.c_str(), "--serve", "--port", "0",
-                  "--speed", "1000", "--render-threads", "1", (char*)nullptr);
-            _exit(127);
-        }
-        close(fds[1]);
-        out = fdopen(fds[0], "r");
-    }
-    ~ServedReplay() {
-        if (pid > 0) {
-            kill(pid, SIGTERM);
-            waitpid(pid, nullptr, 0);
-        }
-        if (out)
-            fclose(out);
-    }
-    int port() {
-        char buf[1024];
-        while (out && fgets(buf, sizeof buf, out))
-            if (const char* at = std::strstr(buf, "on port "))
-                return std::atoi(at + 8);
-        return -1;
-    }
-    // Reads on until it says the replay is at its end; false when its output ended first.
-    bool finished() {
-        char buf[1024];
-        while (out && fgets(buf, sizeof buf, out))
-            if (std::strstr(buf, "at the end of the session"))
-                return true;
-        return false;
-    }
-};
+using trephine::testing::whilePumping;
 
 // `trephine instructor` on `address`, its settled view saved to `png`; the exit status.
 int screenshot(const std::string& address, const std::string& png) {
@@ -106,7 +62,7 @@ TEST(ReplayWindow, AWindowWatchingAReplayEndsOnTheOriginalSessionsPicture) {
         sc.recorder =
             net::SessionRecorder::create(log, net::makeLogHeader(skull, sc, "skull:96", false, 0));
         net::SessionServer server(skull, sc);
-        server.start();
+        Pumped pumped(server);
         // A trainee drills a hole at the site the instructor's view centres on, then leaves.
         net::ClientConfig tc =
             trephine::testing::namedClientConfig(skull, "Ada", net::Role::Trainee, 32);
@@ -115,12 +71,14 @@ TEST(ReplayWindow, AWindowWatchingAReplayEndsOnTheOriginalSessionsPicture) {
         ASSERT_TRUE(trephine::testing::pumpUntil({&ada}, [&] { return ada.hasFullImage(); }));
         for (int i = 0; i < 60; ++i) {
             ada.sendToolState(trephine::testing::burrState(site, i, 60, 1000000));
+            Pumped::pumpAll();
             ada.poll(2);
         }
         ASSERT_TRUE(trephine::testing::pumpUntil({&ada}, [&] { return server.idle(); }));
         ada.disconnect();
         ASSERT_TRUE(trephine::testing::pumpUntil({}, [&] { return server.clientCount() == 0; }));
-        ASSERT_EQ(screenshot("127.0.0.1:" + std::to_string(server.port()), original), 0)
+        const std::string address = "127.0.0.1:" + std::to_string(server.port());
+        ASSERT_EQ(whilePumping([&] { return screenshot(address, original); }), 0)
             << "the window on the original session";
         server.stop();
     }
@@ -133,17 +91,33 @@ TEST(ReplayWindow, AWindowWatchingAReplayEndsOnTheOriginalSessionsPicture) {
         sc.volumeName = "skull:96";
         sc.renderThreads = 1;
         net::SessionServer server(skull, sc);
-        server.start();
-        ASSERT_EQ(screenshot("127.0.0.1:" + std::to_string(server.port()), untouched), 0);
+        Pumped pumped(server);
+        const std::string address = "127.0.0.1:" + std::to_string(server.port());
+        ASSERT_EQ(whilePumping([&] { return screenshot(address, untouched); }), 0);
     }
-    ServedReplay served(log);
-    const int port = served.port();
-    ASSERT_GT(port, 0);
+    // The log served as `trephine replay LOG --serve --speed 1000` serves it.
+    const net::LogContents contents = net::readSessionLog(log);
+    ASSERT_TRUE(contents.stopped.empty()) << contents.stopped;
+    const Volume start =
+        net::logStartVolume(contents.header, [&](const std::string&) { return skull; });
+    net::SessionServer served(
+        start, net::replayServerConfig(contents.header,
+                                       trephine::testing::loopbackServerConfig("skull:96")));
+    served.serveLog(contents.records, 1000.0, true);
+    Pumped pumpedReplay(served);
     // The window joins once the replay is over, as a late watcher: a window watching the drilling
     // would show the fading BB_screen rectangles of its updates over the view.
-    ASSERT_TRUE(served.finished());
-    ASSERT_EQ(screenshot("127.0.0.1:" + std::to_string(port), replayed), 0)
+    ASSERT_TRUE(trephine::testing::waitFor(
+        [&] {
+            const std::optional<net::ReplayState> s = served.replayState();
+            return s && !s->playing && s->positionUs == s->durationUs && served.idle();
+        },
+        60.0))
+        << "the replay reached its end";
+    const std::string address = "127.0.0.1:" + std::to_string(served.port());
+    ASSERT_EQ(whilePumping([&] { return screenshot(address, replayed); }), 0)
         << "the window on the replay";
+    served.stop();
 
     const Image a = readPng(original), b = readPng(replayed);
     ASSERT_GT(a.w, 400);

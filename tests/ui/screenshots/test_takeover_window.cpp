@@ -8,6 +8,7 @@
 #include "net/session_client.h"
 #include "net/session_server.h"
 
+#include "loopback.h"
 #include "screenshot.h"
 #include "test_support.h"
 
@@ -34,7 +35,7 @@ TEST(TakeOverWindow, TheTraineeIsToldItsDrillIsPaused) {
     sc.volumeName = "skull:64";
     sc.renderThreads = 1;
     net::SessionServer server(skull, sc);
-    server.start();
+    trephine::testing::Pumped pumped(server);
     const std::string address = "127.0.0.1:" + std::to_string(server.port());
 
     // The instructor takes over the trainee called Ada as soon as the roster lists her.
@@ -70,7 +71,7 @@ TEST(TakeOverWindow, TheTraineeIsToldItsDrillIsPaused) {
     const std::string cmd = shellQuote(TREPHINE_BIN) + " trainee --connect " + address +
                             " --name Ada --size 500 --screenshot " + shellQuote(out) +
                             " --frames 20 --timeout 80 > " + shellQuote(out + ".log") + " 2>&1";
-    const int rc = std::system(cmd.c_str());
+    const int rc = trephine::testing::whilePumping([&] { return std::system(cmd.c_str()); });
     stop = true;
     instructor.join();
     server.stop();
