@@ -159,6 +159,8 @@ int runHeadlessTrainee(const TraineeOptions& o, std::vector<Sample> script) {
     session.play(std::move(script), scriptEnd, std::move(device));
     session.drill([](double) { return !g_traineeStop; });
     session.liftAndDrain();
+    if (g_traineeStop)
+        session.noteStopped();
     const net::SessionEnd end = session.finish();
 
     printFigures(session.model(), session.core(), o.sync == "volume");

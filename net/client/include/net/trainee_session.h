@@ -71,6 +71,8 @@ public:
     void liftAndDrain(double quietS = 0.5, double maxS = 2.0);
     // Stops the core (the figures stay readable) and says how the session ended.
     SessionEnd finish();
+    // A stop asked for after the script (during the drain) ends the session as Stopped too.
+    void noteStopped() { m_stopped = true; }
     // The line a shell prints for an end that is not ScriptDone ("" for one that is).
     std::string endText(const SessionEnd& end) const;
 
