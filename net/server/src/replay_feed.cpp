@@ -216,7 +216,7 @@ void SessionPolicy::replayOne(const LogRecord& r, uint64_t now, PolicyOutput& ou
             e.client = id;
         out.events.push_back({now, std::move(e)});
     };
-    std::visit(Overloaded{
+    std::visit(Handlers{
                    [&](JoinEvent e) {
                        // Nobody receives its pictures: a DBI (not the whole volume a volume
                        // client is sent) keeps the simulation's work for it small.

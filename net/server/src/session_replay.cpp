@@ -66,7 +66,7 @@ void SessionReplay::apply(const LogRecord& r) {
     ++m_applied;
     if (!r.is<ResumeEvent>())
         m_lastUs = std::max(m_lastUs, r.timeUs);
-    std::visit(Overloaded{
+    std::visit(Handlers{
                    [&](const JoinEvent& e) { join(e, r.timeUs); },
                    [&](const LeaveEvent& e) {
                        leave(e.client);
@@ -120,7 +120,7 @@ void SessionReplay::policy(const Event& e) {
             if (p.takenOverBy == client)
                 p.takenOverBy = 0;
     };
-    std::visit(Overloaded{
+    std::visit(Handlers{
                    [&](const HelloEvent& h) {
                        m_participants[h.client] = {h.client, ++m_hellos, h.role,
                                                    h.name,   Sync::Dbi,  0};
@@ -240,7 +240,7 @@ std::vector<Trajectory> trajectoriesOf(std::span<const LogRecord> records) {
     std::map<uint16_t, size_t> current; // client id -> its trajectory now
     std::map<uint16_t, uint32_t> lastSequence;
     for (const LogRecord& r : records) {
-        std::visit(Overloaded{
+        std::visit(Handlers{
                        [&](const HelloEvent& h) {
                            Trajectory t;
                            t.ordinal = uint32_t(out.size() + 1);

@@ -55,7 +55,7 @@ void SimulationStep::step(std::span<const LogRecord> batch, uint64_t now) {
         // queues, and the log keeps that time), else the step's. So a replay of the log times
         // joins, leaves and samples as the live server did, whenever each was stepped.
         const uint64_t at = r.timeUs ? r.timeUs : now;
-        std::visit(Overloaded{
+        std::visit(Handlers{
                        [&](const JoinEvent& e) { applyJoin(e, at, b, now); },
                        [&](const ViewEvent& e) { applyView(e, b, now); },
                        [&](const SyncEvent& e) { applySync(e, b, now); },

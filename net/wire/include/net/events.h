@@ -6,6 +6,7 @@
 #pragma once
 
 #include "libsim/box.h"
+#include "net/handlers.h"
 #include "net/protocol.h"
 #include "net/serialize.h"
 
@@ -190,12 +191,6 @@ struct ResumeEvent {
 using Event =
     std::variant<JoinEvent, ViewEvent, ToolEvent, LeaveEvent, CutEvent, SyncEvent, VoxelsEvent,
                  HelloEvent, MarkEvent, HoldEvent, ReleaseEvent, ResumeEvent>;
-
-// A visitor made of lambdas, one per event type (std::visit(Overloaded{...}, event)).
-template <typename... F>
-struct Overloaded : F... {
-    using F::operator()...;
-};
 
 namespace detail {
 template <typename T, size_t... I>

@@ -5,6 +5,7 @@
 
 #include "net/assessment_protocol.h"
 #include "net/enet_host.h"
+#include "net/handlers.h"
 #include "net/protocol.h"
 #include "net/replay_protocol.h"
 #include "net/scene.h"
@@ -93,14 +94,6 @@ template <typename M>
 struct MessageTag {
     using Type = M;
 };
-
-// A handler made of lambdas, one per message (net/events.h has the same for events).
-template <typename... Fs>
-struct Handlers : Fs... {
-    using Fs::operator()...;
-};
-template <typename... Fs>
-Handlers(Fs...) -> Handlers<Fs...>;
 
 namespace detail {
 template <typename M, typename R, typename H>
