@@ -86,7 +86,7 @@ TEST(ClientSnapshot, TheDrawnPartLeavesOutWhatAWindowDoesNotDraw) {
     EXPECT_TRUE(redraws([](ClientSnapshot& s) { s.others[2].position.x = 4; }));
     EXPECT_TRUE(redraws([](ClientSnapshot& s) { s.others.erase(2); }));
     EXPECT_TRUE(redraws([](ClientSnapshot& s) { s.state = LinkState::Retrying; }));
-    EXPECT_TRUE(redraws([](ClientSnapshot& s) { s.participants[3].name = "b"; }));
+    EXPECT_TRUE(redraws([](ClientSnapshot& s) { s.participants[3].name.push_back('b'); }));
     EXPECT_TRUE(redraws([](ClientSnapshot& s) { s.welcome.reset(); }));
     EXPECT_TRUE(redraws([](ClientSnapshot& s) { s.scene = std::make_shared<ReceivedScene>(); }));
 }
