@@ -583,8 +583,9 @@ void ClientThread::pollUntilClosed(SessionClient& client, const ClientConfig& cc
     m_modeRates = {};
     m_rateHistory.clear();
     while (!m_stop && !cp->closed()) {
-        cp->poll(1);
-        uint64_t now = steadyNowUs();
+        cp->wait(1);
+        const uint64_t now = steadyNowUs();
+        cp->pump(now);
         if (!cp->welcomed()) {
             if (cp->busyRefusals() > 0)
                 m_closeReason = cp->closeReason(); // the server is there: the window says so

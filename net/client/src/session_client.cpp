@@ -95,25 +95,25 @@ bool SessionClient::sendRaw(Channel channel, std::span<const uint8_t> bytes) {
     return m_host.send(m_peer, channel, bytes);
 }
 
-int SessionClient::poll(uint32_t timeoutMs) {
-    if (m_retryAtUs && m_config.clock() >= m_retryAtUs) {
+int SessionClient::pump(uint64_t nowUs) {
+    if (m_retryAtUs && nowUs >= m_retryAtUs) {
         m_retryAtUs = 0;
         m_peer = m_host.connect(m_address, m_config.protocolVersion);
-        m_lastHeardUs = m_config.clock();
+        m_lastHeardUs = nowUs;
     }
-    int n = m_host.service(timeoutMs, [this](const ENetEvent& ev) { onEvent(ev); });
+    int n = m_host.service(0, [&](const ENetEvent& ev) { onEvent(ev, nowUs); });
     if (m_peer && m_connected) {
         // Any datagram counts as heard, a fragment of a large update too: ENet stamps the peer
         // whenever it receives (a whole message may take seconds on a slow link).
         if (m_peer->lastReceiveTime != m_lastReceiveTime) {
             m_lastReceiveTime = m_peer->lastReceiveTime;
-            m_lastHeardUs = m_config.clock();
+            m_lastHeardUs = std::max(m_lastHeardUs, nowUs);
         }
         // ENet's own estimate, refreshed about every ENET_PEER_PACKET_LOSS_INTERVAL (10 s).
         m_stats.packetLoss = double(m_peer->packetLoss) / double(ENET_PEER_PACKET_LOSS_SCALE);
         m_stats.packetsLost = m_peer->packetsLost;
     }
-    m_stats.tick(m_config.clock());
+    m_stats.tick(nowUs);
     return n;
 }
 
@@ -137,11 +137,11 @@ void SessionClient::disconnect(uint32_t timeoutMs) {
     m_peer = nullptr;
 }
 
-void SessionClient::onEvent(const ENetEvent& ev) {
+void SessionClient::onEvent(const ENetEvent& ev, uint64_t nowUs) {
     switch (ev.type) {
     case ENET_EVENT_TYPE_CONNECT: {
         m_connected = true;
-        m_lastHeardUs = m_connectedUs = m_config.clock();
+        m_lastHeardUs = m_connectedUs = nowUs;
         disableThrottle(m_peer);
         // Without a code the hello goes at once (an open session); with one, it goes sealed
         // after the handshake that the server's Challenge starts.
@@ -159,10 +159,10 @@ void SessionClient::onEvent(const ENetEvent& ev) {
         m_peer = nullptr;
         return;
     case ENET_EVENT_TYPE_RECEIVE: {
-        m_lastHeardUs = m_config.clock();
+        m_lastHeardUs = std::max(m_lastHeardUs, nowUs);
         const auto channel = Channel(std::min<int>(ev.channelID, int(Channel::Count) - 1));
         m_stats.countIn(channel, ev.packet->dataLength);
-        onReceive(channel, {ev.packet->data, ev.packet->dataLength}, m_config.clock());
+        onReceive(channel, {ev.packet->data, ev.packet->dataLength}, nowUs);
         // And once handled: applying a large update (a whole volume, its first render) takes
         // long, and that is no silence of the server's.
         m_lastHeardUs = m_config.clock();

@@ -158,6 +158,12 @@ int Host::service(uint32_t timeoutMs, const EventHandler& handler) {
     return handled;
 }
 
+void Host::wait(uint32_t timeoutMs) {
+    enet_host_flush(m_host);
+    enet_uint32 condition = ENET_SOCKET_WAIT_RECEIVE | ENET_SOCKET_WAIT_INTERRUPT;
+    enet_socket_wait(m_host->socket, &condition, timeoutMs);
+}
+
 namespace {
 // ENet destroys a packet once it is sent (unreliable) or acknowledged (reliable), or with its
 // peer: the bytes leave the counter then, and the packet's share of the counter goes.

@@ -78,9 +78,16 @@ public:
     // Starts connecting; progress happens in poll(). The hello goes out once connected.
     // `serverName` names the server in failure texts (empty: the address).
     void connect(const ENetAddress& address, std::string serverName = {});
-    // Services the network for up to timeoutMs, handles every pending event, flushes sends.
-    // Returns the number of events handled.
-    int poll(uint32_t timeoutMs);
+    // One pass at `nowUs`, without waiting: a Busy retry that is due, every pending event, the
+    // statistics' tick; flushes sends. Returns the number of events handled.
+    int pump(uint64_t nowUs);
+    // Sends what is queued and waits up to timeoutMs for traffic (a runner's wait before pump).
+    void wait(uint32_t timeoutMs) { m_host.wait(timeoutMs); }
+    // wait(timeoutMs), then pump() at the client's clock (ClientConfig::clock).
+    int poll(uint32_t timeoutMs) {
+        wait(timeoutMs);
+        return pump(m_config.clock());
+    }
     // Graceful disconnect (waits up to timeoutMs for the server to acknowledge).
     void disconnect(uint32_t timeoutMs = 200);
 
@@ -273,7 +280,7 @@ public:
     void damagePixelForTest(int x, int y) { m_dbi.color(x, y)[0] ^= 1; }
 
 private:
-    void onEvent(const ENetEvent& ev);
+    void onEvent(const ENetEvent& ev, uint64_t nowUs);
     // Before the welcome, a Busy or Retry refusal connects again (true) instead of closing.
     bool retryAfter(uint32_t disconnectData);
     void onReceive(Channel channel, std::span<const uint8_t> data, uint64_t nowUs);

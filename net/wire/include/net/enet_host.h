@@ -79,6 +79,9 @@ public:
     // flushes queued sends. Packets in receive events are destroyed after the handler returns.
     // Returns the number of events handled.
     int service(uint32_t timeoutMs, const EventHandler& handler);
+    // Sends what is queued, then waits up to timeoutMs for a datagram on the socket (a runner's
+    // wait; service(0) then handles what came).
+    void wait(uint32_t timeoutMs);
 
     // Bytes of packets sent with it that ENet still holds (queued, or sent and not acknowledged):
     // each packet keeps the counter alive until ENet releases it, so it outlives its peer.
