@@ -50,7 +50,8 @@ TEST(AssessmentWindow, TheInstructorSeesTheViolationInTheBannerAndThePanel) {
     sc.volumeName = "skull:64";
     sc.renderThreads = 1;
     net::SessionServer server(skull, sc);
-    trephine::testing::Pumped pumped(server);
+    server.start(); // its own threads: the violation must reach the window within its 90 frames,
+                    // however loaded the machine
     const std::string address = "127.0.0.1:" + std::to_string(server.port());
 
     net::ClientConfig tc;
@@ -82,7 +83,7 @@ TEST(AssessmentWindow, TheInstructorSeesTheViolationInTheBannerAndThePanel) {
     const std::string cmd = shellQuote(TREPHINE_BIN) + " instructor --connect " + address +
                             " --name Cho --window-size 500 --screenshot " + shellQuote(out) +
                             " --frames 90 --timeout 80 > " + shellQuote(out + ".log") + " 2>&1";
-    const int rc = trephine::testing::whilePumping([&] { return std::system(cmd.c_str()); });
+    const int rc = std::system(cmd.c_str());
     stop = true;
     trainee.join();
     server.stop();
