@@ -566,3 +566,32 @@ TEST(Session, TheReportAfterAStopListsNoClientAsConnected) {
     for (const char* mode : {"dbi", "volume"})
         EXPECT_EQ(report["modes"][mode]["clients"], 0) << "no mode counts it: " << report.dump(2);
 }
+
+// A pumped server's time is the one it is given: starting its threads too, whose clock is the
+// steady one, would take it back, so it is refused. Two servers pumped in one thread each judge
+// their own datagrams (ENet's intercept is pointed at the server being serviced), stopping one
+// included.
+TEST(Session, TwoServersPumpedInOneThreadServeTheirOwnClientsAndNeitherCanStart) {
+    Volume sphere = makeSphere(24);
+    auto first = std::make_unique<SessionServer>(sphere, testConfig("sphere:24"));
+    auto pumpedFirst = std::make_unique<Pumped>(*first);
+    SessionServer second(sphere, testConfig("sphere:24"));
+    Pumped pumpedSecond(second);
+    ClientConfig cc = topViewClient(sphere, 32);
+    cc.codec = Codec::Raw; // bit for bit
+    SessionClient a(cc), b(cc);
+    a.connect(loopback(first->port()));
+    b.connect(loopback(second.port()));
+    ASSERT_TRUE(connectAll({&a, &b}));
+    EXPECT_THROW(second.start(), Error);
+    first->stop(); // says goodbye through its own gate, not the one pumped last
+    pumpedFirst.reset();
+    first.reset();
+    ASSERT_TRUE(pumpUntil({&a, &b}, [&] { return a.closed(); }));
+    EXPECT_EQ(a.closeReason(), refuseReasonText(uint32_t(RefuseReason::Shutdown)));
+    drill(b, {&b}, sphereTop(24), 10, 1000000);
+    ASSERT_TRUE(pumpUntil({&b}, [&] { return second.toolStatesApplied() == 10; }));
+    EXPECT_FALSE(b.closed());
+    EXPECT_EQ(second.security().spoofed, 0u);
+    ASSERT_TRUE(waitConverged(second, {&b}));
+}

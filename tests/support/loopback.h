@@ -56,8 +56,11 @@ inline ENetAddress loopback(uint16_t port) {
 // and a timeout is reached by skipping time, not by sleeping.
 class Pumped {
 public:
-    explicit Pumped(net::SessionServer& server) : m_server(&server) { all().push_back(this); }
-    ~Pumped() { std::erase(all(), this); }
+    explicit Pumped(net::SessionServer& server) : m_server(&server), m_list(&all()) {
+        m_list->push_back(this);
+    }
+    // From the list of the thread that made it, whichever thread ends it.
+    ~Pumped() { std::erase(*m_list, this); }
     Pumped(const Pumped&) = delete;
     Pumped& operator=(const Pumped&) = delete;
 
@@ -78,6 +81,7 @@ private:
         return pumped;
     }
     net::SessionServer* m_server;
+    std::vector<Pumped*>* m_list;
     uint64_t m_skippedUs = 0;
 };
 

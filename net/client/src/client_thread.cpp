@@ -575,7 +575,9 @@ void ClientThread::installCallbacks(SessionClient& client, bool renderLocally) {
 void ClientThread::pollUntilClosed(SessionClient& client, const ClientConfig& cc) {
     SessionClient* cp = &client;
     NewSamples newRtt;
-    const uint64_t start = steadyNowUs();
+    // The client's own time base (ClientConfig::clock), the steady clock by default.
+    auto clockNow = [&] { return cc.clock ? cc.clock() : steadyNowUs(); };
+    const uint64_t start = clockNow();
     uint64_t nextPing = start, nextPublish = start;
     RateClock clock;
     clock.lastTickUs = start;
@@ -584,7 +586,7 @@ void ClientThread::pollUntilClosed(SessionClient& client, const ClientConfig& cc
     m_rateHistory.clear();
     while (!m_stop && !cp->closed()) {
         cp->wait(1);
-        const uint64_t now = steadyNowUs();
+        const uint64_t now = clockNow();
         cp->pump(now);
         if (!cp->welcomed()) {
             if (cp->busyRefusals() > 0)

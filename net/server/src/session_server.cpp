@@ -43,6 +43,28 @@ ServerConfig withScene(ServerConfig c, const Volume& volume) {
 // Admission and the foreign-address rule on raw datagrams (defined with the network pass).
 int ENET_CALLBACK screenDatagram(ENetHost* host, ENetEvent*);
 
+// ENet's intercept has no user pointer: the gate and report of the server whose host this thread
+// services, set around each service call (one thread may pump several servers).
+thread_local AdmissionGate* t_admission = nullptr;
+thread_local ReportBook* t_book = nullptr;
+class ScreenFor {
+public:
+    ScreenFor(AdmissionGate& gate, ReportBook& book) : m_gate(t_admission), m_book(t_book) {
+        t_admission = &gate;
+        t_book = &book;
+    }
+    ~ScreenFor() {
+        t_admission = m_gate;
+        t_book = m_book;
+    }
+    ScreenFor(const ScreenFor&) = delete;
+    ScreenFor& operator=(const ScreenFor&) = delete;
+
+private:
+    AdmissionGate* m_gate;
+    ReportBook* m_book;
+};
+
 StepConfig stepConfig(const ServerConfig& c, std::function<bool()> yield) {
     StepConfig s{c.maxStepS, c.maxSweepMm, c.renderThreads, {}};
     s.yield = std::move(yield);
@@ -57,7 +79,7 @@ StepConfig stepConfig(const ServerConfig& c, std::function<bool()> yield) {
 struct SessionServer::Impl {
     Impl(Volume v, const ServerConfig& c)
         : host(Host::listen(c.port, c.maxClients + c.admission.waitingSlots)),
-          wakeFd(eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)), pumpedUs(steadyNowUs()),
+          wakeFd(eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)),
           outbox(
               c.maxInFlightBytes, book, [this] { return clock(); }, [this] { wakeNetwork(); }),
           step(std::move(v), stepConfig(c, [this] { return eventsWaiting(); }), outbox, book,
@@ -100,10 +122,14 @@ struct SessionServer::Impl {
     // out at once instead of after the rest of a 1 ms wait (-1: no eventfd; the network thread
     // then waits out its timeout).
     int wakeFd = -1;
-    // The time: the last one pump() was given, or the steady clock once start()'s threads run.
-    std::atomic<uint64_t> pumpedUs;
+    // The time: the last one pump() was given, else the steady clock (before the first pump, and
+    // once start()'s threads run).
+    std::atomic<uint64_t> pumpedUs{0}; // 0: never pumped
     std::atomic<bool> threaded{false};
-    uint64_t clock() const { return threaded.load() ? steadyNowUs() : pumpedUs.load(); }
+    uint64_t clock() const {
+        const uint64_t pumped = pumpedUs.load();
+        return threaded.load() || pumped == 0 ? steadyNowUs() : pumped;
+    }
     // Where full images are coded apart: inline when pumped, a worker beside the threads.
     const int64_t apartPixels = StepConfig{}.slicePixels + 1;
     InlineExecutor inlineCoder;
@@ -315,7 +341,12 @@ uint16_t SessionServer::port() const {
 
 void SessionServer::start() {
     // Once stopped, a server stays stopped: threads started then would end at once, unjoined.
-    if (m_stop.load() || m_started.exchange(true))
+    if (m_stop.load())
+        return;
+    // Its time would jump back from the pumped one to the steady clock.
+    if (m_impl->pumpedUs.load() != 0)
+        throw Error("start: this server is pumped (pump()); a server is pumped or started");
+    if (m_started.exchange(true))
         return;
     m_impl->threaded = true;
     m_impl->outbox.codeFullImagesApart(m_impl->apartPixels, m_impl->workerCoder);
@@ -509,15 +540,15 @@ std::string SessionServer::reportJson() const {
 
 SessionPolicy::ForceAnswer SessionServer::Impl::force(const ToolState& t, glm::vec3 velocity) {
     const ForceModel& model = forceModels.get(shapeOf(t));
-    const uint64_t c0 = clock();
+    const uint64_t c0 = steadyNowUs(); // a duration: real time, pumped or not
     SessionPolicy::ForceAnswer a;
     {
         std::shared_lock lock(step.voxelMutex());
         a.force = model.compute(step.volume(), ToolPose{t.position, t.orientation},
                                 t.drilling ? t.speed : 0.0f, velocity);
     }
+    a.computeUs = steadyNowUs() - c0;
     a.doneUs = clock();
-    a.computeUs = a.doneUs - c0;
     return a;
 }
 
@@ -794,6 +825,7 @@ void SessionServer::Impl::sendNotices() {
 // Says goodbye so clients print a reason, and gives the goodbyes a moment to leave; a client
 // connecting meanwhile is told the server is shutting down.
 void SessionServer::Impl::sayGoodbye() {
+    const ScreenFor screen(admission, book);
     PolicyOutput out;
     policy.goodbye(clock(), out);
     apply(out);
@@ -828,11 +860,6 @@ void SessionServer::Impl::sayGoodbye() {
 
 namespace {
 
-// The gate and report of the server whose network thread this is: ENet's intercept has no user
-// pointer.
-thread_local AdmissionGate* t_admission = nullptr;
-thread_local ReportBook* t_book = nullptr;
-
 // A datagram that names a connected peer but comes from another address: counted (ENet would
 // drop it silently too).
 int countForeignDatagram(ENetHost* host, ReportBook& book) {
@@ -863,8 +890,7 @@ int ENET_CALLBACK screenDatagram(ENetHost* host, ENetEvent*) {
 } // namespace
 
 void SessionServer::Impl::receive(uint64_t now) {
-    t_admission = &admission;
-    t_book = &book;
+    const ScreenFor screen(admission, book);
     admission.setNow(now);
     host.service(0, [&](const ENetEvent& ev) { onEvent(ev); });
     playReplayed();

@@ -46,8 +46,8 @@ public:
     // One pass of the whole session at `nowUs` on the caller's thread, instead of start(): take
     // every datagram waiting and what the replay has due, apply one batch of what arrived (or
     // one slice of a large view), then send what the outbox lets go and what the policy has due.
-    // Time is only what is passed in (it never goes back); the server starts at the steady
-    // clock's time of its construction. Does nothing once started or stopped.
+    // Time is only what is passed in (it never goes back; the steady clock before the first
+    // pump). Does nothing once started or stopped; a pumped server cannot be started.
     void pump(uint64_t nowUs);
     // Stops: peers are disconnected (RefuseReason::Shutdown), every queued tool state is applied,
     // then saveOnExit is written. Idempotent; the threads end first when start() ran.

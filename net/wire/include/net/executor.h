@@ -1,6 +1,6 @@
-// Where a part's background work runs. The server's runner gives the outbox and the recorder a
-// worker thread each; a test pumping a server in one thread gives them InlineExecutor, so the
-// work is done by the time post() returns and nothing races the test's clock.
+// Where a part's background work runs: a worker thread (the outbox's coder when the server runs
+// its threads; the recorder's syncer unless it is given another), or InlineExecutor, which does
+// the work before post() returns (a pumped server's coder; the recorder's tests).
 #pragma once
 
 #include <condition_variable>
@@ -21,7 +21,7 @@ public:
     // Drops the tasks not yet started and waits for the running one: nothing posted so far runs
     // after this returns.
     virtual void cancel() = 0;
-    // Waits until every task posted so far has run.
+    // Waits until no task waits or runs (posts meanwhile extend the wait).
     virtual void drain() = 0;
 };
 
