@@ -150,6 +150,9 @@ struct SessionServer::Impl {
     std::mutex inMutex;
     std::condition_variable inCv;
     std::vector<LogRecord> inbox;
+    // [Simulation thread] The batch being applied: swapped with the inbox each pass, so both keep
+    // their capacity instead of growing anew.
+    std::vector<LogRecord> batch;
     size_t inboxTools = 0; // Tool events in the inbox (ServerConfig::maxQueuedToolStates)
     size_t maxQueuedToolStates;
     bool busy = false; // the simulation thread is applying a batch (under inMutex)
@@ -912,7 +915,7 @@ void SessionServer::Impl::send(uint64_t now) {
 }
 
 void SessionServer::Impl::simulate(uint64_t now) {
-    std::vector<LogRecord> batch;
+    batch.clear();
     {
         std::lock_guard lock(inMutex);
         batch.swap(inbox);
