@@ -58,8 +58,8 @@ std::vector<HapticsCaseResult> runCases(const Volume& volume, const SurfaceSite&
     if (!csvFile.good())
         throw Error("cannot write " + csvPath + ": check that --out is a writable folder");
     csv << hapticsCsvHeader() << "\n";
-    fmt::print("{:<10} {:>7} {:>8} {:>10} {:>10} {:>12} {:>7} {:>9}\n", "method", "upd Hz",
-               "lat ms", "rms err N", "peak err N", "injected mJ", "stable", "max pen");
+    fmt::print("{:<10} {:>7} {:>8} {:>10} {:>10} {:>12} {:>9} {:>9} {:>7}\n", "method", "upd Hz",
+               "lat ms", "rms err N", "peak err N", "injected mJ", "max pen", "osc+ mm", "stable");
     std::vector<HapticsCaseResult> cases;
     for (double rate : rates)
         for (double lat : latencies)
@@ -67,10 +67,14 @@ std::vector<HapticsCaseResult> runCases(const Volume& volume, const SurfaceSite&
                 HapticsCaseResult r = runHapticsCase(volume, site, config, {m, rate, lat});
                 csv << hapticsCsvRow(r) << "\n";
                 cases.push_back(r);
-                fmt::print("{:<10} {:>7g} {:>8g} {:>10.4f} {:>10.4f} {:>12.4f} {:>7} {:>8.2f}mm\n",
+                fmt::print("{:<10} {:>7g} {:>8g} {:>10.4f} {:>10.4f} {:>12.4f} {:>7.2f}mm {:>9.4f} "
+                           "{:>7}\n",
                            hapticMethodName(m), rate, lat, r.forceRmsErrorN, r.forcePeakErrorN,
-                           r.energyInjectedJ * 1e3, r.stable ? "yes" : "NO", r.maxPenetrationMm);
+                           r.energyInjectedJ * 1e3, r.maxPenetrationMm, r.excessOscillationMm,
+                           r.stable ? "yes" : "NO");
             }
+    fmt::print("(stable: against a run of the same hand on the exact force at 1 kHz with no delay; "
+               "osc+ is the oscillation the display adds, docs/haptics.md)\n");
     // Buffered rows reach the file only here: a full disk shows at the close.
     if (!csvFile.commit())
         throw Error("cannot write " + csvPath + ": check that --out is a writable folder");
@@ -171,7 +175,7 @@ HapticsFigures runHapticsStudy(const HapticsOptions& o) {
         if (!o.ratesGiven)
             rates = {20, 100};
         if (!o.latenciesGiven)
-            latencies = {0, 50};
+            latencies = {0, 50, 300};
     }
     for (double r : rates)
         if (!(r > 0.0 && r <= config.hapticRateHz))

@@ -120,7 +120,7 @@ TEST(HapticsLoopback, MultirateStableAt20HzOverLoopbackWhereZeroOrderHoldIsNot) 
     EXPECT_TRUE(mr.stable) << hapticsCsvRow(mr);
     EXPECT_LE(mr.maxPenetrationMm, config.hand.targetDepthMm + config.maxOvershootMm);
     EXPECT_LT(mr.energyInjectedJ, config.maxEnergyInjectedJ);
-    EXPECT_LE(mr.finalOscillationMm, config.maxFinalOscillationMm);
+    EXPECT_LE(mr.excessOscillationMm, config.maxExcessOscillationMm);
     EXPECT_LE(mr.finalOscillationMm, 1.5 * mr.earlyOscillationMm + 0.01); // not growing
     EXPECT_GT(mr.meanForceN, 0.1) << "the hand is in contact";
 

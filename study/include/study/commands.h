@@ -19,7 +19,7 @@ namespace trephine::study {
 // update, the 1 kHz loop and the force round trip through a server. Writes OUT/haptics.csv.
 struct HapticsOptions {
     std::vector<double> updateRates{20, 50, 100, 1000};
-    std::vector<double> latencies{0, 25, 50};
+    std::vector<double> latencies{0, 25, 50, 100, 200, 300};
     std::string out = ".";
     std::string volume = "skull:128"; // a volume spec, or "box" for a flat bone block
     float burrMm = 2.0f;

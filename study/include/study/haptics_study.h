@@ -9,13 +9,17 @@
 #include "libsim/volume.h"
 
 #include <functional>
+#include <memory>
 #include <string>
 #include <vector>
 
 namespace trephine::study {
 
-enum class HapticMethod { Multirate, ZeroOrderHold };
-const char* hapticMethodName(HapticMethod m); // "multirate", "zoh"
+// Exact: the force model at the device position every tick, with no delay. It is the reference
+// every case is judged against: the same hand and tremor on the display the network only
+// approximates.
+enum class HapticMethod { Multirate, ZeroOrderHold, Exact };
+const char* hapticMethodName(HapticMethod m); // "multirate", "zoh", "exact"
 
 // The hand: a mass on a spring-damper pulled towards a target inside the bone (it presses the
 // tool in; the contact force holds it back). A slow slide along the surface and a small tremor
@@ -31,10 +35,52 @@ struct HandModel {
     double tremorHz = 8.0;
 };
 
+// Where a hand works: the site's surface point and outward normal, the slide's direction, and the
+// offset from the tool's reference point to the cutter's lowest point.
+struct HandFrame {
+    glm::dvec3 surface{0.0};
+    glm::dvec3 normal{0.0, 0.0, 1.0};
+    glm::dvec3 tangent{1.0, 0.0, 0.0};
+    double tipOffsetMm = 0.0;
+
+    double penetration(glm::dvec3 x) const { return glm::dot(surface - x, normal) + tipOffsetMm; }
+    glm::dvec3 atDepth(double depthMm) const { return surface + normal * (tipOffsetMm - depthMm); }
+};
+
+// What the display pushes against. Any hand (this spring-damper one, a simulated force device)
+// only has to report where the tool is and move under the force it is given.
+class StudyHand {
+public:
+    virtual ~StudyHand() = default;
+    virtual glm::dvec3 position() const = 0;
+    // The tool over [t, t + dt] under the device force, held for the tick (the device's own
+    // zero-order hold).
+    virtual void advance(glm::dvec3 forceN, double t, double dt) = 0;
+};
+
+// HandModel integrated with semi-implicit Euler at `substeps` steps a tick, from rest at `start`.
+class SpringHand : public StudyHand {
+public:
+    SpringHand(const HandModel& model, const HandFrame& frame, glm::dvec3 start, int substeps);
+    glm::dvec3 position() const override { return m_x; }
+    void advance(glm::dvec3 forceN, double t, double dt) override;
+
+private:
+    HandModel m_model;
+    HandFrame m_frame;
+    glm::dvec3 m_x, m_v{0.0};
+    int m_substeps;
+};
+
+// Makes the hand of one run, at rest at `start`. Empty: a SpringHand of HapticsStudyConfig::hand.
+using HandFactory =
+    std::function<std::unique_ptr<StudyHand>(const HandFrame& frame, glm::dvec3 start)>;
+
 struct HapticsStudyConfig {
     ToolShape shape = ToolShape::burr(2.0f);
     ForceModelConfig force;
     HandModel hand;
+    HandFactory makeHand;
     BlendConfig blend;
     double durationS = 2.0;
     double hapticRateHz = 1000.0;
@@ -42,10 +88,13 @@ struct HapticsStudyConfig {
     // Ablation: multirate with the gradient dropped (blended f alone). Shows that the stability
     // comes from the extrapolation, not from the blending.
     bool multirateUsesGradient = true;
-    // Stability limits (see docs/haptics.md).
-    double maxOvershootMm = 1.0;        // beyond the hand's target depth
-    double maxFinalOscillationMm = 0.2; // peak-to-peak along the normal over the last 0.25 s
-    double maxEnergyInjectedJ = 0.005;
+    // Stability limits, each against the Exact reference run (see docs/haptics.md).
+    double maxOvershootMm = 1.0; // beyond the hand's target depth
+    // Peak-to-peak along the normal of (depth - the reference's depth) over the last 0.25 s: the
+    // motion the display adds to what the hand's own tremor makes.
+    double maxExcessOscillationMm = 0.05;
+    // Work of the display's error, (displayed - exact force) . dx, summed over the run.
+    double maxEnergyInjectedJ = 0.001;
 };
 
 struct HapticsCase {
@@ -61,13 +110,16 @@ struct HapticsCaseResult {
     double energyInjectedJ = 0.0; // integral of (displayed - true) . v dt; > 0: active
     bool stable = false;
     double maxPenetrationMm = 0.0;
-    double finalOscillationMm = 0.0; // peak-to-peak along the normal, last 0.25 s
-    double earlyOscillationMm = 0.0; // the same over [T/2, T/2 + 0.25 s]
-    double meanForceN = 0.0;         // displayed, over the second half
+    double finalOscillationMm = 0.0;     // peak-to-peak along the normal, last 0.25 s
+    double earlyOscillationMm = 0.0;     // the same over [T/2, T/2 + 0.25 s]
+    double referenceOscillationMm = 0.0; // finalOscillationMm of the Exact run
+    double excessOscillationMm = 0.0;    // of depth - the Exact run's depth, last 0.25 s
+    double meanForceN = 0.0;             // displayed, over the second half
     int modelsDelivered = 0;
 };
 
-// One run. `site` is a point on the bone surface and its outward normal.
+// One run, judged against an Exact run of the same hand. `site` is a point on the bone surface and
+// its outward normal.
 HapticsCaseResult runHapticsCase(const Volume& volume, const SurfaceSite& site,
                                  const HapticsStudyConfig& config, const HapticsCase& c);
 
