@@ -84,12 +84,16 @@ void ModelBlender::setModel(const HapticModelData& m, double now) {
     }
     m_to = next;
     m_alpha = 0.0;
-    if (m_config.blendTimeS > 0.0)
+    estimateDelay(m.position, now);
+    if (m_config.blendTimeS > 0.0) {
         m_blendTime = m_config.blendTimeS;
-    else if (m_hasModel)
-        m_blendTime = std::clamp(now - m_lastModelTime, m_config.minBlendS, m_config.maxBlendS);
-    else
-        m_blendTime = m_config.minBlendS;
+    } else {
+        const double interval = m_hasModel ? now - m_lastModelTime : 0.0;
+        const double forDelay =
+            m_config.delayBlendScaleS > 0.0 ? m_delay * m_delay / m_config.delayBlendScaleS : 0.0;
+        m_blendTime =
+            std::clamp(std::max(interval, forDelay), m_config.minBlendS, m_config.maxBlendS);
+    }
     m_prevModelTime = m_lastModelTime;
     m_lastModelTime = now;
     m_hasModel = true;
@@ -101,10 +105,34 @@ void ModelBlender::resetTo(const HapticModelData& m, double now) {
     m_alpha = 1.0;
 }
 
+void ModelBlender::remember(glm::vec3 p, double now) {
+    if (m_history.size() < kHistory) {
+        m_history.push_back({now, p});
+    } else {
+        m_history[m_historyNext] = {now, p};
+        m_historyNext = (m_historyNext + 1) % kHistory;
+    }
+}
+
+void ModelBlender::estimateDelay(glm::vec3 anchor, double now) {
+    // The server computes at the position the tool state carried, which is the device position
+    // of the tick that sent it, bit for bit: the newest tick there is when it was sent.
+    const size_t n = m_history.size();
+    for (size_t back = 1; back <= n; ++back) {
+        const Tick& tick = m_history[(m_historyNext + n - back) % n];
+        if (tick.position != anchor)
+            continue;
+        if (back > 1) // else the device has stayed there: the sending tick is ambiguous
+            m_delay = std::max(0.0, now - tick.time);
+        return;
+    }
+}
+
 glm::vec3 ModelBlender::update(glm::vec3 p, double now) {
     const double dt = m_ticked ? std::max(0.0, now - m_lastTick) : 0.0;
     m_lastTick = now;
     m_ticked = true;
+    remember(p, now);
     if (!m_hasModel)
         return glm::vec3(0.0f);
     // A position that is not a number gives no force and leaves the blend where it is: the step

@@ -105,6 +105,56 @@ TEST(Haptics, BlendTakesAboutOneUpdatePeriod) {
     EXPECT_NEAR(end.z, 2.0f, 1e-5f);
 }
 
+// The blender finds when the state a model answers was sent from the model's P_N (the device
+// position of the sending tick, bit for bit), and blends over delay^2 / delayBlendScaleS when that
+// is longer than the interval between models.
+TEST(Haptics, TheBlendGrowsWithTheRoundTripTheBlenderMeasures) {
+    BlendConfig config;
+    config.maxStepN = 100.0;     // not the limit here
+    config.staleTimeoutS = 10.0; // nor fading
+    ModelBlender blender(config);
+    auto at = [](int tick) { return glm::vec3(0.01f * float(tick), 0.0f, 0.0f); };
+    blender.resetTo(modelAt(at(0), {0, 0, 1.0f}, 0.0f), 0.0);
+    for (int i = 0; i <= 400; ++i) // the device moves 0.01 mm a tick at 1 kHz
+        blender.update(at(i), i * 1e-3);
+    // Arrives at 400 ms, answering the state sent at 100 ms, 10 ms after the previous model.
+    blender.setModel(modelAt(at(90), {0, 0, 1.0f}, 0.0f), 0.39);
+    blender.setModel(modelAt(at(100), {0, 0, 2.0f}, 0.0f), 0.4);
+    EXPECT_NEAR(blender.delayEstimate(), 0.3, 1e-9);
+    // 0.3^2 / 1 s = 90 ms, not the 10 ms between the models.
+    EXPECT_NEAR(blender.update(at(401), 0.445).z, 1.5f, 0.02f);
+    EXPECT_LT(blender.update(at(402), 0.48).z, 2.0f);
+    EXPECT_NEAR(blender.update(at(403), 0.49).z, 2.0f, 1e-5f);
+
+    // Scale 0: the blend is the interval between models again.
+    config.delayBlendScaleS = 0.0;
+    ModelBlender plain(config);
+    plain.resetTo(modelAt(at(0), {0, 0, 1.0f}, 0.0f), 0.0);
+    for (int i = 0; i <= 400; ++i)
+        plain.update(at(i), i * 1e-3);
+    plain.setModel(modelAt(at(90), {0, 0, 1.0f}, 0.0f), 0.39);
+    plain.setModel(modelAt(at(100), {0, 0, 2.0f}, 0.0f), 0.4);
+    EXPECT_NEAR(plain.delayEstimate(), 0.3, 1e-9);
+    EXPECT_NEAR(plain.update(at(401), 0.41).z, 2.0f, 1e-5f);
+}
+
+// A still device cannot say which of its ticks sent the state: the estimate stays as it was, and
+// a P_N the blender never saw leaves it too.
+TEST(Haptics, TheDelayEstimateKeepsWhenTheSendingTickIsUnknown) {
+    ModelBlender blender;
+    const glm::vec3 moving(1.0f, 0.0f, 0.0f), still(2.0f, 0.0f, 0.0f);
+    blender.resetTo(modelAt(moving, {0, 0, 1.0f}, 0.0f), 0.0);
+    blender.update(moving, 0.0);
+    for (int i = 1; i <= 100; ++i)
+        blender.update(still, i * 1e-3);
+    blender.setModel(modelAt(moving, {0, 0, 1.0f}, 0.0f), 0.1);
+    EXPECT_NEAR(blender.delayEstimate(), 0.1, 1e-9);
+    blender.setModel(modelAt(still, {0, 0, 1.0f}, 0.0f), 0.1);
+    EXPECT_NEAR(blender.delayEstimate(), 0.1, 1e-9);
+    blender.setModel(modelAt({5.0f, 5.0f, 5.0f}, {0, 0, 1.0f}, 0.0f), 0.1);
+    EXPECT_NEAR(blender.delayEstimate(), 0.1, 1e-9);
+}
+
 TEST(Haptics, StaleModelFadesToZero) {
     BlendConfig config;
     config.staleTimeoutS = 0.25;

@@ -51,4 +51,75 @@ TEST(HapticsStudy, CsvHeaderIsExact) {
     HapticsCaseResult r;
     r.c = {HapticMethod::ZeroOrderHold, 20.0, 50.0};
     EXPECT_EQ(hapticsCsvRow(r).rfind("zoh,20,50,", 0), 0u);
+    EXPECT_NE(hapticsCsvHeader().find(",reference_oscillation_mm,excess_oscillation_mm"),
+              std::string::npos);
+}
+
+// The verdict judges each case against a reference run of the same hand and tremor on the exact
+// force at 1 kHz with no delay, so the hand's own tremor (0.2 mm peak-to-peak on the skull) no
+// longer fails a good display, while the cases known to be unstable still fail.
+TEST(HapticsStudy, TheVerdictFlagsKnownUnstableCasesAndPassesTheReference) {
+    const Volume skull = makeSkull(128);
+    const SurfaceSite site = defaultBurrSite(skull);
+    HapticsStudyConfig config;
+    const HapticsCaseResult exact =
+        runHapticsCase(skull, site, config, {HapticMethod::Exact, 20.0, 0.0});
+    EXPECT_TRUE(exact.stable) << hapticsCsvRow(exact);
+    EXPECT_EQ(exact.excessOscillationMm, 0.0);
+    EXPECT_EQ(exact.energyInjectedJ, 0.0);
+    // The hand's own motion is over the old absolute limit of 0.2 mm only just; what counts is
+    // what the display adds to it.
+    EXPECT_GT(exact.finalOscillationMm, 0.15);
+
+    const HapticsCaseResult mr =
+        runHapticsCase(skull, site, config, {HapticMethod::Multirate, 20.0, 0.0});
+    EXPECT_TRUE(mr.stable) << hapticsCsvRow(mr);
+    EXPECT_NEAR(mr.referenceOscillationMm, exact.finalOscillationMm, 1e-12);
+
+    const HapticsCaseResult zoh =
+        runHapticsCase(skull, site, config, {HapticMethod::ZeroOrderHold, 20.0, 0.0});
+    EXPECT_FALSE(zoh.stable) << hapticsCsvRow(zoh);
+    EXPECT_GT(zoh.excessOscillationMm, 10.0 * config.maxExcessOscillationMm);
+
+    config.multirateUsesGradient = false;
+    const HapticsCaseResult noGradient =
+        runHapticsCase(skull, site, config, {HapticMethod::Multirate, 20.0, 0.0});
+    EXPECT_FALSE(noGradient.stable) << hapticsCsvRow(noGradient);
+    EXPECT_GT(noGradient.energyInjectedJ, config.maxEnergyInjectedJ);
+}
+
+// Stability at a 300 ms round trip, by the study's criterion: the blender's delay estimate
+// stretches its blend (BlendConfig::delayBlendScaleS); without that, 100 Hz models 300 ms late
+// shake the hand past the limit.
+TEST(HapticsStudy, MultirateStaysStableAt300Milliseconds) {
+    const Volume skull = makeSkull(128);
+    const SurfaceSite site = defaultBurrSite(skull);
+    HapticsStudyConfig config;
+    for (double rate : {20.0, 100.0}) {
+        const HapticsCaseResult r =
+            runHapticsCase(skull, site, config, {HapticMethod::Multirate, rate, 300.0});
+        EXPECT_TRUE(r.stable) << hapticsCsvRow(r);
+        EXPECT_LE(r.maxPenetrationMm, config.hand.targetDepthMm);
+        EXPECT_GT(r.meanForceN, 1.0) << "the hand stays in contact";
+    }
+    config.blend.delayBlendScaleS = 0.0;
+    const HapticsCaseResult shortBlend =
+        runHapticsCase(skull, site, config, {HapticMethod::Multirate, 100.0, 300.0});
+    EXPECT_FALSE(shortBlend.stable) << hapticsCsvRow(shortBlend);
+    EXPECT_GT(shortBlend.excessOscillationMm, config.maxExcessOscillationMm);
+}
+
+// A round trip over the blender's stale timeout (250 ms) is still a steady stream of models: the
+// run starts with the answers to the hand's earlier states in flight, so the force does not fade
+// out before the first answer of the run arrives.
+TEST(HapticsStudy, ARoundTripOverTheStaleTimeoutKeepsTheForce) {
+    Volume box = makeBox(48);
+    SurfaceSite site = boxTopSite(box);
+    HapticsStudyConfig config;
+    config.durationS = 0.5;
+    const HapticsCaseResult r =
+        runHapticsCase(box, site, config, {HapticMethod::Multirate, 20.0, 400.0});
+    EXPECT_TRUE(r.stable) << hapticsCsvRow(r);
+    EXPECT_LE(r.forcePeakErrorN, 1.0) << hapticsCsvRow(r);
+    EXPECT_EQ(r.modelsDelivered, 1); // the state sent at 50 ms: the only answer within 0.5 s
 }

@@ -88,6 +88,11 @@ struct BlendConfig {
     // A contact only pushes (`unilateral`); false: the paper's plain Equation 1, which pulls a
     // tool lifted past the surface back in (kept to measure the difference).
     bool unilateral = true;
+    // The blend lasts at least delay^2 / delayBlendScaleS (0: off), the delay being the blender's
+    // own estimate (delayEstimate). Each model extrapolates over speed x delay, so successive
+    // models disagree more the longer the delay; a short blend of them shook the hand at 300 ms
+    // (docs/haptics.md). 1 s: 2.5 ms at 50 ms (no change), 40 ms at 200 ms, 90 ms at 300 ms.
+    double delayBlendScaleS = 1.0;
 };
 
 // The haptic-rate side of multi-rate: owned by one thread, fed models with their arrival time.
@@ -106,6 +111,10 @@ public:
     glm::vec3 update(glm::vec3 p, double now);
 
     bool hasModel() const { return m_hasModel; }
+    // The round trip of the newest model whose P_N is a position this blender was updated at:
+    // its arrival less that tick's time (s); 0 before the first. While the device has not moved
+    // since that tick, the tick is ambiguous and the previous estimate stays.
+    double delayEstimate() const { return m_delay; }
     bool stale() const { return m_fading; }
     double blendFraction() const { return m_alpha; } // 1: the newest model alone
     double lastModelTime() const { return m_lastModelTime; }
@@ -114,6 +123,18 @@ public:
 
 private:
     AffineForce current() const;
+    void remember(glm::vec3 p, double now);
+    void estimateDelay(glm::vec3 anchor, double now);
+
+    // The positions of the last kHistory updates, for the delay estimate.
+    static constexpr size_t kHistory = 1024;
+    struct Tick {
+        double time;
+        glm::vec3 position;
+    };
+    std::vector<Tick> m_history;
+    size_t m_historyNext = 0;
+    double m_delay = 0.0;
 
     BlendConfig m_config;
     AffineForce m_from, m_to;
