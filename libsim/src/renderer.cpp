@@ -754,6 +754,9 @@ float coneSkipTo(const Frame& f, int x0, int y0, int x1, int y1, float tStart,
     constexpr int S = BrickGrid::kShift;
     for (int step = 0; step < kConeMaxSteps; ++step) {
         glm::vec3 p = samplePos(f, c, t);
+        // The cross-section's radius here: the box tested only has to reach it for the march to
+        // go on (the leap below shrinks the box by the radius where the ray leaves it).
+        const float rt = std::min(radius, float(tanA * t / f.minSpacing) * 1.01f + 0.05f);
         // The bricks that the cone's cross-section around p can touch, reaching half a voxel
         // further so that the march always moves on, and the smallest distance among them.
         glm::ivec3 lo, hi;
@@ -786,8 +789,8 @@ float coneSkipTo(const Frame& f, int x0, int y0, int x1, int y1, float tStart,
             // (no corner at the iso-value, BrickGrid::cellMask); samples there are below it.
             glm::ivec3 clo, chi;
             for (int a = 0; a < 3; ++a) {
-                clo[a] = floorInt(p[a] - radius - 0.5f);
-                chi[a] = floorInt(p[a] + radius + 0.5f);
+                clo[a] = floorInt(p[a] - rt - 0.5f);
+                chi[a] = floorInt(p[a] + rt + 0.5f);
                 if (clo[a] < 0 || chi[a] >= (f.nb[a] << S) || chi[a] - clo[a] >= 8)
                     return t;
             }
@@ -1218,6 +1221,195 @@ Dbi Renderer::renderRect(const Camera& camera, const PixelRect& rect) const {
     return out;
 }
 
+namespace {
+
+// One tile's pixels (see Renderer::renderInto): what the tile loop of a render shares.
+struct TileJob {
+    const Frame& f;
+    PixelRect rect;
+    Dbi& out;
+    int outX, outY;
+    int tile, tilesX;
+    int32_t* cacheResume; // the hit cache's arrays (null: no cache)
+    uint8_t* cacheInside;
+    size_t cacheStride;
+    bool batchHits;
+    std::atomic<int64_t>& resumed;
+};
+
+__attribute__((always_inline)) inline void renderTileBody(const TileJob& job, int i) {
+    const Frame& f = job.f;
+    const PixelRect& rect = job.rect;
+    Dbi& out = job.out;
+    const int outX = job.outX, outY = job.outY, tile = job.tile, tilesX = job.tilesX;
+    int32_t* const cacheResume = job.cacheResume;
+    uint8_t* const cacheInside = job.cacheInside;
+    const size_t cacheStride = job.cacheStride;
+    std::atomic<int64_t>& resumed = job.resumed;
+    int tx = i % tilesX, ty = i / tilesX;
+    int x0 = rect.x + tx * tile, y0 = rect.y + ty * tile;
+    int x1 = std::min(x0 + tile, rect.x + rect.w), y1 = std::min(y0 + tile, rect.y + rect.h);
+    int64_t known = 0;
+    // The tile's part of the hit cache, in this thread's own copy, read once and written
+    // back once: tiles side by side (other threads) share cache lines of the per-pixel
+    // arrays (four tiles a line of the 1-byte flags), and updating them pixel by pixel in
+    // place measured two threads slower than one (a 500 x 500 frame: 6.6 ms on two, 5.7 on
+    // one; 4.6 ms uncached on two).
+    const int tw = x1 - x0, th = y1 - y0;
+    thread_local std::vector<int32_t> tileResume;
+    thread_local std::vector<uint8_t> tileInside;
+    int32_t* resume = nullptr;
+    uint8_t* inside = nullptr;
+    if (cacheResume) {
+        tileResume.resize(size_t(tw) * size_t(th));
+        tileInside.resize(size_t(tw) * size_t(th));
+        for (int y = 0; y < th; ++y) {
+            const size_t from = size_t(y0 + y) * cacheStride + size_t(x0);
+            std::memcpy(&tileResume[size_t(y) * size_t(tw)], cacheResume + from,
+                        size_t(tw) * sizeof(int32_t));
+            std::memcpy(&tileInside[size_t(y) * size_t(tw)], cacheInside + from, size_t(tw));
+        }
+        resume = tileResume.data();
+        inside = tileInside.data();
+    }
+    const size_t stride = size_t(tw); // of the tile's copy, whose (0, 0) is (x0, y0)
+    auto local = [&](int x, int y) { return size_t(y - y0) * stride + size_t(x - x0); };
+    for (int by = y0; by < y1; by += kConeBlock)
+        for (int bx = x0; bx < x1; bx += kConeBlock) {
+            int bx1 = std::min(bx + kConeBlock, x1), by1 = std::min(by + kConeBlock, y1);
+            // The cone starts where the block's earliest cached first hit was (the eye where
+            // some pixel is unknown): the cache already proves every ray empty before that,
+            // and after erosion the cone leaps through the emptied space once for the block
+            // instead of every ray leaping on its own. A block whose rays can never hit needs
+            // no cone.
+            int32_t kMin = resume ? HitCache::kNever : 0;
+            for (int y = by; y < by1 && kMin > 0; ++y)
+                for (int x = bx; x < bx1; ++x)
+                    kMin = std::min(kMin, resume[local(x, y)]);
+            const float tStart = float(kMin) * f.dt;
+            const float tSkipTo = f.distance && kMin != HitCache::kNever
+                                      ? coneSkipTo(f, bx, by, bx1, by1, tStart)
+                                      : 0.0f;
+            // A cone that went some way and then stopped near surface (a hole's wall, the
+            // rim of a cut) may have stopped for the sake of a few of the block's rays: the
+            // quarters' narrower cones go on from there, each for its own 4 x 4 rays. (Cones
+            // that stop at once stay whole: quartering them measured slower, and so did a
+            // second level of quarters.)
+            const int midX = (bx + bx1) / 2, midY = (by + by1) / 2;
+            float quarterSkip[4] = {tSkipTo, tSkipTo, tSkipTo, tSkipTo};
+            if (tSkipTo > tStart && tSkipTo < INFINITY && midX > bx && midY > by)
+                for (int q = 0; q < 4; ++q)
+                    quarterSkip[q] =
+                        coneSkipTo(f, q & 1 ? midX : bx, q & 2 ? midY : by, q & 1 ? bx1 : midX,
+                                   q & 2 ? by1 : midY, tSkipTo, true);
+            if (quarterSkip[0] == INFINITY && quarterSkip[1] == INFINITY &&
+                quarterSkip[2] == INFINITY && quarterSkip[3] == INFINITY) {
+                // The cones proved every ray of the block empty: background, never to hit.
+                for (int y = by; y < by1; ++y)
+                    for (int x = bx; x < bx1; ++x) {
+                        const int ox = x - rect.x + outX, oy = y - rect.y + outY;
+                        std::memcpy(out.color(ox, oy), kBackgroundRgba, 4);
+                        out.depth()[out.index(ox, oy)] = kBackgroundDepth;
+                        if (resume) {
+                            const size_t at = local(x, y);
+                            known += resume[at] != 0;
+                            resume[at] = HitCache::kNever;
+                            inside[at] = 0;
+                        }
+                    }
+                continue;
+            }
+            // March the block's rays one by one; refine and shade their hits eight at a time.
+            PendingHit pending[kConeBlock * kConeBlock];
+            int npending = 0;
+            for (int y = by; y < by1; ++y)
+                for (int x = bx; x < bx1; ++x) {
+                    int ox = x - rect.x + outX, oy = y - rect.y + outY;
+                    int32_t k = 0;
+                    uint8_t notInside = 0;
+                    const size_t at = resume ? local(x, y) : 0;
+                    int32_t* slot = resume ? &resume[at] : &k;
+                    uint8_t* wasInside = resume ? &inside[at] : &notInside;
+                    known += *slot != 0;
+                    PendingHit& h = pending[npending];
+                    h.r = pixelRay(f, x, y);
+                    const float skip = quarterSkip[(x >= midX) + 2 * (y >= midY)];
+                    h.m = marchToSurface(f, h.r, skip, *slot, *wasInside != 0);
+                    *slot = h.m.kIn;
+                    *wasInside = h.m.hit && h.m.refine;
+                    if (h.m.hit) {
+                        h.ox = ox, h.oy = oy;
+                        ++npending;
+                    } else {
+                        std::memcpy(out.color(ox, oy), kBackgroundRgba, 4);
+                        out.depth()[out.index(ox, oy)] = kBackgroundDepth;
+                    }
+                }
+            auto write = [&](const PendingHit& p, const Hit& hit) {
+                shadePixel(hit, p.r, out.color(p.ox, p.oy));
+                out.depth()[out.index(p.ox, p.oy)] = hitDepth(f, p.r, hit.t);
+            };
+            PendingHit* batch[8];
+            int nbatch = 0;
+            auto flush = [&] {
+                v4sf g[8];
+                refineAndDifferentiate8(f, batch, nbatch, g);
+                for (int l = 0; l < nbatch; ++l) {
+                    const PendingHit& p = *batch[l];
+                    Hit hit;
+                    hit.t = p.m.t;
+                    hit.normal = hitNormal(f, p.r, g[l]);
+                    hit.material =
+                        hitMaterial(f, samplePos4(f, p.r, p.m.t), samplePos4(f, p.r, p.m.tIn));
+                    write(p, hit);
+                }
+                nbatch = 0;
+            };
+            for (int i = 0; i < npending; ++i) {
+                PendingHit& p = pending[i];
+                if (job.batchHits && hitInside(f, p)) {
+                    batch[nbatch++] = &p;
+                    if (nbatch == 8)
+                        flush();
+                    continue;
+                }
+                refineHit(f, p.r, p.m);
+                Hit hit;
+                finishHit(f, p.r, p.m, hit);
+                write(p, hit);
+            }
+            if (nbatch > 0)
+                flush();
+        }
+    if (resume) {
+        for (int y = 0; y < th; ++y) {
+            const size_t to = size_t(y0 + y) * cacheStride + size_t(x0);
+            std::memcpy(cacheResume + to, &tileResume[size_t(y) * size_t(tw)],
+                        size_t(tw) * sizeof(int32_t));
+            std::memcpy(cacheInside + to, &tileInside[size_t(y) * size_t(tw)], size_t(tw));
+        }
+        resumed.fetch_add(known, std::memory_order_relaxed);
+    }
+}
+
+// The tile loop compiled twice: for baseline x86-64 (SSE2) and, with everything it calls inlined
+// (flatten), for AVX2, chosen at run time. Both are the same IEEE operations in the same order
+// (no FMA: contraction would change bits), so the pixels are the same bit for bit.
+__attribute__((flatten)) void renderTileBaseline(const TileJob& job, int i) {
+    renderTileBody(job, i);
+}
+
+__attribute__((flatten, target("avx2,bmi2"))) void renderTileAvx2(const TileJob& job, int i) {
+    renderTileBody(job, i);
+}
+
+bool cpuHasAvx2() {
+    static const bool has = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("bmi2");
+    return has;
+}
+
+} // namespace
+
 void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, int outX, int outY,
                           HitCache* cache) const {
     if (rect.empty() || m_volume->empty())
@@ -1229,151 +1421,24 @@ void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out,
     uint8_t* cacheInside = cache ? cache->m_inside.data() : nullptr;
     const size_t cacheStride = size_t(camera.width);
     std::atomic<int64_t> resumed{0};
+    const TileJob job{f,
+                      rect,
+                      out,
+                      outX,
+                      outY,
+                      tile,
+                      tilesX,
+                      cacheResume,
+                      cacheInside,
+                      cacheStride,
+                      m_options.batchHits,
+                      resumed};
+    const bool avx2 = m_options.avx2 && cpuHasAvx2();
     auto renderTile = [&](int i) {
-        int tx = i % tilesX, ty = i / tilesX;
-        int x0 = rect.x + tx * tile, y0 = rect.y + ty * tile;
-        int x1 = std::min(x0 + tile, rect.x + rect.w), y1 = std::min(y0 + tile, rect.y + rect.h);
-        int64_t known = 0;
-        // The tile's part of the hit cache, in this thread's own copy, read once and written
-        // back once: tiles side by side (other threads) share cache lines of the per-pixel
-        // arrays (four tiles a line of the 1-byte flags), and updating them pixel by pixel in
-        // place measured two threads slower than one (a 500 x 500 frame: 6.6 ms on two, 5.7 on
-        // one; 4.6 ms uncached on two).
-        const int tw = x1 - x0, th = y1 - y0;
-        thread_local std::vector<int32_t> tileResume;
-        thread_local std::vector<uint8_t> tileInside;
-        int32_t* resume = nullptr;
-        uint8_t* inside = nullptr;
-        if (cacheResume) {
-            tileResume.resize(size_t(tw) * size_t(th));
-            tileInside.resize(size_t(tw) * size_t(th));
-            for (int y = 0; y < th; ++y) {
-                const size_t from = size_t(y0 + y) * cacheStride + size_t(x0);
-                std::memcpy(&tileResume[size_t(y) * size_t(tw)], cacheResume + from,
-                            size_t(tw) * sizeof(int32_t));
-                std::memcpy(&tileInside[size_t(y) * size_t(tw)], cacheInside + from, size_t(tw));
-            }
-            resume = tileResume.data();
-            inside = tileInside.data();
-        }
-        const size_t stride = size_t(tw); // of the tile's copy, whose (0, 0) is (x0, y0)
-        auto local = [&](int x, int y) { return size_t(y - y0) * stride + size_t(x - x0); };
-        for (int by = y0; by < y1; by += kConeBlock)
-            for (int bx = x0; bx < x1; bx += kConeBlock) {
-                int bx1 = std::min(bx + kConeBlock, x1), by1 = std::min(by + kConeBlock, y1);
-                // The cone starts where the block's earliest cached first hit was (the eye where
-                // some pixel is unknown): the cache already proves every ray empty before that,
-                // and after erosion the cone leaps through the emptied space once for the block
-                // instead of every ray leaping on its own. A block whose rays can never hit needs
-                // no cone.
-                int32_t kMin = resume ? HitCache::kNever : 0;
-                for (int y = by; y < by1 && kMin > 0; ++y)
-                    for (int x = bx; x < bx1; ++x)
-                        kMin = std::min(kMin, resume[local(x, y)]);
-                const float tStart = float(kMin) * f.dt;
-                const float tSkipTo = f.distance && kMin != HitCache::kNever
-                                          ? coneSkipTo(f, bx, by, bx1, by1, tStart)
-                                          : 0.0f;
-                // A cone that went some way and then stopped near surface (a hole's wall, the
-                // rim of a cut) may have stopped for the sake of a few of the block's rays: the
-                // quarters' narrower cones go on from there, each for its own 4 x 4 rays. (Cones
-                // that stop at once stay whole: quartering them measured slower, and so did a
-                // second level of quarters.)
-                const int midX = (bx + bx1) / 2, midY = (by + by1) / 2;
-                float quarterSkip[4] = {tSkipTo, tSkipTo, tSkipTo, tSkipTo};
-                if (tSkipTo > tStart && tSkipTo < INFINITY && midX > bx && midY > by)
-                    for (int q = 0; q < 4; ++q)
-                        quarterSkip[q] =
-                            coneSkipTo(f, q & 1 ? midX : bx, q & 2 ? midY : by, q & 1 ? bx1 : midX,
-                                       q & 2 ? by1 : midY, tSkipTo, true);
-                if (quarterSkip[0] == INFINITY && quarterSkip[1] == INFINITY &&
-                    quarterSkip[2] == INFINITY && quarterSkip[3] == INFINITY) {
-                    // The cones proved every ray of the block empty: background, never to hit.
-                    for (int y = by; y < by1; ++y)
-                        for (int x = bx; x < bx1; ++x) {
-                            const int ox = x - rect.x + outX, oy = y - rect.y + outY;
-                            std::memcpy(out.color(ox, oy), kBackgroundRgba, 4);
-                            out.depth()[out.index(ox, oy)] = kBackgroundDepth;
-                            if (resume) {
-                                const size_t at = local(x, y);
-                                known += resume[at] != 0;
-                                resume[at] = HitCache::kNever;
-                                inside[at] = 0;
-                            }
-                        }
-                    continue;
-                }
-                // March the block's rays one by one; refine and shade their hits eight at a time.
-                PendingHit pending[kConeBlock * kConeBlock];
-                int npending = 0;
-                for (int y = by; y < by1; ++y)
-                    for (int x = bx; x < bx1; ++x) {
-                        int ox = x - rect.x + outX, oy = y - rect.y + outY;
-                        int32_t k = 0;
-                        uint8_t notInside = 0;
-                        const size_t at = resume ? local(x, y) : 0;
-                        int32_t* slot = resume ? &resume[at] : &k;
-                        uint8_t* wasInside = resume ? &inside[at] : &notInside;
-                        known += *slot != 0;
-                        PendingHit& h = pending[npending];
-                        h.r = pixelRay(f, x, y);
-                        const float skip = quarterSkip[(x >= midX) + 2 * (y >= midY)];
-                        h.m = marchToSurface(f, h.r, skip, *slot, *wasInside != 0);
-                        *slot = h.m.kIn;
-                        *wasInside = h.m.hit && h.m.refine;
-                        if (h.m.hit) {
-                            h.ox = ox, h.oy = oy;
-                            ++npending;
-                        } else {
-                            std::memcpy(out.color(ox, oy), kBackgroundRgba, 4);
-                            out.depth()[out.index(ox, oy)] = kBackgroundDepth;
-                        }
-                    }
-                auto write = [&](const PendingHit& p, const Hit& hit) {
-                    shadePixel(hit, p.r, out.color(p.ox, p.oy));
-                    out.depth()[out.index(p.ox, p.oy)] = hitDepth(f, p.r, hit.t);
-                };
-                PendingHit* batch[8];
-                int nbatch = 0;
-                auto flush = [&] {
-                    v4sf g[8];
-                    refineAndDifferentiate8(f, batch, nbatch, g);
-                    for (int l = 0; l < nbatch; ++l) {
-                        const PendingHit& p = *batch[l];
-                        Hit hit;
-                        hit.t = p.m.t;
-                        hit.normal = hitNormal(f, p.r, g[l]);
-                        hit.material =
-                            hitMaterial(f, samplePos4(f, p.r, p.m.t), samplePos4(f, p.r, p.m.tIn));
-                        write(p, hit);
-                    }
-                    nbatch = 0;
-                };
-                for (int i = 0; i < npending; ++i) {
-                    PendingHit& p = pending[i];
-                    if (m_options.batchHits && hitInside(f, p)) {
-                        batch[nbatch++] = &p;
-                        if (nbatch == 8)
-                            flush();
-                        continue;
-                    }
-                    refineHit(f, p.r, p.m);
-                    Hit hit;
-                    finishHit(f, p.r, p.m, hit);
-                    write(p, hit);
-                }
-                if (nbatch > 0)
-                    flush();
-            }
-        if (resume) {
-            for (int y = 0; y < th; ++y) {
-                const size_t to = size_t(y0 + y) * cacheStride + size_t(x0);
-                std::memcpy(cacheResume + to, &tileResume[size_t(y) * size_t(tw)],
-                            size_t(tw) * sizeof(int32_t));
-                std::memcpy(cacheInside + to, &tileInside[size_t(y) * size_t(tw)], size_t(tw));
-            }
-            resumed.fetch_add(known, std::memory_order_relaxed);
-        }
+        if (avx2)
+            renderTileAvx2(job, i);
+        else
+            renderTileBaseline(job, i);
     };
     if (m_pool)
         m_pool->parallelFor(tilesX * tilesY, renderTile);

@@ -24,6 +24,9 @@ struct RenderOptions {
     int tileSize = 16;     // pixels per tile edge handed to one worker (claimed dynamically)
     // Refine and differentiate hits eight at a time in vectors (bit-identical either way).
     bool batchHits = true;
+    // Run the tile loop's AVX2 build where the CPU has AVX2 (bit-identical either way: the same
+    // operations, no FMA); false keeps baseline x86-64.
+    bool avx2 = true;
 };
 
 // Shading uses the density gradient from central differences at the eight voxels around the hit,
