@@ -362,12 +362,14 @@ void writeHaptics(std::ostringstream& md, const HapticsFigures& haptics) {
             tc.push_back({hapticMethodName(r.c.method), fmt::format("{:.0f}", r.c.updateHz),
                           fmt::format("{:.0f}", r.c.latencyMs),
                           fmt::format("{:.4f}", r.forceRmsErrorN),
-                          fmt::format("{:.3f}", r.energyInjectedJ * 1e3), r.stable ? "yes" : "NO"});
+                          fmt::format("{:.3f}", r.energyInjectedJ * 1e3),
+                          fmt::format("{:.4f}", r.excessOscillationMm), r.stable ? "yes" : "NO"});
         md << markdownTable({"method", "model rate (Hz)", "latency (ms)", "rms force error (N)",
-                             "energy injected (mJ)", "stable"},
+                             "energy injected (mJ)", "added oscillation (mm)", "stable"},
                             tc);
         md << "\nMulti-rate extrapolation (the paper's method) against a zero-order hold of the "
-              "server's force (haptics.csv has every column).\n";
+              "server's force, each judged against the same hand on the exact force with no delay "
+              "(haptics.csv has every column).\n";
     } else {
         md << "Not run.\n";
     }
