@@ -1121,6 +1121,8 @@ void TrainerWindow::drawPanels(const FrameState& f) {
     if (takeOverControls.newCode)
         client.newCode(*takeOverControls.newCode);
     takeOverControls.newCode.reset();
+    for (net::ClientRequest& r : std::exchange(takeOverControls.requests, {}))
+        client.send(std::move(r));
     // View as (the panel, --view-as once the participant is listed).
     if (scene && snap.welcome && snap.state == net::LinkState::Connected)
         if (const auto id =

@@ -178,23 +178,26 @@ bool ClientThread::requestSync(Sync mode) {
 bool ClientThread::annotate(const Annotate& a) {
     return push(a);
 }
+bool ClientThread::send(ClientRequest r) {
+    return push(std::move(r));
+}
 bool ClientThread::takeOver(uint16_t trainee) {
-    return push(TakeOver{trainee});
+    return send(TakeOver{trainee});
 }
 bool ClientThread::viewAs(uint16_t id) {
     return push(ViewAs{id});
 }
 bool ClientThread::remove(Remove m) {
-    return push(m);
+    return send(m);
 }
 bool ClientThread::controlReplay(const ReplayControl& c) {
-    return push(c);
+    return send(c);
 }
 bool ClientThread::newCode(Role role) {
     Codes m;
     m.op = Codes::Op::Issue;
     m.role = role;
-    return push(std::move(m));
+    return send(std::move(m));
 }
 
 std::vector<AppliedVolumeBox> ClientThread::drainVolumeBoxes() {
@@ -338,11 +341,12 @@ bool same(const T& a, const T& b) {
 auto fieldsOf(const ClientSnapshot& s) {
     const auto& [f0, f1, f2, f3, f4, f5, f6, f7, f8, f9, f10, f11, f12, f13, f14, f15, f16, f17,
                  f18, f19, f20, f21, f22, f23, f24, f25, f26, f27, f28, f29, f30, f31, f32, f33,
-                 f34, f35, f36, f37, f38, f39, f40, f41, f42, f43, f44, f45, f46, f47, f48, f49] =
-        s;
+                 f34, f35, f36, f37, f38, f39, f40, f41, f42, f43, f44, f45, f46, f47, f48, f49,
+                 f50] = s;
     return std::tie(f0, f1, f2, f3, f4, f5, f6, f7, f8, f9, f10, f11, f12, f13, f14, f15, f16, f17,
                     f18, f19, f20, f21, f22, f23, f24, f25, f26, f27, f28, f29, f30, f31, f32, f33,
-                    f34, f35, f36, f37, f38, f39, f40, f41, f42, f43, f44, f45, f46, f47, f48, f49);
+                    f34, f35, f36, f37, f38, f39, f40, f41, f42, f43, f44, f45, f46, f47, f48, f49,
+                    f50);
 }
 
 template <typename Tuple, size_t... I>
@@ -377,6 +381,7 @@ DrawnPart drawnPart(const ClientSnapshot& s) {
             DrawnPart::Timeline{s.replay->playing, s.replay->seeks, s.replay->speed,
                                 s.replay->durationUs, s.replay->playing ? 0 : s.replay->positionUs};
     d.codes = s.codes;
+    d.newest = s.newest;
     for (const auto& [id, t] : s.others)
         d.others[id] = {t.position, t.orientation, t.drilling, t.toolKind, t.diameterMm};
     return d;
@@ -414,6 +419,7 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
         s->warnings = c->warnings();
         s->assessment = c->assessment();
         s->codes = c->codes();
+        s->newest = c->newest();
         if (c->replay()) {
             s->replay = *c->replay();
             s->replay->positionUs = c->replayPosition(nowUs);
@@ -673,11 +679,8 @@ void ClientThread::runCommands(SessionClient& client, bool renderLocally) {
         [&](const PingCmd&) { cp->sendPing(); },
         [&](const ToolState& t) { cp->sendToolState(t); },
         [&](const Annotate& a) { cp->annotate(a); },
-        [&](const TakeOver& k) { cp->takeOver(k.trainee); },
         [&](const ViewAs& as) { cp->viewAs(as.clientId); },
-        [&](const Remove& r) { cp->remove(r); },
-        [&](const ReplayControl& rc) { cp->controlReplay(rc); },
-        [&](const Codes& k) { cp->newCode(k.role); },
+        [&](const ClientRequest& r) { cp->send(r); },
     };
     for (const Command& c : cmds)
         if (welcomed || std::holds_alternative<ViewCmd>(c) || std::holds_alternative<SyncCmd>(c))

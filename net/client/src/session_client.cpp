@@ -85,7 +85,7 @@ void SessionClient::sendHandshake(Handshake m) {
 }
 
 void SessionClient::remove(Remove m) {
-    send(Channel::Control, encodeMessage(m));
+    send(m);
 }
 
 bool SessionClient::sendRaw(Channel channel, std::span<const uint8_t> bytes) {
@@ -341,6 +341,20 @@ bool SessionClient::onHandshake(std::span<const uint8_t> data) {
     return true;
 }
 
+namespace {
+
+// The handler of the server state a client keeps whole (IsStoredState): a newer one replaces it.
+struct KeepNewest {
+    MessageStore& store;
+    std::span<const uint8_t> data;
+    template <typename M>
+    requires IsStoredState<M>::value bool operator()(MessageTag<M>) const {
+        return store.put<M>(data);
+    }
+};
+
+} // namespace
+
 bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs) {
     // A message only clients send, or of no type, is malformed (the table's direction).
     return dispatchReceived<Side::Client>(
@@ -361,6 +375,7 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
             [&](MessageTag<AssessmentSnapshot>) { return onAssessmentSnapshot(data); },
             [&](MessageTag<ReplayState>) { return onReplayState(data, nowUs); },
             [&](MessageTag<Codes>) { return onCodes(data); },
+            KeepNewest{m_newest, data},
             // Only in the clear, before the channel is sealed (onReceive).
             [](MessageTag<Handshake>) { return false; },
         },
@@ -926,8 +941,7 @@ void SessionClient::viewAs(uint16_t id) {
 }
 
 void SessionClient::takeOver(uint16_t trainee) {
-    TakeOver m{trainee};
-    send(Channel::Control, encodeMessage(m));
+    send(TakeOver{trainee});
 }
 
 } // namespace trephine::net

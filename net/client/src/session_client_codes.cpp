@@ -15,7 +15,7 @@ void SessionClient::newCode(Role role) {
     Codes m;
     m.op = Codes::Op::Issue;
     m.role = role;
-    send(Channel::Control, encodeMessage(m));
+    send(m);
 }
 
 } // namespace trephine::net

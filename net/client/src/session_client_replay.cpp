@@ -20,7 +20,7 @@ uint64_t SessionClient::replayPosition(uint64_t nowUs) const {
 }
 
 void SessionClient::controlReplay(ReplayControl c) {
-    send(Channel::Control, encodeMessage(c));
+    send(c);
 }
 
 } // namespace trephine::net

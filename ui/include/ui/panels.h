@@ -99,6 +99,8 @@ struct TakeOverControls {
     std::optional<uint16_t> asked;     // a trainee's client id, or 0 to hand back
     std::optional<net::Remove> remove; // an instructor's remove, or letting the removed rejoin
     std::optional<net::Role> newCode;  // an instructor asks for a new code of this role
+    // Plain requests the panel asked for this frame (net::ClientRequest), sent as they are.
+    std::vector<net::ClientRequest> requests;
 };
 // Who holds trainee `id` in `roster` (0: nobody, or not listed), and whom `instructor` holds.
 uint16_t takenOverBy(const std::map<uint16_t, net::ParticipantInfo>& roster, uint16_t id);

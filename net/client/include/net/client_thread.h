@@ -123,6 +123,8 @@ struct ClientSnapshot {
     std::optional<ReplayState> replay;
     // [Instructor] The session's codes, to read out (none: a trainee, or an open session).
     std::optional<Codes> codes;
+    // The server's other state, each kind's newest message (SessionClient::newest).
+    MessageStore newest;
     std::optional<HapticModel> hapticModel; // latest force model (when the client offers it)
     uint64_t hapticModels = 0;
     // [Instructor] the newest relayed force model of every other participant, by client id.
@@ -187,6 +189,7 @@ struct DrawnPart {
     std::vector<AnnotationInfo> annotations;
     std::optional<Timeline> replay;
     std::optional<Codes> codes;
+    MessageStore newest;
     std::map<uint16_t, Tool> others;
     bool operator==(const DrawnPart&) const = default;
 };
@@ -231,6 +234,8 @@ public:
     bool requestSync(Sync mode);
     // [Instructor] Adds, removes or clears marks (SessionClient::annotate).
     bool annotate(const Annotate& a);
+    // A plain request (SessionClient::send), e.g. TakeOver or Remove.
+    bool send(ClientRequest r);
     // [Instructor] Takes over a trainee or hands back (0) (SessionClient::takeOver).
     bool takeOver(uint16_t trainee);
     // [Instructor] Watches through a participant's camera (0: its own) (SessionClient::viewAs).
@@ -266,8 +271,8 @@ private:
     struct SyncCmd {
         Sync sync;
     };
-    using Command = std::variant<ToolState, ViewCmd, PingCmd, SyncCmd, Annotate, TakeOver, ViewAs,
-                                 Remove, ReplayControl, Codes>;
+    using Command =
+        std::variant<ToolState, ViewCmd, PingCmd, SyncCmd, Annotate, ViewAs, ClientRequest>;
 
     // The 1 s rate tick's state for one connection (network thread only).
     struct RateClock {

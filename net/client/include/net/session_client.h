@@ -13,6 +13,7 @@
 #include "libsim/volume.h"
 #include "net/assessment_protocol.h"
 #include "net/enet_host.h"
+#include "net/messages.h"
 #include "net/net_stats.h"
 #include "net/protocol.h"
 #include "net/replay_protocol.h"
@@ -67,6 +68,28 @@ struct ServerFault {
 };
 // "HOST sent a malformed scene (DETAIL)": the session's failure text, the one place it is made.
 std::string serverFaultText(const std::string& server, const ServerFault& fault);
+
+// A request the client sends as it is, with nothing of its own state to follow: any message of
+// the table a client sends, except those listed here, which have methods of their own that keep
+// the client's state (its hello and handshake, views, design, tool states, pings, view-as, marks).
+template <typename M>
+inline constexpr bool kKeepsClientState =
+    std::is_same_v<M, Hello> || std::is_same_v<M, Handshake> || std::is_same_v<M, ViewRequest> ||
+    std::is_same_v<M, SyncMode> || std::is_same_v<M, ToolState> || std::is_same_v<M, Ping> ||
+    std::is_same_v<M, ViewAs> || std::is_same_v<M, Annotate>;
+template <typename M>
+struct IsPlainRequest
+    : std::bool_constant<receives(Side::Server, messageInfo(M::kType).direction) &&
+                         !kKeepsClientState<M>> {};
+using ClientRequest = MessageVariant<IsPlainRequest>;
+
+// Server state the client keeps whole in newest() with no handler of its own: a control message
+// the server sends that a newer one replaces (the table's newest wins). One with a handler (the
+// roster, the marks, ...) is kept by it instead.
+template <typename M>
+struct IsStoredState : std::bool_constant<receives(Side::Client, messageInfo(M::kType).direction) &&
+                                          messageInfo(M::kType).newestWins &&
+                                          messageInfo(M::kType).channel == Channel::Control> {};
 
 class SessionClient {
 public:
@@ -186,6 +209,17 @@ public:
     // are sent them; none in an open session). session_client_codes.cpp.
     void newCode(Role role);
     const std::optional<Codes>& codes() const { return m_codes; }
+    // Sends a plain request (IsPlainRequest) on the table's channel. The server answers, if at
+    // all, with state that newest() or a handler keeps.
+    template <typename M>
+    requires IsPlainRequest<M>::value void send(M m) {
+        send(messageInfo(M::kType).channel, encodeMessage(m));
+    }
+    void send(const ClientRequest& r) {
+        std::visit([this](const auto& m) { send(m); }, r);
+    }
+    // The newest server state of each kind kept without a handler (IsStoredState).
+    const MessageStore& newest() const { return m_newest; }
     // ParticipantView messages received (of the participant viewed as, or a stale one).
     uint64_t participantViewsReceived() const { return m_participantViews; }
 
@@ -392,6 +426,7 @@ private:
     uint64_t m_snapshots = 0;
     std::optional<ReplayState> m_replay;
     std::optional<Codes> m_codes;
+    MessageStore m_newest;
     uint64_t m_replayReceivedUs = 0;
     // Whether relays of `id` are kept: everyone until the first roster, then whom it lists (a relay
     // on the tool or haptic channel can trail the reliable roster that dropped its sender).

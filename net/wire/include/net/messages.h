@@ -12,8 +12,14 @@
 
 #include <array>
 #include <cstdint>
+#include <map>
+#include <optional>
+#include <span>
 #include <string_view>
+#include <tuple>
 #include <type_traits>
+#include <variant>
+#include <vector>
 
 namespace trephine::net {
 
@@ -135,5 +141,51 @@ R dispatchAny(uint8_t type, H&& handler, R otherwise) {
     }(AllMessages{});
     return result;
 }
+
+// The newest message of each kind a receiver keeps whole, by type: state whose newer message says
+// all an older one said (the table's newest wins), held as its wire bytes so that a store is a
+// value (equal stores hold the same messages).
+class MessageStore {
+public:
+    // Keeps `data` as the newest M; false (nothing kept) when it does not decode as one.
+    template <typename M>
+    bool put(std::span<const uint8_t> data) {
+        M m;
+        if (!decodeMessage(data, m))
+            return false;
+        m_bytes[M::kType].assign(data.begin(), data.end());
+        return true;
+    }
+    template <typename M>
+    std::optional<M> get() const {
+        auto it = m_bytes.find(M::kType);
+        M m;
+        if (it == m_bytes.end() || !decodeMessage(std::span<const uint8_t>(it->second), m))
+            return std::nullopt;
+        return m;
+    }
+    bool empty() const { return m_bytes.empty(); }
+    bool operator==(const MessageStore&) const = default;
+
+private:
+    std::map<MessageType, std::vector<uint8_t>> m_bytes;
+};
+
+namespace detail {
+template <template <typename> typename Keep, typename... Ms>
+auto variantOf(MessageList<Ms...>) -> decltype(std::tuple_cat(
+    std::conditional_t<Keep<Ms>::value, std::tuple<Ms>, std::tuple<>>{}...));
+template <typename Tuple>
+struct VariantOfTuple;
+template <typename... Ms>
+struct VariantOfTuple<std::tuple<Ms...>> {
+    using Type = std::variant<Ms...>;
+};
+} // namespace detail
+
+// A variant of the messages of the list that `Keep<M>::value` selects, in the list's order.
+template <template <typename> typename Keep>
+using MessageVariant =
+    typename detail::VariantOfTuple<decltype(detail::variantOf<Keep>(AllMessages{}))>::Type;
 
 } // namespace trephine::net
