@@ -162,6 +162,59 @@ void drillLine(const net::ClientSnapshot& snap, const ToolControls& tool, uint16
         ImGui::TextDisabled("pointer only: take over a trainee to drill");
 }
 
+// Who feels whose forces and who guides whose hand (HandLinks), one line each, so that a trainee
+// knows; an instructor's own links read "you".
+void handLinkLines(const net::ClientSnapshot& snap, uint16_t self) {
+    const std::optional<net::HandLinks> links = snap.newest.get<net::HandLinks>();
+    if (!links)
+        return;
+    auto name = [&](uint16_t id) {
+        return id == self ? std::string("you") : participantName(snap.participants, id);
+    };
+    const ImVec4 c(0.75f, 0.6f, 1.0f, 1);
+    for (const net::HandLink& l : links->list) {
+        const char* s = l.instructor == self ? "" : "s";
+        if (l.feels)
+            ImGui::TextColored(c, "%s feel%s %s forces", name(l.instructor).c_str(), s,
+                               l.feels == self ? "your" : (name(l.feels) + "'s").c_str());
+        const uint16_t held = heldBy(snap.participants, l.instructor);
+        if (l.guides && held)
+            ImGui::TextColored(c, "%s guide%s %s hand", name(l.instructor).c_str(), s,
+                               held == self ? "your" : (name(held) + "'s").c_str());
+    }
+}
+
+// An instructor's own link in force (none: feels nobody, guides nobody).
+net::HandLink ownHandLink(const net::ClientSnapshot& snap, uint16_t self) {
+    if (const std::optional<net::HandLinks> links = snap.newest.get<net::HandLinks>())
+        for (const net::HandLink& l : links->list)
+            if (l.instructor == self)
+                return l;
+    return {self, 0, false};
+}
+
+// [Instructor] Feel a participant's forces on the force device; guide the held trainee's hand.
+void handLinkButtons(const net::ClientSnapshot& snap, uint16_t id, const net::ParticipantInfo& p,
+                     uint16_t self, TakeOverControls& takeOver) {
+    net::HandLink link = ownHandLink(snap, self);
+    ImGui::PushID(int(id) + 0x30000);
+    if (ImGui::SmallButton(link.feels == id ? "stop feeling" : "feel")) {
+        link.feels = link.feels == id ? 0 : id;
+        takeOver.requests.push_back(net::HandLinks{{link}});
+    }
+    itemTip("Your force device feels this participant's drill on the bone (their force models).");
+    ImGui::SameLine();
+    if (p.takenOverBy == self && self != 0) {
+        if (ImGui::SmallButton(link.guides ? "free hand" : "guide hand")) {
+            link.guides = !link.guides;
+            takeOver.requests.push_back(net::HandLinks{{link}});
+        }
+        itemTip("A bounded spring pulls the trainee's force device toward your tool.");
+        ImGui::SameLine();
+    }
+    ImGui::PopID();
+}
+
 // An instructor's mark controls: the same buttons every frame (greyed when they do nothing), so
 // none moves when marks arrive.
 void markControlRows(const net::ClientSnapshot& snap, MarkControls& marks) {
@@ -228,6 +281,8 @@ void participantRow(const net::ClientSnapshot& snap, uint16_t id, const net::Par
         }
         ImGui::PopID();
     }
+    if (takeOver.canTakeOver)
+        handLinkButtons(snap, id, p, self, takeOver);
     // Removing is an instructor's too (docs/security.md): refused from that address with its
     // role's code until "let removed rejoin".
     if (takeOver.canTakeOver) {
@@ -309,6 +364,7 @@ void drawSessionPanel(const net::ClientSnapshot& snap, ToolControls& tool, MarkC
     ImGui::Separator();
     toolRows(tool);
     drillLine(snap, tool, self, takeOver.canTakeOver);
+    handLinkLines(snap, self);
     if (snap.viewingAs)
         ImGui::TextColored(ImVec4(0.5f, 0.8f, 1, 1), "viewing as %s",
                            participantName(snap.participants, snap.viewingAs).c_str());

@@ -71,6 +71,7 @@ void SessionPolicy::disconnect(uint16_t id, uint64_t now, PolicyOutput& out) {
     m_peers.erase(gone);
     countSwitches(); // it left: nothing to switch
     releaseTakeOvers(id);
+    m_handLinks.erase(id);
     m_follow.leave(id);
     out.events.push_back({0, LeaveEvent{id}});
     m_book.record([&](ServerReport& r) {
@@ -148,8 +149,13 @@ void SessionPolicy::update(uint64_t now, PolicyOutput& out) {
     // the role) cannot make the server queue a list per edit for every participant.
     if (m_marksOut.due(now))
         out.messages.push_back({participants(), Channel::Control, marksMessage()});
-    if (m_roster.due(now))
+    if (m_roster.due(now)) {
         out.messages.push_back({participants(), Channel::Control, rosterMessage()});
+        HandLinks links = handLinksInForce();
+        if (!links.list.empty() || m_handLinksListed)
+            out.messages.push_back({participants(), Channel::Control, encodeMessage(links)});
+        m_handLinksListed = !links.list.empty();
+    }
     for (auto& [id, p] : m_peers)
         if (!p.kicked && p.modeSwitch.pending() && p.modeSwitch.due(now))
             pushSwitch(id, p, now, out);
@@ -231,6 +237,7 @@ bool SessionPolicy::handle(uint16_t id, Peer& p, std::span<const uint8_t> data, 
             [&](MessageTag<SyncMode>) { return syncMode(id, p, data, now, out); },
             [&](MessageTag<Annotate>) { return annotate(id, p, data, now, out); },
             [&](MessageTag<TakeOver>) { return takeOver(id, p, data, now, out); },
+            [&](MessageTag<HandLinks>) { return handLink(id, p, data); },
             [&](MessageTag<Remove>) { return remove(id, p, data, now, out); },
             [&](MessageTag<Codes>) { return codes(id, p, data, out); },
             [&](MessageTag<ReplayControl>) {
@@ -490,6 +497,27 @@ bool SessionPolicy::takeOver(uint16_t id, const Peer& p, std::span<const uint8_t
     return true;
 }
 
+// An instructor joins its force device to a participant's forces, or to the hand of the trainee
+// it holds; everyone hears of it with the roster.
+bool SessionPolicy::handLink(uint16_t id, const Peer& p, std::span<const uint8_t> data) {
+    HandLinks m;
+    if (!decodeMessage(data, m))
+        return false;
+    const std::vector<uint16_t> others = participants(id);
+    if (p.helloMsg.role != Role::Instructor || m.list.size() != 1 ||
+        (m.list[0].feels != 0 && std::ranges::find(others, m.list[0].feels) == others.end())) {
+        m_book.count(&ServerCounters::takeOversRefused);
+        return true;
+    }
+    HandLink link{id, m.list[0].feels, m.list[0].guides};
+    if (link.feels == 0 && !link.guides)
+        m_handLinks.erase(id);
+    else
+        m_handLinks[id] = link;
+    m_roster.mark();
+    return true;
+}
+
 // An instructor sends a participant away for good (until it allows them back): the gate keeps
 // the address and the role's code (net/session_gate.h).
 bool SessionPolicy::remove(uint16_t id, const Peer& p, std::span<const uint8_t> data, uint64_t now,
@@ -546,6 +574,24 @@ std::vector<uint8_t> SessionPolicy::rosterMessage() const {
         roster.list.begin(), roster.list.end(),
         [](const ParticipantInfo& a, const ParticipantInfo& b) { return a.clientId < b.clientId; });
     return encodeMessage(roster);
+}
+
+HandLinks SessionPolicy::handLinksInForce() const {
+    HandLinks links;
+    for (const auto& [id, asked] : m_handLinks) {
+        if (m_peers.at(id).kicked)
+            continue;
+        HandLink l = asked;
+        auto felt = m_peers.find(l.feels);
+        if (felt == m_peers.end() || !felt->second.hello || felt->second.kicked)
+            l.feels = 0;
+        l.guides = l.guides && std::ranges::any_of(m_takenOver, [&](const auto& held) {
+                       return held.second == id;
+                   });
+        if (l.feels || l.guides)
+            links.list.push_back(l);
+    }
+    return links;
 }
 
 std::vector<uint8_t> SessionPolicy::marksMessage() const {

@@ -193,6 +193,7 @@ private:
                   PolicyOutput& out);
     bool takeOver(uint16_t id, const Peer& p, std::span<const uint8_t> data, uint64_t now,
                   PolicyOutput& out);
+    bool handLink(uint16_t id, const Peer& p, std::span<const uint8_t> data);
     void kick(uint16_t id, Peer& p, RefuseReason why, PolicyOutput& out, uint64_t now);
     void replayOne(const LogRecord& r, uint64_t now, PolicyOutput& out,
                    std::map<uint16_t, ToolState>& tools);
@@ -212,6 +213,7 @@ private:
     std::vector<uint16_t> participants(uint16_t except = 0, const Role* role = nullptr) const;
     std::vector<uint8_t> rosterMessage() const;
     std::vector<uint8_t> marksMessage() const;
+    HandLinks handLinksInForce() const;
     bool mayCut(uint16_t id, Role role) const;
     bool releaseTakeOvers(uint16_t id);
     bool viewTooLarge(const ViewSpec& v) const;
@@ -236,6 +238,10 @@ private:
     std::map<uint32_t, AnnotationInfo> m_marks; // by id
     uint32_t m_nextMarkId = 1;
     std::map<uint16_t, uint16_t> m_takenOver; // trainee -> the instructor holding it
+    // Each instructor's HandLink as it asked (handLinksInForce: as it holds), sent with the
+    // roster while any is in force and once more when the last ends.
+    std::map<uint16_t, HandLink> m_handLinks;
+    bool m_handLinksListed = false;
     // Joins and leaves go out at once: the others keep a newcomer's relayed tool only once a
     // roster lists it. Design switches and take-overs are paced.
     Pacer m_roster{kRosterIntervalUs};

@@ -25,7 +25,7 @@ namespace trephine::net {
 
 // Travels in ENet's connect data; the server refuses other versions with kRefuseVersion. What
 // each version changed: docs/protocol.md, "Versions".
-inline constexpr uint32_t kProtocolVersion = 11;
+inline constexpr uint32_t kProtocolVersion = 12;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
 enum class RefuseReason : uint32_t {
@@ -136,7 +136,8 @@ inline bool fitsVolumeUpdate(glm::ivec3 size, bool materials) {
     X(ReplayControl, 23, ClientToServer, Control, false, 10)                                       \
     X(Handshake, 24, Both, Control, false, 9)                                                      \
     X(Remove, 25, ClientToServer, Control, false, 9)                                               \
-    X(Codes, 26, Both, Control, true, 10)
+    X(Codes, 26, Both, Control, true, 10)                                                          \
+    X(HandLinks, 27, Both, Control, true, 12)
 
 enum class MessageType : uint8_t {
 #define TREPHINE_MESSAGE_ENUM(name, id, direction, channel, newestWins, since) name = id,
@@ -580,6 +581,37 @@ struct TakeOver {
     template <typename S>
     bool serialize(S& s) {
         return s.integer(trainee);
+    }
+};
+
+// What an instructor's force device is joined to (docs/devices.md): it feels participant `feels`'
+// forces (0: its own), and it guides the hand of the trainee it holds (TakeOver) by a bounded
+// spring toward its own tool. Both are off until asked for.
+struct HandLink {
+    uint16_t instructor = 0;
+    uint16_t feels = 0;
+    bool guides = false;
+    bool operator==(const HandLink&) const = default;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.integer(instructor) && s.integer(feels) && s.boolean(guides);
+    }
+};
+// Both ways (Channel::Control, reliable). Client -> server: an instructor's own link, the one
+// entry of the list (its instructor is the sender, whatever it says); the server refuses
+// (counts as a refused take-over) a trainee's and one feeling someone not in the session.
+// Server -> everyone, with the roster: every link in force by instructor id, so a trainee knows
+// who feels or guides it. A guide holds only while its instructor holds a trainee, and a feel
+// while its participant is in the session: a hand-back or a leave ends them.
+struct HandLinks {
+    static constexpr MessageType kType = MessageType::HandLinks;
+    std::vector<HandLink> list;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return serializeIdList(s, list, kMaxParticipants,
+                               [](const HandLink& l) { return l.instructor; });
     }
 };
 
