@@ -85,12 +85,12 @@ void SpaceMouseParser::release() {
 }
 
 DeviceState spaceMouseStep(ToolPose& pose, double& lastRead, double now,
-                           const SpaceMouseState& state, bool lost,
-                           const SpaceMouseConfig& config) {
+                           const SpaceMouseState& state, bool lost, const SpaceMouseConfig& config,
+                           glm::quat frame) {
     DeviceState s;
     if (!lost && lastRead >= 0.0)
-        pose =
-            integrateSpaceMouse(pose, state, std::min(now - lastRead, kSpaceMouseMaxStepS), config);
+        pose = integrateSpaceMouse(pose, state, std::min(now - lastRead, kSpaceMouseMaxStepS),
+                                   config, frame);
     lastRead = now;
     s.pose = pose;
     s.buttons = lost ? 0u : state.buttons;
@@ -99,7 +99,7 @@ DeviceState spaceMouseStep(ToolPose& pose, double& lastRead, double now,
 }
 
 ToolPose integrateSpaceMouse(const ToolPose& pose, const SpaceMouseState& s, double dt,
-                             const SpaceMouseConfig& c) {
+                             const SpaceMouseConfig& c, glm::quat frame) {
     ToolPose out = pose;
     if (!(dt > 0.0))
         return out;
@@ -107,14 +107,52 @@ ToolPose integrateSpaceMouse(const ToolPose& pose, const SpaceMouseState& s, dou
                        shaped(s.translation.z, c.deadZone));
     const glm::dvec3 r(shaped(s.rotation.x, c.deadZone), shaped(s.rotation.y, c.deadZone),
                        shaped(s.rotation.z, c.deadZone));
-    out.position += glm::vec3(toObject(t) * (c.translationGainMmPerS * dt));
-    const glm::dvec3 w = toObject(r) * (c.rotationGainRadPerS * dt); // rotation vector
+    const glm::dquat f(frame);
+    out.position += glm::vec3(f * toObject(t) * (c.translationGainMmPerS * dt));
+    const glm::dvec3 w = f * toObject(r) * (c.rotationGainRadPerS * dt); // rotation vector
     const double angle = glm::length(w);
     if (angle > 0.0) {
         const glm::quat dq = glm::angleAxis(float(angle), glm::vec3(w / angle));
         out.orientation = glm::normalize(dq * pose.orientation); // about object axes
     }
     return out;
+}
+
+glm::quat spaceMouseViewFrame(glm::vec3 right, glm::vec3 up, glm::vec3 back) {
+    // Table frame x (right), y (away from the user), z (up) onto the view's right, -back, up.
+    return glm::normalize(glm::quat_cast(glm::mat3(right, -back, up)));
+}
+
+namespace {
+
+void putI16(uint8_t* p, int v) {
+    const auto c = uint16_t(int16_t(std::clamp(v, -32768, 32767)));
+    p[0] = uint8_t(c & 0xff);
+    p[1] = uint8_t(c >> 8);
+}
+
+std::array<uint8_t, 7> axesReport(uint8_t id, int x, int y, int z) {
+    std::array<uint8_t, 7> r{id};
+    putI16(&r[1], x);
+    putI16(&r[3], y);
+    putI16(&r[5], z);
+    return r;
+}
+
+} // namespace
+
+// spacenavd's default maps device axes (x, y, z) to (x, -z, -y); this is its inverse.
+std::array<uint8_t, 7> spnavTranslationReport(int x, int y, int z) {
+    return axesReport(1, x, -z, -y);
+}
+
+std::array<uint8_t, 7> spnavRotationReport(int rx, int ry, int rz) {
+    return axesReport(2, rx, -rz, -ry);
+}
+
+std::array<uint8_t, 5> spaceMouseButtonReport(uint32_t buttons) {
+    return {3, uint8_t(buttons), uint8_t(buttons >> 8), uint8_t(buttons >> 16),
+            uint8_t(buttons >> 24)};
 }
 
 bool isSpaceMouse(uint16_t vendorId, uint16_t productId, uint16_t usagePage, uint16_t usage) {
@@ -178,56 +216,83 @@ std::vector<HidDeviceInfo> enumerateHidDevices() {
     return out;
 }
 
-struct SpaceMouseDevice::Impl {
-    hid_device* handle = nullptr;
+namespace {
+
+class HidSource : public SpaceMouseSource {
+public:
+    HidSource(hid_device* handle, std::string name) : m_handle(handle), m_name(std::move(name)) {}
+    ~HidSource() override { hid_close(m_handle); }
+    std::string name() const override { return m_name; }
+    bool poll(SpaceMouseParser& parser) override {
+        uint8_t buf[64];
+        for (int i = 0; i < 64; ++i) {
+            const int n = hid_read(m_handle, buf, sizeof buf);
+            if (n < 0)
+                return false;
+            if (n == 0)
+                break;
+            parser.feed(std::span<const uint8_t>(buf, size_t(n)));
+        }
+        return true;
+    }
+
+private:
+    hid_device* m_handle;
+    std::string m_name;
 };
 
-SpaceMouseDevice::SpaceMouseDevice(SpaceMouseConfig config, const std::string& path)
-    : m_impl(std::make_unique<Impl>()), m_config(config) {
-    std::string chosen = path;
+} // namespace
+
+std::unique_ptr<SpaceMouseSource> openHidSpaceMouse(const std::string& path) {
+    std::string chosen = path, name;
     if (chosen.empty()) {
         for (const HidDeviceInfo& d : enumerateHidDevices())
             if (d.usable) {
                 chosen = d.path;
-                m_name = d.product.empty() ? "SpaceMouse" : d.product;
+                name = d.product.empty() ? "SpaceMouse" : d.product;
                 break;
             }
         if (chosen.empty())
-            throw Error("no SpaceMouse found: attach one (and check /dev/hidraw* permissions) or "
-                        "use the mouse device");
+            throw Error("no SpaceMouse found through hidapi: attach one (and check "
+                        "/dev/hidraw* permissions), or choose another --device");
     }
-    if (hid_init() != 0 || !(m_impl->handle = hid_open_path(chosen.c_str())))
+    hid_device* handle = nullptr;
+    if (hid_init() != 0 || !(handle = hid_open_path(chosen.c_str())))
         throw Error("cannot open HID device " + chosen + ": check its permissions");
-    hid_set_nonblocking(m_impl->handle, 1);
-    if (m_name.empty())
-        m_name = "SpaceMouse";
+    hid_set_nonblocking(handle, 1);
+    return std::make_unique<HidSource>(handle, name.empty() ? "SpaceMouse" : name);
 }
 
-SpaceMouseDevice::~SpaceMouseDevice() {
-    if (m_impl && m_impl->handle)
-        hid_close(m_impl->handle);
+SpaceMouseDevice::SpaceMouseDevice(std::unique_ptr<SpaceMouseSource> source,
+                                   SpaceMouseConfig config)
+    : m_source(std::move(source)), m_name(m_source->name()), m_config(config) {}
+
+SpaceMouseDevice::SpaceMouseDevice(SpaceMouseConfig config, const std::string& path)
+    : SpaceMouseDevice(openHidSpaceMouse(path), config) {}
+
+SpaceMouseDevice::~SpaceMouseDevice() = default;
+
+void SpaceMouseDevice::setFrame(glm::quat frame) {
+    std::lock_guard lock(m_frameMutex);
+    m_frame = frame;
 }
 
 DeviceState SpaceMouseDevice::read(double now) {
-    uint8_t buf[64];
-    for (int i = 0; i < 64 && !m_lost; ++i) { // bounded: never starve the haptic tick
-        int n = hid_read(m_impl->handle, buf, sizeof buf);
-        if (n < 0) {
-            // Unplugged: the last deflection would otherwise keep moving the tool (up to the
-            // full-scale 60 mm/s) for as long as the loop runs.
-            m_lost = true;
-            m_parser.release();
-            std::fprintf(stderr,
-                         "trephine: %s stopped answering (unplugged?); the tool stays "
-                         "where it was\n",
-                         m_name.c_str());
-            break;
-        }
-        if (n == 0)
-            break;
-        m_parser.feed(std::span<const uint8_t>(buf, size_t(n)));
+    if (!m_lost && !m_source->poll(m_parser)) {
+        // Unplugged: the last deflection would otherwise keep moving the tool (up to the
+        // full-scale gain) for as long as the loop runs.
+        m_lost = true;
+        m_parser.release();
+        std::fprintf(stderr,
+                     "trephine: %s stopped answering (unplugged?); the tool stays where it was\n",
+                     m_name.c_str());
     }
-    return spaceMouseStep(m_pose, m_lastRead, now, m_parser.state(), m_lost, m_config);
+    glm::quat frame;
+    {
+        std::lock_guard lock(m_frameMutex);
+        frame = m_frame;
+    }
+    return spaceMouseStep(m_pose, m_lastRead, now, m_parser.state(), m_lost, m_config, frame);
 }
 
 } // namespace trephine

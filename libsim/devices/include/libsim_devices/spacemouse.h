@@ -1,5 +1,6 @@
-// 3Dconnexion SpaceMouse through hidapi: the HID report parser (testable with recorded bytes), the
-// integration of its 6-DOF deflection into a tool pose, the device, and HID enumeration.
+// 3Dconnexion SpaceMouse: the HID report parser (testable with recorded bytes), the integration of
+// its 6-DOF deflection into a tool pose, the device over its two backends (hidapi, and spacenavd
+// through libspnav in spacenav.h), and HID enumeration.
 //
 // Report formats (byte 0 is the report ID; axes little-endian int16, about +-350 at full push):
 // - Older models (SpaceNavigator, SpaceExplorer, SpacePilot, ...): ID 1 = translation x, y, z
@@ -12,9 +13,12 @@
 
 #include "libsim/device.h"
 
+#include <array>
 #include <cstdint>
+#include <glm/gtc/quaternion.hpp>
 #include <glm/vec3.hpp>
 #include <memory>
+#include <mutex>
 #include <span>
 #include <string>
 #include <vector>
@@ -51,10 +55,18 @@ struct SpaceMouseConfig {
     int deadZone = 12; // raw counts, per axis
 };
 
-// Moves `pose` by the deflection held for dt seconds. Device axes map to object space as
+// Moves `pose` by the deflection held for dt seconds. Device axes map to the table frame as
 // x -> +x, y -> -y (push away: +y), z -> -z (lift: +z); rotations follow the same mapping.
+// `frame` turns the table frame into object space (identity: the object's own axes), so a window
+// can make "push away" mean "into the screen" (spaceMouseViewFrame).
 ToolPose integrateSpaceMouse(const ToolPose& pose, const SpaceMouseState& state, double dt,
-                             const SpaceMouseConfig& config);
+                             const SpaceMouseConfig& config,
+                             glm::quat frame = glm::quat(1, 0, 0, 0));
+
+// The frame for a viewer whose right, up and backward (towards the viewer) directions are given
+// (object space, orthonormal): pushing the cap away moves the tool into the view, lifting it
+// moves the tool up the screen.
+glm::quat spaceMouseViewFrame(glm::vec3 right, glm::vec3 up, glm::vec3 back);
 
 // The longest time one read integrates: after a stall (a descheduled thread, a suspended laptop)
 // the tool moves as if the deflection had been held this long, not the whole gap.
@@ -64,7 +76,16 @@ inline constexpr double kSpaceMouseMaxStepS = 0.1;
 // (at most kSpaceMouseMaxStepS of it; nothing on the first read, lastRead < 0), `lastRead` set to
 // `now`. A `lost` device reports invalid and leaves the pose where it was.
 DeviceState spaceMouseStep(ToolPose& pose, double& lastRead, double now,
-                           const SpaceMouseState& state, bool lost, const SpaceMouseConfig& config);
+                           const SpaceMouseState& state, bool lost, const SpaceMouseConfig& config,
+                           glm::quat frame = glm::quat(1, 0, 0, 0));
+
+// spacenavd's events as the HID reports a SpaceNavigator sends (IDs 1, 2, 3), so both backends
+// share one parser. spacenavd's default axes (x right, y up, z away from the user, its
+// `swap-yz` and inversions) are turned back into the device's (x right, y towards the user,
+// z down); a spacenavd.conf that remaps axes remaps them here too.
+std::array<uint8_t, 7> spnavTranslationReport(int x, int y, int z);
+std::array<uint8_t, 7> spnavRotationReport(int rx, int ry, int rz);
+std::array<uint8_t, 5> spaceMouseButtonReport(uint32_t buttons);
 
 // HID usage of a 6-DOF device's interface: Generic Desktop (page 1), Multi-axis Controller (8).
 inline constexpr uint16_t kHidGenericDesktopPage = 0x01, kHidMultiAxisUsage = 0x08;
@@ -87,28 +108,53 @@ struct HidDeviceInfo {
 // All HID devices hidapi sees (empty when none or when hidapi cannot initialise).
 std::vector<HidDeviceInfo> enumerateHidDevices();
 
+// Where a SpaceMouse's reports come from: hidapi (the device's own HID reports) or spacenavd
+// (libspnav's events, turned into the same reports). Tests give their own.
+class SpaceMouseSource {
+public:
+    virtual ~SpaceMouseSource() = default;
+    virtual std::string name() const = 0;
+    // Feeds what arrived since the last call to `parser` without blocking (a bounded number of
+    // reports: never starve the haptic tick); false once the device is gone (unplugged, the
+    // daemon stopped).
+    virtual bool poll(SpaceMouseParser& parser) = 0;
+};
+
+// The first usable SpaceMouse through hidapi (or the one at `path`); throws Error when there is
+// none or it cannot be opened.
+std::unique_ptr<SpaceMouseSource> openHidSpaceMouse(const std::string& path = {});
+
+// A SpaceMouse as a relative device: its deflection moves and turns a pose that starts at the
+// origin (an AnchoredDevice places it), integrated on every read.
 class SpaceMouseDevice : public Device {
 public:
-    // Opens the first usable SpaceMouse (or `path`); throws Error when there is none.
+    explicit SpaceMouseDevice(std::unique_ptr<SpaceMouseSource> source,
+                              SpaceMouseConfig config = {});
+    // Opens the first usable SpaceMouse through hidapi (or `path`); throws Error when there is
+    // none.
     explicit SpaceMouseDevice(SpaceMouseConfig config = {}, const std::string& path = {});
     ~SpaceMouseDevice() override;
     std::string name() const override { return m_name; }
     // Drains pending reports (non-blocking) and integrates the pose since the last read.
     DeviceState read(double now) override;
     void setForce(glm::vec3) override {}
-    void setPose(const ToolPose& pose) { m_pose = pose; }
-    // hidapi failed to read (the device was unplugged): from then on read() reports invalid.
+    // Any thread: the frame later motion is taken in (spaceMouseViewFrame); what has moved stays.
+    void setFrame(glm::quat frame);
+    const SpaceMouseConfig& config() const { return m_config; }
+    // The source stopped answering (the device was unplugged): from then on read() reports
+    // invalid.
     bool lost() const { return m_lost; }
 
 private:
-    struct Impl;
-    std::unique_ptr<Impl> m_impl;
+    std::unique_ptr<SpaceMouseSource> m_source;
     std::string m_name;
     SpaceMouseConfig m_config;
     SpaceMouseParser m_parser;
     ToolPose m_pose;
     double m_lastRead = -1.0;
     bool m_lost = false;
+    mutable std::mutex m_frameMutex;
+    glm::quat m_frame{1, 0, 0, 0};
 };
 
 } // namespace trephine
