@@ -64,10 +64,25 @@ Compositor::~Compositor() {
 }
 
 void Compositor::resize(int width, int height) {
+    resizeDbi(width, height);
+    resizeView(width, height);
+}
+
+void Compositor::resizeView(int width, int height) {
     if (width == m_width && height == m_height && m_fbo)
         return;
     m_width = width;
     m_height = height;
+    makeColorDepthTarget(m_fbo, m_fboColor, m_fboDepth, width, height, "composite");
+    if (!m_colorTex) // nothing held yet: an empty DBI of the view's size
+        resizeDbi(width, height);
+}
+
+void Compositor::resizeDbi(int width, int height) {
+    if (width == m_dbiWidth && height == m_dbiHeight && m_dbiFbo)
+        return;
+    m_dbiWidth = width;
+    m_dbiHeight = height;
     auto makeTex = [&](GLuint& tex, GLint internal, GLenum format, GLenum type) {
         if (!tex)
             glGenTextures(1, &tex);
@@ -83,6 +98,7 @@ void Compositor::resize(int width, int height) {
     // shader pass writing gl_FragDepth took ~0.5 ms).
     makeTex(m_colorTex, GL_RGBA8, GL_RGBA, GL_UNSIGNED_BYTE);
     makeTex(m_depthTex, GL_DEPTH_COMPONENT32F, GL_DEPTH_COMPONENT, GL_FLOAT);
+    glBindTexture(GL_TEXTURE_2D, 0);
     if (!m_dbiFbo)
         glGenFramebuffers(1, &m_dbiFbo);
     glBindFramebuffer(GL_FRAMEBUFFER, m_dbiFbo);
@@ -92,18 +108,18 @@ void Compositor::resize(int width, int height) {
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
     if (!complete)
         throw Error("ui: the DBI framebuffer is incomplete");
-    makeColorDepthTarget(m_fbo, m_fboColor, m_fboDepth, width, height, "composite");
-    uploadFull(Dbi(width, height));
+    uploadRect(PixelRect{0, 0, width, height}, Dbi(width, height));
 }
 
 void Compositor::uploadFull(const Dbi& dbi) {
-    if (dbi.width() != m_width || dbi.height() != m_height)
+    if (dbi.width() != m_dbiWidth || dbi.height() != m_dbiHeight || dbi.width() != m_width ||
+        dbi.height() != m_height)
         resize(dbi.width(), dbi.height());
     uploadRect(dbi.bounds(), dbi);
 }
 
 void Compositor::uploadRect(const PixelRect& rect, const Dbi& patch) {
-    if (rect.empty() || !PixelRect{0, 0, m_width, m_height}.contains(rect) ||
+    if (rect.empty() || !PixelRect{0, 0, m_dbiWidth, m_dbiHeight}.contains(rect) ||
         patch.width() != rect.w || patch.height() != rect.h)
         return;
     // The colour goes up opaque: the DBI's background carries alpha 0, the composite wants 1
@@ -196,6 +212,24 @@ void Compositor::begin(const Camera& camera) {
                       GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT, GL_NEAREST);
     bindTarget(camera);
     beginMeshes();
+}
+
+void Compositor::beginWarped(const Camera& dbiCamera, const Camera& camera) {
+    Camera from = dbiCamera;
+    from.width = m_dbiWidth; // the pixels held say which size they are
+    from.height = m_dbiHeight;
+    Camera to = camera;
+    to.width = m_width;
+    to.height = m_height;
+    bindTarget(to);
+    warp().draw(m_colorTex, m_depthTex, from, to);
+    beginMeshes();
+}
+
+ViewWarp& Compositor::warp() {
+    if (!m_warp)
+        m_warp = std::make_unique<ViewWarp>();
+    return *m_warp;
 }
 
 void Compositor::draw(const GpuMesh& mesh, const glm::mat4& model, glm::vec4 ownerColor,

@@ -3,16 +3,20 @@
 // framebuffer of the same formats that holds the DBI itself (colour uploaded opaque);
 // pass 2 draws meshes depth-tested against it with the matrices the server rendered the DBI with.
 // Both framebuffers are the DBI's size, so pixels map 1:1, and the composite is blitted into the
-// window. Image updates re-upload only their rectangle.
+// window. Image updates re-upload only their rectangle. While a new view is on its way (or after
+// a resize) pass 1 is the DBI warped to the window's camera instead (ui/view_warp.h), and the
+// composite may be another size than the DBI.
 #pragma once
 
 #include "libsim/camera.h"
 #include "libsim/dbi.h"
 #include "ui/gl.h"
 #include "ui/mesh.h"
+#include "ui/view_warp.h"
 
 #include <glm/mat4x4.hpp>
 #include <glm/vec4.hpp>
+#include <memory>
 #include <vector>
 
 namespace trephine::ui {
@@ -38,8 +42,11 @@ public:
 
     // (Re)allocates the textures and framebuffer for a DBI of this size (background filled).
     void resize(int width, int height);
-    int width() const { return m_width; }
+    // Resizes the composite only: the DBI held stays as it is, for beginWarped to scale.
+    void resizeView(int width, int height);
+    int width() const { return m_width; } // the composite's
     int height() const { return m_height; }
+    glm::ivec2 dbiSize() const { return {m_dbiWidth, m_dbiHeight}; }
 
     // Whole-image upload (join, view change) and the per-update sub-rectangle upload.
     void uploadFull(const Dbi& dbi);
@@ -50,6 +57,11 @@ public:
 
     // Pass 1: binds the framebuffer, restores the DBI's colour and depth.
     void begin(const Camera& camera);
+    // Pass 1 for a camera the DBI was not rendered for: the DBI (rendered with `dbiCamera`, of
+    // the DBI's size) warped to `camera` (of the composite's size). Pass 2 then uses `camera`.
+    void beginWarped(const Camera& dbiCamera, const Camera& camera);
+    // The warp's settings (tests, benchmarks).
+    ViewWarp& warp();
     // Pass 1 for a picture drawn by someone else (the replicated-volume client's ray cast): binds
     // the framebuffer, clears colour to the background and depth to 1 (far), sets up pass 2's
     // matrices, and restores nothing. The caller then draws its picture with gl_FragDepth in the
@@ -71,7 +83,11 @@ private:
     void bindTarget(const Camera& camera);
     void beginMeshes();
 
-    int m_width = 0, m_height = 0;
+    void resizeDbi(int width, int height);
+
+    int m_width = 0, m_height = 0;                       // the composite
+    int m_dbiWidth = 0, m_dbiHeight = 0;                 // the DBI's textures
+    std::unique_ptr<ViewWarp> m_warp;                    // made on first use
     GLuint m_colorTex = 0, m_depthTex = 0, m_dbiFbo = 0; // the DBI as uploaded
     GLuint m_fbo = 0, m_fboColor = 0, m_fboDepth = 0;    // the composite
     GLuint m_meshProgram = 0;
