@@ -1,22 +1,14 @@
-// GL helpers the window's passes share: compile and link with a one-line error naming the
-// program, the vertex shader every fullscreen pass uses, and an offscreen colour + depth target.
+// GL helpers the window's passes share (compile and link, the fullscreen triangle, an offscreen
+// colour + depth target): sim_gpu's, which the server's GPU renderer uses too.
 #pragma once
 
+#include "libsim_gpu/gl_program.h"
 #include "ui/gl.h"
 
 namespace trephine::ui {
 
-// One triangle covering the viewport, from gl_VertexID alone (draw 3 vertices, no buffer).
-extern const char* const kFullscreenTriangleVs;
-
-// Compiles and links a vertex + fragment program; throws trephine::Error with the GL log and
-// `what` (e.g. "volume") on failure. Needs a current GL 3.3 core context.
-GLuint linkProgram(const char* vertexSource, const char* fragmentSource, const char* what);
-
-// (Re)allocates `color` (RGBA8, nearest) and `depth` (32-bit float renderbuffer) at width x
-// height and attaches them to `fbo`, creating any of the three that is 0. Leaves the default
-// framebuffer bound; throws trephine::Error naming `what` if the framebuffer is incomplete.
-void makeColorDepthTarget(GLuint& fbo, GLuint& color, GLuint& depth, int width, int height,
-                          const char* what);
+using gpu::kFullscreenTriangleVs;
+using gpu::linkProgram;
+using gpu::makeColorDepthTarget;
 
 } // namespace trephine::ui

@@ -1,13 +1,14 @@
-// The replicated-volume client's GPU ray caster. It follows libsim/src/renderer.cpp step by step
-// (docs/rendering.md, "Ray casting"), with the GPU's texture unit doing the trilinear work:
+// The GPU ray caster (the window's VolumeView, the server's GPU renderer). It follows
+// libsim/src/renderer.cpp step by step (docs/rendering.md, "Ray casting"), with the GPU's texture
+// unit doing the trilinear work:
 //
 // [SECTION] Shaders: one fullscreen triangle; per pixel the CPU renderer's ray, march, refinement,
 //           gradient normal, material and headlight shading, and the hit's GL window depth
 // [SECTION] Uploads: density and material (R8), gradients (RGB16F, one voxel of apron)
 // [SECTION] Drawing: into the bound framebuffer, or into the view's own offscreen target
-#include "ui/volume_view.h"
+#include "libsim_gpu/volume_raycaster.h"
 
-#include "ui/gl_program.h"
+#include "libsim_gpu/gl_program.h"
 
 #include "libsim/brick_grid.h"
 #include "libsim/error.h"
@@ -16,13 +17,14 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cassert>
 #include <chrono>
 #include <glm/gtc/type_ptr.hpp>
 #include <glm/matrix.hpp>
 #include <string>
 #include <vector>
 
-namespace trephine::ui {
+namespace trephine::gpu {
 
 namespace {
 
@@ -231,7 +233,7 @@ struct UnpackBox {
 
 } // namespace
 
-VolumeView::VolumeView() {
+VolumeRaycaster::VolumeRaycaster() {
     m_program = linkProgram(kFullscreenTriangleVs, kFs, "volume");
     glUseProgram(m_program);
     glUniform1i(glGetUniformLocation(m_program, "uDensity"), 0);
@@ -251,7 +253,7 @@ VolumeView::VolumeView() {
     glGenVertexArrays(1, &m_emptyVao); // a core profile draws nothing without a bound VAO
 }
 
-VolumeView::~VolumeView() {
+VolumeRaycaster::~VolumeRaycaster() {
     GLuint tex[] = {m_densityTex, m_materialTex, m_gradientTex, m_brickTex, m_fboColor};
     glDeleteTextures(5, tex);
     glDeleteRenderbuffers(1, &m_fboDepth);
@@ -262,16 +264,16 @@ VolumeView::~VolumeView() {
 
 // [SECTION] Uploads ----------------------------------------------------------------------------
 
-void VolumeView::upload(const Volume& volume) {
+void VolumeRaycaster::upload(const Volume& volume) {
     if (volume.empty())
-        throw Error("ui: VolumeView::upload: the volume is empty");
+        throw Error("gpu: VolumeRaycaster::upload: the volume is empty");
     // The gradient texture holds an apron of one voxel on every side: n + 2 texels an axis.
     GLint maxSize = 0;
     glGetIntegerv(GL_MAX_3D_TEXTURE_SIZE, &maxSize);
     const glm::ivec3 d = volume.dims();
     if (std::max({d.x, d.y, d.z}) + 2 > maxSize)
-        throw Error("ui: the volume (" + std::to_string(d.x) + " x " + std::to_string(d.y) + " x " +
-                    std::to_string(d.z) + ") is too large for this OpenGL's 3D textures (" +
+        throw Error("gpu: the volume (" + std::to_string(d.x) + " x " + std::to_string(d.y) +
+                    " x " + std::to_string(d.z) + ") is too large for this OpenGL's 3D textures (" +
                     std::to_string(maxSize) + " texels an axis, less 2 for the gradients' apron)");
     while (glGetError() != GL_NO_ERROR) {
     } // errors of earlier, unrelated calls are not this upload's
@@ -299,15 +301,15 @@ void VolumeView::upload(const Volume& volume) {
     // rather than draw a blank or flat-shaded volume.
     if (const GLenum e = glGetError(); e != GL_NO_ERROR) {
         m_dims = glm::ivec3(0);
-        throw Error(fmt::format("ui: OpenGL refused the volume's textures (error 0x{:04x}{})",
+        throw Error(fmt::format("gpu: OpenGL refused the volume's textures (error 0x{:04x}{})",
                                 unsigned(e), e == GL_OUT_OF_MEMORY ? ": out of memory" : ""));
     }
 }
 
-VolumeUpdateStats VolumeView::updateBox(const Volume& volume, const Box3i& box) {
+VolumeUpdateStats VolumeRaycaster::updateBox(const Volume& volume, const Box3i& box) {
     VolumeUpdateStats stats;
     if (empty() || volume.dims() != m_dims)
-        throw Error("ui: VolumeView::updateBox: the volume is not the one uploaded");
+        throw Error("gpu: VolumeRaycaster::updateBox: the volume is not the one uploaded");
     Box3i b = box.intersect(volume.bounds());
     if (b.empty())
         return stats;
@@ -340,7 +342,7 @@ VolumeUpdateStats VolumeView::updateBox(const Volume& volume, const Box3i& box) 
 // Gradients of the voxels in `box` (volume coordinates in [-1, n], the apron included), computed
 // as the CPU renderer's gradientAt does at a voxel: half the central differences, air outside.
 // Done in slabs of z so a full upload never holds more than a few MB.
-void VolumeView::uploadGradients(const Volume& volume, const Box3i& box) {
+void VolumeRaycaster::uploadGradients(const Volume& volume, const Box3i& box) {
     const glm::ivec3 n = m_dims;
     const uint8_t* d = volume.densityData();
     const ptrdiff_t sy = n.x, sz = ptrdiff_t(n.x) * n.y;
@@ -382,7 +384,7 @@ void VolumeView::uploadGradients(const Volume& volume, const Box3i& box) {
 
 // The largest density of each brick in `bricks` (brick coordinates, half-open) over its voxels
 // and the next one up on each axis, as BrickGrid's maximum, uploaded to the brick texture.
-void VolumeView::uploadBricks(const Volume& volume, const Box3i& bricks) {
+void VolumeRaycaster::uploadBricks(const Volume& volume, const Box3i& bricks) {
     static_assert(BrickGrid::kSize == 4 && BrickGrid::kApronLo == 0 && BrickGrid::kApronHi == 1,
                   "the shader's bricks (4^3, brick b from floor(p) >> 2) are BrickGrid's");
     if (bricks.empty())
@@ -398,7 +400,7 @@ void VolumeView::uploadBricks(const Volume& volume, const Box3i& bricks) {
 
 // [SECTION] Drawing ----------------------------------------------------------------------------
 
-void VolumeView::draw(const Camera& camera) {
+void VolumeRaycaster::draw(const Camera& camera) {
     if (empty())
         return;
     GLint program = 0, vao = 0, depthFunc = GL_LESS, active = GL_TEXTURE0, viewport[4] = {};
@@ -455,33 +457,61 @@ void VolumeView::draw(const Camera& camera) {
     glUseProgram(GLuint(program));
 }
 
-void VolumeView::ensureTarget(int width, int height) {
-    if (m_fbo && width == m_fboWidth && height == m_fboHeight)
+void VolumeRaycaster::ensureTarget(int width, int height) {
+    if (m_fbo && width <= m_fboWidth && height <= m_fboHeight)
         return;
-    m_fboWidth = width;
-    m_fboHeight = height;
-    makeColorDepthTarget(m_fbo, m_fboColor, m_fboDepth, width, height, "volume view's");
+    m_fboWidth = std::max(width, m_fboWidth);
+    m_fboHeight = std::max(height, m_fboHeight);
+    makeColorDepthTarget(m_fbo, m_fboColor, m_fboDepth, m_fboWidth, m_fboHeight,
+                         "volume ray caster's");
 }
 
-void VolumeView::render(const Camera& camera) {
-    ensureTarget(camera.width, camera.height);
+void VolumeRaycaster::render(const Camera& camera) {
+    render(camera, {0, 0, camera.width, camera.height});
+}
+
+// The viewport is the whole window shifted so that the rectangle's corner lands on the target's
+// corner; draw() takes the pixel position from it, so a pixel's ray does not depend on the
+// rectangle. The scissor keeps a larger target's other pixels unrendered.
+void VolumeRaycaster::render(const Camera& camera, const PixelRect& rect) {
+    const PixelRect r = intersect(rect, {0, 0, camera.width, camera.height});
+    m_rendered = r;
+    if (r.empty())
+        return;
+    ensureTarget(r.w, r.h);
     glBindFramebuffer(GL_FRAMEBUFFER, m_fbo);
-    glViewport(0, 0, camera.width, camera.height);
-    glDisable(GL_SCISSOR_TEST);
+    glViewport(-r.x, -r.y, camera.width, camera.height);
+    glEnable(GL_SCISSOR_TEST);
+    glScissor(0, 0, r.w, r.h);
     draw(camera);
+    glDisable(GL_SCISSOR_TEST);
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
 }
 
-Dbi VolumeView::readBack() {
-    Dbi out(m_fboWidth, m_fboHeight);
-    if (!m_fbo)
-        return out;
-    glBindFramebuffer(GL_READ_FRAMEBUFFER, m_fbo);
-    glPixelStorei(GL_PACK_ALIGNMENT, 1);
-    glReadPixels(0, 0, m_fboWidth, m_fboHeight, GL_RGBA, GL_UNSIGNED_BYTE, out.color());
-    glReadPixels(0, 0, m_fboWidth, m_fboHeight, GL_DEPTH_COMPONENT, GL_FLOAT, out.depth());
-    glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
+Dbi VolumeRaycaster::readBack() {
+    Dbi out(m_rendered.w, m_rendered.h);
+    readInto(out, 0, 0);
     return out;
 }
 
-} // namespace trephine::ui
+void VolumeRaycaster::readBack(Dbi& frame) {
+    readInto(frame, m_rendered.x, m_rendered.y);
+}
+
+// The last render's pixels (at the target's corner) into `out` with their corner at (x, y).
+void VolumeRaycaster::readInto(Dbi& out, int x, int y) {
+    const PixelRect r = m_rendered;
+    if (!m_fbo || r.empty())
+        return;
+    assert(out.bounds().contains(PixelRect{x, y, r.w, r.h}) &&
+           "VolumeRaycaster::readBack: the image does not hold the rendered rectangle");
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, m_fbo);
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    glPixelStorei(GL_PACK_ROW_LENGTH, out.width()); // straight into the image's rows
+    glReadPixels(0, 0, r.w, r.h, GL_RGBA, GL_UNSIGNED_BYTE, out.color(x, y));
+    glReadPixels(0, 0, r.w, r.h, GL_DEPTH_COMPONENT, GL_FLOAT, out.depth() + out.index(x, y));
+    glPixelStorei(GL_PACK_ROW_LENGTH, 0);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
+}
+
+} // namespace trephine::gpu

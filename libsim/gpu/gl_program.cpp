@@ -1,10 +1,10 @@
-#include "ui/gl_program.h"
+#include "libsim_gpu/gl_program.h"
 
 #include "libsim/error.h"
 
 #include <string>
 
-namespace trephine::ui {
+namespace trephine::gpu {
 
 const char* const kFullscreenTriangleVs = R"(#version 330 core
 void main() {
@@ -24,7 +24,7 @@ GLuint compile(GLenum type, const char* src, const char* what) {
         char log[2048];
         glGetShaderInfoLog(s, sizeof log, nullptr, log);
         glDeleteShader(s);
-        throw Error(std::string("ui: ") + what + " shader does not compile: " + log);
+        throw Error(std::string("gl: ") + what + " shader does not compile: " + log);
     }
     return s;
 }
@@ -52,7 +52,7 @@ GLuint linkProgram(const char* vertexSource, const char* fragmentSource, const c
         char log[2048];
         glGetProgramInfoLog(p, sizeof log, nullptr, log);
         glDeleteProgram(p);
-        throw Error(std::string("ui: ") + what + " program does not link: " + log);
+        throw Error(std::string("gl: ") + what + " program does not link: " + log);
     }
     return p;
 }
@@ -79,7 +79,7 @@ void makeColorDepthTarget(GLuint& fbo, GLuint& color, GLuint& depth, int width, 
     const bool complete = glCheckFramebufferStatus(GL_FRAMEBUFFER) == GL_FRAMEBUFFER_COMPLETE;
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
     if (!complete)
-        throw Error(std::string("ui: the ") + what + " framebuffer is incomplete");
+        throw Error(std::string("gl: the ") + what + " framebuffer is incomplete");
 }
 
-} // namespace trephine::ui
+} // namespace trephine::gpu
