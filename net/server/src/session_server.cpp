@@ -69,6 +69,7 @@ StepConfig stepConfig(const ServerConfig& c, std::function<bool()> yield) {
     StepConfig s{c.maxStepS, c.maxSweepMm, c.renderThreads, {}};
     s.yield = std::move(yield);
     s.largeViewPixelsPerS = c.largeViewPixelsPerS;
+    s.renderer = c.renderer;
     s.assessment.cautionMm = c.cautionMm;
     s.assessment.dangerMm = c.dangerMm;
     return s;

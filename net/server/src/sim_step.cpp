@@ -27,6 +27,12 @@ int64_t pixelsOf(const Dbi& frame) {
     return int64_t(frame.width()) * frame.height();
 }
 
+std::unique_ptr<DbiRenderer> makeRenderer(const StepConfig& c, const Volume& v, ThreadPool& pool) {
+    if (c.renderer)
+        return c.renderer(v, &pool);
+    return std::make_unique<CpuDbiRenderer>(v, &pool);
+}
+
 AssessmentConfig withSweep(const StepConfig& c) {
     AssessmentConfig a = c.assessment;
     a.maxSweepMm = c.maxSweepMm;
@@ -39,7 +45,8 @@ SimulationStep::SimulationStep(Volume volume, const StepConfig& config, Outbox& 
                                ReportBook& book, ServerClock clock)
     : m_config(config), m_outbox(outbox), m_book(book), m_clock(std::move(clock)),
       m_volume(normaliseAir(std::move(volume))), m_pool(config.renderThreads),
-      m_renderer(m_volume, &m_pool), m_assessment(m_volume, withSweep(config), book, &m_pool),
+      m_renderer(makeRenderer(config, m_volume, m_pool)),
+      m_assessment(m_volume, withSweep(config), book, &m_pool),
       m_largeBudget(config.largeViewPixelsPerS, double(config.slicePixels)) {}
 
 void SimulationStep::Batch::changedBy(const Box3i& box, uint64_t arrivedUs) {
@@ -254,9 +261,9 @@ void SimulationStep::postVolumes(const Batch& b) {
 
 void SimulationStep::syncGrid() {
     if (m_gridRebuildPending)
-        m_renderer.rebuild(); // voxels written wholesale may have raised densities
+        m_renderer->rebuild(); // voxels written wholesale may have raised densities
     else if (!m_gridPending.empty())
-        m_renderer.volumeChanged(m_gridPending); // erosion only: the hit caches stay valid
+        m_renderer->volumeChanged(m_gridPending); // erosion only: the hit caches stay valid
     m_gridRebuildPending = false;
     m_gridPending = {};
 }
@@ -401,7 +408,7 @@ bool SimulationStep::renderStale(ViewFrame& v) {
         // The paper's way re-renders the whole view, through the view's hit cache as the volume
         // client's re-render does, so the study compares like with like; BB_screen is sent.
         const uint64_t r0 = m_clock();
-        m_renderer.render(v.camera, v.frame.bounds(), v.frame, &v.cache);
+        m_renderer->render(v.camera, v.frame.bounds(), v.frame, &v.cache);
         v.timing.renderUs += uint32_t(m_clock() - r0);
         v.fresh = unite(v.fresh, v.stale);
         v.stale = {};
@@ -417,7 +424,7 @@ bool SimulationStep::renderStale(ViewFrame& v) {
                      : v.stale.h;
         const PixelRect chunk{v.stale.x, v.stale.y, v.stale.w, rows};
         const uint64_t r0 = m_clock();
-        m_renderer.render(v.camera, chunk, v.frame, &v.cache);
+        m_renderer->render(v.camera, chunk, v.frame, &v.cache);
         v.timing.renderUs += uint32_t(m_clock() - r0);
         spendBudget(v, int64_t(rows) * chunk.w);
         v.fresh = unite(v.fresh, chunk);
@@ -515,7 +522,7 @@ void SimulationStep::renderSlices() {
             const int64_t pixels = mayYield ? std::min(sliceLeft, m_config.chunkPixels) : sliceLeft;
             const int rows =
                 int(std::clamp<int64_t>(pixels / width, 1, v.frame.height() - v.rowsDone));
-            m_renderer.render(v.camera, {0, v.rowsDone, v.frame.width(), rows}, v.frame, &v.cache);
+            m_renderer->render(v.camera, {0, v.rowsDone, v.frame.width(), rows}, v.frame, &v.cache);
             spendBudget(v, int64_t(rows) * width);
             v.rowsDone += rows;
             sliceLeft -= int64_t(rows) * width;
@@ -542,7 +549,7 @@ int64_t SimulationStep::viewPixels() const {
 
 Dbi SimulationStep::render(const Camera& camera) {
     syncGrid();
-    return m_renderer.render(camera);
+    return m_renderer->render(camera);
 }
 
 } // namespace trephine::net

@@ -3,6 +3,7 @@
 // net/outbox.h, net/sim_step.h).
 #pragma once
 
+#include "libsim/dbi_renderer.h"
 #include "net/admission.h"
 #include "net/protocol.h"
 #include "net/scene.h"
@@ -40,6 +41,9 @@ struct ServerConfig {
     std::vector<AnnotationInfo> marks;
     int malformedLimit = 50; // a peer that sends more malformed packets is disconnected
     int renderThreads = 0;   // 0: hardware concurrency
+    // What renders the views: empty, the CPU ray caster; `trephine server --renderer gpu` sets
+    // the GPU's (libsim_gpu/gpu_renderer.h).
+    DbiRendererFactory renderer;
     float maxStepS = 0.05f;  // longest drilling step taken from one tool state to the next
     // Between two drilling tool states the cutter sweeps the path in sub-steps of at most a
     // quarter voxel (sweepPoses); a move longer than this is a jump, drilled at its end only.

@@ -7,6 +7,7 @@
 #include "libsim/box.h"
 #include "libsim/camera.h"
 #include "libsim/dbi.h"
+#include "libsim/dbi_renderer.h"
 #include "libsim/drill.h"
 #include "libsim/renderer.h"
 #include "libsim/thread_pool.h"
@@ -55,6 +56,8 @@ struct StepConfig {
     // Post updates to the outbox (a server). A replay (net/session_replay.h) only drills: it
     // renders nothing until asked (render()).
     bool publish = true;
+    // What renders the views (ServerConfig::renderer); empty: the CPU ray caster.
+    DbiRendererFactory renderer = {};
 };
 
 class SimulationStep {
@@ -165,7 +168,7 @@ private:
     std::shared_mutex m_voxelMutex;
     Volume m_volume;
     ThreadPool m_pool;
-    Renderer m_renderer;
+    std::unique_ptr<DbiRenderer> m_renderer; // StepConfig::renderer, else the CPU ray caster
     Assessment m_assessment;
     std::map<uint16_t, Client> m_clients;
     std::vector<ViewFrame> m_views;

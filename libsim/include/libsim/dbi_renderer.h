@@ -1,0 +1,58 @@
+// What the server renders DBIs through: the CPU ray caster (CpuDbiRenderer, the default) or the
+// GPU one (libsim_gpu/gpu_renderer.h). Both give the same pictures within the tolerance
+// docs/rendering.md states, and each gives a rectangle bit for bit as its full frame.
+#pragma once
+
+#include "libsim/box.h"
+#include "libsim/camera.h"
+#include "libsim/dbi.h"
+#include "libsim/renderer.h"
+
+#include <functional>
+#include <memory>
+#include <string>
+
+namespace trephine {
+
+class ThreadPool;
+
+class DbiRenderer {
+public:
+    virtual ~DbiRenderer() = default;
+    // Densities in `changed` only went down (erosion): see Renderer::volumeChanged.
+    virtual void volumeChanged(const Box3i& changed) = 0;
+    // Anything else changed the volume (voxels written wholesale).
+    virtual void rebuild() = 0;
+    // The pixels of `rect` (row 0 at the bottom, clipped to the window) into the camera-sized
+    // `frame` at their place. `cache` is the view's HitCache, which only the CPU renderer reads.
+    virtual void render(const Camera& camera, const PixelRect& rect, Dbi& frame,
+                        HitCache* cache) = 0;
+    // A full frame.
+    virtual Dbi render(const Camera& camera) = 0;
+    // One line for people: "CPU, 2 threads", "GPU: <GL renderer>".
+    virtual std::string describe() const = 0;
+};
+
+// Makes the renderer of a volume (which outlives it); `pool` is the CPU renderer's tile pool.
+using DbiRendererFactory =
+    std::function<std::unique_ptr<DbiRenderer>(const Volume& volume, ThreadPool* pool)>;
+
+// The CPU ray caster behind the interface.
+class CpuDbiRenderer final : public DbiRenderer {
+public:
+    CpuDbiRenderer(const Volume& volume, ThreadPool* pool);
+    void volumeChanged(const Box3i& changed) override { m_renderer.volumeChanged(changed); }
+    void rebuild() override { m_renderer.rebuild(); }
+    void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache) override {
+        m_renderer.render(camera, rect, frame, cache);
+    }
+    Dbi render(const Camera& camera) override { return m_renderer.render(camera); }
+    std::string describe() const override;
+    Renderer& renderer() { return m_renderer; }
+
+private:
+    Renderer m_renderer;
+    int m_threads;
+};
+
+} // namespace trephine
