@@ -1,0 +1,58 @@
+// What a force device makes of HandLinks in a snapshot: the guided trainee's target, the
+// participant an instructor feels, and the guide's bounded, damped pull.
+#include "net/hand_links.h"
+
+#include <glm/geometric.hpp>
+#include <gtest/gtest.h>
+
+using namespace trephine;
+using namespace trephine::net;
+
+namespace {
+
+ClientSnapshot snapshotOf(uint16_t self, uint16_t heldBy, const HandLinks& links) {
+    ClientSnapshot s;
+    s.welcome = Welcome{};
+    s.welcome->clientId = self;
+    s.participants[self] = {self, heldBy ? Role::Trainee : Role::Instructor, Sync::Dbi, "me",
+                            heldBy};
+    s.participants[7] = {7, Role::Instructor, Sync::Dbi, "Dr. Cho", 0};
+    ToolState cho;
+    cho.position = {1, 2, 3};
+    s.others[7] = cho;
+    HandLinks copy = links;
+    const std::vector<uint8_t> bytes = encodeMessage(copy);
+    EXPECT_TRUE(s.newest.put<HandLinks>(bytes));
+    return s;
+}
+
+} // namespace
+
+TEST(HandLinksForce, AGuidedTraineeIsPulledTowardTheToolOfTheInstructorHoldingIt) {
+    const ClientSnapshot guided = snapshotOf(3, 7, HandLinks{{{7, 0, true}}});
+    ASSERT_TRUE(guideTarget(guided).has_value());
+    EXPECT_EQ(*guideTarget(guided), glm::vec3(1, 2, 3));
+    EXPECT_EQ(feltParticipant(guided), 0);
+
+    EXPECT_FALSE(guideTarget(snapshotOf(3, 0, HandLinks{{{7, 0, true}}})))
+        << "not held: no guide, whatever the links say";
+    EXPECT_FALSE(guideTarget(snapshotOf(3, 7, HandLinks{{{7, 3, false}}}))) << "felt, not guided";
+    EXPECT_FALSE(guideTarget(snapshotOf(3, 9, HandLinks{{{7, 0, true}}})))
+        << "guided by an instructor that does not hold it";
+}
+
+TEST(HandLinksForce, AnInstructorFeelsTheParticipantItsLinkNames) {
+    EXPECT_EQ(feltParticipant(snapshotOf(7, 0, HandLinks{{{7, 3, false}}})), 3);
+    EXPECT_EQ(feltParticipant(snapshotOf(7, 0, HandLinks{{{5, 3, false}}})), 0) << "another's";
+    EXPECT_EQ(feltParticipant(ClientSnapshot{}), 0) << "no welcome, no links";
+}
+
+TEST(HandLinksForce, TheGuideIsASpringAndDamperBoundedByItsMaximum) {
+    const HandGuideConfig c;
+    const glm::vec3 near = guideForce({1, 0, 0}, {0, 0, 0}, {0, 0, 0}, c);
+    EXPECT_NEAR(near.x, c.stiffnessNPerMm, 1e-6);
+    const glm::vec3 moving = guideForce({0, 0, 0}, {0, 0, 0}, {10, 0, 0}, c);
+    EXPECT_NEAR(moving.x, -10 * c.dampingNsPerMm, 1e-6) << "damping opposes motion";
+    const glm::vec3 far = guideForce({100, 0, 0}, {0, 0, 0}, {0, 0, 0}, c);
+    EXPECT_NEAR(glm::length(far), c.maxForceN, 1e-5) << "bounded: the trainee can resist";
+}
