@@ -6,6 +6,7 @@
 #include "modes.h"
 
 #include "mode_window.h"
+#include "net/link_emulator.h"
 #include "net/scripts.h"
 #include "net/secure_channel.h"
 #include "net/session_server.h"
@@ -217,7 +218,14 @@ int runHeadlessDemo(const DemoOptions& o) {
     const net::ServerConfig config = demoServerConfig(o.volume);
     net::SessionServer server(std::move(skull), config);
     server.start();
-    net::TraineeSession session(demoSessionConfig(server.port(), config, camera));
+    // --link: the trainee reaches the embedded server through the emulator, as across a network.
+    const auto link =
+        net::startLinkEnd(o.window.link, net::LinkEnd::Client,
+                          net::parseAddress("127.0.0.1:" + std::to_string(server.port())));
+    net::TraineeSessionConfig sessionConfig = demoSessionConfig(server.port(), config, camera);
+    if (link)
+        sessionConfig.address = net::relayAddress(*link);
+    net::TraineeSession session(sessionConfig);
     joinDemo(session);
     std::vector<net::ScriptSample> script = net::feedScript(site, o.feedMmPerS, o.maxSeconds);
     std::unique_ptr<Device> device = scriptedDevice(script);

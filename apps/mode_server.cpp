@@ -4,15 +4,17 @@
 // file reads back). --record FILE logs the session as it goes (net/session_log.h); --resume FILE
 // replays such a log to where its server stopped and goes on appending to it (a damaged one kept
 // aside whole first).
+#include "link_option.h"
 #include "modes.h"
 
 #include "libsim/error.h"
+#include "libsim_gpu/gpu_renderer.h"
 #include "libsim_image/volume_slices.h"
 #include "net/marks_file.h"
+#include "net/replay_feed.h"
 #include "net/scene.h"
 #include "net/secure_channel.h"
 #include "net/server_banner.h"
-#include "net/replay_feed.h"
 #include "net/session_log.h"
 #include "net/session_replay.h"
 #include "net/session_server.h"
@@ -51,6 +53,8 @@ struct ServerOptions {
     std::string resume;
     float cautionMm = 3.0f, dangerMm = 1.0f;
     std::string debrief;
+    std::string renderer = "cpu"; // --renderer: cpu, gpu or auto (libsim_gpu/gpu_renderer.h)
+    std::string link; // --link: the emulator on --port, the server on a private port behind it
 };
 
 // The codes the server runs with: given, or made now; none with --open.
@@ -103,14 +107,20 @@ uint64_t unixNowUs() {
 
 // The lines once the port is known: where to join from, the codes, the recording.
 void printStarted(const ServerOptions& o, const net::ServerConfig& config,
-                  const net::SessionServer& server, glm::ivec3 d) {
+                  const net::SessionServer& server, glm::ivec3 d, const net::LinkEmulator* link) {
+    const uint16_t port = link ? link->port() : server.port();
     std::printf("trephine server: %s (%d x %d x %d) on port %u; Ctrl-C stops\n",
-                config.volumeName.c_str(), d.x, d.y, d.z, unsigned(server.port()));
-    printCodes(o, config, server.port());
+                config.volumeName.c_str(), d.x, d.y, d.z, unsigned(port));
+    if (link)
+        std::printf("trephine server: --link %s: clients reach port %u through the emulated link "
+                    "(%s), the server behind it on port %u\n",
+                    o.link.c_str(), unsigned(port), link->conditions().describe().c_str(),
+                    unsigned(server.port()));
+    printCodes(o, config, port);
     // Where to join from, and whether the session outlives the server (saved, or recorded).
     const bool keeps = !o.saveOnExit.empty() || config.recorder;
     for (const std::string& line :
-         net::serverStartLines(server.port(), net::localAddresses(), keeps, config.traineeCode))
+         net::serverStartLines(port, net::localAddresses(), keeps, config.traineeCode))
         std::printf("trephine server: %s\n", line.c_str());
     if (config.recorder)
         std::printf("trephine server: recording to %s (written back every %d ms, synced every %d "
@@ -221,11 +231,14 @@ int runServer(const ServerOptions& o) {
     config.cautionMm = o.cautionMm;
     config.dangerMm = o.dangerMm;
     config.debriefDir = o.debrief;
-    config.port = o.port;
+    config.port = o.link.empty() ? o.port : 0;
     config.saveOnExit = o.saveOnExit;
     config.renderThreads = o.renderThreads;
     config.maxClients = o.maxClients;
     chooseCodes(o, config);
+    std::string rendering;
+    if (auto gpu = gpu::chooseRenderer(gpu::parseRendererChoice(o.renderer), &rendering))
+        config.renderer = *gpu;
     Volume volume = o.resume.empty() ? startingVolume(o, config) : resumedVolume(o, config);
     glm::ivec3 d = volume.dims();
     net::SessionServer server(std::move(volume), config);
@@ -233,8 +246,12 @@ int runServer(const ServerOptions& o) {
     // not kill it either: SIGPIPE is ignored and the lines are lost, not the session.
     handleStopSignals(onStopSignal);
     std::signal(SIGPIPE, SIG_IGN);
+    const auto link =
+        net::startLinkEnd(o.link, net::LinkEnd::Server,
+                          net::parseAddress("127.0.0.1:" + std::to_string(server.port())), o.port);
     server.start();
-    printStarted(o, config, server, d);
+    printStarted(o, config, server, d, link.get());
+    std::printf("trephine server: rendering on %s\n", rendering.c_str());
     std::fflush(stdout);
     while (!g_stopRequested.load())
         std::this_thread::sleep_for(std::chrono::milliseconds(50));
@@ -262,6 +279,11 @@ void addServerMode(CLI::App& root, int& exitCode) {
            "the instructors' marks and the scene beside it (FILE.marks, FILE.scene, read back by "
            "--volume FILE)")
         ->check(outputFile());
+    sub->add_option("--renderer", o->renderer,
+                    "Render views on the cpu, the gpu (OpenGL through EGL, no display needed; "
+                    "llvmpipe will do) or auto (the GPU when EGL finds a hardware one)")
+        ->check(CLI::IsMember({"cpu", "gpu", "auto"}))
+        ->capture_default_str();
     sub->add_option("--render-threads", o->renderThreads, "Render workers (0: all cores)")
         ->check(CLI::Range(0, 256));
     sub->add_option("--max-clients", o->maxClients,
@@ -296,6 +318,7 @@ void addServerMode(CLI::App& root, int& exitCode) {
     sub->add_option("--danger-mm", o->dangerMm,
                     "... and this near, in danger; touching it is a violation")
         ->capture_default_str();
+    addLinkOption(sub, o->link, "clients join on --port through it");
     sub->add_option("--debrief", o->debrief,
                     "Write a Markdown debrief with SVG plots per participant in this folder when "
                     "the server stops");

@@ -2,6 +2,7 @@
 // `--headless` runs a real client with no window, driven by a script (the built-in `burrhole` or a
 // CSV trajectory, see docs/scripts.md), and writes statistics as a JSON report. `--sync volume`
 // runs the replicated-volume baseline: the client holds the volume and renders its view itself.
+#include "link_option.h"
 #include "mode_window.h"
 #include "modes.h"
 #include "scripted_device.h"
@@ -62,6 +63,7 @@ struct TraineeOptions {
     std::string screenshot;    // window: as `trephine instructor --screenshot`
     int frames = 0;            // window: as `trephine instructor --frames` (0: run until closed)
     double timeoutS = 90.0;
+    std::string link; // --link: the emulator between this trainee and --connect
     // The first option given that only a --headless trainee uses ("": none); the window refuses it
     // rather than run without it.
     std::string headlessOnly;
@@ -137,7 +139,11 @@ void writeReport(const TraineeOptions& o, const net::TraineeSession& session, co
 // [Headless] A trainee session with a script as its tool: join, open the view, drill, lift and
 // drain, then the figures, the report and the picture.
 int runHeadlessTrainee(const TraineeOptions& o, std::vector<Sample> script) {
-    net::TraineeSession session(sessionConfigFor(o));
+    const auto link = net::startLinkEnd(o.link, net::LinkEnd::Client, net::parseAddress(o.connect));
+    net::TraineeSessionConfig config = sessionConfigFor(o);
+    if (link)
+        config.address = net::relayAddress(*link);
+    net::TraineeSession session(config);
     const net::Welcome welcome = session.join();
     session.awaitScene();
     const Camera camera = session.openPreset(o.camera);
@@ -191,6 +197,7 @@ int runTrainee(const TraineeOptions& o) {
         w.screenshot = o.screenshot;
         w.frames = o.frames;
         w.timeoutS = o.timeoutS;
+        w.link = o.link;
         return runWindowedClient(w);
     }
     if (!o.screenshot.empty())
@@ -276,6 +283,7 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
         ->check(participantName())
         ->capture_default_str();
     addCodeOption(sub, o->code, "trainee");
+    addLinkOption(sub, o->link, "between this trainee and --connect");
     sub->add_option("--screenshot", o->screenshot,
                     "Window: write it to this PNG once the view has settled, then exit")
         ->check(outputFile());

@@ -4,7 +4,9 @@
 
 #include "libsim/camera.h"
 #include "libsim/error.h"
+#include "link_option.h"
 #include "modes.h"
+#include "net/enet_host.h"
 
 #include <cstdio>
 
@@ -30,8 +32,9 @@ int runWindowedClient(const WindowedOptions& o) {
     std::string why;
     if (!windowAvailable(&why))
         throw Error("cannot open a window: " + why + " (use --headless, or run under xvfb-run)");
+    const auto link = net::startLinkEnd(o.link, net::LinkEnd::Client, net::parseAddress(o.connect));
     ui::TrainerOptions t;
-    t.address = o.connect;
+    t.address = link ? net::relayAddress(*link) : o.connect;
     t.name = o.name;
     t.code = o.code;
     t.instructor = o.instructor;
@@ -104,6 +107,7 @@ void addWindowOptions(CLI::App* sub, WindowedOptions& o) {
                     "(comma-separated; each waits for the switch before it)")
         ->delimiter(',')
         ->check(finiteRange(0.0, 3600.0));
+    addLinkOption(sub, o.link, "between this window and its server");
 }
 
 void addInstructorMode(CLI::App& root, int& exitCode) {

@@ -31,6 +31,7 @@ struct WindowedOptions {
     std::vector<std::string> marks;    // instructor: "X,Y,Z[:LABEL]" marks placed on joining
     std::string takeOver; // [Instructor] the trainee (name or client id) to take over once joined
     std::string viewAs;   // [Instructor] the participant (name or client id) to view as once joined
+    std::string link;     // --link: the emulator between this window and `connect`
 };
 
 // True when this build has the GUI and a window can open here; `why` says why not.
@@ -39,7 +40,7 @@ bool windowAvailable(std::string* why);
 int runWindowedClient(const WindowedOptions& o);
 
 // Adds --screenshot, --frames, --view, --orbit, --tilt, --window-size, --timeout, --sync,
-// --volume-codec and --switch-sync-at to a windowed mode's subcommand.
+// --volume-codec, --switch-sync-at and --link to a windowed mode's subcommand.
 void addWindowOptions(CLI::App* sub, WindowedOptions& o);
 
 } // namespace trephine::app

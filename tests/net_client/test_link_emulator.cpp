@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <vector>
 
 using namespace trephine;
 using namespace trephine::net;
@@ -25,6 +26,27 @@ TEST(LinkEmulator, ParsesConditions) {
     // Not finite, or large enough to overflow the relay's clock arithmetic.
     for (const char* bad : {"latency=nan", "jitter=inf", "rate=1e300", "seed=1e20"})
         EXPECT_THROW(LinkConditions::parse(bad), Error) << bad;
+    EXPECT_TRUE(LinkConditions::parse("rate=100,shared=1").shared);
+    EXPECT_EQ(LinkConditions::parse("rate=100,shared=1").describe(),
+              "latency 0 ms, jitter 0 ms, loss 0 %, rate 100 Mbit/s shared by all clients");
+    EXPECT_THROW(LinkConditions::parse("shared=2"), Error);
+}
+
+// --link's spec in every mode: one line naming the text; nothing that emulates nothing, and
+// nothing that lets nothing through.
+TEST(LinkEmulator, LinkSpecsAreRefusedWithTheirText) {
+    EXPECT_DOUBLE_EQ(linkSpecConditions("latency=50,loss=1,rate=20").latencyMs, 50);
+    for (const char* bad : {"", ",", "latency=fast", "loss=100", "lag=3"}) {
+        try {
+            linkSpecConditions(bad);
+            ADD_FAILURE() << "accepted '" << bad << "'";
+        } catch (const Error& e) {
+            const std::string what = e.what();
+            EXPECT_NE(what.find(std::string("'") + bad), std::string::npos) << what;
+            EXPECT_EQ(what.find('\n'), std::string::npos) << what;
+        }
+    }
+    EXPECT_EQ(startLinkEnd("", LinkEnd::Client, parseAddress("127.0.0.1:7777")), nullptr);
 }
 
 // ENet through the relay: the connection works, and its round trip grows by the added latency.
@@ -77,6 +99,62 @@ TEST(LinkEmulator, TotalLossDropsEverything) {
 
 // The rate counts each datagram as it occupies an Ethernet link: 100 datagrams of 4 bytes at
 // 1 Mbit/s take 56 ms with their 66 bytes of framing each, 3.2 ms as bare payload.
+namespace {
+
+// Sends `perSender` 4-byte datagrams from each of `senders` sockets through a relay with
+// `conditions` and returns the milliseconds until the last one reached the target (-1: not all).
+double sendThrough(const char* conditions, int senders, int perSender) {
+    ENetSocket target = enet_socket_create(ENET_SOCKET_TYPE_DATAGRAM);
+    ENetAddress any = parseAddress("127.0.0.1:0");
+    enet_socket_bind(target, &any);
+    ENetAddress targetAddress{};
+    enet_socket_get_address(target, &targetAddress);
+    targetAddress.host = any.host;
+    LinkEmulator relay(0, targetAddress, LinkConditions::parse(conditions));
+    const ENetAddress relayAddress = parseAddress("127.0.0.1:" + std::to_string(relay.port()));
+    std::vector<ENetSocket> from(static_cast<size_t>(senders), ENET_SOCKET_NULL);
+    uint8_t payload[4] = {1, 2, 3, 4};
+    const auto start = Clock::now();
+    for (ENetSocket& s : from) {
+        s = enet_socket_create(ENET_SOCKET_TYPE_DATAGRAM);
+        for (int i = 0; i < perSender; ++i) {
+            ENetBuffer b{payload, sizeof payload};
+            enet_socket_send(s, &relayAddress, &b, 1);
+        }
+    }
+    int received = 0;
+    Clock::time_point last{};
+    while (received < senders * perSender && Clock::now() - start < std::chrono::seconds(5)) {
+        enet_uint32 wait = ENET_SOCKET_WAIT_RECEIVE;
+        if (enet_socket_wait(target, &wait, 50) != 0 || !(wait & ENET_SOCKET_WAIT_RECEIVE))
+            continue;
+        uint8_t buffer[64];
+        ENetBuffer b{buffer, sizeof buffer};
+        ENetAddress sender{};
+        if (enet_socket_receive(target, &sender, &b, 1) == int(sizeof payload)) {
+            ++received;
+            last = Clock::now();
+        }
+    }
+    for (ENetSocket s : from)
+        enet_socket_destroy(s);
+    enet_socket_destroy(target);
+    return received == senders * perSender
+               ? std::chrono::duration<double, std::milli>(last - start).count()
+               : -1.0;
+}
+
+} // namespace
+
+// A shared rate is one link for every client: two clients' 100 datagrams each take the wire time
+// of 200 (112 ms at 1 Mbit/s), where each client's own link would carry them side by side.
+TEST(LinkEmulator, ASharedRateSerialisesEveryClientOnOneLink) {
+    const double wireMs = 200 * (4.0 + LinkConditions::kWireOverheadBytes) * 8.0 / 1e6 * 1e3;
+    const double shared = sendThrough("rate=1,shared=1", 2, 100);
+    ASSERT_GT(shared, 0) << "not every datagram came through";
+    EXPECT_GE(shared, 0.95 * wireMs);
+}
+
 TEST(LinkEmulator, RateCountsEachDatagramsFraming) {
     ENetSocket target = enet_socket_create(ENET_SOCKET_TYPE_DATAGRAM);
     ASSERT_NE(target, ENET_SOCKET_NULL);

@@ -49,9 +49,13 @@ LinkConditions LinkConditions::parse(const std::string& text) {
             c.rateMbps = value;
         else if (key == "seed")
             c.seed = uint32_t(value);
+        else if (key == "shared" && (value == 0 || value == 1))
+            c.shared = value == 1;
+        else if (key == "shared")
+            throw Error("link conditions '" + text + "': shared is 0 or 1");
         else
             throw Error("link conditions '" + text + "': unknown key '" + key +
-                        "' (use latency, jitter, loss, rate, seed)");
+                        "' (use latency, jitter, loss, rate, shared, seed)");
     }
     return c;
 }
@@ -64,6 +68,8 @@ std::string LinkConditions::describe() const {
         o << rateMbps << " Mbit/s";
     else
         o << "unlimited";
+    if (shared && rateMbps > 0)
+        o << " shared by all clients";
     return o.str();
 }
 
@@ -112,12 +118,17 @@ uint64_t addressKey(const ENetAddress& a) {
     return (uint64_t(a.host) << 16) | a.port;
 }
 
-ENetSocket makeSocket(uint16_t port) {
+// Loopback, unless `anyHost`: a server's public port, and the sockets towards a target that may be
+// another machine (one bound to 127.0.0.1 cannot send off it).
+ENetSocket makeSocket(uint16_t port, bool anyHost) {
     ENetSocket s = enet_socket_create(ENET_SOCKET_TYPE_DATAGRAM);
     if (s == ENET_SOCKET_NULL)
         throw Error("link emulator: cannot create a UDP socket");
     ENetAddress a{};
-    enet_address_set_host(&a, "127.0.0.1");
+    if (anyHost)
+        a.host = ENET_HOST_ANY;
+    else
+        enet_address_set_host(&a, "127.0.0.1");
     a.port = port;
     if (enet_socket_bind(s, &a) != 0) {
         enet_socket_destroy(s);
@@ -151,11 +162,16 @@ void waitForTraffic(ENetSocket front, const std::map<uint64_t, std::unique_ptr<C
 } // namespace
 
 LinkEmulator::LinkEmulator(uint16_t listenPort, const ENetAddress& target,
-                           LinkConditions conditions)
+                           LinkConditions conditions, bool anyHost)
     : m_target(target), m_conditions(conditions) {
     if (enet_initialize() != 0)
         throw Error("could not initialise ENet");
-    m_front = makeSocket(listenPort);
+    try {
+        m_front = makeSocket(listenPort, anyHost);
+    } catch (...) {
+        enet_deinitialize();
+        throw;
+    }
     ENetAddress bound{};
     enet_socket_get_address(m_front, &bound);
     m_port = bound.port;
@@ -175,6 +191,11 @@ void LinkEmulator::setConditions(const LinkConditions& c) {
     m_conditions = c;
 }
 
+LinkConditions LinkEmulator::conditions() const {
+    std::lock_guard lock(m_mutex);
+    return m_conditions;
+}
+
 void LinkEmulator::run() {
     pthread_setname_np(pthread_self(), "link-emulator");
     // Wake when a datagram is due, not up to the default 50 us of timer slack later.
@@ -184,8 +205,11 @@ void LinkEmulator::run() {
     uint32_t seededWith = 0;
     std::vector<uint8_t> buffer(65536);
     std::vector<pollfd> fds; // the sockets to wait on, refilled each pass (kept: no allocation)
+    // With LinkConditions::shared, every client's lane in one direction waits for these.
+    Clock::time_point sharedUp{}, sharedDown{};
 
-    auto enqueue = [&](Lane& lane, const uint8_t* data, size_t n, const LinkConditions& c) {
+    auto enqueue = [&](Lane& lane, Clock::time_point& sharedBusy, const uint8_t* data, size_t n,
+                       const LinkConditions& c) {
         if (c.lossPercent > 0 && rng.uniform() * 100.0 < c.lossPercent) {
             ++m_dropped;
             return;
@@ -195,13 +219,13 @@ void LinkEmulator::run() {
             c.latencyMs + (c.jitterMs > 0 ? rng.uniform() * c.jitterMs : 0.0));
         auto start = now;
         if (c.rateMbps > 0) {
-            start = std::max(now, lane.busyUntil);
+            Clock::time_point& busy = c.shared ? sharedBusy : lane.busyUntil;
+            start = std::max(now, busy);
             // On the wire a datagram is its payload plus its framing (kWireOverheadBytes).
             const double wireBytes = double(n + LinkConditions::kWireOverheadBytes);
-            lane.busyUntil =
-                start + std::chrono::duration_cast<Clock::duration>(
-                            std::chrono::duration<double>(wireBytes * 8.0 / (c.rateMbps * 1e6)));
-            start = lane.busyUntil;
+            busy = start + std::chrono::duration_cast<Clock::duration>(
+                               std::chrono::duration<double>(wireBytes * 8.0 / (c.rateMbps * 1e6)));
+            start = busy;
         }
         auto due =
             std::max(start + std::chrono::duration_cast<Clock::duration>(delay), lane.lastDue);
@@ -243,9 +267,10 @@ void LinkEmulator::run() {
             if (!cl) {
                 cl = std::make_unique<Client>();
                 cl->address = from;
-                cl->back = makeSocket(0);
+                cl->back = makeSocket(0, true);
             }
-            enqueue(cl->up, buffer.data(), size_t(n), c);
+            m_bytesUp += uint64_t(n);
+            enqueue(cl->up, sharedUp, buffer.data(), size_t(n), c);
         }
         // From the target back to each client.
         for (auto& [key, cl] : clients) {
@@ -255,7 +280,8 @@ void LinkEmulator::run() {
                 int n = enet_socket_receive(cl->back, &from, &b, 1);
                 if (n <= 0)
                     break;
-                enqueue(cl->down, buffer.data(), size_t(n), c);
+                m_bytesDown += uint64_t(n);
+                enqueue(cl->down, sharedDown, buffer.data(), size_t(n), c);
             }
         }
         auto now = Clock::now();
@@ -266,6 +292,34 @@ void LinkEmulator::run() {
     }
     for (auto& [key, cl] : clients)
         enet_socket_destroy(cl->back);
+}
+
+LinkConditions linkSpecConditions(const std::string& spec) {
+    // "", "," or " " would parse as no conditions: a link that emulates nothing, said to be there.
+    if (spec.find_first_not_of(" ,") == std::string::npos)
+        throw Error("link conditions '" + spec +
+                    "': give the link's conditions, e.g. latency=50,loss=1");
+    const LinkConditions c = LinkConditions::parse(spec);
+    if (!(c.lossPercent < 100.0))
+        throw Error("link conditions '" + spec +
+                    "': a loss of 100 % lets nothing through; give under 100");
+    return c;
+}
+
+std::unique_ptr<LinkEmulator> startLinkEnd(const std::string& spec, LinkEnd end,
+                                           const ENetAddress& target, uint16_t publicPort) {
+    if (spec.empty())
+        return nullptr;
+    const LinkConditions c = linkSpecConditions(spec);
+    try {
+        return std::make_unique<LinkEmulator>(publicPort, target, c, end == LinkEnd::Server);
+    } catch (const Error& e) {
+        throw Error("--link '" + spec + "': " + e.what());
+    }
+}
+
+std::string relayAddress(const LinkEmulator& link) {
+    return "127.0.0.1:" + std::to_string(link.port());
 }
 
 } // namespace trephine::net
