@@ -1,0 +1,89 @@
+#include "libsim_gpu/gpu_renderer.h"
+
+#include "libsim_gpu/volume_raycaster.h"
+
+#include "libsim/error.h"
+
+#include <cassert>
+
+namespace trephine::gpu {
+
+GpuRenderer::GpuRenderer(const Volume& volume, std::shared_ptr<EglContext> context)
+    : m_volume(&volume), m_context(std::move(context)) {
+    EglContext::Current current(*m_context);
+    m_caster = std::make_unique<VolumeRaycaster>();
+    m_caster->upload(volume);
+}
+
+GpuRenderer::~GpuRenderer() {
+    EglContext::Current current(*m_context);
+    m_caster.reset(); // its GL objects go while the context is current
+}
+
+void GpuRenderer::volumeChanged(const Box3i& changed) {
+    EglContext::Current current(*m_context);
+    m_caster->updateBox(*m_volume, changed);
+}
+
+void GpuRenderer::rebuild() {
+    EglContext::Current current(*m_context);
+    m_caster->upload(*m_volume);
+}
+
+void GpuRenderer::render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache*) {
+    assert(frame.width() == camera.width && frame.height() == camera.height &&
+           "GpuRenderer::render: the frame is not the camera's size");
+    EglContext::Current current(*m_context);
+    m_caster->render(camera, rect);
+    m_caster->readBack(frame);
+}
+
+Dbi GpuRenderer::render(const Camera& camera) {
+    Dbi frame(camera.width, camera.height);
+    render(camera, frame.bounds(), frame, nullptr);
+    return frame;
+}
+
+std::string GpuRenderer::describe() const {
+    return "GPU: " + m_context->info().renderer;
+}
+
+RendererChoice parseRendererChoice(const std::string& name) {
+    if (name == "cpu")
+        return RendererChoice::Cpu;
+    if (name == "gpu")
+        return RendererChoice::Gpu;
+    if (name == "auto")
+        return RendererChoice::Auto;
+    throw Error("--renderer " + name + ": choose cpu, gpu or auto");
+}
+
+std::optional<DbiRendererFactory> chooseRenderer(RendererChoice choice, std::string* why) {
+    auto say = [&](std::string line) {
+        if (why)
+            *why = std::move(line);
+    };
+    if (choice == RendererChoice::Cpu) {
+        say("the CPU (--renderer cpu)");
+        return std::nullopt;
+    }
+    std::string failure;
+    std::shared_ptr<EglContext> context = EglContext::shared(&failure);
+    if (!context) {
+        if (choice == RendererChoice::Gpu)
+            throw Error("--renderer gpu: " + failure);
+        say("the CPU (--renderer auto: " + failure + ")");
+        return std::nullopt;
+    }
+    if (choice == RendererChoice::Auto && context->info().software) {
+        say("the CPU (--renderer auto: OpenGL is " + context->info().renderer +
+            ", a software renderer)");
+        return std::nullopt;
+    }
+    say("the GPU: " + context->info().renderer + " (OpenGL " + context->info().version + ")");
+    return DbiRendererFactory([context](const Volume& volume, ThreadPool*) {
+        return std::unique_ptr<DbiRenderer>(new GpuRenderer(volume, context));
+    });
+}
+
+} // namespace trephine::gpu

@@ -1,0 +1,146 @@
+// The server's GPU renderer through EGL with no display (Mesa's llvmpipe here): a rectangle is
+// its full frame bit for bit, it agrees with the CPU Renderer within VolumeView's tolerance on
+// skull:128 views, and after an erosion the uploaded box shows it.
+#include "libsim_gpu/gpu_renderer.h"
+
+#include "dbi_agreement.h"
+#include "gpu_test.h"
+
+#include "libsim/dirty_rect.h"
+#include "libsim/error.h"
+#include "libsim/renderer.h"
+#include "libsim/skull.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <random>
+
+using namespace trephine;
+using trephine::testing::agree;
+using trephine::testing::expectAgreement;
+
+namespace {
+
+using GpuRendererTest = trephine::testing::GpuTest;
+
+float smallestSpacing(const Volume& v) {
+    return std::min({v.spacing().x, v.spacing().y, v.spacing().z});
+}
+
+// Random rectangles (some reaching past the window, clipped) and single pixels, each rendered
+// alone into a background frame: their pixels are the full frame's, the rest stays background.
+void expectRectanglesAreTheFullFrame(gpu::GpuRenderer& r, const Camera& cam, unsigned seed) {
+    const Dbi full = r.render(cam);
+    std::mt19937 rng(seed);
+    auto pick = [&](int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(rng); };
+    for (int i = 0; i < 24; ++i) {
+        PixelRect rect = i < 6 ? PixelRect{pick(0, cam.width - 1), pick(0, cam.height - 1), 1, 1}
+                               : PixelRect{pick(-20, cam.width - 1), pick(-20, cam.height - 1),
+                                           pick(1, cam.width), pick(1, cam.height)};
+        SCOPED_TRACE(describe(rect));
+        Dbi frame(cam.width, cam.height);
+        r.render(cam, rect, frame, nullptr);
+        const PixelRect in = intersect(rect, frame.bounds());
+        EXPECT_TRUE(frame.extract(in) == full.extract(in));
+        frame.apply(Dbi(in.w, in.h), in.x, in.y); // background where the rectangle was
+        EXPECT_TRUE(frame == Dbi(cam.width, cam.height)) << "pixels outside the rectangle";
+    }
+}
+
+} // namespace
+
+TEST_F(GpuRendererTest, ARectangleIsItsFullFrameBitForBit) {
+    Volume skull = makeSkull(64);
+    gpu::GpuRenderer r(skull, egl);
+    for (const char* preset : {"working", "paper"}) {
+        SCOPED_TRACE(preset);
+        expectRectanglesAreTheFullFrame(r, cameraPreset(preset, skull, {200, 160}), 7);
+    }
+    // And after an erosion uploaded as a box.
+    const Box3i hole{{20, 20, 40}, {44, 44, 64}};
+    skull.fill(hole, 0, Material::Air);
+    r.volumeChanged(hole);
+    expectRectanglesAreTheFullFrame(r, cameraPreset("paper", skull, {200, 160}), 11);
+}
+
+TEST_F(GpuRendererTest, MatchesTheCpuRendererOnSkull128Views) {
+    const Volume skull = makeSkull(128);
+    gpu::GpuRenderer gpuRenderer(skull, egl);
+    const Renderer cpuRenderer(skull);
+    for (const char* preset : {"working", "paper", "top", "front", "left", "back"}) {
+        SCOPED_TRACE(preset);
+        const Camera cam = cameraPreset(preset, skull, {256, 256});
+        expectAgreement(
+            agree(gpuRenderer.render(cam), cpuRenderer.render(cam), cam, smallestSpacing(skull)));
+    }
+}
+
+// A cut into the bone the working view looks at: the GPU's box upload shows it as the CPU
+// renderer does, and the picture changes only inside BB_screen.
+TEST_F(GpuRendererTest, AnErodedBoxShowsAsInTheCpuRender) {
+    Volume skull = makeSkull(128);
+    const Camera cam = cameraPreset("working", skull, {256, 256});
+    gpu::GpuRenderer gpuRenderer(skull, egl);
+    Renderer cpuRenderer(skull);
+    const Dbi before = gpuRenderer.render(cam);
+    const RayHit centre = cpuRenderer.castRay(cam, cam.width / 2, cam.height / 2);
+    ASSERT_TRUE(centre.hit);
+    const glm::ivec3 v = glm::ivec3(
+        glm::floor(glm::vec3(centre.position) / skull.spacing() + glm::vec3(skull.dims()) * 0.5f));
+    const Box3i cut{v - 6, v + 6};
+    skull.fill(cut, 0, Material::Air);
+    gpuRenderer.volumeChanged(cut);
+    cpuRenderer.volumeChanged(cut);
+    const Dbi after = gpuRenderer.render(cam);
+    expectAgreement(agree(after, cpuRenderer.render(cam), cam, smallestSpacing(skull)));
+    const DbiDiff d = compare(before, after);
+    EXPECT_GT(d.differingPixels, 100) << d.describe();
+    EXPECT_TRUE(dirtyScreenRect(cam, skull, cut).contains(d.bounds)) << d.describe();
+}
+
+TEST(RendererChoice, NamesAreCpuGpuOrAuto) {
+    EXPECT_EQ(gpu::parseRendererChoice("cpu"), gpu::RendererChoice::Cpu);
+    EXPECT_EQ(gpu::parseRendererChoice("gpu"), gpu::RendererChoice::Gpu);
+    EXPECT_EQ(gpu::parseRendererChoice("auto"), gpu::RendererChoice::Auto);
+    try {
+        gpu::parseRendererChoice("GPU0");
+        FAIL() << "GPU0 was taken";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("cpu, gpu or auto"), std::string::npos) << e.what();
+    }
+}
+
+// cpu never opens EGL; gpu takes whatever GL EGL gives (llvmpipe too); auto takes it only when
+// it is not a software renderer, and says why it did not.
+TEST_F(GpuRendererTest, AutoCountsASoftwareRendererAsNoGpu) {
+    std::string why;
+    EXPECT_FALSE(gpu::chooseRenderer(gpu::RendererChoice::Cpu, &why));
+    EXPECT_NE(why.find("CPU"), std::string::npos) << why;
+    EXPECT_TRUE(gpu::chooseRenderer(gpu::RendererChoice::Gpu, &why));
+    EXPECT_NE(why.find(egl->info().renderer), std::string::npos) << why;
+    const bool automatic = bool(gpu::chooseRenderer(gpu::RendererChoice::Auto, &why));
+    EXPECT_EQ(automatic, !egl->info().software) << why;
+    if (egl->info().software)
+        EXPECT_NE(why.find("software"), std::string::npos) << why;
+}
+
+TEST(GlRendererName, SoftwareRasterisersAreKnownByName) {
+    EXPECT_TRUE(gpu::isSoftwareRenderer("llvmpipe (LLVM 15.0.6, 256 bits)"));
+    EXPECT_TRUE(gpu::isSoftwareRenderer("softpipe"));
+    EXPECT_TRUE(gpu::isSoftwareRenderer("Google SwiftShader"));
+    EXPECT_FALSE(gpu::isSoftwareRenderer("NVIDIA H200/PCIe/SSE2"));
+    EXPECT_FALSE(gpu::isSoftwareRenderer("AMD Radeon RX 7900 XTX (radeonsi, navi31, LLVM 15.0.7)"));
+}
+
+// Which GL answered (scripts/gpu-check prints it): an OpenGL of at least 3.3, named.
+TEST_F(GpuRendererTest, EglContextSaysWhichRendererAnswered) {
+    std::printf("  GL renderer: %s, OpenGL %s%s\n", egl->info().renderer.c_str(),
+                egl->info().version.c_str(), egl->info().software ? " (software)" : "");
+    EXPECT_FALSE(egl->info().renderer.empty());
+    int major = 0, minor = 0;
+    ASSERT_EQ(std::sscanf(egl->info().version.c_str(), "%d.%d", &major, &minor), 2)
+        << egl->info().version;
+    EXPECT_GE(major * 10 + minor, 33) << egl->info().version;
+}
