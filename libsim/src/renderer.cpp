@@ -19,6 +19,7 @@
 #include <emmintrin.h>
 #include <glm/geometric.hpp>
 #include <glm/matrix.hpp>
+#include <immintrin.h>
 
 namespace trephine {
 
@@ -50,6 +51,12 @@ namespace {
 // vectorised formula gives the bits of its scalar form.
 typedef float v4sf __attribute__((vector_size(16)));
 typedef int32_t v4si __attribute__((vector_size(16)));
+// Eight lanes: two SSE2 registers on baseline x86-64, one in the AVX2 build. Internal functions
+// only, so the ABI of 32-byte vector arguments without AVX does not matter.
+#pragma GCC diagnostic ignored "-Wpsabi"
+typedef float v8sf __attribute__((vector_size(32)));
+typedef int32_t v8si __attribute__((vector_size(32)));
+typedef uint32_t v8su __attribute__((vector_size(32)));
 
 struct Frame {
     const uint8_t* density;
@@ -87,6 +94,7 @@ struct Frame {
     const uint8_t* runs[6];  // brick grid runs of empty bricks, [2 axis + positive]
     glm::ivec3 nb;           // bricks per axis
     size_t nbxy;
+    bool marchEight; // skipping on and voxel offsets fit int32: marchEight may run (AVX2 build)
 };
 
 // See makeFrame: float positions are exact to ~6e-8 of their magnitude, and skipping needs them
@@ -173,6 +181,8 @@ Frame makeFrame(const Volume& volume, const Camera& camera, const RenderOptions&
         f.runs[i] = bricks.empty() ? nullptr : bricks.runData(i / 2, i % 2 != 0);
     f.nb = bricks.dims();
     f.nbxy = size_t(f.nb.x) * size_t(f.nb.y);
+    f.marchEight = f.distance != nullptr && f.n.x >= 4 && f.n.y >= 2 && f.n.z >= 2 &&
+                   f.sz * ptrdiff_t(f.n.z) < ptrdiff_t(INT32_MAX);
     return f;
 }
 
@@ -492,6 +502,80 @@ struct March {
     float lastValue = 0.0f;
 };
 
+// The AVX2 build's march step: samples k .. k + 7 at once, as far as they stay in bricks that
+// may hold surface, in cells inside the volume, and at most kEnd. Lane by lane the scalar loop's
+// arithmetic (positions, floors, the cell test, the trilinear sample of insideSample), with the
+// grid and the volume read by gathers. Returns how many samples it took (0: the scalar step takes
+// sample k, and leaps if its brick is empty); on a hit, `found`, the hit's offset from k and its
+// value. Updates lastK and lastValue as the scalar loop does.
+__attribute__((target("avx2,bmi2"))) inline int marchEight(const Frame& f, const Ray& r, int k,
+                                                           int kEnd, bool& found, float& value,
+                                                           int& lastK, float& lastValue) {
+    const v8si kv = k + v8si{0, 1, 2, 3, 4, 5, 6, 7};
+    const v8sf t = __builtin_convertvector(kv, v8sf) * f.dt;
+    const v8sf px = f.origin.x + t * r.dv.x, py = f.origin.y + t * r.dv.y,
+               pz = f.origin.z + t * r.dv.z;
+    const v8si ix = __builtin_convertvector(px + 16.0f, v8si) - 16;
+    const v8si iy = __builtin_convertvector(py + 16.0f, v8si) - 16;
+    const v8si iz = __builtin_convertvector(pz + 16.0f, v8si) - 16;
+    // In the volume with three voxels to spare along x (a 4-byte gather of a cell's row then
+    // stays inside the volume's data), and not past the ray's last sample.
+    const v8si inVolume = ((v8su)ix < unsigned(f.n.x - 3)) & ((v8su)iy < unsigned(f.n.y - 1)) &
+                          ((v8su)iz < unsigned(f.n.z - 1)) & (kv <= kEnd);
+    // Each lane's brick and both halves of its cell mask (lanes outside read brick 0).
+    constexpr int S = BrickGrid::kShift;
+    const v8si bi = inVolume ? (ix >> S) + f.nb.x * (iy >> S) + int(f.nbxy) * (iz >> S) : v8si{};
+    const int* const cellWords = reinterpret_cast<const int*>(f.cells);
+    const v8su maskLo = (v8su)_mm256_i32gather_epi32(cellWords, (__m256i)(bi + bi), 4);
+    const v8su maskHi = (v8su)_mm256_i32gather_epi32(cellWords, (__m256i)(bi + bi + 1), 4);
+    // An empty brick's mask is zero: the scalar step leaps from there.
+    const v8si ok = inVolume & ((maskLo | maskHi) != 0u);
+    const unsigned okMask = unsigned(_mm256_movemask_ps((__m256)ok));
+    const int n = __builtin_ctz(~okMask); // the leading lanes that qualify
+    if (n == 0)
+        return 0;
+    const unsigned lanes = (1u << n) - 1u;
+    static_assert(BrickGrid::kSize == 4, "a brick's cell mask is 64 bits, x + 4 y + 16 z");
+    const v8su bit = (v8su)((ix & 3) + 4 * (iy & 3) + 16 * (iz & 3));
+    const v8su half = bit >= 32u ? maskHi : maskLo;
+    const v8si set = (v8si)((half >> (bit & 31u)) & 1u) != 0;
+    const unsigned setMask = unsigned(_mm256_movemask_ps((__m256)set)) & lanes;
+    if (setMask == 0)
+        return n; // all clear: below the iso-value without reading the volume
+    // The trilinear samples (sample8's arithmetic, trilinearCorners' operations lane by lane);
+    // lanes that do not qualify read voxel 0.
+    const v8si base = ok ? ix + int(f.sy) * iy + int(f.sz) * iz : v8si{};
+    // (A lambda would not inherit this function's target, and the gather needs it.)
+    const int* const voxels = reinterpret_cast<const int*>(f.density);
+    const v8su r0 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)base, 1);
+    const v8su r1 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sy)), 1);
+    const v8su r2 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sz)), 1);
+    const v8su r3 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sz + f.sy)), 1);
+    auto lo = [](v8su w) { return __builtin_convertvector(v8si(w & 255u), v8sf); };
+    auto hi = [](v8su w) { return __builtin_convertvector(v8si((w >> 8) & 255u), v8sf); };
+    const v8sf tx = px - __builtin_convertvector(ix, v8sf),
+               ty = py - __builtin_convertvector(iy, v8sf),
+               tz = pz - __builtin_convertvector(iz, v8sf);
+    const v8sf ux = 1.0f - tx, uy = 1.0f - ty, uz = 1.0f - tz;
+    const v8sf c00 = ux * lo(r0) + tx * hi(r0), c10 = ux * lo(r1) + tx * hi(r1);
+    const v8sf c01 = ux * lo(r2) + tx * hi(r2), c11 = ux * lo(r3) + tx * hi(r3);
+    const v8sf c0 = uy * c00 + ty * c10, c1 = uy * c01 + ty * c11;
+    const v8sf v = uz * c0 + tz * c1;
+    const unsigned inside =
+        unsigned(_mm256_movemask_ps((__m256)(v >= float(kSurfaceDensity)))) & setMask;
+    const unsigned below = inside ? setMask & ((1u << __builtin_ctz(inside)) - 1u) : setMask;
+    if (below) {
+        const int l = 31 - __builtin_clz(below);
+        lastK = k + l, lastValue = v[l];
+    }
+    if (!inside)
+        return n;
+    const int h = __builtin_ctz(inside);
+    found = true;
+    value = v[h];
+    return h;
+}
+
 // Samples sit at t = k * dt from the eye for integer k, whatever is skipped. A brick at Chebyshev
 // distance d > 0 from surface lets the ray jump out of the (2d - 1)^3 bricks around it; those
 // samples are all below the iso-value, so the first sample inside is the same with or without
@@ -511,6 +595,8 @@ struct March {
 // and if that sample is still inside (erosion left it) it is the first inside sample: the span
 // (slabs, divisions) is not needed. insideSample decides exactly as the march's brick and cell
 // tests would.
+// `Wide`: the AVX2 build, which takes up to eight samples a step (marchEight).
+template <bool Wide = false>
 March marchToSurface(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume,
                      bool resumeInside = false) {
     March m;
@@ -598,6 +684,19 @@ March marchToSurface(const Frame& f, const Ray& r, float tSkipTo, int32_t kResum
             cellBase = b << S;
         }
         for (; k <= kEnd; ++k) {
+            if constexpr (Wide) {
+                if (f.marchEight) {
+                    const int taken = marchEight(f, r, k, kEnd, found, value, lastK, lastValue);
+                    if (found) {
+                        k += taken;
+                        break;
+                    }
+                    if (taken > 0) {
+                        k += taken - 1; // and the loop's ++k
+                        continue;
+                    }
+                }
+            }
             const v4sf p = samplePos4(f, r, float(k) * dt);
             const v4si i = floorInt4(p);
             const int fx = i[0], fy = i[1], fz = i[2];
@@ -921,12 +1020,6 @@ bool traceRay(const Frame& f, const Ray& r, float tSkipTo, int32_t& resume, Hit&
 // Hits whose samples or shading stencil reach the volume's faces (the border paths) take the
 // scalar functions.
 
-// Internal functions only, so the ABI of 32-byte vector arguments without AVX does not matter.
-#pragma GCC diagnostic ignored "-Wpsabi"
-typedef float v8sf __attribute__((vector_size(32)));
-typedef int32_t v8si __attribute__((vector_size(32)));
-typedef uint32_t v8su __attribute__((vector_size(32)));
-
 struct PendingHit {
     Ray r;
     March m;
@@ -1237,6 +1330,7 @@ struct TileJob {
     std::atomic<int64_t>& resumed;
 };
 
+template <bool Wide>
 __attribute__((always_inline)) inline void renderTileBody(const TileJob& job, int i) {
     const Frame& f = job.f;
     const PixelRect& rect = job.rect;
@@ -1334,7 +1428,7 @@ __attribute__((always_inline)) inline void renderTileBody(const TileJob& job, in
                     PendingHit& h = pending[npending];
                     h.r = pixelRay(f, x, y);
                     const float skip = quarterSkip[(x >= midX) + 2 * (y >= midY)];
-                    h.m = marchToSurface(f, h.r, skip, *slot, *wasInside != 0);
+                    h.m = marchToSurface<Wide>(f, h.r, skip, *slot, *wasInside != 0);
                     *slot = h.m.kIn;
                     *wasInside = h.m.hit && h.m.refine;
                     if (h.m.hit) {
@@ -1396,11 +1490,11 @@ __attribute__((always_inline)) inline void renderTileBody(const TileJob& job, in
 // (flatten), for AVX2, chosen at run time. Both are the same IEEE operations in the same order
 // (no FMA: contraction would change bits), so the pixels are the same bit for bit.
 __attribute__((flatten)) void renderTileBaseline(const TileJob& job, int i) {
-    renderTileBody(job, i);
+    renderTileBody<false>(job, i);
 }
 
 __attribute__((flatten, target("avx2,bmi2"))) void renderTileAvx2(const TileJob& job, int i) {
-    renderTileBody(job, i);
+    renderTileBody<true>(job, i);
 }
 
 bool cpuHasAvx2() {
