@@ -72,7 +72,9 @@ bool tryDisplay(EGLDisplay display, Candidate& out, std::string& why) {
         return false;
     }
     if (!hasExtension(ext, "EGL_KHR_no_config_context")) {
-        const EGLint want[] = {EGL_RENDERABLE_TYPE, EGL_OPENGL_BIT, EGL_NONE};
+        // A device display may have no window configs (eglChooseConfig's default).
+        const EGLint want[] = {EGL_RENDERABLE_TYPE, EGL_OPENGL_BIT, EGL_SURFACE_TYPE,
+                               EGL_PBUFFER_BIT, EGL_NONE};
         EGLint n = 0;
         if (!eglChooseConfig(display, want, &config, 1, &n) || n < 1) {
             why = "no OpenGL config";
@@ -170,6 +172,9 @@ EglContext::~EglContext() {
 
 EglContext::Current::Current(const EglContext& context)
     : m_context(context), m_lock(context.m_mutex) {
+    // The bound API is per thread, and EGL releases the current context of the thread's API:
+    // this thread may not be the one that made the context.
+    eglBindAPI(EGL_OPENGL_API);
     if (!eglMakeCurrent(context.m_display, EGL_NO_SURFACE, EGL_NO_SURFACE, context.m_context))
         throw Error("gpu: the EGL context cannot be made current (it is current on another "
                     "thread)");

@@ -16,6 +16,7 @@
 #include <algorithm>
 #include <cstdio>
 #include <random>
+#include <thread>
 
 using namespace trephine;
 using trephine::testing::agree;
@@ -143,4 +144,19 @@ TEST_F(GpuRendererTest, EglContextSaysWhichRendererAnswered) {
     ASSERT_EQ(std::sscanf(egl->info().version.c_str(), "%d.%d", &major, &minor), 2)
         << egl->info().version;
     EXPECT_GE(major * 10 + minor, 33) << egl->info().version;
+}
+
+// The server renders on its simulation thread, an inspection may come from another: the context
+// is made current for each call and released after, whichever thread made it.
+TEST_F(GpuRendererTest, RendersFromAnyThreadOneAtATime) {
+    const Volume skull = makeSkull(64);
+    const Camera cam = cameraPreset("working", skull, {96, 96});
+    gpu::GpuRenderer r(skull, egl);
+    const Dbi here = r.render(cam);
+    for (int i = 0; i < 3; ++i) {
+        Dbi there;
+        std::thread([&] { there = r.render(cam); }).join();
+        EXPECT_TRUE(there == here) << "from another thread, pass " << i;
+        EXPECT_TRUE(r.render(cam) == here) << "back on this thread, pass " << i;
+    }
 }
