@@ -69,6 +69,7 @@ struct PluginDevice::Impl {
     // Under the lock: stops calling the plugin and says why, once.
     void cutOff(const std::string& why);
     std::string pluginError() const;
+    void say(const std::string& line) const; // to options.report, else stderr
 };
 
 template <typename Fn>
@@ -89,15 +90,19 @@ std::string PluginDevice::Impl::pluginError() const {
     return e && *e ? fmt::format(": {}", e) : std::string();
 }
 
+void PluginDevice::Impl::say(const std::string& line) const {
+    if (options.report)
+        options.report(line);
+    else
+        std::fprintf(stderr, "trephine: %s\n", line.c_str());
+}
+
 void PluginDevice::Impl::cutOff(const std::string& why) {
     if (cut)
         return;
     cut = true;
     fault = fmt::format("device plugin {}: {}; force output cut off", path, why);
-    if (options.report)
-        options.report(fault);
-    else
-        std::fprintf(stderr, "trephine: %s\n", fault.c_str());
+    say(fault);
     wake.notify_all(); // the worker writes zero force if it can
 }
 
@@ -178,7 +183,9 @@ PluginDevice::~PluginDevice() {
         d.worker.join();
         dlclose(d.library);
     } else {
-        d.cutOff(fmt::format("{} still running at close; the library stays loaded", d.callName));
+        d.cut = true;
+        d.say(fmt::format("device plugin {}: {} still running at close; left loaded", d.path,
+                          d.callName));
         lock.unlock();
         d.worker.detach();
     }
@@ -244,14 +251,18 @@ DeviceState PluginDevice::read(double now) {
     if (!d.cut && d.inCall && Clock::now() - d.callStart >= deadline)
         d.cutOff(fmt::format("{} did not return within {:.1f} ms", d.callName,
                              d.options.deadlineS * 1e3));
-    // Cut off, or an earlier tick's read still out: zero force this tick.
-    if (d.cut || d.posted != d.completed) {
+    if (d.cut) {
         d.missed++;
         return {};
     }
-    d.readPending = true;
+    // A read the worker has not started yet (it was late waking) is moved to this tick's time
+    // rather than queued behind.
+    if (d.posted == d.completed) {
+        d.readPending = true;
+        ++d.posted;
+    }
     d.readNow = now;
-    const uint64_t serial = ++d.posted;
+    const uint64_t serial = d.posted;
     d.wake.notify_one();
     if (!d.done.wait_until(lock, Clock::now() + deadline, [&] { return d.completed >= serial; })) {
         d.missed++; // zero force this tick; the next read decides whether it hangs

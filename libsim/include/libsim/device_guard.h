@@ -60,7 +60,8 @@ public:
     void setGate(Gate gate) { m_gate = std::move(gate); }
     // Where a simulated hand wants the tool, handed to the device before each read.
     void setIntentSource(IntentSource source) { m_intent = std::move(source); }
-    // False for good (the session is over): writes zero now and on every later setForce.
+    // For good (the session is over; call with the loop stopped): writes zero now and on every
+    // later setForce.
     void release();
     bool released() const { return m_released.load(); }
 
@@ -68,6 +69,7 @@ public:
     glm::vec3 lastOutput() const { return m_last; }
     DeviceGuardStats stats() const { return m_stats; } // the haptic thread's, or after it stopped
     Device& inner() { return m_inner; }
+    const Device& inner() const { return m_inner; }
 
 private:
     Device& m_inner;

@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cassert>
+#include <glm/gtc/quaternion.hpp>
 #include <thread>
 
 namespace trephine::net {
@@ -36,6 +37,18 @@ ToolState ScriptToolSource::toolAt(const ToolPose& pose, double now) {
 
 glm::vec3 ScriptToolSource::velocity(const ToolPose& pose, double now) {
     return m_velocity.update(pose.position, now);
+}
+
+std::optional<ToolPose> ScriptToolSource::intent(double now) {
+    auto next = std::upper_bound(m_script.begin(), m_script.end(), now,
+                                 [](double v, const ScriptSample& s) { return v < s.t; });
+    const ToolState& b = (next == m_script.end() ? m_script.back() : *next).tool;
+    const ToolState& a = (next == m_script.begin() ? m_script.front() : *std::prev(next)).tool;
+    const double ta = next == m_script.begin() ? now : std::prev(next)->t;
+    const double tb = next == m_script.end() ? ta : next->t;
+    const float u = tb > ta ? float(std::clamp((now - ta) / (tb - ta), 0.0, 1.0)) : 0.0f;
+    return ToolPose{glm::mix(a.position, b.position, u),
+                    glm::slerp(a.orientation, b.orientation, u)};
 }
 
 // [SECTION] force
@@ -85,7 +98,11 @@ void TraineeCore::startHaptics(ToolSource& tools) {
     m_force = std::make_unique<TraineeForce>(tools, m_config.haptics.blend);
     m_force->setClient(m_client.get());
     m_force->setLocal(m_config.client.client.sync == Sync::Volume);
-    m_loop = std::make_unique<HapticLoop>(tools.device(), m_config.haptics,
+    m_guard = std::make_unique<DeviceGuard>(tools.device(), m_config.guard);
+    // Never driven while the link is down: the forces it would feel are stale.
+    m_guard->setGate([this] { return m_client->snapshot()->state == LinkState::Connected; });
+    m_guard->setIntentSource([&tools](double now) { return tools.intent(now); });
+    m_loop = std::make_unique<HapticLoop>(*m_guard, m_config.haptics,
                                           [this, &tools](const DeviceState& s, double now) {
                                               ToolState t = tools.toolAt(s.pose, now);
                                               // The device sample: the server's step and velocity
@@ -113,6 +130,13 @@ void TraineeCore::onModel(const HapticModel& m) {
 void TraineeCore::stopHaptics() {
     if (m_loop)
         m_loop->stop();
+    if (m_guard && !m_guard->released())
+        m_guard->release(); // the session is over for the device: zero, and never driven again
+}
+
+std::string TraineeCore::deviceFault() const {
+    const auto* f = m_guard ? dynamic_cast<const ForceDevice*>(&m_guard->inner()) : nullptr;
+    return f ? f->fault() : std::string();
 }
 
 void TraineeCore::stop() {

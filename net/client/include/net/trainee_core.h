@@ -5,6 +5,7 @@
 #pragma once
 
 #include "libsim/device.h"
+#include "libsim/device_guard.h"
 #include "libsim/force_model.h"
 #include "libsim/haptics.h"
 #include "net/client_model.h"
@@ -16,6 +17,8 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <optional>
+#include <string>
 #include <vector>
 
 namespace trephine::net {
@@ -31,6 +34,9 @@ public:
     virtual ToolState toolAt(const ToolPose& pose, double now) = 0;
     // The tool's velocity (mm/s), for the drilling resistance of a local force model.
     virtual glm::vec3 velocity(const ToolPose& pose, double now) = 0;
+    // Where the user means the tool to be at `now`, for a simulated hand (ForceDevice::setIntent);
+    // none where a real hand holds the device.
+    virtual std::optional<ToolPose> intent(double) { return std::nullopt; }
 };
 
 // One row of a trainee script: the tool state from time t (s) until the next row.
@@ -47,6 +53,8 @@ public:
     Device& device() override { return m_device; }
     ToolState toolAt(const ToolPose& pose, double now) override;
     glm::vec3 velocity(const ToolPose& pose, double now) override;
+    // The rows' poses, linear in position and slerped in orientation between rows.
+    std::optional<ToolPose> intent(double now) override;
     const ScriptSample& sampleAt(double t) const;
     double endS() const { return m_endS; }
 
@@ -90,11 +98,14 @@ private:
 struct TraineeCoreConfig {
     ClientThreadConfig client; // its onHapticModel is the core's
     HapticLoopConfig haptics;
+    DeviceGuardConfig guard; // the device's safety: clamp and per-tick rate limit
 };
 
 // The session client thread plus, once a tool source is given, the haptic loop that sends its tool
 // states and feels the force. connect() first (the tool may need what the session sends), then
 // startHaptics(). The destructor stops both, the loop first (it sends through the client).
+// The loop drives the device through a DeviceGuard: zero force while the link is not connected,
+// and none at all once the loop has stopped.
 class TraineeCore {
 public:
     explicit TraineeCore(TraineeCoreConfig config);
@@ -106,8 +117,9 @@ public:
     // Starts the haptic loop on `tools` (once; `tools` must outlive the core). Forces are local
     // from the start when the client asked for the volume design.
     void startHaptics(ToolSource& tools);
-    // Stops the loop; its figures stay readable. The loop and force live until the core goes, as
-    // the client thread may still be handing a model to them.
+    // Stops the loop and releases the device (zero force, never driven again); its figures stay
+    // readable. The loop and force live until the core goes, as the client thread may still be
+    // handing a model to them.
     void stopHaptics();
     // Stops the haptic loop, then disconnects and joins the client thread.
     void stop();
@@ -124,6 +136,12 @@ public:
     uint64_t localForceTicks() const { return m_force ? m_force->localTicks() : 0; }
     uint64_t serverForceTicks() const { return m_force ? m_force->serverTicks() : 0; }
     size_t localForceTools() const { return m_force ? m_force->toolsUsed() : 0; }
+    // The device guard's counts (read them once the loop has stopped) and the device's fault,
+    // if it was cut off ("" if not, or not a force device).
+    DeviceGuardStats deviceGuardStats() const {
+        return m_guard ? m_guard->stats() : DeviceGuardStats{};
+    }
+    std::string deviceFault() const;
     // The haptic figures a ClientModel report takes from the core (both shells call this).
     ClientReportExtras reportExtras() const;
 
@@ -135,6 +153,7 @@ private:
     // Set once by startHaptics before the loop runs; read by the client thread's model callback.
     std::atomic<bool> m_hapticsLive{false};
     std::unique_ptr<TraineeForce> m_force;
+    std::unique_ptr<DeviceGuard> m_guard; // between the loop and the tool source's device
     std::unique_ptr<HapticLoop> m_loop;
     uint64_t m_loopStartUs = 0; // steadyNowUs() when the loop's clock started
 };
