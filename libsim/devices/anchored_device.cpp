@@ -4,7 +4,7 @@
 
 namespace trephine {
 
-AnchoredDevice::AnchoredDevice(std::unique_ptr<Device> inner)
+AnchoredDevice::AnchoredDevice(std::shared_ptr<Device> inner)
     : m_inner(std::move(inner)), m_force(dynamic_cast<ForceDevice*>(m_inner.get())) {}
 
 DeviceWorkspace AnchoredDevice::workspace() const {

@@ -159,10 +159,12 @@ PedalMap readPedalMap(const std::string& path) {
 std::string pedalMapJson(const PedalMap& m) {
     json j;
     j["joystick"] = m.joystick;
+    // As read (floats printed as the short decimals a person wrote, not 0.05000000074505806).
+    auto dec = [](float v) { return std::round(double(v) * 1e4) / 1e4; };
     j["speed"] = m.speedAxis ? json{{"axis", *m.speedAxis},
-                                    {"released", m.released},
-                                    {"pressed", m.pressed},
-                                    {"dead_zone", m.deadZone}}
+                                    {"released", dec(m.released)},
+                                    {"pressed", dec(m.pressed)},
+                                    {"dead_zone", dec(m.deadZone)}}
                              : json(nullptr);
     j["clutch"] = m.clutchButton ? json{{"button", *m.clutchButton}} : json(nullptr);
     j["tool_switch"] = m.toolButton ? json{{"button", *m.toolButton}} : json(nullptr);

@@ -55,7 +55,7 @@ private:
 bool spaceNavRunning(std::string* why) {
     if (spnav_open() == -1) {
         if (why)
-            *why = "spacenavd does not answer (is it running?)";
+            *why = "does not answer (is it running?)";
         return false;
     }
     spnav_close();

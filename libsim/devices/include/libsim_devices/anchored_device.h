@@ -15,7 +15,7 @@ namespace trephine {
 
 class AnchoredDevice : public ForceDevice {
 public:
-    explicit AnchoredDevice(std::unique_ptr<Device> inner);
+    explicit AnchoredDevice(std::shared_ptr<Device> inner);
     std::string name() const override { return m_inner->name(); }
     // The haptic thread: the inner device's pose moved by the anchor (position added, orientation
     // turned by the anchor's), or, while clutched, the pose held when the clutch went down.
@@ -48,7 +48,7 @@ public:
 private:
     ToolPose compose(const ToolPose& p) const; // under m_mutex
 
-    std::unique_ptr<Device> m_inner;
+    std::shared_ptr<Device> m_inner;
     ForceDevice* m_force; // m_inner when it is one
     mutable std::mutex m_mutex;
     ToolPose m_anchor;

@@ -12,7 +12,7 @@ namespace trephine {
 
 extern const bool kHaveSpaceNav; // this build links libspnav
 
-// True when spacenavd answers (its socket accepts us); `why` says why not.
+// True when spacenavd answers (its socket accepts us); `why` says why not ("does not answer").
 bool spaceNavRunning(std::string* why = nullptr);
 
 // Connects to spacenavd; throws Error (one line) when libspnav is absent from this build or the
