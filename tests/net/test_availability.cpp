@@ -1,9 +1,10 @@
 // Availability without sockets: the admission rules (net/admission.h), the per-peer budgets and
 // names (net/budgets.h), the policy's places, idle timeouts and view budget, and the simulation
-// step's sliced rendering. Time is passed in; nothing sleeps.
+// step's work shared fairly among peers (net/fair_share.h). Time is passed in; nothing sleeps.
 #include "net/admission.h"
 #include "net/budgets.h"
 #include "net/codec.h"
+#include "net/fair_share.h"
 #include "net/session_policy.h"
 #include "net/sim_step.h"
 
@@ -540,7 +541,30 @@ TEST(AvailabilityPolicy, NamesInTheRosterAreValidAndUnique) {
 
 namespace {
 
+// The CPU ray caster, with a clock that counts the pixels it rendered (1 us each): the work
+// clock of a rig whose pieces must cost what they render, the same on every machine.
+class PixelClockRenderer final : public DbiRenderer {
+public:
+    PixelClockRenderer(const Volume& v, ThreadPool* pool, std::shared_ptr<uint64_t> pixels)
+        : m_cpu(v, pool), m_pixels(std::move(pixels)) {}
+    void volumeChanged(const Box3i& changed) override { m_cpu.volumeChanged(changed); }
+    void rebuild() override { m_cpu.rebuild(); }
+    void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache) override {
+        const PixelRect in = intersect(rect, frame.bounds());
+        *m_pixels += uint64_t(in.w) * uint64_t(in.h);
+        m_cpu.render(camera, rect, frame, cache);
+    }
+    Dbi render(const Camera& camera) override { return m_cpu.render(camera); }
+    std::string describe() const override { return "CPU, counting pixels"; }
+
+private:
+    CpuDbiRenderer m_cpu;
+    std::shared_ptr<uint64_t> m_pixels;
+};
+
 struct SliceRig {
+    // Pixels rendered: the work clock when the rig counts pixels (pixelClock).
+    std::shared_ptr<uint64_t> pixels = std::make_shared<uint64_t>(0);
     ReportBook book;
     Outbox outbox{1 << 30, book, steadyNowUs};
     SimulationStep step;
@@ -551,19 +575,26 @@ struct SliceRig {
     int yieldAsked = 0;
 
     SliceRig(Volume v, int64_t slicePixels, int64_t chunkPixels = int64_t(1) << 13,
-             double largeViewPixelsPerS = 0)
+             bool pixelClock = false)
         : step(std::move(v),
                StepConfig{.maxStepS = 0.05f,
                           .maxSweepMm = 10.0f,
                           .renderThreads = 1,
                           .slicePixels = slicePixels,
                           .chunkPixels = chunkPixels,
-                          .largeViewPixelsPerS = largeViewPixelsPerS,
+                          .workClock =
+                              pixelClock ? ServerClock([p = pixels] { return *p; }) : ServerClock(),
                           .yield =
                               [this] {
                                   ++yieldAsked;
                                   return eventsWait;
-                              }},
+                              },
+                          .renderer =
+                              pixelClock ? DbiRendererFactory([p = pixels](const Volume& vol,
+                                                                           ThreadPool* pool) {
+                                  return std::make_unique<PixelClockRenderer>(vol, pool, p);
+                              })
+                                         : DbiRendererFactory()},
                outbox, book, steadyNowUs) {}
     LogRecord join(uint16_t id, const Camera& camera) {
         JoinEvent ev{.client = id, .view = toViewSpec(camera), .volumeCodec = Codec::Lz4};
@@ -686,7 +717,7 @@ TEST(AvailabilitySlices, ALargeViewsChangeYieldsToWaitingEventsAChunkAtATime) {
     auto during = rig.run({topCut(skull, rig.now)});
     ASSERT_TRUE(applyUpdate(during, 1, small, smallSeen)) << "the small view does not wait";
     EXPECT_FALSE(has(during, 2, false)) << "the large view's change is more than one chunk";
-    EXPECT_EQ(rig.yieldAsked, 1) << "one chunk of the large view, then the events";
+    EXPECT_EQ(rig.yieldAsked, 1) << "one piece (the small view's turn), then the events";
     EXPECT_TRUE(rig.step.rendering());
     int steps = 1;
     std::vector<Outbox::Ready> done;
@@ -732,62 +763,153 @@ TEST(AvailabilitySlices, ANewLargeViewRendersAChunkAStepWhileEventsWait) {
     EXPECT_TRUE(compare(seen, rig.step.render(other)).identical());
 }
 
-// Views larger than a slice render within their budget of pixels a second (new rows and changes
-// alike, at most a slice saved up), so their pictures trail; a small view's image and rectangles
-// go in the step as before, and the step says when the large views' work is due again.
-TEST(AvailabilitySlices, LargeViewsRenderWithinTheirBudgetWhileSmallViewsNeverWait) {
+// [SECTION] the fair share of the simulation's time
+
+// Two peers always ready share the time equally whatever their pieces cost: one's 4 ms pieces
+// against the other's 1 ms ones.
+TEST(FairShare, TwoBusyPeersShareTheTimeEquallyWhateverTheirPiecesCost) {
+    uint64_t clock = 0;
+    FairShare share([&] { return clock; });
+    const std::vector<uint16_t> ready{1, 2};
+    std::map<uint16_t, uint64_t> used;
+    for (int i = 0; i < 1000; ++i) {
+        const uint16_t peer = ready[share.pick(ready)];
+        const uint64_t cost = peer == 1 ? 4000 : 1000;
+        clock += cost;
+        share.charge(std::vector<uint16_t>{peer}, cost);
+        used[peer] += cost;
+    }
+    EXPECT_EQ(used[1], share.charged(1));
+    EXPECT_LE(std::abs(int64_t(used[1]) - int64_t(used[2])), 4000) << "within one piece";
+}
+
+// A peer idle while another worked banks nothing: back, it goes first once, then they take turns
+// instead of it running for as long as it was away.
+TEST(FairShare, APeerIdleForAWhileGoesFirstButBanksNoCredit) {
+    FairShare share([] { return uint64_t(0); });
+    const std::vector<uint16_t> alone{1}, both{1, 2};
+    for (int i = 0; i < 100; ++i) {
+        ASSERT_EQ(share.pick(alone), 0u);
+        share.charge(uint16_t(1), 1000);
+    }
+    std::vector<uint16_t> order;
+    for (int i = 0; i < 6; ++i) {
+        const uint16_t peer = both[share.pick(both)];
+        share.charge(peer, 1000);
+        order.push_back(peer);
+    }
+    EXPECT_EQ(order, (std::vector<uint16_t>{2, 1, 2, 1, 2, 1}));
+    share.forget(2);
+    EXPECT_EQ(share.charged(2), 3000u) << "its total stays for the report";
+}
+
+// A lone view gets every step's whole slice whatever its size: a 1920 x 1080 view renders a slice
+// a step with nothing else to do, never waiting for a rate, and a change of it goes in the step.
+TEST(AvailabilityFairShare, ALoneLargeViewGetsTheWholeStepWhateverItsSize) {
     const Volume skull = makeSkull(48);
-    constexpr int64_t kSlice = 64 * 64, kChunk = 256 * 4;
-    constexpr double kPerS = 40960; // 410 pixels per 10 ms step: less than a chunk
-    SliceRig rig(skull, kSlice, kChunk, kPerS);
-    const Camera small = cameraPreset("top", skull, {64, 64});
-    const Camera large = cameraPreset("top", skull, {256, 256});
-    const uint64_t start = rig.now;
-    auto first = rig.run({rig.join(1, small), rig.join(2, large)});
-    EXPECT_TRUE(has(first, 1, true)) << "the small view's image does not wait";
-    Dbi smallSeen, largeSeen;
-    ASSERT_TRUE(applyUpdate(first, 1, small, smallSeen));
-    std::vector<Outbox::Ready> done;
-    int steps = 1, idleSteps = 0;
-    while (!has(done, 2, true) && steps < 1000) {
-        const uint64_t due = rig.step.renderDueUs();
-        ASSERT_TRUE(rig.step.rendering());
-        idleSteps += due > rig.now + 10000; // the next step, too early, must render nothing
+    constexpr int64_t kSlice = 1920 * 64;
+    SliceRig rig(skull, kSlice, 1920 * 8, true);
+    const Camera hd = cameraPreset("top", skull, {1920, 1080});
+    std::vector<Outbox::Ready> done = rig.run({rig.join(1, hd)});
+    int steps = 1;
+    for (; !has(done, 1, true) && steps < 100; ++steps) {
+        EXPECT_EQ(*rig.pixels, uint64_t(steps) * kSlice) << "a whole slice every step";
+        EXPECT_TRUE(rig.step.rendering()) << "work now: the server's loop does not wait";
         done = rig.run({});
-        ++steps;
     }
-    ASSERT_TRUE(has(done, 2, true));
-    // The frame's pixels less the slice saved up, at the budget's rate (less one chunk of debt).
-    const double seconds = double(rig.now - start) * 1e-6;
-    EXPECT_GE(seconds, double(256 * 256 - kSlice - kChunk) / kPerS);
-    EXPECT_LE(seconds, double(256 * 256) / kPerS + 0.05);
-    EXPECT_GT(idleSteps, 0) << "steps before the due time wait for the budget";
-    const AvailabilityCounters counted =
-        rig.book.read([](const ServerReport& r) { return r.availability; });
-    EXPECT_GE(counted.largeViewPixels, uint64_t(256 * 256)) << "the large view's rows";
-    EXPECT_GT(counted.largeViewWaits, 0u);
-    ASSERT_TRUE(applyUpdate(done, 2, large, largeSeen));
-
-    // A cut with the budget spent: the small view's rectangle goes in the step; the large
-    // view's change when its pixels are due, which the step says.
+    EXPECT_EQ(steps, (1080 + 63) / 64);
+    Dbi seen;
+    ASSERT_TRUE(applyUpdate(done, 1, hd, seen));
+    EXPECT_EQ(rig.step.share().charged(1), uint64_t(1920 * 1080)) << "all charged to it";
     auto cut = rig.run({topCut(skull, rig.now)});
-    ASSERT_TRUE(applyUpdate(cut, 1, small, smallSeen)) << "the small view does not wait";
-    EXPECT_FALSE(has(cut, 2, false)) << "the large view's budget is spent";
-    steps = 0;
-    while (rig.step.rendering() && steps < 100) {
-        const uint64_t due = rig.step.renderDueUs();
-        ASSERT_GT(due, rig.now);
-        auto later = rig.run({}, due - rig.now);
-        applyUpdate(later, 2, large, largeSeen);
-        EXPECT_FALSE(has(later, 1, false)) << "nothing new for the small view";
-        ++steps;
-    }
-    EXPECT_GT(steps, 0);
+    ASSERT_TRUE(applyUpdate(cut, 1, hd, seen)) << "its change goes in the step";
     EXPECT_FALSE(rig.step.rendering());
-    EXPECT_TRUE(compare(smallSeen, rig.step.render(small)).identical());
-    EXPECT_TRUE(compare(largeSeen, rig.step.render(large)).identical()) << "with the cut in it";
+    EXPECT_TRUE(compare(seen, rig.step.render(hd)).identical()) << "with the cut in it";
+}
 
-    // After a rest (a slice saved up), a small change of the large view goes in the step.
-    rig.run({}, 1000000);
-    deeperCutGoesInTheStep(rig, skull, large, largeSeen);
+// An honest trainee drilling (a cut a step) beside a greedy peer asking for a new 256 x 256 view
+// every step, with events always waiting (one piece a step): the trainee's rectangles go within
+// its share, at most a step late, and its picture stays exact; the greedy peer is charged its
+// share and its own views never finish while it keeps asking; once it stops, its last one does.
+TEST(AvailabilityFairShare, AnHonestPeersUpdatesGoWithinItsShareWhileAGreedyPeersWorkWaits) {
+    const Volume skull = makeSkull(48);
+    SliceRig rig(skull, 64 * 64 * 4, 256 * 4, true);
+    const Camera small = cameraPreset("top", skull, {64, 64});
+    const Camera greedy = cameraPreset("paper", skull, {256, 256});
+    Dbi seen;
+    auto first = rig.run({rig.join(1, small), rig.join(2, greedy)});
+    ASSERT_TRUE(applyUpdate(first, 1, small, seen));
+    rig.eventsWait = true;
+    int late = 0, greedyFull = 0, sinceUpdate = 0;
+    for (int i = 0; i < 60; ++i) {
+        ViewSpec next = toViewSpec(greedy);
+        next.eye.x += 0.5f * float(i % 7 + 1);
+        rig.outbox.viewChanged(2, uint32_t(i + 2));
+        LogRecord cut = topCut(skull, rig.now);
+        cut.as<CutEvent>()->box.lo.z -= i % 6; // deeper each time: a change every step
+        auto out = rig.run({cut, {0, ViewEvent{2, next, uint32_t(i + 2)}}});
+        greedyFull += has(out, 2, true);
+        sinceUpdate = applyUpdate(out, 1, small, seen) ? 0 : sinceUpdate + 1;
+        late += sinceUpdate > 0;
+        EXPECT_LE(sinceUpdate, 1) << "step " << i;
+    }
+    EXPECT_EQ(greedyFull, 0) << "its newest view replaces the one under way";
+    EXPECT_LT(late, 30) << "most of the trainee's rectangles go in the step";
+    const int64_t honestUs = int64_t(rig.step.share().charged(1)),
+                  greedyUs = int64_t(rig.step.share().charged(2));
+    EXPECT_GT(greedyUs, 0);
+    rig.eventsWait = false;
+    rig.run({}); // the trainee's last change, if it waited
+    EXPECT_TRUE(compare(seen, rig.step.render(small)).identical());
+    std::vector<Outbox::Ready> done;
+    for (int steps = 0; !has(done, 2, true) && steps < 100; ++steps)
+        done = rig.run({});
+    EXPECT_TRUE(has(done, 2, true)) << "alone, its last view finishes";
+    EXPECT_GT(greedyUs, 0) << "it had the time the trainee left";
+    EXPECT_GT(honestUs, 0);
+}
+
+// Two new views, an honest peer's asked for once and a greedy peer's asked for anew every step,
+// events always waiting: they take turns piece for piece, so the honest view arrives in about
+// twice the steps it takes alone, while the greedy peer's never does.
+TEST(AvailabilityFairShare, NewViewsShareTheStepsFairlyWhileTheGreedyPeerStartsOver) {
+    const Volume skull = makeSkull(48);
+    SliceRig rig(skull, 64 * 64 * 4, 256 * 4, true);
+    const Camera honest = cameraPreset("top", skull, {256, 256});
+    const Camera greedy = cameraPreset("paper", skull, {256, 256});
+    rig.eventsWait = true;
+    std::vector<Outbox::Ready> out = rig.run({rig.join(1, honest), rig.join(2, greedy)});
+    int steps = 1, greedyFull = 0;
+    for (; !has(out, 1, true) && steps < 400; ++steps) {
+        ViewSpec next = toViewSpec(greedy);
+        next.eye.x += 0.5f * float(steps % 7 + 1);
+        rig.outbox.viewChanged(2, uint32_t(steps + 1));
+        out = rig.run({{0, ViewEvent{2, next, uint32_t(steps + 1)}}});
+        greedyFull += has(out, 2, true);
+    }
+    ASSERT_TRUE(has(out, 1, true));
+    EXPECT_LE(steps, 2 * 256 / 4 + 3) << "half the pieces, then its frame's copy";
+    EXPECT_EQ(greedyFull, 0);
+    const int64_t honestUs = int64_t(rig.step.share().charged(1)),
+                  greedyUs = int64_t(rig.step.share().charged(2));
+    EXPECT_LE(std::abs(honestUs - greedyUs), 2 * 256 * 4) << "within a piece or two";
+}
+
+// Updates of whole views come before new views' rows, whoever's turn it is: a newcomer (charged
+// nothing yet) waits behind a trainee's rectangle.
+TEST(AvailabilityFairShare, UpdatesOfHeldViewsGoBeforeNewViewsRows) {
+    const Volume skull = makeSkull(48);
+    SliceRig rig(skull, 64 * 64 * 4, 256 * 4, true);
+    const Camera small = cameraPreset("top", skull, {64, 64});
+    Dbi seen;
+    ASSERT_TRUE(applyUpdate(rig.run({rig.join(1, small)}), 1, small, seen));
+    rig.eventsWait = true;
+    const uint64_t before = *rig.pixels;
+    auto out =
+        rig.run({topCut(skull, rig.now), rig.join(3, cameraPreset("paper", skull, {256, 256}))});
+    ASSERT_TRUE(applyUpdate(out, 1, small, seen)) << "the trainee's rectangle first";
+    EXPECT_FALSE(has(out, 3, true));
+    EXPECT_LE(*rig.pixels - before, uint64_t(64 * 64)) << "and nothing of the newcomer's rows";
+    EXPECT_TRUE(rig.step.rendering());
+    EXPECT_TRUE(compare(seen, rig.step.render(small)).identical());
 }

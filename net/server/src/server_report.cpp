@@ -39,8 +39,6 @@ Json availability(const AvailabilityCounters& a) {
             {"idle_timeouts", a.idleTimeouts},
             {"views_deferred", a.viewsDeferred},
             {"views_coalesced", a.viewsCoalesced},
-            {"large_view_pixels", a.largeViewPixels},
-            {"large_view_waits", a.largeViewWaits},
             {"views_over_total", a.viewsOverTotal},
             {"refused_view_total", a.refusedViewTotal},
             {"control_coalesced", a.controlCoalesced},
@@ -119,6 +117,7 @@ nlohmann::ordered_json toJson(const ServerReport& r, const NetStats& stats) {
                          {"haptic_relays", p.hapticRelays},
                          {"malformed", p.malformed},
                          {"views_refused", p.viewsRefused},
+                         {"charged_us", p.chargedUs},
                          {"sync", syncName(p.sync)},
                          {"sync_switches", p.syncSwitches},
                          {"kicked", p.kicked}});

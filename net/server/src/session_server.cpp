@@ -68,7 +68,6 @@ private:
 StepConfig stepConfig(const ServerConfig& c, std::function<bool()> yield) {
     StepConfig s{c.maxStepS, c.maxSweepMm, c.renderThreads, {}};
     s.yield = std::move(yield);
-    s.largeViewPixelsPerS = c.largeViewPixelsPerS;
     s.renderer = c.renderer;
     s.assessment.cautionMm = c.cautionMm;
     s.assessment.dangerMm = c.dangerMm;
@@ -980,13 +979,8 @@ void SessionServer::simulationLoop() {
     for (;;) {
         {
             std::unique_lock lock(s.inMutex);
-            // A view partly rendered is work: its next slice goes without waiting, or once
-            // the large views' render budget is due.
-            const bool slices = s.step.rendering();
-            const uint64_t now = s.clock(), due = s.step.renderDueUs();
-            const uint64_t waitUs = !slices     ? 10000
-                                    : due > now ? std::min<uint64_t>(due - now, 10000)
-                                                : 0;
+            // A view's work not done is work: its next piece goes without waiting.
+            const uint64_t waitUs = s.step.rendering() ? 0 : 10000;
             s.inCv.wait_for(lock, std::chrono::microseconds(waitUs),
                             [&] { return !s.inbox.empty() || s.stopSim; });
             if (s.inbox.empty() && s.stopSim)

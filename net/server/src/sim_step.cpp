@@ -47,7 +47,7 @@ SimulationStep::SimulationStep(Volume volume, const StepConfig& config, Outbox& 
       m_volume(normaliseAir(std::move(volume))), m_pool(config.renderThreads),
       m_renderer(makeRenderer(config, m_volume, m_pool)),
       m_assessment(m_volume, withSweep(config), book, &m_pool),
-      m_largeBudget(config.largeViewPixelsPerS, double(config.slicePixels)) {}
+      m_share(config.workClock ? config.workClock : ServerClock(steadyNowUs)) {}
 
 void SimulationStep::Batch::changedBy(const Box3i& box, uint64_t arrivedUs) {
     changed.merge(box);
@@ -55,7 +55,6 @@ void SimulationStep::Batch::changedBy(const Box3i& box, uint64_t arrivedUs) {
 }
 
 void SimulationStep::step(std::span<const LogRecord> batch, uint64_t now) {
-    m_nowUs = now;
     Batch b;
     for (const LogRecord& r : batch) {
         // The assessment's time: when the event arrived (the server stamps every event it
@@ -87,6 +86,10 @@ void SimulationStep::step(std::span<const LogRecord> batch, uint64_t now) {
     postVolumes(b);
     renderViews(b, updateGrid(b));
     m_assessment.tick(now);
+    m_book.record([&](ServerReport& r) {
+        for (const auto& [id, c] : m_clients)
+            r.peers[id].chargedUs = m_share.charged(id);
+    });
 }
 
 // [SECTION] events
@@ -134,6 +137,7 @@ void SimulationStep::applyLeave(const LeaveEvent& ev, uint64_t at, Batch& b) {
     m_assessment.leave(ev.client, at);
     m_clients.erase(ev.client);
     m_outbox.leave(ev.client);
+    m_share.forget(ev.client);
     b.needFull.erase(ev.client);
     b.needVolume.erase(ev.client);
 }
@@ -246,6 +250,7 @@ void SimulationStep::postVolumes(const Batch& b) {
     for (auto& [id, c] : m_clients) {
         if (c.sync != Sync::Volume)
             continue;
+        const uint64_t t0 = m_share.now();
         auto full = b.needVolume.find(id);
         if (full != b.needVolume.end())
             m_outbox.offerVolume(id, m_volume,
@@ -256,6 +261,7 @@ void SimulationStep::postVolumes(const Batch& b) {
                 VolumeChange{b.changed, false, b.materials, b.causeUs, uint32_t(b.erodeUs)});
         else
             m_outbox.offerVolume(id, m_volume, std::nullopt);
+        m_share.charge(id, m_share.now() - t0); // a design switch's whole volume, mostly
     }
 }
 
@@ -321,62 +327,20 @@ void SimulationStep::renderViews(const Batch& b, uint32_t gridUs) {
             v.frame = Dbi(c.camera.width, c.camera.height);
         }
     }
-    for (ViewFrame& v : m_views)
+    for (ViewFrame& v : m_views) {
         markChanged(v, b, gridUs);
-    // Whole views' changes first, smallest view first: a client's rectangle never waits for a
-    // larger view's, nor for a new view. A view of at most slicePixels costs at most a slice even
-    // re-rendered whole, so its change goes in this step; a larger view's change goes in chunks
-    // and yields to waiting events once one is done, as new views' rows do.
-    std::vector<ViewFrame*> order;
-    for (ViewFrame& v : m_views)
-        if (v.whole())
-            order.push_back(&v);
-    std::stable_sort(order.begin(), order.end(), [](const ViewFrame* x, const ViewFrame* y) {
-        return pixelsOf(x->frame) < pixelsOf(y->frame);
-    });
-    bool stopped = false;
-    for (ViewFrame* v : order) {
-        if (!stopped && v->copying())
-            stopped = copyFrame(*v);
-        if (!stopped && !v->copying())
-            stopped = renderStale(*v);
-        if (v->settled())
-            stopped = settle(*v, stopped);
+        v.holders.clear();
+        for (const auto& [id, c] : m_clients)
+            if (dbiView(c, v.camera))
+                v.holders.push_back(id);
     }
-    if (!stopped)
-        renderSlices();
-    noteRenderDue();
+    schedule();
+    m_rendering = std::any_of(m_views.begin(), m_views.end(),
+                              [](const ViewFrame& v) { return !v.settled(); });
 }
 
 bool SimulationStep::large(const ViewFrame& v) const {
     return pixelsOf(v.frame) > m_config.slicePixels;
-}
-
-bool SimulationStep::budgetAllows(const ViewFrame& v) {
-    return !large(v) || m_config.largeViewPixelsPerS <= 0 || m_largeBudget.covers(1.0, m_nowUs);
-}
-
-void SimulationStep::spendBudget(const ViewFrame& v, int64_t pixels) {
-    if (!large(v) || m_config.largeViewPixelsPerS <= 0)
-        return;
-    m_largeBudget.spend(double(pixels), m_nowUs);
-    m_book.record([&](ServerReport& r) { r.availability.largeViewPixels += uint64_t(pixels); });
-}
-
-// Whether a step has work without events, and from when: at once for a small view's rows or a
-// frame's copy, at the budget's due time when only large views' rendering is left.
-void SimulationStep::noteRenderDue() {
-    bool now = false, later = false;
-    for (const ViewFrame& v : m_views) {
-        if (v.settled())
-            continue;
-        const bool budgeted = !v.copying() && large(v) && m_config.largeViewPixelsPerS > 0;
-        (budgeted ? later : now) = true;
-    }
-    m_renderDueUs = now || !later ? m_nowUs : m_largeBudget.dueUs(1.0, m_nowUs);
-    m_rendering = now || later;
-    if (m_renderDueUs > m_nowUs)
-        m_book.record([](ServerReport& r) { ++r.availability.largeViewWaits; });
 }
 
 // The batch's change in the rows rendered so far joins the view's stale pixels.
@@ -394,16 +358,71 @@ void SimulationStep::markChanged(ViewFrame& v, const Batch& b, uint32_t gridUs) 
     v.timing.renderUs += gridUs; // the brick grid counts in the render stage
 }
 
-bool SimulationStep::chunkDone() {
-    return m_config.yield && m_config.yield();
+// The views' work a piece at a time, the peer whose turn it is first (FairShare), each piece
+// charged to the view's clients: whole views' changes (and copies of frames for full images)
+// before new views' rows, at most a slice of new rows a step. After any piece, the step stops if
+// events wait: they are applied first, so nobody's update waits behind more than one piece of
+// another's work, and a peer that asks for more than its share falls behind in its own queue.
+void SimulationStep::schedule() {
+    for (ViewFrame& v : m_views)
+        if (v.settled())
+            postView(v); // a newcomer to a view already whole gets it now
+    int64_t rowsLeft = std::max<int64_t>(m_config.slicePixels, 1);
+    std::vector<ViewFrame*> ready;
+    std::vector<uint16_t> peers;
+    for (;;) {
+        ready.clear();
+        for (ViewFrame& v : m_views)
+            if (v.whole() && !v.settled() && !v.holders.empty())
+                ready.push_back(&v);
+        if (ready.empty() && rowsLeft > 0)
+            for (ViewFrame& v : m_views)
+                if (!v.whole() && !v.holders.empty())
+                    ready.push_back(&v);
+        if (ready.empty())
+            return;
+        // Ties go to the smaller view: a trainee's rectangle before a larger view's piece.
+        std::stable_sort(ready.begin(), ready.end(), [](const ViewFrame* x, const ViewFrame* y) {
+            return pixelsOf(x->frame) < pixelsOf(y->frame);
+        });
+        peers.clear();
+        for (const ViewFrame* v : ready)
+            peers.push_back(v->holders.front());
+        ViewFrame& v = *ready[m_share.pick(peers)];
+        const uint64_t t0 = m_share.now();
+        workOn(v, rowsLeft);
+        m_share.charge(v.holders, m_share.now() - t0);
+        if (v.settled())
+            postView(v);
+        if (m_config.yield && m_config.yield())
+            return;
+    }
 }
 
-// Renders the view's stale pixels (a view larger than a slice in chunks of rows within the render
-// budget, stopping after one once events wait); true when it stopped for them.
-bool SimulationStep::renderStale(ViewFrame& v) {
-    if (v.stale.empty())
-        return false;
-    const bool mayYield = large(v);
+// One piece of the view's work: the next chunk of its frame's copy, else its changed pixels, else
+// its next rows (counted against the step's `rowsLeft`).
+void SimulationStep::workOn(ViewFrame& v, int64_t& rowsLeft) {
+    if (v.copying()) {
+        copyChunk(v);
+        return;
+    }
+    if (!v.stale.empty()) {
+        renderStale(v);
+        return;
+    }
+    const int width = std::max(v.frame.width(), 1);
+    const int rows = int(std::clamp<int64_t>(std::min(rowsLeft, m_config.chunkPixels) / width, 1,
+                                             v.frame.height() - v.rowsDone));
+    m_renderer->render(v.camera, {0, v.rowsDone, v.frame.width(), rows}, v.frame, &v.cache);
+    v.rowsDone += rows;
+    rowsLeft -= int64_t(rows) * width;
+    if (v.whole())
+        m_book.count(&ServerCounters::renders);
+}
+
+// The view's changed pixels: all of them for a view of at most a slice (or the whole view, the
+// paper's way), else the next chunk of rows of them.
+void SimulationStep::renderStale(ViewFrame& v) {
     if (m_fullRender.load() && v.whole()) {
         // The paper's way re-renders the whole view, through the view's hit cache as the volume
         // client's re-render does, so the study compares like with like; BB_screen is sent.
@@ -413,47 +432,33 @@ bool SimulationStep::renderStale(ViewFrame& v) {
         v.fresh = unite(v.fresh, v.stale);
         v.stale = {};
         m_book.count(&ServerCounters::renders);
-        return false;
+        return;
     }
-    while (!v.stale.empty()) {
-        if (mayYield && !budgetAllows(v))
-            return false; // resumed when the budget is due (renderDueUs)
-        const int rows =
-            mayYield ? int(std::clamp<int64_t>(m_config.chunkPixels / std::max(v.stale.w, 1), 1,
-                                               v.stale.h))
-                     : v.stale.h;
-        const PixelRect chunk{v.stale.x, v.stale.y, v.stale.w, rows};
-        const uint64_t r0 = m_clock();
-        m_renderer->render(v.camera, chunk, v.frame, &v.cache);
-        v.timing.renderUs += uint32_t(m_clock() - r0);
-        spendBudget(v, int64_t(rows) * chunk.w);
-        v.fresh = unite(v.fresh, chunk);
-        v.stale.y += rows;
-        v.stale.h -= rows;
-        if (v.stale.h <= 0) {
-            v.stale = {};
-            m_book.count(&ServerCounters::renders);
-        }
-        if (mayYield && chunkDone())
-            return true;
+    const int rows =
+        large(v)
+            ? int(std::clamp<int64_t>(m_config.chunkPixels / std::max(v.stale.w, 1), 1, v.stale.h))
+            : v.stale.h;
+    const PixelRect chunk{v.stale.x, v.stale.y, v.stale.w, rows};
+    const uint64_t r0 = m_clock();
+    m_renderer->render(v.camera, chunk, v.frame, &v.cache);
+    v.timing.renderUs += uint32_t(m_clock() - r0);
+    v.fresh = unite(v.fresh, chunk);
+    v.stale.y += rows;
+    v.stale.h -= rows;
+    if (v.stale.h <= 0) {
+        v.stale = {};
+        m_book.count(&ServerCounters::renders);
     }
-    return false;
-}
-
-// A settled view to its clients (postView), then, unless the step `stopped` for waiting events,
-// the copy of a large view's frame for those waiting for a full image; whether the step stops.
-bool SimulationStep::settle(ViewFrame& v, bool stopped) {
-    postView(v);
-    return stopped || (v.copying() && copyFrame(v));
 }
 
 // The pixels rendered since the view's last update to its clients, and the whole frame to those
-// waiting for one. A view larger than a slice starts a copy of its frame for them instead:
-// copying 33 MB at once stopped the step for ~11 ms (2048 x 2048 on the 2-core VM).
+// waiting for one, each client charged for its update's coding. A view larger than a slice
+// starts a copy of its frame for them instead: copying 33 MB at once stopped the step for ~11 ms
+// (2048 x 2048 on the 2-core VM).
 void SimulationStep::postView(ViewFrame& v) {
-    for (auto& [id, c] : m_clients) {
-        if (c.sync != Sync::Dbi || !(c.camera == v.camera))
-            continue;
+    for (uint16_t id : v.holders) {
+        Client& c = m_clients.at(id);
+        const uint64_t t0 = m_share.now();
         if (c.fullCauseUs && large(v)) {
             if (!v.copying()) {
                 v.copy = m_outbox.buffer(v.frame.width(), v.frame.height());
@@ -465,30 +470,28 @@ void SimulationStep::postView(ViewFrame& v) {
         } else if (!v.fresh.empty()) {
             m_outbox.postImage(id, v.camera, v.frame, v.fresh, false, v.causeUs, v.timing);
         }
+        m_share.charge(id, m_share.now() - t0);
     }
     v.fresh = {};
     v.causeUs = 0;
     v.timing = {};
 }
 
-// Copies the frame for its full image, a chunk of rows at a time (copying a pixel costs ~1/30 of
-// rendering it), stopping after one once events wait; the copy done, every client waiting for
-// the view's full image gets it. True when it stopped for waiting events.
-bool SimulationStep::copyFrame(ViewFrame& v) {
+// Copies a chunk of the frame's rows for its full image (copying a pixel costs ~1/30 of
+// rendering it); the copy done, every client waiting for the view's full image gets it.
+void SimulationStep::copyChunk(ViewFrame& v) {
     const int width = std::max(v.frame.width(), 1), height = v.frame.height();
-    while (v.rowsCopied < height) {
-        const int rows =
-            int(std::clamp<int64_t>(m_config.chunkPixels * 32 / width, 1, height - v.rowsCopied));
-        const size_t at = size_t(v.rowsCopied) * size_t(width), n = size_t(rows) * size_t(width);
-        std::memcpy(v.copy.color() + 4 * at, v.frame.color() + 4 * at, 4 * n);
-        std::memcpy(v.copy.depth() + at, v.frame.depth() + at, sizeof(float) * n);
-        v.rowsCopied += rows;
-        if (v.rowsCopied < height && chunkDone())
-            return true;
-    }
+    const int rows =
+        int(std::clamp<int64_t>(m_config.chunkPixels * 32 / width, 1, height - v.rowsCopied));
+    const size_t at = size_t(v.rowsCopied) * size_t(width), n = size_t(rows) * size_t(width);
+    std::memcpy(v.copy.color() + 4 * at, v.frame.color() + 4 * at, 4 * n);
+    std::memcpy(v.copy.depth() + at, v.frame.depth() + at, sizeof(float) * n);
+    v.rowsCopied += rows;
+    if (v.rowsCopied < height)
+        return;
     std::vector<std::pair<uint16_t, Client*>> waiting;
-    for (auto& [id, c] : m_clients)
-        if (c.sync == Sync::Dbi && c.camera == v.camera && c.fullCauseUs)
+    for (uint16_t id : v.holders)
+        if (Client& c = m_clients.at(id); c.fullCauseUs)
             waiting.emplace_back(id, &c);
     for (size_t i = 0; i < waiting.size(); ++i) {
         auto [id, c] = waiting[i];
@@ -498,44 +501,6 @@ bool SimulationStep::copyFrame(ViewFrame& v) {
     }
     v.copy = Dbi();
     v.rowsCopied = -1;
-    return chunkDone();
-}
-
-// Up to slicePixels of rows of the views still being rendered, one view after another from where
-// the last step stopped (each view's changes in its rows done first); a view finished here goes
-// to its clients whole. A view larger than a slice renders in chunks and stops after one once
-// events wait.
-void SimulationStep::renderSlices() {
-    int64_t sliceLeft = std::max<int64_t>(m_config.slicePixels, 1);
-    const size_t n = m_views.size();
-    for (size_t k = 0; k < n && sliceLeft > 0; ++k) {
-        const size_t i = (m_nextSlice + k) % n;
-        ViewFrame& v = m_views[i];
-        if (v.whole())
-            continue;
-        if (renderStale(v))
-            return;
-        const bool mayYield = large(v);
-        const int width = std::max(v.frame.width(), 1);
-        bool stop = false;
-        while (!v.whole() && sliceLeft > 0 && !stop && budgetAllows(v)) {
-            const int64_t pixels = mayYield ? std::min(sliceLeft, m_config.chunkPixels) : sliceLeft;
-            const int rows =
-                int(std::clamp<int64_t>(pixels / width, 1, v.frame.height() - v.rowsDone));
-            m_renderer->render(v.camera, {0, v.rowsDone, v.frame.width(), rows}, v.frame, &v.cache);
-            spendBudget(v, int64_t(rows) * width);
-            v.rowsDone += rows;
-            sliceLeft -= int64_t(rows) * width;
-            stop = mayYield && chunkDone();
-        }
-        m_nextSlice = i + 1;
-        if (v.whole()) {
-            m_book.count(&ServerCounters::renders);
-            stop = settle(v, stop);
-        }
-        if (stop)
-            return;
-    }
 }
 
 int64_t SimulationStep::viewPixels() const {

@@ -86,10 +86,6 @@ struct ServerConfig {
     // View pixels a peer may have rendered per second (a token bucket holding two of the largest
     // views); a request beyond it waits, the newest one only, until its pixels are due.
     double viewPixelsPerS = 8.0 * 1024 * 1024;
-    // Pixels a second the server renders for views larger than 512 x 512, all together (their
-    // changes and new views' rows; StepConfig::largeViewPixelsPerS): their pictures trail, and the
-    // views of at most 512 x 512 keep the CPU. 0: no limit.
-    double largeViewPixelsPerS = 1024 * 1024;
     // All participants' views together (w x h each): a view that would pass it is refused. The
     // server keeps about 40 bytes a pixel of view (frame, hit cache, coded copies).
     int64_t maxTotalViewPixels = 16 << 20;

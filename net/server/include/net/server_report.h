@@ -49,9 +49,6 @@ struct AvailabilityCounters {
     uint64_t idleTimeouts = 0;   // participants sent away for saying nothing (idleTimeoutS)
     uint64_t viewsDeferred = 0;  // view requests held back by the peer's render budget
     uint64_t viewsCoalesced = 0; // of which replaced by a newer one before it was due
-    // Pixels rendered for views larger than a slice (under largeViewPixelsPerS), and the steps
-    // that left such views' work for later because that budget was spent.
-    uint64_t largeViewPixels = 0, largeViewWaits = 0;
     uint64_t viewsOverTotal = 0; // views refused: all views together would pass maxTotalViewPixels
     uint64_t refusedViewTotal = 0; // hellos refused for the same reason (RefuseReason::ViewsFull)
     uint64_t controlCoalesced = 0; // rosters, marks, views replaced by a newer one while queued
@@ -67,6 +64,7 @@ struct PeerReport {
     bool hello = false;
     uint64_t bytesIn = 0, bytesOut = 0, messagesIn = 0, messagesOut = 0;
     uint64_t malformed = 0, hapticModels = 0, hapticRelays = 0, toolStates = 0, viewsRefused = 0;
+    uint64_t chargedUs = 0; // the simulation thread's time spent for it (net/fair_share.h)
     uint64_t connectedUs = 0, disconnectedUs = 0; // disconnectedUs 0: still connected
     bool kicked = false;
     Sync sync = Sync::Dbi;

@@ -16,6 +16,7 @@
 #include "net/assessment.h"
 #include "net/budgets.h"
 #include "net/events.h"
+#include "net/fair_share.h"
 #include "net/outbox.h"
 #include "net/protocol.h"
 #include "net/server_report.h"
@@ -36,20 +37,16 @@ struct StepConfig {
     float maxSweepMm = 10.0f;      // ServerConfig::maxSweepMm
     int renderThreads = 0;         // 0: hardware concurrency
     AssessmentConfig assessment{}; // zones; its maxSweepMm is taken from maxSweepMm
-    // New views render in slices of rows, at most this many pixels a step across all of them,
-    // taken in turn (docs/session.md, "Availability").
+    // The views' work goes a piece at a time, the peer whose turn it is first (net/fair_share.h),
+    // and the step stops after any piece once `yield` says events wait: they are applied first
+    // (docs/session.md, "Availability"). New views' rows come in pieces of at most chunkPixels,
+    // at most slicePixels a step. A change of a view of at most slicePixels is one piece; a
+    // larger view's change goes in pieces of at most chunkPixels.
     int64_t slicePixels = int64_t(1) << 18;
-    // The changes of views larger than a slice, and new views' rows, render in chunks of rows of
-    // at most this many pixels, and the step stops after any chunk when `yield` says events
-    // wait: they are applied first, so nobody's update waits behind more than one chunk of
-    // another's large view. A view of at most a slice costs at most a slice even re-rendered
-    // whole: its change always goes in the step.
     int64_t chunkPixels = int64_t(1) << 13;
-    // Views larger than a slice render (changes and new rows alike) at most this many pixels a
-    // second, all of them together, at most a slice saved up: a peer holding or asking for the
-    // largest views gets its pictures later, and the CPU stays with the small views, which never
-    // wait for it. 0: no limit.
-    double largeViewPixelsPerS = 0;
+    // Measures the work charged to peers (FairShare); empty: the steady clock. Not the step's
+    // clock: a pumped server's stands still within a pass.
+    ServerClock workClock = {};
     // [Simulation thread] True when events wait for the next step (the server: its queue is not
     // empty); empty: never.
     std::function<bool()> yield = {};
@@ -86,11 +83,11 @@ public:
     // Re-render every view whole on each change (the paper's way) instead of BB_screen only.
     void setFullRender(bool on) { m_fullRender = on; }
     size_t viewCount() const { return m_views.size(); }
-    // [Any thread] Some view is partly rendered: step() has work even with no events...
+    // [Any thread] Some view's work is not done: step() has work even with no events.
     bool rendering() const { return m_rendering.load(); }
-    // ...from this server time on (later than the last step's when only large views' work is
-    // left and their render budget is spent).
-    uint64_t renderDueUs() const { return m_renderDueUs.load(); }
+    // The simulation thread's time charged to each peer (the views it holds, its updates' and
+    // volume transfers' coding).
+    const FairShare& share() const { return m_share; }
     // The pixels of every view frame held (the server's memory grows with them).
     int64_t viewPixels() const;
 
@@ -113,6 +110,7 @@ private:
         Dbi frame;
         HitCache cache;   // where each pixel's ray met bone: dirty re-renders resume there
         int rowsDone = 0; // rows rendered so far: the frame is whole at frame.height()
+        std::vector<uint16_t> holders; // the DBI clients viewing it, charged for its work
         // Changed pixels (of the rows done) still to render, and those rendered since the
         // view's clients last got them; the oldest cause and the stage times they carry.
         PixelRect stale, fresh;
@@ -149,16 +147,12 @@ private:
     uint32_t updateGrid(const Batch& b);
     void renderViews(const Batch& b, uint32_t gridUs);
     void markChanged(ViewFrame& v, const Batch& b, uint32_t gridUs);
-    bool renderStale(ViewFrame& v);
-    void renderSlices();
+    void schedule();
+    void workOn(ViewFrame& v, int64_t& rowsLeft);
+    void renderStale(ViewFrame& v);
     bool large(const ViewFrame& v) const;
-    bool budgetAllows(const ViewFrame& v);
-    void spendBudget(const ViewFrame& v, int64_t pixels);
-    void noteRenderDue();
-    bool chunkDone();
     void postView(ViewFrame& v);
-    bool copyFrame(ViewFrame& v);
-    bool settle(ViewFrame& v, bool stopped);
+    void copyChunk(ViewFrame& v);
     void syncGrid();
 
     StepConfig m_config;
@@ -179,10 +173,7 @@ private:
     bool m_gridRebuildPending = false;
     std::atomic<bool> m_fullRender{false};
     std::atomic<bool> m_rendering{false};
-    std::atomic<uint64_t> m_renderDueUs{0};
-    RateBudget m_largeBudget; // StepConfig::largeViewPixelsPerS
-    uint64_t m_nowUs = 0;     // the step's server time (the budget's clock)
-    size_t m_nextSlice = 0;   // the view whose slice comes first in the next step (round robin)
+    FairShare m_share; // StepConfig::workClock
 };
 
 } // namespace trephine::net
