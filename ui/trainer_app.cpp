@@ -459,7 +459,9 @@ struct FrameState {
     bool havePicture = false;
     bool switching = false;
     bool viewMatches = false;
-    Camera dbiCamera; // the camera the picture is drawn (and picked) with
+    Camera dbiCamera;    // the camera the picture is drawn with
+    Camera imageCamera;  // [DBI] the camera the held image was rendered (and is picked) with
+    bool warped = false; // [DBI] drawn warped from imageCamera to dbiCamera (a view on its way)
     ToolKind kind = ToolKind::Burr;
     float diameter = 0.0f;
     HapticLoopStats hstats;
@@ -483,9 +485,11 @@ private:
     void fitViewToWindow();
     void takeSnapshot(FrameState& f);
     void takeScene(const FrameState& f);
+    void requestMovedView(const FrameState& f);
     void applyRects(const FrameState& f);
     void applyVolumeBoxes(const FrameState& f);
     void choosePicture(FrameState& f);
+    void aimWarp(FrameState& f) const;
     void updateTool(FrameState& f);
     void mouseTool(const FrameState& f);
     void viewGestures(const InjectedInput& in, glm::vec2 delta);
@@ -650,6 +654,8 @@ bool TrainerWindow::frame() {
     // wheel was always 0, and keys came a frame late.
     window.beginFrame();
     updateTool(f);
+    requestMovedView(f);
+    aimWarp(f); // a gesture may have moved the camera: this frame draws it
     composite(f);
     drawOverlays(f);
     drawPanels(f);
@@ -657,8 +663,9 @@ bool TrainerWindow::frame() {
 }
 
 // A resized window (seen by the last frame's events): the view takes the area the panels leave,
-// and the server is asked for a DBI of its new size; until it comes no picture is drawn (the old
-// one is another size). The window opens fitted to --size, so the first size seen is kept.
+// and the server is asked for a DBI of its new size; until it comes the old picture is drawn
+// warped (scaled) into the new view. The window opens fitted to --size, so the first size seen is
+// kept.
 void TrainerWindow::fitViewToWindow() {
     const glm::ivec2 now(window.width(), window.height());
     if ((now == windowSize && toggles.fullView == fittedFullView) || now.x <= 0 || now.y <= 0)
@@ -672,8 +679,7 @@ void TrainerWindow::fitViewToWindow() {
     if (view == viewSize)
         return;
     viewSize = view;
-    comp.resize(view.x, view.y);
-    haveImage = false; // the old size's rectangles no longer fit the textures
+    comp.resizeView(view.x, view.y); // the DBI held stays, and its rectangles still fit it
     if (scene) {
         wantedCamera = makeCamera();
         client.requestView(net::toViewSpec(wantedCamera));
@@ -729,9 +735,15 @@ void TrainerWindow::takeScene(const FrameState& f) {
             scene.reset();
         }
     }
+    requestMovedView(f);
+}
+
+// The View panel (last frame) or a gesture (this frame) moved the camera: the server is asked for
+// the new view, and this frame already draws the held DBI warped to it.
+void TrainerWindow::requestMovedView(const FrameState& f) {
     if (scene && viewControls.dirty) {
         viewControls.dirty = false;
-        if (snap->viewingAs != 0) // the View panel moved: our own camera again
+        if (f.snap->viewingAs != 0) // the View panel moved: our own camera again
             client.viewAs(0);
         wantedCamera = makeCamera();
         client.requestView(net::toViewSpec(wantedCamera));
@@ -810,14 +822,14 @@ void TrainerWindow::choosePicture(FrameState& f) {
     if (f.havePicture && firstPictureAt < 0)
         firstPictureAt = f.now;
     f.switching = designs.switching();
-    // The DBI is drawn, and picked, with the camera it was rendered with: a new view's full
-    // image can reach the textures before a snapshot names the view (tools drawn with the old
-    // matrices over the new picture for a frame, a jitter while orbiting). The local volume is
-    // drawn with the view the client holds now.
+    // The DBI is picked with the camera it was rendered with (a new view's full image can reach
+    // the textures before a snapshot names the view), and drawn with it or warped (aimWarp). The
+    // local volume is drawn with the view the client holds now.
     const net::ViewSpec& shownView =
         picture == SyncDesign::Dbi && haveImage ? imageView : f.snap->view;
     f.viewMatches = shownView.width == viewSize.x && shownView.height == viewSize.y;
-    f.dbiCamera = net::toCamera(shownView);
+    f.dbiCamera = f.imageCamera = net::toCamera(shownView);
+    aimWarp(f);
     if (picture == SyncDesign::Volume && !(local.camera == f.dbiCamera)) {
         local.dirty = true;        // a new view: the picture for picking must be read back again
         model.boxes.boxes.clear(); // the old view's rectangles (a DBI's go with its full image)
@@ -826,6 +838,21 @@ void TrainerWindow::choosePicture(FrameState& f) {
     // The scripted toggle: flip at the next time, once the switch before it has completed.
     if (const auto due = script.switchDue(f.now, firstPictureAt, f.switching, designs.wanted))
         designs.request(*due, client);
+}
+
+// [DBI] While a new view is on its way, or after a resize, the held image is drawn warped to the
+// camera the window has now: ours, or (viewing as someone) the image's own at this view's size.
+void TrainerWindow::aimWarp(FrameState& f) const {
+    f.warped = false;
+    if (f.picture != SyncDesign::Dbi || !haveImage)
+        return;
+    Camera target = f.imageCamera;
+    if (scene && f.snap->viewingAs == 0)
+        target = wantedCamera;
+    target.width = viewSize.x;
+    target.height = viewSize.y;
+    f.warped = !(target == f.imageCamera);
+    f.dbiCamera = target;
 }
 
 // Tool: the script, or the mouse device on the bone under the cursor; the Session panel's last
@@ -993,7 +1020,7 @@ void TrainerWindow::viewGestures(const InjectedInput& in, glm::vec2 delta) {
 // Composite: pass 1 the DBI (or the ray cast of the local volume), pass 2 the anatomy and the
 // tools with the same matrices and depth test, blitted top-left.
 void TrainerWindow::composite(const FrameState& f) {
-    if (!(f.havePicture && f.viewMatches))
+    if (!(f.havePicture && (f.viewMatches || f.warped)))
         return;
     if (f.picture == SyncDesign::Volume) {
         comp.beginEmpty(f.dbiCamera);
@@ -1008,6 +1035,8 @@ void TrainerWindow::composite(const FrameState& f) {
             if (o.onPicture)
                 o.onPicture(cpuDbiCamera);
         }
+    } else if (f.warped) {
+        comp.beginWarped(f.imageCamera, f.dbiCamera);
     } else {
         comp.begin(f.dbiCamera);
     }
@@ -1024,6 +1053,8 @@ void TrainerWindow::composite(const FrameState& f) {
         comp.draw(tools.get(f.kind, f.diameter), toolMatrix(toolPos, toolRot),
                   toolZoneColor(*f.snap, self).value_or(toolColour(*f.snap, self)),
                   MeshStyle{script.drivesTool() ? 1.0f : kOwnToolAlpha});
+    if (o.onComposite)
+        o.onComposite(comp.readBack(), f.dbiCamera);
     comp.blitTo(0, window.height() - viewSize.y);
 }
 
@@ -1032,7 +1063,7 @@ void TrainerWindow::drawOverlays(FrameState& f) {
     const net::ClientSnapshot& snap = *f.snap;
     const float viewTop = 0.0f;
     const ToolPose ownTool{toolPos, toolRot};
-    if (f.havePicture && f.viewMatches) {
+    if (f.havePicture && (f.viewMatches || f.warped)) {
         drawViewLabels(snap, f.dbiCamera, cpuDbi, viewSize, toolValid ? &ownTool : nullptr,
                        o.name + (toolControls.drilling ? " (drilling)" : ""));
         drawDirtyBoxOverlay(boxState, model.boxes, f.now, 0.0f, viewTop, viewSize.y);

@@ -2,6 +2,7 @@
 // of the new camera: exact for a camera that did not move, close for small orbits, the old picture
 // scaled after a resize. Needs a display (xvfb-run).
 #include "ui/compositor.h"
+#include "ui/trainer_app.h"
 #include "ui/window.h"
 
 #include "gl_window_test.h"
@@ -10,13 +11,20 @@
 #include "libsim/hole.h"
 #include "libsim/renderer.h"
 #include "libsim/skull.h"
+#include "net/session_server.h"
+
+#include "loopback.h"
 
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cstdio>
 #include <cstdlib>
+#include <future>
 #include <memory>
+#include <vector>
 
 using namespace trephine;
 using namespace trephine::ui;
@@ -158,4 +166,128 @@ TEST_F(ViewWarpTest, AResizeShowsTheOldPictureScaled) {
                 "(bone %.1f %%)\n",
                 100.0 * m.all, 100.0 * m.bone);
     EXPECT_GE(m.all, 0.90);
+}
+
+// The window: a right drag, then a resize, each while the server is not pumped (its answer held
+// back). The frame of the change already shows the held picture warped to the new camera, and the
+// server's exact picture, once it is let through, is within tolerance of that warped frame.
+TEST(ViewWarpWindow, ACameraOrSizeChangeChangesTheNextFrameWhileTheServerIsHeldBack) {
+    TREPHINE_NEED_DISPLAY("the trainee window");
+    net::SessionServer server(makeSkull(64), trephine::testing::loopbackServerConfig("skull:64"));
+    trephine::testing::Pumped pumped(server);
+    struct Frame {
+        Dbi view;
+        Camera camera;
+        size_t pictures; // full images taken in so far
+    };
+    std::vector<Frame> frames;    // one per composited frame (the window's thread)
+    std::vector<Camera> pictures; // onPicture
+    std::atomic<bool> hold{false}, quit{false};
+    // Frames of each step (indices into `frames`): before and at the drag, before and at the
+    // resize; the step and its start.
+    size_t beforeDrag = 0, atDrag = 0, beforeResize = 0, atResize = 0;
+    int step = 0, held = 0;
+    constexpr int kWidth = 980, kHeight = 760; // --size 200's window
+    TrainerOptions o;
+    o.address = "127.0.0.1:" + std::to_string(server.port());
+    o.size = 200;
+    o.tiltDeg = 20.0f;
+    o.timeoutS = 100.0;
+    o.visible = false;
+    o.quit = &quit;
+    o.onPicture = [&](const Camera& c) { pictures.push_back(c); };
+    o.onComposite = [&](const Dbi& d, const Camera& c) {
+        frames.push_back({d, c, pictures.size()});
+    };
+    // One step a frame: hold the server, press, drag 17 pixels (5.1 degrees), keep still while
+    // held for 5 frames, let the server go and wait for the exact picture; then the same for a
+    // resize.
+    o.input = [&](double t) {
+        InjectedInput in;
+        in.x = 100.0f, in.y = 100.0f;
+        if (t < 0.3)
+            return in;
+        if (t > 30.0 || frames.size() > 3000) // a hung step: fail below, not run out of memory
+            quit = true;
+        const bool exact = !frames.empty() && frames.back().camera == pictures.back();
+        switch (step) {
+        case 0:
+            hold = true, ++step;
+            break;
+        case 1:
+            in.right = true, beforeDrag = frames.size() - 1, ++step;
+            break;
+        case 2:
+            in.x += 17.0f, in.right = true, atDrag = frames.size(), ++step;
+            break;
+        case 3:
+            in.x += 17.0f, hold = ++held < 5, step += !hold;
+            break;
+        case 4:
+            in.x += 17.0f, hold = false, step += exact;
+            break;
+        case 5:
+            hold = true, beforeResize = frames.size() - 1, ++step;
+            break;
+        case 6:
+            in.windowWidth = kWidth + 120, in.windowHeight = kHeight + 60;
+            if (frames.back().camera.width != frames[beforeResize].camera.width)
+                atResize = frames.size() - 1, held = 0, ++step;
+            break;
+        case 7:
+            in.windowWidth = kWidth + 120, in.windowHeight = kHeight + 60;
+            hold = ++held < 5, quit = quit || (!hold && exact);
+            break;
+        }
+        in.done = quit;
+        return in;
+    };
+    std::future<int> window = std::async(std::launch::async, [&] { return runTrainerWindow(o); });
+    while (window.wait_for(std::chrono::microseconds(500)) != std::future_status::ready)
+        if (!hold)
+            trephine::testing::Pumped::pumpAll();
+    ASSERT_EQ(window.get(), 0);
+    server.stop();
+    ASSERT_EQ(step, 7) << "the step that did not end; frames " << frames.size();
+    ASSERT_GT(atDrag, beforeDrag);
+    ASSERT_GT(atResize, beforeResize);
+
+    // The drag's frame: a new camera, no new picture from the server, a changed frame.
+    const Frame &before = frames[beforeDrag], &at = frames[atDrag];
+    EXPECT_NE(at.camera, before.camera) << "the frame of the drag draws the new camera";
+    EXPECT_EQ(at.pictures, before.pictures) << "the server's answer was held back";
+    EXPECT_LT(matchOf(at.view, before.view, 0).all, 0.8) << "the frame changed with the camera";
+    // Against the server's exact picture of the same camera, once let through (tools and field
+    // drawn over both).
+    const auto exactOf = [&](const Camera& c, size_t from) {
+        for (size_t i = from; i < frames.size(); ++i)
+            if (frames[i].camera == c && frames[i].pictures > frames[from].pictures)
+                return i;
+        return frames.size();
+    };
+    const size_t dragExact = exactOf(at.camera, atDrag);
+    ASSERT_LT(dragExact, frames.size()) << "the server's picture of the dragged view came";
+    const Match drag = matchOf(at.view, frames[dragExact].view, 8);
+    std::printf("window, 5.1-degree drag: the warped frame has %.1f %% of pixels within 8/255 of "
+                "the server's (bone %.1f %%)\n",
+                100.0 * drag.all, 100.0 * drag.bone);
+    EXPECT_GE(drag.all, 0.90);
+
+    // The resize: every frame composited, the first at the new size with the old picture scaled.
+    const Frame& resized = frames[atResize];
+    EXPECT_EQ(resized.pictures, frames[beforeResize].pictures) << "held back";
+    EXPECT_NE(resized.camera.width, frames[beforeResize].camera.width);
+    int64_t bone = 0;
+    for (int y = 0; y < resized.view.height(); ++y)
+        for (int x = 0; x < resized.view.width(); ++x)
+            bone += !isBackground(resized.view.color(x, y));
+    // The wider view sees past the old one's sides: those are background until the server's.
+    EXPECT_GT(bone, int64_t(resized.view.width()) * resized.view.height() / 4)
+        << "the old picture, never an empty view";
+    const size_t resizeExact = exactOf(resized.camera, atResize);
+    ASSERT_LT(resizeExact, frames.size());
+    const Match scaled = matchOf(resized.view, frames[resizeExact].view, 8);
+    std::printf("window, resize: the scaled frame has %.1f %% of pixels within 8/255 of the "
+                "server's (bone %.1f %%)\n",
+                100.0 * scaled.all, 100.0 * scaled.bone);
 }

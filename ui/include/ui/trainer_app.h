@@ -111,6 +111,9 @@ struct TrainerOptions {
     // [Tests] Called on the window's thread with the camera of each whole picture the view takes
     // in (a server's full image, or the local volume's picture redrawn after a change).
     std::function<void(const Camera&)> onPicture;
+    // [Tests] Called on the window's thread with each frame's composite of the view (the picture
+    // and the meshes, no overlays; row 0 at the bottom) and the camera it was drawn with.
+    std::function<void(const Dbi&, const Camera&)> onComposite;
 };
 
 // Runs the window until it closes. Returns the process exit code; throws trephine::Error when no
