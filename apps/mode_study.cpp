@@ -1,11 +1,13 @@
 // `trephine study SUBCOMMAND`: the reproducible studies. `haptics`: multi-rate haptics against a
 // zero-order hold. `updates`: DBI against replicated-volume update cycles (the paper's Table 1,
 // Figures 7 and 8). `display`: the DBI composite's display rate against local volume rendering.
-// `all`: every study and DIR/report.md. Each takes --quick (a run under a minute). The studies
+// `wan`: both designs through the link emulator, and a classroom. `all`: every study and
+// DIR/report.md. Each takes --quick (a run under a minute). The studies
 // live in the study target (study/commands.h); this file parses their flags.
 #include "modes.h"
 
 #include "study/commands.h"
+#include "study/wan_study.h"
 
 #include <fmt/format.h>
 
@@ -106,6 +108,46 @@ void addDisplayCommand(CLI::App* study, int& exitCode) {
     });
 }
 
+void addWanCommand(CLI::App* study, int& exitCode) {
+    auto o = std::make_shared<WanOptions>();
+    CLI::App* wan = study->add_subcommand(
+        "wan", "Both designs through an emulated WAN (RTT x loss x rate) and a classroom");
+    wan->add_option("--out", o->out, "Folder for wan.csv and wan-classroom.csv")
+        ->capture_default_str();
+    wan->add_option("--volume", o->volume, "Volume spec")->capture_default_str();
+    wan->add_option("--codec", o->codec, "Image codec: raw, lz4 or zstd")
+        ->check(CLI::IsMember({"raw", "lz4", "zstd"}))
+        ->capture_default_str();
+    wan->add_option("--clients", o->clients,
+                    "Classroom sizes: one client drills, the others watch (in this process)")
+        ->delimiter(',')
+        ->check(CLI::Range(1, 256))
+        ->capture_default_str();
+    wan->add_option("--boxes", o->boxes, "Box edges N (voxels) of the drilling soak's N^3 cuts")
+        ->delimiter(',')
+        ->check(CLI::Range(1, 512))
+        ->capture_default_str();
+    wan->add_option("--rtts", o->rtts,
+                    "Only these round trips (ms), at 100 Mbit/s, and the target link")
+        ->delimiter(',')
+        ->check(CLI::Range(0.0, 2000.0));
+    wan->add_option("--losses", o->losses, "Only these losses (%), with --rtts")
+        ->delimiter(',')
+        ->check(CLI::Range(0.0, 50.0));
+    wan->add_option("--soak", o->soakS, "Seconds of each drilling soak (the target link's: 60)")
+        ->check(CLI::Range(0.5, 600.0));
+    wan->add_flag("--quick", o->quick,
+                  "RTT 0 and 100 ms, loss 0 and 1 %, the target link, box 40, short soaks, "
+                  "classrooms of 1 and 4: under a minute (--clients and --boxes given win)");
+    wan->callback([o, wan, &exitCode] {
+        o->clientsGiven = wan->count("--clients") > 0;
+        o->boxesGiven = wan->count("--boxes") > 0;
+        WanStudyConfig config;
+        runWanCommand(*o, config);
+        exitCode = 0;
+    });
+}
+
 void addAllCommand(CLI::App* study, int& exitCode) {
     auto a = std::make_shared<AllOptions>();
     CLI::App* all = study->add_subcommand(
@@ -137,6 +179,7 @@ void addStudyMode(CLI::App& root, int& exitCode) {
     addHapticsCommand(study, exitCode);
     addUpdatesCommand(study, exitCode);
     addDisplayCommand(study, exitCode);
+    addWanCommand(study, exitCode);
     addAllCommand(study, exitCode);
 }
 

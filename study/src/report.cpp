@@ -10,6 +10,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cmath>
 #include <ctime>
 #include <filesystem>
 #include <sstream>
@@ -195,6 +196,12 @@ void writeTargets(std::ostringstream& md, const StudyReportInput& in) {
         md << "- " << l << "\n";
     if (!in.display.measured)
         md << "- display study not run: " << in.display.why << "\n";
+    if (!in.wan.rows.empty()) {
+        md << "\nOver the emulated WAN and in a classroom (issue 32; most miss today: the "
+              "baseline for the transport work):\n\n";
+        for (const std::string& l : wanTargetLines(in.wan))
+            md << "- " << l << "\n";
+    }
     md << "\n";
 }
 
@@ -375,6 +382,145 @@ void writeHaptics(std::ostringstream& md, const HapticsFigures& haptics) {
     }
 }
 
+// [WAN] The rows of one design at one box over single-client links of `rate`, by RTT.
+PlotSeries wanSeries(const WanResults& r, const std::string& design, double loss, double rate,
+                     int box, double WanRow::*figure) {
+    PlotSeries s{fmt::format("{} {:.0f} % loss", design, loss), {}, {}, "", design == "volume"};
+    for (const WanRow& row : r.rows)
+        if (row.design == design && !row.classroom && row.box == box && row.lossPct == loss &&
+            row.rateMbit == rate && std::isfinite(row.*figure) && row.*figure >= 0) {
+            s.x.push_back(row.rttMs);
+            s.y.push_back(row.*figure);
+        }
+    return s;
+}
+
+std::string wanFigure(double v) {
+    return std::isnan(v) ? "-" : v < 0 ? "never" : fmt::format("{:.0f}", v);
+}
+
+// [WAN] Both designs per link: the table, latency and join plots (DIR/wan.svg, wan-join.svg).
+void writeWan(std::ostringstream& md, const StudyReportInput& in, const std::string& dir) {
+    const WanResults& r = in.wan;
+    const WanStudyConfig& c = in.wanConfig;
+    md << "## WAN: both designs through the link emulator\n\n";
+    md << fmt::format(
+        "A real server and client in one process, every datagram through the link emulator "
+        "(RTT split evenly between the two directions, loss in each, the rate per direction "
+        "with "
+        "Ethernet framing). Per link a fresh client joins (connect to its first full "
+        "picture, or "
+        "volume), asks for a view 5 degrees round (request to exact picture; the volume "
+        "client "
+        "renders it itself), then per box size a drilling soak: the server cuts the N^3 box "
+        "and "
+        "restores it, {:.0f} changes a second, for {:.1f} s ({:.1f} s at the issue's target "
+        "link, "
+        "100 ms / 1 % / 20 Mbit/s){}. Latency is the client's own figure: the server's cut "
+        "to the "
+        "changed picture, so at least RTT/2; a tool state's way up adds another RTT/2. "
+        "Stall: the "
+        "longest time the picture did not change while the drilling went on. Egress: the "
+        "server's UDP payload towards the client. The volume design sends 1 byte a voxel "
+        "(raw, "
+        "as the paper). Every column is in wan.csv.\n\n",
+        c.cutHz, c.soakS, c.targetSoakS,
+        in.quick ? " (`study all` runs the study quick-sized: `trephine study wan --quick`; "
+                   "`trephine study wan` runs the whole sweep)"
+                 : "");
+    std::vector<std::vector<std::string>> t;
+    for (const WanRow& w : r.rows)
+        if (!w.classroom)
+            t.push_back({w.design,
+                         fmt::format("{:.0f} / {:.0f} / {:.0f}", w.rttMs, w.lossPct, w.rateMbit),
+                         fmt::format("{}^3", w.box), fmt::format("{:.1f}", w.updatesPerS),
+                         wanFigure(w.latencyP50Ms) + " / " + wanFigure(w.latencyP99Ms),
+                         wanFigure(w.joinMs), wanFigure(w.viewChangeMs), wanFigure(w.maxStallMs),
+                         fmt::format("{:.2f}", w.egressBytesPerS * 1e-6)});
+    md << markdownTable({"design", "RTT (ms) / loss (%) / rate (Mbit/s)", "box", "updates/s",
+                         "latency p50 / p99 (ms)", "join (ms)", "view change (ms)", "stall (ms)",
+                         "egress (MB/s)"},
+                        t);
+    const std::vector<int>& boxes = c.boxes;
+    const int box = std::find(boxes.begin(), boxes.end(), 40) != boxes.end() ? 40 : boxes.front();
+    PlotSpec latency{fmt::format("Update latency p99 at {}^3, 100 Mbit/s", box),
+                     "RTT (ms)",
+                     "ms",
+                     true,
+                     640,
+                     400,
+                     {}};
+    PlotSpec join{
+        "Join (connect to first full picture), 100 Mbit/s", "RTT (ms)", "ms", true, 640, 400, {}};
+    std::vector<double> losses;
+    for (const WanRow& w : r.rows)
+        if (std::find(losses.begin(), losses.end(), w.lossPct) == losses.end())
+            losses.push_back(w.lossPct);
+    for (const char* design : {"dbi", "volume"})
+        for (double loss : losses) {
+            latency.series.push_back(wanSeries(r, design, loss, 100, box, &WanRow::latencyP99Ms));
+            join.series.push_back(wanSeries(r, design, loss, 100, box, &WanRow::joinMs));
+        }
+    writeFile((std::filesystem::path(dir) / "wan.svg").string(), svgLinePlot(latency));
+    writeFile((std::filesystem::path(dir) / "wan-join.svg").string(), svgLinePlot(join));
+    md << "\n![Update latency over the WAN](wan.svg)\n\n![Join time over the WAN](wan-join.svg)"
+          "\n\nPaper: it planned \"to see how the two volumetric C-VE methods compare over a wide "
+          "area network\" and measured only its LAN. ENet sends image and volume updates as "
+          "reliable data, at most 64 KiB in flight per peer: about 64 KiB per round trip, so a "
+          "design whose updates outgrow that window queues behind itself as the RTT grows.\n\n";
+}
+
+// [Classroom] One driller and N-1 watchers on one shared link (DIR/classroom.svg).
+void writeClassroom(std::ostringstream& md, const StudyReportInput& in, const std::string& dir) {
+    const WanResults& r = in.wan;
+    md << "## Classroom: one driller, the others watching\n\n";
+    md << fmt::format(
+        "N in-process clients of one design on one shared {:.0f} Mbit/s link (the emulator's "
+        "shared rate: every client's datagrams queue for one serialiser each way): client 0 "
+        "drills (the server cuts its {}^3 box), the others watch from distinct views (the "
+        "paper camera orbited by +-5 to +-35 and 40 degrees: 16 distinct views, then again). "
+        "Volume watchers do not re-render on the CPU (a window ray casts on its GPU). "
+        "wan-classroom.csv has every client's figures.\n\n",
+        in.wanConfig.classroomRateMbit, in.wanConfig.classroomBox);
+    std::vector<std::vector<std::string>> t;
+    PlotSpec egress{"Server egress in a classroom (shared 100 Mbit/s link)",
+                    "clients",
+                    "Mbit/s",
+                    true,
+                    640,
+                    400,
+                    {}};
+    PlotSeries link{"the shared link", {}, {}, "#999999", true};
+    for (const char* design : {"dbi", "volume"}) {
+        PlotSeries s{design, {}, {}, "", false};
+        for (const WanRow& w : r.rows) {
+            if (w.design != design || !w.classroom)
+                continue;
+            s.x.push_back(w.clients);
+            s.y.push_back(w.egressBytesPerS * 8e-6);
+            if (design == std::string("dbi")) {
+                link.x.push_back(w.clients);
+                link.y.push_back(w.rateMbit);
+            }
+            t.push_back({design, std::to_string(w.clients),
+                         fmt::format("{:.1f}", w.egressBytesPerS * 8e-6),
+                         fmt::format("{:.1f}", w.updatesPerS),
+                         fmt::format("{:.1f}", w.minUpdatesPerS), wanFigure(w.latencyP50Ms),
+                         wanFigure(w.latencyP99Ms), wanFigure(w.maxStallMs), wanFigure(w.joinMs)});
+        }
+        egress.series.push_back(s);
+    }
+    egress.series.insert(egress.series.begin(), link);
+    md << markdownTable({"design", "clients", "server egress (Mbit/s)", "updates/s (median client)",
+                         "slowest client (/s)", "latency p50 (median client, ms)", "worst p99 (ms)",
+                         "longest stall (ms)", "last join (ms)"},
+                        t);
+    writeFile((std::filesystem::path(dir) / "classroom.svg").string(), svgLinePlot(egress));
+    md << "\n![Server egress in a classroom](classroom.svg)\n\nPaper: the volume design would "
+          "\"quickly flood the network as the number of clients increases\": every volume client "
+          "is sent every changed voxel, every DBI client only its view's changed pixels.\n\n";
+}
+
 } // namespace
 
 std::string writeStudyReport(const StudyReportInput& in, const std::string& dir) {
@@ -407,6 +553,10 @@ std::string writeStudyReport(const StudyReportInput& in, const std::string& dir)
     }
     writeDisplay(md, in.display);
     writeHaptics(md, in.haptics);
+    if (!in.wan.rows.empty()) {
+        writeWan(md, in, dir);
+        writeClassroom(md, in, dir);
+    }
     return md.str();
 }
 

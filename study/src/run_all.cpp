@@ -1,6 +1,7 @@
 // `study all`: every option checked before the first study, the studies run into a staging folder
 // inside OUT, the report written there, and the whole set moved into OUT together.
 #include "study/commands.h"
+#include "study/wan_study.h"
 
 #include "output.h"
 
@@ -21,9 +22,10 @@ namespace {
 namespace fs = std::filesystem;
 
 // Every file `study all` may write into OUT.
-constexpr const char* kOutputs[] = {"haptics.csv", "updates.csv",      "updates.svg",
-                                    "bytes.svg",   "updates-link.csv", "updates-link.svg",
-                                    "display.csv", "report.md"};
+constexpr const char* kOutputs[] = {
+    "haptics.csv",      "updates.csv",   "updates.svg", "bytes.svg",         "updates-link.csv",
+    "updates-link.svg", "display.csv",   "wan.csv",     "wan-classroom.csv", "wan.svg",
+    "wan-join.svg",     "classroom.svg", "report.md"};
 
 // Each file moves over its name in OUT at the end, which fails for a folder (or anything but a
 // file) there: refused before the first study.
@@ -125,6 +127,13 @@ void runAllStudies(const AllOptions& o, const std::string& command) {
     u.codec = o.codec;
     u.quick = o.quick;
     checkUpdatesOptions(u, *volume);
+    // The WAN study runs quick-sized in `study all` (its whole sweep takes an hour).
+    WanOptions w;
+    w.volume = o.volume;
+    w.opened = volume;
+    w.codec = o.codec;
+    w.quick = true;
+    checkWanOptions(w, *volume);
     makeOutDir(o.out);
     checkOutputsAreFiles(o.out);
 
@@ -139,7 +148,7 @@ void runAllStudies(const AllOptions& o, const std::string& command) {
     input.machine = describeMachine();
     input.quick = o.quick;
 
-    const int studies = linkRun ? 4 : 3;
+    const int studies = linkRun ? 5 : 4;
     fmt::print("== 1/{} haptics ==\n", studies);
     HapticsOptions h;
     h.out = stagingPath.string();
@@ -156,16 +165,21 @@ void runAllStudies(const AllOptions& o, const std::string& command) {
         input.linkUpdates = runUpdatesStudy(u, input.linkUpdateConfig);
     }
 
-    fmt::print("\n== {}/{} display ==\n", studies, studies);
+    fmt::print("\n== {}/{} display ==\n", studies - 1, studies);
     DisplayOptions d;
     d.out = stagingPath.string();
     d.quick = o.quick;
     input.display = runDisplayStudy(d);
 
+    fmt::print("\n== {}/{} WAN and classroom (quick-sized) ==\n", studies, studies);
+    w.out = stagingPath.string();
+    input.wan = runWanCommand(w, input.wanConfig);
+
     const std::string report = writeStudyReport(input, stagingPath.string());
     writeText(stagingPath / "report.md", report);
     moveIntoPlace(staging, o.out);
-    fmt::print("\nwrote {} (with updates.svg{} and bytes.svg; the studies' files moved there "
+    fmt::print("\nwrote {} (with updates.svg{}, bytes.svg, wan.svg, wan-join.svg and "
+               "classroom.svg; the studies' files moved there "
                "from {})\n",
                (fs::path(o.out) / "report.md").string(), linkRun ? ", updates-link.svg" : "",
                stagingPath.filename().string());

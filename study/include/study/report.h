@@ -5,6 +5,7 @@
 
 #include "study/haptics_study.h"
 #include "study/update_study.h"
+#include "study/wan_study.h"
 
 #include <string>
 #include <vector>
@@ -50,6 +51,9 @@ struct StudyReportInput {
     std::vector<UpdateStudyRow> linkUpdates;
     DisplayFigures display;
     HapticsFigures haptics;
+    // The WAN and classroom study (`study all` runs it quick-sized); empty rows: not run.
+    WanStudyConfig wanConfig;
+    WanResults wan;
 };
 
 // CPU model, cores, memory and kernel of this machine, one line.
