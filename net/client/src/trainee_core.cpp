@@ -54,7 +54,34 @@ std::optional<ToolPose> ScriptToolSource::intent(double now) {
 // [SECTION] force
 
 glm::vec3 TraineeForce::force(const ToolPose& pose, double now) {
-    if (const NewestModel::Taken taken = m_serverModel.take(); taken.model)
+    followLinks();
+    glm::vec3 f = feltForce(pose, now);
+    if (m_guide) {
+        f += guideForce(*m_guide, pose.position, m_guideVelocity.update(pose.position, now),
+                        m_guideConfig);
+        m_guidedTicks.fetch_add(1, std::memory_order_relaxed);
+    }
+    return f;
+}
+
+// The force of the bone: another participant's when this instructor feels one, else the local
+// model (volume design) or the server's models extrapolated (multi-rate).
+glm::vec3 TraineeForce::feltForce(const ToolPose& pose, double now) {
+    const NewestModel::Taken taken = m_serverModel.take();
+    if (m_felt) {
+        // Its newest relayed model, as its own force: the gradient is about its tool, not ours.
+        auto relayed = m_linkSnap->relayedModels.find(m_felt);
+        if (relayed != m_linkSnap->relayedModels.end() &&
+            relayed->second.toolSequence != m_feltSequence) {
+            m_feltSequence = relayed->second.toolSequence;
+            HapticModelData d = toModelData(relayed->second);
+            d.gradient = glm::mat3(0.0f);
+            m_blender.setModel(d, now);
+        }
+        m_feltTicks.fetch_add(1, std::memory_order_relaxed);
+        return m_blender.update(pose.position, now);
+    }
+    if (taken.model)
         m_blender.setModel(taken.model->first, now);
     const glm::vec3 extrapolated = m_blender.update(pose.position, now);
     if (m_local.load(std::memory_order_relaxed) && m_client) {
@@ -76,6 +103,21 @@ glm::vec3 TraineeForce::force(const ToolPose& pose, double now) {
     }
     m_serverTicks.fetch_add(1, std::memory_order_relaxed);
     return extrapolated;
+}
+
+// A new snapshot (at most 100 a second) may change the links; the same one changes nothing.
+void TraineeForce::followLinks() {
+    if (!m_client)
+        return;
+    std::shared_ptr<const ClientSnapshot> snap = m_client->snapshot();
+    if (snap == m_linkSnap)
+        return;
+    m_linkSnap = std::move(snap);
+    m_guide = guideTarget(*m_linkSnap);
+    const uint16_t felt = feltParticipant(*m_linkSnap);
+    if (felt != m_felt)
+        m_feltSequence = 0; // a new participant's models: take its newest, whatever its number
+    m_felt = felt;
 }
 
 // [SECTION] core

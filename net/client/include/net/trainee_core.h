@@ -10,6 +10,7 @@
 #include "libsim/haptics.h"
 #include "net/client_model.h"
 #include "net/client_thread.h"
+#include "net/hand_links.h"
 #include "net/protocol.h"
 
 #include <atomic>
@@ -81,10 +82,17 @@ public:
     uint64_t localTicks() const { return m_localTicks.load(); }
     uint64_t serverTicks() const { return m_serverTicks.load(); }
     size_t toolsUsed() const { return m_toolsUsed.load(); } // shapes the local model was built for
+    // Ticks that felt another participant's force, or the guide's pull (HandLinks).
+    uint64_t feltTicks() const { return m_feltTicks.load(); }
+    uint64_t guidedTicks() const { return m_guidedTicks.load(); }
 
     glm::vec3 force(const ToolPose& pose, double now) override;
 
 private:
+    // [Hand links] From the client's newest snapshot: the guide's target and the felt participant.
+    void followLinks();
+    glm::vec3 feltForce(const ToolPose& pose, double now);
+
     ToolSource& m_tools;
     const ClientThread* m_client = nullptr;
     ModelBlender m_blender;
@@ -93,6 +101,14 @@ private:
     std::atomic<bool> m_local{false};
     std::atomic<uint64_t> m_localTicks{0}, m_serverTicks{0};
     std::atomic<size_t> m_toolsUsed{0};
+    // Hand links, haptic thread only: the snapshot they were read from.
+    std::shared_ptr<const ClientSnapshot> m_linkSnap;
+    std::optional<glm::vec3> m_guide;
+    uint16_t m_felt = 0;
+    uint32_t m_feltSequence = 0;
+    VelocityEstimate m_guideVelocity;
+    HandGuideConfig m_guideConfig;
+    std::atomic<uint64_t> m_feltTicks{0}, m_guidedTicks{0};
 };
 
 struct TraineeCoreConfig {
@@ -136,6 +152,9 @@ public:
     uint64_t localForceTicks() const { return m_force ? m_force->localTicks() : 0; }
     uint64_t serverForceTicks() const { return m_force ? m_force->serverTicks() : 0; }
     size_t localForceTools() const { return m_force ? m_force->toolsUsed() : 0; }
+    // [Hand links] ticks that felt another participant, and that the guide pulled.
+    uint64_t feltTicks() const { return m_force ? m_force->feltTicks() : 0; }
+    uint64_t guidedTicks() const { return m_force ? m_force->guidedTicks() : 0; }
     // The device guard's counts (read them once the loop has stopped) and the device's fault,
     // if it was cut off ("" if not, or not a force device).
     DeviceGuardStats deviceGuardStats() const {
