@@ -12,7 +12,10 @@
 #include "libsim/haptics.h"
 #include "libsim/skull.h"
 #include "libsim/tool_catalogue.h"
+#include "libsim_devices/anchored_device.h"
+#include "libsim_devices/device_select.h"
 #include "libsim_devices/devices.h"
+#include "libsim_devices/spacemouse.h"
 #include "libsim_image/dbi_io.h"
 #include "net/client_model.h"
 #include "net/codec.h"
@@ -63,7 +66,9 @@ struct TraineeOptions {
     std::string screenshot;    // window: as `trephine instructor --screenshot`
     int frames = 0;            // window: as `trephine instructor --frames` (0: run until closed)
     double timeoutS = 90.0;
-    std::string link; // --link: the emulator between this trainee and --connect
+    std::string link;     // --link: the emulator between this trainee and --connect
+    std::string device;   // --device: "" (the shell's default), spacemouse[...], plugin:PATH.so
+    std::string pedalMap; // --pedal-map: the window's
     // The first option given that only a --headless trainee uses ("": none); the window refuses it
     // rather than run without it.
     std::string headlessOnly;
@@ -136,9 +141,35 @@ void writeReport(const TraineeOptions& o, const net::TraineeSession& session, co
         throw Error("--report " + o.report + ": cannot write it");
 }
 
+// [Headless] The --device opened before anything connects (null: the script's own poses).
+std::unique_ptr<Device> openHeadlessDevice(const TraineeOptions& o) {
+    std::string error;
+    std::unique_ptr<Device> d = openDevice(o.device, DeviceShell::Headless, error);
+    if (!error.empty())
+        throw Error(error);
+    if (d)
+        std::printf("trainee: the tool follows %s\n", d->name().c_str());
+    return d;
+}
+
+// [Headless] The tool's device: the script's poses, or `opened`, which moves the tool from the
+// script's first pose (a SpaceMouse) or through its own workspace (a plugin); the script gives the
+// tool, its speed and the drilling.
+std::unique_ptr<Device> headlessDevice(std::unique_ptr<Device> opened,
+                                       const std::vector<Sample>& script) {
+    if (!opened)
+        return scriptedDevice(script);
+    if (!dynamic_cast<SpaceMouseDevice*>(opened.get()))
+        return opened;
+    auto placed = std::make_unique<AnchoredDevice>(std::move(opened));
+    placed->setAnchor(ToolPose{script.front().tool.position, script.front().tool.orientation});
+    return placed;
+}
+
 // [Headless] A trainee session with a script as its tool: join, open the view, drill, lift and
 // drain, then the figures, the report and the picture.
-int runHeadlessTrainee(const TraineeOptions& o, std::vector<Sample> script) {
+int runHeadlessTrainee(const TraineeOptions& o, std::vector<Sample> script,
+                       std::unique_ptr<Device> opened) {
     const auto link = net::startLinkEnd(o.link, net::LinkEnd::Client, net::parseAddress(o.connect));
     net::TraineeSessionConfig config = sessionConfigFor(o);
     if (link)
@@ -161,7 +192,7 @@ int runHeadlessTrainee(const TraineeOptions& o, std::vector<Sample> script) {
     handleStopSignals(onTraineeStopSignal);
     // The core's haptic loop (1 kHz) plays the script, feels the server's force models (or, in
     // the volume design, the local volume) and sends tool states at --tool-rate.
-    std::unique_ptr<Device> device = scriptedDevice(script);
+    std::unique_ptr<Device> device = headlessDevice(std::move(opened), script);
     session.play(std::move(script), scriptEnd, std::move(device));
     session.drill([](double) { return !g_traineeStop; });
     session.liftAndDrain();
@@ -198,8 +229,13 @@ int runTrainee(const TraineeOptions& o) {
         w.frames = o.frames;
         w.timeoutS = o.timeoutS;
         w.link = o.link;
+        w.device = o.device;
+        w.pedalMap = o.pedalMap;
         return runWindowedClient(w);
     }
+    if (!o.pedalMap.empty())
+        throw Error("--pedal-map: the window's; a --headless trainee reads no joystick (GLFW's "
+                    "joystick API needs a display)");
     if (!o.screenshot.empty())
         throw Error("--screenshot: the window's; a --headless trainee has none (--save-dbi writes "
                     "its picture)");
@@ -220,7 +256,7 @@ int runTrainee(const TraineeOptions& o) {
     std::vector<Sample> script;
     if (o.script != "burrhole")
         script = net::csvScript(o.script);
-    return runHeadlessTrainee(o, std::move(script));
+    return runHeadlessTrainee(o, std::move(script), openHeadlessDevice(o));
 }
 
 // Options only a --headless trainee uses: listed under their own heading, and refused by the
@@ -284,6 +320,7 @@ void addTraineeMode(CLI::App& root, int& exitCode) {
         ->capture_default_str();
     addCodeOption(sub, o->code, "trainee");
     addLinkOption(sub, o->link, "between this trainee and --connect");
+    addDeviceOptions(sub, o->device, o->pedalMap);
     sub->add_option("--screenshot", o->screenshot,
                     "Window: write it to this PNG once the view has settled, then exit")
         ->check(outputFile());

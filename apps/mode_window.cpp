@@ -4,6 +4,8 @@
 
 #include "libsim/camera.h"
 #include "libsim/error.h"
+#include "libsim_devices/device_select.h"
+#include "libsim_devices/pedal.h"
 #include "link_option.h"
 #include "modes.h"
 #include "net/enet_host.h"
@@ -33,7 +35,15 @@ int runWindowedClient(const WindowedOptions& o) {
     if (!windowAvailable(&why))
         throw Error("cannot open a window: " + why + " (use --headless, or run under xvfb-run)");
     const auto link = net::startLinkEnd(o.link, net::LinkEnd::Client, net::parseAddress(o.connect));
+    // The device and the pedal's mapping are opened before the window: a bad one is one line.
+    std::string error;
+    std::shared_ptr<Device> device = openDevice(o.device, DeviceShell::Window, error);
+    if (!error.empty())
+        throw Error(error);
     ui::TrainerOptions t;
+    t.device = std::move(device);
+    if (!o.pedalMap.empty())
+        t.pedalMap = readPedalMap(o.pedalMap);
     t.address = link ? net::relayAddress(*link) : o.connect;
     t.name = o.name;
     t.code = o.code;
@@ -108,6 +118,18 @@ void addWindowOptions(CLI::App* sub, WindowedOptions& o) {
         ->delimiter(',')
         ->check(finiteRange(0.0, 3600.0));
     addLinkOption(sub, o.link, "between this window and its server");
+    addDeviceOptions(sub, o.device, o.pedalMap);
+}
+
+void addDeviceOptions(CLI::App* sub, std::string& device, std::string& pedalMap) {
+    sub->add_option("--device", device,
+                    "What drives the tool: mouse (the window's default), script (the headless "
+                    "trainee's), spacemouse[:auto|hid|spnav][?speed=MM/S,turn=DEG/S,deadzone=N] "
+                    "or plugin:PATH.so[?ARGS] (docs/devices.md; `trephine devices` says what is "
+                    "attached)");
+    sub->add_option("--pedal-map", pedalMap,
+                    "Window: read a foot pedal or joystick with this mapping (a JSON file, or "
+                    "`default`: axis 0 the drill's speed, button 0 clutch, 1 next tool)");
 }
 
 void addInstructorMode(CLI::App& root, int& exitCode) {

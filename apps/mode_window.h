@@ -32,6 +32,8 @@ struct WindowedOptions {
     std::string takeOver; // [Instructor] the trainee (name or client id) to take over once joined
     std::string viewAs;   // [Instructor] the participant (name or client id) to view as once joined
     std::string link;     // --link: the emulator between this window and `connect`
+    std::string device;   // --device: mouse (""), spacemouse[...] or plugin:PATH.so
+    std::string pedalMap; // --pedal-map: a mapping file or "default" ("": no pedal)
 };
 
 // True when this build has the GUI and a window can open here; `why` says why not.
@@ -42,5 +44,9 @@ int runWindowedClient(const WindowedOptions& o);
 // Adds --screenshot, --frames, --view, --orbit, --tilt, --window-size, --timeout, --sync,
 // --volume-codec, --switch-sync-at and --link to a windowed mode's subcommand.
 void addWindowOptions(CLI::App* sub, WindowedOptions& o);
+
+// --device SPEC and --pedal-map FILE, the same words for every shell (the window, the headless
+// trainee, `trephine devices`); libsim_devices/device_select.h parses the spec.
+void addDeviceOptions(CLI::App* sub, std::string& device, std::string& pedalMap);
 
 } // namespace trephine::app

@@ -22,6 +22,7 @@
 #include "net/trainee_core.h"
 #include "net/view.h"
 #include "ui/compositor.h"
+#include "ui/device_drive.h"
 #include "ui/layout.h"
 #include "ui/link_message.h"
 #include "ui/mouse_tool.h"
@@ -530,9 +531,10 @@ private:
     const net::TraineeCoreConfig coreConfig;
     WindowDevice device;
     WindowTools windowTools{device};
+    DeviceDrive drive{o.device, o.pedalMap, device}; // --device and --pedal-map (device_drive.h)
     net::TraineeCore core{coreConfig};
     net::ClientThread& client = core.client();
-    StopCore stopCore{started(core, windowTools)};
+    StopCore stopCore{started(core, drive.tools() ? *drive.tools() : windowTools)};
 
     // Scene and camera.
     std::optional<Scene> scene;
@@ -878,7 +880,18 @@ void TrainerWindow::updateTool(FrameState& f) {
         toolValid = true;
         if (script.toolJustDone())
             lastRectAt = f.now; // the view settles from the script's end
+    } else if (scene && f.havePicture && drive.drivesTool()) {
+        const ToolShape shape =
+            ToolShape::of(selectedKind(toolControls), selectedDiameter(toolControls));
+        const auto pose = drive.frame(homePose(scene->site, shape, feed.config().liftMm),
+                                      f.dbiCamera, toolControls);
+        toolValid = pose.has_value();
+        if (pose) {
+            toolPos = pose->position;
+            toolRot = pose->orientation;
+        }
     } else if (scene && f.havePicture && f.viewMatches) {
+        drive.pedalOnly(toolControls);
         mouseTool(f);
     }
     f.kind = selectedKind(toolControls);

@@ -58,6 +58,9 @@ DeviceState AnchoredDevice::read(double now) {
     m_presses |= s.buttons & ~m_lastInner.buttons;
     m_lastInner = s;
     s.pose = compose(s.pose);
+    // Not yet placed: its pose means nothing in the scene (a force device's rest sits at the
+    // volume's centre), so nothing is sent or felt from it.
+    s.valid = s.valid && m_anchored;
     m_last = s;
     return s;
 }
@@ -74,6 +77,7 @@ void AnchoredDevice::moveTo(const ToolPose& pose) {
     if (m_lastInner.valid) {
         m_anchor = anchorFor(pose, m_lastInner.pose);
         m_anchored = true;
+        m_last.valid = true; // placed where the device was last read
     } else {
         m_moveTo = pose;
         m_pendingMove = true;

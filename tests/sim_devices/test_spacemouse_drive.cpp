@@ -159,6 +159,7 @@ TEST(SpaceMouseDrive, WhileTheClutchIsHeldTheToolStaysAndThenGoesOnFromThere) {
     Rig rig;
     rig.config.translationGainMmPerS = 20.0;
     AnchoredDevice a(rig.device());
+    a.setAnchor(ToolPose{});
     rig.queue.push_back(axes(1, kSpaceMouseFullScale, 0, 0));
     DeviceState s = runFor(a, 0.0, 1.0);
     EXPECT_NEAR(s.pose.position.x, 20.0f, 0.02f);
@@ -173,21 +174,25 @@ TEST(SpaceMouseDrive, WhileTheClutchIsHeldTheToolStaysAndThenGoesOnFromThere) {
 TEST(SpaceMouseDrive, MoveToRecentresWhereverTheDeviceHasGone) {
     Rig rig;
     AnchoredDevice a(rig.device());
+    EXPECT_FALSE(a.read(0.0).valid) << "not placed: nothing to send";
     rig.queue.push_back(axes(1, kSpaceMouseFullScale, 0, kSpaceMouseFullScale));
-    runFor(a, 0.0, 0.5);
+    runFor(a, 0.001, 0.5);
     ToolPose p;
     p.position = {1, 2, 3};
     a.moveTo(p);
     rig.queue.push_back(axes(1, 0, 0, 0));
-    const DeviceState s = a.read(0.501);
+    const DeviceState s = a.read(0.502);
+    EXPECT_TRUE(s.valid);
     EXPECT_NEAR(glm::length(s.pose.position - p.position), 0.0f, 0.2f);
 }
 
 TEST(SpaceMouseDrive, AnUnpluggedSourceReportsInvalidAndTheToolStaysPut) {
     Rig rig;
     AnchoredDevice a(rig.device());
+    a.setAnchor(ToolPose{});
     rig.queue.push_back(axes(1, kSpaceMouseFullScale, 0, 0));
     const DeviceState before = runFor(a, 0.0, 0.2);
+    EXPECT_TRUE(before.valid);
     rig.gone = true;
     testing::internal::CaptureStderr();
     const DeviceState after = runFor(a, 0.201, 0.5);

@@ -7,6 +7,8 @@
 
 #include "libsim/camera.h"
 #include "libsim/dbi.h"
+#include "libsim/device.h"
+#include "libsim_devices/pedal.h"
 #include "ui/panel_data.h"
 
 #include <array>
@@ -14,6 +16,8 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -96,6 +100,10 @@ struct TrainerOptions {
     // [Instructor] A participant to view as once it is listed (its name or client id): the view
     // follows that participant's camera. The view is not settled before the server says it.
     std::string viewAs;
+    // The device that drives the tool (--device; null: the mouse) and the pedal mapping
+    // (--pedal-map; nullopt: no pedal is read). ui/device_drive.h.
+    std::shared_ptr<Device> device;
+    std::optional<PedalMap> pedalMap;
     // [Tests] GLFW keys tapped once the picture shows, one a frame: each press and its release
     // reach the window's key callback together before the frame polls (a tap shorter than a
     // frame).

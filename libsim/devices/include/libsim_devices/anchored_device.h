@@ -19,6 +19,7 @@ public:
     std::string name() const override { return m_inner->name(); }
     // The haptic thread: the inner device's pose moved by the anchor (position added, orientation
     // turned by the anchor's), or, while clutched, the pose held when the clutch went down.
+    // Invalid until placed (setAnchor, or moveTo and a read).
     DeviceState read(double now) override;
     void setForce(glm::vec3 forceN) override { m_inner->setForce(forceN); }
     bool hasForceOutput() const override { return m_inner->hasForceOutput(); }
