@@ -2,6 +2,7 @@
 
 #include "libsim/error.h"
 
+#include <algorithm>
 #include <atomic>
 #include <charconv>
 #include <mutex>
@@ -38,7 +39,19 @@ uint32_t channelPacketFlags(Channel c) {
 namespace {
 std::mutex g_libMutex;
 int g_libUsers = 0;
+std::mutex g_windowMutex;
+BulkWindow g_defaultWindow;
 } // namespace
+
+BulkWindow defaultBulkWindow() {
+    std::lock_guard lock(g_windowMutex);
+    return g_defaultWindow;
+}
+
+void setDefaultBulkWindow(const BulkWindow& w) {
+    std::lock_guard lock(g_windowMutex);
+    g_defaultWindow = w;
+}
 
 EnetLibrary::EnetLibrary() {
     std::lock_guard lock(g_libMutex);
@@ -99,7 +112,9 @@ Host Host::listen(uint16_t port, size_t maxPeers) {
     if (!h)
         throw Error("cannot listen on UDP port " + std::to_string(port) +
                     " (in use? try another --port)");
-    return Host(h);
+    Host host(h);
+    host.m_window = defaultBulkWindow();
+    return host;
 }
 
 Host Host::client() {
@@ -110,7 +125,8 @@ Host Host::client() {
     return Host(h);
 }
 
-Host::Host(Host&& o) noexcept : m_host(o.m_host) {
+Host::Host(Host&& o) noexcept
+    : m_host(o.m_host), m_window(o.m_window), m_peers(std::move(o.m_peers)) {
     o.m_host = nullptr;
 }
 
@@ -119,6 +135,8 @@ Host& Host::operator=(Host&& o) noexcept {
         if (m_host)
             enet_host_destroy(m_host);
         m_host = o.m_host;
+        m_window = o.m_window;
+        m_peers = std::move(o.m_peers);
         o.m_host = nullptr;
     }
     return *this;
@@ -146,7 +164,9 @@ ENetPeer* Host::connect(const ENetAddress& address, uint32_t connectData,
 int Host::service(uint32_t timeoutMs, const EventHandler& handler) {
     int handled = 0;
     ENetEvent ev;
+    paceBefore();
     int r = enet_host_service(m_host, &ev, timeoutMs);
+    paceAfter();
     while (r > 0) {
         handler(ev);
         if (ev.type == ENET_EVENT_TYPE_RECEIVE)
@@ -154,12 +174,88 @@ int Host::service(uint32_t timeoutMs, const EventHandler& handler) {
         ++handled;
         r = enet_host_check_events(m_host, &ev);
     }
-    enet_host_flush(m_host);
+    flush();
     return handled;
 }
 
-void Host::wait(uint32_t timeoutMs) {
+void Host::flush() {
+    paceBefore();
     enet_host_flush(m_host);
+    paceAfter();
+}
+
+// [SECTION] the bulk window
+
+// Delay-based, as LEDBAT: the smoothed RTT above the lowest of the last 10-20 s is the queue our
+// data built on the path. Below the target the window grows (up to 1.5x a round trip while it
+// is in use), above it shrinks (down to half a round trip), so the path holds about the target
+// of queue and the window about a bandwidth-delay product. Random loss does not shrink it.
+void Host::paceBefore() {
+    if (!m_window.adaptive || !m_host)
+        return;
+    const uint32_t now = enet_time_get();
+    m_peers.resize(m_host->peerCount);
+    for (size_t i = 0; i < m_host->peerCount; ++i) {
+        ENetPeer* p = &m_host->peers[i];
+        if (p->state != ENET_PEER_STATE_CONNECTED)
+            continue;
+        PeerWindow& w = m_peers[i];
+        if (w.connectId != p->connectID || w.window <= 0) {
+            w = PeerWindow{};
+            w.connectId = p->connectID;
+            w.window = m_window.minBytes;
+            w.lastMs = w.periodStartMs = now;
+        }
+        const double dt = std::min<double>(now - w.lastMs, 100.0);
+        w.lastMs = now;
+        const double rtt = std::max<double>(p->roundTripTime, 1.0);
+        if (now - w.periodStartMs >= 10000) {
+            w.minRttMs = w.periodMinRttMs;
+            w.periodMinRttMs = 0;
+            w.periodStartMs = now;
+        }
+        w.periodMinRttMs = w.periodMinRttMs > 0 ? std::min(w.periodMinRttMs, rtt) : rtt;
+        const double base =
+            w.minRttMs > 0 ? std::min(w.minRttMs, w.periodMinRttMs) : w.periodMinRttMs;
+        const double queue = rtt - base, target = m_window.queueTargetMs;
+        const double rounds = std::min(1.0, dt / base);
+        // Grown only while in use: an idle peer's window says nothing about the path.
+        const bool used = double(p->reliableDataInTransit) + p->mtu > w.window * 0.5;
+        if (queue <= target) {
+            if (used)
+                w.window *= 1.0 + 0.5 * rounds * (1.0 - queue / target);
+        } else {
+            w.window *= 1.0 - 0.5 * rounds * std::min(1.0, (queue - target) / target);
+        }
+        w.window = std::clamp(w.window, double(m_window.minBytes), double(m_window.maxBytes));
+        // Paced: a window spread over the lowest round trip, so an idle peer's first image does
+        // not enter the path at once.
+        const double pace = w.window / base; // bytes a millisecond
+        w.tokens = std::min(w.tokens + pace * dt, std::max(double(m_window.burstBytes), pace * dt));
+        w.inTransit = p->reliableDataInTransit;
+        p->windowSize = uint32_t(std::min(w.window, double(w.inTransit) + std::max(w.tokens, 0.0)));
+    }
+}
+
+// What ENet sent in the pass (in-transit bytes grew by it, less acknowledgements it took in:
+// those freed the path, so sending in their place is the ack clock) comes off the tokens.
+void Host::paceAfter() {
+    if (!m_window.adaptive || !m_host)
+        return;
+    for (size_t i = 0; i < m_host->peerCount && i < m_peers.size(); ++i) {
+        ENetPeer* p = &m_host->peers[i];
+        PeerWindow& w = m_peers[i];
+        if (p->state != ENET_PEER_STATE_CONNECTED || w.connectId != p->connectID)
+            continue;
+        if (p->reliableDataInTransit > w.inTransit)
+            w.tokens -= double(p->reliableDataInTransit - w.inTransit);
+        w.inTransit = p->reliableDataInTransit;
+        p->windowSize = uint32_t(std::min(w.window, double(w.inTransit) + std::max(w.tokens, 0.0)));
+    }
+}
+
+void Host::wait(uint32_t timeoutMs) {
+    flush();
     enet_uint32 condition = ENET_SOCKET_WAIT_RECEIVE | ENET_SOCKET_WAIT_INTERRUPT;
     enet_socket_wait(m_host->socket, &condition, timeoutMs);
 }

@@ -12,6 +12,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <vector>
 
 namespace trephine::net {
 
@@ -52,6 +53,23 @@ inline void disableThrottle(ENetPeer* peer) {
     peer->packetThrottle = ENET_PEER_PACKET_THROTTLE_SCALE;
 }
 
+// How a server host sizes each peer's reliable window. ENet sends reliable data only while less
+// than peer->windowSize is unacknowledged, and negotiates at most 64 KiB: ~5 Mbit/s at 100 ms
+// RTT, so a full 500^2 view took 8 round trips. The host sizes the window itself instead, by
+// delay: it grows while the smoothed RTT stays within queueTargetMs of the lowest seen, shrinks
+// when bulk data queues up on the path, and releases new data at window / lowest RTT, so the
+// path's queue (where tool states and force models wait too) stays about queueTargetMs long.
+struct BulkWindow {
+    bool adaptive = true; // false: ENet's negotiated window (64 KiB), as before
+    uint32_t minBytes = 64 * 1024;
+    uint32_t maxBytes = 16u << 20;
+    double queueTargetMs = 10;
+    uint32_t burstBytes = 16 * 1024; // the most released at once beyond the pace
+};
+// What Host::listen uses (the transport benchmark compares both settings in one process).
+BulkWindow defaultBulkWindow();
+void setDefaultBulkWindow(const BulkWindow& w);
+
 class Host {
 public:
     using EventHandler = std::function<void(const ENetEvent&)>;
@@ -91,12 +109,27 @@ public:
     // With `inFlight`, its size counts there until ENet releases the packet.
     bool send(ENetPeer* peer, Channel channel, std::span<const uint8_t> bytes,
               const InFlight& inFlight = {});
-    void flush() { enet_host_flush(m_host); }
+    void flush();
+
+    void setBulkWindow(const BulkWindow& w) { m_window = w; }
+    // The window the host gives peer now (ENet's own when not adaptive).
+    uint32_t windowBytes(const ENetPeer* peer) const { return peer->windowSize; }
 
 private:
     explicit Host(ENetHost* h) : m_host(h) {}
+    // One peer slot's window as the host sizes it.
+    struct PeerWindow {
+        uint32_t connectId = 0; // the connection it belongs to: a new one starts afresh
+        double window = 0, tokens = 0, minRttMs = 0, periodMinRttMs = 0;
+        uint32_t lastMs = 0, periodStartMs = 0, inTransit = 0;
+    };
+    // Before ENet sends: every connected peer's window for this pass. After: what it sent.
+    void paceBefore();
+    void paceAfter();
     EnetLibrary m_lib;
     ENetHost* m_host = nullptr;
+    BulkWindow m_window{false};
+    std::vector<PeerWindow> m_peers;
 };
 
 } // namespace trephine::net
