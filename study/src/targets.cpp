@@ -290,6 +290,21 @@ void classroomTargetLines(const WanResults& r, std::vector<std::string>& lines) 
 
 } // namespace
 
+std::vector<std::string> lanTargetLines(const std::vector<UpdateStudyRow>& lanRows) {
+    std::vector<std::string> lines;
+    for (int n : {10, 40, 80}) {
+        const double ratio = rateRatio(lanRows, n);
+        if (ratio < 0)
+            continue;
+        lines.push_back(
+            fmt::format("{} LAN non-regression {}^3: dbi / volume {}x over the emulated "
+                        "100 Mbit/s LAN (issue 32: keeps >= {:.1f}x)",
+                        passText(ratio >= kLanRateTarget), n,
+                        figureAgainst(ratio, kLanRateTarget, true, 1), kLanRateTarget));
+    }
+    return lines;
+}
+
 std::vector<std::string> wanTargetLines(const WanResults& results) {
     std::vector<std::string> lines;
     linkTargetLines(results, lines);

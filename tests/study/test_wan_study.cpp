@@ -143,3 +143,20 @@ TEST(WanStudy, ABoxThatDoesNotFitIsRefusedBeforeAnythingStarts) {
     c.classroom = {0};
     EXPECT_THROW(checkWanStudy(paperSkull(64), c), Error);
 }
+
+// Issue 32's LAN target judges the update study's rows over the emulated LAN, size by size.
+TEST(WanStudy, TheLanNonRegressionTargetJudgesEachSize) {
+    auto row = [](const char* method, int n, double rate) {
+        UpdateStudyRow r;
+        r.method = method;
+        r.box = n;
+        r.updatesPerS = rate;
+        return r;
+    };
+    const std::vector<std::string> lines =
+        lanTargetLines({row("dbi", 10, 800), row("volume", 10, 100), row("dbi", 40, 700),
+                        row("volume", 40, 100), row("dbi", 20, 100), row("volume", 20, 100)});
+    ASSERT_EQ(lines.size(), 2u);
+    EXPECT_EQ(lines[0].rfind("PASS LAN non-regression 10^3: dbi / volume 8.0x", 0), 0u) << lines[0];
+    EXPECT_EQ(lines[1].rfind("MISS LAN non-regression 40^3: dbi / volume 7.0x", 0), 0u) << lines[1];
+}

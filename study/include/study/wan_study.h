@@ -8,6 +8,7 @@
 #include "libsim/volume.h"
 #include "net/link_emulator.h"
 #include "net/protocol.h"
+#include "study/update_study.h"
 
 #include <functional>
 #include <memory>
@@ -89,6 +90,10 @@ std::string wanClientsCsvRow(const WanClientRow& row);
 
 // The issue's WAN and classroom targets as PASS/MISS lines beside the figures they judge.
 std::vector<std::string> wanTargetLines(const WanResults& results);
+// Issue 32's LAN non-regression target: the update study over the emulated 100 Mbit/s LAN keeps
+// dbi / volume >= kLanRateTarget at 10^3, 40^3 and 80^3 (the sizes it has of these).
+constexpr double kLanRateTarget = 7.8;
+std::vector<std::string> lanTargetLines(const std::vector<UpdateStudyRow>& lanRows);
 
 // `study wan`'s options (apps/mode_study.cpp parses them).
 struct WanOptions {
