@@ -34,6 +34,11 @@ void addHapticsCommand(CLI::App* study, int& exitCode) {
     haptics->add_option("--volume", o->volume, "Volume spec, or `box` for a flat bone block")
         ->capture_default_str();
     haptics->add_option("--burr", o->burrMm, "Burr diameter, mm (1-6)")->capture_default_str();
+    haptics
+        ->add_option("--hand", o->hand,
+                     "The hand: device (the simulated force device, through the plugin ABI), "
+                     "device:PATH.so, or spring (the same physics in the study's code)")
+        ->capture_default_str();
     haptics->add_flag("--quick", o->quick,
                       "A reduced grid in well under a minute (--update-rates and --latencies "
                       "given win)");

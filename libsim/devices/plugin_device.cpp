@@ -317,63 +317,91 @@ std::pair<std::string, std::string> splitSpec(const std::string& spec) {
 
 } // namespace
 
+bool loadPlugin(const std::string& path, const std::string& args, LoadedPlugin& out,
+                std::string& error) {
+    if (path.empty()) {
+        error = "device plugin: no file given (plugin:PATH.so)";
+        return false;
+    }
+    // A path without a slash would be searched for along the library path, not in the directory
+    // the user means.
+    const std::string file = path.find('/') == std::string::npos ? "./" + path : path;
+    void* library = dlopen(file.c_str(), RTLD_NOW | RTLD_LOCAL);
+    if (!library) {
+        error = fmt::format("device plugin {}: cannot load it: {}", path, dlerror());
+        return false;
+    }
+    auto fail = [&](const std::string& why) {
+        error = fmt::format("device plugin {}: {}", path, why);
+        dlclose(library);
+        return false;
+    };
+    auto entry = reinterpret_cast<TrephineDeviceEntry>(dlsym(library, TREPHINE_DEVICE_ENTRY));
+    if (!entry)
+        return fail(fmt::format("no {} entry point (is it a Trephine device plugin?)",
+                                TREPHINE_DEVICE_ENTRY));
+    const TrephineDeviceApi* api = entry(TREPHINE_DEVICE_ABI_VERSION);
+    if (!api)
+        return fail(
+            fmt::format("it does not serve device ABI version {}", TREPHINE_DEVICE_ABI_VERSION));
+    if (api->abi_version != TREPHINE_DEVICE_ABI_VERSION ||
+        api->struct_size < offsetof(TrephineDeviceApi, applied_force))
+        return fail(fmt::format("it was built for device ABI version {}, this is version {}",
+                                api->abi_version, TREPHINE_DEVICE_ABI_VERSION));
+    if (!api->open || !api->close || !api->info || !api->read || !api->write_force)
+        return fail("its function table lacks open, close, info, read or write_force");
+    // Optional entries past the plugin's own table are absent.
+    LoadedPlugin p;
+    p.library = library;
+    std::memcpy(&p.api, api, std::min<size_t>(api->struct_size, sizeof p.api));
+    char why[256] = "";
+    p.device = p.api.open(args.c_str(), why, sizeof why);
+    if (!p.device) {
+        why[sizeof why - 1] = 0;
+        return fail(fmt::format("open failed: {}", why[0] ? why : "no reason given"));
+    }
+    auto lastError = [&] {
+        const char* e = p.api.last_error ? p.api.last_error(p.device) : nullptr;
+        return e && *e ? std::string(": ") + e : std::string();
+    };
+    if (const int r = p.api.info(p.device, &p.info); r != TREPHINE_DEVICE_OK) {
+        const std::string why = fmt::format("info failed ({}){}", r, lastError());
+        p.api.close(p.device);
+        return fail(why);
+    }
+    p.info.name[sizeof p.info.name - 1] = 0;
+    if (!(p.info.max_force_n > 0.0)) {
+        p.api.close(p.device);
+        return fail("it reports no maximum force");
+    }
+    out = p;
+    return true;
+}
+
+void unloadPlugin(LoadedPlugin& p) {
+    if (p.device)
+        p.api.close(p.device);
+    if (p.library)
+        dlclose(p.library);
+    p = {};
+}
+
 std::unique_ptr<PluginDevice> openPlugin(const std::string& spec, const PluginOptions& options,
                                          std::string& error) {
     auto [path, args] = splitSpec(spec);
-    if (path.empty()) {
-        error = "device plugin: no file given (plugin:PATH.so)";
-        return nullptr;
-    }
     auto d = std::make_shared<PluginDevice::Impl>();
     d->path = path;
     d->options = options;
     if (d->options.args.empty())
         d->options.args = args;
-    // A path without a slash would be searched for along the library path, not in the directory
-    // the user means.
-    const std::string file = path.find('/') == std::string::npos ? "./" + path : path;
-    d->library = dlopen(file.c_str(), RTLD_NOW | RTLD_LOCAL);
-    if (!d->library) {
-        error = fmt::format("device plugin {}: cannot load it: {}", path, dlerror());
+    LoadedPlugin p;
+    if (!loadPlugin(path, d->options.args, p, error))
         return nullptr;
-    }
-    auto fail = [&](const std::string& why) {
-        error = fmt::format("device plugin {}: {}", path, why);
-        dlclose(d->library);
-        return nullptr;
-    };
-    auto entry = reinterpret_cast<TrephineDeviceEntry>(dlsym(d->library, TREPHINE_DEVICE_ENTRY));
-    if (!entry)
-        return fail(fmt::format("no {} entry point (is it a Trephine device plugin?)",
-                                TREPHINE_DEVICE_ENTRY));
-    d->api = entry(TREPHINE_DEVICE_ABI_VERSION);
-    if (!d->api)
-        return fail(
-            fmt::format("it does not serve device ABI version {}", TREPHINE_DEVICE_ABI_VERSION));
-    if (d->api->abi_version != TREPHINE_DEVICE_ABI_VERSION ||
-        d->api->struct_size < offsetof(TrephineDeviceApi, applied_force))
-        return fail(fmt::format("it was built for device ABI version {}, this is version {}",
-                                d->api->abi_version, TREPHINE_DEVICE_ABI_VERSION));
-    if (!d->api->open || !d->api->close || !d->api->info || !d->api->read || !d->api->write_force)
-        return fail("its function table lacks open, close, info, read or write_force");
-    // Optional entries past the plugin's own table are absent.
-    std::memcpy(&d->table, d->api, std::min<size_t>(d->api->struct_size, sizeof d->table));
+    d->library = p.library;
+    d->table = p.api;
     d->api = &d->table;
-    char why[256] = "";
-    d->device = d->api->open(d->options.args.c_str(), why, sizeof why);
-    if (!d->device) {
-        why[sizeof why - 1] = 0;
-        return fail(fmt::format("open failed: {}", why[0] ? why : "no reason given"));
-    }
-    if (const int r = d->api->info(d->device, &d->info); r != TREPHINE_DEVICE_OK) {
-        d->api->close(d->device);
-        return fail(fmt::format("info failed ({}){}", r, d->pluginError()));
-    }
-    d->info.name[sizeof d->info.name - 1] = 0;
-    if (!(d->info.max_force_n > 0.0)) {
-        d->api->close(d->device);
-        return fail("it reports no maximum force");
-    }
+    d->device = p.device;
+    d->info = p.info;
     d->worker = std::thread([d] { d->run(); });
     return std::unique_ptr<PluginDevice>(new PluginDevice(d));
 }

@@ -39,14 +39,15 @@ SpringHand::SpringHand(const HandModel& model, const HandFrame& frame, glm::dvec
                        int substeps)
     : m_model(model), m_frame(frame), m_x(start), m_substeps(std::max(1, substeps)) {}
 
+glm::dvec3 handTarget(const HandModel& model, const HandFrame& frame, double t) {
+    const double tremor = model.tremorMm * std::sin(2.0 * std::numbers::pi * model.tremorHz * t);
+    return frame.atDepth(model.targetDepthMm - tremor) + frame.tangent * (model.slideMmPerS * t);
+}
+
 void SpringHand::advance(glm::dvec3 forceN, double t, double dt) {
     const double h = dt / m_substeps;
     for (int s = 0; s < m_substeps; ++s) {
-        const double ts = t + s * h;
-        const double tremor =
-            m_model.tremorMm * std::sin(2.0 * std::numbers::pi * m_model.tremorHz * ts);
-        const glm::dvec3 target = m_frame.atDepth(m_model.targetDepthMm - tremor) +
-                                  m_frame.tangent * (m_model.slideMmPerS * ts);
+        const glm::dvec3 target = handTarget(m_model, m_frame, t + s * h);
         const glm::dvec3 fHand =
             m_model.stiffnessNPerMm * (target - m_x) - m_model.dampingNsPerMm * m_v;
         m_v += (fHand + forceN) / m_model.massKg * 1000.0 * h; // mm/s^2

@@ -169,6 +169,22 @@ HapticsFigures runHapticsStudy(const HapticsOptions& o) {
     }
     HapticsStudyConfig config;
     config.shape = ToolShape::burr(o.burrMm);
+    std::string handName = "spring-damper hand";
+    if (o.hand != "spring") {
+        std::string path = o.hand == "device"                ? builtSimDevicePath()
+                           : o.hand.rfind("device:", 0) == 0 ? o.hand.substr(7)
+                                                             : std::string();
+        if (path.empty())
+            throw Error(o.hand == "device"
+                            ? "--hand device: no simulated device beside this program "
+                              "(build the trephine_sim_device target, or give --hand spring)"
+                            : "--hand " + o.hand + ": spring, device or device:PATH.so");
+        PluginHand probe(path, config.hand, {}, glm::dvec3(0.0)); // a bad plugin fails here, once
+        config.makeHand = [path, hand = config.hand](const HandFrame& f, glm::dvec3 start) {
+            return std::make_unique<PluginHand>(path, hand, f, start);
+        };
+        handName = "simulated force device " + path;
+    }
     std::vector<double> rates = o.updateRates, latencies = o.latencies;
     if (o.quick) {
         config.durationS = 1.0;
@@ -187,9 +203,9 @@ HapticsFigures runHapticsStudy(const HapticsOptions& o) {
     makeOutDir(o.out);
     const std::string csvPath = (std::filesystem::path(o.out) / "haptics.csv").string();
     fmt::print("Haptics study: {} pressed on {} at ({:.1f}, {:.1f}, {:.1f}) mm, {:.1f} s per case, "
-               "1 kHz haptic loop\n",
+               "1 kHz haptic loop; the hand: {}\n",
                config.shape.describe(), o.volume, site.position.x, site.position.y, site.position.z,
-               config.durationS);
+               config.durationS, handName);
     figures.cases = runCases(volume, site, config, rates, latencies, csvPath);
     figures.timings = timeForceModels(volume, site, o.quick ? 500 : 3000);
     figures.loopRateHz = measureLoopRate(volume, site, config.shape, o.quick ? 0.3 : 1.0);

@@ -2,6 +2,7 @@
 // of f alone, and the CSV it writes.
 #include "study/haptics_study.h"
 
+#include "libsim/error.h"
 #include "libsim/skull.h"
 
 #include <gtest/gtest.h>
@@ -122,4 +123,29 @@ TEST(HapticsStudy, ARoundTripOverTheStaleTimeoutKeepsTheForce) {
     EXPECT_TRUE(r.stable) << hapticsCsvRow(r);
     EXPECT_LE(r.forcePeakErrorN, 1.0) << hapticsCsvRow(r);
     EXPECT_EQ(r.modelsDelivered, 1); // the state sent at 50 ms: the only answer within 0.5 s
+}
+
+// The study's hand through the device plugin ABI: the simulated force device built beside the
+// tests is the same hand as SpringHand, so both give the same verdicts and, to a few per cent,
+// the same figures; a file that is no plugin is one line.
+TEST(HapticsStudy, TheSimulatedDeviceThroughThePluginAbiIsTheSameHand) {
+    const std::string path = builtSimDevicePath();
+    ASSERT_FALSE(path.empty()) << "build the trephine_sim_device target";
+    Volume box = makeBox(48);
+    SurfaceSite site = boxTopSite(box);
+    HapticsStudyConfig spring;
+    spring.durationS = 1.0;
+    HapticsStudyConfig device = spring;
+    device.makeHand = [&](const HandFrame& f, glm::dvec3 start) {
+        return std::make_unique<PluginHand>(path, device.hand, f, start);
+    };
+    for (HapticsCase c : {HapticsCase{HapticMethod::Multirate, 20.0, 300.0},
+                          HapticsCase{HapticMethod::ZeroOrderHold, 20.0, 0.0}}) {
+        const HapticsCaseResult a = runHapticsCase(box, site, spring, c);
+        const HapticsCaseResult b = runHapticsCase(box, site, device, c);
+        EXPECT_EQ(a.stable, b.stable) << hapticsCsvRow(a) << "\n" << hapticsCsvRow(b);
+        EXPECT_NEAR(b.forceRmsErrorN, a.forceRmsErrorN, 0.05 * a.forceRmsErrorN + 1e-4);
+        EXPECT_NEAR(b.maxPenetrationMm, a.maxPenetrationMm, 0.05);
+    }
+    EXPECT_THROW(PluginHand("/etc/hostname", spring.hand, {}, glm::dvec3(0.0)), Error);
 }

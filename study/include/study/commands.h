@@ -23,6 +23,9 @@ struct HapticsOptions {
     std::string out = ".";
     std::string volume = "skull:128"; // a volume spec, or "box" for a flat bone block
     float burrMm = 2.0f;
+    // The hand: "device" (the simulated force device through the plugin ABI, built beside the
+    // program), "device:PATH.so", or "spring" (the same physics in the study's own code).
+    std::string hand = "device";
     bool quick = false;
     // Given on the command line: they win over --quick's reduced grid.
     bool ratesGiven = false, latenciesGiven = false;

@@ -72,6 +72,34 @@ private:
     int m_substeps;
 };
 
+// Where HandModel's hand aims at time t: its target depth less the tremor, slid along the surface.
+glm::dvec3 handTarget(const HandModel& model, const HandFrame& frame, double t);
+
+// The simulated force device (plugins/sim_device) as the hand, through the device plugin ABI,
+// called directly on simulated time: HandModel's mass, stiffness and damping are its arguments,
+// its intent each tick is handTarget at the tick's middle, and it integrates the tick itself.
+class PluginHand : public StudyHand {
+public:
+    // Throws trephine::Error (one line) when the plugin does not load.
+    PluginHand(const std::string& path, const HandModel& model, const HandFrame& frame,
+               glm::dvec3 start);
+    ~PluginHand() override;
+    PluginHand(const PluginHand&) = delete;
+    PluginHand& operator=(const PluginHand&) = delete;
+    glm::dvec3 position() const override { return m_x; }
+    void advance(glm::dvec3 forceN, double t, double dt) override;
+
+private:
+    struct Loaded;
+    std::unique_ptr<Loaded> m_plugin;
+    HandModel m_model;
+    HandFrame m_frame;
+    glm::dvec3 m_x;
+    bool m_started = false;
+};
+// The simulated force device built beside this program (../plugins/ from its folder); "" if none.
+std::string builtSimDevicePath();
+
 // Makes the hand of one run, at rest at `start`. Empty: a SpringHand of HapticsStudyConfig::hand.
 using HandFactory =
     std::function<std::unique_ptr<StudyHand>(const HandFrame& frame, glm::dvec3 start)>;

@@ -4,6 +4,7 @@
 #pragma once
 
 #include "libsim/device_guard.h"
+#include "libsim_devices/trephine_device_abi.h"
 
 #include <cstdint>
 #include <functional>
@@ -56,6 +57,21 @@ private:
     explicit PluginDevice(std::shared_ptr<Impl> impl);
     std::shared_ptr<Impl> m_impl; // shared with the worker, which may outlive a hung close
 };
+
+// A plugin's library loaded and its device opened, its table padded with nulls to this ABI's
+// size. Called directly, on the caller's thread: for simulated time (the haptics study's hand),
+// where a slow call cannot cost a tick; a live loop uses PluginDevice.
+struct LoadedPlugin {
+    void* library = nullptr;
+    TrephineDeviceApi api{};
+    TrephineDevice* device = nullptr;
+    TrephineDeviceInfo info{};
+};
+// Loads `path` and opens its device with `args`; false and a one-line `error` as openPluginDevice.
+bool loadPlugin(const std::string& path, const std::string& args, LoadedPlugin& out,
+                std::string& error);
+// Closes the device and unloads the library.
+void unloadPlugin(LoadedPlugin& p);
 
 // Loads PATH (a spec "PATH.so" or "PATH.so?ARGS") and opens its device. nullptr and a one-line
 // `error` (naming the file and what failed) when the library, its entry point, its ABI version or
