@@ -6,6 +6,7 @@
 #include "net/trainee_core.h"
 
 #include "libsim/skull.h"
+#include "libsim/tool_catalogue.h"
 
 #include "loopback.h"
 
@@ -190,6 +191,31 @@ TEST(ScriptToolSource, RowsHoldAndDrillingStopsAtTheEnd) {
     EXPECT_TRUE(tools.toolAt(at, 1.2).drilling);
     EXPECT_FALSE(tools.toolAt(at, 1.5).drilling);
     EXPECT_EQ(tools.toolAt(at, 2.0).speed, 0.0f);
+}
+
+// A device with buttons headless (a SpaceMouse): button 0 stops and starts the drill, button 1
+// picks the next tool at its default size; a held button counts once.
+TEST(ScriptToolSource, ADevicesButtonsTakeOverFromTheRows) {
+    StillDevice device({{0, 0, 0}, {1, 0, 0, 0}});
+    std::vector<ScriptSample> script(1);
+    script[0].tool.toolKind = uint8_t(ToolKind::Burr);
+    script[0].tool.diameterMm = 4.0f;
+    script[0].tool.speed = 1.0f;
+    script[0].tool.drilling = true;
+    ScriptToolSource tools(device, script, 10.0);
+    const ToolPose at{{1, 2, 3}, {1, 0, 0, 0}};
+    tools.noteButtons(0, 0.0);
+    EXPECT_TRUE(tools.toolAt(at, 0.1).drilling);
+    tools.noteButtons(1u, 0.2);
+    tools.noteButtons(1u, 0.3); // still held
+    EXPECT_FALSE(tools.toolAt(at, 0.3).drilling);
+    EXPECT_EQ(tools.toolAt(at, 0.3).speed, 0.0f);
+    tools.noteButtons(0, 0.4);
+    tools.noteButtons(1u, 0.5);
+    EXPECT_TRUE(tools.toolAt(at, 0.5).drilling);
+    tools.noteButtons(2u, 0.6);
+    EXPECT_EQ(tools.toolAt(at, 0.6).toolKind, uint8_t(ToolKind::Perforator));
+    EXPECT_EQ(tools.toolAt(at, 0.6).diameterMm, toolType(ToolKind::Perforator).defaultDiameterMm);
 }
 
 // The core against a loopback server, in both designs: the haptic loop's tool states reach the

@@ -1,6 +1,7 @@
 #include "net/trainee_core.h"
 
 #include "libsim/error.h"
+#include "libsim/tool_catalogue.h"
 #include "net/net_stats.h"
 #include "net/tool_model.h"
 
@@ -24,8 +25,26 @@ const ScriptSample& ScriptToolSource::sampleAt(double t) const {
     return it == m_script.begin() ? m_script.front() : *std::prev(it);
 }
 
+void ScriptToolSource::noteButtons(uint32_t buttons, double now) {
+    const uint32_t pressed = buttons & ~m_buttons;
+    m_buttons = buttons;
+    if (pressed & 1u)
+        m_drilling = !toolAt(ToolPose{}, now).drilling;
+    if (pressed & 2u)
+        ++m_nextTools;
+}
+
 ToolState ScriptToolSource::toolAt(const ToolPose& pose, double now) {
     ToolState t = sampleAt(now).tool;
+    if (m_nextTools) {
+        const ToolType& next = toolType(ToolKind((t.toolKind + m_nextTools) % kToolKindCount));
+        t.toolKind = uint8_t(next.kind);
+        t.diameterMm = next.defaultDiameterMm;
+    }
+    if (m_drilling) {
+        t.drilling = *m_drilling;
+        t.speed = *m_drilling ? 1.0f : 0.0f;
+    }
     if (now >= m_endS) {
         t.speed = 0.0f; // the script is over: no more drilling
         t.drilling = false;
@@ -146,6 +165,7 @@ void TraineeCore::startHaptics(ToolSource& tools) {
     m_guard->setIntentSource([&tools](double now) { return tools.intent(now); });
     m_loop = std::make_unique<HapticLoop>(*m_guard, m_config.haptics,
                                           [this, &tools](const DeviceState& s, double now) {
+                                              tools.noteButtons(s.buttons, now);
                                               ToolState t = tools.toolAt(s.pose, now);
                                               // The device sample: the server's step and velocity
                                               // follow the loop's sampling, and the force round

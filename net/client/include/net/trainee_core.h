@@ -38,6 +38,8 @@ public:
     // Where the user means the tool to be at `now`, for a simulated hand (ForceDevice::setIntent);
     // none where a real hand holds the device.
     virtual std::optional<ToolPose> intent(double) { return std::nullopt; }
+    // The device's buttons as the loop read them (bit i: button i), before each tool state.
+    virtual void noteButtons(uint32_t, double) {}
 };
 
 // One row of a trainee script: the tool state from time t (s) until the next row.
@@ -56,6 +58,9 @@ public:
     glm::vec3 velocity(const ToolPose& pose, double now) override;
     // The rows' poses, linear in position and slerped in orientation between rows.
     std::optional<ToolPose> intent(double now) override;
+    // A device with buttons (a SpaceMouse headless) takes over from the rows: button 0 starts and
+    // stops the drill, button 1 picks the next tool at its default size.
+    void noteButtons(uint32_t buttons, double now) override;
     const ScriptSample& sampleAt(double t) const;
     double endS() const { return m_endS; }
 
@@ -64,6 +69,9 @@ private:
     std::vector<ScriptSample> m_script; // not empty, sorted by t
     double m_endS;
     VelocityEstimate m_velocity;
+    uint32_t m_buttons = 0;
+    std::optional<bool> m_drilling; // set by button 0: the rows' drilling no longer counts
+    int m_nextTools = 0;            // button 1 presses
 };
 
 // The haptic loop's force in either design, chosen per tick. DBI: the server's force models,
