@@ -68,7 +68,7 @@ struct StudyClient {
     std::unique_ptr<SessionClient> session;
     std::vector<std::pair<uint64_t, double>> applied; // steadyNowUs, latency ms
     double fullBytes = 0;                             // the join's full picture or volume
-    uint64_t connectUs = 0, joinedUs = 0;
+    uint64_t connectUs = 0, joinedUs = 0, pingedUs = 0;
     float yawDeg = 0;
 
     bool ready() const {
@@ -117,9 +117,15 @@ void pumpAll(Clients& clients) {
     int events = 0;
     for (auto& c : clients) {
         c->session->wait(0);
-        events += c->session->pump(steadyNowUs());
+        const uint64_t now = steadyNowUs();
+        events += c->session->pump(now);
         if (!c->joinedUs && c->ready())
-            c->joinedUs = steadyNowUs();
+            c->joinedUs = now;
+        // As every runner does: a client silent for ServerConfig::idleTimeoutS is sent away.
+        if (c->joinedUs && now - c->pingedUs > 250000) {
+            c->session->sendPing();
+            c->pingedUs = now;
+        }
     }
     if (events == 0)
         std::this_thread::sleep_for(std::chrono::microseconds(200));
@@ -134,6 +140,16 @@ bool pumpAllUntil(Clients& clients, double timeoutS, F done) {
         pumpAll(clients);
     }
     return true;
+}
+
+// Each says goodbye (a reset alone would hold its server place until ENet's timeout), then the
+// server is given up to 10 s to let every place go, so the next run finds it empty.
+void leaveAll(SessionServer& server, Clients& clients) {
+    for (auto& c : clients)
+        c->session->disconnect(200);
+    const uint64_t deadline = steadyNowUs() + 10000000;
+    while (server.clientCount() > 0 && steadyNowUs() < deadline)
+        std::this_thread::sleep_for(std::chrono::milliseconds(10));
 }
 
 bool allJoined(const Clients& clients) {
@@ -298,6 +314,7 @@ void measureLink(Bench& bench, const Design& d, const WanLink& l, std::vector<Wa
             base.box = b.n;
             rows.push_back(base);
         }
+        leaveAll(bench.server, clients);
         return;
     }
     base.joinMs = double(c.joinedUs - c.connectUs) * 1e-3;
@@ -330,7 +347,7 @@ void measureLink(Bench& bench, const Design& d, const WanLink& l, std::vector<Wa
         r.egressBytesPerS = w.egressBytes / r.soakS;
         rows.push_back(r);
     }
-    c.session->disconnect(100);
+    leaveAll(bench.server, clients);
 }
 
 // The classroom's views: the driller's paper camera, then 15 others orbited about its target in
@@ -369,9 +386,19 @@ void measureClassroom(Bench& bench, const Design& d, int n, WanResults& out) {
     row.classroom = true;
     row.viewChangeMs = kNotMeasured;
     if (!pumpAllUntil(clients, config.joinTimeoutS * 2, [&] { return allJoined(clients); })) {
+        const auto joined = std::count_if(clients.begin(), clients.end(),
+                                          [](const auto& c) { return c->joinedUs != 0; });
+        std::string why;
+        for (const auto& c : clients)
+            if (!c->joinedUs && why.empty())
+                why =
+                    c->session->closeReason().empty() ? "still waiting" : c->session->closeReason();
+        fmt::print(stderr, "wan study: {} classroom of {}: {} joined within {:.0f} s ({})\n",
+                   d.name, n, joined, config.joinTimeoutS * 2, why);
         row.joinMs = -1;
         row.updatesPerS = row.latencyP50Ms = row.latencyP99Ms = row.maxStallMs = kNotMeasured;
         out.rows.push_back(row);
+        leaveAll(bench.server, clients);
         return;
     }
     const SoakWindow w =
@@ -400,8 +427,7 @@ void measureClassroom(Bench& bench, const Design& d, int n, WanResults& out) {
     row.offeredPerS = double(w.submitted) / row.soakS;
     row.egressBytesPerS = w.egressBytes / row.soakS;
     out.rows.push_back(row);
-    for (auto& c : clients)
-        c->session->disconnect(0);
+    leaveAll(bench.server, clients);
 }
 
 } // namespace
