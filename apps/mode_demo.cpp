@@ -204,6 +204,7 @@ void printResult(const DemoRun& run, const DemoOptions& o, const Volume& before,
 int runHeadlessDemo(const DemoOptions& o) {
     std::printf("Trephine demo: an embedded server and a headless trainee over loopback: a burr "
                 "hole with the cranial perforator\n");
+    std::unique_ptr<Device> opened = openHeadlessDevice(o.window.device, "demo");
     Volume skull = openVolume(o.volume);
     const Volume original = skull;
     std::printf("volume   %s: %d x %d x %d voxels, %.3g mm spacing\n", o.volume.c_str(),
@@ -228,7 +229,7 @@ int runHeadlessDemo(const DemoOptions& o) {
     net::TraineeSession session(sessionConfig);
     joinDemo(session);
     std::vector<net::ScriptSample> script = net::feedScript(site, o.feedMmPerS, o.maxSeconds);
-    std::unique_ptr<Device> device = scriptedDevice(script);
+    std::unique_ptr<Device> device = headlessDevice(std::move(opened), script);
     session.play(std::move(script), o.maxSeconds, std::move(device));
     const DemoRun run = drillOverLoopback(session, server, site, o);
     session.liftAndDrain(0.3);

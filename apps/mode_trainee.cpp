@@ -141,31 +141,6 @@ void writeReport(const TraineeOptions& o, const net::TraineeSession& session, co
         throw Error("--report " + o.report + ": cannot write it");
 }
 
-// [Headless] The --device opened before anything connects (null: the script's own poses).
-std::unique_ptr<Device> openHeadlessDevice(const TraineeOptions& o) {
-    std::string error;
-    std::unique_ptr<Device> d = openDevice(o.device, DeviceShell::Headless, error);
-    if (!error.empty())
-        throw Error(error);
-    if (d)
-        std::printf("trainee: the tool follows %s\n", d->name().c_str());
-    return d;
-}
-
-// [Headless] The tool's device: the script's poses, or `opened`, which moves the tool from the
-// script's first pose (a SpaceMouse) or through its own workspace (a plugin); the script gives the
-// tool, its speed and the drilling.
-std::unique_ptr<Device> headlessDevice(std::unique_ptr<Device> opened,
-                                       const std::vector<Sample>& script) {
-    if (!opened)
-        return scriptedDevice(script);
-    if (!dynamic_cast<SpaceMouseDevice*>(opened.get()))
-        return opened;
-    auto placed = std::make_unique<AnchoredDevice>(std::move(opened));
-    placed->setAnchor(ToolPose{script.front().tool.position, script.front().tool.orientation});
-    return placed;
-}
-
 // [Headless] A trainee session with a script as its tool: join, open the view, drill, lift and
 // drain, then the figures, the report and the picture.
 int runHeadlessTrainee(const TraineeOptions& o, std::vector<Sample> script,
@@ -256,7 +231,7 @@ int runTrainee(const TraineeOptions& o) {
     std::vector<Sample> script;
     if (o.script != "burrhole")
         script = net::csvScript(o.script);
-    return runHeadlessTrainee(o, std::move(script), openHeadlessDevice(o));
+    return runHeadlessTrainee(o, std::move(script), openHeadlessDevice(o.device, "trainee"));
 }
 
 // Options only a --headless trainee uses: listed under their own heading, and refused by the
