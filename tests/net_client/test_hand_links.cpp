@@ -1,6 +1,7 @@
 // What a force device makes of HandLinks in a snapshot: the guided trainee's target, the
 // participant an instructor feels, and the guide's bounded, damped pull.
 #include "net/hand_links.h"
+#include "net/trainee_core.h"
 
 #include <glm/geometric.hpp>
 #include <gtest/gtest.h>
@@ -55,4 +56,23 @@ TEST(HandLinksForce, TheGuideIsASpringAndDamperBoundedByItsMaximum) {
     EXPECT_NEAR(moving.x, -10 * c.dampingNsPerMm, 1e-6) << "damping opposes motion";
     const glm::vec3 far = guideForce({100, 0, 0}, {0, 0, 0}, {0, 0, 0}, c);
     EXPECT_NEAR(glm::length(far), c.maxForceN, 1e-5) << "bounded: the trainee can resist";
+}
+
+// The assessment's zone felt on the device: a buzz along the tool's axis in the danger zone and
+// twice that touching a structure, nothing in caution or clear.
+TEST(ZoneBuzz, DangerAndViolationBuzzAlongTheToolCautionDoesNot) {
+    const glm::vec3 axis(0, 0, 1);
+    float danger = 0, violation = 0;
+    for (int i = 0; i < 1000; ++i) { // one second at 1 kHz
+        const double t = i * 1e-3;
+        EXPECT_EQ(zoneBuzz(Zone::Clear, t, axis), glm::vec3(0.0f));
+        EXPECT_EQ(zoneBuzz(Zone::Caution, t, axis), glm::vec3(0.0f));
+        const glm::vec3 d = zoneBuzz(Zone::Danger, t, axis);
+        EXPECT_EQ(d.x, 0.0f);
+        EXPECT_EQ(d.y, 0.0f);
+        danger = std::max(danger, std::abs(d.z));
+        violation = std::max(violation, glm::length(zoneBuzz(Zone::Violation, t, axis)));
+    }
+    EXPECT_NEAR(danger, 0.3f, 0.01f);
+    EXPECT_NEAR(violation, 0.6f, 0.01f);
 }

@@ -7,7 +7,9 @@
 
 #include <algorithm>
 #include <cassert>
+#include <cmath>
 #include <glm/gtc/quaternion.hpp>
+#include <numbers>
 #include <thread>
 
 namespace trephine::net {
@@ -74,7 +76,8 @@ std::optional<ToolPose> ScriptToolSource::intent(double now) {
 
 glm::vec3 TraineeForce::force(const ToolPose& pose, double now) {
     followLinks();
-    glm::vec3 f = feltForce(pose, now);
+    glm::vec3 f = feltForce(pose, now) +
+                  zoneBuzz(m_zone, now, pose.orientation * glm::vec3(0.0f, 0.0f, 1.0f));
     if (m_guide) {
         f += guideForce(*m_guide, pose.position, m_guideVelocity.update(pose.position, now),
                         m_guideConfig);
@@ -124,6 +127,13 @@ glm::vec3 TraineeForce::feltForce(const ToolPose& pose, double now) {
     return extrapolated;
 }
 
+glm::vec3 zoneBuzz(Zone zone, double now, glm::vec3 axis) {
+    const float amplitude = zone == Zone::Violation ? 0.6f : zone == Zone::Danger ? 0.3f : 0.0f;
+    if (amplitude == 0.0f)
+        return glm::vec3(0.0f);
+    return axis * (amplitude * float(std::sin(2.0 * std::numbers::pi * 60.0 * now)));
+}
+
 // A new snapshot (at most 100 a second) may change the links; the same one changes nothing.
 void TraineeForce::followLinks() {
     if (!m_client)
@@ -133,6 +143,9 @@ void TraineeForce::followLinks() {
         return;
     m_linkSnap = std::move(snap);
     m_guide = guideTarget(*m_linkSnap);
+    const uint16_t self = m_linkSnap->welcome ? m_linkSnap->welcome->clientId : 0;
+    const auto warning = m_linkSnap->warnings.find(self);
+    m_zone = warning == m_linkSnap->warnings.end() ? Zone::Clear : warning->second.zone;
     const uint16_t felt = feltParticipant(*m_linkSnap);
     if (felt != m_felt)
         m_feltSequence = 0; // a new participant's models: take its newest, whatever its number

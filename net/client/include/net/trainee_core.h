@@ -74,6 +74,11 @@ private:
     int m_nextTools = 0;            // button 1 presses
 };
 
+// The assessment's warning felt on the device: a 60 Hz buzz along the tool's axis while its own
+// tool is in the danger zone (0.3 N) or touching a structure (0.6 N); nothing when clear or in
+// caution, which the view shows.
+glm::vec3 zoneBuzz(Zone zone, double now, glm::vec3 axis);
+
 // The haptic loop's force in either design, chosen per tick. DBI: the server's force models,
 // extrapolated and blended (the multi-rate scheme). Local: the ForceModel on the client's own copy
 // of the volume, read under ClientThread::withLocalVolume's shared lock; while no copy is held it
@@ -114,6 +119,7 @@ private:
     std::optional<glm::vec3> m_guide;
     uint16_t m_felt = 0;
     uint32_t m_feltSequence = 0;
+    Zone m_zone = Zone::Clear; // of the newest warning about its own tool
     VelocityEstimate m_guideVelocity;
     HandGuideConfig m_guideConfig;
     std::atomic<uint64_t> m_feltTicks{0}, m_guidedTicks{0};
