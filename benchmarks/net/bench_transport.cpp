@@ -54,15 +54,12 @@ void BM_TransportOverLink(benchmark::State& state) {
     const bool adaptive = state.range(0) != 0;
     const double rttMs = double(state.range(1)), lossPct = double(state.range(2));
     const Volume& skull = skull128();
-    BulkWindow window;
-    window.adaptive = adaptive;
-    setDefaultBulkWindow(window);
     ServerConfig sc;
+    sc.bulkWindow.adaptive = adaptive;
     sc.port = 0;
     sc.volumeName = "skull:128";
     SessionServer server(skull, sc);
     server.start();
-    setDefaultBulkWindow(BulkWindow{});
     LinkConditions link;
     link.latencyMs = rttMs / 2;
     link.lossPercent = lossPct;

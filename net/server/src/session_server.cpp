@@ -78,7 +78,7 @@ StepConfig stepConfig(const ServerConfig& c, std::function<bool()> yield) {
 
 struct SessionServer::Impl {
     Impl(Volume v, const ServerConfig& c)
-        : host(Host::listen(c.port, c.maxClients + c.admission.waitingSlots)),
+        : host(Host::listen(c.port, c.maxClients + c.admission.waitingSlots, c.bulkWindow)),
           wakeFd(eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)),
           outbox(
               c.maxInFlightBytes, book, [this] { return clock(); }, [this] { wakeNetwork(); }),

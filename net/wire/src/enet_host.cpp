@@ -39,19 +39,7 @@ uint32_t channelPacketFlags(Channel c) {
 namespace {
 std::mutex g_libMutex;
 int g_libUsers = 0;
-std::mutex g_windowMutex;
-BulkWindow g_defaultWindow;
 } // namespace
-
-BulkWindow defaultBulkWindow() {
-    std::lock_guard lock(g_windowMutex);
-    return g_defaultWindow;
-}
-
-void setDefaultBulkWindow(const BulkWindow& w) {
-    std::lock_guard lock(g_windowMutex);
-    g_defaultWindow = w;
-}
 
 EnetLibrary::EnetLibrary() {
     std::lock_guard lock(g_libMutex);
@@ -103,7 +91,7 @@ std::string formatAddress(const ENetAddress& a) {
     return std::string(ip) + ":" + std::to_string(a.port);
 }
 
-Host Host::listen(uint16_t port, size_t maxPeers) {
+Host Host::listen(uint16_t port, size_t maxPeers, BulkWindow window) {
     EnetLibrary lib; // keeps ENet initialised while the host is created
     ENetAddress a{};
     a.host = ENET_HOST_ANY;
@@ -113,7 +101,7 @@ Host Host::listen(uint16_t port, size_t maxPeers) {
         throw Error("cannot listen on UDP port " + std::to_string(port) +
                     " (in use? try another --port)");
     Host host(h);
-    host.m_window = defaultBulkWindow();
+    host.m_window = window;
     return host;
 }
 

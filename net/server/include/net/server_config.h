@@ -5,6 +5,7 @@
 
 #include "libsim/dbi_renderer.h"
 #include "net/admission.h"
+#include "net/enet_host.h"
 #include "net/protocol.h"
 #include "net/scene.h"
 
@@ -44,7 +45,7 @@ struct ServerConfig {
     // What renders the views: empty, the CPU ray caster; `trephine server --renderer gpu` sets
     // the GPU's (libsim_gpu/gpu_renderer.h).
     DbiRendererFactory renderer;
-    float maxStepS = 0.05f;  // longest drilling step taken from one tool state to the next
+    float maxStepS = 0.05f; // longest drilling step taken from one tool state to the next
     // Between two drilling tool states the cutter sweeps the path in sub-steps of at most a
     // quarter voxel (sweepPoses); a move longer than this is a jump, drilled at its end only.
     float maxSweepMm = 10.0f;
@@ -89,6 +90,8 @@ struct ServerConfig {
     // All participants' views together (w x h each): a view that would pass it is refused. The
     // server keeps about 40 bytes a pixel of view (frame, hit cache, coded copies).
     int64_t maxTotalViewPixels = 16 << 20;
+    // How the host sizes each peer's reliable window (docs/protocol.md, "The reliable window").
+    BulkWindow bulkWindow;
     // When set, every change to the session is appended here (net/session_log.h) before anything
     // it caused is sent to a client.
     std::shared_ptr<SessionRecorder> recorder;

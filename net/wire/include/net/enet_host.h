@@ -66,16 +66,13 @@ struct BulkWindow {
     double queueTargetMs = 10;
     uint32_t burstBytes = 16 * 1024; // the most released at once beyond the pace
 };
-// What Host::listen uses (the transport benchmark compares both settings in one process).
-BulkWindow defaultBulkWindow();
-void setDefaultBulkWindow(const BulkWindow& w);
 
 class Host {
 public:
     using EventHandler = std::function<void(const ENetEvent&)>;
 
     // A server host bound to port (0 = any free port; see port()). Throws trephine::Error.
-    static Host listen(uint16_t port, size_t maxPeers);
+    static Host listen(uint16_t port, size_t maxPeers, BulkWindow window = {});
     // A client host with one outgoing peer slot.
     static Host client();
 
