@@ -470,9 +470,9 @@ void writeWan(std::ostringstream& md, const StudyReportInput& in, const std::str
     writeFile((std::filesystem::path(dir) / "wan-join.svg").string(), svgLinePlot(join));
     md << "\n![Update latency over the WAN](wan.svg)\n\n![Join time over the WAN](wan-join.svg)"
           "\n\nPaper: it planned \"to see how the two volumetric C-VE methods compare over a wide "
-          "area network\" and measured only its LAN. ENet sends image and volume updates as "
-          "reliable data, at most 64 KiB in flight per peer: about 64 KiB per round trip, so a "
-          "design whose updates outgrow that window queues behind itself as the RTT grows.\n\n";
+          "area network\" and measured only its LAN. Image and volume updates travel as reliable "
+          "ENet data, retransmitted in order: a lost fragment holds back everything behind it for "
+          "a round trip or more, so the p99s and stalls grow with RTT x loss.\n\n";
 }
 
 // [Classroom] One driller and N-1 watchers on one shared link (DIR/classroom.svg).
