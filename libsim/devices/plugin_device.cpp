@@ -246,11 +246,13 @@ DeviceState PluginDevice::read(double now) {
     std::unique_lock lock(d.mutex);
     const auto deadline = std::chrono::duration_cast<Clock::duration>(
         std::chrono::duration<double>(d.options.deadlineS));
-    // A call out longer than the deadline cuts the device off. Counted from when the worker went
-    // into the plugin: a worker not yet scheduled is the machine's lateness, not the plugin's.
-    if (!d.cut && d.inCall && Clock::now() - d.callStart >= deadline)
+    const auto hang = std::chrono::duration_cast<Clock::duration>(
+        std::chrono::duration<double>(std::max(d.options.hangS, d.options.deadlineS)));
+    // A call out longer than hangS cuts the device off. Counted from when the worker went into
+    // the plugin: a worker not yet scheduled is the machine's lateness, not the plugin's.
+    if (!d.cut && d.inCall && Clock::now() - d.callStart >= hang)
         d.cutOff(fmt::format("{} did not return within {:.1f} ms", d.callName,
-                             d.options.deadlineS * 1e3));
+                             std::max(d.options.hangS, d.options.deadlineS) * 1e3));
     if (d.cut) {
         d.missed++;
         return {};

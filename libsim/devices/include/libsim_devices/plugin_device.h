@@ -17,9 +17,13 @@ namespace trephine {
 struct PluginOptions {
     // Passed to the plugin's open() (e.g. "mass=0.15,k=1"): the part of a spec after '?'.
     std::string args;
-    // A plugin call not back this long after it was posted cuts the device off: from that tick on
-    // it reads invalid (the loop outputs zero force) and is never called again but to close.
+    // A read not back this long after it was posted reads invalid: the loop outputs zero force
+    // that tick (one tick).
     double deadlineS = 0.001;
+    // A call inside the plugin this long cuts the device off: from then on it reads invalid and
+    // is never called again but to close. Longer than a tick, so that one preemption or USB
+    // hiccup on a busy machine costs a tick's force, not the session's.
+    double hangS = 0.02;
     // Where the one line saying why a device was cut off goes (default: stderr).
     std::function<void(const std::string&)> report;
 };
