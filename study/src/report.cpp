@@ -430,9 +430,10 @@ void writeWan(std::ostringstream& md, const StudyReportInput& in, const std::str
         "(raw, "
         "as the paper). Every column is in wan.csv.\n\n",
         c.cutHz, c.soakS, c.targetSoakS,
-        in.quick ? " (`study all` runs the study quick-sized: `trephine study wan --quick`; "
-                   "`trephine study wan` runs the whole sweep)"
-                 : "");
+        c.targetSoakS < 60
+            ? " (`study all` runs the study quick-sized: `trephine study wan --quick`; "
+              "`trephine study wan` runs the whole sweep)"
+            : "");
     std::vector<std::vector<std::string>> t;
     for (const WanRow& w : r.rows)
         if (!w.classroom)
