@@ -97,6 +97,10 @@ TEST(HandLinks, EveryoneHearsWhoFeelsAndGuidesUntilHandBackAndLeave) {
     // reaches everyone left.
     s.cho.takeOver(0);
     EXPECT_TRUE(s.everyoneHas({{cho, ada, false}}));
+    s.cho.takeOver(ben); // the guide is not carried to the next hold: it is asked for again
+    EXPECT_TRUE(pumpUntil(s.all, [&] { return s.ben.participants().at(ben).takenOverBy == cho; }));
+    EXPECT_TRUE(s.everyoneHas({{cho, ada, false}}));
+    s.cho.takeOver(0);
     s.ada.disconnect();
     EXPECT_TRUE(s.everyoneHas({}));
     EXPECT_TRUE(s.ben.newest().get<HandLinks>().has_value()) << "the ending is said, not implied";

@@ -58,8 +58,8 @@ TEST(HandLinksForce, TheGuideIsASpringAndDamperBoundedByItsMaximum) {
     EXPECT_NEAR(glm::length(far), c.maxForceN, 1e-5) << "bounded: the trainee can resist";
 }
 
-// The assessment's zone felt on the device: a buzz along the tool's axis in the danger zone and
-// twice that touching a structure, nothing in caution or clear.
+// The assessment's zone felt on the device: a buzz up the tool's shaft in the danger zone and
+// twice that touching a structure, never toward the bone, nothing in caution or clear.
 TEST(ZoneBuzz, DangerAndViolationBuzzAlongTheToolCautionDoesNot) {
     const glm::vec3 axis(0, 0, 1);
     float danger = 0, violation = 0;
@@ -70,6 +70,7 @@ TEST(ZoneBuzz, DangerAndViolationBuzzAlongTheToolCautionDoesNot) {
         const glm::vec3 d = zoneBuzz(Zone::Danger, t, axis);
         EXPECT_EQ(d.x, 0.0f);
         EXPECT_EQ(d.y, 0.0f);
+        EXPECT_GE(d.z, 0.0f) << "one-sided";
         danger = std::max(danger, std::abs(d.z));
         violation = std::max(violation, glm::length(zoneBuzz(Zone::Violation, t, axis)));
     }

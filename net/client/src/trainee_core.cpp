@@ -131,7 +131,9 @@ glm::vec3 zoneBuzz(Zone zone, double now, glm::vec3 axis) {
     const float amplitude = zone == Zone::Violation ? 0.6f : zone == Zone::Danger ? 0.3f : 0.0f;
     if (amplitude == 0.0f)
         return glm::vec3(0.0f);
-    return axis * (amplitude * float(std::sin(2.0 * std::numbers::pi * 60.0 * now)));
+    // One-sided, back up the shaft: a buzz never pushes the tool toward the structure.
+    const float wave = 0.5f + 0.5f * float(std::sin(2.0 * std::numbers::pi * 60.0 * now));
+    return axis * (amplitude * wave);
 }
 
 // A new snapshot (at most 100 a second) may change the links; the same one changes nothing.
@@ -173,8 +175,15 @@ void TraineeCore::startHaptics(ToolSource& tools) {
     m_force->setClient(m_client.get());
     m_force->setLocal(m_config.client.client.sync == Sync::Volume);
     m_guard = std::make_unique<DeviceGuard>(tools.device(), m_config.guard);
-    // Never driven while the link is down: the forces it would feel are stale.
-    m_guard->setGate([this] { return m_client->snapshot()->state == LinkState::Connected; });
+    // Never driven while the link is down, or silent (a server gone without a goodbye, which ENet
+    // notices only after 5-30 s): the guide, the buzz and the forces it would feel are stale. The
+    // client pings every 250 ms, so a second of silence is four answers missed.
+    m_guard->setGate([this] {
+        const std::shared_ptr<const ClientSnapshot> s = m_client->snapshot();
+        const ClientConfig& cc = m_config.client.client;
+        const uint64_t now = cc.clock ? cc.clock() : steadyNowUs();
+        return s->state == LinkState::Connected && now - s->lastHeardUs < kSilentLinkUs;
+    });
     m_guard->setIntentSource([&tools](double now) { return tools.intent(now); });
     m_loop = std::make_unique<HapticLoop>(*m_guard, m_config.haptics,
                                           [this, &tools](const DeviceState& s, double now) {

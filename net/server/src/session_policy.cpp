@@ -611,10 +611,18 @@ bool SessionPolicy::mayCut(uint16_t id, Role role) const {
                        [&](const auto& held) { return held.second == id; });
 }
 
-// Hands back whatever `id` holds or is held by; true when that changed anything.
+// Hands back whatever `id` holds or is held by; true when that changed anything. A guide ends
+// with its hold: it is never carried to the next trainee the instructor takes.
 bool SessionPolicy::releaseTakeOvers(uint16_t id) {
     return std::erase_if(m_takenOver, [&](const auto& held) {
-               return held.first == id || held.second == id;
+               if (held.first != id && held.second != id)
+                   return false;
+               if (auto link = m_handLinks.find(held.second); link != m_handLinks.end()) {
+                   link->second.guides = false;
+                   if (link->second.feels == 0)
+                       m_handLinks.erase(link);
+               }
+               return true;
            }) > 0;
 }
 

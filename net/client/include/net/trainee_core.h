@@ -74,9 +74,9 @@ private:
     int m_nextTools = 0;            // button 1 presses
 };
 
-// The assessment's warning felt on the device: a 60 Hz buzz along the tool's axis while its own
-// tool is in the danger zone (0.3 N) or touching a structure (0.6 N); nothing when clear or in
-// caution, which the view shows.
+// The assessment's warning felt on the device: a 60 Hz buzz back up the tool's shaft (its local
+// +z, away from the tip), never toward the bone, while its own tool is in the danger zone (peak
+// 0.3 N) or touching a structure (0.6 N); nothing when clear or in caution, which the view shows.
 glm::vec3 zoneBuzz(Zone zone, double now, glm::vec3 axis);
 
 // The haptic loop's force in either design, chosen per tick. DBI: the server's force models,
@@ -124,6 +124,9 @@ private:
     HandGuideConfig m_guideConfig;
     std::atomic<uint64_t> m_feltTicks{0}, m_guidedTicks{0};
 };
+
+// Silence from a connected server after which the device is no longer driven.
+inline constexpr uint64_t kSilentLinkUs = 1'000'000;
 
 struct TraineeCoreConfig {
     ClientThreadConfig client; // its onHapticModel is the core's
