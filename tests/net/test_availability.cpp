@@ -799,8 +799,9 @@ TEST(FairShare, APeerIdleForAWhileGoesFirstButBanksNoCredit) {
         order.push_back(peer);
     }
     EXPECT_EQ(order, (std::vector<uint16_t>{2, 1, 2, 1, 2, 1}));
-    share.forget(2);
-    EXPECT_EQ(share.charged(2), 3000u) << "its total stays for the report";
+    EXPECT_EQ(share.charged(2), 3000u);
+    share.forget(2); // gone: its report keeps the total the step last wrote
+    EXPECT_EQ(share.charged(2), 0u) << "a later peer given its id starts from nothing";
 }
 
 // A lone view gets every step's whole slice whatever its size: a 1920 x 1080 view renders a slice

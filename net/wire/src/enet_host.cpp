@@ -215,7 +215,10 @@ void Host::paceBefore() {
         } else {
             w.window *= 1.0 - 0.5 * rounds * std::min(1.0, (queue - target) / target);
         }
-        w.window = std::clamp(w.window, double(m_window.minBytes), double(m_window.maxBytes));
+        // ENet multiplies the window by its packet throttle (<= 32) in 32 bits.
+        const double most = std::min(double(m_window.maxBytes),
+                                     double(UINT32_MAX / ENET_PEER_PACKET_THROTTLE_SCALE));
+        w.window = std::clamp(w.window, double(m_window.minBytes), most);
         // Paced: a window spread over the lowest round trip, so an idle peer's first image does
         // not enter the path at once.
         const double pace = w.window / base; // bytes a millisecond

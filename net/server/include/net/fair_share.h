@@ -27,7 +27,10 @@ public:
     void charge(std::span<const uint16_t> peers, uint64_t us);
     // Work done for one peer outside the queue (a volume transfer, an update's coding).
     void charge(uint16_t peer, uint64_t us);
-    void forget(uint16_t peer) { m_finish.erase(peer); }
+    void forget(uint16_t peer) {
+        m_finish.erase(peer);
+        m_total.erase(peer); // a later peer given the same id starts from nothing
+    }
     // The time charged to `peer` in all (what the report shows).
     uint64_t charged(uint16_t peer) const;
 
