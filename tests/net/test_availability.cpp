@@ -914,3 +914,25 @@ TEST(AvailabilityFairShare, UpdatesOfHeldViewsGoBeforeNewViewsRows) {
     EXPECT_TRUE(rig.step.rendering());
     EXPECT_TRUE(compare(seen, rig.step.render(small)).identical());
 }
+
+// Others' changes, anew every step while events always wait, never starve a newcomer: each step
+// that gave new views nothing gives them a piece, so its first picture arrives.
+TEST(AvailabilityFairShare, ANewcomerIsNotStarvedByAViewChangedEveryStep) {
+    const Volume skull = makeSkull(48);
+    SliceRig rig(skull, 64 * 64 * 4, 256 * 4, true);
+    const Camera busy = cameraPreset("top", skull, {256, 256});
+    std::vector<Outbox::Ready> out = rig.run({rig.join(1, busy)});
+    for (int steps = 0; !has(out, 1, true) && steps < 100; ++steps)
+        out = rig.run({});
+    ASSERT_TRUE(has(out, 1, true));
+    rig.eventsWait = true;
+    out = rig.run({rig.join(3, cameraPreset("paper", skull, {64, 64}))});
+    int steps = 1;
+    for (; !has(out, 3, true) && steps < 200; ++steps) {
+        LogRecord cut = topCut(skull, rig.now);
+        cut.as<CutEvent>()->box.lo.z -= steps % 6; // a change to the busy view every step
+        out = rig.run({cut});
+    }
+    EXPECT_TRUE(has(out, 3, true)) << "the newcomer's first picture after " << steps << " steps";
+    EXPECT_LE(steps, 64 * 64 / (256 * 4) + 3) << "a piece a step, then its frame's copy";
+}

@@ -368,19 +368,17 @@ void SimulationStep::schedule() {
         if (v.settled())
             postView(v); // a newcomer to a view already whole gets it now
     int64_t rowsLeft = std::max<int64_t>(m_config.slicePixels, 1);
+    const int64_t slice = rowsLeft;
     std::vector<ViewFrame*> ready;
     std::vector<uint16_t> peers;
-    for (;;) {
+    // One piece for the peer whose turn it is among the views `wanted` selects.
+    auto pieceFor = [&](auto wanted) {
         ready.clear();
         for (ViewFrame& v : m_views)
-            if (v.whole() && !v.settled() && !v.holders.empty())
+            if (!v.holders.empty() && wanted(v))
                 ready.push_back(&v);
-        if (ready.empty() && rowsLeft > 0)
-            for (ViewFrame& v : m_views)
-                if (!v.whole() && !v.holders.empty())
-                    ready.push_back(&v);
         if (ready.empty())
-            return;
+            return false;
         // Ties go to the smaller view: a trainee's rectangle before a larger view's piece.
         std::stable_sort(ready.begin(), ready.end(), [](const ViewFrame* x, const ViewFrame* y) {
             return pixelsOf(x->frame) < pixelsOf(y->frame);
@@ -394,19 +392,33 @@ void SimulationStep::schedule() {
         m_share.charge(v.holders, m_share.now() - t0);
         if (v.settled())
             postView(v);
-        if (m_config.yield && m_config.yield())
+        return true;
+    };
+    auto changed = [](const ViewFrame& v) { return v.whole() && !v.settled(); };
+    auto newRows = [](const ViewFrame& v) { return !v.whole(); };
+    for (;;) {
+        if (!pieceFor(changed) && !(rowsLeft > 0 && pieceFor(newRows)))
             return;
+        if (m_config.yield && m_config.yield()) {
+            // Events wait and go first, but a step that gave new views nothing gives them a
+            // piece: others' changes, each step anew, never starve a newcomer's first picture.
+            if (rowsLeft == slice)
+                pieceFor(newRows);
+            return;
+        }
     }
 }
 
-// One piece of the view's work: the next chunk of its frame's copy, else its changed pixels, else
-// its next rows (counted against the step's `rowsLeft`).
+// One piece of the view's work: the next chunk of its frame's copy, else its next rows (counted
+// against the step's `rowsLeft`), else its changed pixels. Rows before changes: a change in the
+// rows done so far, every step, would otherwise hold a new view's rows back for good; nothing of
+// it is sent before it is whole, so its changes are rendered then, before its copy.
 void SimulationStep::workOn(ViewFrame& v, int64_t& rowsLeft) {
     if (v.copying()) {
         copyChunk(v);
         return;
     }
-    if (!v.stale.empty()) {
+    if (!v.stale.empty() && v.whole()) {
         renderStale(v);
         return;
     }
