@@ -141,9 +141,12 @@ std::unique_ptr<EglContext> EglContext::open() {
     auto best = std::find_if(found.begin(), found.end(), [](auto& c) { return !c.info.software; });
     if (best == found.end())
         best = found.begin();
+    // The others go; a display shared with the chosen one stays initialised.
     for (auto it = found.begin(); it != found.end(); ++it)
         if (it != best && it->display != best->display)
             close(*it);
+        else if (it != best)
+            eglDestroyContext(it->display, it->context);
     return std::unique_ptr<EglContext>(new EglContext(best->display, best->context, best->info));
 }
 
