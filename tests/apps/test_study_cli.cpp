@@ -384,10 +384,11 @@ TEST(StudyCli, AMisspeltOrMissingModeIsNamedWithTheChoices) {
     struct Case {
         const char* args;
         const char* says;
-    } cases[] = {{"stduy updates --quick", "unknown mode 'stduy' (modes: server,"},
-                 {"study update --quick", "unknown subcommand 'update' (study has: haptics,"},
-                 {"", "a mode is required (modes: server,"},
-                 {"study", "a subcommand is required (study has: haptics, updates, display, all)"}};
+    } cases[] = {
+        {"stduy updates --quick", "unknown mode 'stduy' (modes: server,"},
+        {"study update --quick", "unknown subcommand 'update' (study has: haptics,"},
+        {"", "a mode is required (modes: server,"},
+        {"study", "a subcommand is required (study has: haptics, updates, display, wan, all)"}};
     for (const Case& c : cases) {
         CommandResult r = runTrephine(dir, c.args);
         EXPECT_EQ(r.exitCode, 2) << c.args;
@@ -414,7 +415,8 @@ TEST(StudyCli, AllLinkOffRunsTheUpdateStudyOnce) {
     if (display)
         setenv("DISPLAY", savedDisplay.c_str(), 1);
     ASSERT_EQ(r.exitCode, 0) << r.out << r.err;
-    EXPECT_NE(r.out.find("== 3/3 display =="), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("== 3/4 display =="), std::string::npos) << r.out;
+    EXPECT_NE(r.out.find("== 4/4 WAN and classroom (quick-sized) =="), std::string::npos) << r.out;
     checkUpdates(readCsv(out + "/updates.csv"), {10, 40, 80});
     EXPECT_FALSE(std::filesystem::exists(out + "/updates-link.csv"));
     EXPECT_FALSE(std::filesystem::exists(out + "/updates-link.svg"));
