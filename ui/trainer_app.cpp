@@ -959,7 +959,9 @@ void TrainerWindow::mouseTool(const FrameState& f) {
     glm::vec3 axis(0.0f);
     const float ringMm = 0.5f * shape.diameterMm + 2.0f; // the bone around a hole the cutter cut
     hole.reset();
-    if (overView)
+    // While the picture is drawn warped, the bone under the pointer is not where cpuDbi says: the
+    // pick waits one round trip for the exact picture rather than land the tool off the bone.
+    if (overView && !f.warped)
         hit = pickSurface(cpuDbi, cpuDbiCamera, px, py);
     if (hit) {
         pointerPick = *hit;
