@@ -228,7 +228,7 @@ TEST(SessionLossy, AToolStateIsNotDelayedByAFullImageInFlight) {
 // 100 ms, 20 Mbit/s link holds 250 kB), and a reliable 2 MB message still arrives whole.
 TEST(SessionLossy, TheServersWindowGrowsPastEnetsOnALongFatLink) {
     Host server = Host::listen(0, 1);
-    server.setBulkWindow(BulkWindow{});
+    server.setBulkWindow(BulkWindow{.adaptive = true});
     LinkEmulator link(0, loopback(server.port()), LinkConditions::parse("latency=50,rate=20"));
     Host client = Host::client();
     ASSERT_NE(client.connect(loopback(link.port()), kProtocolVersion), nullptr);
