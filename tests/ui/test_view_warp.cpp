@@ -124,8 +124,9 @@ TEST_F(ViewWarpTest, ACameraThatDidNotMoveIsTheDbiBitForBit) {
         // The depth is the mesh's, rasterised from float matrices: one vertex a pixel meets the
         // bone within a hair of the exact picture; coarser cells are planes between their
         // corners (the window blits, never warps, a camera that did not move).
-        if (step == 1)
+        if (step == 1) {
             EXPECT_LT(depthError, 1e-5f);
+        }
     }
 }
 
