@@ -27,15 +27,7 @@ std::vector<JoystickInput> pollJoysticks() {
 }
 
 net::ToolState DeviceTools::toolAt(const ToolPose& pose, double) {
-    const WindowDevice::Tool t = m_window.tool();
-    net::ToolState ts;
-    ts.toolKind = uint8_t(t.kind);
-    ts.diameterMm = t.diameterMm;
-    ts.position = pose.position;
-    ts.orientation = pose.orientation;
-    ts.speed = t.drilling ? t.speed : 0.0f;
-    ts.drilling = t.drilling;
-    return ts;
+    return m_window.toolAt(pose);
 }
 
 glm::vec3 DeviceTools::velocity(const ToolPose& pose, double now) {

@@ -175,6 +175,18 @@ WindowDevice::Tool WindowDevice::tool() const {
     return m_tool;
 }
 
+net::ToolState WindowDevice::toolAt(const ToolPose& pose) const {
+    const Tool t = tool();
+    net::ToolState ts;
+    ts.toolKind = uint8_t(t.kind);
+    ts.diameterMm = t.diameterMm;
+    ts.position = pose.position;
+    ts.orientation = pose.orientation;
+    ts.speed = t.drilling ? t.speed : 0.0f;
+    ts.drilling = t.drilling;
+    return ts;
+}
+
 glm::vec3 WindowDevice::velocity() const {
     std::lock_guard lock(m_mutex);
     return m_velocity;

@@ -119,17 +119,7 @@ class WindowTools : public net::ToolSource {
 public:
     explicit WindowTools(WindowDevice& device) : m_device(device) {}
     Device& device() override { return m_device; }
-    net::ToolState toolAt(const ToolPose& pose, double) override {
-        const WindowDevice::Tool t = m_device.tool();
-        net::ToolState ts;
-        ts.toolKind = uint8_t(t.kind);
-        ts.diameterMm = t.diameterMm;
-        ts.position = pose.position;
-        ts.orientation = pose.orientation;
-        ts.speed = t.drilling ? t.speed : 0.0f;
-        ts.drilling = t.drilling;
-        return ts;
-    }
+    net::ToolState toolAt(const ToolPose& pose, double) override { return m_device.toolAt(pose); }
     glm::vec3 velocity(const ToolPose&, double) override { return m_device.velocity(); }
 
 private:

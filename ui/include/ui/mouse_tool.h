@@ -9,6 +9,7 @@
 #include "libsim/force_model.h"
 #include "libsim/skull.h"
 #include "libsim/tool.h"
+#include "net/protocol.h"
 
 #include <mutex>
 #include <optional>
@@ -114,6 +115,8 @@ public:
     // The frame's pose and tool, set at `frameTimeS` (seconds, any clock that only moves forward).
     void set(const DeviceState& s, const Tool& t, double frameTimeS);
     Tool tool() const;
+    // The tool state the haptic loop sends for the frame's tool held at `pose`.
+    net::ToolState toolAt(const ToolPose& pose) const;
     // The tool's velocity (mm/s) from the last two frames' poses and their frame times
     // (VelocityEstimate: 0 after a gap or a jump), not from the haptic loop's ticks: the pose
     // changes only once a frame.
