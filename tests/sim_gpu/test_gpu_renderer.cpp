@@ -123,8 +123,9 @@ TEST_F(GpuRendererTest, AutoCountsASoftwareRendererAsNoGpu) {
     EXPECT_NE(why.find(egl->info().renderer), std::string::npos) << why;
     const bool automatic = bool(gpu::chooseRenderer(gpu::RendererChoice::Auto, &why));
     EXPECT_EQ(automatic, !egl->info().software) << why;
-    if (egl->info().software)
+    if (egl->info().software) {
         EXPECT_NE(why.find("software"), std::string::npos) << why;
+    }
 }
 
 TEST(GlRendererName, SoftwareRasterisersAreKnownByName) {

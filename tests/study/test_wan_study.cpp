@@ -101,10 +101,12 @@ TEST(WanStudy, TheCsvHasTheIssuesColumnsAndARowWithSaneFiguresPerDesignLinkAndCl
         EXPECT_GE(w.maxStallMs, 1000.0 / w.offeredPerS * 0.5);
         // A join is a round trip at least (the connect, the hello), and more.
         EXPECT_GE(w.joinMs, w.rttMs);
-        if (!w.classroom && w.design == "dbi")
+        if (!w.classroom && w.design == "dbi") {
             EXPECT_GE(w.viewChangeMs, w.rttMs) << "a new view is a request and its image";
-        if (w.classroom)
+        }
+        if (w.classroom) {
             EXPECT_TRUE(std::isnan(w.viewChangeMs));
+        }
     }
     for (const WanClientRow& c : r.clients) {
         EXPECT_GT(c.updatesPerS, 0) << c.index;
