@@ -20,6 +20,7 @@
 using namespace trephine;
 using namespace trephine::net;
 using trephine::testing::Pumped;
+using trephine::testing::pumpWhile;
 
 namespace {
 
@@ -63,30 +64,6 @@ std::string failure(F f) {
         return e.what();
     }
     return {};
-}
-
-// Runs `steps` on a thread of the test while this thread pumps the server until they return, and
-// after each pass runs `between` (what must happen on the pumping thread, such as a stop). The
-// session's own timeouts end a step the server never answers; what the steps throw is thrown here.
-void pumpWhile(const std::function<void()>& steps, const std::function<void()>& between = {}) {
-    std::atomic<bool> done = false;
-    std::exception_ptr thrown;
-    std::thread session([&] {
-        try {
-            steps();
-        } catch (...) {
-            thrown = std::current_exception();
-        }
-        done = true;
-    });
-    while (!done) {
-        trephine::testing::pumpFor(0.001);
-        if (between)
-            between();
-    }
-    session.join();
-    if (thrown)
-        std::rethrow_exception(thrown);
 }
 
 class TraineeSessionTest : public ::testing::Test {

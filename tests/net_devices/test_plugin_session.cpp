@@ -28,24 +28,7 @@ namespace {
 
 const std::string kPlugins = TREPHINE_PLUGIN_DIR;
 
-// The session's steps on a thread of the test while this thread pumps the server.
-void pumpWhile(const std::function<void()>& steps) {
-    std::atomic<bool> done = false;
-    std::exception_ptr thrown;
-    std::thread session([&] {
-        try {
-            steps();
-        } catch (...) {
-            thrown = std::current_exception();
-        }
-        done = true;
-    });
-    while (!done)
-        trephine::testing::pumpFor(0.001);
-    session.join();
-    if (thrown)
-        std::rethrow_exception(thrown);
-}
+using trephine::testing::pumpWhile;
 
 class PluginSessionTest : public ::testing::Test {
 protected:

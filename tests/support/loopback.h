@@ -17,7 +17,9 @@
 
 #include <random>
 
+#include <atomic>
 #include <chrono>
+#include <exception>
 #include <functional>
 #include <memory>
 #include <string>
@@ -228,6 +230,31 @@ inline void pumpFor(double seconds) {
         Pumped::pumpAll();
         std::this_thread::sleep_for(std::chrono::microseconds(500));
     } while (std::chrono::steady_clock::now() < end);
+}
+
+// Runs `steps` on a thread of the test while this thread pumps the server until they return, and
+// after each pass runs `between` (what must happen on the pumping thread, such as a stop). The
+// session's own timeouts end a step the server never answers; what the steps throw is thrown here.
+inline void pumpWhile(const std::function<void()>& steps,
+                      const std::function<void()>& between = {}) {
+    std::atomic<bool> done = false;
+    std::exception_ptr thrown;
+    std::thread session([&] {
+        try {
+            steps();
+        } catch (...) {
+            thrown = std::current_exception();
+        }
+        done = true;
+    });
+    while (!done) {
+        trephine::testing::pumpFor(0.001);
+        if (between)
+            between();
+    }
+    session.join();
+    if (thrown)
+        std::rethrow_exception(thrown);
 }
 
 // Drills at `site` through a ClientThread: `states` 5 mm burr tool states 10 ms apart, 0.08 mm

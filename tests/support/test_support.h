@@ -2,6 +2,8 @@
 // running the built `trephine` binary (TREPHINE_BIN) as a user would.
 #pragma once
 
+#include "libsim/volume.h"
+
 #include <atomic>
 #include <chrono>
 #include <cstdlib>
@@ -13,6 +15,16 @@
 #include <unistd.h>
 
 namespace trephine::testing {
+
+// The bone voxels of `v` (bone material, density above zero): what drilling removes.
+inline int64_t boneVoxels(const Volume& v) {
+    int64_t n = 0;
+    for (int z = 0; z < v.dims().z; ++z)
+        for (int y = 0; y < v.dims().y; ++y)
+            for (int x = 0; x < v.dims().x; ++x)
+                n += isBone(v.material(x, y, z)) && v.density(x, y, z) > 0;
+    return n;
+}
 
 // A fresh folder under the system temp dir, removed with everything in it on destruction.
 struct TempDir {

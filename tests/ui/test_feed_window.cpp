@@ -26,19 +26,7 @@
 
 using namespace trephine;
 using namespace trephine::ui;
-
-namespace {
-
-int64_t boneVoxels(const Volume& v) {
-    int64_t n = 0;
-    for (int z = 0; z < v.dims().z; ++z)
-        for (int y = 0; y < v.dims().y; ++y)
-            for (int x = 0; x < v.dims().x; ++x)
-                n += isBone(v.material(x, y, z)) && v.density(x, y, z) > 0;
-    return n;
-}
-
-} // namespace
+using trephine::testing::boneVoxels;
 
 TEST(FeedWindow, HoldingTheButtonOverBoneDrillsAHoleTheScreenshotShowsUncovered) {
     TREPHINE_NEED_DISPLAY("the trainee window");

@@ -20,17 +20,9 @@
 
 using namespace trephine;
 using namespace trephine::ui;
+using trephine::testing::boneVoxels;
 
 namespace {
-
-int64_t boneVoxels(const Volume& v) {
-    int64_t n = 0;
-    for (int z = 0; z < v.dims().z; ++z)
-        for (int y = 0; y < v.dims().y; ++y)
-            for (int x = 0; x < v.dims().x; ++x)
-                n += isBone(v.material(x, y, z)) && v.density(x, y, z) > 0;
-    return n;
-}
 
 // The seconds since the window's first picture (negative before), as the window's input
 // callback last saw them; the source's script runs on it.
