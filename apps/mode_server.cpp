@@ -45,7 +45,7 @@ struct ServerOptions {
     std::string volume = "skull:128";
     std::string saveOnExit;
     int renderThreads = 0;
-    size_t maxClients = 16;
+    size_t maxClients = net::ServerConfig{}.maxClients;
     std::string report;
     std::string traineeCode, instructorCode; // generated when not given (docs/security.md)
     bool open = false;                       // no codes: anyone who reaches the port joins

@@ -571,3 +571,24 @@ TEST(SessionPolicy, RejectedMessagesCountTowardTheMalformedLimit) {
     EXPECT_FALSE(rig.p().live(ada));
     EXPECT_EQ(rig.counters().malformedKicks, 1u);
 }
+
+// The defaults take a classroom: 64 trainees at the default 500 x 500 view, and their
+// instructor, each welcomed.
+TEST(SessionPolicy, AClassroomOf64JoinsWithTheDefaults) {
+    PolicyRig rig;
+    std::vector<uint16_t> ids;
+    for (int i = 0; i <= 64; ++i) {
+        PolicyOutput out;
+        const uint16_t id = rig.p().connect(kProtocolVersion, rig.now, out);
+        ASSERT_NE(id, 0) << "participant " << i;
+        Hello h;
+        h.name = "p" + std::to_string(i);
+        h.role = i == 64 ? Role::Instructor : Role::Trainee;
+        PolicyOutput answer = rig.send(id, h);
+        ASSERT_EQ(sentTo<Welcome>(answer, id).size(), 1u) << "participant " << i;
+        ids.push_back(id);
+    }
+    for (uint16_t id : ids)
+        EXPECT_TRUE(rig.p().admitted(id));
+    EXPECT_EQ(rig.counters().refusedFull, 0u);
+}

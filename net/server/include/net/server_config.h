@@ -22,8 +22,9 @@ class SessionRecorder;
 struct ServerConfig {
     uint16_t port = 7777; // 0: any free port (tests); see SessionServer::port()
     // Participants at once; one more is refused with RefuseReason::ServerFull (ENet keeps a few
-    // spare peer slots so the refusal can be said).
-    size_t maxClients = 16;
+    // spare peer slots so the refusal can be said). A classroom of 64 trainees and their
+    // instructors joins without a flag.
+    size_t maxClients = 72;
     // The largest view (width x height pixels) served: a larger hello is refused (BadHello), a
     // larger view request is dropped and counted (viewsRefused()).
     int64_t maxViewPixels = 2048 * 2048;
