@@ -198,3 +198,50 @@ TEST(LinkEmulator, RateCountsEachDatagramsFraming) {
     enet_socket_destroy(sender);
     enet_socket_destroy(target);
 }
+
+// A relay in front of a server on this machine passes on each client host as an address of its
+// own, one for all of a host's ports, so the server's per-address rules (admission, a removal)
+// see hosts, not the relay.
+TEST(LinkEmulator, EachClientHostReachesALocalTargetFromItsOwnAddress) {
+    ENetSocket target = enet_socket_create(ENET_SOCKET_TYPE_DATAGRAM);
+    ENetAddress bound = parseAddress("127.0.0.1:0");
+    ASSERT_EQ(enet_socket_bind(target, &bound), 0);
+    ENetAddress targetAddress{};
+    enet_socket_get_address(target, &targetAddress);
+    targetAddress.host = bound.host;
+    LinkEmulator relay(0, targetAddress, LinkConditions{});
+    const ENetAddress relayAddress = parseAddress("127.0.0.1:" + std::to_string(relay.port()));
+    // Two sockets of host 127.0.0.2 and one of host 127.0.0.3.
+    std::vector<ENetSocket> from;
+    for (const char* host : {"127.0.0.2:0", "127.0.0.2:0", "127.0.0.3:0"}) {
+        ENetSocket s = enet_socket_create(ENET_SOCKET_TYPE_DATAGRAM);
+        ENetAddress a = parseAddress(host);
+        ASSERT_EQ(enet_socket_bind(s, &a), 0) << host;
+        from.push_back(s);
+    }
+    std::vector<uint32_t> seen(from.size(), 0);
+    for (size_t i = 0; i < from.size(); ++i) {
+        uint8_t payload[1] = {uint8_t(i)};
+        ENetBuffer b{payload, 1};
+        enet_socket_send(from[i], &relayAddress, &b, 1);
+        const auto deadline = Clock::now() + std::chrono::seconds(5);
+        while (!seen[i] && Clock::now() < deadline) {
+            enet_uint32 wait = ENET_SOCKET_WAIT_RECEIVE;
+            if (enet_socket_wait(target, &wait, 50) != 0 || !(wait & ENET_SOCKET_WAIT_RECEIVE))
+                continue;
+            uint8_t got[8];
+            ENetBuffer r{got, sizeof got};
+            ENetAddress sender{};
+            if (enet_socket_receive(target, &sender, &r, 1) == 1 && got[0] == i)
+                seen[i] = sender.host;
+        }
+        ASSERT_NE(seen[i], 0u) << "datagram " << i << " did not arrive";
+        EXPECT_EQ(ENET_NET_TO_HOST_32(seen[i]) >> 24, 127u) << "a loopback address";
+    }
+    EXPECT_EQ(seen[0], seen[1]) << "one host, one address";
+    EXPECT_NE(seen[0], seen[2]) << "two hosts, two addresses";
+    EXPECT_NE(seen[0], bound.host) << "not the relay's own 127.0.0.1";
+    for (ENetSocket s : from)
+        enet_socket_destroy(s);
+    enet_socket_destroy(target);
+}

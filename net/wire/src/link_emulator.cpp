@@ -118,26 +118,49 @@ uint64_t addressKey(const ENetAddress& a) {
     return (uint64_t(a.host) << 16) | a.port;
 }
 
+// A non-blocking UDP socket bound to `at`, with room for bursts; ENET_SOCKET_NULL if it cannot be.
+ENetSocket bindSocket(const ENetAddress& at) {
+    ENetSocket s = enet_socket_create(ENET_SOCKET_TYPE_DATAGRAM);
+    if (s == ENET_SOCKET_NULL)
+        return s;
+    if (enet_socket_bind(s, &at) != 0) {
+        enet_socket_destroy(s);
+        return ENET_SOCKET_NULL;
+    }
+    enet_socket_set_option(s, ENET_SOCKOPT_NONBLOCK, 1);
+    enet_socket_set_option(s, ENET_SOCKOPT_RCVBUF, 4 * 1024 * 1024);
+    enet_socket_set_option(s, ENET_SOCKOPT_SNDBUF, 4 * 1024 * 1024);
+    return s;
+}
+
 // Loopback, unless `anyHost`: a server's public port, and the sockets towards a target that may be
 // another machine (one bound to 127.0.0.1 cannot send off it).
 ENetSocket makeSocket(uint16_t port, bool anyHost) {
-    ENetSocket s = enet_socket_create(ENET_SOCKET_TYPE_DATAGRAM);
-    if (s == ENET_SOCKET_NULL)
-        throw Error("link emulator: cannot create a UDP socket");
     ENetAddress a{};
     if (anyHost)
         a.host = ENET_HOST_ANY;
     else
         enet_address_set_host(&a, "127.0.0.1");
     a.port = port;
-    if (enet_socket_bind(s, &a) != 0) {
-        enet_socket_destroy(s);
+    ENetSocket s = bindSocket(a);
+    if (s == ENET_SOCKET_NULL)
         throw Error("link emulator: cannot bind UDP port " + std::to_string(port));
-    }
-    enet_socket_set_option(s, ENET_SOCKOPT_NONBLOCK, 1);
-    enet_socket_set_option(s, ENET_SOCKOPT_RCVBUF, 4 * 1024 * 1024);
-    enet_socket_set_option(s, ENET_SOCKOPT_SNDBUF, 4 * 1024 * 1024);
     return s;
+}
+
+// Towards a target on this machine, a client's socket is bound to a loopback address of its own,
+// one per client host (127.0.0.0/8 is all loopback on Linux): the target then tells clients'
+// hosts apart as it would without the relay (a server's per-address limits and removals).
+ENetSocket makeBackSocket(const ENetAddress& client, const ENetAddress& target) {
+    if ((ENET_NET_TO_HOST_32(target.host) >> 24) != 127)
+        return makeSocket(0, true);
+    // A host's alias in 127.0.0.2 ... 127.255.255.254, the same for every port of it.
+    uint32_t h = ENET_NET_TO_HOST_32(client.host) * 0x9E3779B1u;
+    h = std::clamp<uint32_t>((h ^ (h >> 15)) & 0xFFFFFFu, 2, 0xFFFFFEu);
+    ENetAddress a{};
+    a.host = ENET_HOST_TO_NET_32((127u << 24) | h);
+    ENetSocket s = bindSocket(a);
+    return s != ENET_SOCKET_NULL ? s : makeSocket(0, true); // no alias: all from one address
 }
 
 // Waits until a datagram arrives or the next queued one is due, at most 1 ms (the relay's loop
@@ -267,7 +290,7 @@ void LinkEmulator::run() {
             if (!cl) {
                 cl = std::make_unique<Client>();
                 cl->address = from;
-                cl->back = makeSocket(0, true);
+                cl->back = makeBackSocket(from, m_target);
             }
             m_bytesUp += uint64_t(n);
             enqueue(cl->up, sharedUp, buffer.data(), size_t(n), c);

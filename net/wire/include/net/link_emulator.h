@@ -3,7 +3,8 @@
 // on these kernels, so tests and the update study (`trephine study updates --link`) put this
 // between client and server.
 // Clients send to the relay's port; it forwards to the target through one socket per client, so
-// any number of clients can share one relay. `--link` in every mode starts one with startLinkEnd.
+// any number of clients can share one relay. Towards a target on this machine each client host's
+// sockets are bound to a loopback address of that host's own, so the target tells hosts apart. `--link` in every mode starts one with startLinkEnd.
 #pragma once
 
 #include <enet/enet.h>
