@@ -87,10 +87,12 @@ TEST(HandLinks, EveryoneHearsWhoFeelsAndGuidesUntilHandBackAndLeave) {
     EXPECT_TRUE(s.everyoneHas({{cho, ada, true}}));
 
     // Refused, changing nothing: a trainee's link, and feeling someone not in the session.
-    const uint64_t refused = s.server.takeOversRefused();
+    const uint64_t refused = s.server.handLinksRefused();
+    const uint64_t takeOversRefused = s.server.takeOversRefused();
     s.ada.send(HandLinks{{{0, ben, false}}});
     s.cho.send(HandLinks{{{0, 999, true}}});
-    EXPECT_TRUE(pumpUntil(s.all, [&] { return s.server.takeOversRefused() == refused + 2; }));
+    EXPECT_TRUE(pumpUntil(s.all, [&] { return s.server.handLinksRefused() == refused + 2; }));
+    EXPECT_EQ(s.server.takeOversRefused(), takeOversRefused) << "counted as what they are";
     EXPECT_TRUE(s.everyoneHas({{cho, ada, true}}));
 
     // Handing back ends the guide; the felt trainee leaving ends the feel, and the empty list

@@ -80,6 +80,7 @@ nlohmann::ordered_json toJson(const ServerReport& r, const NetStats& stats) {
               {"annotations_refused", c.annotationsRefused},
               {"take_overs_refused", c.takeOversRefused},
               {"replay_controls_refused", c.replayControlsRefused},
+              {"hand_links_refused", c.handLinksRefused},
               {"drilling_paused", c.drillingPaused},
               {"peak_in_flight_bytes", c.peakInFlightBytes},
               {"channels", channels(stats)},

@@ -506,7 +506,7 @@ bool SessionPolicy::handLink(uint16_t id, const Peer& p, std::span<const uint8_t
     const std::vector<uint16_t> others = participants(id);
     if (p.helloMsg.role != Role::Instructor || m.list.size() != 1 ||
         (m.list[0].feels != 0 && std::ranges::find(others, m.list[0].feels) == others.end())) {
-        m_book.count(&ServerCounters::takeOversRefused);
+        m_book.count(&ServerCounters::handLinksRefused);
         return true;
     }
     HandLink link{id, m.list[0].feels, m.list[0].guides};

@@ -37,6 +37,7 @@ struct ServerCounters {
     uint64_t hapticModelsSent = 0, hapticRelaysSent = 0;
     uint64_t refusedFull = 0, helloTimeouts = 0, viewsRefused = 0;
     uint64_t annotationsRefused = 0, takeOversRefused = 0, drillingPaused = 0;
+    uint64_t handLinksRefused = 0;
     uint64_t replayControlsRefused = 0; // ReplayControl to a server not serving a log
     int64_t peakInFlightBytes = 0;      // the most one client's updates held by ENet at once
 };

@@ -117,6 +117,8 @@ public:
     // TakeOver messages not applied: from trainees, of a client that is not a listed trainee, or
     // of a trainee another instructor holds.
     uint64_t takeOversRefused() const { return counters().takeOversRefused; }
+    // HandLinks messages not applied: from trainees, or feeling someone not in the session.
+    uint64_t handLinksRefused() const { return counters().handLinksRefused; }
     // Drilling tool states whose cutting the server paused: a trainee taken over, or an
     // instructor holding nobody (their tools still touch the bone).
     uint64_t drillingPaused() const { return counters().drillingPaused; }
