@@ -72,6 +72,7 @@ struct Frame {
     // on the far plane share one clip w, so after the divide it is affine in the pixel.
     glm::dvec4 farH, farDx, farDy;
     double nearOverFar;
+    double focalPx; // distance of the image plane from the eye, in pixels
     // Pixel rays in float (pixelRay): eye-to-far-plane vector of window position (wx, wy) is
     // toFar0 + wx * toFarDx + wy * toFarDy (lane 3 zero), affine since the far plane's clip w is
     // one constant.
@@ -126,6 +127,8 @@ Frame makeFrame(const Volume& volume, const Camera& camera, const RenderOptions&
     f.farDx = inv * glm::dvec4(1.0, 0.0, 0.0, 0.0);
     f.farDy = inv * glm::dvec4(0.0, 1.0, 0.0, 0.0);
     f.nearOverFar = double(camera.nearMm) / double(camera.farMm);
+    f.focalPx = 0.5 * camera.height /
+                std::tan(0.5 * (double(camera.fovYDeg) * 3.14159265358979323846 / 180.0));
     f.nearOverFarF = float(f.nearOverFar);
     {
         // h(ndc) = farH + ndc.x farDx + ndc.y farDy has one w over the far plane (farDx.w and
@@ -596,12 +599,18 @@ __attribute__((target("avx2,bmi2"))) inline int marchEight(const Frame& f, const
 // (slabs, divisions) is not needed. insideSample decides exactly as the march's brick and cell
 // tests would.
 // `Wide`: the AVX2 build, which takes up to eight samples a step (marchEight).
-template <bool Wide = false>
-March marchToSurface(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume,
-                     bool resumeInside = false) {
-    March m;
+// Where a ray's march starts: its span's first and last sample and the first sample not yet
+// proved below the iso-value (marchSpan), or no march at all.
+struct Span {
+    int kStart = 0, kEnd = -1, k = 0;
+};
+
+// The set-up of marchToSurface: false when it is decided without marching (`m` says how: no
+// hit, or the cache's still-inside sample); else `s` is where to march.
+bool marchSpan(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume, bool resumeInside,
+               March& m, Span& s) {
     if (tSkipTo == INFINITY) // a cone proved the whole ray empty
-        return m;
+        return false;
     if (resumeInside && tSkipTo * (1.0f / f.dt) < float(kResume)) {
         const v4sf p = samplePos4(f, r, float(kResume) * f.dt);
         float value;
@@ -612,7 +621,7 @@ March marchToSurface(const Frame& f, const Ray& r, float tSkipTo, int32_t kResum
             m.t = m.tIn;
             m.value = value;
             m.refine = true;
-            return m;
+            return false;
         }
     }
     // Samples live where some trilinear corner is inside the volume: voxel coordinates [-1, n].
@@ -631,7 +640,7 @@ March marchToSurface(const Frame& f, const Ray& r, float tSkipTo, int32_t kResum
             float o = f.origin[a];
             if (r.dv[a] == 0.0f) {
                 if (o < -1.0f || o > float(f.n[a]))
-                    return m;
+                    return false;
                 continue;
             }
             float ta = (-1.0f - o) * r.invDv[a], tb = (float(f.n[a]) - o) * r.invDv[a];
@@ -643,7 +652,7 @@ March marchToSurface(const Frame& f, const Ray& r, float tSkipTo, int32_t kResum
     // with it kEnd, past int (tLimit / dt is 2^30).
     t1 = std::min(t1, f.tLimit);
     if (!(t0 <= t1))
-        return m;
+        return false;
     const float dt = f.dt;
     const float invDt = 1.0f / dt;
     const int kStart = int(std::ceil(t0 / dt));
@@ -652,15 +661,25 @@ March marchToSurface(const Frame& f, const Ray& r, float tSkipTo, int32_t kResum
     // The tile pass proved that no sample before tSkipTo can be inside; the cache, none before
     // kResume.
     if (!(tSkipTo <= t1) || kResume > kEnd)
-        return m;
+        return false;
     int k = tSkipTo > t0 ? std::max(kStart, int(tSkipTo * invDt)) : kStart;
     k = std::max(k, int(kResume));
+    s = Span{kStart, kEnd, k};
+    return true;
+}
+
+// The march proper from sample s.k: fixed sample indices, brick leaps, clear cells, the first
+// sample inside. `lastK`, `lastValue`: the last computed sample below the iso-value before s.k.
+template <bool Wide = false>
+March marchFrom(const Frame& f, const Ray& r, const Span& s, int lastK = INT_MIN,
+                float lastValue = 0.0f) {
+    March m;
+    const float dt = f.dt;
+    const float invDt = 1.0f / dt;
+    const int kStart = s.kStart, kEnd = s.kEnd;
+    int k = s.k;
     float value = 0.0f;
     bool found = false;
-    // The last sample below the iso-value whose density was computed (by the same arithmetic as
-    // sampleDensity, so reusing it for the refinement changes no bit).
-    int lastK = INT_MIN;
-    float lastValue = 0.0f;
     constexpr int S = BrickGrid::kShift;
     while (k <= kEnd && !found) {
         uint64_t cells = ~uint64_t(0);
@@ -738,6 +757,98 @@ March marchToSurface(const Frame& f, const Ray& r, float tSkipTo, int32_t kResum
     m.lastK = lastK;
     m.lastValue = lastValue;
     return m;
+}
+
+template <bool Wide = false>
+March marchToSurface(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume,
+                     bool resumeInside = false) {
+    March m;
+    Span s;
+    if (!marchSpan(f, r, tSkipTo, kResume, resumeInside, m, s))
+        return m;
+    return marchFrom<Wide>(f, r, s);
+}
+
+// Steps of a packet before the lanes still marching go on alone (a ray grazing the surface).
+constexpr int kPacketMaxSteps = 24;
+
+// Eight rays of a pixel row marched in lockstep, one sample per ray a step (AVX2 build). A ray
+// marched alone is a chain of dependent loads and branches that mispredict where its surface
+// comes; eight side by side need few more steps than one and share them. Each lane is the
+// scalar loop's arithmetic and tests (marchEight's, lane by lane), so it finds the same first
+// inside sample. A lane leaves the packet where the scalar march would do more than test a cell:
+// a sample in an empty brick (a leap), outside the volume's cells or within 3 voxels of the high
+// x face, or past its last sample; `k` then says where marchFrom goes on. Lanes of `live` march;
+// those returned have found their first inside sample at k, its density in `value`.
+struct Packet {
+    v8sf dvx, dvy, dvz;
+    v8si k, kEnd;
+    v8si lastK;
+    v8sf lastValue, value;
+};
+
+__attribute__((target("avx2,bmi2"))) inline unsigned marchPacket(const Frame& f, Packet& pk,
+                                                                 unsigned live) {
+    constexpr int S = BrickGrid::kShift;
+    const int* const cellWords = reinterpret_cast<const int*>(f.cells);
+    const int* const voxels = reinterpret_cast<const int*>(f.density);
+    unsigned hitLanes = 0;
+    v8si k = pk.k;
+    for (int step = 0; live != 0 && step < kPacketMaxSteps; ++step) {
+        const v8sf t = __builtin_convertvector(k, v8sf) * f.dt;
+        const v8sf px = f.origin.x + t * pk.dvx, py = f.origin.y + t * pk.dvy,
+                   pz = f.origin.z + t * pk.dvz;
+        const v8si ix = __builtin_convertvector(px + 16.0f, v8si) - 16;
+        const v8si iy = __builtin_convertvector(py + 16.0f, v8si) - 16;
+        const v8si iz = __builtin_convertvector(pz + 16.0f, v8si) - 16;
+        const v8si inVolume = ((v8su)ix < unsigned(f.n.x - 3)) & ((v8su)iy < unsigned(f.n.y - 1)) &
+                              ((v8su)iz < unsigned(f.n.z - 1)) & (k <= pk.kEnd);
+        const v8si bi =
+            inVolume ? (ix >> S) + f.nb.x * (iy >> S) + int(f.nbxy) * (iz >> S) : v8si{};
+        const v8su maskLo = (v8su)_mm256_i32gather_epi32(cellWords, (__m256i)(bi + bi), 4);
+        const v8su maskHi = (v8su)_mm256_i32gather_epi32(cellWords, (__m256i)(bi + bi + 1), 4);
+        const v8si ok = inVolume & ((maskLo | maskHi) != 0u);
+        // Lanes that leave: the scalar march takes their sample k.
+        live &= unsigned(_mm256_movemask_ps((__m256)ok));
+        const v8si liveV = (v8si{1, 2, 4, 8, 16, 32, 64, 128} & int(live)) != 0;
+        const v8su bit = (v8su)((ix & 3) + 4 * (iy & 3) + 16 * (iz & 3));
+        const v8su half = bit >= 32u ? maskHi : maskLo;
+        const v8si set = (v8si)((half >> (bit & 31u)) & 1u) != 0;
+        const unsigned setMask = unsigned(_mm256_movemask_ps((__m256)set)) & live;
+        if (setMask != 0) {
+            const v8si laneSet = set & liveV;
+            const v8si base = laneSet ? ix + int(f.sy) * iy + int(f.sz) * iz : v8si{};
+            const v8su r0 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)base, 1);
+            const v8su r1 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sy)), 1);
+            const v8su r2 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sz)), 1);
+            const v8su r3 =
+                (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sz + f.sy)), 1);
+            auto lo = [](v8su w) { return __builtin_convertvector(v8si(w & 255u), v8sf); };
+            auto hi = [](v8su w) { return __builtin_convertvector(v8si((w >> 8) & 255u), v8sf); };
+            const v8sf tx = px - __builtin_convertvector(ix, v8sf),
+                       ty = py - __builtin_convertvector(iy, v8sf),
+                       tz = pz - __builtin_convertvector(iz, v8sf);
+            const v8sf ux = 1.0f - tx, uy = 1.0f - ty, uz = 1.0f - tz;
+            const v8sf c00 = ux * lo(r0) + tx * hi(r0), c10 = ux * lo(r1) + tx * hi(r1);
+            const v8sf c01 = ux * lo(r2) + tx * hi(r2), c11 = ux * lo(r3) + tx * hi(r3);
+            const v8sf c0 = uy * c00 + ty * c10, c1 = uy * c01 + ty * c11;
+            const v8sf v = uz * c0 + tz * c1;
+            const v8si in = v >= float(kSurfaceDensity);
+            const unsigned inside = unsigned(_mm256_movemask_ps((__m256)in)) & setMask;
+            // Computed and below: the last sample outside so far.
+            const v8si below = laneSet & ~in;
+            pk.lastK = below ? k : pk.lastK;
+            pk.lastValue = below ? v : pk.lastValue;
+            pk.value = (laneSet & in) ? v : pk.value;
+            hitLanes |= inside;
+            live &= ~inside;
+        }
+        // Every lane still marching moves on one sample; the others keep their k.
+        const v8si liveMask = v8si{1, 2, 4, 8, 16, 32, 64, 128} & int(live);
+        k = liveMask != 0 ? k + 1 : k;
+    }
+    pk.k = k;
+    return hitLanes;
 }
 
 // Refines a hit between the last sample outside and the first inside: a secant (regula falsi)
@@ -818,15 +929,14 @@ float coneSkipTo(const Frame& f, int x0, int y0, int x1, int y1, float tStart,
         if (f.distance[size_t(b.x) + size_t(f.nb.x) * size_t(b.y) + f.nbxy * size_t(b.z)] == 0)
             return tStart;
     }
-    double cosMin = 1.0;
-    for (int i = 0; i < 4; ++i) {
-        Ray q = windowRay(f, (i & 1) ? x1 - 0.5 : x0 + 0.5, (i & 2) ? y1 - 0.5 : y0 + 0.5);
-        cosMin = std::min(cosMin, glm::dot(c.dir, q.dir));
-    }
-    if (cosMin < 0.5) // a block wider than 60 degrees: nothing worth proving
+    // The angle between the central ray and any pixel's ray of the block: two points of the
+    // image plane, at least focalPx from the eye, a distance h apart, subtend sin A <= h /
+    // focalPx (law of sines), whatever the block's place in the window.
+    const double hx = 0.5 * (x1 - x0) - 0.5, hy = 0.5 * (y1 - y0) - 0.5;
+    const double sinA = std::sqrt(hx * hx + hy * hy) / f.focalPx;
+    if (!(sinA < 0.8)) // a block wider than ~53 degrees: nothing worth proving
         return 0.0f;
-    cosMin = std::min(cosMin, 1.0);
-    const double tanA = std::sqrt(1.0 - cosMin * cosMin) / cosMin;
+    const double tanA = sinA / std::sqrt(1.0 - sinA * sinA);
     // Cone radius in voxels at the farthest sample, plus slack for rounding.
     const float radius = float(tanA * f.maxSampleT / f.minSpacing) * 1.01f + 0.05f;
 
@@ -1330,6 +1440,87 @@ struct TileJob {
     std::atomic<int64_t>& resumed;
 };
 
+// The rays of pixels [bx, bx1) of row y marched as one packet (AVX2 build): each ray's span set
+// up on its own, the packet's lockstep march, then marchFrom for lanes that left it. Hits go to
+// `pending`, misses straight to `out`; the hit cache (tile copy, origin (x0, y0)) as in the
+// scalar loop of renderTileBody.
+__attribute__((always_inline)) inline void
+marchRow(const Frame& f, int x0, int y0, int bx, int bx1, int y, const float* quarterSkip, int midX,
+         int midY, int32_t* resume, uint8_t* inside, size_t stride, int64_t& known,
+         PendingHit* pending, int& npending, Dbi& out, const PixelRect& rect, int outX, int outY) {
+    const int n = bx1 - bx;
+    Span spans[8];
+    Packet pk;
+    unsigned live = 0;
+    PendingHit* lane[8];
+    for (int l = 0; l < n; ++l) {
+        const int x = bx + l;
+        int32_t k0 = 0;
+        uint8_t in0 = 0;
+        if (resume) {
+            const size_t at = size_t(y - y0) * stride + size_t(x - x0);
+            k0 = resume[at], in0 = inside[at];
+            known += k0 != 0;
+        }
+        PendingHit& h = pending[npending + l];
+        lane[l] = &h;
+        h.r = pixelRay(f, x, y);
+        h.ox = x - rect.x + outX, h.oy = y - rect.y + outY;
+        const float skip = quarterSkip[(x >= midX) + 2 * (y >= midY)];
+        h.m = March{};
+        if (marchSpan(f, h.r, skip, k0, in0 != 0, h.m, spans[l])) {
+            live |= 1u << l;
+            pk.dvx[l] = h.r.dv.x, pk.dvy[l] = h.r.dv.y, pk.dvz[l] = h.r.dv.z;
+            pk.k[l] = spans[l].k, pk.kEnd[l] = spans[l].kEnd;
+        } else {
+            pk.dvx[l] = pk.dvy[l] = pk.dvz[l] = 0.0f;
+            pk.k[l] = 0, pk.kEnd[l] = -1;
+        }
+    }
+    for (int l = n; l < 8; ++l)
+        pk.dvx[l] = pk.dvy[l] = pk.dvz[l] = 0.0f, pk.k[l] = 0, pk.kEnd[l] = -1;
+    pk.lastK = v8si{} + INT_MIN;
+    pk.lastValue = v8sf{};
+    pk.value = v8sf{};
+    const unsigned marching = live;
+    const unsigned hits = live ? marchPacket(f, pk, live) : 0u;
+    int next = npending;
+    for (int l = 0; l < n; ++l) {
+        PendingHit& h = *lane[l];
+        if (marching >> l & 1u) {
+            Span s = spans[l];
+            if (hits >> l & 1u) {
+                March& m = h.m;
+                m.hit = true;
+                m.kIn = pk.k[l];
+                m.tIn = float(pk.k[l]) * f.dt;
+                m.t = m.tIn;
+                m.value = pk.value[l];
+                m.refine = pk.k[l] > s.kStart;
+                m.lastK = pk.lastK[l];
+                m.lastValue = pk.lastValue[l];
+            } else {
+                s.k = pk.k[l];
+                h.m = marchFrom<true>(f, h.r, s, pk.lastK[l], pk.lastValue[l]);
+            }
+        }
+        if (resume) {
+            const size_t at = size_t(y - y0) * stride + size_t(bx + l - x0);
+            resume[at] = h.m.kIn;
+            inside[at] = h.m.hit && h.m.refine;
+        }
+        if (h.m.hit) {
+            if (&pending[next] != &h)
+                pending[next] = h;
+            ++next;
+        } else {
+            std::memcpy(out.color(h.ox, h.oy), kBackgroundRgba, 4);
+            out.depth()[out.index(h.ox, h.oy)] = kBackgroundDepth;
+        }
+    }
+    npending = next;
+}
+
 template <bool Wide>
 __attribute__((always_inline)) inline void renderTileBody(const TileJob& job, int i) {
     const Frame& f = job.f;
@@ -1416,7 +1607,14 @@ __attribute__((always_inline)) inline void renderTileBody(const TileJob& job, in
             // March the block's rays one by one; refine and shade their hits eight at a time.
             PendingHit pending[kConeBlock * kConeBlock];
             int npending = 0;
-            for (int y = by; y < by1; ++y)
+            for (int y = by; y < by1; ++y) {
+                if constexpr (Wide) {
+                    if (f.marchEight) {
+                        marchRow(f, x0, y0, bx, bx1, y, quarterSkip, midX, midY, resume, inside,
+                                 stride, known, pending, npending, out, rect, outX, outY);
+                        continue;
+                    }
+                }
                 for (int x = bx; x < bx1; ++x) {
                     int ox = x - rect.x + outX, oy = y - rect.y + outY;
                     int32_t k = 0;
@@ -1439,6 +1637,7 @@ __attribute__((always_inline)) inline void renderTileBody(const TileJob& job, in
                         out.depth()[out.index(ox, oy)] = kBackgroundDepth;
                     }
                 }
+            }
             auto write = [&](const PendingHit& p, const Hit& hit) {
                 shadePixel(hit, p.r, out.color(p.ox, p.oy));
                 out.depth()[out.index(p.ox, p.oy)] = hitDepth(f, p.r, hit.t);
