@@ -233,6 +233,9 @@ TEST(Outbox, PredictedUpdatesAreCodedAgainstWhatTheClientReallyHolds) {
     Outbox::Taken t = rig.outbox.take(live);
     ASSERT_EQ(t.updates.size(), 1u);
     client.apply(t.updates[0]);
+    // Acknowledged: the outbox knows the client holds exactly its copy (rectangles after a full
+    // image go lossy, and are predicted only then).
+    rig.outbox.acknowledge(4, ImageAck{0, decoded(t.updates[0]).sequence});
 
     held->store(1); // what follows waits, merging
     const PixelRect a{2, 2, 12, 12}, b{8, 8, 20, 10};

@@ -152,6 +152,7 @@ std::vector<std::vector<uint8_t>> sampleMessages() {
     ImageUpdate image;
     image.sequence = 11;
     image.viewId = 2;
+    image.fullSequence = 9;
     image.x = 3;
     image.y = 4;
     image.width = 5;
@@ -246,6 +247,7 @@ std::vector<std::vector<uint8_t>> sampleMessages() {
     current.instructor = "HW2R-9PZE";
     all.push_back(encoded(current));
     all.push_back(encoded(HandLinks{{{2, 5, false}, {3, 0, true}}}));
+    all.push_back(encoded(ImageAck{4, 77}));
     all.push_back(encoded(SafetyWarning{4, Zone::Danger, Zone::Caution, "sinus", 0.8f, 17, 99}));
     AssessmentSnapshot snapshot;
     snapshot.serverTimeUs = 5;

@@ -763,6 +763,8 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
     } else {
         return true;
     }
+    if (u.fullSequence != 0 && !lossyApplies(u))
+        return true;
     if (u.x + u.width > view->width || u.y + u.height > view->height)
         return reject("its rectangle leaves the view");
     if (u.full && (u.x != 0 || u.y != 0 || u.width != view->width || u.height != view->height))
@@ -792,8 +794,11 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
     m_lastSequence = u.sequence;
     m_lastImageSeq = u.sequence;
     ++m_updatesApplied;
+    if (u.full || u.fullSequence != 0)
+        acknowledgeImage(u.sequence);
     if (u.full) {
         ++m_fullUpdates;
+        m_fullSequence = u.sequence;
         if (u.viewId == m_viewId)
             m_hasFull = true;
         // The resync's answer, or a newer request's (the server may replace an unsent full
@@ -805,6 +810,30 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
     if (m_updateCallback)
         m_updateCallback(u, PixelRect{u.x, u.y, u.width, u.height}, u.full);
     return true;
+}
+
+// A lossy rectangle (of the view we show) applies only on the full image it names, and only when
+// newer than every image applied: the image and lossy channels are not ordered with each other,
+// and a late one would roll pixels back. A repeat is the server's repair of a rectangle whose
+// acknowledgement was lost: acknowledged again, not applied.
+bool SessionClient::lossyApplies(const ImageUpdate& u) {
+    if (u.fullSequence != m_fullSequence || !m_hasFull) {
+        ++m_lossyIgnored;
+        return false;
+    }
+    if (notNewer(u.sequence, m_lastImageSeq)) {
+        ++m_lossyIgnored;
+        acknowledgeImage(*m_lastImageSeq);
+        return false;
+    }
+    return true;
+}
+
+void SessionClient::acknowledgeImage(uint32_t sequence) {
+    if (!connected())
+        return;
+    send(ImageAck{m_viewId, sequence});
+    ++m_acksSent;
 }
 
 bool SessionClient::decodeImagePatch(const ImageUpdate& u, const ViewSpec& view, bool switching,

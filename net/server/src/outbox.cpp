@@ -4,6 +4,7 @@
 #include "net/image_delta.h"
 
 #include <algorithm>
+#include <cmath>
 #include <utility>
 
 namespace trephine::net {
@@ -26,6 +27,8 @@ void Outbox::join(uint16_t id, Host::InFlight inFlight, Codec codec, Codec volum
     c.codec = codec;
     c.volumeCodec = volumeCodec;
     countNoted();
+    std::lock_guard lock(m_mutex);
+    m_lossy[id] = Lossy{};
 }
 
 void Outbox::leave(uint16_t id) {
@@ -34,12 +37,14 @@ void Outbox::leave(uint16_t id) {
     std::lock_guard lock(m_mutex);
     m_images.erase(id);
     m_volumes.erase(id);
+    m_lossy.erase(id);
 }
 
 void Outbox::viewChanged(uint16_t id, uint32_t viewId) {
     m_clients[id].viewId = viewId;
     std::lock_guard lock(m_mutex);
     m_images.erase(id);
+    resetLossy(id, viewId, 0); // rectangles wait for the new view's full image
 }
 
 void Outbox::modeChanged(uint16_t id, Sync mode, Codec volumeCodec) {
@@ -52,6 +57,7 @@ void Outbox::modeChanged(uint16_t id, Sync mode, Codec volumeCodec) {
         countNoted();
     }
     std::lock_guard lock(m_mutex);
+    resetLossy(id, c.viewId, 0); // either way the next DBI is a full one
     if (mode == Sync::Volume)
         m_images.erase(id);
     else
@@ -67,6 +73,7 @@ void Outbox::clear() {
     m_images.clear();
     m_volumes.clear();
     m_refused.clear();
+    m_lossy.clear();
 }
 
 const Dbi* Outbox::shadow(uint16_t id) const {
@@ -115,7 +122,8 @@ Dbi Outbox::buffer(int width, int height) {
 void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect, bool full,
                   uint64_t causeUs, ImageTiming timing, Dbi* owned) {
     Client& c = m_clients[id];
-    std::optional<PendingImage> old = takeMergeable(id, c.viewId, full, causeUs);
+    LossyBase base;
+    std::optional<PendingImage> old = takeMergeable(id, c.viewId, full, causeUs, base);
     // Not of this frame (a view change drops waiting images; this is the safety net): the
     // client's pixels are unknown, so it gets the whole frame.
     const bool merge = old && frame.bounds().contains(old->rect);
@@ -129,12 +137,24 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
         full = full || old->full;
         causeUs = std::min(causeUs, old->causeUs);
     }
+    // After a full image, rectangles go lossy and carry every one not acknowledged. The client
+    // holds exactly the shadow only when it has acknowledged all, and the shadow holds no
+    // unpredicted rectangle that never left (it has no undo).
+    const bool lossy = !full && base.fullSequence != 0;
+    const bool predictable = !lossy || (base.predictable && (!merge || !old->undo.empty()));
+    if (lossy && !base.unacked.empty())
+        rect = rect.empty() ? base.unacked : unite(rect, base.unacked);
     rect = full ? frame.bounds() : intersect(rect, frame.bounds());
     if (rect.empty())
         return;
     ImageUpdate u;
     u.sequence = ++m_sequence;
     u.viewId = c.viewId;
+    u.fullSequence = lossy ? base.fullSequence : 0;
+    if (full) {
+        std::lock_guard lock(m_mutex);
+        resetLossy(id, c.viewId, u.sequence); // it says all the rectangles before it said
+    }
     u.causeServerUs = causeUs;
     u.full = full;
     u.x = uint16_t(rect.x);
@@ -161,7 +181,7 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
     }
     const uint64_t e0 = m_clock();
     const Dbi pixels = frame.extract(rect);
-    Dbi undo = encodeInto(u, c, frame, pixels, camera);
+    Dbi undo = encodeInto(u, c, frame, pixels, camera, predictable);
     // Only zstd clients get predicted updates, so only they need the copy (a whole frame:
     // 33.5 MB for 2048 x 2048).
     if (c.codec != Codec::Zstd)
@@ -192,6 +212,8 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
                    encodeMessage(u),
                    std::move(undo),
                    c.inFlight};
+    p.lossy = lossy;
+    p.sequence = u.sequence;
     {
         std::lock_guard lock(m_mutex);
         m_images[id].push_back(std::move(p));
@@ -203,8 +225,14 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
 // [Posting thread] Takes the client's newest waiting image when the new one merges with it; a full
 // image clears them all (keeping their oldest cause), an image of an older view is dropped.
 std::optional<Outbox::PendingImage> Outbox::takeMergeable(uint16_t id, uint32_t viewId, bool full,
-                                                          uint64_t& causeUs) {
+                                                          uint64_t& causeUs, LossyBase& base) {
     std::lock_guard lock(m_mutex);
+    if (auto l = m_lossy.find(id); l != m_lossy.end() && l->second.viewId == viewId) {
+        base.fullSequence = l->second.fullSequence;
+        base.predictable = l->second.based && l->second.unacked.empty();
+        for (const SentRect& r : l->second.unacked)
+            base.unacked = base.unacked.empty() ? r.rect : unite(base.unacked, r.rect);
+    }
     auto it = m_images.find(id);
     if (it == m_images.end())
         return std::nullopt;
@@ -232,11 +260,11 @@ std::optional<Outbox::PendingImage> Outbox::takeMergeable(uint16_t id, uint32_t 
 // Codes `pixels` (the update's rectangle of `frame`) into `u`: predicted against the client's
 // copy for zstd clients, planar otherwise. Gives the copy's pixels it replaces (empty if planar).
 Dbi Outbox::encodeInto(ImageUpdate& u, const Client& c, const Dbi& frame, const Dbi& pixels,
-                       const Camera& camera) {
+                       const Camera& camera, bool predictable) {
     // Predicted updates trade ~4 ns a pixel more coding at each end than the planar form for
     // about half its bytes (benchmark_net 'predicted|planar'): worth it with zstd (the codec
     // chosen for bytes), not with lz4 (chosen for latency).
-    if (!u.full && c.codec == Codec::Zstd && c.shadow.width() == frame.width() &&
+    if (!u.full && predictable && c.codec == Codec::Zstd && c.shadow.width() == frame.width() &&
         c.shadow.height() == frame.height()) {
         Dbi undo = c.shadow.extract({int(u.x), int(u.y), int(u.width), int(u.height)});
         PredictedImage p = encodePredicted(pixels, undo, c.codec, DepthQuantizer(camera));
@@ -432,27 +460,34 @@ void Outbox::offerNoted(const Volume& volume) {
 
 Outbox::Taken Outbox::take(const std::function<bool(uint16_t)>& live) {
     Taken taken;
+    const uint64_t now = m_clock();
     std::lock_guard lock(m_mutex);
     taken.refused.swap(m_refused);
-    // A live client with too much still in ENet's hands gets nothing now: its update stays here,
-    // where the next changes merge into it. A client's images go in order, up to one still being
-    // coded.
+    // A live client with too much still in ENet's hands, or too many lossy bytes unacknowledged,
+    // gets nothing now: its update stays here, where the next changes merge into it. A client's
+    // images go in order, up to one still being coded.
     for (auto it = m_images.begin(); it != m_images.end();) {
         const bool isLive = live(it->first);
         std::vector<PendingImage>& waiting = it->second;
-        if (isLive && heldBack(waiting.front().inFlight)) {
-            ++it;
-            continue;
-        }
+        const auto held = [&](const PendingImage& p) {
+            if (!p.lossy)
+                return heldBack(p.inFlight);
+            auto l = m_lossy.find(it->first);
+            return l != m_lossy.end() && lossyHeldBack(l->second, now);
+        };
         size_t n = 0;
-        for (; isLive && n < waiting.size() && !waiting[n].coding; ++n) {
+        for (; isLive && n < waiting.size() && !waiting[n].coding && !held(waiting[n]); ++n) {
             PendingImage& p = waiting[n];
-            taken.updates.push_back(
-                {it->first, Sync::Dbi, p.full, p.payloadBytes, p.rawBytes, std::move(p.message)});
+            if (p.lossy)
+                sendLossy(it->first, p, now);
+            taken.updates.push_back({it->first, Sync::Dbi,
+                                     p.lossy ? Channel::ImageLossy : Channel::Image, p.full,
+                                     p.payloadBytes, p.rawBytes, std::move(p.message)});
         }
         waiting.erase(waiting.begin(), isLive ? waiting.begin() + long(n) : waiting.end());
         it = waiting.empty() ? m_images.erase(it) : std::next(it);
     }
+    takeRepairs(live, now, taken);
     for (auto it = m_volumes.begin(); it != m_volumes.end();) {
         const bool isLive = live(it->first);
         PendingVolume& p = it->second;
@@ -461,11 +496,113 @@ Outbox::Taken Outbox::take(const std::function<bool(uint16_t)>& live) {
             continue;
         }
         if (isLive)
-            taken.updates.push_back({it->first, Sync::Volume, p.change.full, p.payloadBytes,
-                                     p.rawBytes, std::move(p.message)});
+            taken.updates.push_back({it->first, Sync::Volume, Channel::Volume, p.change.full,
+                                     p.payloadBytes, p.rawBytes, std::move(p.message)});
         it = m_volumes.erase(it);
     }
     return taken;
+}
+
+// [SECTION] lossy rectangles
+
+void Outbox::resetLossy(uint16_t id, uint32_t viewId, uint32_t fullSequence) {
+    auto it = m_lossy.find(id);
+    if (it == m_lossy.end())
+        return;
+    Lossy& l = it->second;
+    const double srtt = l.srttUs, var = l.rttVarUs; // the path's, whatever the view
+    l = Lossy{};
+    l.viewId = viewId;
+    l.fullSequence = fullSequence;
+    l.srttUs = srtt;
+    l.rttVarUs = var;
+}
+
+// 1.5 round trips (or the smoothed one and four deviations, when it varies more) and a margin
+// for the client's pass; before a round trip is measured, 250 ms.
+uint64_t Outbox::repairTimeout(const Lossy& l) {
+    if (l.srttUs <= 0)
+        return 250'000;
+    const double rto = std::max(1.5 * l.srttUs, l.srttUs + 4 * l.rttVarUs) + 5'000;
+    return uint64_t(std::clamp(rto, 10'000.0, 2'000'000.0));
+}
+
+uint64_t Outbox::repairTimeoutUs(uint16_t id) const {
+    std::lock_guard lock(m_mutex);
+    auto it = m_lossy.find(id);
+    return it == m_lossy.end() ? 0 : repairTimeout(it->second);
+}
+
+// Bytes still on their way: unacknowledged and younger than the repair timeout (older ones are
+// taken as lost, so a link that loses everything is offered one window a timeout).
+bool Outbox::lossyHeldBack(const Lossy& l, uint64_t now) const {
+    const uint64_t timeout = repairTimeout(l);
+    int64_t onTheWay = 0;
+    for (const SentRect& r : l.unacked)
+        if (now - r.sentUs < timeout)
+            onTheWay += r.bytes;
+    return onTheWay > std::min(kLossyWindowBytes, m_maxInFlightBytes);
+}
+
+void Outbox::sendLossy(uint16_t id, PendingImage& p, uint64_t now) {
+    auto it = m_lossy.find(id);
+    if (it == m_lossy.end())
+        return;
+    Lossy& l = it->second;
+    l.unacked.push_back({p.sequence, p.rect, int64_t(p.message.size()), now, 0});
+    l.newestSent = p.sequence;
+    l.newest = p.message; // kept for a repair: the union at current pixels
+    l.newestPayload = p.payloadBytes;
+    l.newestRaw = p.rawBytes;
+}
+
+// The newest rectangle carries every one before it not acknowledged, at pixels no newer change
+// has replaced (a newer one would wait, or have gone): re-sending its bytes repairs them all.
+void Outbox::takeRepairs(const std::function<bool(uint16_t)>& live, uint64_t now, Taken& taken) {
+    for (auto& [id, l] : m_lossy) {
+        if (l.unacked.empty() || l.newest.empty() || m_images.count(id) || !live(id))
+            continue;
+        SentRect& r = l.unacked.back();
+        if (now - r.sentUs < repairTimeout(l) << std::min(r.repairs, 4))
+            continue;
+        r.sentUs = now;
+        ++r.repairs;
+        ++m_repairs;
+        taken.updates.push_back(
+            {id, Sync::Dbi, Channel::ImageLossy, false, l.newestPayload, l.newestRaw, l.newest});
+    }
+}
+
+void Outbox::acknowledge(uint16_t id, const ImageAck& ack) {
+    const uint64_t now = m_clock();
+    std::lock_guard lock(m_mutex);
+    auto it = m_lossy.find(id);
+    const auto after = [](uint32_t a, uint32_t b) { return int32_t(a - b) > 0; };
+    // Only what this server sent this client, for the view it holds: anything else is stale (an
+    // old view's, one from before its full image) or forged (a sequence not sent yet).
+    if (it == m_lossy.end() || it->second.viewId != ack.viewId || it->second.fullSequence == 0 ||
+        after(it->second.fullSequence, ack.sequence) ||
+        after(ack.sequence,
+              it->second.newestSent ? it->second.newestSent : it->second.fullSequence)) {
+        ++m_acksIgnored;
+        return;
+    }
+    Lossy& l = it->second;
+    l.based = true;
+    auto acked = l.unacked.begin();
+    for (; acked != l.unacked.end() && !after(acked->sequence, ack.sequence); ++acked)
+        if (acked->sequence == ack.sequence && acked->repairs == 0) {
+            // One round trip (Karn: never one of a re-sent rectangle), smoothed as TCP does.
+            const double sample = double(now - acked->sentUs);
+            if (l.srttUs <= 0) {
+                l.srttUs = sample;
+                l.rttVarUs = sample / 2;
+            } else {
+                l.rttVarUs = 0.75 * l.rttVarUs + 0.25 * std::abs(l.srttUs - sample);
+                l.srttUs = 0.875 * l.srttUs + 0.125 * sample;
+            }
+        }
+    l.unacked.erase(l.unacked.begin(), acked);
 }
 
 } // namespace trephine::net

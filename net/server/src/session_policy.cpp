@@ -250,6 +250,13 @@ bool SessionPolicy::handle(uint16_t id, Peer& p, std::span<const uint8_t> data, 
                     m_book.count(&ServerCounters::replayControlsRefused);
                 return true;
             },
+            [&](MessageTag<ImageAck>) { // the outbox judges it (net/outbox.h)
+                ImageAck a;
+                if (!decodeMessage(data, a))
+                    return false;
+                out.imageAcks.push_back({id, a});
+                return true;
+            },
             [&](MessageTag<Ping>) {
                 Ping ping;
                 if (!decodeMessage(data, ping))

@@ -650,6 +650,8 @@ void SessionServer::Impl::guard(uint64_t now) {
 // Sends what the policy asked for; its events go to the simulation (and the log) first.
 void SessionServer::Impl::apply(PolicyOutput& out, bool mayDrop) {
     push(out.events, out.log, mayDrop);
+    for (const auto& [id, ack] : out.imageAcks)
+        outbox.acknowledge(id, ack);
     // New codes first: the instructors' copies join this output's messages; printed like the
     // start banner, for whoever reads them out.
     for (const std::string& line : issueCodes(gate, policy, out)) {
@@ -794,8 +796,7 @@ void SessionServer::Impl::sendUpdates() {
     }
     apply(out);
     for (Outbox::Ready& u : taken.updates) {
-        const Channel ch = u.mode == Sync::Dbi ? Channel::Image : Channel::Volume;
-        if (!sendTo(u.client, ch, u.message, policy.inFlight(u.client)))
+        if (!sendTo(u.client, u.channel, u.message, policy.inFlight(u.client)))
             continue;
         book.record([&](ServerReport& r) {
             ModeTotals& t = r.modes[size_t(u.mode)].sent;

@@ -21,6 +21,8 @@ const char* channelName(Channel c) {
         return "image";
     case Channel::Volume:
         return "volume";
+    case Channel::ImageLossy:
+        return "image-lossy";
     default:
         return "?";
     }
@@ -31,6 +33,9 @@ uint32_t channelPacketFlags(Channel c) {
     case Channel::ToolState:
     case Channel::Haptic:
         return ENET_PACKET_FLAG_UNSEQUENCED;
+    case Channel::ImageLossy:
+        // Without the flag ENet sends a packet over the MTU as reliable fragments.
+        return ENET_PACKET_FLAG_UNRELIABLE_FRAGMENT;
     default:
         return ENET_PACKET_FLAG_RELIABLE;
     }

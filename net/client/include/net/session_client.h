@@ -257,6 +257,10 @@ public:
     uint64_t resyncs() const { return m_resyncs; }
     // Predicted image updates applied (coded against our own pixels, net/image_delta.h).
     uint64_t predictedApplied() const { return m_predicted; }
+    // Lossy rectangles (ImageUpdate::fullSequence) ignored: not on the full image we hold, or no
+    // newer than the last image applied (a repeat is acknowledged again). And ImageAcks sent.
+    uint64_t lossyIgnored() const { return m_lossyIgnored; }
+    uint64_t imageAcksSent() const { return m_acksSent; }
     uint64_t toolStatesSent() const { return m_toolSent; }
     uint32_t lastUpdateSequence() const { return m_lastSequence; }
     NetStats& stats() { return m_stats; }
@@ -360,6 +364,8 @@ private:
     bool onReplayState(std::span<const uint8_t> data, uint64_t nowUs); // session_client_replay.cpp
     bool onCodes(std::span<const uint8_t> data);                       // session_client_codes.cpp
     bool applyImage(const ImageUpdate& u, uint64_t nowUs);
+    bool lossyApplies(const ImageUpdate& u);
+    void acknowledgeImage(uint32_t sequence);
     // u's pixels into `patch`; false when they do not decode. `stale`: nothing to show (a
     // predicted update coded against pixels other than ours: asks for the whole view again).
     bool decodeImagePatch(const ImageUpdate& u, const ViewSpec& view, bool switching, Dbi& patch,
@@ -445,6 +451,9 @@ private:
     // The newest update sequence applied in each mode: a switch accepts only a full update newer
     // than everything of the mode it leaves (the two channels are not ordered with each other).
     std::optional<uint32_t> m_lastImageSeq, m_lastVolumeSeq; // of the last update applied
+    // The sequence of the full image of m_viewId we hold: lossy rectangles apply on it only.
+    uint32_t m_fullSequence = 0;
+    uint64_t m_lossyIgnored = 0, m_acksSent = 0;
     std::unique_ptr<Volume> m_volume;
     std::unique_ptr<ThreadPool> m_pool;
     std::unique_ptr<Renderer> m_renderer;

@@ -3,8 +3,12 @@
 // merges into the waiting one, so a region is never queued twice and the newest pixels or voxels
 // win. It keeps each zstd client's copy of its DBI (the shadow predicted updates are coded
 // against) and holds a client back while ENet still holds more than maxInFlightBytes of its
-// updates. Posting and taking may run on two threads; everything else is the posting thread's.
-// No ENet here: tests post and take in one thread, with a clock passed in.
+// updates. Full images go reliably; the rectangles after one go lossy (Channel::ImageLossy):
+// each carries every rectangle the client has not acknowledged, at current pixels, and the
+// newest is re-sent while unacknowledged past a timeout, so a lost one costs an update interval
+// or a repair, never a retransmission in order. Posting and taking may run on two threads, and
+// acknowledgements arrive on the taking one; everything else is the posting thread's. No ENet
+// here: tests post and take in one thread, with a clock passed in.
 #pragma once
 
 #include "libsim/box.h"
@@ -48,7 +52,8 @@ public:
     // An update ready for the network: its message and what the report counts of it.
     struct Ready {
         uint16_t client = 0;
-        Sync mode = Sync::Dbi; // Dbi: an ImageUpdate (Channel::Image); Volume: a VolumeUpdate
+        Sync mode = Sync::Dbi;            // Dbi: an ImageUpdate; Volume: a VolumeUpdate
+        Channel channel = Channel::Image; // Image, ImageLossy or Volume
         bool full = false;
         uint32_t payloadBytes = 0, rawBytes = 0;
         std::vector<uint8_t> message;
@@ -109,9 +114,25 @@ public:
     void offerNoted(const Volume& volume);
 
     // [Network thread] Takes every waiting update except those of live clients held back (over
-    // maxInFlightBytes in ENet's hands); those of clients not `live` (gone, or being sent away)
-    // are dropped.
+    // maxInFlightBytes in ENet's hands, or lossy bytes unacknowledged within the repair timeout
+    // over kLossyWindowBytes); those of clients not `live` (gone, or being sent away) are
+    // dropped. With them, the repairs due: a live client's newest lossy rectangle again when it
+    // is still unacknowledged past the timeout (doubling with each repair of it) and nothing
+    // newer waits.
     Taken take(const std::function<bool(uint16_t)>& live);
+    // [Network thread] Client `id` has applied image `sequence` of its view (ImageAck): what it
+    // acknowledges is forgotten, and its round trip times the repairs. An ack of another view, of
+    // an image older than the client's full image or newer than any sent is ignored.
+    void acknowledge(uint16_t id, const ImageAck& ack);
+    // The most lossy bytes a client may have unacknowledged (within the repair timeout) before
+    // its next rectangle waits, merged with the ones after it: a round trip's worth at 20 Mbit/s
+    // and 100 ms, so a slow link queues little in front of tool states and force models.
+    static constexpr int64_t kLossyWindowBytes = 256 * 1024;
+    // [Any thread] Repairs sent so far, and acknowledgements ignored as not this client's.
+    uint64_t repairs() const { return m_repairs.load(); }
+    uint64_t acksIgnored() const { return m_acksIgnored.load(); }
+    // [Any thread] The timeout after which client `id`'s unacknowledged rectangle is re-sent.
+    uint64_t repairTimeoutUs(uint16_t id) const;
 
     // [Either thread, once the other has stopped] Forgets every waiting update and noted change:
     // nobody will take them (the server has stopped).
@@ -136,6 +157,33 @@ private:
         Host::InFlight inFlight;
         uint64_t ticket = 0; // coded apart: its job's ticket (0: coded at the post)
         bool coding = false; // coded apart, not yet done: it and what follows it wait
+        bool lossy = false;  // a rectangle on Channel::ImageLossy
+        uint32_t sequence = 0;
+    };
+    // A lossy rectangle sent and not acknowledged.
+    struct SentRect {
+        uint32_t sequence = 0;
+        PixelRect rect;
+        int64_t bytes = 0;
+        uint64_t sentUs = 0;
+        int repairs = 0; // re-sent that many times: its acknowledgement times no round trip
+    };
+    // A DBI client's lossy rectangles (under m_mutex: acknowledged on the network thread).
+    struct Lossy {
+        uint32_t viewId = 0;
+        uint32_t fullSequence = 0;     // the full image they build on; 0: none yet, sent reliably
+        bool based = false;            // the client has acknowledged that full image or later
+        std::vector<SentRect> unacked; // oldest first
+        uint32_t newestSent = 0;
+        std::vector<uint8_t> newest; // the newest sent rectangle's message: the repair
+        uint32_t newestPayload = 0, newestRaw = 0;
+        double srttUs = 0, rttVarUs = 0; // 0: no round trip measured yet
+    };
+    // What a lossy rectangle posted now must carry, read under m_mutex.
+    struct LossyBase {
+        uint32_t fullSequence = 0;
+        PixelRect unacked;        // the union of the rectangles not acknowledged
+        bool predictable = false; // the client holds exactly the shadow
     };
     // A full image for the coder thread: its message but the payload, and the pixels.
     struct CodingJob {
@@ -169,9 +217,15 @@ private:
                             const VolumeChange& change);
     void countNoted();
     std::optional<PendingImage> takeMergeable(uint16_t id, uint32_t viewId, bool full,
-                                              uint64_t& causeUs);
+                                              uint64_t& causeUs, LossyBase& base);
     Dbi encodeInto(ImageUpdate& u, const Client& c, const Dbi& frame, const Dbi& pixels,
-                   const Camera& camera);
+                   const Camera& camera, bool predictable);
+    // Under m_mutex:
+    void resetLossy(uint16_t id, uint32_t viewId, uint32_t fullSequence);
+    bool lossyHeldBack(const Lossy& l, uint64_t now) const;
+    static uint64_t repairTimeout(const Lossy& l);
+    void sendLossy(uint16_t id, PendingImage& p, uint64_t now);
+    void takeRepairs(const std::function<bool(uint16_t)>& live, uint64_t now, Taken& taken);
     void codeApart(uint16_t id, CodingJob job);
     void code(CodingJob job);
 
@@ -189,6 +243,8 @@ private:
     std::map<uint16_t, std::vector<PendingImage>> m_images;
     std::map<uint16_t, PendingVolume> m_volumes;
     std::vector<uint16_t> m_refused;
+    std::map<uint16_t, Lossy> m_lossy;
+    std::atomic<uint64_t> m_repairs{0}, m_acksIgnored{0};
 
     // Where full images are coded apart; the tickets and the spare buffer are under m_mutex.
     int64_t m_apartPixels = 0;

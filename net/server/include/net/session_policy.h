@@ -85,6 +85,8 @@ struct PolicyOutput {
     std::vector<CodeRequest> newCodes;
     // [Replay] Windows' timeline controls, for the server's ReplayPlayer (net/replay_feed.h).
     std::vector<ReplayControl> replayControls;
+    // Clients' acknowledgements of lossy images, for the outbox (Outbox::acknowledge).
+    std::vector<std::pair<uint16_t, ImageAck>> imageAcks;
 };
 
 class SessionPolicy {

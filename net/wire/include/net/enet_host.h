@@ -23,7 +23,10 @@ enum class Channel : uint8_t {
     Haptic = 2,    // unsequenced, newest wins: force and gradient from the server
     Image = 3,     // reliable: DBI rectangle updates
     Volume = 4,    // reliable: voxel updates for the replicated-volume baseline
-    Count = 5
+    // Unreliable, sequenced (a late older packet is dropped), fragments unreliable too: drilling
+    // rectangles, newest-wins state the server repairs from acknowledgements (net/outbox.h).
+    ImageLossy = 5,
+    Count = 6
 };
 const char* channelName(Channel c);
 

@@ -25,7 +25,7 @@ namespace trephine::net {
 
 // Travels in ENet's connect data; the server refuses other versions with kRefuseVersion. What
 // each version changed: docs/protocol.md, "Versions".
-inline constexpr uint32_t kProtocolVersion = 12;
+inline constexpr uint32_t kProtocolVersion = 13;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
 enum class RefuseReason : uint32_t {
@@ -137,7 +137,8 @@ inline bool fitsVolumeUpdate(glm::ivec3 size, bool materials) {
     X(Handshake, 24, Both, Control, false, 9)                                                      \
     X(Remove, 25, ClientToServer, Control, false, 9)                                               \
     X(Codes, 26, Both, Control, true, 10)                                                          \
-    X(HandLinks, 27, Both, Control, true, 12)
+    X(HandLinks, 27, Both, Control, true, 12)                                                      \
+    X(ImageAck, 28, ClientToServer, ImageLossy, true, 13)
 
 enum class MessageType : uint8_t {
 #define TREPHINE_MESSAGE_ENUM(name, id, direction, channel, newestWins, since) name = id,
@@ -384,11 +385,16 @@ struct HapticRelay {
     }
 };
 
-// A rectangle of the client's DBI (x, y from the bottom-left, as GL), encoded with `codec`.
+// A rectangle of the client's DBI (x, y from the bottom-left, as GL), encoded with `codec`. Full
+// images travel reliably on Channel::Image; since version 13 the server sends drilling
+// rectangles on Channel::ImageLossy, unreliable, naming the full image they build on.
 struct ImageUpdate {
     static constexpr MessageType kType = MessageType::ImageUpdate;
     uint32_t sequence = 0;
-    uint32_t viewId = 0;        // the ViewRequest this image belongs to (0 = the hello's view)
+    uint32_t viewId = 0; // the ViewRequest this image belongs to (0 = the hello's view)
+    // A lossy rectangle: the sequence of the full image it applies on (a client holding another
+    // ignores it). 0: sent reliably, in order (full images, and servers before version 13).
+    uint32_t fullSequence = 0;
     uint64_t causeServerUs = 0; // when the tool state that caused it reached the server
     uint64_t sentServerUs = 0;
     bool full = false; // a whole-window refresh (join or view change)
@@ -407,9 +413,10 @@ struct ImageUpdate {
 
     template <typename S>
     bool serialize(S& s) {
-        return s.integer(sequence) && s.integer(viewId) && s.integer(causeServerUs) &&
-               s.integer(sentServerUs) && s.integer(erodeUs) && s.integer(renderUs) &&
-               s.integer(encodeUs) && s.integer(gridUs) && gridUs <= renderUs && s.boolean(full) &&
+        return s.integer(sequence) && s.integer(viewId) && s.integer(fullSequence) &&
+               s.integer(causeServerUs) && s.integer(sentServerUs) && s.integer(erodeUs) &&
+               s.integer(renderUs) && s.integer(encodeUs) && s.integer(gridUs) &&
+               gridUs <= renderUs && s.boolean(full) && !(full && fullSequence != 0) &&
                s.boolean(predicted) && s.integer(baseHash) && !(predicted && full) &&
                s.ranged(x, uint16_t(0), uint16_t(kMaxWindowSize - 1)) &&
                s.ranged(y, uint16_t(0), uint16_t(kMaxWindowSize - 1)) &&
@@ -712,6 +719,21 @@ struct Remove {
     template <typename S>
     bool serialize(S& s) {
         return s.ranged(op, Op::Remove, Op::AllowRejoin) && s.integer(clientId);
+    }
+};
+
+// Client -> server (Channel::ImageLossy, unreliable, newest wins): the newest image of view
+// `viewId` the client has applied (full, or a lossy rectangle on its full image). Cumulative: a
+// lossy rectangle carries every rectangle not yet acknowledged, so this acknowledges all before
+// it; the server forgets them and re-sends what stays unacknowledged (net/outbox.h).
+struct ImageAck {
+    static constexpr MessageType kType = MessageType::ImageAck;
+    uint32_t viewId = 0;
+    uint32_t sequence = 0;
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.integer(viewId) && s.integer(sequence);
     }
 };
 
