@@ -257,7 +257,8 @@ TEST(Session, EveryToolPoseReachesTheOtherClients) {
 }
 
 // A raw image of the largest view (2048 x 2048: 33.5 MB at 8 bytes a pixel) is more than ENet
-// delivers in one message: the server sends it lz4-coded, and the client shows it.
+// delivers in one message: the server sends it lz4-coded, and the client shows it (its preview
+// first, then the exact frame: docs/session.md, "Progressive first pictures").
 TEST(Session, ARawClientOfTheLargestViewGetsItsPictureCoded) {
     Volume sphere = makeSphere(48);
     SessionServer server(sphere, testConfig("sphere:48"));
@@ -269,6 +270,7 @@ TEST(Session, ARawClientOfTheLargestViewGetsItsPictureCoded) {
     SessionClient client(cfg);
     client.connect(loopback(server.port()));
     ASSERT_TRUE(connectAll({&client}));
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return client.fullUpdates() >= 2; }));
     const Camera cam = toCamera(cfg.view);
     DepthCheck d = compareDepthMm(client.dbi(), server.renderView(cfg.view), cam);
     EXPECT_TRUE(d.colorsEqual && d.backgroundEqual);

@@ -1,5 +1,6 @@
 #include "net/sim_step.h"
 
+#include "libsim/dbi_preview.h"
 #include "libsim/dirty_rect.h"
 #include "libsim/tool.h"
 #include "net/tool_model.h"
@@ -322,10 +323,13 @@ void SimulationStep::renderViews(const Batch& b, uint32_t gridUs) {
         if (reuse != dropped.end()) {
             v.frame = std::move(reuse->frame);
             v.cache = std::move(reuse->cache); // restarted for the new camera, its memory kept
+            v.preview = std::move(reuse->preview);
             dropped.erase(reuse);
         } else {
             v.frame = Dbi(c.camera.width, c.camera.height);
         }
+        if (m_config.previewPixels > 0 && pixelsOf(v.frame) > m_config.previewPixels)
+            v.previewRows = 0;
     }
     for (ViewFrame& v : m_views) {
         markChanged(v, b, gridUs);
@@ -410,9 +414,10 @@ void SimulationStep::schedule() {
 }
 
 // One piece of the view's work: the next chunk of its frame's copy, else its next rows (counted
-// against the step's `rowsLeft`), else its changed pixels. Rows before changes: a change in the
-// rows done so far, every step, would otherwise hold a new view's rows back for good; nothing of
-// it is sent before it is whole, so its changes are rendered then, before its copy.
+// against the step's `rowsLeft`; a new large view's preview rows first), else its changed
+// pixels. Rows before changes: a change in the rows done so far, every step, would otherwise hold
+// a new view's rows back for good; nothing exact of it is sent before it is whole, so its changes
+// are rendered then, before its copy.
 void SimulationStep::workOn(ViewFrame& v, int64_t& rowsLeft) {
     if (v.copying()) {
         copyChunk(v);
@@ -420,6 +425,10 @@ void SimulationStep::workOn(ViewFrame& v, int64_t& rowsLeft) {
     }
     if (!v.stale.empty() && v.whole()) {
         renderStale(v);
+        return;
+    }
+    if (v.previewing()) {
+        previewChunk(v, rowsLeft);
         return;
     }
     const int width = std::max(v.frame.width(), 1);
@@ -430,6 +439,42 @@ void SimulationStep::workOn(ViewFrame& v, int64_t& rowsLeft) {
     rowsLeft -= int64_t(rows) * width;
     if (v.whole())
         m_book.count(&ServerCounters::renders);
+}
+
+// The next rows of a new view's preview, counted against `rowsLeft` like its exact rows, each
+// written at once into the view-sized picture as 2 x 2 blocks (so no piece copies the whole
+// picture); the last sends it.
+void SimulationStep::previewChunk(ViewFrame& v, int64_t& rowsLeft) {
+    const Camera half = previewCamera(v.camera);
+    if (v.previewRows == 0) {
+        if (v.preview.width() != half.width || v.preview.height() != half.height)
+            v.preview = Dbi(half.width, half.height);
+        v.previewFull = m_outbox.buffer(v.frame.width(), v.frame.height());
+    }
+    const int rows = int(std::clamp<int64_t>(std::min(rowsLeft, m_config.chunkPixels) / half.width,
+                                             1, half.height - v.previewRows));
+    m_renderer->render(half, {0, v.previewRows, half.width, rows}, v.preview, nullptr);
+    upsampleRows(v.preview, v.previewRows, rows, v.previewFull);
+    v.previewRows += rows;
+    rowsLeft -= int64_t(rows) * half.width;
+    if (v.previewRows >= half.height)
+        postPreview(v);
+}
+
+// Every client waiting for the view's full image gets the preview as one (coded apart, as large
+// full images are). They still wait: the exact frame's full image follows and replaces it, in the
+// outbox too if the preview has not left; a view changed meanwhile drops both, as ever.
+void SimulationStep::postPreview(ViewFrame& v) {
+    std::vector<std::pair<uint16_t, uint64_t>> waiting;
+    for (uint16_t id : v.holders)
+        if (const Client& c = m_clients.at(id); c.fullCauseUs)
+            waiting.emplace_back(id, c.fullCauseUs);
+    for (size_t i = 0; i < waiting.size(); ++i)
+        m_outbox.postFullImage(waiting[i].first, v.camera,
+                               i + 1 < waiting.size() ? v.previewFull : std::move(v.previewFull),
+                               waiting[i].second);
+    v.previewFull = Dbi();
+    v.previewRows = -1;
 }
 
 // The view's changed pixels: all of them for a view of at most a slice (or the whole view, the

@@ -44,6 +44,10 @@ struct StepConfig {
     // larger view's change goes in pieces of at most chunkPixels.
     int64_t slicePixels = int64_t(1) << 18;
     int64_t chunkPixels = int64_t(1) << 13;
+    // A new view of more pixels than this is first rendered at half width and height (a quarter
+    // of the rays, in pieces as its rows are), upsampled and sent as its full image, then the
+    // exact frame follows as today (docs/session.md, "Progressive first pictures"). 0: never.
+    int64_t previewPixels = int64_t(1) << 18;
     // Measures the work charged to peers (FairShare); empty: the steady clock. Not the step's
     // clock: a pumped server's stands still within a pass.
     ServerClock workClock = {};
@@ -120,6 +124,11 @@ private:
         // in chunks (the frame holds still meanwhile); -1: none under way.
         Dbi copy;
         int rowsCopied = -1;
+        // A view larger than previewPixels, new: its half-size render (previewCamera) so far and
+        // the view-sized picture made of it; -1: no preview under way (none, or sent).
+        Dbi preview, previewFull;
+        int previewRows = -1;
+        bool previewing() const { return previewRows >= 0; }
         bool whole() const { return rowsDone >= frame.height(); }
         bool copying() const { return rowsCopied >= 0; }
         bool settled() const { return whole() && stale.empty() && !copying(); }
@@ -150,6 +159,8 @@ private:
     void schedule();
     void workOn(ViewFrame& v, int64_t& rowsLeft);
     void renderStale(ViewFrame& v);
+    void previewChunk(ViewFrame& v, int64_t& rowsLeft);
+    void postPreview(ViewFrame& v);
     bool large(const ViewFrame& v) const;
     void postView(ViewFrame& v);
     void copyChunk(ViewFrame& v);
