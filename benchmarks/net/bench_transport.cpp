@@ -3,7 +3,9 @@
 // (adaptive 0, as before) and the host's delay-sized bulk window (adaptive 1).
 // Per link: the join, three 5-degree view changes (ask to full picture), the force answers to
 // tool states sent while each view's full image is in flight, and a 3 s soak of 40^3 cuts and
-// restores at 20 Hz (update latency, longest stall). One iteration a case: seconds of real time.
+// restores at 20 Hz (update latency, longest stall; the bytes of an applied update, the server's
+// egress through the relay, repairs included, and the client's acknowledgements upstream).
+// One iteration a case: seconds of real time.
 //   benchmark_net --benchmark_filter=Transport
 #include "libsim/skull.h"
 #include "net/link_emulator.h"
@@ -74,10 +76,12 @@ void BM_TransportOverLink(benchmark::State& state) {
     SessionClient client(cc);
     std::vector<double> latencies, forceRtts;
     std::vector<uint64_t> appliedAt;
-    double fullBytes = 0;
+    double fullBytes = 0, updateBytes = 0;
     client.setRecordCallback([&](const UpdateRecord& r) {
         if (r.full)
             fullBytes = r.bytes;
+        if (!r.full)
+            updateBytes += r.bytes;
         if (!r.full && r.latencyUs >= 0) {
             latencies.push_back(r.latencyUs * 1e-3);
             appliedAt.push_back(r.appliedUs);
@@ -130,6 +134,9 @@ void BM_TransportOverLink(benchmark::State& state) {
         now.copyBox(box, density, material);
         latencies.clear();
         appliedAt.clear();
+        updateBytes = 0;
+        const uint64_t down0 = relay.bytesDown(),
+                       acks0 = client.stats().totalBytesOut(Channel::ImageLossy);
         const uint64_t start = steadyNowUs();
         uint64_t next = start;
         int submitted = 0;
@@ -146,6 +153,7 @@ void BM_TransportOverLink(benchmark::State& state) {
         }
         const uint64_t end = steadyNowUs();
         pumpUntil(client, [&] { return steadyNowUs() > end + 2000000; });
+        const double soakS = double(steadyNowUs() - start) * 1e-6;
         double stall = 0;
         uint64_t last = start;
         for (uint64_t at : appliedAt)
@@ -158,6 +166,11 @@ void BM_TransportOverLink(benchmark::State& state) {
         state.counters["update_p99"] = percentile(latencies, 99);
         state.counters["max_stall_ms"] = stall;
         state.counters["updates"] = double(latencies.size());
+        state.counters["update_kB"] =
+            latencies.empty() ? 0 : updateBytes * 1e-3 / double(latencies.size());
+        state.counters["down_kB_per_s"] = double(relay.bytesDown() - down0) * 1e-3 / soakS;
+        state.counters["acks_B_per_s"] =
+            double(client.stats().totalBytesOut(Channel::ImageLossy) - acks0) / soakS;
     }
     client.disconnect();
     server.stop();

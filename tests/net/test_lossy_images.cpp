@@ -146,8 +146,8 @@ TEST(LossyOutbox, ARectangleCarriesEveryOneNotAcknowledged) {
 }
 
 // With no further drilling, the newest unacknowledged rectangle goes again once the repair
-// timeout passes (the same bytes: its pixels are current), then after twice the timeout, and
-// never once acknowledged.
+// timeout passes (the same bytes: its pixels are current), then after twice the timeout (one more
+// a repair), and never once acknowledged.
 TEST(LossyOutbox, AnUnacknowledgedRectangleIsResentAfterTheTimeout) {
     Rig rig;
     rig.full();

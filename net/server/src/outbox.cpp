@@ -558,12 +558,14 @@ void Outbox::sendLossy(uint16_t id, PendingImage& p, uint64_t now) {
 
 // The newest rectangle carries every one before it not acknowledged, at pixels no newer change
 // has replaced (a newer one would wait, or have gone): re-sending its bytes repairs them all.
+// The wait grows by one timeout a repair, to four: doubling left a rectangle unrepaired for
+// 1.5 s at 5 % loss, where half of all 15-fragment rectangles are lost.
 void Outbox::takeRepairs(const std::function<bool(uint16_t)>& live, uint64_t now, Taken& taken) {
     for (auto& [id, l] : m_lossy) {
         if (l.unacked.empty() || l.newest.empty() || m_images.count(id) || !live(id))
             continue;
         SentRect& r = l.unacked.back();
-        if (now - r.sentUs < repairTimeout(l) << std::min(r.repairs, 4))
+        if (now - r.sentUs < repairTimeout(l) * uint64_t(1 + std::min(r.repairs, 3)))
             continue;
         r.sentUs = now;
         ++r.repairs;

@@ -117,8 +117,8 @@ public:
     // maxInFlightBytes in ENet's hands, or lossy bytes unacknowledged within the repair timeout
     // over kLossyWindowBytes); those of clients not `live` (gone, or being sent away) are
     // dropped. With them, the repairs due: a live client's newest lossy rectangle again when it
-    // is still unacknowledged past the timeout (doubling with each repair of it) and nothing
-    // newer waits.
+    // is still unacknowledged past the timeout (one timeout more a repair of it, up to four) and
+    // nothing newer waits.
     Taken take(const std::function<bool(uint16_t)>& live);
     // [Network thread] Client `id` has applied image `sequence` of its view (ImageAck): what it
     // acknowledges is forgotten, and its round trip times the repairs. An ack of another view, of
