@@ -4,7 +4,10 @@
 // addresses x 32 silent peers reconnect as soon as they are dropped, (d) a greedy peer asks for a
 // new 256^2, 512^2 or 2048^2 view every 5 ms, (e) a peer holds a 2048^2 or 1920 x 1080 view of the
 // trainee's site (every change is rendered for it too), (f) a peer switches design 100 times a
-// second, (g) a peer leaves and joins 8.8 times a second. Each prints beside its target: join
+// second, (g) a peer leaves and joins 8.8 times a second, (h) an authenticated trainee sends
+// sealed messages with a byte flipped, cut short or replayed, 2000 a second (and authenticates
+// again each time it is sent away), (i) an instructor asks for a new code 200 times a second.
+// Each prints beside its target: join
 // <= 2 s; p99 <= 2x the figure without hostile peers (run (a) first, in the same process). The
 // full-screen runs: a lone 1920 x 1080 trainee, and four at once, beside a 500^2 one. The
 // memory run holds 15 peers asking for distinct 2048^2 views and prints the process's peak
@@ -14,6 +17,7 @@
 
 #include "libsim/skull.h"
 #include "libsim/stats.h"
+#include "net/secure_channel.h"
 #include "net/session_client.h"
 #include "net/session_gate.h"
 #include "net/session_server.h"
@@ -122,6 +126,167 @@ private:
     std::thread m_thread;
 };
 
+// An authenticated trainee at 127.0.0.<address> that says hello, then sends a sealed ToolState
+// every `everyUs` spoilt in turn: a byte flipped, cut short, or one sent before replayed. Sent away
+// for it (the malformed limit), it connects and authenticates again at once.
+class MutatingPeer {
+public:
+    MutatingPeer(uint16_t port, const Volume& v, int everyUs, uint8_t address = 6)
+        : m_view(toViewSpec(cameraPreset("paper", v, {kWindow, kWindow}))) {
+        m_thread = std::thread([=, this] { run(port, everyUs, address); });
+    }
+    ~MutatingPeer() {
+        m_stop = true;
+        m_thread.join();
+    }
+    bool welcomed() const { return m_everWelcomed.load(); }
+
+private:
+    struct Link {
+        ENetPeer* peer = nullptr;
+        std::optional<SpakeClient> spake;
+        std::optional<SecureChannel> channel;
+        bool welcomed = false;
+        std::vector<uint8_t> sent; // a sealed message sent, to replay
+    };
+    void run(uint16_t port, int everyUs, uint8_t address) {
+        ENetAddress bindTo{};
+        bindTo.host = htonl(0x7f000000u | address);
+        ENetHost* host = enet_host_create(&bindTo, 1, size_t(Channel::Count), 0, 0);
+        if (!host)
+            return;
+        const ENetAddress server = parseAddress("127.0.0.1:" + std::to_string(port));
+        Link link;
+        link.peer = enet_host_connect(host, &server, size_t(Channel::Count), kProtocolVersion);
+        uint64_t next = 0;
+        uint32_t sequence = 0;
+        while (!m_stop) {
+            ENetEvent ev;
+            while (enet_host_service(host, &ev, 0) > 0) {
+                if (ev.type == ENET_EVENT_TYPE_RECEIVE) {
+                    receive(link, {ev.packet->data, ev.packet->dataLength});
+                    enet_packet_destroy(ev.packet);
+                } else if (ev.type == ENET_EVENT_TYPE_DISCONNECT) {
+                    link = Link{}; // sent away: again, at once
+                    link.peer =
+                        enet_host_connect(host, &server, size_t(Channel::Count), kProtocolVersion);
+                }
+            }
+            const uint64_t now = steadyNowUs();
+            if (link.welcomed && now >= next) {
+                ToolState t;
+                t.sequence = ++sequence;
+                t.clientTimeUs = now;
+                t.diameterMm = 5.0f;
+                std::vector<uint8_t> sealed =
+                    link.channel->seal(Channel::ToolState, encodeMessage(t));
+                // One in ten goes intact (a replay must copy one the server opened), the rest
+                // with a byte flipped, cut short, or as the last intact one again.
+                if (sequence % 10 == 0)
+                    link.sent = sealed;
+                else if (sequence % 3 == 0)
+                    sealed[sealed.size() / 2] ^= 0x5a;
+                else if (sequence % 3 == 1 || link.sent.empty())
+                    sealed.resize(sealed.size() - 7);
+                else
+                    sealed = link.sent;
+                enet_peer_send(
+                    link.peer, uint8_t(Channel::ToolState),
+                    enet_packet_create(sealed.data(), sealed.size(), ENET_PACKET_FLAG_UNSEQUENCED));
+                next = now + uint64_t(everyUs);
+            }
+            std::this_thread::sleep_for(std::chrono::microseconds(100));
+        }
+        enet_peer_disconnect_now(link.peer, 0);
+        enet_host_destroy(host);
+    }
+    // The handshake as SessionClient does it (its w computed once: the salt is the server's).
+    void receive(Link& link, std::span<const uint8_t> data) {
+        if (link.channel) {
+            std::vector<uint8_t> plain;
+            if (link.channel->open(Channel::Control, data, plain) == SecureChannel::Opened::Ok &&
+                !plain.empty() && plain[0] == uint8_t(MessageType::Welcome))
+                link.welcomed = m_everWelcomed = true;
+            return;
+        }
+        Handshake m;
+        if (!decodeMessage(data, m))
+            return;
+        if (m.step == Handshake::Step::Challenge) {
+            Salt salt;
+            std::copy(m.salt.begin(), m.salt.end(), salt.begin());
+            if (!m_w)
+                m_w = codeScalar(normaliseCode(kTraineeCode), salt);
+            link.spake.emplace(*m_w, salt, Role::Trainee);
+            Handshake offer;
+            offer.step = Handshake::Step::Offer;
+            offer.share = link.spake->share();
+            send(link.peer, encodeMessage(offer));
+        } else if (m.step == Handshake::Step::Answer && link.spake) {
+            for (size_t i = 0; i < m.entries.size(); ++i) {
+                const auto keys = link.spake->keys(m.entries[i].share, m.entries[i].role);
+                if (!keys || m.entries[i].role != Role::Trainee)
+                    continue;
+                Handshake confirm;
+                confirm.step = Handshake::Step::Confirm;
+                confirm.entry = uint8_t(i);
+                confirm.mac = keys->clientConfirm;
+                send(link.peer, encodeMessage(confirm));
+                link.channel.emplace(*keys, false);
+                Hello h;
+                h.name = "mutating";
+                h.view = m_view;
+                send(link.peer, link.channel->seal(Channel::Control, encodeMessage(h)));
+                return;
+            }
+        }
+    }
+    static void send(ENetPeer* peer, const std::vector<uint8_t>& bytes) {
+        enet_peer_send(peer, uint8_t(Channel::Control),
+                       enet_packet_create(bytes.data(), bytes.size(), ENET_PACKET_FLAG_RELIABLE));
+    }
+
+    ViewSpec m_view;
+    std::optional<Bytes32> m_w;
+    std::atomic<bool> m_stop{false}, m_everWelcomed{false};
+    std::thread m_thread;
+};
+
+// An instructor that asks for a new instructor code every `everyUs` (the trainees' code stays).
+class CodeRequester {
+public:
+    CodeRequester(uint16_t port, const Volume& v, int everyUs) {
+        ClientConfig cc;
+        cc.name = "coder";
+        cc.role = Role::Instructor;
+        cc.code = kInstructorCode;
+        cc.view = toViewSpec(cameraPreset("paper", v, {64, 64}));
+        m_thread = std::thread([=, this] {
+            SessionClient c(cc);
+            c.connect(parseAddress("127.0.0.1:" + std::to_string(port)));
+            uint64_t next = 0;
+            while (!m_stop && !c.closed()) {
+                c.poll(1);
+                m_welcomed = m_welcomed || c.welcomed();
+                if (c.welcomed() && steadyNowUs() >= next) {
+                    c.newCode(Role::Instructor);
+                    next = steadyNowUs() + uint64_t(everyUs);
+                }
+            }
+            c.disconnect(50);
+        });
+    }
+    ~CodeRequester() {
+        m_stop = true;
+        m_thread.join();
+    }
+    bool welcomed() const { return m_welcomed.load(); }
+
+private:
+    std::atomic<bool> m_stop{false}, m_welcomed{false};
+    std::thread m_thread;
+};
+
 struct Figures {
     double joinS = 0, p50Us = 0, p99Us = 0;
     double viewS = 0; // a new view requested once joined -> its full image applied
@@ -137,10 +302,12 @@ struct Figures {
 // `width` x `height`: the trainee's window; `deeperMm`: its strokes that much deeper (several
 // trainees drilling at once each cut fresh bone).
 Figures traineeRun(SessionServer& server, const Volume& skull, int width = kWindow,
-                   int height = kWindow, float deeperMm = 0, const std::string& name = "trainee") {
+                   int height = kWindow, float deeperMm = 0, const std::string& name = "trainee",
+                   const std::string& code = "") {
     Figures f;
     ClientConfig cc;
     cc.name = name;
+    cc.code = code;
     cc.view = toViewSpec(cameraPreset("paper", skull, {width, height}));
     SessionClient client(cc);
     const uint64_t t0 = steadyNowUs();
@@ -212,7 +379,9 @@ enum class Hostile {
     Holding,
     Holding1080,
     Switching,
-    Churning
+    Churning,
+    Mutating,
+    NewCodes
 };
 
 double g_quietP99Us = 0; // the figure without hostile peers, from the first run
@@ -226,6 +395,12 @@ void underAttack(benchmark::State& state, Hostile kind) {
         config.volumeName = "skull:80";
         if (const char* e = std::getenv("TREPHINE_VIEW_PIXELS_PER_S"))
             config.viewPixelsPerS = std::atof(e);
+        // The abuse of authenticated peers needs codes (the trainee joins with its code too).
+        const bool sealed = kind == Hostile::Mutating || kind == Hostile::NewCodes;
+        if (sealed) {
+            config.traineeCode = kTraineeCode;
+            config.instructorCode = kInstructorCode;
+        }
         SessionServer server(skull, config);
         server.start();
         std::optional<testing::HalfOpenFlood> flood;
@@ -266,16 +441,30 @@ void underAttack(benchmark::State& state, Hostile kind) {
         default:
             break;
         }
-        while (greedy && !greedy->welcomed())
+        // Spoilt sealed messages 2000 a second; a new code 200 times a second.
+        std::optional<MutatingPeer> mutating;
+        std::optional<CodeRequester> coder;
+        if (kind == Hostile::Mutating)
+            mutating.emplace(server.port(), skull, 500);
+        if (kind == Hostile::NewCodes)
+            coder.emplace(server.port(), skull, 5000);
+        while ((greedy && !greedy->welcomed()) || (mutating && !mutating->welcomed()) ||
+               (coder && !coder->welcomed()))
             std::this_thread::sleep_for(std::chrono::milliseconds(5));
         std::this_thread::sleep_for(std::chrono::milliseconds(500)); // the attack under way
-        f = traineeRun(server, skull);
+        f = traineeRun(server, skull, kWindow, kWindow, 0, "trainee", sealed ? kTraineeCode : "");
         const nlohmann::json a = nlohmann::json::parse(server.reportJson()).at("availability");
         for (const char* k :
              {"connects_rate_limited", "connects_address_busy", "connects_pool_full",
               "connects_displaced", "connects_cookieless", "handshakes_reset", "views_deferred"})
             state.counters[k] = a.at(k).get<double>();
         state.counters["hello_timeouts"] = double(server.helloTimeouts());
+        if (sealed) {
+            const nlohmann::json sec = nlohmann::json::parse(server.reportJson()).at("security");
+            for (const char* k : {"forged_dropped", "replayed_dropped", "codes_issued"})
+                state.counters[k] = sec.at(k).get<double>();
+            state.counters["malformed_kicks"] = double(server.disconnectedForMalformed());
+        }
     }
     if (kind == Hostile::None)
         g_quietP99Us = f.p99Us;
@@ -495,6 +684,8 @@ BENCHMARK_CAPTURE(underAttack, holding_1080p_view, Hostile::Holding1080)
     ->UseRealTime();
 BENCHMARK_CAPTURE(underAttack, design_switches, Hostile::Switching)->Iterations(1)->UseRealTime();
 BENCHMARK_CAPTURE(underAttack, join_leave_churn, Hostile::Churning)->Iterations(1)->UseRealTime();
+BENCHMARK_CAPTURE(underAttack, mutated_sealed, Hostile::Mutating)->Iterations(1)->UseRealTime();
+BENCHMARK_CAPTURE(underAttack, new_codes, Hostile::NewCodes)->Iterations(1)->UseRealTime();
 BENCHMARK(fullScreenTrainees)->Arg(0)->Arg(1)->Arg(4)->Iterations(1)->UseRealTime();
 BENCHMARK(classroomBehindAGuesser)->Iterations(1)->UseRealTime()->Unit(benchmark::kSecond);
 BENCHMARK(memoryBound)->Iterations(1)->UseRealTime()->Unit(benchmark::kMillisecond);
