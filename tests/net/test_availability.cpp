@@ -5,11 +5,16 @@
 #include "net/budgets.h"
 #include "net/codec.h"
 #include "net/fair_share.h"
+#include "net/secure_channel.h"
+#include "net/session_codes.h"
+#include "net/session_gate.h"
 #include "net/session_policy.h"
 #include "net/sim_step.h"
 
 #include "libsim/skull.h"
 #include "net/view.h"
+
+#include "gate_client.h"
 
 #include <enet/protocol.h>
 #include <gtest/gtest.h>
@@ -804,24 +809,212 @@ TEST(FairShare, APeerIdleForAWhileGoesFirstButBanksNoCredit) {
     EXPECT_EQ(share.charged(2), 0u) << "a later peer given its id starts from nothing";
 }
 
+// [SECTION] the network thread's share: FairInbox, CodeMint
+
+// A peer whose messages cost the network thread more falls behind in its own queue: each pass the
+// honest peer's message, sent after a pile of the other's, is handled first or after at most one
+// of them, and only the costly peer's queue grows.
+TEST(FairInbox, APeerWhoseMessagesCostMoreFallsBehindWhileAnHonestPeersGoFirst) {
+    uint64_t clock = 0;
+    FairInbox inbox([&] { return clock; });
+    const std::vector<uint8_t> costly{1}, cheap{2};
+    size_t lastGreedyWaiting = 0;
+    for (int pass = 0; pass < 50; ++pass) {
+        for (int i = 0; i < 10; ++i)
+            inbox.push(5, Channel::Control, costly); // 10 x 2 ms arrive first
+        inbox.push(1, Channel::ToolState, cheap);
+        int position = 0, honestAt = -1;
+        inbox.serve(4000, [&](uint16_t peer, Channel, std::span<const uint8_t> m) {
+            clock += m[0] == 1 ? 2000 : 50;
+            if (peer == 1)
+                honestAt = position;
+            ++position;
+        });
+        EXPECT_GE(honestAt, 0) << "pass " << pass << ": the honest message waited";
+        EXPECT_LE(honestAt, 1) << "pass " << pass;
+        EXPECT_EQ(inbox.waiting(1), 0u);
+        EXPECT_GE(inbox.waiting(5), lastGreedyWaiting);
+        lastGreedyWaiting = inbox.waiting(5);
+    }
+    EXPECT_GT(lastGreedyWaiting, 300u) << "its own queue grew";
+    EXPECT_GT(inbox.charged(5), 20 * inbox.charged(1));
+}
+
+// Work done for a peer outside its messages (its updates' sending, its codes' hashing) counts as
+// theirs do: charged, the peer goes after one that was not.
+TEST(FairInbox, WorkChargedOutsideItsMessagesPutsAPeerBehind) {
+    uint64_t clock = 0;
+    FairInbox inbox([&] { return clock; });
+    inbox.push(1, Channel::Control, std::vector<uint8_t>{0});
+    inbox.push(2, Channel::Control, std::vector<uint8_t>{0});
+    inbox.serve(0, [&](uint16_t, Channel, std::span<const uint8_t>) { clock += 10; });
+    inbox.serve(0, [&](uint16_t, Channel, std::span<const uint8_t>) { clock += 10; });
+    inbox.charge(1, 20000); // a whole volume sent to peer 1
+    std::vector<uint16_t> order;
+    for (int i = 0; i < 3; ++i) {
+        inbox.push(1, Channel::Control, std::vector<uint8_t>{0});
+        inbox.push(2, Channel::Control, std::vector<uint8_t>{0});
+    }
+    inbox.serve(1000000, [&](uint16_t peer, Channel, std::span<const uint8_t>) {
+        clock += 10;
+        order.push_back(peer);
+    });
+    EXPECT_EQ(order, (std::vector<uint16_t>{2, 2, 2, 1, 1, 1}));
+}
+
+// A full queue drops what comes next; a peer leaving has what it sent handled first, in order.
+TEST(FairInbox, AFullQueueDropsTheNextAndALeavingPeersMessagesAreHandledInOrder) {
+    FairInbox inbox([] { return uint64_t(0); }, 3);
+    for (uint8_t i = 0; i < 3; ++i)
+        EXPECT_TRUE(inbox.push(7, Channel::Control, std::vector<uint8_t>{i}));
+    EXPECT_FALSE(inbox.push(7, Channel::Control, std::vector<uint8_t>{3}));
+    EXPECT_TRUE(inbox.push(8, Channel::Control, std::vector<uint8_t>{9})) << "per peer";
+    std::vector<uint8_t> seen;
+    inbox.drain(7, [&](uint16_t peer, Channel, std::span<const uint8_t> m) {
+        EXPECT_EQ(peer, 7);
+        seen.push_back(m[0]);
+    });
+    EXPECT_EQ(seen, (std::vector<uint8_t>{0, 1, 2}));
+    EXPECT_EQ(inbox.waiting(), 1u);
+}
+
+// Sealed messages spoilt by an authenticated peer (a byte flipped, cut short, replayed, empty)
+// are dropped and counted by the gate, never delivered, and the time spent refusing them is the
+// sender's: its queue waits while an honest peer's message goes first.
+TEST(FairInbox, SpoiltSealedMessagesAreDroppedCountedAndChargedToTheirSender) {
+    ServerConfig config;
+    config.traineeCode = "TRAIN-EE42";
+    config.instructorCode = "TEACH-3R99";
+    ReportBook book;
+    SessionGate gate(config, book);
+    trephine::testing::GateClient client{config.traineeCode};
+    ENetAddress at{};
+    at.host = 0x0100007f;
+    const std::vector<uint8_t> challenge = gate.connect(5, at);
+    const SessionGate::Result answer =
+        gate.receive(5, Channel::Control, client.offer(challenge), 0);
+    ASSERT_EQ(answer.kind, SessionGate::Result::Kind::Reply);
+    const std::vector<uint8_t> confirm =
+        client.confirm(std::vector<uint8_t>(answer.message.begin(), answer.message.end()));
+    ASSERT_EQ(gate.receive(5, Channel::Control, confirm, 0).kind,
+              SessionGate::Result::Kind::Proven);
+    SecureChannel sender(*client.keys, false);
+
+    uint64_t clock = 0;
+    FairInbox inbox([&] { return clock; });
+    ToolState t;
+    const std::vector<uint8_t> intact = sender.seal(Channel::ToolState, encodeMessage(t));
+    ASSERT_EQ(gate.receive(5, Channel::ToolState, intact, 0).kind,
+              SessionGate::Result::Kind::Deliver);
+    for (uint32_t i = 1; i <= 300; ++i) {
+        t.sequence = i;
+        std::vector<uint8_t> m = sender.seal(Channel::ToolState, encodeMessage(t));
+        switch (i % 4) {
+        case 0:
+            m[m.size() / 2] ^= 0x40;
+            break;
+        case 1:
+            m.resize(m.size() - 5);
+            break;
+        case 2:
+            m = intact;
+            break; // opened once already
+        default:
+            m.resize(i % 8);
+            break;
+        }
+        inbox.push(5, Channel::ToolState, m);
+    }
+    inbox.push(1, Channel::ToolState, std::vector<uint8_t>{uint8_t(MessageType::Ping)});
+    int delivered = 0, bad = 0, position = 0, honestAt = -1;
+    // The fake clock stands for the time each refusal takes.
+    const auto handle = [&](uint16_t peer, Channel ch, std::span<const uint8_t> m) {
+        if (peer == 1)
+            honestAt = position;
+        ++position;
+        clock += 20;
+        if (peer != 5)
+            return;
+        const SessionGate::Result r = gate.receive(peer, ch, m, clock);
+        delivered += r.kind == SessionGate::Result::Kind::Deliver;
+        bad += r.kind == SessionGate::Result::Kind::Bad;
+    };
+    inbox.serve(100, handle);
+    EXPECT_LE(honestAt, 1) << "the honest message waits behind at most one";
+    while (inbox.waiting() > 0)
+        inbox.serve(100, handle);
+    EXPECT_EQ(delivered, 0);
+    EXPECT_EQ(bad, 300);
+    const SecurityCounters s = book.read([](const ServerReport& r) { return r.security; });
+    EXPECT_GT(s.forged, 0u);
+    EXPECT_GT(s.replayed, 0u);
+    EXPECT_EQ(s.forged + s.replayed, 300u) << "each one counted once";
+    EXPECT_EQ(inbox.charged(5), 300u * 20u);
+}
+
+// An instructor asking for a new code 200 times while one is hashed costs two hashes, not 200:
+// the newest waiting request wins, it waits until the role's hashing is under its duty cycle,
+// and each hash's time comes back to be charged to whoever asked.
+TEST(CodeMint, RequestsWhileACodeIsHashedCoalesceNewestWinsWithinTheDutyCycle) {
+    struct Manual final : Executor {
+        std::vector<std::function<void()>> tasks;
+        void post(std::function<void()> task) override { tasks.push_back(std::move(task)); }
+        void cancel() override { tasks.clear(); }
+        void drain() override {}
+        void run() {
+            auto now = std::move(tasks);
+            tasks.clear();
+            for (auto& task : now)
+                task();
+        }
+    } worker;
+    Salt salt{};
+    salt[0] = 7;
+    CodeMint mint(worker);
+    for (uint16_t i = 0; i < 200; ++i)
+        mint.request({Role::Instructor, 3, "cho" + std::to_string(i)}, salt, 1000 + i);
+    mint.request({Role::Trainee, 3, "cho"}, salt, 1200); // another role hashes beside it
+    EXPECT_EQ(worker.tasks.size(), 2u) << "one hash a role at a time";
+    EXPECT_TRUE(mint.take(1300).empty()) << "nothing hashed yet";
+    worker.run();
+    std::vector<CodeMint::Done> issued = mint.take(1300);
+    ASSERT_EQ(issued.size(), 2u);
+    EXPECT_EQ(issued[0].request.byName, "cho0");
+    EXPECT_GT(issued[0].us, 0u) << "the hash's time, to charge";
+    EXPECT_EQ(issued[0].minted.w, codeScalar(normaliseCode(issued[0].minted.code), salt));
+    EXPECT_TRUE(worker.tasks.empty()) << "the next waits for its turn";
+    const uint64_t turn = 1000 + uint64_t(double(issued[0].us) / CodeMint::kDutyCycle);
+    EXPECT_TRUE(mint.take(turn - 1).empty());
+    EXPECT_TRUE(worker.tasks.empty());
+    mint.take(turn);
+    ASSERT_EQ(worker.tasks.size(), 1u) << "its turn: the newest request";
+    worker.run();
+    issued = mint.take(turn);
+    ASSERT_EQ(issued.size(), 1u);
+    EXPECT_EQ(issued[0].request.byName, "cho199");
+    EXPECT_FALSE(mint.busy());
+}
+
 // A lone view gets every step's whole slice whatever its size: a 1920 x 1080 view renders a slice
-// a step with nothing else to do, never waiting for a rate, and a change of it goes in the step.
+// a step with nothing else to do (its half-size preview, then its rows), never waiting for a rate,
+// and a change of it goes in the step.
 TEST(AvailabilityFairShare, ALoneLargeViewGetsTheWholeStepWhateverItsSize) {
     const Volume skull = makeSkull(48);
     constexpr int64_t kSlice = 1920 * 64;
+    constexpr int64_t kPixels = 1920 * 1080 + 960 * 540; // the exact frame and its preview
     SliceRig rig(skull, kSlice, 1920 * 8, true);
     const Camera hd = cameraPreset("top", skull, {1920, 1080});
     std::vector<Outbox::Ready> done = rig.run({rig.join(1, hd)});
-    int steps = 1;
-    for (; !has(done, 1, true) && steps < 100; ++steps) {
+    int steps = 1, fullImages = 0;
+    for (; (fullImages += has(done, 1, true)) < 2 && steps < 100; ++steps) {
         EXPECT_EQ(*rig.pixels, uint64_t(steps) * kSlice) << "a whole slice every step";
         EXPECT_TRUE(rig.step.rendering()) << "work now: the server's loop does not wait";
         done = rig.run({});
     }
-    EXPECT_EQ(steps, (1080 + 63) / 64);
+    EXPECT_EQ(steps, (kPixels + kSlice - 1) / kSlice) << "the preview, then the exact frame";
     Dbi seen;
     ASSERT_TRUE(applyUpdate(done, 1, hd, seen));
-    EXPECT_EQ(rig.step.share().charged(1), uint64_t(1920 * 1080)) << "all charged to it";
+    EXPECT_EQ(rig.step.share().charged(1), uint64_t(kPixels)) << "all charged to it";
     auto cut = rig.run({topCut(skull, rig.now)});
     ASSERT_TRUE(applyUpdate(cut, 1, hd, seen)) << "its change goes in the step";
     EXPECT_FALSE(rig.step.rendering());

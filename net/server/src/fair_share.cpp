@@ -40,4 +40,53 @@ uint64_t FairShare::charged(uint16_t peer) const {
     return it == m_total.end() ? 0 : it->second;
 }
 
+// [SECTION] the network thread's inbox
+
+bool FairInbox::push(uint16_t peer, Channel channel, std::span<const uint8_t> bytes) {
+    std::deque<Message>& q = m_queues[peer];
+    if (q.size() >= m_maxWaiting)
+        return false;
+    q.push_back({channel, {bytes.begin(), bytes.end()}});
+    ++m_waiting;
+    return true;
+}
+
+size_t FairInbox::waiting(uint16_t peer) const {
+    auto it = m_queues.find(peer);
+    return it == m_queues.end() ? 0 : it->second.size();
+}
+
+// The handler may queue more, or drain another peer: the message is taken out first.
+void FairInbox::handleOne(uint16_t peer, const Handler& handle) {
+    auto it = m_queues.find(peer);
+    Message m = std::move(it->second.front());
+    it->second.pop_front();
+    --m_waiting;
+    if (it->second.empty())
+        m_queues.erase(it);
+    const uint64_t t0 = m_share.now();
+    handle(peer, m.channel, m.bytes);
+    m_share.charge(peer, m_share.now() - t0);
+}
+
+size_t FairInbox::serve(uint64_t sliceUs, const Handler& handle) {
+    const uint64_t start = m_share.now();
+    size_t handled = 0;
+    std::vector<uint16_t> ready;
+    while (m_waiting > 0 && (handled == 0 || m_share.now() - start < sliceUs)) {
+        ready.clear();
+        for (const auto& [peer, q] : m_queues)
+            ready.push_back(peer);
+        handleOne(ready[m_share.pick(ready)], handle);
+        ++handled;
+    }
+    return handled;
+}
+
+void FairInbox::drain(uint16_t peer, const Handler& handle) {
+    while (waiting(peer) > 0)
+        handleOne(peer, handle);
+    m_share.forget(peer);
+}
+
 } // namespace trephine::net

@@ -44,6 +44,7 @@ Json availability(const AvailabilityCounters& a) {
             {"control_coalesced", a.controlCoalesced},
             {"control_dropped", a.controlDropped},
             {"names_repaired", a.namesRepaired},
+            {"received_dropped", a.receivedDropped},
             {"peak_control_bytes", a.peakControlBytes}};
 }
 
@@ -79,8 +80,8 @@ nlohmann::ordered_json toJson(const ServerReport& r, const NetStats& stats) {
               {"views_refused", c.viewsRefused},
               {"annotations_refused", c.annotationsRefused},
               {"take_overs_refused", c.takeOversRefused},
-              {"replay_controls_refused", c.replayControlsRefused},
               {"hand_links_refused", c.handLinksRefused},
+              {"replay_controls_refused", c.replayControlsRefused},
               {"drilling_paused", c.drillingPaused},
               {"peak_in_flight_bytes", c.peakInFlightBytes},
               {"channels", channels(stats)},
@@ -119,6 +120,7 @@ nlohmann::ordered_json toJson(const ServerReport& r, const NetStats& stats) {
                          {"malformed", p.malformed},
                          {"views_refused", p.viewsRefused},
                          {"charged_us", p.chargedUs},
+                         {"net_charged_us", p.netChargedUs},
                          {"sync", syncName(p.sync)},
                          {"sync_switches", p.syncSwitches},
                          {"kicked", p.kicked}});

@@ -1,5 +1,6 @@
 #include "net/session_codes.h"
 
+#include "net/net_stats.h"
 #include "net/secure_channel.h"
 #include "net/session_gate.h"
 #include "net/session_policy.h"
@@ -31,18 +32,88 @@ std::vector<std::string> issueCodes(SessionGate& gate, SessionPolicy& policy, Po
     return lines;
 }
 
+MintedCode mintCode(const Salt& salt) {
+    MintedCode m;
+    m.code = generateCode();
+    m.w = codeScalar(normaliseCode(m.code), salt);
+    return m;
+}
+
+// [SECTION] the mint
+
+void CodeMint::start(const CodeRequest& r, const Salt& salt, uint64_t now) {
+    m_hashing.insert(r.role);
+    m_worker->post([this, r, salt, now] {
+        const uint64_t t0 = steadyNowUs();
+        MintedCode minted = mintCode(salt);
+        const uint64_t us = steadyNowUs() - t0;
+        std::lock_guard lock(m_mutex);
+        m_done.push_back({r, std::move(minted), us, now});
+    });
+}
+
+void CodeMint::request(const CodeRequest& r, const Salt& salt, uint64_t now) {
+    if (m_hashing.count(r.role) || now < m_turnUs[r.role])
+        m_waiting[r.role] = {r, salt}; // the newest request wins
+    else
+        start(r, salt, now);
+}
+
+std::vector<CodeMint::Done> CodeMint::take(uint64_t now) {
+    std::vector<Done> out;
+    for (;;) {
+        std::vector<Done> done;
+        {
+            std::lock_guard lock(m_mutex);
+            done.swap(m_done);
+        }
+        for (Done& d : done) {
+            m_hashing.erase(d.request.role);
+            m_turnUs[d.request.role] = d.startedUs + uint64_t(double(d.us) / kDutyCycle);
+            out.push_back(std::move(d));
+        }
+        // Waiting requests whose turn has come; an inline worker hashes them at once: again.
+        bool started = false;
+        for (auto it = m_waiting.begin(); it != m_waiting.end();) {
+            const Role role = it->first;
+            if (m_hashing.count(role) || now < m_turnUs[role]) {
+                ++it;
+                continue;
+            }
+            const auto [r, salt] = it->second;
+            it = m_waiting.erase(it);
+            start(r, salt, now);
+            started = true;
+        }
+        if (!started)
+            return out;
+    }
+}
+
 // [SECTION] the gate
+
+std::optional<Salt> SessionGate::salt() const {
+    if (!m_codes)
+        return std::nullopt;
+    return m_codes->salt;
+}
 
 std::string SessionGate::issue(Role role) {
     if (!m_codes)
         return {}; // the policy refuses any request in an open session
-    std::string code;
-    const Bytes32& other = role == Role::Trainee ? m_codes->instructor : m_codes->trainee;
-    Bytes32 w;
-    do { // 40 random bits: the other role's code again is unlikely, and would make roles one
-        code = generateCode();
-        w = codeScalar(normaliseCode(code), m_codes->salt); // the Challenge's salt, still
-    } while (w == other);
+    MintedCode m;
+    do
+        m = mintCode(m_codes->salt); // the Challenge's salt, still
+    while (!install(role, m.w));
+    return m.code;
+}
+
+bool SessionGate::install(Role role, const Bytes32& w) {
+    if (!m_codes)
+        return false;
+    // 40 random bits: the other role's code again is unlikely, and would make roles one.
+    if (w == (role == Role::Trainee ? m_codes->instructor : m_codes->trainee))
+        return false;
     (role == Role::Trainee ? m_codes->trainee : m_codes->instructor) = w;
     // A handshake answered with the old code must not end in the session: its confirmation can
     // no longer match, so it is refused as a wrong code.
@@ -52,7 +123,7 @@ std::string SessionGate::issue(Role role) {
                 randombytes_buf(keys.clientConfirm.data(), keys.clientConfirm.size());
     std::erase_if(m_removed, [&](const auto& r) { return r.second == role; });
     count(&SecurityCounters::codesIssued);
-    return code;
+    return true;
 }
 
 // [SECTION] the policy

@@ -5,9 +5,11 @@
 #include "libsim/replacing_file.h"
 #include "libsim/volume_io.h"
 #include "net/debrief.h"
+#include "net/fair_share.h"
 #include "net/marks_file.h"
 #include "net/outbox.h"
 #include "net/replay_feed.h"
+#include "net/session_codes.h"
 #include "net/session_gate.h"
 #include "net/session_log.h"
 #include "net/session_policy.h"
@@ -18,6 +20,7 @@
 #include <poll.h>
 #include <pthread.h>
 #include <sys/eventfd.h>
+#include <sys/resource.h>
 #include <unistd.h>
 
 #include <condition_variable>
@@ -130,8 +133,10 @@ struct SessionServer::Impl {
         const uint64_t pumped = pumpedUs.load();
         return threaded.load() || pumped == 0 ? steadyNowUs() : pumped;
     }
-    // Where full images are coded apart: inline when pumped, a worker beside the threads.
-    const int64_t apartPixels = StepConfig{}.slicePixels + 1;
+    // Where full images are coded apart: inline when pumped, a worker beside the threads. From
+    // 256^2 up: a peer asking for new views every few ms would otherwise hold the simulation
+    // thread for each one's coding (a 512^2 image: ~1 ms) while others' rectangles wait.
+    const int64_t apartPixels = 256 * 256;
     InlineExecutor inlineCoder;
     WorkerExecutor workerCoder{"trephine-coder", 10};
     Outbox outbox;
@@ -139,12 +144,22 @@ struct SessionServer::Impl {
     // (renderView, volumeSnapshot) between batches.
     std::mutex stepMutex;
     SimulationStep step;
-    ForceModelCache forceModels;         // network thread only
-    SessionPolicy policy;                // network thread only
-    SessionGate gate;                    // network thread only: codes, sealing (docs/security.md)
-    std::map<uint16_t, ENetPeer*> links; // policy ids -> ENet peers (network thread only)
-    int64_t peakInFlight = 0;            // network thread's copy of the report's peak
-    uint64_t nextTickUs = 0;             // the channel statistics' next tick
+    ForceModelCache forceModels; // network thread only
+    SessionPolicy policy;        // network thread only
+    SessionGate gate;            // network thread only: codes, sealing (docs/security.md)
+    // [Network thread] What peers send, handled in fair order and charged to them, with every
+    // other piece of work done for a peer here (docs/session.md, "Availability"). A pass handles
+    // at most kReceiveSliceUs of it before it sends; the rest waits for the next pass.
+    static constexpr uint64_t kReceiveSliceUs = 2000;
+    FairInbox received{[] { return steadyNowUs(); }};
+    // New codes hashed on a worker, newest wins per role (inline when pumped).
+    InlineExecutor inlineMint;
+    WorkerExecutor workerMint{"trephine-codes", 10};
+    CodeMint mint{inlineMint};
+    std::map<uint16_t, uint64_t> netCharged; // what the report has of `received`'s charges
+    std::map<uint16_t, ENetPeer*> links;     // policy ids -> ENet peers (network thread only)
+    int64_t peakInFlight = 0;                // network thread's copy of the report's peak
+    uint64_t nextTickUs = 0;                 // the channel statistics' next tick
 
     // Network -> simulation.
     std::mutex inMutex;
@@ -181,6 +196,8 @@ struct SessionServer::Impl {
     void finishSimulation();
     SessionPolicy::ForceAnswer force(const ToolState& t, glm::vec3 velocity);
     void onEvent(const ENetEvent& ev);
+    void handleReceived(uint16_t id, Channel channel, std::span<const uint8_t> data);
+    void issueMinted(PolicyOutput& out);
     void apply(PolicyOutput& out, bool mayDrop = true);
     // [Replay] The timeline of a log served (serveLog; network thread only once started), the
     // log's start to rebuild from, and what other threads hand it and read of it.
@@ -268,6 +285,8 @@ void SessionServer::Impl::push(std::vector<LogRecord>& events, const std::vector
 
 namespace {
 
+constexpr int kSimulationNice = 5;
+
 void nameThread(const char* name) {
     pthread_setname_np(pthread_self(), name);
 }
@@ -353,6 +372,7 @@ void SessionServer::start() {
         return;
     m_impl->threaded = true;
     m_impl->outbox.codeFullImagesApart(m_impl->apartPixels, m_impl->workerCoder);
+    m_impl->mint.setWorker(m_impl->workerMint);
     m_netThread = std::thread([this] { networkLoop(); });
     m_simThread = std::thread([this] { simulationLoop(); });
 }
@@ -597,6 +617,11 @@ bool SessionServer::Impl::sendControl(uint16_t id, const std::vector<uint8_t>& b
 }
 
 void SessionServer::Impl::forget(uint16_t id, uint64_t now) {
+    // What it sent before it left is handled first, as it was sent.
+    received.drain(id, [this](uint16_t peer, Channel ch, std::span<const uint8_t> data) {
+        handleReceived(peer, ch, data);
+    });
+    netCharged.erase(id);
     PolicyOutput out;
     policy.disconnect(id, now, out);
     gate.leave(id);
@@ -615,6 +640,11 @@ void SessionServer::Impl::forgetPeer(ENetPeer* p, uint64_t now) {
 
 void SessionServer::Impl::guard(uint64_t now) {
     admission.reap(now);
+    for (const auto& [id, peer] : links)
+        if (const uint64_t c = received.charged(id); c != netCharged[id]) {
+            netCharged[id] = c;
+            book.peer(id, [&](PeerReport& r) { r.netChargedUs = c; });
+        }
     for (const auto& [id, answer] : gate.release(now))
         sendTo(id, Channel::Control, answer);
     for (uint16_t id : gate.held())
@@ -652,12 +682,12 @@ void SessionServer::Impl::apply(PolicyOutput& out, bool mayDrop) {
     push(out.events, out.log, mayDrop);
     for (const auto& [id, ack] : out.imageAcks)
         outbox.acknowledge(id, ack);
-    // New codes first: the instructors' copies join this output's messages; printed like the
-    // start banner, for whoever reads them out.
-    for (const std::string& line : issueCodes(gate, policy, out)) {
-        std::printf("trephine server: %s\n", line.c_str());
-        std::fflush(stdout);
-    }
+    // New codes first (those hashed by now: at once when pumped): the instructors' copies join
+    // this output's messages.
+    if (const std::optional<Salt> salt = gate.salt())
+        for (const CodeRequest& r : std::exchange(out.newCodes, {}))
+            mint.request(r, *salt, clock());
+    issueMinted(out);
     for (const PolicyOutput::Message& m : out.messages)
         for (uint16_t id : m.to)
             sendTo(id, m.channel, m.bytes);
@@ -675,6 +705,23 @@ void SessionServer::Impl::apply(PolicyOutput& out, bool mayDrop) {
     for (const PolicyOutput::Disconnect& d : out.disconnects)
         if (auto link = links.find(d.client); link != links.end())
             enet_peer_disconnect(link->second, d.data);
+}
+
+// The codes the mint has hashed: installed, told to every instructor, printed like the start
+// banner for whoever reads them out; the hashing is charged to whoever asked.
+void SessionServer::Impl::issueMinted(PolicyOutput& out) {
+    for (CodeMint::Done& d : mint.take(clock())) {
+        if (links.count(d.request.by))
+            received.charge(d.request.by, d.us);
+        if (!gate.install(d.request.role, d.minted.w)) {
+            mint.request(d.request, *gate.salt(), clock()); // the other role's code: another
+            continue;
+        }
+        policy.codeIssued(d.request.role, d.minted.code, out);
+        std::printf("trephine server: %s\n",
+                    codeIssuedLine(d.request.role, d.minted.code, d.request.byName).c_str());
+        std::fflush(stdout);
+    }
 }
 
 void SessionServer::Impl::onEvent(const ENetEvent& ev) {
@@ -711,8 +758,25 @@ void SessionServer::Impl::onEvent(const ENetEvent& ev) {
             r.bytesIn += bytes;
             ++r.messagesIn;
         });
-        const SessionGate::Result in =
-            gate.receive(id, Channel(ev.channelID), {ev.packet->data, bytes}, now);
+        // Handled in its turn (receive()); a peer with a full queue loses the message.
+        if (!received.push(id, Channel(ev.channelID), {ev.packet->data, bytes}))
+            book.record([](ServerReport& r) { ++r.availability.receivedDropped; });
+        return;
+    }
+    default:
+        return;
+    }
+}
+
+// A message `id` sent, in its turn: opened by the gate, then the policy's.
+void SessionServer::Impl::handleReceived(uint16_t id, Channel channel,
+                                         std::span<const uint8_t> data) {
+    if (!policy.live(id))
+        return;
+    const uint64_t now = clock();
+    PolicyOutput out;
+    {
+        const SessionGate::Result in = gate.receive(id, channel, data, now);
         switch (in.kind) {
         case SessionGate::Result::Kind::Deliver:
             out = policy.receive(id, in.message, now);
@@ -732,14 +796,10 @@ void SessionServer::Impl::onEvent(const ENetEvent& ev) {
             out = policy.reject(id, now);
             break;
         }
-        if (out.malformed)
-            stats.countMalformed();
-        apply(out);
-        return;
     }
-    default:
-        return;
-    }
+    if (out.malformed)
+        stats.countMalformed();
+    apply(out);
 }
 
 // A served log's timeline: the windows' controls, then the records due (after a rebuild from the
@@ -796,8 +856,12 @@ void SessionServer::Impl::sendUpdates() {
     }
     apply(out);
     for (Outbox::Ready& u : taken.updates) {
-        if (!sendTo(u.client, u.channel, u.message, policy.inFlight(u.client)))
+        // Sealing and handing it to ENet (a whole volume's fragments) is work for that client.
+        const uint64_t t0 = received.now();
+        const bool sent = sendTo(u.client, u.channel, u.message, policy.inFlight(u.client));
+        if (!sent)
             continue;
+        received.charge(u.client, received.now() - t0);
         book.record([&](ServerReport& r) {
             ModeTotals& t = r.modes[size_t(u.mode)].sent;
             ++t.updates;
@@ -897,6 +961,9 @@ void SessionServer::Impl::receive(uint64_t now) {
     const ScreenFor screen(admission, book);
     admission.setNow(now);
     host.service(0, [&](const ENetEvent& ev) { onEvent(ev); });
+    received.serve(kReceiveSliceUs, [this](uint16_t id, Channel ch, std::span<const uint8_t> data) {
+        handleReceived(id, ch, data);
+    });
     playReplayed();
 }
 
@@ -967,7 +1034,7 @@ void SessionServer::networkLoop() {
     Impl& s = *m_impl;
     while (!m_stop.load()) {
         // Wait on the socket and the wake-up together, then handle everything pending.
-        s.waitNetwork(1);
+        s.waitNetwork(s.received.waiting() > 0 ? 0 : 1); // messages left waiting go at once
         s.receive(s.clock());
         s.send(s.clock());
     }
@@ -976,6 +1043,9 @@ void SessionServer::networkLoop() {
 
 void SessionServer::simulationLoop() {
     nameThread("trephine-sim");
+    // Below the network thread, whose work is short and waited for (forces, sends): woken, it
+    // takes the core from a long render at once instead of after the render's time slice.
+    setpriority(PRIO_PROCESS, pid_t(::gettid()), kSimulationNice);
     Impl& s = *m_impl;
     for (;;) {
         {

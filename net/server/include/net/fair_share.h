@@ -4,11 +4,15 @@
 // share waits behind the others, and only its own work piles up.
 #pragma once
 
+#include "net/enet_host.h"
 #include "net/outbox.h"
 
 #include <cstdint>
+#include <deque>
+#include <functional>
 #include <map>
 #include <span>
+#include <vector>
 
 namespace trephine::net {
 
@@ -41,6 +45,45 @@ private:
     // Per peer: its virtual finish time (charged time, lifted on each idle spell), and in all.
     std::map<uint16_t, uint64_t> m_finish, m_total;
     uint64_t m_virtual = 0; // the start tag of the piece picked last
+};
+
+// The network thread's side of the same rule: what peers send waits in a queue per peer and is
+// handled in fair order, each message's handling (opening or refusing it, the policy, what it
+// sends) charged to its sender in measured time, and so is other work done for a peer there (its
+// updates' sealing and sending, its new codes). A peer whose messages cost more falls behind in
+// its own queue; an honest peer's message waits behind at most one message of another's.
+class FairInbox {
+public:
+    using Handler = std::function<void(uint16_t peer, Channel, std::span<const uint8_t>)>;
+    // `clock` as FairShare's; a peer with `maxWaiting` messages queued has the next dropped.
+    explicit FairInbox(ServerClock clock, size_t maxWaiting = 4096)
+        : m_share(std::move(clock)), m_maxWaiting(maxWaiting) {}
+
+    // Queues what `peer` sent; false when its queue is full (the message is dropped).
+    bool push(uint16_t peer, Channel channel, std::span<const uint8_t> bytes);
+    // Handles waiting messages, the least charged peer's first, until none waits or `sliceUs`
+    // of work is done (at least one is handled); returns how many were.
+    size_t serve(uint64_t sliceUs, const Handler& handle);
+    // Handles every message `peer` has waiting, in order (it is leaving), then forgets it.
+    void drain(uint16_t peer, const Handler& handle);
+    // Work done for `peer` outside its messages; `us` measured by the caller.
+    void charge(uint16_t peer, uint64_t us) { m_share.charge(peer, us); }
+    uint64_t now() const { return m_share.now(); }
+    size_t waiting() const { return m_waiting; }
+    size_t waiting(uint16_t peer) const;
+    uint64_t charged(uint16_t peer) const { return m_share.charged(peer); }
+
+private:
+    struct Message {
+        Channel channel;
+        std::vector<uint8_t> bytes;
+    };
+    void handleOne(uint16_t peer, const Handler& handle);
+
+    FairShare m_share;
+    size_t m_maxWaiting;
+    std::map<uint16_t, std::deque<Message>> m_queues; // only peers with something waiting
+    size_t m_waiting = 0;
 };
 
 } // namespace trephine::net

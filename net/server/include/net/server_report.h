@@ -55,6 +55,7 @@ struct AvailabilityCounters {
     uint64_t controlCoalesced = 0; // rosters, marks, views replaced by a newer one while queued
     uint64_t controlDropped = 0;   // pongs not sent: the peer's control backlog was over budget
     uint64_t namesRepaired = 0;    // hello names that were not UTF-8 text, or already taken
+    uint64_t receivedDropped = 0;  // messages dropped: the peer had FairInbox's most waiting
     int64_t peakControlBytes = 0;  // the most control bytes ENet held for one peer at once
 };
 
@@ -65,7 +66,8 @@ struct PeerReport {
     bool hello = false;
     uint64_t bytesIn = 0, bytesOut = 0, messagesIn = 0, messagesOut = 0;
     uint64_t malformed = 0, hapticModels = 0, hapticRelays = 0, toolStates = 0, viewsRefused = 0;
-    uint64_t chargedUs = 0; // the simulation thread's time spent for it (net/fair_share.h)
+    uint64_t chargedUs = 0;    // the simulation thread's time spent for it (net/fair_share.h)
+    uint64_t netChargedUs = 0; // the network thread's (and its code hashing), FairInbox
     uint64_t connectedUs = 0, disconnectedUs = 0; // disconnectedUs 0: still connected
     bool kicked = false;
     Sync sync = Sync::Dbi;

@@ -78,8 +78,13 @@ public:
     // [Codes] A new code for `role` (generateCode), hashed with the session's salt: the old one
     // proves nothing from now on, handshakes under way with it included, and the removals from
     // that role's code are lifted. Peers already in stay. Returns the code as printed.
-    // Defined in session_codes.cpp.
+    // Defined in session_codes.cpp, with install().
     std::string issue(Role role);
+    // [Codes] As issue(), with a code hashed elsewhere (CodeMint): false, and nothing changed,
+    // for the other role's code or an open session.
+    bool install(Role role, const Bytes32& w);
+    // The salt codes are hashed with (none in an open session).
+    std::optional<Salt> salt() const;
     size_t removedCount() const { return m_removed.size(); }
     // The answers due at `now` to offers that waited (AttemptLimit), for the peers named.
     std::vector<std::pair<uint16_t, std::vector<uint8_t>>> release(uint64_t now);
