@@ -77,3 +77,29 @@ TEST(ZoneBuzz, DangerAndViolationBuzzAlongTheToolCautionDoesNot) {
     EXPECT_NEAR(danger, 0.3f, 0.01f);
     EXPECT_NEAR(violation, 0.6f, 0.01f);
 }
+
+// Taking the hand and handing it back are felt as a pull fading in and out over rampS, not a step.
+TEST(HandLinksForce, TheGuidesPullFadesInAndOutOverItsRamp) {
+    const HandGuideConfig c; // 100 mm away: the pull is at its maximum
+    const glm::vec3 target(100, 0, 0), p(0, 0, 0), still(0, 0, 0);
+    GuideRamp ramp;
+    double t = 10.0;
+    EXPECT_EQ(ramp.force(target, p, still, t, c), glm::vec3(0.0f)) << "nothing on the first tick";
+    double previous = 0;
+    for (int i = 1; i <= 250; ++i) { // 1 kHz ticks over the ramp
+        const double f = glm::length(ramp.force(target, p, still, t + i * 1e-3, c));
+        EXPECT_LE(f - previous, c.maxForceN / (c.rampS * 1000) + 1e-5) << "tick " << i;
+        previous = f;
+    }
+    EXPECT_NEAR(previous, c.maxForceN, 1e-4) << "the whole pull once the ramp is done";
+    t += 0.25;
+    EXPECT_NEAR(ramp.force(target, p, still, t + 0.1, c).x, c.maxForceN, 1e-4);
+    t += 0.1;
+    // The guide ends: the pull toward its last target fades out, then nothing.
+    EXPECT_NEAR(ramp.force(std::nullopt, p, still, t + 0.125, c).x, c.maxForceN / 2, 1e-3);
+    EXPECT_EQ(ramp.force(std::nullopt, p, still, t + 0.25, c), glm::vec3(0.0f));
+    EXPECT_FALSE(ramp.pulling());
+    // A later guide starts from nothing again, however long after.
+    EXPECT_EQ(ramp.force(target, p, still, t + 60.0, c), glm::vec3(0.0f));
+    EXPECT_NEAR(ramp.force(target, p, still, t + 60.05, c).x, c.maxForceN * 0.2, 1e-3);
+}

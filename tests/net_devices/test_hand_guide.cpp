@@ -76,7 +76,7 @@ TEST(FeltTakeOver, TheTraineesDeviceFollowsTheInstructorsPathAndSettles) {
     };
     ASSERT_TRUE(pumpUntil({&cho}, [&] {
         toolAt(a);
-        return ada.guidedTicks() > 100;
+        return ada.guidedTicks() > 400; // the pull's ramp done (HandGuideConfig::rampS)
     }));
 
     // Along the path at 20 mm/s, then held at its end; the device's distance from the
@@ -107,8 +107,9 @@ TEST(FeltTakeOver, TheTraineesDeviceFollowsTheInstructorsPathAndSettles) {
     // Handed back: the guide ends, and the device feels nothing in the air.
     cho.takeOver(0);
     ASSERT_TRUE(pumpUntil({&cho}, [&] { return !guideTarget(*ada.client().snapshot()); }));
+    // The loop reads that snapshot within a tick, then the pull fades out over its ramp.
     pumpUntil(
-        {&cho}, [] { return false; }, 0.05); // the loop reads that snapshot within a tick
+        {&cho}, [] { return false; }, 0.05 + HandGuideConfig{}.rampS);
     const uint64_t after = ada.guidedTicks();
     pumpUntil(
         {&cho}, [] { return false; }, 0.1);

@@ -2,6 +2,8 @@
 
 #include "libsim/haptics.h"
 
+#include <algorithm>
+
 namespace trephine::net {
 
 namespace {
@@ -40,6 +42,22 @@ uint16_t feltParticipant(const ClientSnapshot& s) {
 glm::vec3 guideForce(glm::vec3 target, glm::vec3 p, glm::vec3 v, const HandGuideConfig& c) {
     const glm::vec3 f = float(c.stiffnessNPerMm) * (target - p) - float(c.dampingNsPerMm) * v;
     return clampForce(f, float(c.maxForceN));
+}
+
+glm::vec3 GuideRamp::force(std::optional<glm::vec3> target, glm::vec3 p, glm::vec3 v, double now,
+                           const HandGuideConfig& c) {
+    const double dt = m_ticked ? std::max(now - m_lastS, 0.0) : 0.0;
+    m_ticked = true;
+    m_lastS = now;
+    if (target)
+        m_target = *target;
+    const double step = c.rampS > 0.0 ? dt / c.rampS : 1.0;
+    m_gain = std::clamp(m_gain + (target ? step : -step), 0.0, 1.0);
+    if (m_gain == 0.0) {
+        m_ticked = target.has_value(); // faded out: the next guide ramps from its first tick
+        return glm::vec3(0.0f);
+    }
+    return float(m_gain) * guideForce(m_target, p, v, c);
 }
 
 } // namespace trephine::net

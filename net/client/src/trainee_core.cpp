@@ -78,9 +78,9 @@ glm::vec3 TraineeForce::force(const ToolPose& pose, double now) {
     followLinks();
     glm::vec3 f = feltForce(pose, now) +
                   zoneBuzz(m_zone, now, pose.orientation * glm::vec3(0.0f, 0.0f, 1.0f));
-    if (m_guide) {
-        f += guideForce(*m_guide, pose.position, m_guideVelocity.update(pose.position, now),
-                        m_guideConfig);
+    if (m_guide || m_guideRamp.pulling()) {
+        f += m_guideRamp.force(m_guide, pose.position, m_guideVelocity.update(pose.position, now),
+                               now, m_guideConfig);
         m_guidedTicks.fetch_add(1, std::memory_order_relaxed);
     }
     return f;

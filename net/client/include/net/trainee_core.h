@@ -122,6 +122,7 @@ private:
     Zone m_zone = Zone::Clear; // of the newest warning about its own tool
     VelocityEstimate m_guideVelocity;
     HandGuideConfig m_guideConfig;
+    GuideRamp m_guideRamp;
     std::atomic<uint64_t> m_feltTicks{0}, m_guidedTicks{0};
 };
 
