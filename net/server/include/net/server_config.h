@@ -89,8 +89,9 @@ struct ServerConfig {
     // views); a request beyond it waits, the newest one only, until its pixels are due.
     double viewPixelsPerS = 8.0 * 1024 * 1024;
     // All participants' views together (w x h each): a view that would pass it is refused. The
-    // server keeps about 40 bytes a pixel of view (frame, hit cache, coded copies).
-    int64_t maxTotalViewPixels = 16 << 20;
+    // server keeps about 40 bytes a pixel of view (frame, hit cache, coded copies). Room for
+    // maxClients at the default 500 x 500 view (18 M) and a few full-screen views beside them.
+    int64_t maxTotalViewPixels = 32 << 20;
     // How the host sizes each peer's reliable window (docs/protocol.md, "The reliable window").
     BulkWindow bulkWindow;
     // When set, every change to the session is appended here (net/session_log.h) before anything
