@@ -833,6 +833,9 @@ void SessionClient::acknowledgeImage(uint32_t sequence) {
     if (!connected())
         return;
     send(ImageAck{m_viewId, sequence});
+    // At once, before whoever waits on this picture acts on it: a change the server posts
+    // before the ack arrives goes planar (the predicted coding needs everything acknowledged).
+    m_host.flush();
     ++m_acksSent;
 }
 
