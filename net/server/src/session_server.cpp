@@ -20,7 +20,6 @@
 #include <poll.h>
 #include <pthread.h>
 #include <sys/eventfd.h>
-#include <sys/resource.h>
 #include <unistd.h>
 
 #include <condition_variable>
@@ -284,8 +283,6 @@ void SessionServer::Impl::push(std::vector<LogRecord>& events, const std::vector
 // [SECTION] lifetime
 
 namespace {
-
-constexpr int kSimulationNice = 5;
 
 void nameThread(const char* name) {
     pthread_setname_np(pthread_self(), name);
@@ -1043,9 +1040,6 @@ void SessionServer::networkLoop() {
 
 void SessionServer::simulationLoop() {
     nameThread("trephine-sim");
-    // Below the network thread, whose work is short and waited for (forces, sends): woken, it
-    // takes the core from a long render at once instead of after the render's time slice.
-    setpriority(PRIO_PROCESS, pid_t(::gettid()), kSimulationNice);
     Impl& s = *m_impl;
     for (;;) {
         {
