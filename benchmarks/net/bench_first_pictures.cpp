@@ -6,6 +6,7 @@
 // 1920 x 1080 and 2048 x 2048, alone or beside a 500^2 trainee drilling a state every 10 ms,
 // whose update p99 is printed for the quiet half of its run and for the half the view changes
 // fall in (target: first exact 1080p picture <= 0.25 s).
+#include "libsim/dbi_preview.h"
 #include "libsim/skull.h"
 #include "libsim/stats.h"
 #include "net/executor.h"
@@ -19,7 +20,6 @@
 
 #include <algorithm>
 #include <atomic>
-#include <cstring>
 #include <thread>
 #include <vector>
 
@@ -98,20 +98,6 @@ void firstPicturesStep(benchmark::State& state) {
 }
 
 // [SECTION] over loopback
-
-// True when every 2 x 2 block at even coordinates is one colour and depth: what an upsampled
-// preview is and an exact render of bone practically never is.
-bool blockConstant(const Dbi& d) {
-    for (int y = 0; y + 1 < d.height(); y += 2)
-        for (int x = 0; x + 1 < d.width(); x += 2) {
-            const float z = d.depth(x, y);
-            if (d.depth(x + 1, y) != z || d.depth(x, y + 1) != z || d.depth(x + 1, y + 1) != z ||
-                std::memcmp(d.color(x, y), d.color(x + 1, y), 4) != 0 ||
-                std::memcmp(d.color(x, y), d.color(x, y + 1), 4) != 0)
-                return false;
-        }
-    return true;
-}
 
 // A 500^2 trainee drilling a state every 10 ms (ten 20 mm strokes, as bench_availability's) for
 // `states` states; the update p99 of the first and of the second half.

@@ -143,6 +143,8 @@ TEST(ProgressivePictures, ALargeNewViewGetsItsPreviewFirstThenTheExactFrame) {
     EXPECT_TRUE(compare(got[0].pixels, expectedPreview(rig.step, view)).identical());
     EXPECT_FALSE(compare(got[0].pixels, exact).identical()) << "a preview, not the picture";
     EXPECT_TRUE(compare(got[1].pixels, exact).identical());
+    EXPECT_TRUE(blockConstant(got[0].pixels));
+    EXPECT_FALSE(blockConstant(exact)) << "what the benchmarks tell them apart by";
     EXPECT_EQ(rig.step.share().charged(1), uint64_t(160 * 120 + 80 * 60));
 }
 
