@@ -1,7 +1,8 @@
-// The simulation thread's time shared fairly among peers (docs/session.md, "Availability"):
-// start-time fair queuing over each peer's queue of work, every piece charged in measured time to
-// the peers it was done for. A peer alone gets all the time; a peer that asks for more than its
-// share waits behind the others, and only its own work piles up.
+// The server's time shared fairly among peers (docs/session.md, "Availability"): start-time fair
+// queuing over each peer's queue of work, every piece charged in measured time to the peers it
+// was done for; FairShare on the simulation thread, FairInbox (the same rule over what peers
+// send) on the network thread. A peer alone gets all the time; a peer that asks for more than
+// its share waits behind the others, and only its own work piles up.
 #pragma once
 
 #include "net/enet_host.h"
