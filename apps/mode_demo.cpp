@@ -126,7 +126,7 @@ void printSession(const net::TraineeSession& session) {
     const auto& image = s.rateHistory;
     double inBytes = 0;
     for (const auto& second : image)
-        inBytes += second[size_t(net::Channel::Image)].bytesInPerS;
+        inBytes += net::imageBytesInPerS(second);
     std::printf(
         "bytes    %.1f KB/s of image updates on average over %zu s; %llu tool states sent\n",
         image.empty() ? 0.0 : inBytes / double(image.size()) * 1e-3, image.size(),

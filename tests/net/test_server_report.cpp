@@ -63,3 +63,13 @@ TEST(ServerReport, NamesThatAreNotUtf8AreReplacedNotFatal) {
     nlohmann::json j = nlohmann::json::parse(text);
     EXPECT_EQ(j["peers"][0]["name"].get<std::string>().substr(0, 2), "Ad");
 }
+
+// What a client shows as its image rate counts full images and drilling rectangles alike.
+TEST(NetStats, ImageBytesCountBothImageChannels) {
+    std::array<ChannelRates, size_t(Channel::Count)> rates{};
+    rates[size_t(Channel::Image)].bytesInPerS = 1000;
+    rates[size_t(Channel::ImageLossy)].bytesInPerS = 250;
+    rates[size_t(Channel::Volume)].bytesInPerS = 7;
+    rates[size_t(Channel::Image)].bytesOutPerS = 99;
+    EXPECT_DOUBLE_EQ(imageBytesInPerS(rates), 1250);
+}

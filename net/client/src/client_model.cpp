@@ -281,7 +281,7 @@ void ClientModel::addSnapshot(const std::shared_ptr<const ClientSnapshot>& snap,
         const auto& rt = snap->rates;
         const uint64_t u = snap->updatesApplied;
         network.addSecond(
-            rt[size_t(Channel::Image)].bytesInPerS, rt[size_t(Channel::ToolState)].bytesOutPerS,
+            imageBytesInPerS(rt), rt[size_t(Channel::ToolState)].bytesOutPerS,
             rt[size_t(Channel::Haptic)].bytesInPerS,
             double(u >= m_updatesAtLastSecond ? u - m_updatesAtLastSecond : u), snap->rttUs);
         m_updatesAtLastSecond = u;

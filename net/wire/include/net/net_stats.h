@@ -13,6 +13,7 @@
 #include <cstdint>
 #include <deque>
 #include <glm/vec3.hpp>
+#include <span>
 #include <string>
 
 namespace trephine::net {
@@ -25,6 +26,16 @@ uint64_t steadyNowUs();
 struct ChannelRates {
     double bytesInPerS = 0, bytesOutPerS = 0, messagesInPerS = 0, messagesOutPerS = 0;
 };
+
+// Image bytes received per second: full images (Channel::Image) and drilling rectangles
+// (Channel::ImageLossy) together.
+inline double imageBytesInPerS(std::span<const ChannelRates> perChannel) {
+    double sum = 0;
+    for (Channel c : {Channel::Image, Channel::ImageLossy})
+        if (size_t(c) < perChannel.size())
+            sum += perChannel[size_t(c)].bytesInPerS;
+    return sum;
+}
 
 // One applied image or volume update, with its stage breakdown (microseconds; -1 where unknown),
 // so that a study can compute medians per stage: erode, render (DBI only) and encode at the
