@@ -88,13 +88,17 @@ struct Rig {
         : outbox(maxInFlight, book, clock.fn()) {
         outbox.join(1, std::make_shared<std::atomic<int64_t>>(0), codec, Codec::Lz4);
     }
-    // Posts the whole frame and takes it: the full image rectangles build on.
-    ImageUpdate full() {
+    // Posts the whole frame and takes it: the full image rectangles build on, acknowledged as a
+    // client does when it arrives unless `acknowledged` is false.
+    ImageUpdate full(bool acknowledged = true) {
         outbox.postImage(1, cam, frame, frame.bounds(), true, 1, {});
         Outbox::Taken t = outbox.take(live);
         EXPECT_EQ(t.updates.size(), 1u);
         EXPECT_EQ(t.updates.at(0).channel, Channel::Image);
-        return decoded(t.updates.at(0));
+        const ImageUpdate u = decoded(t.updates.at(0));
+        if (acknowledged)
+            outbox.acknowledge(1, ImageAck{u.viewId, u.sequence});
+        return u;
     }
     // Changes `rect` (new pixels of `seed`), posts it and takes what goes.
     Outbox::Taken cut(PixelRect rect, int seed) {
@@ -120,6 +124,7 @@ TEST(LossyOutbox, ARectangleCarriesEveryOneNotAcknowledged) {
     Dbi client;
     applyTo(client, t.updates.at(0), rig.cam);
     const uint32_t fullSeq = decoded(t.updates.at(0)).sequence;
+    rig.outbox.acknowledge(1, ImageAck{0, fullSeq});
 
     const PixelRect a{4, 4, 10, 6}, b{30, 20, 8, 8}, c{50, 2, 6, 6};
     t = rig.cut(a, 1);
@@ -258,16 +263,65 @@ TEST(LossyOutbox, AClientPastTheLossyWindowWaitsMerging) {
 // outbox knows the pixels it holds. Otherwise planar, whatever it got.
 TEST(LossyOutbox, PredictedOnlyWhenEverythingIsAcknowledged) {
     Rig rig(1 << 20, Codec::Zstd);
-    const ImageUpdate f = rig.full();
+    const ImageUpdate f = rig.full(false);
     const ImageUpdate first = decoded(rig.cut({4, 4, 10, 10}, 1).updates.at(0));
     EXPECT_FALSE(first.predicted) << "the full image is not acknowledged yet";
+    rig.outbox.acknowledge(1, ImageAck{0, f.sequence});
     const ImageUpdate second = decoded(rig.cut({8, 8, 10, 10}, 2).updates.at(0));
-    EXPECT_FALSE(second.predicted);
+    EXPECT_FALSE(second.predicted) << "the first is not acknowledged";
     rig.outbox.acknowledge(1, ImageAck{0, second.sequence});
     const ImageUpdate third = decoded(rig.cut({20, 8, 10, 10}, 3).updates.at(0));
     EXPECT_TRUE(third.predicted);
     EXPECT_EQ(rectOf(third), (PixelRect{20, 8, 10, 10}));
     (void)f;
+}
+
+// Until the client acknowledges its full image, and for a rectangle of more than a few
+// datagrams, rectangles go reliably behind the full image (a lossy one would overtake it, or be
+// lost whole with any fragment), still naming it; later lossy ones carry them until
+// acknowledged, and none is repaired.
+TEST(LossyOutbox, RectanglesBeforeTheFullImagesAckOrLargeGoReliably) {
+    Rig rig;
+    const ImageUpdate f = rig.full(false);
+    const PixelRect a{4, 4, 10, 6}, b{30, 20, 8, 8};
+    Outbox::Taken t = rig.cut(a, 1);
+    ASSERT_EQ(t.updates.size(), 1u);
+    EXPECT_EQ(t.updates[0].channel, Channel::Image) << "behind its full image";
+    EXPECT_EQ(decoded(t.updates[0]).fullSequence, f.sequence);
+    rig.outbox.acknowledge(1, ImageAck{0, f.sequence});
+    t = rig.cut(b, 2);
+    ASSERT_EQ(t.updates.size(), 1u);
+    EXPECT_EQ(t.updates[0].channel, Channel::ImageLossy);
+    EXPECT_EQ(rectOf(decoded(t.updates[0])), unite(a, b)) << "the reliable one is carried";
+
+    // A raw frame of 300 x 200 is 480 kB: past kLossyMaxMessageBytes, so it goes reliably.
+    Rig big;
+    big.cam = cameraFor(300, 200);
+    big.frame = picture(300, 200, 0);
+    big.full();
+    big.frame = with(big.frame, picture(300, 200, 5), big.frame.bounds());
+    big.outbox.postImage(1, big.cam, big.frame, {0, 0, 300, 100}, false, 2, {});
+    t = big.outbox.take(live);
+    ASSERT_EQ(t.updates.size(), 1u);
+    EXPECT_GT(t.updates[0].message.size(), Outbox::kLossyMaxMessageBytes);
+    EXPECT_EQ(t.updates[0].channel, Channel::Image);
+    big.clock.advance(10 * big.outbox.repairTimeoutUs(1));
+    EXPECT_TRUE(big.outbox.take(live).updates.empty()) << "ENet delivers it: no repair";
+}
+
+// A client that never acknowledges costs a bounded list: every rectangle still carries all.
+TEST(LossyOutbox, AClientThatNeverAcknowledgesKeepsABoundedList) {
+    Rig rig;
+    rig.full();
+    PixelRect all;
+    for (int i = 0; i < 3 * int(Outbox::kMaxUnacked); ++i) {
+        const PixelRect r{i % 60, (i * 7) % 44, 3, 3};
+        all = all.empty() ? r : unite(all, r);
+        rig.clock.advance(rig.outbox.repairTimeoutUs(1) + 1); // the window: earlier ones lost
+        Outbox::Taken t = rig.cut(r, i + 1);
+        ASSERT_EQ(t.updates.size(), 1u) << i;
+        EXPECT_EQ(rectOf(decoded(t.updates[0])), all) << i;
+    }
 }
 
 // [SECTION] the client, fed by a fake server

@@ -137,12 +137,13 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
         full = full || old->full;
         causeUs = std::min(causeUs, old->causeUs);
     }
-    // After a full image, rectangles go lossy and carry every one not acknowledged. The client
-    // holds exactly the shadow only when it has acknowledged all, and the shadow holds no
-    // unpredicted rectangle that never left (it has no undo).
-    const bool lossy = !full && base.fullSequence != 0;
-    const bool predictable = !lossy || (base.predictable && (!merge || !old->undo.empty()));
-    if (lossy && !base.unacked.empty())
+    // After a full image, rectangles carry every one not acknowledged, and go lossy once the
+    // client has acknowledged that full image (before, a lossy one would overtake it and be
+    // ignored). The client holds exactly the shadow only when it has acknowledged all, and the
+    // shadow holds no unpredicted rectangle that never left (it has no undo).
+    const bool afterFull = !full && base.fullSequence != 0;
+    const bool predictable = !afterFull || (base.predictable && (!merge || !old->undo.empty()));
+    if (afterFull && !base.unacked.empty())
         rect = rect.empty() ? base.unacked : unite(rect, base.unacked);
     rect = full ? frame.bounds() : intersect(rect, frame.bounds());
     if (rect.empty())
@@ -150,7 +151,7 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
     ImageUpdate u;
     u.sequence = ++m_sequence;
     u.viewId = c.viewId;
-    u.fullSequence = lossy ? base.fullSequence : 0;
+    u.fullSequence = afterFull ? base.fullSequence : 0;
     if (full) {
         std::lock_guard lock(m_mutex);
         resetLossy(id, c.viewId, u.sequence); // it says all the rectangles before it said
@@ -212,7 +213,8 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
                    encodeMessage(u),
                    std::move(undo),
                    c.inFlight};
-    p.lossy = lossy;
+    p.afterFull = afterFull;
+    p.lossy = afterFull && base.based && p.message.size() <= kLossyMaxMessageBytes;
     p.sequence = u.sequence;
     {
         std::lock_guard lock(m_mutex);
@@ -230,6 +232,7 @@ std::optional<Outbox::PendingImage> Outbox::takeMergeable(uint16_t id, uint32_t 
     if (auto l = m_lossy.find(id); l != m_lossy.end() && l->second.viewId == viewId) {
         base.fullSequence = l->second.fullSequence;
         base.predictable = l->second.based && l->second.unacked.empty();
+        base.based = l->second.based;
         for (const SentRect& r : l->second.unacked)
             base.unacked = base.unacked.empty() ? r.rect : unite(base.unacked, r.rect);
     }
@@ -478,8 +481,8 @@ Outbox::Taken Outbox::take(const std::function<bool(uint16_t)>& live) {
         size_t n = 0;
         for (; isLive && n < waiting.size() && !waiting[n].coding && !held(waiting[n]); ++n) {
             PendingImage& p = waiting[n];
-            if (p.lossy)
-                sendLossy(it->first, p, now);
+            if (p.afterFull)
+                sentAfterFull(it->first, p, now);
             taken.updates.push_back({it->first, Sync::Dbi,
                                      p.lossy ? Channel::ImageLossy : Channel::Image, p.full,
                                      p.payloadBytes, p.rawBytes, std::move(p.message)});
@@ -510,12 +513,14 @@ void Outbox::resetLossy(uint16_t id, uint32_t viewId, uint32_t fullSequence) {
     if (it == m_lossy.end())
         return;
     Lossy& l = it->second;
-    const double srtt = l.srttUs, var = l.rttVarUs; // the path's, whatever the view
+    const Lossy path = l; // its round trips and delivery are the path's, whatever the view
     l = Lossy{};
     l.viewId = viewId;
     l.fullSequence = fullSequence;
-    l.srttUs = srtt;
-    l.rttVarUs = var;
+    l.srttUs = path.srttUs;
+    l.rttVarUs = path.rttVarUs;
+    l.minRttUs = path.minRttUs;
+    l.deliveredPerS = path.deliveredPerS;
 }
 
 // 1.5 round trips (or the smoothed one and four deviations, when it varies more) and a margin
@@ -539,18 +544,38 @@ bool Outbox::lossyHeldBack(const Lossy& l, uint64_t now) const {
     const uint64_t timeout = repairTimeout(l);
     int64_t onTheWay = 0;
     for (const SentRect& r : l.unacked)
-        if (now - r.sentUs < timeout)
+        if (!r.reliable && now - r.sentUs < timeout)
             onTheWay += r.bytes;
-    return onTheWay > std::min(kLossyWindowBytes, m_maxInFlightBytes);
+    return onTheWay > std::min(lossyWindow(l), m_maxInFlightBytes);
 }
 
-void Outbox::sendLossy(uint16_t id, PendingImage& p, uint64_t now) {
+int64_t Outbox::lossyWindow(const Lossy& l) {
+    if (l.minRttUs <= 0 || l.deliveredPerS <= 0)
+        return kLossyStartBytes;
+    const double window = 2.0 * l.deliveredPerS * l.minRttUs * 1e-6;
+    return std::clamp(int64_t(window), kLossyMinWindowBytes, kLossyWindowBytes);
+}
+
+// A rectangle after a full image has gone, lossy or not: later ones carry it until it is
+// acknowledged (a reliable one may arrive after a newer lossy one, which the client then has).
+void Outbox::sentAfterFull(uint16_t id, PendingImage& p, uint64_t now) {
     auto it = m_lossy.find(id);
     if (it == m_lossy.end())
         return;
     Lossy& l = it->second;
-    l.unacked.push_back({p.sequence, p.rect, int64_t(p.message.size()), now, 0});
+    l.unacked.push_back({p.sequence, p.rect, int64_t(p.message.size()), now, 0, !p.lossy});
+    if (l.unacked.size() > kMaxUnacked) {
+        SentRect& next = l.unacked[1];
+        next.rect = unite(l.unacked[0].rect, next.rect);
+        next.bytes += l.unacked[0].reliable ? 0 : l.unacked[0].bytes;
+        next.repairs = std::max(next.repairs, 1); // times no round trip
+        l.unacked.erase(l.unacked.begin());
+    }
     l.newestSent = p.sequence;
+    if (!p.lossy) {
+        l.newest.clear(); // ENet delivers it: nothing to repair
+        return;
+    }
     l.newest = p.message; // kept for a repair: the union at current pixels
     l.newestPayload = p.payloadBytes;
     l.newestRaw = p.rawBytes;
@@ -596,6 +621,7 @@ void Outbox::acknowledge(uint16_t id, const ImageAck& ack) {
         if (acked->sequence == ack.sequence && acked->repairs == 0) {
             // One round trip (Karn: never one of a re-sent rectangle), smoothed as TCP does.
             const double sample = double(now - acked->sentUs);
+            l.minRttUs = l.minRttUs > 0 ? std::min(l.minRttUs, sample) : sample;
             if (l.srttUs <= 0) {
                 l.srttUs = sample;
                 l.rttVarUs = sample / 2;
@@ -604,6 +630,15 @@ void Outbox::acknowledge(uint16_t id, const ImageAck& ack) {
                 l.srttUs = 0.875 * l.srttUs + 0.125 * sample;
             }
         }
+    // What the link delivers: lossy bytes acknowledged over the time since the last ack, smoothed.
+    int64_t bytes = 0;
+    for (auto r = l.unacked.begin(); r != acked; ++r)
+        bytes += r->reliable ? 0 : r->bytes;
+    if (l.lastAckUs && now > l.lastAckUs && bytes > 0) {
+        const double rate = double(bytes) * 1e6 / double(now - l.lastAckUs);
+        l.deliveredPerS = l.deliveredPerS > 0 ? 0.8 * l.deliveredPerS + 0.2 * rate : rate;
+    }
+    l.lastAckUs = now;
     l.unacked.erase(l.unacked.begin(), acked);
 }
 

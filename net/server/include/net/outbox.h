@@ -125,9 +125,19 @@ public:
     // an image older than the client's full image or newer than any sent is ignored.
     void acknowledge(uint16_t id, const ImageAck& ack);
     // The most lossy bytes a client may have unacknowledged (within the repair timeout) before
-    // its next rectangle waits, merged with the ones after it: a round trip's worth at 20 Mbit/s
-    // and 100 ms, so a slow link queues little in front of tool states and force models.
+    // its next rectangle waits, merged with the ones after it: twice what the acknowledgements
+    // say the link delivers in its shortest round trip, within these bounds (the upper one a
+    // round trip at 20 Mbit/s and 100 ms), so a slow link queues little in front of tool states
+    // and force models; kLossyStartBytes until both are measured.
     static constexpr int64_t kLossyWindowBytes = 256 * 1024;
+    static constexpr int64_t kLossyMinWindowBytes = 32 * 1024, kLossyStartBytes = 64 * 1024;
+    // The largest rectangle sent lossy (~24 datagrams): one lost fragment loses the whole of it,
+    // so a larger one (a large view's union, a raw client) goes reliably on Channel::Image, still
+    // naming its full image, and is never repaired.
+    static constexpr size_t kLossyMaxMessageBytes = 32 * 1024;
+    // Unacknowledged rectangles kept per client; past it the oldest two merge (a client that
+    // never acknowledges costs a bounded list).
+    static constexpr size_t kMaxUnacked = 32;
     // [Any thread] Repairs sent so far, and acknowledgements ignored as not this client's.
     uint64_t repairs() const { return m_repairs.load(); }
     uint64_t acksIgnored() const { return m_acksIgnored.load(); }
@@ -155,9 +165,10 @@ private:
         std::vector<uint8_t> message;
         Dbi undo; // empty when full
         Host::InFlight inFlight;
-        uint64_t ticket = 0; // coded apart: its job's ticket (0: coded at the post)
-        bool coding = false; // coded apart, not yet done: it and what follows it wait
-        bool lossy = false;  // a rectangle on Channel::ImageLossy
+        uint64_t ticket = 0;    // coded apart: its job's ticket (0: coded at the post)
+        bool coding = false;    // coded apart, not yet done: it and what follows it wait
+        bool lossy = false;     // a rectangle on Channel::ImageLossy
+        bool afterFull = false; // a rectangle naming its full image (lossy or not)
         uint32_t sequence = 0;
     };
     // A lossy rectangle sent and not acknowledged.
@@ -166,7 +177,8 @@ private:
         PixelRect rect;
         int64_t bytes = 0;
         uint64_t sentUs = 0;
-        int repairs = 0; // re-sent that many times: its acknowledgement times no round trip
+        int repairs = 0;       // re-sent that many times: its acknowledgement times no round trip
+        bool reliable = false; // sent on Channel::Image: never repaired, outside the window
     };
     // A DBI client's lossy rectangles (under m_mutex: acknowledged on the network thread).
     struct Lossy {
@@ -178,12 +190,16 @@ private:
         std::vector<uint8_t> newest; // the newest sent rectangle's message: the repair
         uint32_t newestPayload = 0, newestRaw = 0;
         double srttUs = 0, rttVarUs = 0; // 0: no round trip measured yet
+        double minRttUs = 0;             // the shortest round trip measured (0: none)
+        double deliveredPerS = 0;        // lossy bytes acknowledged a second, smoothed
+        uint64_t lastAckUs = 0;
     };
     // What a lossy rectangle posted now must carry, read under m_mutex.
     struct LossyBase {
         uint32_t fullSequence = 0;
         PixelRect unacked;        // the union of the rectangles not acknowledged
         bool predictable = false; // the client holds exactly the shadow
+        bool based = false;       // the client has acknowledged its full image
     };
     // A full image for the coder thread: its message but the payload, and the pixels.
     struct CodingJob {
@@ -223,8 +239,9 @@ private:
     // Under m_mutex:
     void resetLossy(uint16_t id, uint32_t viewId, uint32_t fullSequence);
     bool lossyHeldBack(const Lossy& l, uint64_t now) const;
+    static int64_t lossyWindow(const Lossy& l);
     static uint64_t repairTimeout(const Lossy& l);
-    void sendLossy(uint16_t id, PendingImage& p, uint64_t now);
+    void sentAfterFull(uint16_t id, PendingImage& p, uint64_t now);
     void takeRepairs(const std::function<bool(uint16_t)>& live, uint64_t now, Taken& taken);
     void codeApart(uint16_t id, CodingJob job);
     void code(CodingJob job);
