@@ -878,6 +878,25 @@ TEST(FairInbox, AFullQueueDropsTheNextAndALeavingPeersMessagesAreHandledInOrder)
     EXPECT_EQ(inbox.waiting(), 1u);
 }
 
+// A peer that floods and leaves has only the first kDrainMessages handled as it goes: the rest of
+// its flood is dropped, not handled at once outside the fair order.
+TEST(FairInbox, ALeavingPeersFloodIsDroppedPastTheFirstFew) {
+    FairInbox inbox([] { return uint64_t(0); });
+    const size_t flood = 3 * FairInbox::kDrainMessages;
+    for (size_t i = 0; i < flood; ++i)
+        ASSERT_TRUE(inbox.push(7, Channel::ToolState, std::vector<uint8_t>{uint8_t(i)}));
+    inbox.push(8, Channel::Control, std::vector<uint8_t>{1});
+    size_t handled = 0;
+    const size_t dropped = inbox.drain(7, [&](uint16_t, Channel, std::span<const uint8_t> m) {
+        EXPECT_EQ(m[0], uint8_t(handled)) << "in order";
+        ++handled;
+    });
+    EXPECT_EQ(handled, FairInbox::kDrainMessages);
+    EXPECT_EQ(dropped, flood - FairInbox::kDrainMessages);
+    EXPECT_EQ(inbox.waiting(), 1u) << "the other peer's message still waits";
+    EXPECT_EQ(inbox.waiting(7), 0u);
+}
+
 // Sealed messages spoilt by an authenticated peer (a byte flipped, cut short, replayed, empty)
 // are dropped and counted by the gate, never delivered, and the time spent refusing them is the
 // sender's: its queue waits while an honest peer's message goes first.

@@ -83,10 +83,16 @@ size_t FairInbox::serve(uint64_t sliceUs, const Handler& handle) {
     return handled;
 }
 
-void FairInbox::drain(uint16_t peer, const Handler& handle) {
-    while (waiting(peer) > 0)
+size_t FairInbox::drain(uint16_t peer, const Handler& handle) {
+    for (size_t handled = 0; handled < kDrainMessages && waiting(peer) > 0; ++handled)
         handleOne(peer, handle);
+    const size_t dropped = waiting(peer);
+    if (auto it = m_queues.find(peer); it != m_queues.end()) {
+        m_waiting -= it->second.size();
+        m_queues.erase(it);
+    }
     m_share.forget(peer);
+    return dropped;
 }
 
 } // namespace trephine::net

@@ -615,10 +615,13 @@ bool SessionServer::Impl::sendControl(uint16_t id, const std::vector<uint8_t>& b
 }
 
 void SessionServer::Impl::forget(uint16_t id, uint64_t now) {
-    // What it sent before it left is handled first, as it was sent.
-    received.drain(id, [this](uint16_t peer, Channel ch, std::span<const uint8_t> data) {
-        handleReceived(peer, ch, data);
-    });
+    // What it sent before it left is handled first, as it was sent (a flood's tail is dropped).
+    const size_t dropped =
+        received.drain(id, [this](uint16_t peer, Channel ch, std::span<const uint8_t> data) {
+            handleReceived(peer, ch, data);
+        });
+    if (dropped)
+        book.record([&](ServerReport& r) { r.availability.receivedDropped += dropped; });
     netCharged.erase(id);
     PolicyOutput out;
     policy.disconnect(id, now, out);

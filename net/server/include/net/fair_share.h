@@ -65,8 +65,12 @@ public:
     // Handles waiting messages, the least charged peer's first, until none waits or `sliceUs`
     // of work is done (at least one is handled); returns how many were.
     size_t serve(uint64_t sliceUs, const Handler& handle);
-    // Handles every message `peer` has waiting, in order (it is leaving), then forgets it.
-    void drain(uint16_t peer, const Handler& handle);
+    // Handles the first kDrainMessages `peer` has waiting, in order (it is leaving), drops the
+    // rest and forgets it; returns how many were dropped. An honest peer's queue is served
+    // every pass, so it leaves with a few at most; a flood then gone is not handled at once,
+    // outside the fair order.
+    static constexpr size_t kDrainMessages = 64;
+    size_t drain(uint16_t peer, const Handler& handle);
     // Work done for `peer` outside its messages; `us` measured by the caller.
     void charge(uint16_t peer, uint64_t us) { m_share.charge(peer, us); }
     uint64_t now() const { return m_share.now(); }
