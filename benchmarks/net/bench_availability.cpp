@@ -15,7 +15,6 @@
 // join behind a guesser at their address (join times beside 5 s, guesses beside the bound).
 #include "flood.h"
 
-#include "libsim/dbi_preview.h"
 #include "libsim/skull.h"
 #include "libsim/stats.h"
 #include "net/secure_channel.h"
@@ -322,11 +321,11 @@ Figures traineeRun(SessionServer& server, const Volume& skull, int width = kWind
     }
     ViewSpec moved = cc.view; // the first exact picture of a view asked for once joined
     moved.eye += glm::vec3(0.5f, 0, 0);
-    // A view over StepConfig::previewPixels comes first as its upsampled preview, whose 2 x 2
-    // blocks are each one pixel (docs/session.md, "Progressive first pictures"): not counted.
+    // A view over StepConfig::previewPixels comes first as its preview (docs/session.md,
+    // "Progressive first pictures"): not counted.
     bool exact = false;
     client.setUpdateCallback([&](const ImageUpdate&, const PixelRect&, bool full) {
-        exact = exact || (full && client.hasFullImage() && !blockConstant(client.dbi()));
+        exact = exact || (full && client.hasFullImage());
     });
     const uint64_t v0 = steadyNowUs();
     client.requestView(moved);

@@ -6,7 +6,6 @@
 // 1920 x 1080 and 2048 x 2048, alone or beside a 500^2 trainee drilling a state every 10 ms,
 // whose update p99 is printed for the quiet half of its run and for the half the view changes
 // fall in (target: first exact 1080p picture <= 0.25 s).
-#include "libsim/dbi_preview.h"
 #include "libsim/skull.h"
 #include "libsim/stats.h"
 #include "net/executor.h"
@@ -175,7 +174,7 @@ void firstPictures(benchmark::State& state) {
             const uint64_t now = steadyNowUs();
             if (!firstAt)
                 firstAt = now;
-            if (!exactAt && !blockConstant(client.dbi()))
+            if (!exactAt && !u.preview)
                 exactAt = now;
         });
         client.connect(parseAddress("127.0.0.1:" + std::to_string(server.port())));

@@ -33,18 +33,4 @@ void upsampleRows(const Dbi& half, int row, int rows, Dbi& full) {
     }
 }
 
-bool blockConstant(const Dbi& d) {
-    for (int y = 0; y + 1 < d.height(); y += 2)
-        for (int x = 0; x + 1 < d.width(); x += 2) {
-            const float z = d.depth(x, y);
-            const uint8_t* c = d.color(x, y);
-            if (d.depth(x + 1, y) != z || d.depth(x, y + 1) != z || d.depth(x + 1, y + 1) != z ||
-                std::memcmp(c, d.color(x + 1, y), 4) != 0 ||
-                std::memcmp(c, d.color(x, y + 1), 4) != 0 ||
-                std::memcmp(c, d.color(x + 1, y + 1), 4) != 0)
-                return false;
-        }
-    return true;
-}
-
 } // namespace trephine

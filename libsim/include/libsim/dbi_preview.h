@@ -18,9 +18,4 @@ Camera previewCamera(const Camera& view);
 // size), each pixel as a 2 x 2 block clipped to `full`.
 void upsampleRows(const Dbi& half, int row, int rows, Dbi& full);
 
-// Every 2 x 2 block at even coordinates is one colour and depth, as upsampleRows makes them; an
-// exact render showing bone practically never is (benchmarks tell a preview from the exact
-// picture by it).
-bool blockConstant(const Dbi& dbi);
-
 } // namespace trephine

@@ -411,8 +411,8 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
         s->viewingAs = c->viewingAs();
         s->view = c->view();
         s->viewId = c->viewId();
-        s->hasFullImage = c->hasFullImage();
-        s->waitingForView = c->welcomed() && !c->hasFullImage();
+        s->hasFullImage = c->hasPicture(); // a preview is a picture to show
+        s->waitingForView = c->welcomed() && !c->hasPicture();
         s->others = c->others();
         s->participants = c->participants();
         s->annotations = c->annotations();
@@ -694,7 +694,7 @@ void ClientThread::publishFullCopies(const SessionClient& c, uint64_t nowUs) {
         b.appliedUs = nowUs;
         pushBox(std::move(b));
     }
-    if (m_needFull.exchange(false) && c.hasFullImage()) {
+    if (m_needFull.exchange(false) && c.hasPicture()) {
         AppliedRect r;
         r.full = true;
         r.rect = c.dbi().bounds();

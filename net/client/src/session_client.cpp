@@ -740,6 +740,7 @@ void SessionClient::enterVolumeSync() {
         (m_dbi.width() != m_view.width || m_dbi.height() != m_view.height))
         m_dbi = Dbi(m_view.width, m_view.height);
     m_hasFull = true;
+    m_exactViewId = m_viewId; // rendered here
 }
 
 bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
@@ -801,6 +802,8 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
         m_fullSequence = u.sequence;
         if (u.viewId == m_viewId)
             m_hasFull = true;
+        if (!u.preview)
+            m_exactViewId = u.viewId;
         // The resync's answer, or a newer request's (the server may replace an unsent full
         // image by a newer view's): our copy is the server's again.
         if (m_resyncRequestId && int32_t(u.viewId - *m_resyncRequestId) >= 0)
@@ -938,6 +941,7 @@ uint32_t SessionClient::requestView(const ViewSpec& view) {
         // We render it ourselves, now; the server only keeps it for a switch to DBI.
         m_view = view;
         m_viewId = r.requestId;
+        m_exactViewId = m_viewId;
         if (m_config.renderLocally)
             renderLocal();
         else

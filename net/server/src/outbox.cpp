@@ -104,8 +104,9 @@ void Outbox::postImage(uint16_t id, const Camera& camera, const Dbi& frame, Pixe
     post(id, camera, frame, rect, full, causeUs, timing, nullptr);
 }
 
-void Outbox::postFullImage(uint16_t id, const Camera& camera, Dbi pixels, uint64_t causeUs) {
-    post(id, camera, pixels, pixels.bounds(), true, causeUs, {}, &pixels);
+void Outbox::postFullImage(uint16_t id, const Camera& camera, Dbi pixels, uint64_t causeUs,
+                           bool preview) {
+    post(id, camera, pixels, pixels.bounds(), true, causeUs, {}, &pixels, preview);
 }
 
 Dbi Outbox::buffer(int width, int height) {
@@ -120,7 +121,7 @@ Dbi Outbox::buffer(int width, int height) {
 
 // `owned`: `frame` itself, which a full image coded apart takes instead of a copy.
 void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect, bool full,
-                  uint64_t causeUs, ImageTiming timing, Dbi* owned) {
+                  uint64_t causeUs, ImageTiming timing, Dbi* owned, bool preview) {
     Client& c = m_clients[id];
     LossyBase base;
     std::optional<PendingImage> old = takeMergeable(id, c.viewId, full, causeUs, base);
@@ -158,6 +159,7 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
     }
     u.causeServerUs = causeUs;
     u.full = full;
+    u.preview = full && preview;
     u.x = uint16_t(rect.x);
     u.y = uint16_t(rect.y);
     u.width = uint16_t(rect.w);

@@ -472,7 +472,7 @@ void SimulationStep::postPreview(ViewFrame& v) {
     for (size_t i = 0; i < waiting.size(); ++i)
         m_outbox.postFullImage(waiting[i].first, v.camera,
                                i + 1 < waiting.size() ? v.previewFull : std::move(v.previewFull),
-                               waiting[i].second);
+                               waiting[i].second, true);
     v.previewFull = Dbi();
     v.previewRows = -1;
 }

@@ -107,8 +107,8 @@ struct ClientSnapshot {
     uint16_t viewingAs = 0; // [Instructor] whose camera the view follows (0: its own)
     ViewSpec view;
     uint32_t viewId = 0;
-    bool hasFullImage = false;
-    bool waitingForView = false; // a requested view has not arrived in full yet
+    bool hasFullImage = false;   // a picture of the view: its exact full image or its preview
+    bool waitingForView = false; // a requested view has no picture yet
     std::map<uint16_t, ToolState> others;
     // Everyone in the session (this client included) by client id: names, roles, designs.
     std::map<uint16_t, ParticipantInfo> participants;

@@ -170,8 +170,10 @@ public:
     void setVolumeMutex(std::shared_mutex* mutex) { m_volumeMutex = mutex; }
     const ViewSpec& view() const { return m_view; }
     uint32_t viewId() const { return m_viewId; }
-    // True once a full image of the current view (the latest requested one) has been applied.
-    bool hasFullImage() const { return m_hasFull && m_requestedViewId == m_viewId; }
+    // True once the exact full image of the current view (the latest requested one) has been
+    // applied; hasPicture() already from its half-size preview (ImageUpdate::preview).
+    bool hasFullImage() const { return hasPicture() && m_exactViewId == m_viewId; }
+    bool hasPicture() const { return m_hasFull && m_requestedViewId == m_viewId; }
 
     // Sends our tool; sequence and clientTimeUs are filled in when zero. Returns the sequence.
     uint32_t sendToolState(ToolState state);
@@ -413,6 +415,7 @@ private:
     uint32_t m_nextRequestId = 1;
     Dbi m_dbi;
     bool m_hasFull = false;
+    std::optional<uint32_t> m_exactViewId; // the view of the last exact full image applied
 
     std::map<uint16_t, ToolState> m_others;
     std::map<uint16_t, ParticipantInfo> m_participants;

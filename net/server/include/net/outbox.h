@@ -101,7 +101,10 @@ public:
                    uint64_t causeUs, ImageTiming timing);
     // A full image of `pixels` (a copy of the view's frame the caller made, see buffer()), coded
     // apart like the large ones postImage copies itself.
-    void postFullImage(uint16_t id, const Camera& camera, Dbi pixels, uint64_t causeUs);
+    // `preview`: a new view's first, half-size picture (ImageUpdate::preview); its exact full
+    // image follows.
+    void postFullImage(uint16_t id, const Camera& camera, Dbi pixels, uint64_t causeUs,
+                       bool preview = false);
     // [Posting thread] A frame of that size for postFullImage: the coder's last buffer when it
     // fits (its memory already mapped), else a new one.
     Dbi buffer(int width, int height);
@@ -227,7 +230,7 @@ private:
 
     bool heldBack(const Host::InFlight& inFlight) const;
     void post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect, bool full,
-              uint64_t causeUs, ImageTiming timing, Dbi* owned);
+              uint64_t causeUs, ImageTiming timing, Dbi* owned, bool preview = false);
     bool postVolume(uint16_t id, const Client& c, const Volume& volume, VolumeChange change);
     void postVolumeOrRefuse(uint16_t id, const Client& c, const Volume& volume,
                             const VolumeChange& change);

@@ -398,6 +398,9 @@ struct ImageUpdate {
     uint64_t causeServerUs = 0; // when the tool state that caused it reached the server
     uint64_t sentServerUs = 0;
     bool full = false; // a whole-window refresh (join or view change)
+    // A full image rendered at half size, each pixel a 2 x 2 block: a new large view's first
+    // picture, shown until its exact full image follows (version 13).
+    bool preview = false;
     uint16_t x = 0, y = 0, width = 0, height = 0;
     Codec codec = Codec::Raw;
     uint32_t rawBytes = 0; // size before compression
@@ -417,7 +420,8 @@ struct ImageUpdate {
                s.integer(causeServerUs) && s.integer(sentServerUs) && s.integer(erodeUs) &&
                s.integer(renderUs) && s.integer(encodeUs) && s.integer(gridUs) &&
                gridUs <= renderUs && s.boolean(full) && !(full && fullSequence != 0) &&
-               s.boolean(predicted) && s.integer(baseHash) && !(predicted && full) &&
+               s.boolean(preview) && !(preview && !full) && s.boolean(predicted) &&
+               s.integer(baseHash) && !(predicted && full) &&
                s.ranged(x, uint16_t(0), uint16_t(kMaxWindowSize - 1)) &&
                s.ranged(y, uint16_t(0), uint16_t(kMaxWindowSize - 1)) &&
                s.ranged(width, uint16_t(1), kMaxWindowSize) &&
