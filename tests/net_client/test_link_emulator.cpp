@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
+#include <span>
 #include <vector>
 
 using namespace trephine;
@@ -101,6 +102,15 @@ TEST(LinkEmulator, TotalLossDropsEverything) {
 // 1 Mbit/s take 56 ms with their 66 bytes of framing each, 3.2 ms as bare payload.
 namespace {
 
+// The next datagram at `target` within 50 ms into `into` (its size, or -1), and its sender.
+int receiveWithin50Ms(ENetSocket target, std::span<uint8_t> into, ENetAddress& sender) {
+    enet_uint32 wait = ENET_SOCKET_WAIT_RECEIVE;
+    if (enet_socket_wait(target, &wait, 50) != 0 || !(wait & ENET_SOCKET_WAIT_RECEIVE))
+        return -1;
+    ENetBuffer b{into.data(), into.size()};
+    return enet_socket_receive(target, &sender, &b, 1);
+}
+
 // Sends `perSender` 4-byte datagrams from each of `senders` sockets through a relay with
 // `conditions` and returns the milliseconds until the last one reached the target (-1: not all).
 double sendThrough(const char* conditions, int senders, int perSender) {
@@ -125,13 +135,9 @@ double sendThrough(const char* conditions, int senders, int perSender) {
     int received = 0;
     Clock::time_point last{};
     while (received < senders * perSender && Clock::now() - start < std::chrono::seconds(5)) {
-        enet_uint32 wait = ENET_SOCKET_WAIT_RECEIVE;
-        if (enet_socket_wait(target, &wait, 50) != 0 || !(wait & ENET_SOCKET_WAIT_RECEIVE))
-            continue;
         uint8_t buffer[64];
-        ENetBuffer b{buffer, sizeof buffer};
         ENetAddress sender{};
-        if (enet_socket_receive(target, &sender, &b, 1) == int(sizeof payload)) {
+        if (receiveWithin50Ms(target, buffer, sender) == int(sizeof payload)) {
             ++received;
             last = Clock::now();
         }
@@ -226,13 +232,9 @@ TEST(LinkEmulator, EachClientHostReachesALocalTargetFromItsOwnAddress) {
         enet_socket_send(from[i], &relayAddress, &b, 1);
         const auto deadline = Clock::now() + std::chrono::seconds(5);
         while (!seen[i] && Clock::now() < deadline) {
-            enet_uint32 wait = ENET_SOCKET_WAIT_RECEIVE;
-            if (enet_socket_wait(target, &wait, 50) != 0 || !(wait & ENET_SOCKET_WAIT_RECEIVE))
-                continue;
             uint8_t got[8];
-            ENetBuffer r{got, sizeof got};
             ENetAddress sender{};
-            if (enet_socket_receive(target, &sender, &r, 1) == 1 && got[0] == i)
+            if (receiveWithin50Ms(target, got, sender) == 1 && got[0] == i)
                 seen[i] = sender.host;
         }
         ASSERT_NE(seen[i], 0u) << "datagram " << i << " did not arrive";

@@ -193,19 +193,7 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
         c.shadow = frame;
     else if (!c.shadow.empty())
         c.shadow.apply(pixels, rect.x, rect.y);
-    u.sentServerUs = m_clock();
-    u.erodeUs = timing.erodeUs;
-    u.renderUs = timing.renderUs;
-    u.gridUs = std::min(timing.gridUs, timing.renderUs);
-    u.encodeUs = uint32_t(u.sentServerUs - e0);
-    m_book.record([&](ServerReport& r) {
-        ModeReport& m = r.modes[size_t(Sync::Dbi)];
-        m.encodeUs.add(double(u.encodeUs));
-        if (!full) {
-            m.erodeUs.add(double(timing.erodeUs));
-            m.renderUs.add(double(timing.renderUs));
-        }
-    });
+    stampTimes(u, timing, e0);
     PendingImage p{c.viewId,
                    rect,
                    full,
@@ -224,6 +212,23 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
     }
     if (m_wake)
         m_wake();
+}
+
+// The update's stage times (its coding began at `codedFromUs`), in it and in the report.
+void Outbox::stampTimes(ImageUpdate& u, ImageTiming timing, uint64_t codedFromUs) {
+    u.sentServerUs = m_clock();
+    u.erodeUs = timing.erodeUs;
+    u.renderUs = timing.renderUs;
+    u.gridUs = std::min(timing.gridUs, timing.renderUs);
+    u.encodeUs = uint32_t(u.sentServerUs - codedFromUs);
+    m_book.record([&](ServerReport& r) {
+        ModeReport& m = r.modes[size_t(Sync::Dbi)];
+        m.encodeUs.add(double(u.encodeUs));
+        if (!u.full) {
+            m.erodeUs.add(double(timing.erodeUs));
+            m.renderUs.add(double(timing.renderUs));
+        }
+    });
 }
 
 // [Posting thread] Takes the client's newest waiting image when the new one merges with it; a full

@@ -166,6 +166,19 @@ ENetSocket makeBackSocket(const ENetAddress& client, const ENetAddress& target) 
 // Waits until a datagram arrives or the next queued one is due, at most 1 ms (the relay's loop
 // sees its stop then). ppoll, not select: whole milliseconds would make a relay with datagrams
 // queued spin a core until they are due, taking it from the peers it serves.
+// Every datagram waiting on `s`, each into `buffer` and to `f(from, bytes)`.
+template <typename F>
+void receiveAll(ENetSocket s, std::vector<uint8_t>& buffer, F f) {
+    for (;;) {
+        ENetAddress from{};
+        ENetBuffer b = makeBuffer(buffer.data(), buffer.size());
+        const int n = enet_socket_receive(s, &from, &b, 1);
+        if (n <= 0)
+            return;
+        f(from, size_t(n));
+    }
+}
+
 // `polled` gets the client of each fds entry after the first (the front's).
 void waitForTraffic(ENetSocket front, const std::map<uint64_t, std::unique_ptr<Client>>& clients,
                     std::vector<pollfd>& fds, std::vector<Client*>& polled) {
@@ -284,37 +297,25 @@ void LinkEmulator::run() {
         waitForTraffic(m_front, clients, fds, polled);
 
         // From clients to the target.
-        for (;;) {
-            ENetAddress from{};
-            ENetBuffer b = makeBuffer(buffer.data(), buffer.size());
-            int n = enet_socket_receive(m_front, &from, &b, 1);
-            if (n <= 0)
-                break;
+        receiveAll(m_front, buffer, [&](const ENetAddress& from, size_t n) {
             auto& cl = clients[addressKey(from)];
             if (!cl) {
                 cl = std::make_unique<Client>();
                 cl->address = from;
                 cl->back = makeBackSocket(from, m_target);
             }
-            m_bytesUp += uint64_t(n);
-            enqueue(cl->up, sharedUp, buffer.data(), size_t(n), c);
-        }
+            m_bytesUp += n;
+            enqueue(cl->up, sharedUp, buffer.data(), n, c);
+        });
         // From the target back to each client whose socket has some: a receive on each of a
         // classroom's 64 sockets every pass took a core from the server it relays for.
-        for (size_t i = 0; i < polled.size(); ++i) {
-            if (!(fds[i + 1].revents & POLLIN))
-                continue;
-            Client* cl = polled[i];
-            for (;;) {
-                ENetAddress from{};
-                ENetBuffer b = makeBuffer(buffer.data(), buffer.size());
-                int n = enet_socket_receive(cl->back, &from, &b, 1);
-                if (n <= 0)
-                    break;
-                m_bytesDown += uint64_t(n);
-                enqueue(cl->down, sharedDown, buffer.data(), size_t(n), c);
-            }
-        }
+        for (size_t i = 0; i < polled.size(); ++i)
+            if (fds[i + 1].revents & POLLIN)
+                receiveAll(polled[i]->back, buffer,
+                           [&, cl = polled[i]](const ENetAddress&, size_t n) {
+                               m_bytesDown += n;
+                               enqueue(cl->down, sharedDown, buffer.data(), n, c);
+                           });
         auto now = Clock::now();
         for (auto& [key, cl] : clients) {
             deliver(cl->up, cl->back, m_target, now);

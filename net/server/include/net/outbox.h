@@ -241,6 +241,7 @@ private:
                    const Camera& camera, bool predictable);
     // Under m_mutex:
     void resetLossy(uint16_t id, uint32_t viewId, uint32_t fullSequence);
+    void stampTimes(ImageUpdate& u, ImageTiming timing, uint64_t codedFromUs);
     bool lossyHeldBack(const Lossy& l, uint64_t now) const;
     static int64_t lossyWindow(const Lossy& l);
     static uint64_t repairTimeout(const Lossy& l);
