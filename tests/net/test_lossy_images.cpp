@@ -106,6 +106,15 @@ struct Rig {
         outbox.postImage(1, cam, frame, rect, false, 2, {});
         return outbox.take(live);
     }
+    // The client holds image `held` and reports `unusable`, chained on one it lacks; the step's
+    // repair (SimulationStep::postRepairs) posts the frame with no change, and it is taken.
+    Outbox::Taken reportLoss(uint32_t held, uint32_t unusable) {
+        outbox.acknowledge(1, ImageAck{0, held, unusable});
+        EXPECT_EQ(outbox.repairsWanted(), std::vector<uint16_t>{1});
+        outbox.postImage(1, cam, frame, {}, false, 0, {});
+        EXPECT_TRUE(outbox.repairsWanted().empty());
+        return outbox.take(live);
+    }
 };
 
 PixelRect rectOf(const ImageUpdate& u) {
@@ -114,40 +123,87 @@ PixelRect rectOf(const ImageUpdate& u) {
 
 } // namespace
 
-// After a full image each rectangle goes lossy, names that full image and carries every rectangle
-// not acknowledged at current pixels: a client that lost the first still gets the frame exactly
-// from the second. Once everything is acknowledged, a rectangle carries itself alone.
-TEST(LossyOutbox, ARectangleCarriesEveryOneNotAcknowledged) {
+// After a full image each rectangle goes lossy, names that full image and is chained: it carries
+// its own pixels and builds on the one before it, so a client that got them all holds the frame.
+TEST(LossyOutbox, RectanglesAreChainedWhileNoLossIsReported) {
     Rig rig;
-    rig.outbox.postImage(1, rig.cam, rig.frame, rig.frame.bounds(), true, 1, {});
-    Outbox::Taken t = rig.outbox.take(live);
-    Dbi client;
-    applyTo(client, t.updates.at(0), rig.cam);
-    const uint32_t fullSeq = decoded(t.updates.at(0)).sequence;
-    rig.outbox.acknowledge(1, ImageAck{0, fullSeq});
-
-    const PixelRect a{4, 4, 10, 6}, b{30, 20, 8, 8}, c{50, 2, 6, 6};
-    t = rig.cut(a, 1);
+    const ImageUpdate f = rig.full();
+    Dbi client = rig.frame;
+    const PixelRect a{4, 4, 10, 6}, b{30, 20, 8, 8};
+    Outbox::Taken t = rig.cut(a, 1);
     ASSERT_EQ(t.updates.size(), 1u);
     EXPECT_EQ(t.updates[0].channel, Channel::ImageLossy);
     const ImageUpdate first = decoded(t.updates[0]);
-    EXPECT_EQ(first.fullSequence, fullSeq);
+    EXPECT_EQ(first.fullSequence, f.sequence);
+    EXPECT_EQ(first.baseSequence, f.sequence);
     EXPECT_EQ(rectOf(first), a);
-    // Lost. The next carries both.
+    applyTo(client, t.updates[0], rig.cam);
     t = rig.cut(b, 2);
     ASSERT_EQ(t.updates.size(), 1u);
     const ImageUpdate second = decoded(t.updates[0]);
-    EXPECT_EQ(rectOf(second), unite(a, b));
+    EXPECT_EQ(second.baseSequence, first.sequence) << "unacknowledged, still built on";
+    EXPECT_EQ(rectOf(second), b);
     applyTo(client, t.updates[0], rig.cam);
     EXPECT_TRUE(compare(client, rig.frame).identical());
+    EXPECT_TRUE(rig.outbox.repairsWanted().empty());
+}
 
-    rig.outbox.acknowledge(1, ImageAck{0, second.sequence});
-    t = rig.cut(c, 3);
+// A client that lost a chained rectangle reports the next as unusable: the repair carries every
+// rectangle not acknowledged at current pixels, and the frame is exact from it. For
+// kSelfContainedAfterLossUs after, each rectangle carries them all (a loss then costs an update
+// interval, not a report and a repair); then they are chained again.
+TEST(LossyOutbox, AReportedLossIsRepairedAndSelfContainedForAWhile) {
+    Rig rig;
+    const ImageUpdate f = rig.full();
+    Dbi client = rig.frame;
+    const PixelRect a{4, 4, 10, 6}, b{30, 20, 8, 8}, c{50, 2, 6, 6}, d{40, 30, 4, 4};
+    rig.cut(a, 1); // lost
+    const ImageUpdate second = decoded(rig.cut(b, 2).updates.at(0));
+    ASSERT_NE(second.baseSequence, f.sequence);
+    Outbox::Taken t = rig.reportLoss(f.sequence, second.sequence);
     ASSERT_EQ(t.updates.size(), 1u);
-    EXPECT_EQ(rectOf(decoded(t.updates[0])), c);
+    const ImageUpdate repair = decoded(t.updates[0]);
+    EXPECT_EQ(repair.baseSequence, 0u);
+    EXPECT_EQ(rectOf(repair), unite(a, b));
+    EXPECT_EQ(repair.causeServerUs, 2u) << "caused when the rectangles it carries were";
     applyTo(client, t.updates[0], rig.cam);
     EXPECT_TRUE(compare(client, rig.frame).identical());
+    EXPECT_EQ(rig.outbox.gapsReported(), 1u);
+    // The same loss reported of the chained one that went before the repair is not repaired
+    // twice.
+    rig.outbox.acknowledge(1, ImageAck{0, f.sequence, second.sequence});
+    EXPECT_TRUE(rig.outbox.repairsWanted().empty());
+
+    t = rig.cut(c, 3);
+    EXPECT_EQ(rectOf(decoded(t.updates.at(0))), unite(unite(a, b), c)) << "self-contained";
+    rig.outbox.acknowledge(1, ImageAck{0, decoded(t.updates[0]).sequence});
+    EXPECT_EQ(rectOf(decoded(rig.cut(d, 4).updates.at(0))), d) << "all acknowledged";
+    rig.clock.advance(Outbox::kSelfContainedAfterLossUs);
+    const ImageUpdate chained = decoded(rig.cut(c, 5).updates.at(0));
+    EXPECT_EQ(rectOf(chained), c);
+    EXPECT_NE(chained.baseSequence, 0u);
     EXPECT_EQ(rig.outbox.acksIgnored(), 0u);
+}
+
+// While rectangles are self-contained a lost one brings no report (the next carries it), but the
+// acknowledgement that passes over it is a sign of loss all the same: they stay self-contained.
+TEST(LossyOutbox, AnAcknowledgementPassingOverARectangleKeepsThemSelfContained) {
+    Rig rig;
+    const ImageUpdate f = rig.full();
+    const PixelRect a{4, 4, 10, 6}, b{30, 20, 8, 8}, c{50, 2, 6, 6};
+    const ImageUpdate first = decoded(rig.cut(a, 1).updates.at(0));
+    const ImageUpdate repair = decoded(rig.reportLoss(f.sequence, first.sequence).updates.at(0));
+    rig.outbox.acknowledge(1, ImageAck{0, repair.sequence});
+    const uint64_t most = Outbox::kSelfContainedAfterLossUs;
+    rig.clock.advance(most * 9 / 10);
+    rig.cut(b, 2); // lost
+    const ImageUpdate carried = decoded(rig.cut(c, 3).updates.at(0));
+    EXPECT_EQ(rectOf(carried), unite(b, c));
+    rig.outbox.acknowledge(1, ImageAck{0, carried.sequence});
+    rig.clock.advance(most * 9 / 10);
+    EXPECT_EQ(decoded(rig.cut(a, 4).updates.at(0)).baseSequence, 0u) << "still self-contained";
+    rig.clock.advance(most);
+    EXPECT_NE(decoded(rig.cut(b, 5).updates.at(0)).baseSequence, 0u);
 }
 
 // With no further drilling, the newest unacknowledged rectangle goes again once the repair
@@ -249,37 +305,47 @@ TEST(LossyOutbox, AClientPastTheLossyWindowWaitsMerging) {
     rig.outbox.acknowledge(1, ImageAck{0, first.sequence});
     Outbox::Taken t = rig.outbox.take(live);
     ASSERT_EQ(t.updates.size(), 1u);
-    // One update, the newest pixels; a was unacknowledged when b came, so it is carried too.
-    EXPECT_EQ(rectOf(decoded(t.updates[0])), unite(a, unite(b, c)));
+    // One update, the newest pixels, built on the first.
+    const ImageUpdate merged = decoded(t.updates[0]);
+    EXPECT_EQ(rectOf(merged), unite(b, c));
+    EXPECT_EQ(merged.baseSequence, first.sequence);
     // Unacknowledged, it counts until the repair timeout; then the waiting one goes.
     EXPECT_TRUE(rig.cut(a, 4).updates.empty());
     rig.clock.advance(rig.outbox.repairTimeoutUs(1));
     t = rig.outbox.take(live);
     ASSERT_EQ(t.updates.size(), 1u);
-    EXPECT_EQ(rectOf(decoded(t.updates[0])), unite(a, unite(b, c)));
+    EXPECT_EQ(rectOf(decoded(t.updates[0])), a);
 }
 
-// A zstd client's rectangles are predicted only when it has acknowledged everything: then the
-// outbox knows the pixels it holds. Otherwise planar, whatever it got.
-TEST(LossyOutbox, PredictedOnlyWhenEverythingIsAcknowledged) {
+// A zstd client's chained rectangles are predicted against the picture they build on, whether
+// or not anything is acknowledged; a self-contained one is planar (what the client holds under
+// it is not known), and the one chained after it builds on it.
+TEST(LossyOutbox, ChainedRectanglesArePredictedSelfContainedOnesPlanar) {
     Rig rig(1 << 20, Codec::Zstd);
-    const ImageUpdate f = rig.full(false);
+    rig.full(false);
     const ImageUpdate first = decoded(rig.cut({4, 4, 10, 10}, 1).updates.at(0));
-    EXPECT_FALSE(first.predicted) << "the full image is not acknowledged yet";
-    rig.outbox.acknowledge(1, ImageAck{0, f.sequence});
+    EXPECT_TRUE(first.predicted) << "behind the full image, reliably";
+    rig.outbox.acknowledge(1, ImageAck{0, first.sequence});
     const ImageUpdate second = decoded(rig.cut({8, 8, 10, 10}, 2).updates.at(0));
-    EXPECT_FALSE(second.predicted) << "the first is not acknowledged";
-    rig.outbox.acknowledge(1, ImageAck{0, second.sequence});
-    const ImageUpdate third = decoded(rig.cut({20, 8, 10, 10}, 3).updates.at(0));
-    EXPECT_TRUE(third.predicted);
-    EXPECT_EQ(rectOf(third), (PixelRect{20, 8, 10, 10}));
-    (void)f;
+    EXPECT_TRUE(second.predicted);
+    const ImageUpdate third = decoded(rig.cut({30, 8, 10, 10}, 3).updates.at(0));
+    const ImageUpdate repair =
+        decoded(rig.reportLoss(first.sequence, third.sequence).updates.at(0));
+    EXPECT_FALSE(repair.predicted);
+    EXPECT_EQ(rectOf(repair), unite(PixelRect{8, 8, 10, 10}, PixelRect{30, 8, 10, 10}));
+    rig.outbox.acknowledge(1, ImageAck{0, repair.sequence});
+    rig.clock.advance(Outbox::kSelfContainedAfterLossUs);
+    const ImageUpdate fourth = decoded(rig.cut({20, 8, 10, 10}, 4).updates.at(0));
+    EXPECT_TRUE(fourth.predicted);
+    EXPECT_EQ(fourth.baseSequence, repair.sequence);
+    EXPECT_EQ(rectOf(fourth), (PixelRect{20, 8, 10, 10}));
 }
 
 // Until the client acknowledges its full image, and for a rectangle of more than a few
 // datagrams, rectangles go reliably behind the full image (a lossy one would overtake it, or be
-// lost whole with any fragment), still naming it; later lossy ones carry them until
-// acknowledged, and none is repaired.
+// lost whole with any fragment), still naming it (chained on each other, in order); the first
+// lossy one carries them until acknowledged (chained, it would overtake its base), and none is
+// repaired.
 TEST(LossyOutbox, RectanglesBeforeTheFullImagesAckOrLargeGoReliably) {
     Rig rig;
     const ImageUpdate f = rig.full(false);
@@ -288,11 +354,16 @@ TEST(LossyOutbox, RectanglesBeforeTheFullImagesAckOrLargeGoReliably) {
     ASSERT_EQ(t.updates.size(), 1u);
     EXPECT_EQ(t.updates[0].channel, Channel::Image) << "behind its full image";
     EXPECT_EQ(decoded(t.updates[0]).fullSequence, f.sequence);
+    EXPECT_EQ(decoded(t.updates[0]).baseSequence, f.sequence);
     rig.outbox.acknowledge(1, ImageAck{0, f.sequence});
     t = rig.cut(b, 2);
     ASSERT_EQ(t.updates.size(), 1u);
     EXPECT_EQ(t.updates[0].channel, Channel::ImageLossy);
-    EXPECT_EQ(rectOf(decoded(t.updates[0])), unite(a, b)) << "the reliable one is carried";
+    const ImageUpdate carrying = decoded(t.updates[0]);
+    EXPECT_EQ(rectOf(carrying), unite(a, b)) << "the reliable one is carried";
+    EXPECT_EQ(carrying.baseSequence, 0u);
+    const ImageUpdate next = decoded(rig.cut(a, 3).updates.at(0));
+    EXPECT_EQ(next.baseSequence, carrying.sequence) << "chained on the lossy one";
 
     // A raw frame of 300 x 200 is 480 kB: past kLossyMaxMessageBytes, so it goes reliably.
     Rig big;
@@ -309,19 +380,25 @@ TEST(LossyOutbox, RectanglesBeforeTheFullImagesAckOrLargeGoReliably) {
     EXPECT_TRUE(big.outbox.take(live).updates.empty()) << "ENet delivers it: no repair";
 }
 
-// A client that never acknowledges costs a bounded list: every rectangle still carries all.
+// A client that never acknowledges costs a bounded list (the oldest merge), and a repair still
+// carries every rectangle it was sent.
 TEST(LossyOutbox, AClientThatNeverAcknowledgesKeepsABoundedList) {
     Rig rig;
-    rig.full();
+    const ImageUpdate f = rig.full();
     PixelRect all;
+    uint32_t newest = 0;
     for (int i = 0; i < 3 * int(Outbox::kMaxUnacked); ++i) {
         const PixelRect r{i % 60, (i * 7) % 44, 3, 3};
         all = all.empty() ? r : unite(all, r);
-        rig.clock.advance(rig.outbox.repairTimeoutUs(1) + 1); // the window: earlier ones lost
         Outbox::Taken t = rig.cut(r, i + 1);
         ASSERT_EQ(t.updates.size(), 1u) << i;
-        EXPECT_EQ(rectOf(decoded(t.updates[0])), all) << i;
+        const ImageUpdate u = decoded(t.updates[0]);
+        EXPECT_EQ(rectOf(u), r) << i;
+        newest = u.sequence;
     }
+    Outbox::Taken t = rig.reportLoss(f.sequence, newest);
+    ASSERT_EQ(t.updates.size(), 1u);
+    EXPECT_EQ(rectOf(decoded(t.updates[0])), all);
 }
 
 // [SECTION] the client, fed by a fake server
@@ -386,14 +463,16 @@ struct FedClient {
         }
         return false;
     }
-    // An image of view `viewId`: full, or a lossy rectangle at (x, y) on full image `on`.
+    // An image of view `viewId`: full, or a lossy rectangle at (x, y) on full image `on`,
+    // chained on image `base` (0: self-contained).
     void image(uint32_t sequence, uint32_t viewId, bool full, uint32_t on, PixelRect r,
-               uint8_t value) {
+               uint8_t value, uint32_t base = 0) {
         ImageUpdate u;
         u.sequence = sequence;
         u.viewId = viewId;
         u.full = full;
         u.fullSequence = on;
+        u.baseSequence = base;
         u.x = uint16_t(r.x);
         u.y = uint16_t(r.y);
         u.width = uint16_t(r.w);
@@ -460,6 +539,28 @@ TEST(LossyClient, ALateOrRepeatedRectangleIsNotApplied) {
     EXPECT_EQ(f.client->lossyIgnored(), 2u);
     ASSERT_GT(f.acks.size(), acks);
     EXPECT_EQ(f.acks.back().sequence, 7u);
+}
+
+// A chained rectangle applies only on the image it builds on. One that builds on an image that
+// never came is ignored and reported unusable beside the newest image applied; a self-contained
+// one then applies, and the chain goes on from it.
+TEST(LossyClient, AChainedRectangleOnAnImageNotHeldIsReported) {
+    FedClient f;
+    f.image(5, 0, true, 0, {0, 0, 16, 16}, 10);
+    f.image(6, 0, false, 5, {2, 2, 4, 4}, 60, 5);
+    EXPECT_EQ(f.pixel(3, 3), 60);
+    f.image(8, 0, false, 5, {8, 8, 4, 4}, 80, 7); // 7 was lost
+    EXPECT_EQ(f.pixel(9, 9), 10);
+    EXPECT_EQ(f.client->lossyIgnored(), 1u);
+    ASSERT_FALSE(f.acks.empty());
+    EXPECT_EQ(f.acks.back().sequence, 6u);
+    EXPECT_EQ(f.acks.back().unusable, 8u);
+    f.image(9, 0, false, 5, {2, 2, 10, 10}, 90); // the repair: every one not acknowledged
+    f.image(10, 0, false, 5, {0, 0, 2, 2}, 100, 9);
+    EXPECT_EQ(f.pixel(9, 9), 90);
+    EXPECT_EQ(f.pixel(1, 1), 100);
+    EXPECT_EQ(f.acks.back().sequence, 10u);
+    EXPECT_EQ(f.acks.back().unusable, 0u);
 }
 
 // A rectangle of a view the client has left, or arriving after the full image that replaced

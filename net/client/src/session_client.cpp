@@ -815,10 +815,11 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
     return true;
 }
 
-// A lossy rectangle (of the view we show) applies only on the full image it names, and only when
-// newer than every image applied: the image and lossy channels are not ordered with each other,
-// and a late one would roll pixels back. A repeat is the server's repair of a rectangle whose
-// acknowledgement was lost: acknowledged again, not applied.
+// A rectangle after a full image (of the view we show) applies only on the full image it names,
+// only when newer than every image applied (the image and lossy channels are not ordered with
+// each other, and a late one would roll pixels back), and, chained, only on the image it builds
+// on. A repeat is the server's repair of a rectangle whose acknowledgement was lost: acknowledged
+// again, not applied. A chained one on an image we lack tells the server one was lost.
 bool SessionClient::lossyApplies(const ImageUpdate& u) {
     if (u.fullSequence != m_fullSequence || !m_hasFull) {
         ++m_lossyIgnored;
@@ -829,13 +830,18 @@ bool SessionClient::lossyApplies(const ImageUpdate& u) {
         acknowledgeImage(*m_lastImageSeq);
         return false;
     }
+    if (u.baseSequence != 0 && u.baseSequence != m_lastImageSeq) {
+        ++m_lossyIgnored;
+        acknowledgeImage(*m_lastImageSeq, u.sequence);
+        return false;
+    }
     return true;
 }
 
-void SessionClient::acknowledgeImage(uint32_t sequence) {
+void SessionClient::acknowledgeImage(uint32_t sequence, uint32_t unusable) {
     if (!connected())
         return;
-    send(ImageAck{m_viewId, sequence});
+    send(ImageAck{m_viewId, sequence, unusable});
     // At once, before whoever waits on this picture acts on it: a change the server posts
     // before the ack arrives goes planar (the predicted coding needs everything acknowledged).
     m_host.flush();

@@ -138,24 +138,34 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
         full = full || old->full;
         causeUs = std::min(causeUs, old->causeUs);
     }
-    // After a full image, rectangles carry every one not acknowledged, and go lossy once the
-    // client has acknowledged that full image (before, a lossy one would overtake it and be
-    // ignored). The client holds exactly the shadow only when it has acknowledged all, and the
-    // shadow holds no unpredicted rectangle that never left (it has no undo).
+    // After a full image a rectangle goes lossy once the client has acknowledged that full image
+    // (before, a lossy one would overtake it and be ignored), chained or self-contained.
     const bool afterFull = !full && base.fullSequence != 0;
-    const bool predictable = !afterFull || (base.predictable && (!merge || !old->undo.empty()));
-    if (afterFull && !base.unacked.empty())
-        rect = rect.empty() ? base.unacked : unite(rect, base.unacked);
+    const uint32_t baseSequence = afterFull ? chainOn(c, base, merge ? &*old : nullptr) : 0;
+    const bool chained = baseSequence != 0;
+    if (afterFull && !chained) {
+        if (causeUs == 0) // a repair: what it carries was caused that long ago
+            causeUs = base.unackedCauseUs;
+        if (!base.unacked.empty())
+            rect = rect.empty() ? base.unacked : unite(rect, base.unacked);
+    }
     rect = full ? frame.bounds() : intersect(rect, frame.bounds());
-    if (rect.empty())
+    if (rect.empty()) {
+        if (afterFull && !chained)
+            postedSelfContained(id, c.lastPosted); // nothing left to repair
         return;
+    }
     ImageUpdate u;
     u.sequence = ++m_sequence;
     u.viewId = c.viewId;
     u.fullSequence = afterFull ? base.fullSequence : 0;
+    u.baseSequence = baseSequence;
+    c.lastPosted = u.sequence;
     if (full) {
         std::lock_guard lock(m_mutex);
         resetLossy(id, c.viewId, u.sequence); // it says all the rectangles before it said
+    } else if (afterFull && !chained) {
+        postedSelfContained(id, u.sequence);
     }
     u.causeServerUs = causeUs;
     u.full = full;
@@ -169,22 +179,12 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
                   ? Codec::Lz4
                   : c.codec;
     if (full && (owned || (m_apartPixels > 0 && rect.area() >= m_apartPixels))) {
-        // Only zstd clients get predicted updates, so only they need the copy.
-        c.shadow = c.codec == Codec::Zstd ? frame : Dbi();
-        Dbi pixels;
-        if (owned) {
-            pixels = std::move(*owned);
-        } else {
-            // Into the coder's last buffer when it fits: a fresh one costs ~20 ms of page faults.
-            pixels = buffer(frame.width(), frame.height());
-            pixels = frame; // rect is the frame's bounds
-        }
-        codeApart(id, CodingJob{id, 0, std::move(u), std::move(pixels), camera});
+        postApart(id, c, camera, frame, owned, std::move(u));
         return;
     }
     const uint64_t e0 = m_clock();
     const Dbi pixels = frame.extract(rect);
-    Dbi undo = encodeInto(u, c, frame, pixels, camera, predictable);
+    Dbi undo = encodeInto(u, c, frame, pixels, camera, !afterFull || chained);
     // Only zstd clients get predicted updates, so only they need the copy (a whole frame:
     // 33.5 MB for 2048 x 2048).
     if (c.codec != Codec::Zstd)
@@ -206,12 +206,41 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
     p.afterFull = afterFull;
     p.lossy = afterFull && base.based && p.message.size() <= kLossyMaxMessageBytes;
     p.sequence = u.sequence;
+    p.baseSequence = baseSequence;
     {
         std::lock_guard lock(m_mutex);
         m_images[id].push_back(std::move(p));
     }
     if (m_wake)
         m_wake();
+}
+
+// The image a chained rectangle builds on (the one posted before it, or the one a merged one
+// built on; the shadow holds it), or 0: self-contained, carrying every one not acknowledged.
+// Self-contained: from a client that lost one lately, merged with a self-contained one, or after
+// a reliable one not yet acknowledged (a lossy chained one would overtake it; a reliable one
+// would make every later one reliable).
+uint32_t Outbox::chainOn(const Client& c, const LossyBase& base, const PendingImage* merged) {
+    const uint32_t on = merged ? merged->baseSequence : c.lastPosted;
+    const bool behindReliable =
+        base.based && std::count(base.reliableUnacked.begin(), base.reliableUnacked.end(), on);
+    return base.chain && !behindReliable ? on : 0;
+}
+
+// A full image coded apart, from `owned` or a copy of `frame`.
+void Outbox::postApart(uint16_t id, Client& c, const Camera& camera, const Dbi& frame, Dbi* owned,
+                       ImageUpdate u) {
+    // Only zstd clients get predicted updates, so only they need the copy.
+    c.shadow = c.codec == Codec::Zstd ? frame : Dbi();
+    Dbi pixels;
+    if (owned) {
+        pixels = std::move(*owned);
+    } else {
+        // Into the coder's last buffer when it fits: a fresh one costs ~20 ms of page faults.
+        pixels = buffer(frame.width(), frame.height());
+        pixels = frame; // a full image: the frame's bounds
+    }
+    codeApart(id, CodingJob{id, 0, std::move(u), std::move(pixels), camera});
 }
 
 // The update's stage times (its coding began at `codedFromUs`), in it and in the report.
@@ -235,13 +264,21 @@ void Outbox::stampTimes(ImageUpdate& u, ImageTiming timing, uint64_t codedFromUs
 // image clears them all (keeping their oldest cause), an image of an older view is dropped.
 std::optional<Outbox::PendingImage> Outbox::takeMergeable(uint16_t id, uint32_t viewId, bool full,
                                                           uint64_t& causeUs, LossyBase& base) {
+    const uint64_t now = m_clock();
     std::lock_guard lock(m_mutex);
-    if (auto l = m_lossy.find(id); l != m_lossy.end() && l->second.viewId == viewId) {
-        base.fullSequence = l->second.fullSequence;
-        base.predictable = l->second.based && l->second.unacked.empty();
-        base.based = l->second.based;
-        for (const SentRect& r : l->second.unacked)
+    if (auto it = m_lossy.find(id); it != m_lossy.end() && it->second.viewId == viewId) {
+        const Lossy& l = it->second;
+        base.fullSequence = l.fullSequence;
+        base.chain = !l.repairWanted &&
+                     (l.lossSeenUs == 0 || now - l.lossSeenUs >= kSelfContainedAfterLossUs);
+        base.based = l.based;
+        for (const SentRect& r : l.unacked) {
             base.unacked = base.unacked.empty() ? r.rect : unite(base.unacked, r.rect);
+            base.unackedCauseUs =
+                base.unackedCauseUs ? std::min(base.unackedCauseUs, r.causeUs) : r.causeUs;
+            if (r.reliable)
+                base.reliableUnacked.push_back(r.sequence);
+        }
     }
     auto it = m_images.find(id);
     if (it == m_images.end())
@@ -268,15 +305,17 @@ std::optional<Outbox::PendingImage> Outbox::takeMergeable(uint16_t id, uint32_t 
 }
 
 // Codes `pixels` (the update's rectangle of `frame`) into `u`: predicted against the client's
-// copy for zstd clients, planar otherwise. Gives the copy's pixels it replaces (empty if planar).
+// copy for zstd clients when `predictable`, planar otherwise. Gives the copy's pixels it replaces
+// (empty for a full image or a client without a copy), which a merge puts back.
 Dbi Outbox::encodeInto(ImageUpdate& u, const Client& c, const Dbi& frame, const Dbi& pixels,
                        const Camera& camera, bool predictable) {
+    const bool copied = !u.full && c.codec == Codec::Zstd && c.shadow.width() == frame.width() &&
+                        c.shadow.height() == frame.height();
+    Dbi undo = copied ? c.shadow.extract({int(u.x), int(u.y), int(u.width), int(u.height)}) : Dbi();
     // Predicted updates trade ~4 ns a pixel more coding at each end than the planar form for
     // about half its bytes (benchmark_net 'predicted|planar'): worth it with zstd (the codec
     // chosen for bytes), not with lz4 (chosen for latency).
-    if (!u.full && predictable && c.codec == Codec::Zstd && c.shadow.width() == frame.width() &&
-        c.shadow.height() == frame.height()) {
-        Dbi undo = c.shadow.extract({int(u.x), int(u.y), int(u.width), int(u.height)});
+    if (copied && predictable) {
         PredictedImage p = encodePredicted(pixels, undo, c.codec, DepthQuantizer(camera));
         u.predicted = true;
         u.baseHash = p.baseHash;
@@ -287,7 +326,26 @@ Dbi Outbox::encodeInto(ImageUpdate& u, const Client& c, const Dbi& frame, const 
     EncodedImage e = encodeImage(pixels, u.codec, camera);
     u.rawBytes = e.rawBytes;
     u.payload = std::move(e.payload);
-    return Dbi();
+    return undo;
+}
+
+// [Posting thread] Every rectangle before `sequence` is in it (or acknowledged): a loss reported
+// of one of them is repaired.
+void Outbox::postedSelfContained(uint16_t id, uint32_t sequence) {
+    std::lock_guard lock(m_mutex);
+    if (auto it = m_lossy.find(id); it != m_lossy.end()) {
+        it->second.repairWanted = false;
+        it->second.selfContained = sequence;
+    }
+}
+
+std::vector<uint16_t> Outbox::repairsWanted() const {
+    std::vector<uint16_t> ids;
+    std::lock_guard lock(m_mutex);
+    for (const auto& [id, l] : m_lossy)
+        if (l.repairWanted && !m_images.count(id))
+            ids.push_back(id);
+    return ids;
 }
 
 // The full image waits, being coded, at the end of the client's images; the coder fills in its
@@ -524,6 +582,8 @@ void Outbox::resetLossy(uint16_t id, uint32_t viewId, uint32_t fullSequence) {
     l = Lossy{};
     l.viewId = viewId;
     l.fullSequence = fullSequence;
+    l.selfContained = fullSequence; // nothing before the full image needs repair
+    l.lossSeenUs = path.lossSeenUs;
     l.srttUs = path.srttUs;
     l.rttVarUs = path.rttVarUs;
     l.minRttUs = path.minRttUs;
@@ -570,10 +630,12 @@ void Outbox::sentAfterFull(uint16_t id, PendingImage& p, uint64_t now) {
     if (it == m_lossy.end())
         return;
     Lossy& l = it->second;
-    l.unacked.push_back({p.sequence, p.rect, int64_t(p.message.size()), now, 0, !p.lossy});
+    l.unacked.push_back(
+        {p.sequence, p.rect, int64_t(p.message.size()), now, p.causeUs, 0, !p.lossy});
     if (l.unacked.size() > kMaxUnacked) {
         SentRect& next = l.unacked[1];
         next.rect = unite(l.unacked[0].rect, next.rect);
+        next.causeUs = std::min(next.causeUs, l.unacked[0].causeUs);
         next.bytes += l.unacked[0].reliable ? 0 : l.unacked[0].bytes;
         next.repairs = std::max(next.repairs, 1); // times no round trip
         l.unacked.erase(l.unacked.begin());
@@ -623,8 +685,20 @@ void Outbox::acknowledge(uint16_t id, const ImageAck& ack) {
     }
     Lossy& l = it->second;
     l.based = true;
+    // A rectangle it could not use, chained after one lost and no self-contained one since:
+    // the next rectangle posted carries everything not acknowledged.
+    if (ack.unusable != 0 && !after(ack.unusable, l.newestSent) &&
+        after(ack.unusable, l.selfContained)) {
+        l.lossSeenUs = now;
+        l.repairWanted = true;
+        ++m_gapsReported;
+    }
     auto acked = l.unacked.begin();
-    for (; acked != l.unacked.end() && !after(acked->sequence, ack.sequence); ++acked)
+    for (; acked != l.unacked.end() && !after(acked->sequence, ack.sequence); ++acked) {
+        // The client acknowledges every image it applies: one passed over was lost (or its
+        // acknowledgement was): the path loses datagrams.
+        if (acked->sequence != ack.sequence && !acked->reliable)
+            l.lossSeenUs = now;
         if (acked->sequence == ack.sequence && acked->repairs == 0) {
             // One round trip (Karn: never one of a re-sent rectangle), smoothed as TCP does.
             const double sample = double(now - acked->sentUs);
@@ -637,6 +711,7 @@ void Outbox::acknowledge(uint16_t id, const ImageAck& ack) {
                 l.srttUs = 0.875 * l.srttUs + 0.125 * sample;
             }
         }
+    }
     // What the link delivers: lossy bytes acknowledged over the time since the last ack, smoothed.
     int64_t bytes = 0;
     for (auto r = l.unacked.begin(); r != acked; ++r)

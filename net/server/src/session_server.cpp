@@ -1016,6 +1016,7 @@ void SessionServer::Impl::simulate(uint64_t now) {
         } else {
             step.step(batch, now);
         }
+        step.postRepairs();
     }
     std::lock_guard lock(inMutex);
     busy = false;

@@ -560,6 +560,21 @@ void SimulationStep::copyChunk(ViewFrame& v) {
     v.rowsCopied = -1;
 }
 
+void SimulationStep::postRepairs() {
+    for (uint16_t id : m_outbox.repairsWanted()) {
+        auto c = m_clients.find(id);
+        if (c == m_clients.end() || c->second.sync != Sync::Dbi || c->second.fullCauseUs)
+            continue;
+        auto v = std::find_if(m_views.begin(), m_views.end(),
+                              [&](const ViewFrame& f) { return f.camera == c->second.camera; });
+        if (v == m_views.end() || !v->settled())
+            continue;
+        const uint64_t t0 = m_share.now();
+        m_outbox.postImage(id, v->camera, v->frame, {}, false, 0, {});
+        m_share.charge(id, m_share.now() - t0);
+    }
+}
+
 int64_t SimulationStep::viewPixels() const {
     int64_t total = 0;
     for (const ViewFrame& v : m_views)

@@ -259,8 +259,9 @@ public:
     uint64_t resyncs() const { return m_resyncs; }
     // Predicted image updates applied (coded against our own pixels, net/image_delta.h).
     uint64_t predictedApplied() const { return m_predicted; }
-    // Lossy rectangles (ImageUpdate::fullSequence) ignored: not on the full image we hold, or no
-    // newer than the last image applied (a repeat is acknowledged again). And ImageAcks sent.
+    // Rectangles after a full image (ImageUpdate::fullSequence) ignored: not on the full image we
+    // hold, no newer than the last image applied (a repeat is acknowledged again), or chained on
+    // an image we lack (reported as unusable). And ImageAcks sent.
     uint64_t lossyIgnored() const { return m_lossyIgnored; }
     uint64_t imageAcksSent() const { return m_acksSent; }
     uint64_t toolStatesSent() const { return m_toolSent; }
@@ -367,7 +368,7 @@ private:
     bool onCodes(std::span<const uint8_t> data);                       // session_client_codes.cpp
     bool applyImage(const ImageUpdate& u, uint64_t nowUs);
     bool lossyApplies(const ImageUpdate& u);
-    void acknowledgeImage(uint32_t sequence);
+    void acknowledgeImage(uint32_t sequence, uint32_t unusable = 0);
     // u's pixels into `patch`; false when they do not decode. `stale`: nothing to show (a
     // predicted update coded against pixels other than ours: asks for the whole view again).
     bool decodeImagePatch(const ImageUpdate& u, const ViewSpec& view, bool switching, Dbi& patch,

@@ -3,10 +3,15 @@
 // merges into the waiting one, so a region is never queued twice and the newest pixels or voxels
 // win. It keeps each zstd client's copy of its DBI (the shadow predicted updates are coded
 // against) and holds a client back while ENet still holds more than maxInFlightBytes of its
-// updates. Full images go reliably; the rectangles after one go lossy (Channel::ImageLossy):
-// each carries every rectangle the client has not acknowledged, at current pixels, and the
-// newest is re-sent while unacknowledged past a timeout, so a lost one costs an update interval
-// or a repair, never a retransmission in order. Posting and taking may run on two threads, and
+// updates. Full images go reliably; the rectangles after one go lossy (Channel::ImageLossy), in
+// one of two forms. Chained: only its own pixels, predicted against the picture the client holds
+// once the one before it arrives (ImageUpdate::baseSequence), as small as a reliable update.
+// Self-contained: every rectangle the client has not acknowledged, at current pixels, so a lost
+// one costs an update interval. Rectangles are chained until the client reports one it could not
+// use (ImageAck::unusable); then a self-contained one repairs the gap at once, and they stay
+// self-contained for kSelfContainedAfterLossUs after that or any sign of loss (an acknowledgement
+// passing over a rectangle). The newest is re-sent while unacknowledged past a
+// timeout, never a retransmission in order. Posting and taking may run on two threads, and
 // acknowledgements arrive on the taking one; everything else is the posting thread's. No ENet
 // here: tests post and take in one thread, with a clock passed in.
 #pragma once
@@ -141,9 +146,18 @@ public:
     // Unacknowledged rectangles kept per client; past it the oldest two merge (a client that
     // never acknowledges costs a bounded list).
     static constexpr size_t kMaxUnacked = 32;
+    // After a client reports a lost rectangle, or acknowledges past one (every image applied is
+    // acknowledged), its rectangles are self-contained this long: on a lossy link a loss then
+    // costs an update interval, not a round trip and a repair.
+    static constexpr uint64_t kSelfContainedAfterLossUs = 10'000'000;
+    // [Posting thread] Clients that reported a lost rectangle and wait for no image: each needs a
+    // rectangle posted (an empty one will do: it carries what they have not acknowledged).
+    std::vector<uint16_t> repairsWanted() const;
     // [Any thread] Repairs sent so far, and acknowledgements ignored as not this client's.
     uint64_t repairs() const { return m_repairs.load(); }
     uint64_t acksIgnored() const { return m_acksIgnored.load(); }
+    // [Any thread] Lost rectangles clients reported (ImageAck::unusable) that a repair answered.
+    uint64_t gapsReported() const { return m_gapsReported.load(); }
     // [Any thread] The timeout after which client `id`'s unacknowledged rectangle is re-sent.
     uint64_t repairTimeoutUs(uint16_t id) const;
 
@@ -173,6 +187,7 @@ private:
         bool lossy = false;     // a rectangle on Channel::ImageLossy
         bool afterFull = false; // a rectangle naming its full image (lossy or not)
         uint32_t sequence = 0;
+        uint32_t baseSequence = 0; // chained: the image it builds on (ImageUpdate::baseSequence)
     };
     // A lossy rectangle sent and not acknowledged.
     struct SentRect {
@@ -180,6 +195,7 @@ private:
         PixelRect rect;
         int64_t bytes = 0;
         uint64_t sentUs = 0;
+        uint64_t causeUs = 0;
         int repairs = 0;       // re-sent that many times: its acknowledgement times no round trip
         bool reliable = false; // sent on Channel::Image: never repaired, outside the window
     };
@@ -196,13 +212,18 @@ private:
         double minRttUs = 0;             // the shortest round trip measured (0: none)
         double deliveredPerS = 0;        // lossy bytes acknowledged a second, smoothed
         uint64_t lastAckUs = 0;
+        uint64_t lossSeenUs = 0;    // when a rectangle of the client's was last lost (0: never)
+        bool repairWanted = false;  // since then no self-contained rectangle has been posted
+        uint32_t selfContained = 0; // the newest self-contained rectangle posted
     };
     // What a lossy rectangle posted now must carry, read under m_mutex.
     struct LossyBase {
         uint32_t fullSequence = 0;
-        PixelRect unacked;        // the union of the rectangles not acknowledged
-        bool predictable = false; // the client holds exactly the shadow
-        bool based = false;       // the client has acknowledged its full image
+        PixelRect unacked;                     // the union of the rectangles not acknowledged
+        uint64_t unackedCauseUs = 0;           // their oldest cause
+        bool chain = false;                    // no loss reported lately: rectangles are chained
+        bool based = false;                    // the client has acknowledged its full image
+        std::vector<uint32_t> reliableUnacked; // rectangles sent reliably, not acknowledged
     };
     // A full image for the coder thread: its message but the payload, and the pixels.
     struct CodingJob {
@@ -225,6 +246,7 @@ private:
         Codec volumeCodec = Codec::Raw;
         uint32_t viewId = 0;
         Dbi shadow;
+        uint32_t lastPosted = 0; // the newest image posted (a chained rectangle builds on it)
         std::optional<VolumeChange> noted;
     };
 
@@ -239,6 +261,10 @@ private:
                                               uint64_t& causeUs, LossyBase& base);
     Dbi encodeInto(ImageUpdate& u, const Client& c, const Dbi& frame, const Dbi& pixels,
                    const Camera& camera, bool predictable);
+    void postedSelfContained(uint16_t id, uint32_t sequence);
+    static uint32_t chainOn(const Client& c, const LossyBase& base, const PendingImage* merged);
+    void postApart(uint16_t id, Client& c, const Camera& camera, const Dbi& frame, Dbi* owned,
+                   ImageUpdate u);
     // Under m_mutex:
     void resetLossy(uint16_t id, uint32_t viewId, uint32_t fullSequence);
     void stampTimes(ImageUpdate& u, ImageTiming timing, uint64_t codedFromUs);
@@ -265,7 +291,7 @@ private:
     std::map<uint16_t, PendingVolume> m_volumes;
     std::vector<uint16_t> m_refused;
     std::map<uint16_t, Lossy> m_lossy;
-    std::atomic<uint64_t> m_repairs{0}, m_acksIgnored{0};
+    std::atomic<uint64_t> m_repairs{0}, m_acksIgnored{0}, m_gapsReported{0};
 
     // Where full images are coded apart; the tickets and the spare buffer are under m_mutex.
     int64_t m_apartPixels = 0;

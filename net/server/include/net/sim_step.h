@@ -75,6 +75,10 @@ public:
     void step(std::span<const LogRecord> batch, uint64_t now);
     // With nothing to apply: held-back volume clients' noted changes go once they can.
     void offerNoted() { m_outbox.offerNoted(m_volume); }
+    // After step() or offerNoted(): a client that reported a lost rectangle, whose view has no
+    // change under way (that change's update repairs it), gets the rectangles it has not
+    // acknowledged, at current pixels, charged to it.
+    void postRepairs();
     // The assessment of every applied tool state (its notices go out on the network thread).
     Assessment& assessment() { return m_assessment; }
 

@@ -25,7 +25,7 @@ namespace trephine::net {
 
 // Travels in ENet's connect data; the server refuses other versions with kRefuseVersion. What
 // each version changed: docs/protocol.md, "Versions".
-inline constexpr uint32_t kProtocolVersion = 13;
+inline constexpr uint32_t kProtocolVersion = 14;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
 enum class RefuseReason : uint32_t {
@@ -395,6 +395,10 @@ struct ImageUpdate {
     // A lossy rectangle: the sequence of the full image it applies on (a client holding another
     // ignores it). 0: sent reliably, in order (full images, and servers before version 13).
     uint32_t fullSequence = 0;
+    // A rectangle after a full image that builds on the client's picture after image
+    // `baseSequence` (version 14): it applies only there, and carries only its own pixels. 0: it
+    // carries every rectangle the client has not acknowledged, and applies on any older picture.
+    uint32_t baseSequence = 0;
     uint64_t causeServerUs = 0; // when the tool state that caused it reached the server
     uint64_t sentServerUs = 0;
     bool full = false; // a whole-window refresh (join or view change)
@@ -417,6 +421,7 @@ struct ImageUpdate {
     template <typename S>
     bool serialize(S& s) {
         return s.integer(sequence) && s.integer(viewId) && s.integer(fullSequence) &&
+               s.integer(baseSequence) && !(baseSequence != 0 && fullSequence == 0) &&
                s.integer(causeServerUs) && s.integer(sentServerUs) && s.integer(erodeUs) &&
                s.integer(renderUs) && s.integer(encodeUs) && s.integer(gridUs) &&
                gridUs <= renderUs && s.boolean(full) && !(full && fullSequence != 0) &&
@@ -727,17 +732,20 @@ struct Remove {
 };
 
 // Client -> server (Channel::ImageLossy, unreliable, newest wins): the newest image of view
-// `viewId` the client has applied (full, or a lossy rectangle on its full image). Cumulative: a
-// lossy rectangle carries every rectangle not yet acknowledged, so this acknowledges all before
-// it; the server forgets them and re-sends what stays unacknowledged (net/outbox.h).
+// `viewId` the client has applied (full, or a rectangle on its full image). Cumulative: a
+// rectangle applies only on the one before it or carries every one not yet acknowledged, so this
+// acknowledges all before it; the server forgets them and re-sends what stays unacknowledged
+// (net/outbox.h). `unusable` (version 14; 0: none): a newer rectangle that arrived but builds on
+// a picture the client does not hold, so one before it was lost.
 struct ImageAck {
     static constexpr MessageType kType = MessageType::ImageAck;
     uint32_t viewId = 0;
     uint32_t sequence = 0;
+    uint32_t unusable = 0;
 
     template <typename S>
     bool serialize(S& s) {
-        return s.integer(viewId) && s.integer(sequence);
+        return s.integer(viewId) && s.integer(sequence) && s.integer(unusable);
     }
 };
 
