@@ -130,6 +130,11 @@ TEST(WanStudy, TheReportHasWanAndClassroomSectionsWithTheirPlotsAndTargets) {
     EXPECT_NE(md.find("quickly flood the network"), std::string::npos);
     EXPECT_NE(md.find("a classroom of 64 joins without a flag"), std::string::npos) << md;
     EXPECT_NE(md.find("PASS classroom of 4 (dbi design"), std::string::npos) << md;
+    // Beside it, what the target asks of the link, from the lone client's bytes an update.
+    EXPECT_NE(md.find("alone, one client's 10^3 updates are 1.0 kB each on the wire, so 30/s to "
+                      "each of 4 is 1 Mbit/s of the link's 100"),
+              std::string::npos)
+        << md;
     const std::string plot = slurpFile(dir / "classroom.svg");
     EXPECT_NE(plot.find("the shared link"), std::string::npos);
     for (const char* svg : {"wan.svg", "wan-join.svg", "classroom.svg"})

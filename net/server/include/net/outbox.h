@@ -136,9 +136,10 @@ public:
     // its next rectangle waits, merged with the ones after it: twice what the acknowledgements
     // say the link delivers in its shortest round trip, within these bounds (the upper one a
     // round trip at 20 Mbit/s and 100 ms), so a slow link queues little in front of tool states
-    // and force models; kLossyStartBytes until both are measured.
+    // and force models; kLossyStartBytes until both are measured. The lower bound is a few
+    // datagrams: every client's floor waits on a shared link (64 x 32 KiB queued 170 ms there).
     static constexpr int64_t kLossyWindowBytes = 256 * 1024;
-    static constexpr int64_t kLossyMinWindowBytes = 32 * 1024, kLossyStartBytes = 64 * 1024;
+    static constexpr int64_t kLossyMinWindowBytes = 8 * 1024, kLossyStartBytes = 64 * 1024;
     // The largest rectangle sent lossy (~24 datagrams): one lost fragment loses the whole of it,
     // so a larger one (a large view's union, a raw client) goes reliably on Channel::Image, still
     // naming its full image, and is never repaired.
