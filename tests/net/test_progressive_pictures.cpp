@@ -81,7 +81,8 @@ struct PreviewRig {
     }
 };
 
-// A full image or rectangle a client got, decoded.
+// A full image or rectangle a client got, decoded (a preview shown as a client does, its pixels
+// as 2 x 2 blocks).
 struct Got {
     ImageUpdate update;
     Dbi pixels;
@@ -97,8 +98,14 @@ std::vector<Got> imagesOf(const std::vector<Outbox::Ready>& updates, uint16_t id
         Got g;
         g.step = step;
         EXPECT_TRUE(decodeMessage(r.message, g.update));
+        const Camera coded = g.update.preview ? previewCamera(camera) : camera;
         EXPECT_TRUE(decodeImage(g.update.payload, g.update.rawBytes, g.update.codec, g.update.width,
-                                g.update.height, camera, g.pixels));
+                                g.update.height, coded, g.pixels));
+        if (g.update.preview) {
+            Dbi blocks(camera.width, camera.height);
+            upsampleRows(g.pixels, 0, g.pixels.height(), blocks);
+            g.pixels = std::move(blocks);
+        }
         out.push_back(std::move(g));
     }
     return out;
@@ -144,6 +151,8 @@ TEST(ProgressivePictures, ALargeNewViewGetsItsPreviewFirstThenTheExactFrame) {
     EXPECT_FALSE(compare(got[0].pixels, exact).identical()) << "a preview, not the picture";
     EXPECT_TRUE(compare(got[1].pixels, exact).identical());
     EXPECT_TRUE(got[0].update.preview) << "said to be one";
+    EXPECT_EQ(got[0].update.width, 80) << "sent at half size";
+    EXPECT_EQ(got[0].update.height, 60);
     EXPECT_FALSE(got[1].update.preview);
     EXPECT_EQ(rig.step.share().charged(1), uint64_t(160 * 120 + 80 * 60));
 }

@@ -1,5 +1,6 @@
 #include "net/session_client.h"
 
+#include "libsim/dbi_preview.h"
 #include "libsim/error.h"
 #include "libsim/renderer.h"
 #include "libsim/thread_pool.h"
@@ -768,7 +769,9 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
         return true;
     if (u.x + u.width > view->width || u.y + u.height > view->height)
         return reject("its rectangle leaves the view");
-    if (u.full && (u.x != 0 || u.y != 0 || u.width != view->width || u.height != view->height))
+    // A preview is the view at half size (previewCamera), each pixel a 2 x 2 block of it.
+    const Camera whole = u.preview ? previewCamera(toCamera(*view)) : toCamera(*view);
+    if (u.full && (u.x != 0 || u.y != 0 || u.width != whole.width || u.height != whole.height))
         return reject("a full image that is not the whole view");
     Dbi patch;
     bool stale = false;
@@ -776,6 +779,11 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
         return false;
     if (stale)
         return true;
+    if (u.preview) {
+        Dbi blocks(view->width, view->height);
+        upsampleRows(patch, 0, patch.height(), blocks);
+        patch = std::move(blocks);
+    }
     if (switching) {
         m_view = *view;
         m_viewId = u.viewId;
@@ -811,7 +819,7 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
     }
     recordImage(u, start, nowUs);
     if (m_updateCallback)
-        m_updateCallback(u, PixelRect{u.x, u.y, u.width, u.height}, u.full);
+        m_updateCallback(u, PixelRect{u.x, u.y, patch.width(), patch.height()}, u.full);
     return true;
 }
 
@@ -850,7 +858,7 @@ void SessionClient::acknowledgeImage(uint32_t sequence, uint32_t unusable) {
 
 bool SessionClient::decodeImagePatch(const ImageUpdate& u, const ViewSpec& view, bool switching,
                                      Dbi& patch, bool& stale) {
-    const Camera camera = toCamera(view);
+    const Camera camera = u.preview ? previewCamera(toCamera(view)) : toCamera(view);
     if (!u.predicted) {
         if (!decodeImage(u.payload, u.rawBytes, u.codec, u.width, u.height, camera, patch))
             return reject("its pixels do not decode");

@@ -230,8 +230,9 @@ uint32_t Outbox::chainOn(const Client& c, const LossyBase& base, const PendingIm
 // A full image coded apart, from `owned` or a copy of `frame`.
 void Outbox::postApart(uint16_t id, Client& c, const Camera& camera, const Dbi& frame, Dbi* owned,
                        ImageUpdate u) {
-    // Only zstd clients get predicted updates, so only they need the copy.
-    c.shadow = c.codec == Codec::Zstd ? frame : Dbi();
+    // Only zstd clients get predicted updates, so only they need the copy; a preview is none
+    // (rectangles wait for the exact full image).
+    c.shadow = c.codec == Codec::Zstd && !u.preview ? frame : Dbi();
     Dbi pixels;
     if (owned) {
         pixels = std::move(*owned);

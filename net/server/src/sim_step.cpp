@@ -441,39 +441,34 @@ void SimulationStep::workOn(ViewFrame& v, int64_t& rowsLeft) {
         m_book.count(&ServerCounters::renders);
 }
 
-// The next rows of a new view's preview, counted against `rowsLeft` like its exact rows, each
-// written at once into the view-sized picture as 2 x 2 blocks (so no piece copies the whole
-// picture); the last sends it.
+// The next rows of a new view's preview, counted against `rowsLeft` like its exact rows; the
+// last sends it.
 void SimulationStep::previewChunk(ViewFrame& v, int64_t& rowsLeft) {
     const Camera half = previewCamera(v.camera);
-    if (v.previewRows == 0) {
-        if (v.preview.width() != half.width || v.preview.height() != half.height)
-            v.preview = Dbi(half.width, half.height);
-        v.previewFull = m_outbox.buffer(v.frame.width(), v.frame.height());
-    }
+    if (v.previewRows == 0 &&
+        (v.preview.width() != half.width || v.preview.height() != half.height))
+        v.preview = Dbi(half.width, half.height);
     const int rows = int(std::clamp<int64_t>(std::min(rowsLeft, m_config.chunkPixels) / half.width,
                                              1, half.height - v.previewRows));
     m_renderer->render(half, {0, v.previewRows, half.width, rows}, v.preview, nullptr);
-    upsampleRows(v.preview, v.previewRows, rows, v.previewFull);
     v.previewRows += rows;
     rowsLeft -= int64_t(rows) * half.width;
     if (v.previewRows >= half.height)
         postPreview(v);
 }
 
-// Every client waiting for the view's full image gets the preview as one (coded apart, as large
-// full images are). They still wait: the exact frame's full image follows and replaces it, in the
-// outbox too if the preview has not left; a view changed meanwhile drops both, as ever.
+// Every client waiting for the view's full image gets the half-size preview as one (coded apart,
+// as large full images are; the client shows each pixel as a 2 x 2 block). They still wait: the
+// exact frame's full image follows and replaces it, in the outbox too if the preview has not
+// left; a view changed meanwhile drops both, as ever.
 void SimulationStep::postPreview(ViewFrame& v) {
-    std::vector<std::pair<uint16_t, uint64_t>> waiting;
+    const Camera half = previewCamera(v.camera);
     for (uint16_t id : v.holders)
-        if (const Client& c = m_clients.at(id); c.fullCauseUs)
-            waiting.emplace_back(id, c.fullCauseUs);
-    for (size_t i = 0; i < waiting.size(); ++i)
-        m_outbox.postFullImage(waiting[i].first, v.camera,
-                               i + 1 < waiting.size() ? v.previewFull : std::move(v.previewFull),
-                               waiting[i].second, true);
-    v.previewFull = Dbi();
+        if (const Client& c = m_clients.at(id); c.fullCauseUs) {
+            Dbi copy = m_outbox.buffer(half.width, half.height);
+            copy = v.preview; // the frame's is kept for the next new view of this size
+            m_outbox.postFullImage(id, half, std::move(copy), c.fullCauseUs, true);
+        }
     v.previewRows = -1;
 }
 

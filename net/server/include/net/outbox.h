@@ -106,8 +106,8 @@ public:
                    uint64_t causeUs, ImageTiming timing);
     // A full image of `pixels` (a copy of the view's frame the caller made, see buffer()), coded
     // apart like the large ones postImage copies itself.
-    // `preview`: a new view's first, half-size picture (ImageUpdate::preview); its exact full
-    // image follows.
+    // `preview`: a new view's first picture, `pixels` and `camera` its half-size render
+    // (previewCamera, ImageUpdate::preview); its exact full image follows.
     void postFullImage(uint16_t id, const Camera& camera, Dbi pixels, uint64_t causeUs,
                        bool preview = false);
     // [Posting thread] A frame of that size for postFullImage: the coder's last buffer when it

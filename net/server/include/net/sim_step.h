@@ -128,9 +128,9 @@ private:
         // in chunks (the frame holds still meanwhile); -1: none under way.
         Dbi copy;
         int rowsCopied = -1;
-        // A view larger than previewPixels, new: its half-size render (previewCamera) so far and
-        // the view-sized picture made of it; -1: no preview under way (none, or sent).
-        Dbi preview, previewFull;
+        // A view larger than previewPixels, new: its half-size render (previewCamera) so far;
+        // -1: no preview under way (none, or sent).
+        Dbi preview;
         int previewRows = -1;
         bool previewing() const { return previewRows >= 0; }
         bool whole() const { return rowsDone >= frame.height(); }

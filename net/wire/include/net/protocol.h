@@ -402,8 +402,9 @@ struct ImageUpdate {
     uint64_t causeServerUs = 0; // when the tool state that caused it reached the server
     uint64_t sentServerUs = 0;
     bool full = false; // a whole-window refresh (join or view change)
-    // A full image rendered at half size, each pixel a 2 x 2 block: a new large view's first
-    // picture, shown until its exact full image follows (version 13).
+    // A new large view's first picture, shown until its exact full image follows (version 13):
+    // the view at half size (previewCamera; x = y = 0, width and height (w + 1) / 2 and
+    // (h + 1) / 2 of the view's), each pixel shown as a 2 x 2 block (since version 14).
     bool preview = false;
     uint16_t x = 0, y = 0, width = 0, height = 0;
     Codec codec = Codec::Raw;
