@@ -805,6 +805,10 @@ TEST(FairShare, APeerIdleForAWhileGoesFirstButBanksNoCredit) {
     }
     EXPECT_EQ(order, (std::vector<uint16_t>{2, 1, 2, 1, 2, 1}));
     EXPECT_EQ(share.charged(2), 3000u);
+    // Where each stands (the order the server sends updates in) is a piece apart, not the
+    // 100 ms peer 1 worked alone.
+    EXPECT_LE(share.standing(1) - share.standing(2), 1000u);
+    EXPECT_EQ(share.charged(1), 103000u);
     share.forget(2); // gone: its report keeps the total the step last wrote
     EXPECT_EQ(share.charged(2), 0u) << "a later peer given its id starts from nothing";
 }

@@ -858,14 +858,15 @@ void SessionServer::Impl::sendUpdates() {
         policy.refuseVolume(id, clock(), out);
     }
     apply(out);
-    // The least charged client's updates first, and what is handed to ENet is flushed before a
-    // large update joins it: a small rectangle does not wait behind another peer's large one's
-    // datagrams (ENet's flush goes peer by peer in slot order). One flush for all the small ones:
-    // each flush walks every peer slot, and one a client cost a classroom of 64 its updates.
-    // Stable: a client's own stay in order.
+    // Updates in their clients' fair order (where each stands, not its lifetime total, which put
+    // a long-standing trainee behind every newcomer's burst), and what is handed to ENet is
+    // flushed before a large update joins it: a small rectangle does not wait behind another
+    // peer's large one's datagrams (ENet's flush goes peer by peer in slot order). One flush for
+    // all the small ones: each flush walks every peer slot, and one a client cost a classroom of
+    // 64 its updates. Stable: a client's own stay in order.
     std::stable_sort(taken.updates.begin(), taken.updates.end(),
                      [&](const Outbox::Ready& a, const Outbox::Ready& b) {
-                         return received.charged(a.client) < received.charged(b.client);
+                         return received.standing(a.client) < received.standing(b.client);
                      });
     bool handed = false;
     for (const Outbox::Ready& u : taken.updates) {

@@ -38,6 +38,10 @@ public:
     }
     // The time charged to `peer` in all (what the report shows).
     uint64_t charged(uint16_t peer) const;
+    // Where `peer` stands in the fair order (less goes first): its start tag, the order pick()
+    // uses. Unlike charged(), work done while no other peer was waiting does not put it behind a
+    // newcomer for good.
+    uint64_t standing(uint16_t peer) const { return tag(peer); }
 
 private:
     uint64_t tag(uint16_t peer) const;
@@ -77,6 +81,7 @@ public:
     size_t waiting() const { return m_waiting; }
     size_t waiting(uint16_t peer) const;
     uint64_t charged(uint16_t peer) const { return m_share.charged(peer); }
+    uint64_t standing(uint16_t peer) const { return m_share.standing(peer); }
 
 private:
     struct Message {
