@@ -267,6 +267,8 @@ TEST(LossyOutbox, AForgedOrStaleAcknowledgementIsIgnored) {
     rig.outbox.acknowledge(1, ImageAck{0, sent + 0x80000000u});
     rig.outbox.acknowledge(9, ImageAck{0, sent}); // nobody
     EXPECT_EQ(rig.outbox.acksIgnored(), 5u);
+    rig.outbox.acknowledge(1, ImageAck{0, f.sequence, sent + 5}); // reports one never sent
+    EXPECT_TRUE(rig.outbox.repairsWanted().empty());
     rig.clock.advance(rig.outbox.repairTimeoutUs(1));
     EXPECT_EQ(rig.outbox.take(live).updates.size(), 1u) << "still repaired";
     rig.outbox.leave(1);
@@ -378,6 +380,47 @@ TEST(LossyOutbox, RectanglesBeforeTheFullImagesAckOrLargeGoReliably) {
     EXPECT_EQ(t.updates[0].channel, Channel::Image);
     big.clock.advance(10 * big.outbox.repairTimeoutUs(1));
     EXPECT_TRUE(big.outbox.take(live).updates.empty()) << "ENet delivers it: no repair";
+}
+
+// A chained rectangle too large to go lossy goes reliably, and ENet delivers it; but on a lost base
+// it is unusable, and the client's one report of that may be lost as well. Unacknowledged past the
+// timeout it asks the step for a self-contained repair, which carries both.
+TEST(LossyOutbox, AReliableChainedRectangleUnacknowledgedIsRepairedSelfContained) {
+    Rig big;
+    big.cam = cameraFor(300, 200);
+    big.frame = picture(300, 200, 0);
+    big.full();
+    const PixelRect small{4, 4, 10, 10}, large{0, 50, 300, 100};
+    big.frame = with(big.frame, picture(300, 200, 1), small);
+    big.outbox.postImage(1, big.cam, big.frame, small, false, 2, {});
+    ASSERT_EQ(big.outbox.take(live).updates.at(0).channel, Channel::ImageLossy); // lost
+    big.frame = with(big.frame, picture(300, 200, 2), large);
+    big.outbox.postImage(1, big.cam, big.frame, large, false, 3, {});
+    Outbox::Taken t = big.outbox.take(live);
+    ASSERT_EQ(t.updates.size(), 1u);
+    EXPECT_EQ(t.updates[0].channel, Channel::Image);
+    EXPECT_NE(decoded(t.updates[0]).baseSequence, 0u);
+    big.clock.advance(big.outbox.repairTimeoutUs(1) + 1);
+    EXPECT_TRUE(big.outbox.take(live).updates.empty()) << "nothing to re-send as it was";
+    EXPECT_EQ(big.outbox.repairsWanted(), std::vector<uint16_t>{1});
+    big.outbox.postImage(1, big.cam, big.frame, {}, false, 0, {});
+    t = big.outbox.take(live);
+    ASSERT_EQ(t.updates.size(), 1u);
+    const ImageUpdate repair = decoded(t.updates[0]);
+    EXPECT_EQ(repair.baseSequence, 0u);
+    EXPECT_EQ(rectOf(repair), unite(small, large));
+}
+
+// A previewed view's exact frame finds the coder's frame-sized buffer still there: a preview's
+// half-size pixels are never kept as the spare, and buffer() of another size leaves it.
+TEST(LossyOutbox, APreviewLeavesTheFrameSizedBufferForTheExactFrame) {
+    Rig rig;
+    rig.outbox.postFullImage(1, rig.cam, Dbi(rig.frame), 1); // coded inline: its pixels kept
+    const Camera half = cameraFor(32, 24);
+    rig.outbox.postFullImage(1, half, picture(32, 24, 3), 1, true);
+    EXPECT_EQ(rig.outbox.buffer(32, 24), Dbi(32, 24)) << "a new one: no preview kept";
+    const Dbi spare = rig.outbox.buffer(64, 48);
+    EXPECT_EQ(spare, rig.frame) << "the last frame's buffer, kept";
 }
 
 // A client that never acknowledges costs a bounded list (the oldest merge), and a repair still

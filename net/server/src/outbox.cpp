@@ -110,13 +110,13 @@ void Outbox::postFullImage(uint16_t id, const Camera& camera, Dbi pixels, uint64
 }
 
 Dbi Outbox::buffer(int width, int height) {
-    Dbi spare;
     {
         std::lock_guard lock(m_mutex);
-        spare = std::exchange(m_spare, Dbi()); // a moved-from Dbi keeps its size, not its pixels
+        // One of another size stays for the next full image.
+        if (m_spare.width() == width && m_spare.height() == height)
+            return std::exchange(m_spare, Dbi()); // a moved-from Dbi keeps its size, not pixels
     }
-    return spare.width() == width && spare.height() == height ? std::move(spare)
-                                                              : Dbi(width, height);
+    return Dbi(width, height);
 }
 
 // `owned`: `frame` itself, which a full image coded apart takes instead of a copy.
@@ -383,7 +383,8 @@ void Outbox::code(CodingJob job) {
     bool done = false;
     {
         std::lock_guard lock(m_mutex);
-        m_spare = std::move(job.pixels);
+        if (!u.preview) // a view's frames are the buffers worth keeping, not its half-size preview
+            m_spare = std::move(job.pixels);
         if (auto it = m_images.find(job.client); it != m_images.end())
             for (PendingImage& p : it->second)
                 if (p.ticket == job.ticket && p.coding) {
@@ -631,8 +632,8 @@ void Outbox::sentAfterFull(uint16_t id, PendingImage& p, uint64_t now) {
     if (it == m_lossy.end())
         return;
     Lossy& l = it->second;
-    l.unacked.push_back(
-        {p.sequence, p.rect, int64_t(p.message.size()), now, p.causeUs, 0, !p.lossy});
+    l.unacked.push_back({p.sequence, p.rect, int64_t(p.message.size()), now, p.causeUs, 0, !p.lossy,
+                         p.baseSequence != 0});
     if (l.unacked.size() > kMaxUnacked) {
         SentRect& next = l.unacked[1];
         next.rect = unite(l.unacked[0].rect, next.rect);
@@ -657,14 +658,22 @@ void Outbox::sentAfterFull(uint16_t id, PendingImage& p, uint64_t now) {
 // 1.5 s at 5 % loss, where half of all 15-fragment rectangles are lost.
 void Outbox::takeRepairs(const std::function<bool(uint16_t)>& live, uint64_t now, Taken& taken) {
     for (auto& [id, l] : m_lossy) {
-        if (l.unacked.empty() || l.newest.empty() || m_images.count(id) || !live(id))
+        if (l.unacked.empty() || m_images.count(id) || !live(id))
             continue;
         SentRect& r = l.unacked.back();
+        // ENet delivers a reliable one, and a self-contained one applies; a chained one is
+        // unusable after a lost one, and the client's one report of it may be lost too.
+        if (r.reliable && !r.chained)
+            continue;
         if (now - r.sentUs < repairTimeout(l) * uint64_t(1 + std::min(r.repairs, 3)))
             continue;
         r.sentUs = now;
         ++r.repairs;
         ++m_repairs;
+        if (r.reliable) {
+            l.repairWanted = true; // the step posts a self-contained one
+            continue;
+        }
         taken.updates.push_back(
             {id, Sync::Dbi, Channel::ImageLossy, false, l.newestPayload, l.newestRaw, l.newest});
     }
@@ -688,7 +697,7 @@ void Outbox::acknowledge(uint16_t id, const ImageAck& ack) {
     l.based = true;
     // A rectangle it could not use, chained after one lost and no self-contained one since:
     // the next rectangle posted carries everything not acknowledged.
-    if (ack.unusable != 0 && !after(ack.unusable, l.newestSent) &&
+    if (ack.unusable != 0 && !after(ack.unusable, l.newestSent ? l.newestSent : l.fullSequence) &&
         after(ack.unusable, l.selfContained)) {
         l.lossSeenUs = now;
         l.repairWanted = true;

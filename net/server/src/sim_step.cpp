@@ -465,9 +465,8 @@ void SimulationStep::postPreview(ViewFrame& v) {
     const Camera half = previewCamera(v.camera);
     for (uint16_t id : v.holders)
         if (const Client& c = m_clients.at(id); c.fullCauseUs) {
-            Dbi copy = m_outbox.buffer(half.width, half.height);
-            copy = v.preview; // the frame's is kept for the next new view of this size
-            m_outbox.postFullImage(id, half, std::move(copy), c.fullCauseUs, true);
+            // A copy: the view's own is kept for its next new view of this size.
+            m_outbox.postFullImage(id, half, Dbi(v.preview), c.fullCauseUs, true);
         }
     v.previewRows = -1;
 }

@@ -126,7 +126,8 @@ public:
     // over kLossyWindowBytes); those of clients not `live` (gone, or being sent away) are
     // dropped. With them, the repairs due: a live client's newest lossy rectangle again when it
     // is still unacknowledged past the timeout (one timeout more a repair of it, up to four) and
-    // nothing newer waits.
+    // nothing newer waits; a reliable chained one left so asks the step (postRepairs) for a
+    // self-contained one.
     Taken take(const std::function<bool(uint16_t)>& live);
     // [Network thread] Client `id` has applied image `sequence` of its view (ImageAck): what it
     // acknowledges is forgotten, and its round trip times the repairs. An ack of another view, of
@@ -157,7 +158,7 @@ public:
     // [Any thread] Repairs sent so far, and acknowledgements ignored as not this client's.
     uint64_t repairs() const { return m_repairs.load(); }
     uint64_t acksIgnored() const { return m_acksIgnored.load(); }
-    // [Any thread] Lost rectangles clients reported (ImageAck::unusable) that a repair answered.
+    // [Any thread] Lost rectangles clients reported (ImageAck::unusable), each asking a repair.
     uint64_t gapsReported() const { return m_gapsReported.load(); }
     // [Any thread] The timeout after which client `id`'s unacknowledged rectangle is re-sent.
     uint64_t repairTimeoutUs(uint16_t id) const;
@@ -198,7 +199,8 @@ private:
         uint64_t sentUs = 0;
         uint64_t causeUs = 0;
         int repairs = 0;       // re-sent that many times: its acknowledgement times no round trip
-        bool reliable = false; // sent on Channel::Image: never repaired, outside the window
+        bool reliable = false; // sent on Channel::Image: outside the window, never re-sent
+        bool chained = false;  // ImageUpdate::baseSequence set
     };
     // A DBI client's lossy rectangles (under m_mutex: acknowledged on the network thread).
     struct Lossy {
