@@ -866,6 +866,27 @@ TEST(FairInbox, WorkChargedOutsideItsMessagesPutsAPeerBehind) {
     EXPECT_EQ(order, (std::vector<uint16_t>{2, 2, 2, 1, 1, 1}));
 }
 
+// The queue is bounded in bytes too: large packets fill it long before the message count, and
+// one larger than the bound is dropped on its own, leaving nothing queued.
+TEST(FairInbox, AQueueIsBoundedInBytesAndAnOversizedMessageIsDropped) {
+    FairInbox inbox([] { return uint64_t(0); });
+    const std::vector<uint8_t> large(FairInbox::kMaxWaitingBytes / 3 + 1, 7);
+    EXPECT_TRUE(inbox.push(1, Channel::Control, large));
+    EXPECT_TRUE(inbox.push(1, Channel::Control, large));
+    EXPECT_FALSE(inbox.push(1, Channel::Control, large)) << "past the bytes, not the count";
+    EXPECT_TRUE(inbox.push(1, Channel::Control, std::vector<uint8_t>{1}));
+    const std::vector<uint8_t> oversized(FairInbox::kMaxWaitingBytes + 1, 7);
+    EXPECT_FALSE(inbox.push(2, Channel::Control, oversized));
+    EXPECT_EQ(inbox.waiting(2), 0u);
+    size_t handled = 0;
+    inbox.serve(1000000, [&](uint16_t peer, Channel, std::span<const uint8_t>) {
+        EXPECT_EQ(peer, 1);
+        ++handled;
+    });
+    EXPECT_EQ(handled, 3u);
+    EXPECT_TRUE(inbox.push(1, Channel::Control, large)) << "handled, its bytes are free again";
+}
+
 // A full queue drops what comes next; a peer leaving has what it sent handled first, in order.
 TEST(FairInbox, AFullQueueDropsTheNextAndALeavingPeersMessagesAreHandledInOrder) {
     FairInbox inbox([] { return uint64_t(0); }, 3);

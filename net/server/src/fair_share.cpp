@@ -43,26 +43,31 @@ uint64_t FairShare::charged(uint16_t peer) const {
 // [SECTION] the network thread's inbox
 
 bool FairInbox::push(uint16_t peer, Channel channel, std::span<const uint8_t> bytes) {
-    std::deque<Message>& q = m_queues[peer];
-    if (q.size() >= m_maxWaiting)
+    auto it = m_queues.find(peer);
+    const size_t count = it == m_queues.end() ? 0 : it->second.messages.size();
+    const size_t held = it == m_queues.end() ? 0 : it->second.bytes;
+    if (count >= m_maxWaiting || held + bytes.size() > m_maxWaitingBytes)
         return false;
-    q.push_back({channel, {bytes.begin(), bytes.end()}});
+    Queue& q = it == m_queues.end() ? m_queues[peer] : it->second;
+    q.messages.push_back({channel, {bytes.begin(), bytes.end()}});
+    q.bytes += bytes.size();
     ++m_waiting;
     return true;
 }
 
 size_t FairInbox::waiting(uint16_t peer) const {
     auto it = m_queues.find(peer);
-    return it == m_queues.end() ? 0 : it->second.size();
+    return it == m_queues.end() ? 0 : it->second.messages.size();
 }
 
 // The handler may queue more, or drain another peer: the message is taken out first.
 void FairInbox::handleOne(uint16_t peer, const Handler& handle) {
     auto it = m_queues.find(peer);
-    Message m = std::move(it->second.front());
-    it->second.pop_front();
+    Message m = std::move(it->second.messages.front());
+    it->second.messages.pop_front();
+    it->second.bytes -= m.bytes.size();
     --m_waiting;
-    if (it->second.empty())
+    if (it->second.messages.empty())
         m_queues.erase(it);
     const uint64_t t0 = m_share.now();
     handle(peer, m.channel, m.bytes);
@@ -88,7 +93,7 @@ size_t FairInbox::drain(uint16_t peer, const Handler& handle) {
         handleOne(peer, handle);
     const size_t dropped = waiting(peer);
     if (auto it = m_queues.find(peer); it != m_queues.end()) {
-        m_waiting -= it->second.size();
+        m_waiting -= it->second.messages.size();
         m_queues.erase(it);
     }
     m_share.forget(peer);

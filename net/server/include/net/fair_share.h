@@ -60,9 +60,15 @@ private:
 class FairInbox {
 public:
     using Handler = std::function<void(uint16_t peer, Channel, std::span<const uint8_t>)>;
-    // `clock` as FairShare's; a peer with `maxWaiting` messages queued has the next dropped.
-    explicit FairInbox(ServerClock clock, size_t maxWaiting = 4096)
-        : m_share(std::move(clock)), m_maxWaiting(maxWaiting) {}
+    // The most bytes a peer may have queued. A client's messages are a few kB at most (a hello,
+    // a mark's label, a list of hand links), so an honest queue never nears it; a flood of large
+    // packets costs its sender's messages, not the server's memory (72 peers: 72 MiB at most).
+    static constexpr size_t kMaxWaitingBytes = size_t(1) << 20;
+    // `clock` as FairShare's; a peer with `maxWaiting` messages or `maxWaitingBytes` queued has
+    // the next dropped.
+    explicit FairInbox(ServerClock clock, size_t maxWaiting = 4096,
+                       size_t maxWaitingBytes = kMaxWaitingBytes)
+        : m_share(std::move(clock)), m_maxWaiting(maxWaiting), m_maxWaitingBytes(maxWaitingBytes) {}
 
     // Queues what `peer` sent; false when its queue is full (the message is dropped).
     bool push(uint16_t peer, Channel channel, std::span<const uint8_t> bytes);
@@ -88,11 +94,15 @@ private:
         Channel channel;
         std::vector<uint8_t> bytes;
     };
+    struct Queue {
+        std::deque<Message> messages;
+        size_t bytes = 0;
+    };
     void handleOne(uint16_t peer, const Handler& handle);
 
     FairShare m_share;
-    size_t m_maxWaiting;
-    std::map<uint16_t, std::deque<Message>> m_queues; // only peers with something waiting
+    size_t m_maxWaiting, m_maxWaitingBytes;
+    std::map<uint16_t, Queue> m_queues; // only peers with something waiting
     size_t m_waiting = 0;
 };
 
