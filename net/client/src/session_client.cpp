@@ -850,8 +850,8 @@ void SessionClient::acknowledgeImage(uint32_t sequence, uint32_t unusable) {
     if (!connected())
         return;
     send(ImageAck{m_viewId, sequence, unusable});
-    // At once, before whoever waits on this picture acts on it: a change the server posts
-    // before the ack arrives goes planar (the predicted coding needs everything acknowledged).
+    // At once: the server times its round trip from it and repairs a reported loss from it, and
+    // until it arrives it keeps the rectangle for self-contained ones to carry.
     m_host.flush();
     ++m_acksSent;
 }

@@ -625,8 +625,9 @@ int64_t Outbox::lossyWindow(const Lossy& l) {
     return std::clamp(int64_t(window), kLossyMinWindowBytes, kLossyWindowBytes);
 }
 
-// A rectangle after a full image has gone, lossy or not: later ones carry it until it is
-// acknowledged (a reliable one may arrive after a newer lossy one, which the client then has).
+// A rectangle after a full image has gone, lossy or not: remembered until acknowledged, for
+// self-contained ones to carry, the window and the round trip (a reliable one may arrive after a
+// newer lossy one, which the client then has).
 void Outbox::sentAfterFull(uint16_t id, PendingImage& p, uint64_t now) {
     auto it = m_lossy.find(id);
     if (it == m_lossy.end())
@@ -647,15 +648,16 @@ void Outbox::sentAfterFull(uint16_t id, PendingImage& p, uint64_t now) {
         l.newest.clear(); // ENet delivers it: nothing to repair
         return;
     }
-    l.newest = p.message; // kept for a repair: the union at current pixels
+    l.newest = p.message; // kept for a repair (its pixels are current: a newer change would wait)
     l.newestPayload = p.payloadBytes;
     l.newestRaw = p.rawBytes;
 }
 
-// The newest rectangle carries every one before it not acknowledged, at pixels no newer change
-// has replaced (a newer one would wait, or have gone): re-sending its bytes repairs them all.
-// The wait grows by one timeout a repair, to four: doubling left a rectangle unrepaired for
-// 1.5 s at 5 % loss, where half of all 15-fragment rectangles are lost.
+// The newest rectangle's pixels are current (a newer change would wait, or have gone), so
+// re-sending its bytes repairs it: all before it too when it is self-contained; a chained one
+// applies if only it was lost, else the client reports it unusable. The wait grows by one timeout a
+// repair, to four: doubling left a rectangle unrepaired for 1.5 s at 5 % loss, where half of all
+// 15-fragment rectangles are lost.
 void Outbox::takeRepairs(const std::function<bool(uint16_t)>& live, uint64_t now, Taken& taken) {
     for (auto& [id, l] : m_lossy) {
         if (l.unacked.empty() || m_images.count(id) || !live(id))

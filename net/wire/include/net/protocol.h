@@ -392,8 +392,8 @@ struct ImageUpdate {
     static constexpr MessageType kType = MessageType::ImageUpdate;
     uint32_t sequence = 0;
     uint32_t viewId = 0; // the ViewRequest this image belongs to (0 = the hello's view)
-    // A lossy rectangle: the sequence of the full image it applies on (a client holding another
-    // ignores it). 0: sent reliably, in order (full images, and servers before version 13).
+    // A rectangle after a full image (lossy or not): the sequence of the full image it applies on
+    // (a client holding another ignores it). 0: a full image.
     uint32_t fullSequence = 0;
     // A rectangle after a full image that builds on the client's picture after image
     // `baseSequence` (version 14): it applies only there, and carries only its own pixels. 0: it
