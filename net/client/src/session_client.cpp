@@ -103,6 +103,7 @@ int SessionClient::pump(uint64_t nowUs) {
         m_lastHeardUs = nowUs;
     }
     int n = m_host.service(0, [&](const ENetEvent& ev) { onEvent(ev, nowUs); });
+    m_stats.countMalformed(m_host.takeFragmentsRefused());
     if (m_peer && m_connected) {
         // Any datagram counts as heard, a fragment of a large update too: ENet stamps the peer
         // whenever it receives (a whole message may take seconds on a slow link).
@@ -767,6 +768,13 @@ bool SessionClient::applyImage(const ImageUpdate& u, uint64_t nowUs) {
     }
     if (u.fullSequence != 0 && !lossyApplies(u))
         return true;
+    // A full image re-sent after its acknowledgement was lost: newer rectangles may be applied
+    // on it, which it would roll back. Acknowledged again.
+    if (u.full && !switching && m_hasFull && notNewer(u.sequence, m_lastImageSeq)) {
+        ++m_lossyIgnored;
+        acknowledgeImage(*m_lastImageSeq);
+        return true;
+    }
     if (u.x + u.width > view->width || u.y + u.height > view->height)
         return reject("its rectangle leaves the view");
     // A preview is the view at half size (previewCamera), each pixel a 2 x 2 block of it.
@@ -849,7 +857,8 @@ bool SessionClient::lossyApplies(const ImageUpdate& u) {
 void SessionClient::acknowledgeImage(uint32_t sequence, uint32_t unusable) {
     if (!connected())
         return;
-    send(ImageAck{m_viewId, sequence, unusable});
+    send(ImageAck{m_viewId, sequence, unusable,
+                  uint16_t(std::min<uint32_t>(m_host.lossPermille(m_peer), 1000))});
     // At once: the server times its round trip from it and repairs a reported loss from it, and
     // until it arrives it keeps the rectangle for self-contained ones to carry.
     m_host.flush();

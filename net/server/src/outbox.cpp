@@ -265,13 +265,11 @@ void Outbox::stampTimes(ImageUpdate& u, ImageTiming timing, uint64_t codedFromUs
 // image clears them all (keeping their oldest cause), an image of an older view is dropped.
 std::optional<Outbox::PendingImage> Outbox::takeMergeable(uint16_t id, uint32_t viewId, bool full,
                                                           uint64_t& causeUs, LossyBase& base) {
-    const uint64_t now = m_clock();
     std::lock_guard lock(m_mutex);
     if (auto it = m_lossy.find(id); it != m_lossy.end() && it->second.viewId == viewId) {
         const Lossy& l = it->second;
         base.fullSequence = l.fullSequence;
-        base.chain = !l.repairWanted &&
-                     (l.lossSeenUs == 0 || now - l.lossSeenUs >= kSelfContainedAfterLossUs);
+        base.chain = !l.repairWanted;
         base.based = l.based;
         for (const SentRect& r : l.unacked) {
             base.unacked = base.unacked.empty() ? r.rect : unite(base.unacked, r.rect);
@@ -356,6 +354,7 @@ void Outbox::codeApart(uint16_t id, CodingJob job) {
     p.viewId = job.update.viewId;
     p.rect = {0, 0, job.pixels.width(), job.pixels.height()};
     p.full = true;
+    p.sequence = job.update.sequence;
     p.causeUs = job.update.causeServerUs;
     p.inFlight = m_clients[id].inFlight;
     p.coding = true;
@@ -539,8 +538,9 @@ Outbox::Taken Outbox::take(const std::function<bool(uint16_t)>& live) {
     for (auto it = m_images.begin(); it != m_images.end();) {
         const bool isLive = live(it->first);
         std::vector<PendingImage>& waiting = it->second;
-        const auto held = [&](const PendingImage& p) {
-            if (!p.lossy)
+        const auto held = [&](PendingImage& p) {
+            // A full image waits for what ENet holds of the client's, lossy or not.
+            if (!sendsLossy(it->first, p) || (p.full && heldBack(p.inFlight)))
                 return heldBack(p.inFlight);
             auto l = m_lossy.find(it->first);
             return l != m_lossy.end() && lossyHeldBack(l->second, now);
@@ -550,9 +550,13 @@ Outbox::Taken Outbox::take(const std::function<bool(uint16_t)>& live) {
             PendingImage& p = waiting[n];
             if (p.afterFull)
                 sentAfterFull(it->first, p, now);
+            else if (p.full)
+                sentFull(it->first, p, now);
+            auto l = m_lossy.find(it->first);
             taken.updates.push_back({it->first, Sync::Dbi,
                                      p.lossy ? Channel::ImageLossy : Channel::Image, p.full,
-                                     p.payloadBytes, p.rawBytes, std::move(p.message)});
+                                     p.payloadBytes, p.rawBytes, std::move(p.message),
+                                     p.lossy && l != m_lossy.end() ? l->second.lossPermille : 0});
         }
         waiting.erase(waiting.begin(), isLive ? waiting.begin() + long(n) : waiting.end());
         it = waiting.empty() ? m_images.erase(it) : std::next(it);
@@ -585,11 +589,12 @@ void Outbox::resetLossy(uint16_t id, uint32_t viewId, uint32_t fullSequence) {
     l.viewId = viewId;
     l.fullSequence = fullSequence;
     l.selfContained = fullSequence; // nothing before the full image needs repair
-    l.lossSeenUs = path.lossSeenUs;
     l.srttUs = path.srttUs;
     l.rttVarUs = path.rttVarUs;
     l.minRttUs = path.minRttUs;
     l.deliveredPerS = path.deliveredPerS;
+    l.lossPermille = path.lossPermille;
+    l.lossReported = path.lossReported;
 }
 
 // 1.5 round trips (or the smoothed one and four deviations, when it varies more) and a margin
@@ -628,6 +633,38 @@ int64_t Outbox::lossyWindow(const Lossy& l) {
 // A rectangle after a full image has gone, lossy or not: remembered until acknowledged, for
 // self-contained ones to carry, the window and the round trip (a reliable one may arrive after a
 // newer lossy one, which the client then has).
+// Whether `p` goes lossy, decided once it is coded. A full image that fits a lossy message, to a
+// client that reports loss: its parity carries it through a lost datagram, where a reliable one
+// waits a round trip for ENet's resend; on a clean link ENet's window paces it (64 lossy joins at
+// once overflowed a classroom's relay). A rectangle after a full image sent lossy that the client
+// has not acknowledged: a reliable one could overtake it, and be ignored and never repaired.
+bool Outbox::sendsLossy(uint16_t id, PendingImage& p) const {
+    auto l = m_lossy.find(id);
+    if (p.full) {
+        p.lossy = p.message.size() <= kLossyMaxMessageBytes && l != m_lossy.end() &&
+                  l->second.lossReported && l->second.lossPermille > 0;
+    } else if (p.afterFull && !p.lossy && p.message.size() <= kLossyMaxMessageBytes) {
+        p.lossy = l != m_lossy.end() && !l->second.based && l->second.fullLossy;
+    }
+    return p.lossy;
+}
+
+// A full image leaves: lossy, it is kept until acknowledged, to be sent again.
+void Outbox::sentFull(uint16_t id, const PendingImage& p, uint64_t now) {
+    auto it = m_lossy.find(id);
+    if (it == m_lossy.end() || it->second.fullSequence != p.sequence)
+        return;
+    Lossy& l = it->second;
+    l.fullLossy = p.lossy;
+    l.fullSentUs = now;
+    l.fullRepairs = 0;
+    if (p.lossy) {
+        l.fullMessage = p.message;
+        l.fullPayload = p.payloadBytes;
+        l.fullRaw = p.rawBytes;
+    }
+}
+
 void Outbox::sentAfterFull(uint16_t id, PendingImage& p, uint64_t now) {
     auto it = m_lossy.find(id);
     if (it == m_lossy.end())
@@ -660,7 +697,17 @@ void Outbox::sentAfterFull(uint16_t id, PendingImage& p, uint64_t now) {
 // 15-fragment rectangles are lost.
 void Outbox::takeRepairs(const std::function<bool(uint16_t)>& live, uint64_t now, Taken& taken) {
     for (auto& [id, l] : m_lossy) {
-        if (l.unacked.empty() || m_images.count(id) || !live(id))
+        if (m_images.count(id) || !live(id))
+            continue;
+        if (!l.based && !l.fullMessage.empty() &&
+            now - l.fullSentUs >= repairTimeout(l) * uint64_t(1 + std::min(l.fullRepairs, 3))) {
+            l.fullSentUs = now;
+            ++l.fullRepairs;
+            ++m_repairs;
+            taken.updates.push_back({id, Sync::Dbi, Channel::ImageLossy, true, l.fullPayload,
+                                     l.fullRaw, l.fullMessage, l.lossPermille});
+        }
+        if (l.unacked.empty())
             continue;
         SentRect& r = l.unacked.back();
         // ENet delivers a reliable one, and a self-contained one applies; a chained one is
@@ -676,8 +723,8 @@ void Outbox::takeRepairs(const std::function<bool(uint16_t)>& live, uint64_t now
             l.repairWanted = true; // the step posts a self-contained one
             continue;
         }
-        taken.updates.push_back(
-            {id, Sync::Dbi, Channel::ImageLossy, false, l.newestPayload, l.newestRaw, l.newest});
+        taken.updates.push_back({id, Sync::Dbi, Channel::ImageLossy, false, l.newestPayload,
+                                 l.newestRaw, l.newest, l.lossPermille});
     }
 }
 
@@ -697,20 +744,18 @@ void Outbox::acknowledge(uint16_t id, const ImageAck& ack) {
     }
     Lossy& l = it->second;
     l.based = true;
+    l.fullMessage = {};
+    l.lossPermille = ack.lossPermille;
+    l.lossReported = true;
     // A rectangle it could not use, chained after one lost and no self-contained one since:
     // the next rectangle posted carries everything not acknowledged.
     if (ack.unusable != 0 && !after(ack.unusable, l.newestSent ? l.newestSent : l.fullSequence) &&
         after(ack.unusable, l.selfContained)) {
-        l.lossSeenUs = now;
         l.repairWanted = true;
         ++m_gapsReported;
     }
     auto acked = l.unacked.begin();
     for (; acked != l.unacked.end() && !after(acked->sequence, ack.sequence); ++acked) {
-        // The client acknowledges every image it applies: one passed over was lost (or its
-        // acknowledgement was): the path loses datagrams.
-        if (acked->sequence != ack.sequence && !acked->reliable)
-            l.lossSeenUs = now;
         if (acked->sequence == ack.sequence && acked->repairs == 0) {
             // One round trip (Karn: never one of a re-sent rectangle), smoothed as TCP does.
             const double sample = double(now - acked->sentUs);

@@ -211,7 +211,7 @@ struct SessionServer::Impl {
     std::optional<ReplayState> replayPublished; // under replayMutex
     void playReplayed();
     bool sendTo(uint16_t id, Channel ch, const std::vector<uint8_t>& bytes,
-                const Host::InFlight& inFlight = {});
+                const Host::InFlight& inFlight = {}, uint32_t lossPermille = 0);
     bool sendControl(uint16_t id, const std::vector<uint8_t>& bytes);
     void forget(uint16_t id, uint64_t now);     // a peer gone (disconnected, or its slot reset)
     void forgetPeer(ENetPeer* p, uint64_t now); // the peer in an ENet slot the gate resets
@@ -577,7 +577,7 @@ SessionPolicy::ForceAnswer SessionServer::Impl::force(const ToolState& t, glm::v
 
 // False when ENet refused the packet (it is then not counted anywhere).
 bool SessionServer::Impl::sendTo(uint16_t id, Channel ch, const std::vector<uint8_t>& bytes,
-                                 const Host::InFlight& inFlight) {
+                                 const Host::InFlight& inFlight, uint32_t lossPermille) {
     if (ch == Channel::Control && !inFlight)
         return sendControl(id, bytes);
     auto link = links.find(id);
@@ -588,7 +588,7 @@ bool SessionServer::Impl::sendTo(uint16_t id, Channel ch, const std::vector<uint
     const std::vector<uint8_t> sealedBytes =
         sealed ? gate.seal(id, ch, bytes) : std::vector<uint8_t>{};
     const std::vector<uint8_t>& wire = sealed ? sealedBytes : bytes;
-    if (!host.send(link->second, ch, wire, inFlight))
+    if (!host.send(link->second, ch, wire, inFlight, lossPermille))
         return false;
     stats.countOut(ch, wire.size());
     book.peer(id, [&](PeerReport& r) {
@@ -876,7 +876,8 @@ void SessionServer::Impl::sendUpdates() {
         }
         // Sealing and handing it to ENet (a whole volume's fragments) is work for that client.
         const uint64_t t0 = received.now();
-        const bool sent = sendTo(u.client, u.channel, u.message, policy.inFlight(u.client));
+        const bool sent =
+            sendTo(u.client, u.channel, u.message, policy.inFlight(u.client), u.lossPermille);
         handed = handed || sent;
         if (!sent)
             continue;
@@ -980,6 +981,7 @@ void SessionServer::Impl::receive(uint64_t now) {
     const ScreenFor screen(admission, book);
     admission.setNow(now);
     host.service(0, [&](const ENetEvent& ev) { onEvent(ev); });
+    stats.countMalformed(host.takeFragmentsRefused());
     received.serve(kReceiveSliceUs, [this](uint16_t id, Channel ch, std::span<const uint8_t> data) {
         handleReceived(id, ch, data);
     });

@@ -34,8 +34,8 @@ uint32_t channelPacketFlags(Channel c) {
     case Channel::Haptic:
         return ENET_PACKET_FLAG_UNSEQUENCED;
     case Channel::ImageLossy:
-        // Without the flag ENet sends a packet over the MTU as reliable fragments.
-        return ENET_PACKET_FLAG_UNRELIABLE_FRAGMENT;
+        // Our fragments, each under the MTU; their order is ours to keep (net/fragments.h).
+        return ENET_PACKET_FLAG_UNSEQUENCED;
     default:
         return ENET_PACKET_FLAG_RELIABLE;
     }
@@ -105,7 +105,7 @@ Host Host::listen(uint16_t port, size_t maxPeers, BulkWindow window) {
     if (!h)
         throw Error("cannot listen on UDP port " + std::to_string(port) +
                     " (in use? try another --port)");
-    Host host(h);
+    Host host(h, kServerLossyMessageBytes);
     host.m_window = window;
     return host;
 }
@@ -115,11 +115,13 @@ Host Host::client() {
     ENetHost* h = enet_host_create(nullptr, 1, size_t(Channel::Count), 0, 0);
     if (!h)
         throw Error("cannot create an ENet client host");
-    return Host(h);
+    return Host(h, kClientLossyMessageBytes);
 }
 
 Host::Host(Host&& o) noexcept
-    : m_host(o.m_host), m_window(o.m_window), m_peers(std::move(o.m_peers)) {
+    : m_host(o.m_host), m_lossyMessageBytes(o.m_lossyMessageBytes), m_window(o.m_window),
+      m_peers(std::move(o.m_peers)), m_fragments(std::move(o.m_fragments)),
+      m_fragmentsRefused(o.m_fragmentsRefused) {
     o.m_host = nullptr;
 }
 
@@ -128,8 +130,11 @@ Host& Host::operator=(Host&& o) noexcept {
         if (m_host)
             enet_host_destroy(m_host);
         m_host = o.m_host;
+        m_lossyMessageBytes = o.m_lossyMessageBytes;
         m_window = o.m_window;
         m_peers = std::move(o.m_peers);
+        m_fragments = std::move(o.m_fragments);
+        m_fragmentsRefused = o.m_fragmentsRefused;
         o.m_host = nullptr;
     }
     return *this;
@@ -161,7 +166,10 @@ int Host::service(uint32_t timeoutMs, const EventHandler& handler) {
     int r = enet_host_service(m_host, &ev, timeoutMs);
     paceAfter();
     while (r > 0) {
-        handler(ev);
+        if (ev.type == ENET_EVENT_TYPE_RECEIVE && ev.channelID == uint8_t(Channel::ImageLossy))
+            reassemble(ev, handler);
+        else
+            handler(ev);
         if (ev.type == ENET_EVENT_TYPE_RECEIVE)
             enet_packet_destroy(ev.packet);
         ++handled;
@@ -266,8 +274,60 @@ void releaseInFlight(ENetPacket* packet) {
 }
 } // namespace
 
+Host::PeerFragments& Host::fragments(const ENetPeer* peer) {
+    const size_t slot = size_t(peer - m_host->peers);
+    if (m_fragments.size() < m_host->peerCount)
+        m_fragments.resize(m_host->peerCount);
+    PeerFragments& f = m_fragments[slot];
+    if (!f.assembler || f.connectId != peer->connectID) {
+        f = PeerFragments{};
+        f.connectId = peer->connectID;
+        f.assembler.emplace(m_lossyMessageBytes);
+    }
+    return f;
+}
+
+uint32_t Host::lossPermille(const ENetPeer* peer) const {
+    const size_t slot = size_t(peer - m_host->peers);
+    if (slot >= m_fragments.size() || !m_fragments[slot].assembler ||
+        m_fragments[slot].connectId != peer->connectID)
+        return 0;
+    return m_fragments[slot].assembler->lossPermille();
+}
+
+void Host::reassemble(const ENetEvent& ev, const EventHandler& handler) {
+    std::vector<uint8_t> message;
+    const auto result = fragments(ev.peer).assembler->add(
+        std::span<const uint8_t>(ev.packet->data, ev.packet->dataLength), message);
+    if (result == FragmentAssembler::Result::Refused)
+        ++m_fragmentsRefused;
+    if (result != FragmentAssembler::Result::Complete)
+        return;
+    ENetEvent whole = ev;
+    whole.packet = enet_packet_create(message.data(), message.size(), ev.packet->flags);
+    if (!whole.packet)
+        return;
+    handler(whole);
+    enet_packet_destroy(whole.packet);
+}
+
 bool Host::send(ENetPeer* peer, Channel channel, std::span<const uint8_t> bytes,
-                const InFlight& inFlight) {
+                const InFlight& inFlight, uint32_t lossPermille) {
+    if (channel == Channel::ImageLossy) {
+        // Each fragment fits one ENet datagram unfragmented: the MTU less ENet's headers.
+        const size_t room = peer->mtu - sizeof(ENetProtocolHeader) - sizeof(uint32_t) -
+                            sizeof(ENetProtocolSendFragment);
+        const auto pieces = splitMessage(bytes, fragments(peer).sent++, room, lossPermille);
+        bool sent = !pieces.empty();
+        for (const auto& piece : pieces)
+            sent = sendPacket(peer, channel, piece, inFlight) && sent;
+        return sent;
+    }
+    return sendPacket(peer, channel, bytes, inFlight);
+}
+
+bool Host::sendPacket(ENetPeer* peer, Channel channel, std::span<const uint8_t> bytes,
+                      const InFlight& inFlight) {
     ENetPacket* p = enet_packet_create(bytes.data(), bytes.size(), channelPacketFlags(channel));
     if (!p)
         return false;

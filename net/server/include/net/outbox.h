@@ -3,15 +3,14 @@
 // merges into the waiting one, so a region is never queued twice and the newest pixels or voxels
 // win. It keeps each zstd client's copy of its DBI (the shadow predicted updates are coded
 // against) and holds a client back while ENet still holds more than maxInFlightBytes of its
-// updates. Full images go reliably; the rectangles after one go lossy (Channel::ImageLossy), in
-// one of two forms. Chained: only its own pixels, predicted against the picture the client holds
-// once the one before it arrives (ImageUpdate::baseSequence), as small as a reliable update.
-// Self-contained: every rectangle the client has not acknowledged, at current pixels, so a lost
-// one costs an update interval. Rectangles are chained until the client reports one it could not
-// use (ImageAck::unusable); then a self-contained one repairs the gap at once, and they stay
-// self-contained for kSelfContainedAfterLossUs after that or any sign of loss (an acknowledgement
-// passing over a rectangle). The newest is re-sent while unacknowledged past a
-// timeout, never a retransmission in order. Posting and taking may run on two threads, and
+// updates. Full images go reliably, or lossy to a client that reports loss; the rectangles after
+// one go lossy (Channel::ImageLossy, with parity for the loss the client reports), in one of two
+// forms. Chained: only its own pixels, predicted against the picture the client holds once the
+// one before it arrives (ImageUpdate::baseSequence), as small as a reliable update.
+// Self-contained: every rectangle the client has not acknowledged, at current pixels. Rectangles
+// are chained; when the client reports one it could not use (ImageAck::unusable), a
+// self-contained one repairs the gap at once. The newest image is re-sent while unacknowledged
+// past a timeout, never a retransmission in order. Posting and taking may run on two threads, and
 // acknowledgements arrive on the taking one; everything else is the posting thread's. No ENet
 // here: tests post and take in one thread, with a clock passed in.
 #pragma once
@@ -62,6 +61,7 @@ public:
         bool full = false;
         uint32_t payloadBytes = 0, rawBytes = 0;
         std::vector<uint8_t> message;
+        uint32_t lossPermille = 0; // ImageLossy: the loss its parity is for (Host::send)
     };
     struct Taken {
         std::vector<Ready> updates; // images first, each kind by client id
@@ -141,17 +141,15 @@ public:
     // datagrams: every client's floor waits on a shared link (64 x 32 KiB queued 170 ms there).
     static constexpr int64_t kLossyWindowBytes = 256 * 1024;
     static constexpr int64_t kLossyMinWindowBytes = 8 * 1024, kLossyStartBytes = 64 * 1024;
-    // The largest rectangle sent lossy (~24 datagrams): one lost fragment loses the whole of it,
-    // so a larger one (a large view's union, a raw client) goes reliably on Channel::Image, still
-    // naming its full image, and is never repaired.
-    static constexpr size_t kLossyMaxMessageBytes = 32 * 1024;
+    // The largest rectangle sent lossy (~100 datagrams): with parity for a 1 % loss (a group of
+    // 8) it arrives 96 % of the time; a larger one (a large view's union, a raw client) goes
+    // reliably on Channel::Image, still naming its full image, and is never repaired.
+    static constexpr size_t kLossyMaxMessageBytes = 128 * 1024;
+    // The loss a client's parity is for until it reports one (net/fragments.h): 1 %.
+    static constexpr uint32_t kUnknownLossPermille = 10;
     // Unacknowledged rectangles kept per client; past it the oldest two merge (a client that
     // never acknowledges costs a bounded list).
     static constexpr size_t kMaxUnacked = 32;
-    // After a client reports a lost rectangle, or acknowledges past one (every image applied is
-    // acknowledged), its rectangles are self-contained this long: on a lossy link a loss then
-    // costs an update interval, not a round trip and a repair.
-    static constexpr uint64_t kSelfContainedAfterLossUs = 10'000'000;
     // [Posting thread] Clients that reported a lost rectangle and wait for no image: each needs a
     // rectangle posted (an empty one will do: it carries what they have not acknowledged).
     std::vector<uint16_t> repairsWanted() const;
@@ -211,11 +209,18 @@ private:
         uint32_t newestSent = 0;
         std::vector<uint8_t> newest; // the newest sent rectangle's message: the repair
         uint32_t newestPayload = 0, newestRaw = 0;
-        double srttUs = 0, rttVarUs = 0; // 0: no round trip measured yet
-        double minRttUs = 0;             // the shortest round trip measured (0: none)
-        double deliveredPerS = 0;        // lossy bytes acknowledged a second, smoothed
+        double srttUs = 0, rttVarUs = 0;              // 0: no round trip measured yet
+        double minRttUs = 0;                          // the shortest round trip measured (0: none)
+        double deliveredPerS = 0;                     // lossy bytes acknowledged a second, smoothed
+        uint32_t lossPermille = kUnknownLossPermille; // the loss the client last reported
+        bool lossReported = false;
+        // The full image sent lossy and not yet acknowledged: re-sent past the repair timeout.
+        bool fullLossy = false;
+        std::vector<uint8_t> fullMessage;
+        uint32_t fullPayload = 0, fullRaw = 0;
+        uint64_t fullSentUs = 0;
+        int fullRepairs = 0;
         uint64_t lastAckUs = 0;
-        uint64_t lossSeenUs = 0;    // when a rectangle of the client's was last lost (0: never)
         bool repairWanted = false;  // since then no self-contained rectangle has been posted
         uint32_t selfContained = 0; // the newest self-contained rectangle posted
     };
@@ -275,6 +280,8 @@ private:
     static int64_t lossyWindow(const Lossy& l);
     static uint64_t repairTimeout(const Lossy& l);
     void sentAfterFull(uint16_t id, PendingImage& p, uint64_t now);
+    void sentFull(uint16_t id, const PendingImage& p, uint64_t now);
+    bool sendsLossy(uint16_t id, PendingImage& p) const;
     void takeRepairs(const std::function<bool(uint16_t)>& live, uint64_t now, Taken& taken);
     void codeApart(uint16_t id, CodingJob job);
     void code(CodingJob job);

@@ -3,6 +3,8 @@
 // event per enet_host_service; the rest wait in enet_host_check_events).
 #pragma once
 
+#include "net/fragments.h"
+
 #include <enet/enet.h>
 
 #include <atomic>
@@ -12,6 +14,7 @@
 #include <optional>
 #include <span>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace trephine::net {
@@ -23,8 +26,9 @@ enum class Channel : uint8_t {
     Haptic = 2,    // unsequenced, newest wins: force and gradient from the server
     Image = 3,     // reliable: DBI rectangle updates
     Volume = 4,    // reliable: voxel updates for the replicated-volume baseline
-    // Unreliable, sequenced (a late older packet is dropped), fragments unreliable too: drilling
-    // rectangles, newest-wins state the server repairs from acknowledgements (net/outbox.h).
+    // Unreliable, newest wins (a message older than one delivered is dropped), in fragments of
+    // our own with parity (net/fragments.h): drilling rectangles, state the server repairs from
+    // acknowledgements (net/outbox.h).
     ImageLossy = 5,
     Count = 6
 };
@@ -109,30 +113,55 @@ public:
     using InFlight = std::shared_ptr<std::atomic<int64_t>>;
 
     // Queues a packet on the channel with that channel's flags; sent on the next service/flush.
-    // With `inFlight`, its size counts there until ENet releases the packet.
+    // With `inFlight`, its size counts there until ENet releases the packet. On
+    // Channel::ImageLossy it goes as datagram-sized fragments with the parity for a loss of
+    // `lossPermille` per thousand (0: none; net/fragments.h); the receiving host delivers it whole.
     bool send(ENetPeer* peer, Channel channel, std::span<const uint8_t> bytes,
-              const InFlight& inFlight = {});
+              const InFlight& inFlight = {}, uint32_t lossPermille = 0);
     void flush();
+
+    // The largest Channel::ImageLossy message a host puts back together: a client's (a server's
+    // images), and a server's (a client's acknowledgements).
+    static constexpr size_t kClientLossyMessageBytes = 16u << 20, kServerLossyMessageBytes = 4096;
+    // Of the Channel::ImageLossy datagrams from `peer`: lost per thousand, smoothed. And those
+    // refused as not fragments (hostile or corrupt) since the last call: malformed input.
+    uint32_t lossPermille(const ENetPeer* peer) const;
+    uint64_t takeFragmentsRefused() { return std::exchange(m_fragmentsRefused, 0); }
 
     void setBulkWindow(const BulkWindow& w) { m_window = w; }
     // The window the host gives peer now (ENet's own when not adaptive).
     uint32_t windowBytes(const ENetPeer* peer) const { return peer->windowSize; }
 
 private:
-    explicit Host(ENetHost* h) : m_host(h) {}
+    Host(ENetHost* h, size_t lossyMessageBytes)
+        : m_host(h), m_lossyMessageBytes(lossyMessageBytes) {}
     // One peer slot's window as the host sizes it.
     struct PeerWindow {
         uint32_t connectId = 0; // the connection it belongs to: a new one starts afresh
         double window = 0, tokens = 0, minRttMs = 0, periodMinRttMs = 0;
         uint32_t lastMs = 0, periodStartMs = 0, inTransit = 0;
     };
+    // One peer slot's lossy messages: the count of those sent, and those coming back together.
+    struct PeerFragments {
+        uint32_t connectId = 0;
+        uint32_t sent = 0;
+        std::optional<FragmentAssembler> assembler;
+    };
     // Before ENet sends: every connected peer's window for this pass. After: what it sent.
     void paceBefore();
     void paceAfter();
+    PeerFragments& fragments(const ENetPeer* peer);
+    bool sendPacket(ENetPeer* peer, Channel channel, std::span<const uint8_t> bytes,
+                    const InFlight& inFlight);
+    // A Channel::ImageLossy datagram received: the handler gets the message it completes.
+    void reassemble(const ENetEvent& ev, const EventHandler& handler);
     EnetLibrary m_lib;
     ENetHost* m_host = nullptr;
+    size_t m_lossyMessageBytes = kClientLossyMessageBytes;
     BulkWindow m_window{false};
     std::vector<PeerWindow> m_peers;
+    std::vector<PeerFragments> m_fragments;
+    uint64_t m_fragmentsRefused = 0;
 };
 
 } // namespace trephine::net

@@ -25,7 +25,7 @@ namespace trephine::net {
 
 // Travels in ENet's connect data; the server refuses other versions with kRefuseVersion. What
 // each version changed: docs/protocol.md, "Versions".
-inline constexpr uint32_t kProtocolVersion = 14;
+inline constexpr uint32_t kProtocolVersion = 15;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
 enum class RefuseReason : uint32_t {
@@ -737,16 +737,20 @@ struct Remove {
 // rectangle applies only on the one before it or carries every one not yet acknowledged, so this
 // acknowledges all before it; the server forgets them and re-sends what stays unacknowledged
 // (net/outbox.h). `unusable` (version 14; 0: none): a newer rectangle that arrived but builds on
-// a picture the client does not hold, so one before it was lost.
+// a picture the client does not hold, so one before it was lost. `lossPermille` (version 15): of
+// the channel's datagrams the client's host received, those lost per thousand (Host::lossPermille),
+// which sizes the parity the server sends them with (net/fragments.h).
 struct ImageAck {
     static constexpr MessageType kType = MessageType::ImageAck;
     uint32_t viewId = 0;
     uint32_t sequence = 0;
     uint32_t unusable = 0;
+    uint16_t lossPermille = 0;
 
     template <typename S>
     bool serialize(S& s) {
-        return s.integer(viewId) && s.integer(sequence) && s.integer(unusable);
+        return s.integer(viewId) && s.integer(sequence) && s.integer(unusable) &&
+               s.ranged(lossPermille, uint16_t(0), uint16_t(1000));
     }
 };
 
