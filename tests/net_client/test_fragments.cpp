@@ -38,16 +38,16 @@ std::optional<std::vector<uint8_t>> deliver(FragmentAssembler& a, const Fragment
 } // namespace
 
 TEST(Fragments, EveryMessageComesBackWholeWithOrWithoutParity) {
-    for (size_t n : {size_t(0), size_t(1), size_t(85), size_t(86), size_t(87), size_t(5000)}) {
+    for (size_t n : {size_t(0), size_t(1), size_t(255), size_t(256), size_t(257), size_t(5000)}) {
         for (uint32_t loss : {0u, 10u, 50u}) {
             const auto m = message(n, uint32_t(n));
-            const Fragments f = splitMessage(m, 7, 100, loss);
-            const int data = n <= 86 ? 1 : int((n + 85) / 86); // 100 less a 14-byte header
+            const Fragments f = splitMessage(m, 7, 270, loss);
+            const int data = n <= 256 ? 1 : int((n + 255) / 256); // 270 less a 14-byte header
             const int stripes = (data + kMaxStripe - 1) / kMaxStripe;
             const int parity = n == 0 ? 0 : parityFor((data + stripes - 1) / stripes, loss);
             EXPECT_EQ(f.size(), size_t(data + stripes * parity)) << n << " bytes, loss " << loss;
             for (const auto& piece : f)
-                EXPECT_LE(piece.size(), 100u);
+                EXPECT_LE(piece.size(), 270u);
             FragmentAssembler a(1 << 20);
             EXPECT_EQ(deliver(a, f), m) << n << " bytes, loss " << loss;
             EXPECT_EQ(a.lost(), 0u);
@@ -60,10 +60,10 @@ TEST(Fragments, ParityRebuildsAsManyLostFragmentsAsItHasAndNoMore) {
     EXPECT_EQ(parityFor(11, 10), 2);
     EXPECT_EQ(parityFor(23, 10), 3);
     EXPECT_EQ(parityFor(11, 50), 4);
-    // 5000 bytes: 59 data fragments of 85 bytes (the last 70) in stripes of 30 and 29, with 3
+    // 15000 bytes: 59 data fragments of 255 bytes (the last 210) in stripes of 30 and 29, with 3
     // parity fragments each at 1 %: data 0-29, their parity 59-61; data 30-58, parity 62-64.
-    const auto m = message(5000, 1);
-    const Fragments f = splitMessage(m, 1, 100, 10);
+    const auto m = message(15000, 1);
+    const Fragments f = splitMessage(m, 1, 270, 10);
     ASSERT_EQ(f.size(), 65u);
     // Sent in stripe order: positions 0-29 data, 30-32 parity, 33-61 data, 62-64 parity.
     const std::vector<std::vector<size_t>> rebuilt = {
@@ -92,13 +92,13 @@ TEST(Fragments, ParityRebuildsAsManyLostFragmentsAsItHasAndNoMore) {
         ASSERT_EQ(deliver(r, f, lose), m) << "trial " << trial;
     }
     FragmentAssembler b(1 << 20);
-    EXPECT_EQ(deliver(b, splitMessage(m, 1, 100, 0), {5}), std::nullopt) << "no parity";
+    EXPECT_EQ(deliver(b, splitMessage(m, 1, 270, 0), {5}), std::nullopt) << "no parity";
 }
 
 TEST(Fragments, NewestWinsAndOnlyAFewIncompleteMessagesAreKept) {
     FragmentAssembler a(1 << 20);
-    const auto m1 = message(300, 1), m2 = message(300, 2);
-    const Fragments f1 = splitMessage(m1, 1, 100, 0), f2 = splitMessage(m2, 2, 100, 0);
+    const auto m1 = message(900, 1), m2 = message(900, 2); // four fragments each
+    const Fragments f1 = splitMessage(m1, 1, 270, 0), f2 = splitMessage(m2, 2, 270, 0);
     std::vector<uint8_t> out;
     EXPECT_EQ(a.add(f1[0], out), FragmentAssembler::Result::Incomplete);
     EXPECT_EQ(deliver(a, f2), m2);
@@ -107,18 +107,19 @@ TEST(Fragments, NewestWinsAndOnlyAFewIncompleteMessagesAreKept) {
     // Incomplete messages past kMaxPartial: the oldest goes; the newer ones still complete.
     std::vector<Fragments> pending;
     for (uint32_t id = 10; id < 10 + FragmentAssembler::kMaxPartial + 1; ++id) {
-        pending.push_back(splitMessage(message(300, id), id, 100, 0));
+        pending.push_back(splitMessage(message(900, id), id, 270, 0));
         EXPECT_EQ(a.add(pending.back()[0], out), FragmentAssembler::Result::Incomplete);
     }
-    EXPECT_EQ(a.add(pending[0][1], out), FragmentAssembler::Result::Incomplete); // starts again
+    // The evicted one's late fragment does not evict a newer one.
+    EXPECT_EQ(a.add(pending[0][1], out), FragmentAssembler::Result::Stale);
     EXPECT_EQ(deliver(a, {pending.back()[1], pending.back()[2], pending.back()[3]}),
-              message(300, uint32_t(10 + FragmentAssembler::kMaxPartial)));
+              message(900, uint32_t(10 + FragmentAssembler::kMaxPartial)));
 }
 
 TEST(Fragments, AnythingThatIsNotAFragmentIsRefusedAndNeverCrashes) {
     FragmentAssembler a(4096);
     std::vector<uint8_t> out;
-    const Fragments f = splitMessage(message(1000, 3), 5, 100, 50);
+    const Fragments f = splitMessage(message(1000, 3), 5, 270, 50);
     auto bad = [&](std::vector<uint8_t> d) { return a.add(d, out); };
     using R = FragmentAssembler::Result;
     EXPECT_EQ(bad({1, 2, 3}), R::Refused); // shorter than a header
@@ -138,6 +139,11 @@ TEST(Fragments, AnythingThatIsNotAFragmentIsRefusedAndNeverCrashes) {
     auto stripe = f[0];
     stripe[8] = 0; // stripes of nothing
     EXPECT_EQ(bad(stripe), R::Refused);
+    stripe[8] = 1; // stripes other than the sender's even ones
+    EXPECT_EQ(bad(stripe), R::Refused);
+    // Thousands of one-byte fragments for a datagram: no sender splits so.
+    std::vector<uint8_t> tiny = {9, 0, 0, 0, 0, 0, 0, 16, 32, 16, 0, 16, 0, 0, 0};
+    EXPECT_EQ(bad(tiny), R::Refused);
     auto parity = f[0];
     parity[9] = kMaxParity + 1;
     EXPECT_EQ(bad(parity), R::Refused);
@@ -163,7 +169,7 @@ TEST(Fragments, TheLossFigureFollowsTheLink) {
     std::mt19937 rng(4);
     std::bernoulli_distribution lost(0.01);
     for (uint32_t id = 1; id <= 400; ++id) {
-        const Fragments f = splitMessage(message(2000, id), id, 100, 10);
+        const Fragments f = splitMessage(message(6000, id), id, 270, 10);
         std::vector<size_t> lose;
         for (size_t i = 0; i < f.size(); ++i)
             if (lost(rng))
@@ -171,6 +177,14 @@ TEST(Fragments, TheLossFigureFollowsTheLink) {
         deliver(a, f, lose);
     }
     EXPECT_GT(a.received(), 9000u);
+    // One-datagram messages lost whole count too.
+    FragmentAssembler small(1 << 20);
+    for (uint32_t id = 1; id <= 1000; ++id)
+        if (id % 50 != 0)
+            deliver(small, splitMessage(message(40, id), id, 270, 0));
+    EXPECT_EQ(small.lost(), 19u); // the last one lost is not followed by another
+    EXPECT_GE(small.lossPermille(), 10u);
+    EXPECT_LE(small.lossPermille(), 40u);
     EXPECT_GE(a.lossPermille(), 3u);
     EXPECT_LE(a.lossPermille(), 25u);
 }

@@ -103,7 +103,6 @@ int SessionClient::pump(uint64_t nowUs) {
         m_lastHeardUs = nowUs;
     }
     int n = m_host.service(0, [&](const ENetEvent& ev) { onEvent(ev, nowUs); });
-    m_stats.countMalformed(m_host.takeFragmentsRefused());
     if (m_peer && m_connected) {
         // Any datagram counts as heard, a fragment of a large update too: ENet stamps the peer
         // whenever it receives (a whole message may take seconds on a slow link).

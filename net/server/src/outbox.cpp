@@ -539,10 +539,13 @@ Outbox::Taken Outbox::take(const std::function<bool(uint16_t)>& live) {
         const bool isLive = live(it->first);
         std::vector<PendingImage>& waiting = it->second;
         const auto held = [&](PendingImage& p) {
-            // A full image waits for what ENet holds of the client's, lossy or not.
-            if (!sendsLossy(it->first, p) || (p.full && heldBack(p.inFlight)))
-                return heldBack(p.inFlight);
             auto l = m_lossy.find(it->first);
+            // A full image waits for what ENet holds of the client's, lossy or not; a rectangle
+            // too large to go lossy waits for a lossy full image's acknowledgement (reliable, it
+            // could overtake it and be ignored).
+            if (!sendsLossy(it->first, p) || (p.full && heldBack(p.inFlight)))
+                return heldBack(p.inFlight) || (p.afterFull && l != m_lossy.end() &&
+                                                l->second.fullLossy && !l->second.based);
             return l != m_lossy.end() && lossyHeldBack(l->second, now);
         };
         size_t n = 0;
@@ -594,7 +597,6 @@ void Outbox::resetLossy(uint16_t id, uint32_t viewId, uint32_t fullSequence) {
     l.minRttUs = path.minRttUs;
     l.deliveredPerS = path.deliveredPerS;
     l.lossPermille = path.lossPermille;
-    l.lossReported = path.lossReported;
 }
 
 // 1.5 round trips (or the smoothed one and four deviations, when it varies more) and a margin
@@ -642,7 +644,7 @@ bool Outbox::sendsLossy(uint16_t id, PendingImage& p) const {
     auto l = m_lossy.find(id);
     if (p.full) {
         p.lossy = p.message.size() <= kLossyMaxMessageBytes && l != m_lossy.end() &&
-                  l->second.lossReported && l->second.lossPermille > 0;
+                  l->second.lossPermille > 0;
     } else if (p.afterFull && !p.lossy && p.message.size() <= kLossyMaxMessageBytes) {
         p.lossy = l != m_lossy.end() && !l->second.based && l->second.fullLossy;
     }
@@ -659,6 +661,7 @@ void Outbox::sentFull(uint16_t id, const PendingImage& p, uint64_t now) {
     l.fullSentUs = now;
     l.fullRepairs = 0;
     if (p.lossy) {
+        l.fullInFlight = p.inFlight;
         l.fullMessage = p.message;
         l.fullPayload = p.payloadBytes;
         l.fullRaw = p.rawBytes;
@@ -697,17 +700,24 @@ void Outbox::sentAfterFull(uint16_t id, PendingImage& p, uint64_t now) {
 // 15-fragment rectangles are lost.
 void Outbox::takeRepairs(const std::function<bool(uint16_t)>& live, uint64_t now, Taken& taken) {
     for (auto& [id, l] : m_lossy) {
-        if (m_images.count(id) || !live(id))
+        if (!live(id))
             continue;
-        if (!l.based && !l.fullMessage.empty() &&
-            now - l.fullSentUs >= repairTimeout(l) * uint64_t(1 + std::min(l.fullRepairs, 3))) {
+        // An unacknowledged lossy full image again (rectangles may wait behind it): after the
+        // repair timeout and its own delivery time at the measured rate, twice that each time,
+        // and not while ENet still holds much of the client's (a shared link's queue).
+        const double deliverUs =
+            l.deliveredPerS > 0 ? double(l.fullMessage.size()) * 1e6 / l.deliveredPerS : 0;
+        const uint64_t fullTimeout = (repairTimeout(l) + uint64_t(deliverUs))
+                                     << std::min(l.fullRepairs, 4);
+        if (!l.based && !l.fullMessage.empty() && now - l.fullSentUs >= fullTimeout &&
+            !heldBack(l.fullInFlight)) {
             l.fullSentUs = now;
             ++l.fullRepairs;
             ++m_repairs;
             taken.updates.push_back({id, Sync::Dbi, Channel::ImageLossy, true, l.fullPayload,
                                      l.fullRaw, l.fullMessage, l.lossPermille});
         }
-        if (l.unacked.empty())
+        if (l.unacked.empty() || m_images.count(id))
             continue;
         SentRect& r = l.unacked.back();
         // ENet delivers a reliable one, and a self-contained one applies; a chained one is
@@ -745,8 +755,8 @@ void Outbox::acknowledge(uint16_t id, const ImageAck& ack) {
     Lossy& l = it->second;
     l.based = true;
     l.fullMessage = {};
+    l.fullInFlight.reset();
     l.lossPermille = ack.lossPermille;
-    l.lossReported = true;
     // A rectangle it could not use, chained after one lost and no self-contained one since:
     // the next rectangle posted carries everything not acknowledged.
     if (ack.unusable != 0 && !after(ack.unusable, l.newestSent ? l.newestSent : l.fullSequence) &&

@@ -981,7 +981,6 @@ void SessionServer::Impl::receive(uint64_t now) {
     const ScreenFor screen(admission, book);
     admission.setNow(now);
     host.service(0, [&](const ENetEvent& ev) { onEvent(ev); });
-    stats.countMalformed(host.takeFragmentsRefused());
     received.serve(kReceiveSliceUs, [this](uint16_t id, Channel ch, std::span<const uint8_t> data) {
         handleReceived(id, ch, data);
     });

@@ -120,8 +120,7 @@ Host Host::client() {
 
 Host::Host(Host&& o) noexcept
     : m_host(o.m_host), m_lossyMessageBytes(o.m_lossyMessageBytes), m_window(o.m_window),
-      m_peers(std::move(o.m_peers)), m_fragments(std::move(o.m_fragments)),
-      m_fragmentsRefused(o.m_fragmentsRefused) {
+      m_peers(std::move(o.m_peers)), m_fragments(std::move(o.m_fragments)) {
     o.m_host = nullptr;
 }
 
@@ -134,7 +133,6 @@ Host& Host::operator=(Host&& o) noexcept {
         m_window = o.m_window;
         m_peers = std::move(o.m_peers);
         m_fragments = std::move(o.m_fragments);
-        m_fragmentsRefused = o.m_fragmentsRefused;
         o.m_host = nullptr;
     }
     return *this;
@@ -300,7 +298,7 @@ void Host::reassemble(const ENetEvent& ev, const EventHandler& handler) {
     const auto result = fragments(ev.peer).assembler->add(
         std::span<const uint8_t>(ev.packet->data, ev.packet->dataLength), message);
     if (result == FragmentAssembler::Result::Refused)
-        ++m_fragmentsRefused;
+        handler(ev); // not ours: the session finds it malformed, and whose it is
     if (result != FragmentAssembler::Result::Complete)
         return;
     ENetEvent whole = ev;

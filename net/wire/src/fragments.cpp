@@ -152,10 +152,14 @@ FragmentAssembler::Result FragmentAssembler::add(std::span<const uint8_t> datagr
         return Result::Refused;
     const int total = h.dataCount + stripeCount(h.dataCount, h.stripe) * h.parity;
     const size_t fragmentBytes = (size_t(h.length) + h.dataCount - 1) / h.dataCount;
-    // The sender's split leaves every data fragment at least a byte (one empty message aside).
+    // Only the sender's split: every data fragment at least a byte (one empty message aside), at
+    // least kMinFragmentBytes when there are several (a hostile header naming thousands of
+    // one-byte fragments costs nothing to send), and stripes as even as splitMessage makes them.
     const bool splitsEvenly =
-        h.dataCount == 1 || size_t(h.dataCount - 1) * fragmentBytes < h.length;
-    if (!splitsEvenly || h.index >= total)
+        h.dataCount == 1 ||
+        (size_t(h.dataCount - 1) * fragmentBytes < h.length && fragmentBytes >= kMinFragmentBytes);
+    const int stripes = stripeCount(h.dataCount, kMaxStripe);
+    if (!splitsEvenly || h.stripe != (h.dataCount + stripes - 1) / stripes || h.index >= total)
         return Result::Refused;
     const size_t expected =
         h.index < h.dataCount ? dataBytes(h.length, fragmentBytes, h.index) : fragmentBytes;
@@ -163,10 +167,20 @@ FragmentAssembler::Result FragmentAssembler::add(std::span<const uint8_t> datagr
         return Result::Refused;
     if (m_delivered && !newer(h.message, *m_delivered))
         return Result::Stale;
+    // Messages skipped in the sender's count were lost whole: a datagram each, at least (a
+    // one-datagram acknowledgement or small rectangle shows its loss no other way).
+    if (m_newest && newer(h.message, *m_newest))
+        count(int(std::min<uint32_t>(h.message - *m_newest - 1, 64)), 0);
+    if (!m_newest || newer(h.message, *m_newest))
+        m_newest = h.message;
 
     auto it = std::find_if(m_partial.begin(), m_partial.end(),
                            [&](const Partial& p) { return p.id == h.message; });
     if (it == m_partial.end()) {
+        const bool older = std::all_of(m_partial.begin(), m_partial.end(),
+                                       [&](const Partial& p) { return newer(p.id, h.message); });
+        if (m_partial.size() >= kMaxPartial && older)
+            return Result::Stale; // a late one does not evict newer ones
         if (m_partial.size() >= kMaxPartial) {
             auto oldest = std::min_element(
                 m_partial.begin(), m_partial.end(),
@@ -181,8 +195,6 @@ FragmentAssembler::Result FragmentAssembler::add(std::span<const uint8_t> datagr
         p.stripe = h.stripe;
         p.parity = h.parity;
         p.fragmentBytes = fragmentBytes;
-        p.fragments.resize(size_t(total));
-        p.got.assign(size_t(total), false);
         m_partial.push_back(std::move(p));
         it = m_partial.end() - 1;
     } else if (it->length != h.length || it->dataCount != h.dataCount || it->stripe != h.stripe ||
@@ -190,10 +202,9 @@ FragmentAssembler::Result FragmentAssembler::add(std::span<const uint8_t> datagr
         return Result::Refused;
     }
     Partial& p = *it;
-    if (p.got[h.index])
+    if (p.fragments.count(h.index))
         return Result::Incomplete; // a duplicate
     p.fragments[h.index].assign(d + kFragmentHeaderBytes, d + datagram.size());
-    p.got[h.index] = true;
     p.highest = std::max(p.highest, int(h.index));
     ++p.have;
     if (!complete(p, out))
@@ -224,11 +235,11 @@ bool FragmentAssembler::complete(Partial& p, std::vector<uint8_t>& out) const {
         Rebuild r{first, std::min<int>(p.stripe, p.dataCount - first), {}};
         int came = 0;
         for (int i = first; i < first + r.k; ++i)
-            p.got[i] ? ++came : (r.missing.push_back(i), 0);
+            p.fragments.count(i) ? ++came : (r.missing.push_back(i), 0);
         if (r.missing.empty())
             continue;
         for (int j = 0; j < p.parity; ++j)
-            came += p.got[p.dataCount + first / p.stripe * p.parity + j];
+            came += int(p.fragments.count(p.dataCount + first / p.stripe * p.parity + j));
         if (came < r.k)
             return false;
         rebuilds.push_back(std::move(r));
@@ -242,9 +253,10 @@ bool FragmentAssembler::complete(Partial& p, std::vector<uint8_t>& out) const {
         for (int row = 0; row < r.k + p.parity && int(padded.size()) < r.k; ++row) {
             const int index =
                 row < r.k ? r.first + row : p.dataCount + r.first / p.stripe * p.parity + row - r.k;
-            if (!p.got[index])
+            auto got = p.fragments.find(index);
+            if (got == p.fragments.end())
                 continue;
-            padded.push_back(p.fragments[index]);
+            padded.push_back(got->second);
             padded.back().resize(p.fragmentBytes, 0);
             rows.insert(rows.end(), a.begin() + row * r.k, a.begin() + (row + 1) * r.k);
         }
@@ -287,10 +299,9 @@ void FragmentAssembler::count(int lost, int received) {
     // Smoothed over ~256 datagrams: steady at the link's loss, one loss on a clean link
     // raises it to 4 per thousand, decaying back under 1 within ~350 datagrams.
     constexpr double a = 1.0 / 256;
-    for (int i = 0; i < received; ++i)
-        m_lossRate *= 1 - a;
-    for (int i = 0; i < lost; ++i)
-        m_lossRate = m_lossRate * (1 - a) + a;
+    m_lossRate *= std::pow(1 - a, std::max(received, 0));
+    const double kept = std::pow(1 - a, std::max(lost, 0));
+    m_lossRate = m_lossRate * kept + (1 - kept); // each lost one moves it `a` towards 1
 }
 
 } // namespace trephine::net

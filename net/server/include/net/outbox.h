@@ -145,8 +145,6 @@ public:
     // 8) it arrives 96 % of the time; a larger one (a large view's union, a raw client) goes
     // reliably on Channel::Image, still naming its full image, and is never repaired.
     static constexpr size_t kLossyMaxMessageBytes = 128 * 1024;
-    // The loss a client's parity is for until it reports one (net/fragments.h): 1 %.
-    static constexpr uint32_t kUnknownLossPermille = 10;
     // Unacknowledged rectangles kept per client; past it the oldest two merge (a client that
     // never acknowledges costs a bounded list).
     static constexpr size_t kMaxUnacked = 32;
@@ -209,14 +207,14 @@ private:
         uint32_t newestSent = 0;
         std::vector<uint8_t> newest; // the newest sent rectangle's message: the repair
         uint32_t newestPayload = 0, newestRaw = 0;
-        double srttUs = 0, rttVarUs = 0;              // 0: no round trip measured yet
-        double minRttUs = 0;                          // the shortest round trip measured (0: none)
-        double deliveredPerS = 0;                     // lossy bytes acknowledged a second, smoothed
-        uint32_t lossPermille = kUnknownLossPermille; // the loss the client last reported
-        bool lossReported = false;
+        double srttUs = 0, rttVarUs = 0; // 0: no round trip measured yet
+        double minRttUs = 0;             // the shortest round trip measured (0: none)
+        double deliveredPerS = 0;        // lossy bytes acknowledged a second, smoothed
+        uint32_t lossPermille = 0;       // the loss the client last reported (its parity's)
         // The full image sent lossy and not yet acknowledged: re-sent past the repair timeout.
         bool fullLossy = false;
         std::vector<uint8_t> fullMessage;
+        Host::InFlight fullInFlight; // the client's bytes in ENet's hands: no re-send while held
         uint32_t fullPayload = 0, fullRaw = 0;
         uint64_t fullSentUs = 0;
         int fullRepairs = 0;

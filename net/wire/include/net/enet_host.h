@@ -123,10 +123,9 @@ public:
     // The largest Channel::ImageLossy message a host puts back together: a client's (a server's
     // images), and a server's (a client's acknowledgements).
     static constexpr size_t kClientLossyMessageBytes = 16u << 20, kServerLossyMessageBytes = 4096;
-    // Of the Channel::ImageLossy datagrams from `peer`: lost per thousand, smoothed. And those
-    // refused as not fragments (hostile or corrupt) since the last call: malformed input.
+    // Of the Channel::ImageLossy datagrams from `peer`: lost per thousand, smoothed. One that is
+    // not a fragment reaches the handler as it came, for the session to refuse as malformed.
     uint32_t lossPermille(const ENetPeer* peer) const;
-    uint64_t takeFragmentsRefused() { return std::exchange(m_fragmentsRefused, 0); }
 
     void setBulkWindow(const BulkWindow& w) { m_window = w; }
     // The window the host gives peer now (ENet's own when not adaptive).
@@ -161,7 +160,6 @@ private:
     BulkWindow m_window{false};
     std::vector<PeerWindow> m_peers;
     std::vector<PeerFragments> m_fragments;
-    uint64_t m_fragmentsRefused = 0;
 };
 
 } // namespace trephine::net

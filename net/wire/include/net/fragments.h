@@ -14,6 +14,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <map>
 #include <optional>
 #include <span>
 #include <vector>
@@ -25,6 +26,9 @@ inline constexpr size_t kFragmentHeaderBytes = 14;
 // stripe may be lost at the loss reported.
 inline constexpr int kMaxStripe = 32, kMaxParity = 16;
 inline constexpr double kStripeLossTarget = 1e-3;
+// The least a data fragment of a message of several holds: a sender fills at least half of a
+// datagram's room (ENet's smallest MTU, 576, leaves ~530).
+inline constexpr size_t kMinFragmentBytes = 128;
 
 // The parity fragments for a stripe of `data` fragments at a loss of `lossPermille` per
 // thousand datagrams: 0 below 1 per thousand, else the fewest that lose all `data` of them with
@@ -39,8 +43,10 @@ std::vector<std::vector<uint8_t>> splitMessage(std::span<const uint8_t> message,
 
 // One peer's messages put back together from their fragments, newest wins: a message older than
 // the newest one delivered is never delivered, and at most kMaxPartial incomplete ones are kept
-// (a newer one's first fragment evicts the oldest). Counts the datagrams lost, for the receiver's
-// loss figure: those missing below the highest index seen of each message completed or dropped.
+// (a newer one's first fragment evicts the oldest; an older one's is dropped). Memory follows
+// the datagrams received, never what a header claims. Counts the datagrams lost, for the receiver's
+// loss figure: those missing below the highest index seen of each message completed or dropped,
+// and one for each message of which none came.
 class FragmentAssembler {
 public:
     static constexpr size_t kMaxPartial = 4;
@@ -62,8 +68,7 @@ private:
         uint16_t dataCount = 0;
         uint8_t stripe = 0, parity = 0;
         size_t fragmentBytes = 0;
-        std::vector<std::vector<uint8_t>> fragments; // data, then parity
-        std::vector<bool> got;                       // received (a rebuilt one is not)
+        std::map<int, std::vector<uint8_t>> fragments; // by index, as they came (or rebuilt)
         int highest = -1, have = 0;
     };
     bool complete(Partial& p, std::vector<uint8_t>& out) const;
@@ -73,6 +78,7 @@ private:
     size_t m_maxMessageBytes;
     std::vector<Partial> m_partial;
     std::optional<uint32_t> m_delivered; // the newest message delivered
+    std::optional<uint32_t> m_newest;    // the newest message a fragment of which came
     uint64_t m_received = 0, m_lost = 0;
     double m_lossRate = 0;
 };

@@ -75,7 +75,7 @@ public:
     // Called by the thread that sends or receives; cheap and lock-free.
     void countIn(Channel c, size_t bytes);
     void countOut(Channel c, size_t bytes);
-    void countMalformed(uint64_t n = 1) { m_malformed.fetch_add(n, std::memory_order_relaxed); }
+    void countMalformed() { m_malformed.fetch_add(1, std::memory_order_relaxed); }
 
     // Folds the counters since the last tick into rates and appends them to the history.
     void tick(uint64_t nowUs);
