@@ -544,8 +544,8 @@ Outbox::Taken Outbox::take(const std::function<bool(uint16_t)>& live) {
             // too large to go lossy waits for a lossy full image's acknowledgement (reliable, it
             // could overtake it and be ignored).
             if (!sendsLossy(it->first, p) || (p.full && heldBack(p.inFlight)))
-                return heldBack(p.inFlight) || (p.afterFull && l != m_lossy.end() &&
-                                                l->second.fullLossy && !l->second.based);
+                return heldBack(p.inFlight) ||
+                       (p.afterFull && l != m_lossy.end() && l->second.fullUnacked());
             return l != m_lossy.end() && lossyHeldBack(l->second, now);
         };
         size_t n = 0;
@@ -646,7 +646,7 @@ bool Outbox::sendsLossy(uint16_t id, PendingImage& p) const {
         p.lossy = p.message.size() <= kLossyMaxMessageBytes && l != m_lossy.end() &&
                   l->second.lossPermille > 0;
     } else if (p.afterFull && !p.lossy && p.message.size() <= kLossyMaxMessageBytes) {
-        p.lossy = l != m_lossy.end() && !l->second.based && l->second.fullLossy;
+        p.lossy = l != m_lossy.end() && l->second.fullUnacked();
     }
     return p.lossy;
 }
@@ -657,9 +657,9 @@ void Outbox::sentFull(uint16_t id, const PendingImage& p, uint64_t now) {
     if (it == m_lossy.end() || it->second.fullSequence != p.sequence)
         return;
     Lossy& l = it->second;
-    l.fullLossy = p.lossy;
     l.fullSentUs = now;
     l.fullRepairs = 0;
+    l.fullMessage.clear();
     if (p.lossy) {
         l.fullInFlight = p.inFlight;
         l.fullMessage = p.message;
@@ -709,8 +709,7 @@ void Outbox::takeRepairs(const std::function<bool(uint16_t)>& live, uint64_t now
             l.deliveredPerS > 0 ? double(l.fullMessage.size()) * 1e6 / l.deliveredPerS : 0;
         const uint64_t fullTimeout = (repairTimeout(l) + uint64_t(deliverUs))
                                      << std::min(l.fullRepairs, 4);
-        if (!l.based && !l.fullMessage.empty() && now - l.fullSentUs >= fullTimeout &&
-            !heldBack(l.fullInFlight)) {
+        if (l.fullUnacked() && now - l.fullSentUs >= fullTimeout && !heldBack(l.fullInFlight)) {
             l.fullSentUs = now;
             ++l.fullRepairs;
             ++m_repairs;

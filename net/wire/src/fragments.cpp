@@ -9,12 +9,6 @@ namespace trephine::net {
 
 namespace {
 
-struct Header {
-    uint32_t message = 0, length = 0;
-    uint16_t index = 0, dataCount = 0;
-    uint8_t stripe = 0, parity = 0;
-};
-
 void put(std::vector<uint8_t>& out, uint64_t v, int bytes) {
     for (int i = 0; i < bytes; ++i)
         out.push_back(uint8_t(v >> (8 * i)));
@@ -141,12 +135,9 @@ FragmentAssembler::Result FragmentAssembler::add(std::span<const uint8_t> datagr
     if (datagram.size() < kFragmentHeaderBytes)
         return Result::Refused;
     const uint8_t* d = datagram.data();
-    const Header h{uint32_t(get(d, 4)),
-                   uint32_t(get(d + 10, 4)),
-                   uint16_t(get(d + 4, 2)),
-                   uint16_t(get(d + 6, 2)),
-                   d[8],
-                   d[9]};
+    const uint32_t message = uint32_t(get(d, 4));
+    const uint16_t index = uint16_t(get(d + 4, 2));
+    const Shape h{uint32_t(get(d + 10, 4)), uint16_t(get(d + 6, 2)), d[8], d[9]};
     if (h.dataCount == 0 || h.stripe == 0 || h.stripe > kMaxStripe || h.parity > kMaxParity ||
         h.length > m_maxMessageBytes)
         return Result::Refused;
@@ -159,26 +150,26 @@ FragmentAssembler::Result FragmentAssembler::add(std::span<const uint8_t> datagr
         h.dataCount == 1 ||
         (size_t(h.dataCount - 1) * fragmentBytes < h.length && fragmentBytes >= kMinFragmentBytes);
     const int stripes = stripeCount(h.dataCount, kMaxStripe);
-    if (!splitsEvenly || h.stripe != (h.dataCount + stripes - 1) / stripes || h.index >= total)
+    if (!splitsEvenly || h.stripe != (h.dataCount + stripes - 1) / stripes || index >= total)
         return Result::Refused;
     const size_t expected =
-        h.index < h.dataCount ? dataBytes(h.length, fragmentBytes, h.index) : fragmentBytes;
+        index < h.dataCount ? dataBytes(h.length, fragmentBytes, index) : fragmentBytes;
     if (datagram.size() - kFragmentHeaderBytes != expected)
         return Result::Refused;
-    if (m_delivered && !newer(h.message, *m_delivered))
+    if (m_delivered && !newer(message, *m_delivered))
         return Result::Stale;
     // Messages skipped in the sender's count were lost whole: a datagram each, at least (a
     // one-datagram acknowledgement or small rectangle shows its loss no other way).
-    if (m_newest && newer(h.message, *m_newest))
-        count(int(std::min<uint32_t>(h.message - *m_newest - 1, 64)), 0);
-    if (!m_newest || newer(h.message, *m_newest))
-        m_newest = h.message;
+    if (m_newest && newer(message, *m_newest))
+        count(int(std::min<uint32_t>(message - *m_newest - 1, 64)), 0);
+    if (!m_newest || newer(message, *m_newest))
+        m_newest = message;
 
     auto it = std::find_if(m_partial.begin(), m_partial.end(),
-                           [&](const Partial& p) { return p.id == h.message; });
+                           [&](const Partial& p) { return p.id == message; });
     if (it == m_partial.end()) {
         const bool older = std::all_of(m_partial.begin(), m_partial.end(),
-                                       [&](const Partial& p) { return newer(p.id, h.message); });
+                                       [&](const Partial& p) { return newer(p.id, message); });
         if (m_partial.size() >= kMaxPartial && older)
             return Result::Stale; // a late one does not evict newer ones
         if (m_partial.size() >= kMaxPartial) {
@@ -188,24 +179,16 @@ FragmentAssembler::Result FragmentAssembler::add(std::span<const uint8_t> datagr
             retire(*oldest);
             m_partial.erase(oldest);
         }
-        Partial p;
-        p.id = h.message;
-        p.length = h.length;
-        p.dataCount = h.dataCount;
-        p.stripe = h.stripe;
-        p.parity = h.parity;
-        p.fragmentBytes = fragmentBytes;
-        m_partial.push_back(std::move(p));
+        m_partial.push_back(Partial{message, h, fragmentBytes, {}, -1, 0});
         it = m_partial.end() - 1;
-    } else if (it->length != h.length || it->dataCount != h.dataCount || it->stripe != h.stripe ||
-               it->parity != h.parity) {
+    } else if (!(it->shape == h)) {
         return Result::Refused;
     }
     Partial& p = *it;
-    if (p.fragments.count(h.index))
+    if (p.fragments.count(index))
         return Result::Incomplete; // a duplicate
-    p.fragments[h.index].assign(d + kFragmentHeaderBytes, d + datagram.size());
-    p.highest = std::max(p.highest, int(h.index));
+    p.fragments[index].assign(d + kFragmentHeaderBytes, d + datagram.size());
+    p.highest = std::max(p.highest, int(index));
     ++p.have;
     if (!complete(p, out))
         return Result::Incomplete;
@@ -226,33 +209,34 @@ FragmentAssembler::Result FragmentAssembler::add(std::span<const uint8_t> datagr
 // The message once every stripe has its data, or as many of its data and parity fragments as it
 // has data: the missing data are rebuilt from the generator's rows of those that came.
 bool FragmentAssembler::complete(Partial& p, std::vector<uint8_t>& out) const {
+    const Shape& s = p.shape;
     struct Rebuild {
         int first = 0, k = 0;
         std::vector<int> missing;
     };
     std::vector<Rebuild> rebuilds;
-    for (int first = 0; first < p.dataCount; first += p.stripe) {
-        Rebuild r{first, std::min<int>(p.stripe, p.dataCount - first), {}};
+    for (int first = 0; first < s.dataCount; first += s.stripe) {
+        Rebuild r{first, std::min<int>(s.stripe, s.dataCount - first), {}};
         int came = 0;
         for (int i = first; i < first + r.k; ++i)
             p.fragments.count(i) ? ++came : (r.missing.push_back(i), 0);
         if (r.missing.empty())
             continue;
-        for (int j = 0; j < p.parity; ++j)
-            came += int(p.fragments.count(p.dataCount + first / p.stripe * p.parity + j));
+        for (int j = 0; j < s.parity; ++j)
+            came += int(p.fragments.count(s.dataCount + first / s.stripe * s.parity + j));
         if (came < r.k)
             return false;
         rebuilds.push_back(std::move(r));
     }
     for (const Rebuild& r : rebuilds) {
-        const std::vector<uint8_t> a = generator(r.k, p.parity);
+        const std::vector<uint8_t> a = generator(r.k, s.parity);
         // The first k fragments that came, data padded to full length, and their rows.
         std::vector<std::vector<uint8_t>> padded;
         std::vector<uint8_t*> inputs;
         std::vector<uint8_t> rows;
-        for (int row = 0; row < r.k + p.parity && int(padded.size()) < r.k; ++row) {
+        for (int row = 0; row < r.k + s.parity && int(padded.size()) < r.k; ++row) {
             const int index =
-                row < r.k ? r.first + row : p.dataCount + r.first / p.stripe * p.parity + row - r.k;
+                row < r.k ? r.first + row : s.dataCount + r.first / s.stripe * s.parity + row - r.k;
             auto got = p.fragments.find(index);
             if (got == p.fragments.end())
                 continue;
@@ -276,13 +260,13 @@ bool FragmentAssembler::complete(Partial& p, std::vector<uint8_t>& out) const {
         }
         code(decode, inputs, outputs, p.fragmentBytes);
         for (size_t m = 0; m < r.missing.size(); ++m) {
-            rebuilt[m].resize(dataBytes(p.length, p.fragmentBytes, r.missing[m]));
+            rebuilt[m].resize(dataBytes(s.length, p.fragmentBytes, r.missing[m]));
             p.fragments[size_t(r.missing[m])] = std::move(rebuilt[m]);
         }
     }
     out.clear();
-    out.reserve(p.length);
-    for (int i = 0; i < p.dataCount; ++i)
+    out.reserve(s.length);
+    for (int i = 0; i < s.dataCount; ++i)
         out.insert(out.end(), p.fragments[i].begin(), p.fragments[i].end());
     return true;
 }

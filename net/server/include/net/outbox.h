@@ -211,8 +211,8 @@ private:
         double minRttUs = 0;             // the shortest round trip measured (0: none)
         double deliveredPerS = 0;        // lossy bytes acknowledged a second, smoothed
         uint32_t lossPermille = 0;       // the loss the client last reported (its parity's)
-        // The full image sent lossy and not yet acknowledged: re-sent past the repair timeout.
-        bool fullLossy = false;
+        // The full image sent lossy and not yet acknowledged (empty when none): re-sent past the
+        // repair timeout.
         std::vector<uint8_t> fullMessage;
         Host::InFlight fullInFlight; // the client's bytes in ENet's hands: no re-send while held
         uint32_t fullPayload = 0, fullRaw = 0;
@@ -221,6 +221,7 @@ private:
         uint64_t lastAckUs = 0;
         bool repairWanted = false;  // since then no self-contained rectangle has been posted
         uint32_t selfContained = 0; // the newest self-contained rectangle posted
+        bool fullUnacked() const { return !based && !fullMessage.empty(); }
     };
     // What a lossy rectangle posted now must carry, read under m_mutex.
     struct LossyBase {

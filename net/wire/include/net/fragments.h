@@ -63,10 +63,16 @@ public:
     uint32_t lossPermille() const { return uint32_t(m_lossRate * 1000.0 + 0.5); }
 
 private:
-    struct Partial {
-        uint32_t id = 0, length = 0;
+    // What every fragment of a message says alike.
+    struct Shape {
+        uint32_t length = 0;
         uint16_t dataCount = 0;
         uint8_t stripe = 0, parity = 0;
+        bool operator==(const Shape&) const = default;
+    };
+    struct Partial {
+        uint32_t id = 0;
+        Shape shape;
         size_t fragmentBytes = 0;
         std::map<int, std::vector<uint8_t>> fragments; // by index, as they came (or rebuilt)
         int highest = -1, have = 0;
