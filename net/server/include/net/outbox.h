@@ -141,9 +141,10 @@ public:
     // datagrams: every client's floor waits on a shared link (64 x 32 KiB queued 170 ms there).
     static constexpr int64_t kLossyWindowBytes = 256 * 1024;
     static constexpr int64_t kLossyMinWindowBytes = 8 * 1024, kLossyStartBytes = 64 * 1024;
-    // The largest rectangle sent lossy (~100 datagrams): with parity for a 1 % loss (a group of
-    // 8) it arrives 96 % of the time; a larger one (a large view's union, a raw client) goes
-    // reliably on Channel::Image, still naming its full image, and is never repaired.
+    // The largest image sent lossy (~100 datagrams, four stripes each lost at most once in a
+    // thousand at the parity for the reported loss); a larger rectangle (a large view's union, a
+    // raw client) goes reliably on Channel::Image, still naming its full image, and is never
+    // repaired, and a larger full image goes reliably.
     static constexpr size_t kLossyMaxMessageBytes = 128 * 1024;
     // Unacknowledged rectangles kept per client; past it the oldest two merge (a client that
     // never acknowledges costs a bounded list).
