@@ -778,8 +778,8 @@ constexpr int kPacketMaxSteps = 24;
 // scalar loop's arithmetic and tests (marchEight's, lane by lane), so it finds the same first
 // inside sample. A lane leaves the packet where the scalar march would do more than test a cell:
 // a sample in an empty brick (a leap), outside the volume's cells or within 3 voxels of the high
-// x face, or past its last sample; `k` then says where marchFrom goes on. Lanes of `live` march;
-// those returned have found their first inside sample at k, its density in `value`.
+// x face, or past its last sample; `k` then says where marchFrom goes on; a lane that finds its
+// first inside sample stops at it, its density in `value`.
 struct Packet {
     v8sf dvx, dvy, dvz;
     v8si k, kEnd;
@@ -787,68 +787,89 @@ struct Packet {
     v8sf lastValue, value;
 };
 
-__attribute__((target("avx2,bmi2"))) inline unsigned marchPacket(const Frame& f, Packet& pk,
-                                                                 unsigned live) {
+// One step of a packet: each live lane takes its sample k (lanes that leave keep it, lanes that
+// find their first inside sample are added to `hitLanes`), then moves on one sample.
+__attribute__((target("avx2,bmi2"), always_inline)) inline void
+stepPacket(const Frame& f, Packet& pk, v8si& k, unsigned& live, unsigned& hitLanes) {
     constexpr int S = BrickGrid::kShift;
     const int* const cellWords = reinterpret_cast<const int*>(f.cells);
     const int* const voxels = reinterpret_cast<const int*>(f.density);
-    unsigned hitLanes = 0;
-    v8si k = pk.k;
-    for (int step = 0; live != 0 && step < kPacketMaxSteps; ++step) {
-        const v8sf t = __builtin_convertvector(k, v8sf) * f.dt;
-        const v8sf px = f.origin.x + t * pk.dvx, py = f.origin.y + t * pk.dvy,
-                   pz = f.origin.z + t * pk.dvz;
-        const v8si ix = __builtin_convertvector(px + 16.0f, v8si) - 16;
-        const v8si iy = __builtin_convertvector(py + 16.0f, v8si) - 16;
-        const v8si iz = __builtin_convertvector(pz + 16.0f, v8si) - 16;
-        const v8si inVolume = ((v8su)ix < unsigned(f.n.x - 3)) & ((v8su)iy < unsigned(f.n.y - 1)) &
-                              ((v8su)iz < unsigned(f.n.z - 1)) & (k <= pk.kEnd);
-        const v8si bi =
-            inVolume ? (ix >> S) + f.nb.x * (iy >> S) + int(f.nbxy) * (iz >> S) : v8si{};
-        const v8su maskLo = (v8su)_mm256_i32gather_epi32(cellWords, (__m256i)(bi + bi), 4);
-        const v8su maskHi = (v8su)_mm256_i32gather_epi32(cellWords, (__m256i)(bi + bi + 1), 4);
-        const v8si ok = inVolume & ((maskLo | maskHi) != 0u);
-        // Lanes that leave: the scalar march takes their sample k.
-        live &= unsigned(_mm256_movemask_ps((__m256)ok));
-        const v8si liveV = (v8si{1, 2, 4, 8, 16, 32, 64, 128} & int(live)) != 0;
-        const v8su bit = (v8su)((ix & 3) + 4 * (iy & 3) + 16 * (iz & 3));
-        const v8su half = bit >= 32u ? maskHi : maskLo;
-        const v8si set = (v8si)((half >> (bit & 31u)) & 1u) != 0;
-        const unsigned setMask = unsigned(_mm256_movemask_ps((__m256)set)) & live;
-        if (setMask != 0) {
-            const v8si laneSet = set & liveV;
-            const v8si base = laneSet ? ix + int(f.sy) * iy + int(f.sz) * iz : v8si{};
-            const v8su r0 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)base, 1);
-            const v8su r1 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sy)), 1);
-            const v8su r2 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sz)), 1);
-            const v8su r3 =
-                (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sz + f.sy)), 1);
-            auto lo = [](v8su w) { return __builtin_convertvector(v8si(w & 255u), v8sf); };
-            auto hi = [](v8su w) { return __builtin_convertvector(v8si((w >> 8) & 255u), v8sf); };
-            const v8sf tx = px - __builtin_convertvector(ix, v8sf),
-                       ty = py - __builtin_convertvector(iy, v8sf),
-                       tz = pz - __builtin_convertvector(iz, v8sf);
-            const v8sf ux = 1.0f - tx, uy = 1.0f - ty, uz = 1.0f - tz;
-            const v8sf c00 = ux * lo(r0) + tx * hi(r0), c10 = ux * lo(r1) + tx * hi(r1);
-            const v8sf c01 = ux * lo(r2) + tx * hi(r2), c11 = ux * lo(r3) + tx * hi(r3);
-            const v8sf c0 = uy * c00 + ty * c10, c1 = uy * c01 + ty * c11;
-            const v8sf v = uz * c0 + tz * c1;
-            const v8si in = v >= float(kSurfaceDensity);
-            const unsigned inside = unsigned(_mm256_movemask_ps((__m256)in)) & setMask;
-            // Computed and below: the last sample outside so far.
-            const v8si below = laneSet & ~in;
-            pk.lastK = below ? k : pk.lastK;
-            pk.lastValue = below ? v : pk.lastValue;
-            pk.value = (laneSet & in) ? v : pk.value;
-            hitLanes |= inside;
-            live &= ~inside;
-        }
-        // Every lane still marching moves on one sample; the others keep their k.
-        const v8si liveMask = v8si{1, 2, 4, 8, 16, 32, 64, 128} & int(live);
-        k = liveMask != 0 ? k + 1 : k;
+    const v8sf t = __builtin_convertvector(k, v8sf) * f.dt;
+    const v8sf px = f.origin.x + t * pk.dvx, py = f.origin.y + t * pk.dvy,
+               pz = f.origin.z + t * pk.dvz;
+    const v8si ix = __builtin_convertvector(px + 16.0f, v8si) - 16;
+    const v8si iy = __builtin_convertvector(py + 16.0f, v8si) - 16;
+    const v8si iz = __builtin_convertvector(pz + 16.0f, v8si) - 16;
+    const v8si inVolume = ((v8su)ix < unsigned(f.n.x - 3)) & ((v8su)iy < unsigned(f.n.y - 1)) &
+                          ((v8su)iz < unsigned(f.n.z - 1)) & (k <= pk.kEnd);
+    const v8si bi = inVolume ? (ix >> S) + f.nb.x * (iy >> S) + int(f.nbxy) * (iz >> S) : v8si{};
+    const v8su maskLo = (v8su)_mm256_i32gather_epi32(cellWords, (__m256i)(bi + bi), 4);
+    const v8su maskHi = (v8su)_mm256_i32gather_epi32(cellWords, (__m256i)(bi + bi + 1), 4);
+    const v8si ok = inVolume & ((maskLo | maskHi) != 0u);
+    // Lanes that leave: the scalar march takes their sample k.
+    live &= unsigned(_mm256_movemask_ps((__m256)ok));
+    const v8si liveV = (v8si{1, 2, 4, 8, 16, 32, 64, 128} & int(live)) != 0;
+    const v8su bit = (v8su)((ix & 3) + 4 * (iy & 3) + 16 * (iz & 3));
+    const v8su half = bit >= 32u ? maskHi : maskLo;
+    const v8si set = (v8si)((half >> (bit & 31u)) & 1u) != 0;
+    const unsigned setMask = unsigned(_mm256_movemask_ps((__m256)set)) & live;
+    if (setMask != 0) {
+        const v8si laneSet = set & liveV;
+        const v8si base = laneSet ? ix + int(f.sy) * iy + int(f.sz) * iz : v8si{};
+        const v8su r0 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)base, 1);
+        const v8su r1 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sy)), 1);
+        const v8su r2 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sz)), 1);
+        const v8su r3 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sz + f.sy)), 1);
+        auto lo = [](v8su w) { return __builtin_convertvector(v8si(w & 255u), v8sf); };
+        auto hi = [](v8su w) { return __builtin_convertvector(v8si((w >> 8) & 255u), v8sf); };
+        const v8sf tx = px - __builtin_convertvector(ix, v8sf),
+                   ty = py - __builtin_convertvector(iy, v8sf),
+                   tz = pz - __builtin_convertvector(iz, v8sf);
+        const v8sf ux = 1.0f - tx, uy = 1.0f - ty, uz = 1.0f - tz;
+        const v8sf c00 = ux * lo(r0) + tx * hi(r0), c10 = ux * lo(r1) + tx * hi(r1);
+        const v8sf c01 = ux * lo(r2) + tx * hi(r2), c11 = ux * lo(r3) + tx * hi(r3);
+        const v8sf c0 = uy * c00 + ty * c10, c1 = uy * c01 + ty * c11;
+        const v8sf v = uz * c0 + tz * c1;
+        const v8si in = v >= float(kSurfaceDensity);
+        const unsigned inside = unsigned(_mm256_movemask_ps((__m256)in)) & setMask;
+        // Computed and below: the last sample outside so far.
+        const v8si below = laneSet & ~in;
+        pk.lastK = below ? k : pk.lastK;
+        pk.lastValue = below ? v : pk.lastValue;
+        pk.value = (laneSet & in) ? v : pk.value;
+        hitLanes |= inside;
+        live &= ~inside;
     }
-    pk.k = k;
-    return hitLanes;
+    // Every lane still marching moves on one sample; the others keep their k.
+    const v8si liveMask = v8si{1, 2, 4, 8, 16, 32, 64, 128} & int(live);
+    k = liveMask != 0 ? k + 1 : k;
+}
+
+// Marches `count` packets (up to kPackets) whose lanes of live[i] march; returns each one's
+// lanes that found their first inside sample, in hits[i]. Packets step side by side: a step is a
+// chain of dependent gathers, and the other packets' chains fill the wait.
+constexpr int kPackets = 4;
+__attribute__((target("avx2,bmi2"))) inline void
+marchPackets(const Frame& f, Packet* pk, unsigned* live, unsigned* hits, int count) {
+    v8si k[kPackets];
+    unsigned l[kPackets];
+    for (int i = 0; i < kPackets; ++i) {
+        k[i] = i < count ? pk[i].k : v8si{};
+        l[i] = i < count ? live[i] : 0u;
+        hits[i] = 0;
+    }
+    for (int step = 0; step < kPacketMaxSteps; ++step) {
+        unsigned any = 0;
+        for (int i = 0; i < kPackets; ++i)
+            if (l[i]) {
+                stepPacket(f, pk[i], k[i], l[i], hits[i]);
+                any |= l[i];
+            }
+        if (!any)
+            break;
+    }
+    for (int i = 0; i < count; ++i)
+        pk[i].k = k[i];
 }
 
 // Refines a hit between the last sample outside and the first inside: a secant (regula falsi)
@@ -888,12 +909,14 @@ March march(const Frame& f, const Ray& r, float tSkipTo, int32_t kResume) {
 // The bits c * step for the cells c of [lo, hi] clipped to a brick's [0, kSize): summed over
 // three axes' spans (steps 1, 4, 16) by multiplying, the cells of a box in a brick's cell mask.
 inline uint64_t cellSpan(int lo, int hi, int step) {
+    static_assert(BrickGrid::kSize == 4, "four cells an axis: bits 0, step, 2 step, 3 step");
     lo = std::max(lo, 0);
     hi = std::min(hi, BrickGrid::kSize - 1);
-    uint64_t bits = 0;
-    for (int c = lo; c <= hi; ++c)
-        bits |= uint64_t(1) << (c * step);
-    return bits;
+    if (lo > hi)
+        return 0;
+    const uint64_t all =
+        1u | uint64_t(1) << step | uint64_t(1) << (2 * step) | uint64_t(1) << (3 * step);
+    return all & ((uint64_t(2) << (hi * step)) - 1) & ~((uint64_t(1) << (lo * step)) - 1);
 }
 
 // Pixels per edge of the blocks that share one cone march.
@@ -937,7 +960,9 @@ float coneSkipTo(const Frame& f, int x0, int y0, int x1, int y1, float tStart,
     if (!(sinA < 0.8)) // a block wider than ~53 degrees: nothing worth proving
         return 0.0f;
     const double tanA = sinA / std::sqrt(1.0 - sinA * sinA);
-    // Cone radius in voxels at the farthest sample, plus slack for rounding.
+    // Cone radius in voxels at distance t: grow * t + 0.05, whose 1 % and 0.05 voxel of slack
+    // cover float's rounding; at most its value at the farthest sample.
+    const float grow = float(tanA / f.minSpacing) * 1.01f;
     const float radius = float(tanA * f.maxSampleT / f.minSpacing) * 1.01f + 0.05f;
 
     // Where the central ray is within `radius` of the sampled region [-1, n] (near and far
@@ -965,7 +990,7 @@ float coneSkipTo(const Frame& f, int x0, int y0, int x1, int y1, float tStart,
         glm::vec3 p = samplePos(f, c, t);
         // The cross-section's radius here: the box tested only has to reach it for the march to
         // go on (the leap below shrinks the box by the radius where the ray leaves it).
-        const float rt = std::min(radius, float(tanA * t / f.minSpacing) * 1.01f + 0.05f);
+        const float rt = std::min(radius, grow * t + 0.05f);
         // The bricks that the cone's cross-section around p can touch, reaching half a voxel
         // further so that the march always moves on, and the smallest distance among them.
         glm::ivec3 lo, hi;
@@ -1029,9 +1054,7 @@ float coneSkipTo(const Frame& f, int x0, int y0, int x1, int y1, float tStart,
             else if (c.dv[a] < 0.0f && boxLo[a] > -INFINITY)
                 tBox = std::min(tBox, (boxLo[a] - f.origin[a]) * c.invDv[a]);
         }
-        float r = tBox < INFINITY
-                      ? std::min(radius, float(tanA * tBox / f.minSpacing) * 1.01f + 0.05f)
-                      : radius;
+        float r = tBox < INFINITY ? std::min(radius, grow * tBox + 0.05f) : radius;
         // The box shrunk by the radius; the central point must be inside it for the cone to be.
         float tNext = INFINITY;
         for (int a = 0; a < 3; ++a) {
@@ -1440,84 +1463,93 @@ struct TileJob {
     std::atomic<int64_t>& resumed;
 };
 
-// The rays of pixels [bx, bx1) of row y marched as one packet (AVX2 build): each ray's span set
-// up on its own, the packet's lockstep march, then marchFrom for lanes that left it. Hits go to
-// `pending`, misses straight to `out`; the hit cache (tile copy, origin (x0, y0)) as in the
-// scalar loop of renderTileBody.
+// The rays of pixels [bx, bx1) of rows y .. y + rows - 1 (one or two) marched as one packet a
+// row (AVX2 build): each ray's span set up on its own, the packets' lockstep march, then
+// marchFrom for lanes that left it. Hits go to `pending` in pixel order, misses straight to
+// `out`; the hit cache (tile copy, origin (x0, y0)) as in the scalar loop of renderTileBody.
 __attribute__((always_inline)) inline void
-marchRow(const Frame& f, int x0, int y0, int bx, int bx1, int y, const float* quarterSkip, int midX,
-         int midY, int32_t* resume, uint8_t* inside, size_t stride, int64_t& known,
-         PendingHit* pending, int& npending, Dbi& out, const PixelRect& rect, int outX, int outY) {
+marchRows(const Frame& f, int x0, int y0, int bx, int bx1, int y, int rows,
+          const float* quarterSkip, int midX, int midY, int32_t* resume, uint8_t* inside,
+          size_t stride, int64_t& known, PendingHit* pending, int& npending, Dbi& out,
+          const PixelRect& rect, int outX, int outY) {
     const int n = bx1 - bx;
-    Span spans[8];
-    Packet pk;
-    unsigned live = 0;
-    PendingHit* lane[8];
-    for (int l = 0; l < n; ++l) {
-        const int x = bx + l;
-        int32_t k0 = 0;
-        uint8_t in0 = 0;
-        if (resume) {
-            const size_t at = size_t(y - y0) * stride + size_t(x - x0);
-            k0 = resume[at], in0 = inside[at];
-            known += k0 != 0;
-        }
-        PendingHit& h = pending[npending + l];
-        lane[l] = &h;
-        h.r = pixelRay(f, x, y);
-        h.ox = x - rect.x + outX, h.oy = y - rect.y + outY;
-        const float skip = quarterSkip[(x >= midX) + 2 * (y >= midY)];
-        h.m = March{};
-        if (marchSpan(f, h.r, skip, k0, in0 != 0, h.m, spans[l])) {
-            live |= 1u << l;
-            pk.dvx[l] = h.r.dv.x, pk.dvy[l] = h.r.dv.y, pk.dvz[l] = h.r.dv.z;
-            pk.k[l] = spans[l].k, pk.kEnd[l] = spans[l].kEnd;
-        } else {
-            pk.dvx[l] = pk.dvy[l] = pk.dvz[l] = 0.0f;
-            pk.k[l] = 0, pk.kEnd[l] = -1;
-        }
-    }
-    for (int l = n; l < 8; ++l)
-        pk.dvx[l] = pk.dvy[l] = pk.dvz[l] = 0.0f, pk.k[l] = 0, pk.kEnd[l] = -1;
-    pk.lastK = v8si{} + INT_MIN;
-    pk.lastValue = v8sf{};
-    pk.value = v8sf{};
-    const unsigned marching = live;
-    const unsigned hits = live ? marchPacket(f, pk, live) : 0u;
-    int next = npending;
-    for (int l = 0; l < n; ++l) {
-        PendingHit& h = *lane[l];
-        if (marching >> l & 1u) {
-            Span s = spans[l];
-            if (hits >> l & 1u) {
-                March& m = h.m;
-                m.hit = true;
-                m.kIn = pk.k[l];
-                m.tIn = float(pk.k[l]) * f.dt;
-                m.t = m.tIn;
-                m.value = pk.value[l];
-                m.refine = pk.k[l] > s.kStart;
-                m.lastK = pk.lastK[l];
-                m.lastValue = pk.lastValue[l];
+    Span spans[kPackets][8];
+    Packet pk[kPackets];
+    unsigned live[kPackets] = {}, hits[kPackets] = {};
+    for (int row = 0; row < rows; ++row) {
+        const int py = y + row;
+        Packet& p = pk[row];
+        for (int l = 0; l < n; ++l) {
+            const int x = bx + l;
+            int32_t k0 = 0;
+            uint8_t in0 = 0;
+            if (resume) {
+                const size_t at = size_t(py - y0) * stride + size_t(x - x0);
+                k0 = resume[at], in0 = inside[at];
+                known += k0 != 0;
+            }
+            PendingHit& h = pending[npending + row * n + l];
+            h.r = pixelRay(f, x, py);
+            h.ox = x - rect.x + outX, h.oy = py - rect.y + outY;
+            const float skip = quarterSkip[(x >= midX) + 2 * (py >= midY)];
+            h.m = March{};
+            if (marchSpan(f, h.r, skip, k0, in0 != 0, h.m, spans[row][l])) {
+                live[row] |= 1u << l;
+                p.dvx[l] = h.r.dv.x, p.dvy[l] = h.r.dv.y, p.dvz[l] = h.r.dv.z;
+                p.k[l] = spans[row][l].k, p.kEnd[l] = spans[row][l].kEnd;
             } else {
-                s.k = pk.k[l];
-                h.m = marchFrom<true>(f, h.r, s, pk.lastK[l], pk.lastValue[l]);
+                p.dvx[l] = p.dvy[l] = p.dvz[l] = 0.0f;
+                p.k[l] = 0, p.kEnd[l] = -1;
             }
         }
-        if (resume) {
-            const size_t at = size_t(y - y0) * stride + size_t(bx + l - x0);
-            resume[at] = h.m.kIn;
-            inside[at] = h.m.hit && h.m.refine;
-        }
-        if (h.m.hit) {
-            if (&pending[next] != &h)
-                pending[next] = h;
-            ++next;
-        } else {
-            std::memcpy(out.color(h.ox, h.oy), kBackgroundRgba, 4);
-            out.depth()[out.index(h.ox, h.oy)] = kBackgroundDepth;
-        }
+        for (int l = n; l < 8; ++l)
+            p.dvx[l] = p.dvy[l] = p.dvz[l] = 0.0f, p.k[l] = 0, p.kEnd[l] = -1;
+        p.lastK = v8si{} + INT_MIN;
+        p.lastValue = v8sf{};
+        p.value = v8sf{};
     }
+    unsigned marching[kPackets], any = 0;
+    for (int i = 0; i < kPackets; ++i)
+        marching[i] = live[i], any |= live[i];
+    if (any)
+        marchPackets(f, pk, live, hits, rows);
+    // Row by row, lane by lane: hits move down to `next` (never past a lane still to be read).
+    int next = npending;
+    for (int row = 0; row < rows; ++row)
+        for (int l = 0; l < n; ++l) {
+            PendingHit& h = pending[npending + row * n + l];
+            const Packet& p = pk[row];
+            if (marching[row] >> l & 1u) {
+                Span s = spans[row][l];
+                if (hits[row] >> l & 1u) {
+                    March& m = h.m;
+                    m.hit = true;
+                    m.kIn = p.k[l];
+                    m.tIn = float(p.k[l]) * f.dt;
+                    m.t = m.tIn;
+                    m.value = p.value[l];
+                    m.refine = p.k[l] > s.kStart;
+                    m.lastK = p.lastK[l];
+                    m.lastValue = p.lastValue[l];
+                } else {
+                    s.k = p.k[l];
+                    h.m = marchFrom<true>(f, h.r, s, p.lastK[l], p.lastValue[l]);
+                }
+            }
+            if (resume) {
+                const size_t at = size_t(y + row - y0) * stride + size_t(bx + l - x0);
+                resume[at] = h.m.kIn;
+                inside[at] = h.m.hit && h.m.refine;
+            }
+            if (h.m.hit) {
+                if (&pending[next] != &h)
+                    pending[next] = h;
+                ++next;
+            } else {
+                std::memcpy(out.color(h.ox, h.oy), kBackgroundRgba, 4);
+                out.depth()[out.index(h.ox, h.oy)] = kBackgroundDepth;
+            }
+        }
     npending = next;
 }
 
@@ -1610,8 +1642,10 @@ __attribute__((always_inline)) inline void renderTileBody(const TileJob& job, in
             for (int y = by; y < by1; ++y) {
                 if constexpr (Wide) {
                     if (f.marchEight) {
-                        marchRow(f, x0, y0, bx, bx1, y, quarterSkip, midX, midY, resume, inside,
-                                 stride, known, pending, npending, out, rect, outX, outY);
+                        const int rows = std::min(kPackets, by1 - y);
+                        marchRows(f, x0, y0, bx, bx1, y, rows, quarterSkip, midX, midY, resume,
+                                  inside, stride, known, pending, npending, out, rect, outX, outY);
+                        y += rows - 1;
                         continue;
                     }
                 }
