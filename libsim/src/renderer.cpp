@@ -1254,14 +1254,19 @@ inline bool hitInside(const Frame& f, const PendingHit& h) {
 // refineHit then the gradient of finishHit for up to eight hits (all hitInside), lane by lane;
 // writes each hit's refined t into its March and its gradient (per voxel) to g.
 void refineAndDifferentiate8(const Frame& f, PendingHit* const* hits, int count, v4sf g[8]) {
-    v8sf ox, oy, oz, dx, dy, dz, tIn, value, ta;
-    v8si refine;
+    v8sf ox{}, oy{}, oz{}, dx{}, dy{}, dz{}, tIn{}, value{}, ta{}, before{}; // set lane by lane
+    v8si refine{};
+    // The sample before the first inside one: most often the march computed it (lastK), by
+    // sample8's arithmetic, and then it is not sampled again.
+    bool known = true;
     for (int l = 0; l < 8; ++l) {
         const PendingHit& h = *hits[l < count ? l : 0]; // lanes past count repeat the first
         ox[l] = f.origin.x, oy[l] = f.origin.y, oz[l] = f.origin.z;
         dx[l] = h.r.dv.x, dy[l] = h.r.dv.y, dz[l] = h.r.dv.z;
         tIn[l] = h.m.tIn;
         value[l] = h.m.value;
+        before[l] = h.m.lastValue;
+        known = known && (!h.m.refine || h.m.lastK == h.m.kIn - 1);
         // A hit at the first sample of the ray's span is not refined: its lanes bracket [tIn, tIn]
         // with fa < 0, so every sample below stays at tIn (inside the volume, never NaN) and is
         // dropped at the end.
@@ -1270,7 +1275,7 @@ void refineAndDifferentiate8(const Frame& f, PendingHit* const* hits, int count,
     }
     const float iso = float(kSurfaceDensity);
     v8sf tb = tIn;
-    v8sf fa = sample8(f, ox + ta * dx, oy + ta * dy, oz + ta * dz) - iso;
+    v8sf fa = (known ? before : sample8(f, ox + ta * dx, oy + ta * dy, oz + ta * dz)) - iso;
     // fa < 0 <= fb brackets the iso-value; the march and a valid hit cache guarantee it (the
     // sample before the first inside one was below, and erosion only lowers it). A cache kept
     // across a rise in density (no Renderer::rebuild) can break it, and the secant would then
