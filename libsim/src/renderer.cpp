@@ -1468,6 +1468,88 @@ struct TileJob {
     std::atomic<int64_t>& resumed;
 };
 
+// std::max(a, b) and std::min(a, b) lane by lane: maxps(b, a), minps(b, a). (Functions, not
+// lambdas: a lambda would not inherit the target.)
+__attribute__((target("avx2,bmi2"), always_inline)) inline v8sf maxOf(v8sf a, v8sf b) {
+    return (v8sf)_mm256_max_ps((__m256)b, (__m256)a);
+}
+__attribute__((target("avx2,bmi2"), always_inline)) inline v8sf minOf(v8sf a, v8sf b) {
+    return (v8sf)_mm256_min_ps((__m256)b, (__m256)a);
+}
+
+// A row's rays and their spans (AVX2 build): pixelRay's and marchSpan's operations lane by lane
+// in eight lanes, so the same bits, with their divisions and square root done once for eight
+// rays. A lane whose direction lies in a plane of the axes, or with a cached inside sample to
+// test, takes marchSpan itself. Lanes that march are added to `live` with their span in `spans`
+// and the packet `p`; the others' March says whether they hit.
+__attribute__((target("avx2,bmi2"))) inline void setUpRow(const Frame& f, int bx, int n, int py,
+                                                          v8sf skip, v8si k0, unsigned in0,
+                                                          PendingHit* h, Span* spans, Packet& p,
+                                                          unsigned& live) {
+    const v8sf fx = __builtin_convertvector(bx + v8si{0, 1, 2, 3, 4, 5, 6, 7}, v8sf) + 0.5f;
+    const float fy = float(py) + 0.5f;
+    v8sf toFar[3], dv[3], invDv[3];
+    for (int c = 0; c < 3; ++c)
+        toFar[c] = (f.toFar0[c] + fx * f.toFarDx[c]) + fy * f.toFarDy[c];
+    const v8sf len = (v8sf)_mm256_sqrt_ps(
+        (__m256)((toFar[0] * toFar[0] + toFar[1] * toFar[1]) + toFar[2] * toFar[2]));
+    const v8sf inv = 1.0f / len;
+    v8sf dir[3];
+    v8si flat = v8si{};
+    for (int c = 0; c < 3; ++c) {
+        dir[c] = toFar[c] * inv;
+        dv[c] = dir[c] * f.invSpacing4[c];
+        invDv[c] = 1.0f / dv[c];
+        flat |= dv[c] == 0.0f;
+    }
+    const v8sf tNear = len * f.nearOverFarF;
+    v8sf t0 = maxOf(tNear, v8sf{}), t1 = len;
+    for (int c = 0; c < 3; ++c) {
+        const v8sf ta = (f.regionLo[c] - f.origin4[c]) * invDv[c];
+        const v8sf tb = (f.regionHi[c] - f.origin4[c]) * invDv[c];
+        t0 = maxOf(t0, minOf(ta, tb));
+        t1 = minOf(t1, maxOf(ta, tb));
+    }
+    t1 = minOf(t1, v8sf{} + f.tLimit);
+    const float dt = f.dt, invDt = 1.0f / dt;
+    const v8si kStart = __builtin_convertvector(
+        (v8sf)_mm256_round_ps((__m256)(t0 / dt), _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC), v8si);
+    const v8si kEnd = __builtin_convertvector(
+        (v8sf)_mm256_round_ps((__m256)(t1 / dt), _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC), v8si);
+    const v8si marches = (skip != INFINITY) & (t0 <= t1) & (skip <= t1) & (k0 <= kEnd);
+    const v8si kSkip = __builtin_convertvector(skip * invDt, v8si);
+    v8si k = skip > t0 ? (kSkip > kStart ? kSkip : kStart) : kStart;
+    k = k0 > k ? k0 : k;
+    for (int l = 0; l < n; ++l) {
+        Ray& r = h[l].r;
+        r.dir = glm::dvec3(dir[0][l], dir[1][l], dir[2][l]);
+        r.tFar = len[l];
+        r.tNear = tNear[l];
+        r.dv = glm::vec3(dv[0][l], dv[1][l], dv[2][l]);
+        r.invDv = glm::vec3(invDv[0][l], invDv[1][l], invDv[2][l]);
+        r.dv4 = v4sf{dv[0][l], dv[1][l], dv[2][l], 0.0f};
+        r.dir4 = v4sf{dir[0][l], dir[1][l], dir[2][l], 0.0f};
+        r.invDv4 = v4sf{invDv[0][l], invDv[1][l], invDv[2][l], 1.0f};
+        r.mainAxis = mainAxisOf(r.dv);
+        h[l].m = March{};
+        bool marching;
+        if (flat[l] || (in0 >> l & 1u)) {
+            marching = marchSpan(f, r, skip[l], k0[l], (in0 >> l & 1u) != 0, h[l].m, spans[l]);
+        } else {
+            marching = marches[l] != 0;
+            spans[l] = Span{kStart[l], kEnd[l], k[l]};
+        }
+        if (marching) {
+            live |= 1u << l;
+            p.dvx[l] = r.dv.x, p.dvy[l] = r.dv.y, p.dvz[l] = r.dv.z;
+            p.k[l] = spans[l].k, p.kEnd[l] = spans[l].kEnd;
+        } else {
+            p.dvx[l] = p.dvy[l] = p.dvz[l] = 0.0f;
+            p.k[l] = 0, p.kEnd[l] = -1;
+        }
+    }
+}
+
 // The rays of pixels [bx, bx1) of rows y .. y + rows - 1 (one or two) marched as one packet a
 // row (AVX2 build): each ray's span set up on its own, the packets' lockstep march, then
 // marchFrom for lanes that left it. Hits go to `pending` in pixel order, misses straight to
@@ -1484,29 +1566,23 @@ marchRows(const Frame& f, int x0, int y0, int bx, int bx1, int y, int rows,
     for (int row = 0; row < rows; ++row) {
         const int py = y + row;
         Packet& p = pk[row];
+        v8sf skip{};
+        v8si k0{};
+        unsigned in0 = 0;
         for (int l = 0; l < n; ++l) {
             const int x = bx + l;
-            int32_t k0 = 0;
-            uint8_t in0 = 0;
             if (resume) {
                 const size_t at = size_t(py - y0) * stride + size_t(x - x0);
-                k0 = resume[at], in0 = inside[at];
-                known += k0 != 0;
+                k0[l] = resume[at];
+                in0 |= unsigned(inside[at] != 0) << l;
+                known += resume[at] != 0;
             }
             PendingHit& h = pending[npending + row * n + l];
-            h.r = pixelRay(f, x, py);
             h.ox = x - rect.x + outX, h.oy = py - rect.y + outY;
-            const float skip = quarterSkip[(x >= midX) + 2 * (py >= midY)];
-            h.m = March{};
-            if (marchSpan(f, h.r, skip, k0, in0 != 0, h.m, spans[row][l])) {
-                live[row] |= 1u << l;
-                p.dvx[l] = h.r.dv.x, p.dvy[l] = h.r.dv.y, p.dvz[l] = h.r.dv.z;
-                p.k[l] = spans[row][l].k, p.kEnd[l] = spans[row][l].kEnd;
-            } else {
-                p.dvx[l] = p.dvy[l] = p.dvz[l] = 0.0f;
-                p.k[l] = 0, p.kEnd[l] = -1;
-            }
+            skip[l] = quarterSkip[(x >= midX) + 2 * (py >= midY)];
         }
+        setUpRow(f, bx, n, py, skip, k0, in0, &pending[npending + row * n], spans[row], p,
+                 live[row]);
         for (int l = n; l < 8; ++l)
             p.dvx[l] = p.dvy[l] = p.dvz[l] = 0.0f, p.k[l] = 0, p.kEnd[l] = -1;
         p.lastK = v8si{} + INT_MIN;
