@@ -505,6 +505,27 @@ struct March {
     float lastValue = 0.0f;
 };
 
+// Eight lanes' brick cell masks (brick index `bi`) read by two gathers of four 64-bit masks
+// (half the loads of 32-bit halves), as bits: `nonEmpty`, the brick may hold surface; `setBits`,
+// the lane's cell (bit 0..63 of its brick's mask) is set.
+__attribute__((target("avx2,bmi2"), always_inline)) inline void
+cellBits(const Frame& f, v8si bi, v8su bit, unsigned& nonEmpty, unsigned& setBits) {
+    const long long* const masks = reinterpret_cast<const long long*>(f.cells);
+    nonEmpty = setBits = 0;
+    for (int h = 0; h < 2; ++h) {
+        const __m128i idx =
+            h ? _mm256_extracti128_si256((__m256i)bi, 1) : _mm256_castsi256_si128((__m256i)bi);
+        const __m128i at =
+            h ? _mm256_extracti128_si256((__m256i)bit, 1) : _mm256_castsi256_si128((__m256i)bit);
+        const __m256i mask = _mm256_i32gather_epi64(masks, idx, 8);
+        const __m256i empty = _mm256_cmpeq_epi64(mask, _mm256_setzero_si256());
+        const __m256i cell =
+            _mm256_slli_epi64(_mm256_srlv_epi64(mask, _mm256_cvtepu32_epi64(at)), 63);
+        nonEmpty |= unsigned(~_mm256_movemask_pd((__m256d)empty) & 15) << (4 * h);
+        setBits |= unsigned(_mm256_movemask_pd((__m256d)cell)) << (4 * h);
+    }
+}
+
 // The AVX2 build's march step: samples k .. k + 7 at once, as far as they stay in bricks that
 // may hold surface, in cells inside the volume, and at most kEnd. Lane by lane the scalar loop's
 // arithmetic (positions, floors, the cell test, the trilinear sample of insideSample), with the
@@ -528,25 +549,22 @@ __attribute__((target("avx2,bmi2"))) inline int marchEight(const Frame& f, const
     // Each lane's brick and both halves of its cell mask (lanes outside read brick 0).
     constexpr int S = BrickGrid::kShift;
     const v8si bi = inVolume ? (ix >> S) + f.nb.x * (iy >> S) + int(f.nbxy) * (iz >> S) : v8si{};
-    const int* const cellWords = reinterpret_cast<const int*>(f.cells);
-    const v8su maskLo = (v8su)_mm256_i32gather_epi32(cellWords, (__m256i)(bi + bi), 4);
-    const v8su maskHi = (v8su)_mm256_i32gather_epi32(cellWords, (__m256i)(bi + bi + 1), 4);
+    static_assert(BrickGrid::kSize == 4, "a brick's cell mask is 64 bits, x + 4 y + 16 z");
+    const v8su bit = (v8su)((ix & 3) + 4 * (iy & 3) + 16 * (iz & 3));
+    unsigned nonEmpty, setBits;
+    cellBits(f, bi, bit, nonEmpty, setBits);
     // An empty brick's mask is zero: the scalar step leaps from there.
-    const v8si ok = inVolume & ((maskLo | maskHi) != 0u);
-    const unsigned okMask = unsigned(_mm256_movemask_ps((__m256)ok));
+    const unsigned okMask = unsigned(_mm256_movemask_ps((__m256)inVolume)) & nonEmpty;
     const int n = __builtin_ctz(~okMask); // the leading lanes that qualify
     if (n == 0)
         return 0;
     const unsigned lanes = (1u << n) - 1u;
-    static_assert(BrickGrid::kSize == 4, "a brick's cell mask is 64 bits, x + 4 y + 16 z");
-    const v8su bit = (v8su)((ix & 3) + 4 * (iy & 3) + 16 * (iz & 3));
-    const v8su half = bit >= 32u ? maskHi : maskLo;
-    const v8si set = (v8si)((half >> (bit & 31u)) & 1u) != 0;
-    const unsigned setMask = unsigned(_mm256_movemask_ps((__m256)set)) & lanes;
+    const unsigned setMask = setBits & lanes;
     if (setMask == 0)
         return n; // all clear: below the iso-value without reading the volume
     // The trilinear samples (sample8's arithmetic, trilinearCorners' operations lane by lane);
     // lanes that do not qualify read voxel 0.
+    const v8si ok = (v8si{1, 2, 4, 8, 16, 32, 64, 128} & int(okMask)) != 0;
     const v8si base = ok ? ix + int(f.sy) * iy + int(f.sz) * iz : v8si{};
     // (A lambda would not inherit this function's target, and the gather needs it.)
     const int* const voxels = reinterpret_cast<const int*>(f.density);
@@ -792,7 +810,6 @@ struct Packet {
 __attribute__((target("avx2,bmi2"), always_inline)) inline void
 stepPacket(const Frame& f, Packet& pk, v8si& k, unsigned& live, unsigned& hitLanes) {
     constexpr int S = BrickGrid::kShift;
-    const int* const cellWords = reinterpret_cast<const int*>(f.cells);
     const int* const voxels = reinterpret_cast<const int*>(f.density);
     const v8sf t = __builtin_convertvector(k, v8sf) * f.dt;
     const v8sf px = f.origin.x + t * pk.dvx, py = f.origin.y + t * pk.dvy,
@@ -803,18 +820,14 @@ stepPacket(const Frame& f, Packet& pk, v8si& k, unsigned& live, unsigned& hitLan
     const v8si inVolume = ((v8su)ix < unsigned(f.n.x - 3)) & ((v8su)iy < unsigned(f.n.y - 1)) &
                           ((v8su)iz < unsigned(f.n.z - 1)) & (k <= pk.kEnd);
     const v8si bi = inVolume ? (ix >> S) + f.nb.x * (iy >> S) + int(f.nbxy) * (iz >> S) : v8si{};
-    const v8su maskLo = (v8su)_mm256_i32gather_epi32(cellWords, (__m256i)(bi + bi), 4);
-    const v8su maskHi = (v8su)_mm256_i32gather_epi32(cellWords, (__m256i)(bi + bi + 1), 4);
-    const v8si ok = inVolume & ((maskLo | maskHi) != 0u);
-    // Lanes that leave: the scalar march takes their sample k.
-    live &= unsigned(_mm256_movemask_ps((__m256)ok));
-    const v8si liveV = (v8si{1, 2, 4, 8, 16, 32, 64, 128} & int(live)) != 0;
     const v8su bit = (v8su)((ix & 3) + 4 * (iy & 3) + 16 * (iz & 3));
-    const v8su half = bit >= 32u ? maskHi : maskLo;
-    const v8si set = (v8si)((half >> (bit & 31u)) & 1u) != 0;
-    const unsigned setMask = unsigned(_mm256_movemask_ps((__m256)set)) & live;
+    unsigned nonEmpty, setBits;
+    cellBits(f, bi, bit, nonEmpty, setBits);
+    // Lanes that leave: the scalar march takes their sample k.
+    live &= unsigned(_mm256_movemask_ps((__m256)inVolume)) & nonEmpty;
+    const unsigned setMask = setBits & live;
     if (setMask != 0) {
-        const v8si laneSet = set & liveV;
+        const v8si laneSet = (v8si{1, 2, 4, 8, 16, 32, 64, 128} & int(setMask)) != 0;
         const v8si base = laneSet ? ix + int(f.sy) * iy + int(f.sz) * iz : v8si{};
         const v8su r0 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)base, 1);
         const v8su r1 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sy)), 1);
