@@ -546,7 +546,7 @@ __attribute__((target("avx2,bmi2"))) inline int marchEight(const Frame& f, const
     // stays inside the volume's data), and not past the ray's last sample.
     const v8si inVolume = ((v8su)ix < unsigned(f.n.x - 3)) & ((v8su)iy < unsigned(f.n.y - 1)) &
                           ((v8su)iz < unsigned(f.n.z - 1)) & (kv <= kEnd);
-    // Each lane's brick and both halves of its cell mask (lanes outside read brick 0).
+    // Each lane's brick and its cell mask (lanes outside read brick 0).
     constexpr int S = BrickGrid::kShift;
     const v8si bi = inVolume ? (ix >> S) + f.nb.x * (iy >> S) + int(f.nbxy) * (iz >> S) : v8si{};
     static_assert(BrickGrid::kSize == 4, "a brick's cell mask is 64 bits, x + 4 y + 16 z");
@@ -889,7 +889,8 @@ marchPackets(const Frame& f, Packet* pk, unsigned* live, unsigned* hits, int cou
 // step, one sample there to narrow the bracket, and a final secant. The outside sample is
 // recomputed unless the march just computed it, so skipping it changes nothing. (Bisection costs
 // three more samples and as many mispredicted branches, for accuracy the depth test does not
-// need.) refineHits does the same for eight hits at once, lane by lane the same operations.
+// need.) refineAndDifferentiate8 does the same for eight hits at once, lane by lane the same
+// operations.
 void refineHit(const Frame& f, const Ray& r, March& m) {
     if (!m.refine)
         return;
@@ -1158,13 +1159,13 @@ bool traceRay(const Frame& f, const Ray& r, float tSkipTo, int32_t& resume, Hit&
 // [SECTION] Hits eight at a time ------------------------------------------------------------------
 //
 // After the march, what is left of a hit (the refinement's two samples, the 32-voxel gradient) is
-// the same arithmetic for every ray, so the render loop marches a block's rays one by one and then
-// refines and differentiates their hits eight at a time, one ray per lane of GCC's 8-wide vectors
-// (two SSE2 registers on baseline x86-64). Lane by lane these are the scalar functions' IEEE
-// operations in the scalar order (no FMA on baseline x86-64), so the pixels are bit for bit
-// those of refineHit + finishHit, which castRay and RenderOptions::batchHits = false still use.
-// Hits whose samples or shading stencil reach the volume's faces (the border paths) take the
-// scalar functions.
+// the same arithmetic for every ray, so the render loop marches a block's rays (one by one, or in
+// packets in the AVX2 build) and then refines and differentiates their hits eight at a time, one
+// ray per lane of GCC's 8-wide vectors (two SSE2 registers on baseline x86-64). Lane by lane these
+// are the scalar functions' IEEE operations in the scalar order (no FMA on baseline x86-64), so the
+// pixels are bit for bit those of refineHit + finishHit, which castRay and RenderOptions::batchHits
+// = false still use. Hits whose samples or shading stencil reach the volume's faces (the border
+// paths) take the scalar functions.
 
 struct PendingHit {
     Ray r;
@@ -1490,6 +1491,11 @@ __attribute__((target("avx2,bmi2"), always_inline)) inline v8sf minOf(v8sf a, v8
     return (v8sf)_mm256_min_ps((__m256)b, (__m256)a);
 }
 
+// int(v) lane by lane, by cvttps: defined for every lane (INT_MIN for what int cannot hold).
+__attribute__((target("avx2,bmi2"), always_inline)) inline v8si truncOf(v8sf v) {
+    return (v8si)_mm256_cvttps_epi32((__m256)v);
+}
+
 // A row's rays and their spans (AVX2 build): pixelRay's and marchSpan's operations lane by lane
 // in eight lanes, so the same bits, with their divisions and square root done once for eight
 // rays. A lane whose direction lies in a plane of the axes, or with a cached inside sample to
@@ -1525,12 +1531,14 @@ __attribute__((target("avx2,bmi2"))) inline void setUpRow(const Frame& f, int bx
     }
     t1 = minOf(t1, v8sf{} + f.tLimit);
     const float dt = f.dt, invDt = 1.0f / dt;
-    const v8si kStart = __builtin_convertvector(
-        (v8sf)_mm256_round_ps((__m256)(t0 / dt), _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC), v8si);
-    const v8si kEnd = __builtin_convertvector(
-        (v8sf)_mm256_round_ps((__m256)(t1 / dt), _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC), v8si);
+    // (Lanes that miss the volume, or that a cone proved empty, convert an infinity or a NaN
+    // here, and are not marched.)
+    const v8si kStart = truncOf(
+        (v8sf)_mm256_round_ps((__m256)(t0 / dt), _MM_FROUND_TO_POS_INF | _MM_FROUND_NO_EXC));
+    const v8si kEnd = truncOf(
+        (v8sf)_mm256_round_ps((__m256)(t1 / dt), _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC));
     const v8si marches = (skip != INFINITY) & (t0 <= t1) & (skip <= t1) & (k0 <= kEnd);
-    const v8si kSkip = __builtin_convertvector(skip * invDt, v8si);
+    const v8si kSkip = truncOf(skip * invDt);
     v8si k = skip > t0 ? (kSkip > kStart ? kSkip : kStart) : kStart;
     k = k0 > k ? k0 : k;
     for (int l = 0; l < n; ++l) {
@@ -1563,7 +1571,7 @@ __attribute__((target("avx2,bmi2"))) inline void setUpRow(const Frame& f, int bx
     }
 }
 
-// The rays of pixels [bx, bx1) of rows y .. y + rows - 1 (one or two) marched as one packet a
+// The rays of pixels [bx, bx1) of rows y .. y + rows - 1 (up to kPackets) marched as one packet a
 // row (AVX2 build): each ray's span set up on its own, the packets' lockstep march, then
 // marchFrom for lanes that left it. Hits go to `pending` in pixel order, misses straight to
 // `out`; the hit cache (tile copy, origin (x0, y0)) as in the scalar loop of renderTileBody.
@@ -1730,7 +1738,8 @@ __attribute__((always_inline)) inline void renderTileBody(const TileJob& job, in
                     }
                 continue;
             }
-            // March the block's rays one by one; refine and shade their hits eight at a time.
+            // March the block's rays (in packets of a row, AVX2 build); refine and shade their hits
+            // eight at a time.
             PendingHit pending[kConeBlock * kConeBlock];
             int npending = 0;
             for (int y = by; y < by1; ++y) {
