@@ -46,11 +46,13 @@ MintedCode mintCode(const Salt& salt);
 // New codes hashed apart from the network thread, newest wins per role: a request while that
 // role's code is being hashed, or waits for its turn, replaces the one waiting. A role's hashing
 // takes at most kDutyCycle of the time (a hash of d starts the next d / kDutyCycle after it
-// began), so an instructor asking 200 times a second costs a tenth of one low-priority core, not
-// the network thread (docs/session.md, "Availability").
+// began), so an instructor asking 200 times a second costs a hundredth of one low-priority core,
+// not the network thread. An 8 MiB hash slows whatever shares the cores while it runs: at a tenth
+// a trainee's update p99 read 4-10x, at a hundredth within 1.3x (docs/session.md,
+// "Availability"); an honest instructor's second code of a role within ~1 s waits that long.
 class CodeMint {
 public:
-    static constexpr double kDutyCycle = 0.1;
+    static constexpr double kDutyCycle = 0.01;
     struct Done {
         CodeRequest request;
         MintedCode minted;
