@@ -84,7 +84,8 @@ struct Rig {
     Outbox outbox;
     Camera cam = cameraFor(64, 48);
     Dbi frame = picture(64, 48, 0);
-    Channel fullChannel = Channel::Control; // the last full image's
+    Channel fullChannel = Channel::Control; // the last full image's, and the loss of its parity
+    uint32_t fullLoss = 0;
     explicit Rig(int64_t maxInFlight = 1 << 20, Codec codec = Codec::Raw)
         : outbox(maxInFlight, book, clock.fn()) {
         outbox.join(1, std::make_shared<std::atomic<int64_t>>(0), codec, Codec::Lz4);
@@ -96,6 +97,7 @@ struct Rig {
         Outbox::Taken t = outbox.take(live);
         EXPECT_EQ(t.updates.size(), 1u);
         fullChannel = t.updates.at(0).channel;
+        fullLoss = t.updates.at(0).lossPermille;
         const ImageUpdate u = decoded(t.updates.at(0));
         if (acknowledged)
             outbox.acknowledge(1, ImageAck{u.viewId, u.sequence});
@@ -330,7 +332,7 @@ TEST(LossyOutbox, ChainedRectanglesArePredictedSelfContainedOnesPlanar) {
 // acknowledged, not.
 TEST(LossyOutbox, ASmallFullImageAndTheRectanglesAfterItGoLossyAndItIsResent) {
     Rig rig;
-    rig.full(); // acknowledged: no loss reported, so it went reliably
+    rig.full(); // the join's: it goes reliably
     EXPECT_EQ(rig.fullChannel, Channel::Image);
     rig.outbox.acknowledge(1, ImageAck{0, rig.full().sequence, 0, 10});
     const ImageUpdate f = rig.full(false);
@@ -356,6 +358,33 @@ TEST(LossyOutbox, ASmallFullImageAndTheRectanglesAfterItGoLossyAndItIsResent) {
     ASSERT_EQ(t.updates.size(), 1u) << "only the rectangle";
     EXPECT_FALSE(t.updates[0].full);
     EXPECT_EQ(t.updates[0].lossPermille, 50u);
+}
+
+// Until the client acknowledges something sent lossy its loss figure says nothing, and parity is
+// for kAssumedLossPermille: a full image then goes lossy (a view change right after a join over a
+// long lossy link does not wait a round trip for ENet's resend), but not the join's, which ENet's
+// window paces. Once the client reports a clean link from lossy datagrams, full images go
+// reliably and rectangles carry no parity.
+TEST(LossyOutbox, BeforeTheClientsLossCountsAFullImageButTheJoinsGoesLossy) {
+    Rig rig;
+    const ImageUpdate join = rig.full(false);
+    EXPECT_EQ(rig.fullChannel, Channel::Image) << "the join's";
+    rig.outbox.acknowledge(1, ImageAck{0, join.sequence, 0, 0}); // nothing lossy received yet
+    Outbox::Taken t = rig.cut({4, 4, 10, 6}, 1);
+    ASSERT_EQ(t.updates.size(), 1u);
+    EXPECT_EQ(t.updates[0].channel, Channel::ImageLossy);
+    EXPECT_EQ(t.updates[0].lossPermille, Outbox::kAssumedLossPermille);
+    const ImageUpdate moved = rig.full(false); // a view change's
+    EXPECT_EQ(rig.fullChannel, Channel::ImageLossy);
+    EXPECT_EQ(rig.fullLoss, Outbox::kAssumedLossPermille);
+    // Acknowledged with the loss measured over its datagrams: none.
+    rig.outbox.acknowledge(1, ImageAck{0, moved.sequence, 0, 0});
+    t = rig.cut({30, 20, 8, 8}, 2);
+    ASSERT_EQ(t.updates.size(), 1u);
+    EXPECT_EQ(t.updates[0].lossPermille, 0u);
+    rig.full();
+    EXPECT_EQ(rig.fullChannel, Channel::Image) << "a clean link: ENet's window paces it";
+    EXPECT_EQ(rig.fullLoss, 0u);
 }
 
 // A rectangle of more than ~100 datagrams goes reliably, as do those after a full image too

@@ -559,7 +559,7 @@ Outbox::Taken Outbox::take(const std::function<bool(uint16_t)>& live) {
             taken.updates.push_back({it->first, Sync::Dbi,
                                      p.lossy ? Channel::ImageLossy : Channel::Image, p.full,
                                      p.payloadBytes, p.rawBytes, std::move(p.message),
-                                     p.lossy && l != m_lossy.end() ? l->second.lossPermille : 0});
+                                     p.lossy && l != m_lossy.end() ? parityLoss(l->second) : 0});
         }
         waiting.erase(waiting.begin(), isLive ? waiting.begin() + long(n) : waiting.end());
         it = waiting.empty() ? m_images.erase(it) : std::next(it);
@@ -597,6 +597,8 @@ void Outbox::resetLossy(uint16_t id, uint32_t viewId, uint32_t fullSequence) {
     l.minRttUs = path.minRttUs;
     l.deliveredPerS = path.deliveredPerS;
     l.lossPermille = path.lossPermille;
+    l.lossMeasured = path.lossMeasured;
+    l.fullSent = path.fullSent;
 }
 
 // 1.5 round trips (or the smoothed one and four deviations, when it varies more) and a margin
@@ -635,16 +637,17 @@ int64_t Outbox::lossyWindow(const Lossy& l) {
 // A rectangle after a full image has gone, lossy or not: remembered until acknowledged, for
 // self-contained ones to carry, the window and the round trip (a reliable one may arrive after a
 // newer lossy one, which the client then has).
-// Whether `p` goes lossy, decided once it is coded. A full image that fits a lossy message, to a
-// client that reports loss: its parity carries it through a lost datagram, where a reliable one
-// waits a round trip for ENet's resend; on a clean link ENet's window paces it (64 lossy joins at
+// Whether `p` goes lossy, decided once it is coded. A full image that fits a lossy message, but
+// the join's, to a client that reports loss or has not measured it yet: its parity carries it
+// through a lost datagram, where a reliable one waits a round trip for ENet's resend. The join's,
+// and any on a link measured clean, go reliably: ENet's window paces them (64 lossy joins at
 // once overflowed a classroom's relay). A rectangle after a full image sent lossy that the client
 // has not acknowledged: a reliable one could overtake it, and be ignored and never repaired.
 bool Outbox::sendsLossy(uint16_t id, PendingImage& p) const {
     auto l = m_lossy.find(id);
     if (p.full) {
         p.lossy = p.message.size() <= kLossyMaxMessageBytes && l != m_lossy.end() &&
-                  l->second.lossPermille > 0;
+                  l->second.fullSent && (!l->second.lossMeasured || l->second.lossPermille > 0);
     } else if (p.afterFull && !p.lossy && p.message.size() <= kLossyMaxMessageBytes) {
         p.lossy = l != m_lossy.end() && l->second.fullUnacked();
     }
@@ -657,6 +660,7 @@ void Outbox::sentFull(uint16_t id, const PendingImage& p, uint64_t now) {
     if (it == m_lossy.end() || it->second.fullSequence != p.sequence)
         return;
     Lossy& l = it->second;
+    l.fullSent = true;
     l.fullSentUs = now;
     l.fullRepairs = 0;
     l.fullMessage.clear();
@@ -714,7 +718,7 @@ void Outbox::takeRepairs(const std::function<bool(uint16_t)>& live, uint64_t now
             ++l.fullRepairs;
             ++m_repairs;
             taken.updates.push_back({id, Sync::Dbi, Channel::ImageLossy, true, l.fullPayload,
-                                     l.fullRaw, l.fullMessage, l.lossPermille});
+                                     l.fullRaw, l.fullMessage, parityLoss(l)});
         }
         if (l.unacked.empty() || m_images.count(id))
             continue;
@@ -733,7 +737,7 @@ void Outbox::takeRepairs(const std::function<bool(uint16_t)>& live, uint64_t now
             continue;
         }
         taken.updates.push_back({id, Sync::Dbi, Channel::ImageLossy, false, l.newestPayload,
-                                 l.newestRaw, l.newest, l.lossPermille});
+                                 l.newestRaw, l.newest, parityLoss(l)});
     }
 }
 
@@ -753,6 +757,10 @@ void Outbox::acknowledge(uint16_t id, const ImageAck& ack) {
     }
     Lossy& l = it->second;
     l.based = true;
+    // Its figure counts once it acknowledges something sent lossy: a full image, or rectangles.
+    for (auto r = l.unacked.begin(); r != l.unacked.end() && !after(r->sequence, ack.sequence); ++r)
+        l.lossMeasured = l.lossMeasured || !r->reliable;
+    l.lossMeasured = l.lossMeasured || !l.fullMessage.empty();
     l.fullMessage = {};
     l.fullInFlight.reset();
     l.lossPermille = ack.lossPermille;

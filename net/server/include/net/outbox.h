@@ -146,6 +146,9 @@ public:
     // raw client) goes reliably on Channel::Image, still naming its full image, and is never
     // repaired, and a larger full image goes reliably.
     static constexpr size_t kLossyMaxMessageBytes = 128 * 1024;
+    // The loss parity is sized for before the client's figure counts (Lossy::lossMeasured): 1 %,
+    // a long link's; a LAN's costs a stripe a few fragments until its first acknowledgement.
+    static constexpr uint32_t kAssumedLossPermille = 10;
     // Unacknowledged rectangles kept per client; past it the oldest two merge (a client that
     // never acknowledges costs a bounded list).
     static constexpr size_t kMaxUnacked = 32;
@@ -211,7 +214,11 @@ private:
         double srttUs = 0, rttVarUs = 0; // 0: no round trip measured yet
         double minRttUs = 0;             // the shortest round trip measured (0: none)
         double deliveredPerS = 0;        // lossy bytes acknowledged a second, smoothed
-        uint32_t lossPermille = 0;       // the loss the client last reported (its parity's)
+        uint32_t lossPermille = 0;       // the loss the client last reported
+        // The client has acknowledged something sent lossy, so its figure counts; until then its
+        // parity is for kAssumedLossPermille.
+        bool lossMeasured = false;
+        bool fullSent = false; // a full image has gone (the join's goes reliably, see sendsLossy)
         // The full image sent lossy and not yet acknowledged (empty when none): re-sent past the
         // repair timeout.
         std::vector<uint8_t> fullMessage;
@@ -278,6 +285,9 @@ private:
     void stampTimes(ImageUpdate& u, ImageTiming timing, uint64_t codedFromUs);
     bool lossyHeldBack(const Lossy& l, uint64_t now) const;
     static int64_t lossyWindow(const Lossy& l);
+    static uint32_t parityLoss(const Lossy& l) {
+        return l.lossMeasured ? l.lossPermille : kAssumedLossPermille;
+    }
     static uint64_t repairTimeout(const Lossy& l);
     void sentAfterFull(uint16_t id, PendingImage& p, uint64_t now);
     void sentFull(uint16_t id, const PendingImage& p, uint64_t now);
