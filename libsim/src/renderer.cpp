@@ -526,6 +526,30 @@ cellBits(const Frame& f, v8si bi, v8su bit, unsigned& nonEmpty, unsigned& setBit
     }
 }
 
+// The trilinear density at eight positions (p) in cells (i) inside the volume, lanes of `lanes`
+// (others read voxel 0): each cell's four voxel rows by gathers, then sample8's arithmetic
+// (trilinearCorners' operations lane by lane).
+__attribute__((target("avx2,bmi2"), always_inline)) inline v8sf
+trilinearGathered(const Frame& f, v8sf px, v8sf py, v8sf pz, v8si ix, v8si iy, v8si iz,
+                  v8si lanes) {
+    const int* const voxels = reinterpret_cast<const int*>(f.density);
+    const v8si base = lanes ? ix + int(f.sy) * iy + int(f.sz) * iz : v8si{};
+    const v8su r0 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)base, 1);
+    const v8su r1 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sy)), 1);
+    const v8su r2 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sz)), 1);
+    const v8su r3 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sz + f.sy)), 1);
+    auto lo = [](v8su w) { return __builtin_convertvector(v8si(w & 255u), v8sf); };
+    auto hi = [](v8su w) { return __builtin_convertvector(v8si((w >> 8) & 255u), v8sf); };
+    const v8sf tx = px - __builtin_convertvector(ix, v8sf),
+               ty = py - __builtin_convertvector(iy, v8sf),
+               tz = pz - __builtin_convertvector(iz, v8sf);
+    const v8sf ux = 1.0f - tx, uy = 1.0f - ty, uz = 1.0f - tz;
+    const v8sf c00 = ux * lo(r0) + tx * hi(r0), c10 = ux * lo(r1) + tx * hi(r1);
+    const v8sf c01 = ux * lo(r2) + tx * hi(r2), c11 = ux * lo(r3) + tx * hi(r3);
+    const v8sf c0 = uy * c00 + ty * c10, c1 = uy * c01 + ty * c11;
+    return uz * c0 + tz * c1;
+}
+
 // The AVX2 build's march step: samples k .. k + 7 at once, as far as they stay in bricks that
 // may hold surface, in cells inside the volume, and at most kEnd. Lane by lane the scalar loop's
 // arithmetic (positions, floors, the cell test, the trilinear sample of insideSample), with the
@@ -565,23 +589,7 @@ __attribute__((target("avx2,bmi2"))) inline int marchEight(const Frame& f, const
     // The trilinear samples (sample8's arithmetic, trilinearCorners' operations lane by lane);
     // lanes that do not qualify read voxel 0.
     const v8si ok = (v8si{1, 2, 4, 8, 16, 32, 64, 128} & int(okMask)) != 0;
-    const v8si base = ok ? ix + int(f.sy) * iy + int(f.sz) * iz : v8si{};
-    // (A lambda would not inherit this function's target, and the gather needs it.)
-    const int* const voxels = reinterpret_cast<const int*>(f.density);
-    const v8su r0 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)base, 1);
-    const v8su r1 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sy)), 1);
-    const v8su r2 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sz)), 1);
-    const v8su r3 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sz + f.sy)), 1);
-    auto lo = [](v8su w) { return __builtin_convertvector(v8si(w & 255u), v8sf); };
-    auto hi = [](v8su w) { return __builtin_convertvector(v8si((w >> 8) & 255u), v8sf); };
-    const v8sf tx = px - __builtin_convertvector(ix, v8sf),
-               ty = py - __builtin_convertvector(iy, v8sf),
-               tz = pz - __builtin_convertvector(iz, v8sf);
-    const v8sf ux = 1.0f - tx, uy = 1.0f - ty, uz = 1.0f - tz;
-    const v8sf c00 = ux * lo(r0) + tx * hi(r0), c10 = ux * lo(r1) + tx * hi(r1);
-    const v8sf c01 = ux * lo(r2) + tx * hi(r2), c11 = ux * lo(r3) + tx * hi(r3);
-    const v8sf c0 = uy * c00 + ty * c10, c1 = uy * c01 + ty * c11;
-    const v8sf v = uz * c0 + tz * c1;
+    const v8sf v = trilinearGathered(f, px, py, pz, ix, iy, iz, ok);
     const unsigned inside =
         unsigned(_mm256_movemask_ps((__m256)(v >= float(kSurfaceDensity)))) & setMask;
     const unsigned below = inside ? setMask & ((1u << __builtin_ctz(inside)) - 1u) : setMask;
@@ -810,7 +818,6 @@ struct Packet {
 __attribute__((target("avx2,bmi2"), always_inline)) inline void
 stepPacket(const Frame& f, Packet& pk, v8si& k, unsigned& live, unsigned& hitLanes) {
     constexpr int S = BrickGrid::kShift;
-    const int* const voxels = reinterpret_cast<const int*>(f.density);
     const v8sf t = __builtin_convertvector(k, v8sf) * f.dt;
     const v8sf px = f.origin.x + t * pk.dvx, py = f.origin.y + t * pk.dvy,
                pz = f.origin.z + t * pk.dvz;
@@ -828,21 +835,7 @@ stepPacket(const Frame& f, Packet& pk, v8si& k, unsigned& live, unsigned& hitLan
     const unsigned setMask = setBits & live;
     if (setMask != 0) {
         const v8si laneSet = (v8si{1, 2, 4, 8, 16, 32, 64, 128} & int(setMask)) != 0;
-        const v8si base = laneSet ? ix + int(f.sy) * iy + int(f.sz) * iz : v8si{};
-        const v8su r0 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)base, 1);
-        const v8su r1 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sy)), 1);
-        const v8su r2 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sz)), 1);
-        const v8su r3 = (v8su)_mm256_i32gather_epi32(voxels, (__m256i)(base + int(f.sz + f.sy)), 1);
-        auto lo = [](v8su w) { return __builtin_convertvector(v8si(w & 255u), v8sf); };
-        auto hi = [](v8su w) { return __builtin_convertvector(v8si((w >> 8) & 255u), v8sf); };
-        const v8sf tx = px - __builtin_convertvector(ix, v8sf),
-                   ty = py - __builtin_convertvector(iy, v8sf),
-                   tz = pz - __builtin_convertvector(iz, v8sf);
-        const v8sf ux = 1.0f - tx, uy = 1.0f - ty, uz = 1.0f - tz;
-        const v8sf c00 = ux * lo(r0) + tx * hi(r0), c10 = ux * lo(r1) + tx * hi(r1);
-        const v8sf c01 = ux * lo(r2) + tx * hi(r2), c11 = ux * lo(r3) + tx * hi(r3);
-        const v8sf c0 = uy * c00 + ty * c10, c1 = uy * c01 + ty * c11;
-        const v8sf v = uz * c0 + tz * c1;
+        const v8sf v = trilinearGathered(f, px, py, pz, ix, iy, iz, laneSet);
         const v8si in = v >= float(kSurfaceDensity);
         const unsigned inside = unsigned(_mm256_movemask_ps((__m256)in)) & setMask;
         // Computed and below: the last sample outside so far.

@@ -6,6 +6,7 @@
 #include "net/session_client.h"
 #include "net/view.h"
 
+#include "libsim/dbi_preview.h"
 #include "libsim/skull.h"
 #include "net/codec.h"
 #include "net/image_delta.h"
@@ -326,15 +327,16 @@ TEST(LossyOutbox, ChainedRectanglesArePredictedSelfContainedOnesPlanar) {
     EXPECT_EQ(rectOf(fourth), (PixelRect{20, 8, 10, 10}));
 }
 
-// A full image that fits a lossy message goes lossy to a client that reports loss, and so do the
-// rectangles after it before its acknowledgement, chained on it (a reliable one could overtake it,
-// be ignored and never be repaired). Unacknowledged past the repair timeout it goes again; once
-// acknowledged, not.
+// A full image that fits a lossy message goes lossy once a round trip is measured, to a client
+// that has not measured a clean link, and so do the rectangles after it before its
+// acknowledgement, chained on it (a reliable one could overtake it, be ignored and never be
+// repaired). Unacknowledged past the repair timeout it goes again; once acknowledged, not.
 TEST(LossyOutbox, ASmallFullImageAndTheRectanglesAfterItGoLossyAndItIsResent) {
     Rig rig;
-    rig.full(); // the join's: it goes reliably
+    const ImageUpdate join = rig.full(false); // the join's: it goes reliably
     EXPECT_EQ(rig.fullChannel, Channel::Image);
-    rig.outbox.acknowledge(1, ImageAck{0, rig.full().sequence, 0, 10});
+    rig.clock.advance(50'000);
+    rig.outbox.acknowledge(1, ImageAck{0, join.sequence, 0, 30}); // the first round trip
     const ImageUpdate f = rig.full(false);
     EXPECT_EQ(rig.fullChannel, Channel::ImageLossy);
     const PixelRect a{4, 4, 10, 6};
@@ -349,37 +351,58 @@ TEST(LossyOutbox, ASmallFullImageAndTheRectanglesAfterItGoLossyAndItIsResent) {
     EXPECT_TRUE(t.updates[0].full);
     EXPECT_EQ(t.updates[0].channel, Channel::ImageLossy);
     EXPECT_EQ(decoded(t.updates[0]).sequence, f.sequence);
-    EXPECT_EQ(t.updates[0].lossPermille, 10u);
+    EXPECT_EQ(t.updates[0].lossPermille, Outbox::kAssumedLossPermille) << "not measured yet";
     EXPECT_EQ(rig.outbox.repairs(), 2u);
-    // Acknowledged, with the loss the client measures: that sizes the parity from then on.
+    // Acknowledged: the loss the client reports sizes the parity once it has acknowledged
+    // kLossMeasuredBytes sent lossy (BeforeTheClientsLossCounts...), not yet.
     rig.outbox.acknowledge(1, ImageAck{0, f.sequence, 0, 50});
     rig.clock.advance(10 * rig.outbox.repairTimeoutUs(1));
     t = rig.outbox.take(live);
     ASSERT_EQ(t.updates.size(), 1u) << "only the rectangle";
     EXPECT_FALSE(t.updates[0].full);
-    EXPECT_EQ(t.updates[0].lossPermille, 50u);
+    EXPECT_EQ(t.updates[0].lossPermille, Outbox::kAssumedLossPermille);
 }
 
-// Until the client acknowledges something sent lossy its loss figure says nothing, and parity is
-// for kAssumedLossPermille: a full image then goes lossy (a view change right after a join over a
-// long lossy link does not wait a round trip for ENet's resend), but not the join's, which ENet's
-// window paces. Once the client reports a clean link from lossy datagrams, full images go
-// reliably and rectangles carry no parity.
+// Until the client has acknowledged kLossMeasuredBytes sent lossy, its loss figure (smoothed from
+// zero) says little, and parity is for kAssumedLossPermille. A full image then goes lossy once a
+// round trip is measured (a view change right after a join over a long lossy link does not wait
+// for ENet's resend), but not the join's, which ENet's window paces and whose acknowledgement
+// gives that round trip; a preview before it does not count as the join's. Once the client's
+// figure counts and reads a clean link, full images go reliably and rectangles carry no parity.
 TEST(LossyOutbox, BeforeTheClientsLossCountsAFullImageButTheJoinsGoesLossy) {
     Rig rig;
+    rig.outbox.postFullImage(1, previewCamera(rig.cam), Dbi(32, 24), 1, true);
+    Outbox::Taken t = rig.outbox.take(live);
+    ASSERT_EQ(t.updates.size(), 1u);
+    EXPECT_EQ(t.updates[0].channel, Channel::Image) << "the join's preview";
     const ImageUpdate join = rig.full(false);
-    EXPECT_EQ(rig.fullChannel, Channel::Image) << "the join's";
+    EXPECT_EQ(rig.fullChannel, Channel::Image) << "the join's exact picture";
+    rig.clock.advance(120'000);
     rig.outbox.acknowledge(1, ImageAck{0, join.sequence, 0, 0}); // nothing lossy received yet
-    Outbox::Taken t = rig.cut({4, 4, 10, 6}, 1);
+    const uint64_t timeout = rig.outbox.repairTimeoutUs(1);
+    EXPECT_GE(timeout, 180'000u) << "its round trip, delivery included, times the repairs";
+    t = rig.cut({4, 4, 10, 6}, 1);
     ASSERT_EQ(t.updates.size(), 1u);
     EXPECT_EQ(t.updates[0].channel, Channel::ImageLossy);
     EXPECT_EQ(t.updates[0].lossPermille, Outbox::kAssumedLossPermille);
     const ImageUpdate moved = rig.full(false); // a view change's
     EXPECT_EQ(rig.fullChannel, Channel::ImageLossy);
     EXPECT_EQ(rig.fullLoss, Outbox::kAssumedLossPermille);
-    // Acknowledged with the loss measured over its datagrams: none.
+    // A first report of no loss over a few datagrams is not yet a measurement.
     rig.outbox.acknowledge(1, ImageAck{0, moved.sequence, 0, 0});
-    t = rig.cut({30, 20, 8, 8}, 2);
+    rig.full(false);
+    EXPECT_EQ(rig.fullChannel, Channel::ImageLossy);
+    // Whole-frame rectangles acknowledged with no loss until the figure counts.
+    int64_t acked = 0;
+    for (int seed = 2; acked < Outbox::kLossMeasuredBytes; ++seed) {
+        rig.clock.advance(1000);
+        t = rig.cut(rig.frame.bounds(), seed);
+        ASSERT_EQ(t.updates.size(), 1u);
+        ASSERT_EQ(t.updates[0].channel, Channel::ImageLossy);
+        acked += int64_t(t.updates[0].message.size());
+        rig.outbox.acknowledge(1, ImageAck{0, decoded(t.updates[0]).sequence, 0, 0});
+    }
+    t = rig.cut({30, 20, 8, 8}, 1);
     ASSERT_EQ(t.updates.size(), 1u);
     EXPECT_EQ(t.updates[0].lossPermille, 0u);
     rig.full();

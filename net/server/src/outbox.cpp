@@ -358,6 +358,7 @@ void Outbox::codeApart(uint16_t id, CodingJob job) {
     p.causeUs = job.update.causeServerUs;
     p.inFlight = m_clients[id].inFlight;
     p.coding = true;
+    p.preview = job.update.preview;
     {
         std::lock_guard lock(m_mutex);
         p.ticket = job.ticket = ++m_tickets;
@@ -597,7 +598,7 @@ void Outbox::resetLossy(uint16_t id, uint32_t viewId, uint32_t fullSequence) {
     l.minRttUs = path.minRttUs;
     l.deliveredPerS = path.deliveredPerS;
     l.lossPermille = path.lossPermille;
-    l.lossMeasured = path.lossMeasured;
+    l.lossyAckedBytes = path.lossyAckedBytes;
     l.fullSent = path.fullSent;
 }
 
@@ -637,17 +638,19 @@ int64_t Outbox::lossyWindow(const Lossy& l) {
 // A rectangle after a full image has gone, lossy or not: remembered until acknowledged, for
 // self-contained ones to carry, the window and the round trip (a reliable one may arrive after a
 // newer lossy one, which the client then has).
-// Whether `p` goes lossy, decided once it is coded. A full image that fits a lossy message, but
-// the join's, to a client that reports loss or has not measured it yet: its parity carries it
-// through a lost datagram, where a reliable one waits a round trip for ENet's resend. The join's,
-// and any on a link measured clean, go reliably: ENet's window paces them (64 lossy joins at
-// once overflowed a classroom's relay). A rectangle after a full image sent lossy that the client
-// has not acknowledged: a reliable one could overtake it, and be ignored and never repaired.
+// Whether `p` goes lossy, decided once it is coded. A full image that fits a lossy message, once
+// a round trip is measured (the join's acknowledgement gives the first), to a client that reports
+// loss or has not measured it yet: its parity carries it through a lost datagram, where a
+// reliable one waits a round trip for ENet's resend. The join's, any before that round trip, and
+// any on a link measured clean go reliably: ENet's window paces them, and a lossy one's re-send
+// needs the round trip (64 lossy joins at once, re-sent every 250 ms, overflowed a classroom's
+// relay). A rectangle after a full image sent lossy that the client has not acknowledged: a
+// reliable one could overtake it, and be ignored and never repaired.
 bool Outbox::sendsLossy(uint16_t id, PendingImage& p) const {
     auto l = m_lossy.find(id);
     if (p.full) {
         p.lossy = p.message.size() <= kLossyMaxMessageBytes && l != m_lossy.end() &&
-                  l->second.fullSent && (!l->second.lossMeasured || l->second.lossPermille > 0);
+                  l->second.srttUs > 0 && (!l->second.lossMeasured() || l->second.lossPermille > 0);
     } else if (p.afterFull && !p.lossy && p.message.size() <= kLossyMaxMessageBytes) {
         p.lossy = l != m_lossy.end() && l->second.fullUnacked();
     }
@@ -660,7 +663,7 @@ void Outbox::sentFull(uint16_t id, const PendingImage& p, uint64_t now) {
     if (it == m_lossy.end() || it->second.fullSequence != p.sequence)
         return;
     Lossy& l = it->second;
-    l.fullSent = true;
+    l.fullSent = l.fullSent || !p.preview;
     l.fullSentUs = now;
     l.fullRepairs = 0;
     l.fullMessage.clear();
@@ -756,11 +759,15 @@ void Outbox::acknowledge(uint16_t id, const ImageAck& ack) {
         return;
     }
     Lossy& l = it->second;
+    // The first acknowledgement of the join's exact full image, never re-sent, is the first round
+    // trip: an upper bound (it includes the image's delivery), for the repair timeout only.
+    if (!l.based && l.srttUs <= 0 && l.fullSent && l.fullRepairs == 0 && l.fullSentUs > 0 &&
+        now > l.fullSentUs) {
+        l.srttUs = double(now - l.fullSentUs);
+        l.rttVarUs = l.srttUs / 2;
+    }
     l.based = true;
-    // Its figure counts once it acknowledges something sent lossy: a full image, or rectangles.
-    for (auto r = l.unacked.begin(); r != l.unacked.end() && !after(r->sequence, ack.sequence); ++r)
-        l.lossMeasured = l.lossMeasured || !r->reliable;
-    l.lossMeasured = l.lossMeasured || !l.fullMessage.empty();
+    l.lossyAckedBytes += int64_t(l.fullMessage.size());
     l.fullMessage = {};
     l.fullInFlight.reset();
     l.lossPermille = ack.lossPermille;
@@ -790,6 +797,7 @@ void Outbox::acknowledge(uint16_t id, const ImageAck& ack) {
     int64_t bytes = 0;
     for (auto r = l.unacked.begin(); r != acked; ++r)
         bytes += r->reliable ? 0 : r->bytes;
+    l.lossyAckedBytes += bytes;
     if (l.lastAckUs && now > l.lastAckUs && bytes > 0) {
         const double rate = double(bytes) * 1e6 / double(now - l.lastAckUs);
         l.deliveredPerS = l.deliveredPerS > 0 ? 0.8 * l.deliveredPerS + 0.2 * rate : rate;

@@ -3,8 +3,9 @@
 // merges into the waiting one, so a region is never queued twice and the newest pixels or voxels
 // win. It keeps each zstd client's copy of its DBI (the shadow predicted updates are coded
 // against) and holds a client back while ENet still holds more than maxInFlightBytes of its
-// updates. Full images go reliably, or lossy to a client that reports loss; the rectangles after
-// one go lossy (Channel::ImageLossy, with parity for the loss the client reports), in one of two
+// updates. Full images go reliably, or lossy once a round trip is measured to a client that has
+// not measured a clean link (sendsLossy); the rectangles after one go lossy (Channel::ImageLossy,
+// with parity for the loss the client reports, or 1 % before its figure counts), in one of two
 // forms. Chained: only its own pixels, predicted against the picture the client holds once the
 // one before it arrives (ImageUpdate::baseSequence), as small as a reliable update.
 // Self-contained: every rectangle the client has not acknowledged, at current pixels. Rectangles
@@ -142,13 +143,14 @@ public:
     static constexpr int64_t kLossyWindowBytes = 256 * 1024;
     static constexpr int64_t kLossyMinWindowBytes = 8 * 1024, kLossyStartBytes = 64 * 1024;
     // The largest image sent lossy (~100 datagrams, four stripes each lost at most once in a
-    // thousand at the parity for the reported loss); a larger rectangle (a large view's union, a
+    // thousand at the parity for the client's loss); a larger rectangle (a large view's union, a
     // raw client) goes reliably on Channel::Image, still naming its full image, and is never
     // repaired, and a larger full image goes reliably.
     static constexpr size_t kLossyMaxMessageBytes = 128 * 1024;
-    // The loss parity is sized for before the client's figure counts (Lossy::lossMeasured): 1 %,
-    // a long link's; a LAN's costs a stripe a few fragments until its first acknowledgement.
+    // The loss parity is sized for before the client's figure counts (Lossy::lossMeasured()): 1 %,
+    // a long link's; a LAN's costs a stripe a few fragments for its first ~200 datagrams.
     static constexpr uint32_t kAssumedLossPermille = 10;
+    static constexpr int64_t kLossMeasuredBytes = 256 * 1024;
     // Unacknowledged rectangles kept per client; past it the oldest two merge (a client that
     // never acknowledges costs a bounded list).
     static constexpr size_t kMaxUnacked = 32;
@@ -188,6 +190,7 @@ private:
         bool coding = false;    // coded apart, not yet done: it and what follows it wait
         bool lossy = false;     // a rectangle on Channel::ImageLossy
         bool afterFull = false; // a rectangle naming its full image (lossy or not)
+        bool preview = false;   // a new view's half-size first picture (ImageUpdate::preview)
         uint32_t sequence = 0;
         uint32_t baseSequence = 0; // chained: the image it builds on (ImageUpdate::baseSequence)
     };
@@ -215,10 +218,11 @@ private:
         double minRttUs = 0;             // the shortest round trip measured (0: none)
         double deliveredPerS = 0;        // lossy bytes acknowledged a second, smoothed
         uint32_t lossPermille = 0;       // the loss the client last reported
-        // The client has acknowledged something sent lossy, so its figure counts; until then its
-        // parity is for kAssumedLossPermille.
-        bool lossMeasured = false;
-        bool fullSent = false; // a full image has gone (the join's goes reliably, see sendsLossy)
+        // Lossy bytes the client has acknowledged: its figure (smoothed over ~256 datagrams from
+        // zero) counts from kLossMeasuredBytes on; until then parity is for kAssumedLossPermille.
+        int64_t lossyAckedBytes = 0;
+        bool lossMeasured() const { return lossyAckedBytes >= kLossMeasuredBytes; }
+        bool fullSent = false; // an exact full image has gone (the join's goes reliably)
         // The full image sent lossy and not yet acknowledged (empty when none): re-sent past the
         // repair timeout.
         std::vector<uint8_t> fullMessage;
@@ -286,7 +290,7 @@ private:
     bool lossyHeldBack(const Lossy& l, uint64_t now) const;
     static int64_t lossyWindow(const Lossy& l);
     static uint32_t parityLoss(const Lossy& l) {
-        return l.lossMeasured ? l.lossPermille : kAssumedLossPermille;
+        return l.lossMeasured() ? l.lossPermille : kAssumedLossPermille;
     }
     static uint64_t repairTimeout(const Lossy& l);
     void sentAfterFull(uint16_t id, PendingImage& p, uint64_t now);
