@@ -635,9 +635,6 @@ int64_t Outbox::lossyWindow(const Lossy& l) {
     return std::clamp(int64_t(window), kLossyMinWindowBytes, kLossyWindowBytes);
 }
 
-// A rectangle after a full image has gone, lossy or not: remembered until acknowledged, for
-// self-contained ones to carry, the window and the round trip (a reliable one may arrive after a
-// newer lossy one, which the client then has).
 // Whether `p` goes lossy, decided once it is coded. A full image that fits a lossy message, once
 // a round trip is measured (the join's acknowledgement gives the first), to a client that reports
 // loss or has not measured it yet: its parity carries it through a lost datagram, where a
@@ -675,6 +672,9 @@ void Outbox::sentFull(uint16_t id, const PendingImage& p, uint64_t now) {
     }
 }
 
+// A rectangle after a full image has gone, lossy or not: remembered until acknowledged, for
+// self-contained ones to carry, the window and the round trip (a reliable one may arrive after a
+// newer lossy one, which the client then has).
 void Outbox::sentAfterFull(uint16_t id, PendingImage& p, uint64_t now) {
     auto it = m_lossy.find(id);
     if (it == m_lossy.end())

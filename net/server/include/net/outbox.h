@@ -222,7 +222,7 @@ private:
         // zero) counts from kLossMeasuredBytes on; until then parity is for kAssumedLossPermille.
         int64_t lossyAckedBytes = 0;
         bool lossMeasured() const { return lossyAckedBytes >= kLossMeasuredBytes; }
-        bool fullSent = false; // an exact full image has gone (the join's goes reliably)
+        bool fullSent = false; // an exact full image has gone: its acknowledgement is a round trip
         // The full image sent lossy and not yet acknowledged (empty when none): re-sent past the
         // repair timeout.
         std::vector<uint8_t> fullMessage;
