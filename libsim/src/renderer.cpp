@@ -1431,8 +1431,18 @@ void Renderer::render(const Camera& camera, const PixelRect& rect, Dbi& frame) c
 
 void Renderer::render(const Camera& camera, const PixelRect& rect, Dbi& frame,
                       HitCache* cache) const {
+    prepare(camera, frame, cache);
+    // Inside the camera's window too: the hit cache is sized and strided by it, and the assert
+    // in prepare() is gone from a release build.
+    PixelRect r =
+        intersect(intersect(rect, frame.bounds()), PixelRect(0, 0, camera.width, camera.height));
+    renderInto(camera, r, frame, r.x, r.y, cache, Tiling{});
+}
+
+void Renderer::prepare(const Camera& camera, const Dbi& frame, HitCache* cache) const {
     assert(frame.width() == camera.width && frame.height() == camera.height &&
            "Renderer::render: the frame must be the camera's window size");
+    (void)frame;
     if (cache && !cache->validFor(*this, camera)) {
         // Another view or a volume that may have gained density: start afresh. 0 (unknown) is a
         // valid lower bound for every pixel.
@@ -1444,18 +1454,13 @@ void Renderer::render(const Camera& camera, const PixelRect& rect, Dbi& frame,
         cache->m_inside.assign(size_t(camera.width) * size_t(camera.height), 0);
         cache->m_resumed = 0;
     }
-    // Inside the camera's window too: the hit cache is sized and strided by it, and the assert
-    // above is gone from a release build.
-    PixelRect r =
-        intersect(intersect(rect, frame.bounds()), PixelRect(0, 0, camera.width, camera.height));
-    renderInto(camera, r, frame, r.x, r.y, cache);
 }
 
 Dbi Renderer::renderRect(const Camera& camera, const PixelRect& rect) const {
     assert(PixelRect(0, 0, camera.width, camera.height).contains(rect) &&
            "Renderer::renderRect: rectangle outside the window");
     Dbi out(rect.w, rect.h);
-    renderInto(camera, rect, out, 0, 0, nullptr);
+    renderInto(camera, rect, out, 0, 0, nullptr, Tiling{});
     return out;
 }
 
@@ -1467,8 +1472,8 @@ struct TileJob {
     PixelRect rect;
     Dbi& out;
     int outX, outY;
-    int tile, tilesX;
-    int32_t* cacheResume; // the hit cache's arrays (null: no cache)
+    int tile, tileH, tilesX; // tile's width, height; tiles in a row
+    int32_t* cacheResume;    // the hit cache's arrays (null: no cache)
     uint8_t* cacheInside;
     size_t cacheStride;
     bool batchHits;
@@ -1653,14 +1658,15 @@ __attribute__((always_inline)) inline void renderTileBody(const TileJob& job, in
     const Frame& f = job.f;
     const PixelRect& rect = job.rect;
     Dbi& out = job.out;
-    const int outX = job.outX, outY = job.outY, tile = job.tile, tilesX = job.tilesX;
+    const int outX = job.outX, outY = job.outY, tile = job.tile, tileH = job.tileH,
+              tilesX = job.tilesX;
     int32_t* const cacheResume = job.cacheResume;
     uint8_t* const cacheInside = job.cacheInside;
     const size_t cacheStride = job.cacheStride;
     std::atomic<int64_t>& resumed = job.resumed;
     int tx = i % tilesX, ty = i / tilesX;
-    int x0 = rect.x + tx * tile, y0 = rect.y + ty * tile;
-    int x1 = std::min(x0 + tile, rect.x + rect.w), y1 = std::min(y0 + tile, rect.y + rect.h);
+    int x0 = rect.x + tx * tile, y0 = rect.y + ty * tileH;
+    int x1 = std::min(x0 + tile, rect.x + rect.w), y1 = std::min(y0 + tileH, rect.y + rect.h);
     int64_t known = 0;
     // The tile's part of the hit cache, in this thread's own copy, read once and written
     // back once: tiles side by side (other threads) share cache lines of the per-pixel
@@ -1833,28 +1839,20 @@ bool cpuHasAvx2() {
 
 } // namespace
 
-void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, int outX, int outY,
-                          HitCache* cache) const {
+int Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, int outX, int outY,
+                         HitCache* cache, const Tiling& tiling) const {
     if (rect.empty() || m_volume->empty())
-        return;
+        return 0;
     const Frame f = makeFrame(*m_volume, camera, m_options, m_bricks);
     const int tile = std::max(4, m_options.tileSize);
-    const int tilesX = (rect.w + tile - 1) / tile, tilesY = (rect.h + tile - 1) / tile;
+    const int tileH = tiling.columns ? rect.h : tile;
+    const int tilesX = (rect.w + tile - 1) / tile, tilesY = (rect.h + tileH - 1) / tileH;
     int32_t* cacheResume = cache ? cache->m_resume.data() : nullptr;
     uint8_t* cacheInside = cache ? cache->m_inside.data() : nullptr;
     const size_t cacheStride = size_t(camera.width);
     std::atomic<int64_t> resumed{0};
-    const TileJob job{f,
-                      rect,
-                      out,
-                      outX,
-                      outY,
-                      tile,
-                      tilesX,
-                      cacheResume,
-                      cacheInside,
-                      cacheStride,
-                      m_options.batchHits,
+    const TileJob job{f,      rect,   out,         outX,        outY,        tile,
+                      tileH,  tilesX, cacheResume, cacheInside, cacheStride, m_options.batchHits,
                       resumed};
     const bool avx2 = m_options.avx2 && cpuHasAvx2();
     auto renderTile = [&](int i) {
@@ -1863,13 +1861,42 @@ void Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out,
         else
             renderTileBaseline(job, i);
     };
-    if (m_pool)
-        m_pool->parallelFor(tilesX * tilesY, renderTile);
-    else
-        for (int i = 0; i < tilesX * tilesY; ++i)
+    const int tiles = tilesX * tilesY;
+    ThreadPool* pool = tiling.pool ? tiling.pool : m_pool;
+    int done = tiles;
+    if (tiling.stop) {
+        const int atLeast =
+            int((int64_t(tiling.atLeast) + int64_t(tile) * tileH - 1) / (int64_t(tile) * tileH));
+        if (pool) {
+            done = pool->parallelForUntil(tiles, renderTile, *tiling.stop, atLeast);
+        } else {
+            done = 0;
+            while (done < tiles && (done < atLeast || !(*tiling.stop)()))
+                renderTile(done++);
+        }
+    } else if (pool) {
+        pool->parallelFor(tiles, renderTile);
+    } else {
+        for (int i = 0; i < tiles; ++i)
             renderTile(i);
+    }
     if (cache)
         cache->m_resumed += resumed.load(std::memory_order_relaxed);
+    return done;
+}
+
+int Renderer::renderBulk(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache,
+                         const std::function<bool()>& stop, int atLeast) const {
+    // render()'s clipping and cache set-up, then its columns of tiles in order.
+    PixelRect r =
+        intersect(intersect(rect, frame.bounds()), PixelRect(0, 0, camera.width, camera.height));
+    if (r.empty() || m_volume->empty())
+        return rect.w; // nothing to render: all of it done
+    prepare(camera, frame, cache);
+    const int tile = std::max(4, m_options.tileSize);
+    const int w = std::min(r.w, tile * renderInto(camera, r, frame, r.x, r.y, cache,
+                                                  {m_bulkPool, true, &stop, std::max(atLeast, 1)}));
+    return w == r.w ? rect.w : r.x - rect.x + w;
 }
 
 } // namespace trephine

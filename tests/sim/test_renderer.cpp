@@ -10,6 +10,7 @@
 #include "libsim/thread_pool.h"
 
 #include <atomic>
+#include <cerrno>
 #include <cmath>
 #include <cstring>
 #include <glm/gtc/quaternion.hpp>
@@ -21,7 +22,10 @@
 #include <random>
 #include <set>
 #include <string>
+#include <sys/resource.h>
+#include <sys/syscall.h>
 #include <thread>
+#include <unistd.h>
 #include <vector>
 
 namespace trephine {
@@ -231,6 +235,111 @@ TEST(ThreadPool, NamesItsWorkersAfterThePool) {
     EXPECT_EQ(namesOf(render), (std::multiset<std::string>{caller, "render-1", "render-2"}));
     ThreadPool longName(2, "a-very-long-pool-name");
     EXPECT_EQ(namesOf(longName), (std::multiset<std::string>{caller, "a-very-long-p-1"}));
+}
+
+// A job that may stop does its first items and no others, each once: `atLeast` of them without
+// asking, then as many as were started before `stop` said so (asked from any thread; a worker's
+// first item is claimed without asking), exactly those on one thread.
+TEST(ThreadPool, AJobThatStopsHasDoneItsFirstItemsAndNoOthers) {
+    for (int threads : {1, 2, 5}) {
+        SCOPED_TRACE(threads);
+        ThreadPool pool(threads);
+        std::mt19937 rng(5);
+        for (int job = 0; job < 300; ++job) {
+            const int count = std::uniform_int_distribution<int>(1, 60)(rng);
+            const int stopAfter = std::uniform_int_distribution<int>(0, 70)(rng);
+            const int atLeast = std::uniform_int_distribution<int>(0, 8)(rng);
+            std::vector<std::atomic<int>> hits(static_cast<size_t>(count));
+            std::atomic<int> done{0};
+            const int got = pool.parallelForUntil(
+                count,
+                [&](int i) {
+                    if (i % 5 == 2)
+                        std::this_thread::yield();
+                    hits[size_t(i)].fetch_add(1);
+                    done.fetch_add(1);
+                },
+                [&] { return done.load() >= stopAfter; }, atLeast);
+            ASSERT_EQ(done.load(), got) << "job " << job;
+            const int owed = std::min(count, std::max(atLeast, stopAfter));
+            if (threads == 1) {
+                ASSERT_EQ(got, owed) << "job " << job;
+            }
+            ASSERT_GE(got, owed) << "job " << job;
+            ASSERT_LE(got, std::min(count, owed + threads)) << "job " << job;
+            for (int i = 0; i < count; ++i)
+                ASSERT_EQ(hits[size_t(i)].load(), i < got ? 1 : 0)
+                    << "job " << job << " item " << i;
+        }
+    }
+}
+
+// A background pool's work runs on its workers, at its nice value; the caller only waits.
+TEST(ThreadPool, ABackgroundPoolsWorkRunsOnItsWorkersAtItsNiceValue) {
+    ThreadPool background(2, "bulk", 7);
+    EXPECT_EQ(background.size(), 2);
+    const pid_t caller = pid_t(syscall(SYS_gettid));
+    std::mutex mutex;
+    std::set<pid_t> threads;
+    std::set<int> nices;
+    for (int job = 0; job < 20; ++job)
+        background.parallelFor(8, [&](int) {
+            const pid_t self = pid_t(syscall(SYS_gettid));
+            errno = 0;
+            const int nice = getpriority(PRIO_PROCESS, id_t(self));
+            std::lock_guard lock(mutex);
+            threads.insert(self);
+            nices.insert(nice);
+        });
+    EXPECT_EQ(threads.count(caller), 0u);
+    EXPECT_LE(threads.size(), 2u);
+    EXPECT_EQ(nices, std::set<int>{7});
+    EXPECT_EQ(getpriority(PRIO_PROCESS, id_t(caller)), 0) << "the caller keeps its own";
+    EXPECT_EQ(background.parallelForUntil(
+                  8, [](int) {}, [] { return true; }, 3),
+              3);
+}
+
+// Bulk pieces (columns of tiles, stopped anywhere, on a background pool) assemble the full
+// frame bit for bit, through the hit cache too.
+TEST(Renderer, BulkPiecesStoppedAnywhereChangeNoBit) {
+    Volume skull = makeSkull(48);
+    ThreadPool pool(2), bulk(2, "bulk", 5);
+    Renderer renderer(skull, &pool);
+    renderer.setBulkPool(&bulk);
+    std::mt19937 rng(11);
+    for (const char* preset : {"paper", "top"}) {
+        SCOPED_TRACE(preset);
+        const Camera c = cameraPreset(preset, skull, {131, 77});
+        const Dbi reference = renderer.render(c);
+        Dbi frame(c.width, c.height);
+        HitCache cache;
+        int pieces = 0;
+        for (int y = 0; y < c.height;) {
+            const int rows = std::min(c.height - y, 1 + int(rng() % 20));
+            for (int x = 0; x < c.width; ++pieces) {
+                std::atomic<int> asked{0};
+                const int stopAt = int(rng() % 4);
+                const int w = renderer.renderBulk(c, {x, y, c.width - x, rows}, frame, &cache,
+                                                  [&] { return ++asked > stopAt; });
+                ASSERT_GT(w, 0);
+                x += w;
+            }
+            y += rows;
+        }
+        EXPECT_GT(pieces, 2 * (c.height / 20)) << "pieces stopped part-way";
+        EXPECT_TRUE(frame == reference) << compare(frame, reference).describe();
+        // Through the cache filled above, and stopped after `atLeast` pixels' worth.
+        Dbi again(c.width, c.height);
+        EXPECT_EQ(renderer.renderBulk(
+                      c, {0, 0, c.width, c.height}, again, &cache, [] { return true; },
+                      16 * c.height + 1),
+                  32);
+        EXPECT_EQ(renderer.renderBulk(c, {32, 0, c.width - 32, c.height}, again, &cache,
+                                      [] { return false; }),
+                  c.width - 32);
+        EXPECT_TRUE(again == reference);
+    }
 }
 
 // Tiles of any size over a pool of any size give the same image (items are claimed dynamically).

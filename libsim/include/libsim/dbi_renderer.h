@@ -27,6 +27,18 @@ public:
     // `frame` at their place. `cache` is the view's HitCache, which only the CPU renderer reads.
     virtual void render(const Camera& camera, const PixelRect& rect, Dbi& frame,
                         HitCache* cache) = 0;
+    // Bulk work: as render(), but may stop early once `stop` says so after `atLeast` pixels'
+    // worth, and runs on the bulk pool if one is set (Renderer::renderBulk); returns the width
+    // done from rect.x, all its rows. A renderer that cannot stop part-way renders all of it.
+    virtual int renderBulk(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache,
+                           const std::function<bool()>& stop, int atLeast) {
+        (void)stop;
+        (void)atLeast;
+        render(camera, rect, frame, cache);
+        return rect.w;
+    }
+    // renderBulk's threads (ThreadPool's background kind), for a renderer with a pool.
+    virtual void setBulkPool(ThreadPool* pool) { (void)pool; }
     // A full frame.
     virtual Dbi render(const Camera& camera) = 0;
     // One line for people: "CPU, 2 threads", "GPU: <GL renderer>".
@@ -46,6 +58,11 @@ public:
     void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache) override {
         m_renderer.render(camera, rect, frame, cache);
     }
+    int renderBulk(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache,
+                   const std::function<bool()>& stop, int atLeast) override {
+        return m_renderer.renderBulk(camera, rect, frame, cache, stop, atLeast);
+    }
+    void setBulkPool(ThreadPool* pool) override { m_renderer.setBulkPool(pool); }
     Dbi render(const Camera& camera) override { return m_renderer.render(camera); }
     std::string describe() const override;
     Renderer& renderer() { return m_renderer; }

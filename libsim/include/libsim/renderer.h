@@ -9,6 +9,7 @@
 #include "libsim/volume.h"
 
 #include <cstdint>
+#include <functional>
 #include <glm/vec3.hpp>
 #include <vector>
 
@@ -114,6 +115,8 @@ public:
     const RenderOptions& options() const { return m_options; }
     void setOptions(const RenderOptions& options) { m_options = options; }
     void setPool(ThreadPool* pool) { m_pool = pool; }
+    // renderBulk's pool (ThreadPool's background kind); null: the pool above.
+    void setBulkPool(ThreadPool* pool) { m_bulkPool = pool; }
 
     // A full camera.width x camera.height image.
     Dbi render(const Camera& camera) const;
@@ -128,6 +131,13 @@ public:
     void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache) const;
     // A full frame that also fills `cache`.
     Dbi render(const Camera& camera, HitCache* cache) const;
+    // A piece of bulk work (a new view's rows) that gives way to others' updates within one
+    // tile's time: as render(camera, rect, frame, cache), on the bulk pool if there is one, in
+    // columns of tiles from the left (each the rect's height), asking `stop` before each column
+    // past the first `atLeast` pixels' worth: once it says so, no more start. Returns the width
+    // done from rect.x (all of it when never stopped).
+    int renderBulk(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache,
+                   const std::function<bool()>& stop, int atLeast = 0) const;
     // The pixels of `rect` as an image of the rectangle's size; rect must lie inside the window.
     Dbi renderRect(const Camera& camera, const PixelRect& rect) const;
 
@@ -135,11 +145,22 @@ public:
     RayHit castRay(const Camera& camera, int x, int y) const;
 
 private:
-    void renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, int outX, int outY,
-                    HitCache* cache) const;
+    // Tiles of `tile` pixels square, or with columns set columns of the rect's height; with
+    // stop set returns the tiles done (see renderBulk).
+    struct Tiling {
+        ThreadPool* pool = nullptr; // else m_pool
+        bool columns = false;
+        const std::function<bool()>* stop = nullptr;
+        int atLeast = 0;
+    };
+    // Restarts `cache` if it is not valid for the camera (render()'s first step).
+    void prepare(const Camera& camera, const Dbi& frame, HitCache* cache) const;
+    int renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, int outX, int outY,
+                   HitCache* cache, const Tiling& tiling) const;
 
     const Volume* m_volume;
     ThreadPool* m_pool;
+    ThreadPool* m_bulkPool = nullptr;
     RenderOptions m_options;
     BrickGrid m_bricks;
     uint64_t m_generation;

@@ -24,31 +24,52 @@ public:
     // threads counts the calling thread: 0 means std::thread::hardware_concurrency(); 1 runs
     // everything on the caller. The workers are named "<name>-1", "<name>-2", ... (15 bytes at
     // most), so a profiler or top -H tells whose they are.
-    explicit ThreadPool(int threads = 0, const std::string& name = "pool");
+    //
+    // With `nice` above 0 the pool is for background work: `threads` workers run at that nice
+    // value (Linux: each thread's own) and the calling thread only waits for them, so all the
+    // work yields the CPU to whatever else runs, the caller's other work included.
+    explicit ThreadPool(int threads = 0, const std::string& name = "pool", int nice = 0);
     ~ThreadPool();
     ThreadPool(const ThreadPool&) = delete;
     ThreadPool& operator=(const ThreadPool&) = delete;
 
-    // Threads that take part in parallelFor, the caller included.
-    int size() const { return int(m_workers.size()) + 1; }
+    // Threads that take part in parallelFor: the caller too, unless the pool is a background one.
+    int size() const { return int(m_workers.size()) + (m_callerWorks ? 1 : 0); }
 
     // Calls fn(i) for every i in [0, count), spread over the pool; items are taken in increasing
     // order. Not reentrant: call it from one thread at a time.
     void parallelFor(int count, const std::function<void(int)>& fn);
+    // As parallelFor, but past the first `atLeast` items `stop` is asked as each item finishes
+    // (from any of the threads, while the job runs): once it says so no more are started, but
+    // for a worker's first item, claimed without asking. Returns how many were done, always the
+    // first ones: items are claimed in order.
+    int parallelForUntil(int count, const std::function<void(int)>& fn,
+                         const std::function<bool()>& stop, int atLeast = 1);
 
 private:
+    struct Job {
+        const std::function<void(int)>* fn = nullptr;
+        int count = 0;
+        const std::function<bool()>* stop = nullptr; // asked before item atLeast on
+        int atLeast = 0;
+    };
+    int run(const Job& job);
     void workerLoop();
     // Claims and runs items of job `generation` until none is left (or a newer job started).
-    void runItems(uint32_t generation, int count, const std::function<void(int)>* fn);
+    void runItems(uint32_t generation, const Job& job);
+    // Claims no more items of job `generation` (its claim counter gets kClosed); the ones not
+    // claimed count as finished.
+    void close(uint32_t generation, int count);
 
     std::vector<std::thread> m_workers;
+    bool m_callerWorks = true;
     std::mutex m_mutex;
     std::condition_variable m_wake;
-    const std::function<void(int)>* m_fn = nullptr; // guarded by m_mutex
-    int m_count = 0;                                // guarded by m_mutex
-    uint32_t m_generation = 0;                      // guarded by m_mutex; bumped for every job
+    Job m_job;                 // guarded by m_mutex
+    uint32_t m_generation = 0; // guarded by m_mutex; bumped for every job
     bool m_stop = false;
-    // (generation << 32) | next unclaimed item of the current job.
+    // (generation << 32) | next unclaimed item of the current job, | kClosed once stopped.
+    static constexpr uint32_t kClosed = 1u << 31;
     std::atomic<uint64_t> m_claim{0};
     // Items of the current job not yet finished; the caller waits for 0.
     std::atomic<int> m_remaining{0};
