@@ -559,6 +559,12 @@ public:
         *m_pixels += uint64_t(in.w) * uint64_t(in.h);
         m_cpu.render(camera, rect, frame, cache);
     }
+    int renderBulk(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache,
+                   const std::function<bool()>& stop, int atLeast) override {
+        const int w = m_cpu.renderBulk(camera, rect, frame, cache, stop, atLeast);
+        *m_pixels += uint64_t(w) * uint64_t(rect.h); // the step's rects lie in the frame
+        return w;
+    }
     Dbi render(const Camera& camera) override { return m_cpu.render(camera); }
     std::string describe() const override { return "CPU, counting pixels"; }
 
@@ -575,31 +581,32 @@ struct SliceRig {
     SimulationStep step;
     uint64_t now = kStartUs;
 
-    // What the step's `yield` says (events wait) and how often it was asked.
+    // What the step's `yield` says (events wait, or they do from its ask `waitFromAsk` on) and
+    // how often it was asked.
     bool eventsWait = false;
-    int yieldAsked = 0;
+    int yieldAsked = 0, waitFromAsk = 0;
 
     SliceRig(Volume v, int64_t slicePixels, int64_t chunkPixels = int64_t(1) << 13,
              bool pixelClock = false)
         : step(std::move(v),
-               StepConfig{.maxStepS = 0.05f,
-                          .maxSweepMm = 10.0f,
-                          .renderThreads = 1,
-                          .slicePixels = slicePixels,
-                          .chunkPixels = chunkPixels,
-                          .workClock =
-                              pixelClock ? ServerClock([p = pixels] { return *p; }) : ServerClock(),
-                          .yield =
-                              [this] {
-                                  ++yieldAsked;
-                                  return eventsWait;
-                              },
-                          .renderer =
-                              pixelClock ? DbiRendererFactory([p = pixels](const Volume& vol,
-                                                                           ThreadPool* pool) {
-                                  return std::make_unique<PixelClockRenderer>(vol, pool, p);
-                              })
-                                         : DbiRendererFactory()},
+               StepConfig{
+                   .maxStepS = 0.05f,
+                   .maxSweepMm = 10.0f,
+                   .renderThreads = 1,
+                   .slicePixels = slicePixels,
+                   .chunkPixels = chunkPixels,
+                   .workClock =
+                       pixelClock ? ServerClock([p = pixels] { return *p; }) : ServerClock(),
+                   .yield =
+                       [this] {
+                           ++yieldAsked;
+                           return eventsWait || (waitFromAsk > 0 && yieldAsked >= waitFromAsk);
+                       },
+                   .renderer = pixelClock ? DbiRendererFactory([p = pixels](const Volume& vol,
+                                                                            ThreadPool* pool) {
+                       return std::make_unique<PixelClockRenderer>(vol, pool, p);
+                   })
+                                          : DbiRendererFactory()},
                outbox, book, steadyNowUs) {}
     LogRecord join(uint16_t id, const Camera& camera) {
         JoinEvent ev{.client = id, .view = toViewSpec(camera), .volumeCodec = Codec::Lz4};
@@ -743,8 +750,9 @@ TEST(AvailabilitySlices, ALargeViewsChangeYieldsToWaitingEventsAChunkAtATime) {
     deeperCutGoesInTheStep(rig, skull, large, largeSeen);
 }
 
-// A new view larger than a slice renders a chunk a step while events wait, a slice a step when
-// none do.
+// A new view larger than a slice renders a chunk a step while events wait (a column of tiles,
+// then the rest of the chunk), a slice a step when none do; its copy for the full image then
+// goes a piece a step while events wait.
 TEST(AvailabilitySlices, ANewLargeViewRendersAChunkAStepWhileEventsWait) {
     const Volume skull = makeSkull(48);
     SliceRig rig(skull, 256 * 64, 256 * 16);
@@ -754,7 +762,8 @@ TEST(AvailabilitySlices, ANewLargeViewRendersAChunkAStepWhileEventsWait) {
     std::vector<Outbox::Ready> done = rig.run({rig.join(2, large)});
     for (++steps; !has(done, 2, true) && steps < 100; ++steps)
         done = rig.run({});
-    EXPECT_EQ(steps, 256 / 16 + 1) << "16 rows a step, then the copy for its full image";
+    EXPECT_EQ(steps, 256 / 16 + 256 / 64)
+        << "16 rows a step, then the copy for its full image, 64 rows a step";
     rig.eventsWait = false;
     steps = 0;
     const Camera other = cameraPreset("top", skull, {256, 256});
@@ -766,6 +775,40 @@ TEST(AvailabilitySlices, ANewLargeViewRendersAChunkAStepWhileEventsWait) {
     Dbi seen;
     ASSERT_TRUE(applyUpdate(done, 2, other, seen));
     EXPECT_TRUE(compare(seen, rig.step.render(other)).identical());
+}
+
+// A new view's rows are bulk work: once events wait, its band stops at the next column of tiles
+// (16 pixels wide here), not at the end of its band; the step then gives new views the rest of a
+// chunk's worth (the other newcomer's turn) and stops. Whole, each is the full render's pixels.
+TEST(AvailabilitySlices, ANewViewsRowsGiveWayAtTheNextColumnOfTilesOnceEventsWait) {
+    const Volume skull = makeSkull(48);
+    SliceRig rig(skull, 256 * 64, 256 * 16, true);
+    const Camera first = cameraPreset("working", skull, {256, 256}); // bone in its first band
+    const Camera second = cameraPreset("top", skull, {256, 256});
+    rig.waitFromAsk = 4; // three columns past the first, then events wait
+    EXPECT_TRUE(rig.run({rig.join(1, first), rig.join(2, second)}).empty());
+    EXPECT_EQ(rig.step.share().charged(1), uint64_t(4 * 16 * 16)) << "4 columns of its band";
+    EXPECT_EQ(rig.step.share().charged(2), uint64_t(12 * 16 * 16)) << "the rest of the chunk";
+    // A cut that changes the first view's columns done: its band starts again.
+    const Dbi before = rig.step.render(first);
+    const Box3i all{glm::ivec3(0), skull.dims()};
+    rig.run({{rig.now, CutEvent{all}}});
+    const PixelRect doneColumns{0, 0, 4 * 16, 16};
+    ASSERT_FALSE(rig.step.render(first).extract(doneColumns) == before.extract(doneColumns))
+        << "the cut shows in the columns done";
+    rig.waitFromAsk = 0;
+    *rig.pixels = 0;
+    rig.run({});
+    EXPECT_EQ(*rig.pixels, uint64_t(256 * 64)) << "nothing waiting: a slice";
+    std::vector<Outbox::Ready> done;
+    for (int steps = 0; !(has(done, 1, true) && has(done, 2, true)) && steps < 20; ++steps)
+        for (auto& u : rig.run({}))
+            done.push_back(std::move(u));
+    Dbi seen;
+    for (auto [id, camera] : {std::pair{uint16_t(1), first}, std::pair{uint16_t(2), second}}) {
+        ASSERT_TRUE(applyUpdate(done, id, camera, seen));
+        EXPECT_TRUE(compare(seen, rig.step.render(camera)).identical()) << id;
+    }
 }
 
 // [SECTION] the fair share of the simulation's time
@@ -1126,11 +1169,15 @@ TEST(AvailabilityFairShare, NewViewsShareTheStepsFairlyWhileTheGreedyPeerStartsO
         greedyFull += has(out, 2, true);
     }
     ASSERT_TRUE(has(out, 1, true));
-    EXPECT_LE(steps, 2 * 256 / 4 + 3) << "half the pieces, then its frame's copy";
+    // Its frame's copy goes a piece a step (4 chunks' worth), free on the pixel clock; the greedy
+    // peer meanwhile gets the chunk of new rows every step gives.
+    const int copySteps = 256 * 256 / (256 * 4 * 4);
+    EXPECT_LE(steps, 2 * 256 / 4 + copySteps + 1) << "half the pieces, then its frame's copy";
     EXPECT_EQ(greedyFull, 0);
     const int64_t honestUs = int64_t(rig.step.share().charged(1)),
                   greedyUs = int64_t(rig.step.share().charged(2));
-    EXPECT_LE(std::abs(honestUs - greedyUs), 2 * 256 * 4) << "within a piece or two";
+    EXPECT_LE(std::abs(honestUs - greedyUs), (2 + copySteps) * 256 * 4)
+        << "within a piece or two, and the copy's";
 }
 
 // Updates of whole views come before new views' rows, whoever's turn it is: a newcomer (charged

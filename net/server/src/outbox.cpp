@@ -178,7 +178,7 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
     u.codec = c.codec == Codec::Raw && uint64_t(rect.area()) * 8 > kMaxImagePayloadBytes
                   ? Codec::Lz4
                   : c.codec;
-    if (full && (owned || (m_apartPixels > 0 && rect.area() >= m_apartPixels))) {
+    if (full && (owned || codesApart(rect.area()))) {
         postApart(id, c, camera, frame, owned, std::move(u));
         return;
     }

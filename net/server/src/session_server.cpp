@@ -36,6 +36,10 @@ namespace trephine::net {
 
 namespace {
 
+// The nice value of the server's background work: new views' rows and full images' coding take
+// what the network thread, updates and the clients leave of the CPU.
+constexpr int kBulkNice = 10;
+
 // The config with its scene: the one given (a saved session's), or one built from the volume.
 ServerConfig withScene(ServerConfig c, const Volume& volume) {
     if (!c.scene)
@@ -138,7 +142,7 @@ struct SessionServer::Impl {
     // thread for each one's coding (a 512^2 image: ~1 ms) while others' rectangles wait.
     const int64_t apartPixels = 256 * 256;
     InlineExecutor inlineCoder;
-    WorkerExecutor workerCoder{"trephine-coder", 10};
+    WorkerExecutor workerCoder{"trephine-coder", kBulkNice};
     Outbox outbox;
     // The simulation step under stepMutex: the simulation thread per batch, inspection
     // (renderView, volumeSnapshot) between batches.
@@ -174,11 +178,11 @@ struct SessionServer::Impl {
     size_t maxQueuedToolStates;
     bool busy = false; // the simulation thread is applying a batch (under inMutex)
     bool stopSim = false;
-    // [Simulation thread] Events wait for the next batch: a large view's rendering yields to them.
-    bool eventsWaiting() {
-        std::lock_guard lock(inMutex);
-        return !inbox.empty();
-    }
+    // Events wait for the next batch: bulk rendering yields to them. Asked by the bulk pool's
+    // threads before each column of tiles, so read without inMutex: a nice-10 thread preempted
+    // holding it would stop the network thread's next push.
+    std::atomic<bool> inboxWaiting{false}; // !inbox.empty(), written under inMutex
+    bool eventsWaiting() const { return inboxWaiting.load(std::memory_order_relaxed); }
 
     // [Availability] Connections not yet admitted (net/admission.h) and each peer's control
     // backlog (net/budgets.h); network thread only.
@@ -270,6 +274,7 @@ void SessionServer::Impl::push(std::vector<LogRecord>& events, const std::vector
             }
             inbox.push_back(std::move(ev));
         }
+        inboxWaiting.store(!inbox.empty(), std::memory_order_relaxed);
         // Written before the simulation can take the events, and before the caller sends what
         // they caused: nothing a client sees is missing from the log after a crash.
         if (recorder) {
@@ -372,6 +377,7 @@ void SessionServer::start() {
         return;
     m_impl->threaded = true;
     m_impl->outbox.codeFullImagesApart(m_impl->apartPixels, m_impl->workerCoder);
+    m_impl->step.renderBulkApart(kBulkNice);
     m_impl->mint.setWorker(m_impl->workerMint);
     m_netThread = std::thread([this] { networkLoop(); });
     m_simThread = std::thread([this] { simulationLoop(); });
@@ -1007,6 +1013,7 @@ void SessionServer::Impl::simulate(uint64_t now) {
     {
         std::lock_guard lock(inMutex);
         batch.swap(inbox);
+        inboxWaiting.store(false, std::memory_order_relaxed);
         inboxTools = 0;
         busy = !batch.empty() || step.rendering();
     }

@@ -347,12 +347,22 @@ bool SimulationStep::large(const ViewFrame& v) const {
     return pixelsOf(v.frame) > m_config.slicePixels;
 }
 
-// The batch's change in the rows rendered so far joins the view's stale pixels.
+// A full image the outbox codes apart is copied for it in chunks, so the step stops for one
+// chunk's copy at a time (a whole 512 x 512 frame is 2 MB).
+bool SimulationStep::copiedApart(const ViewFrame& v) const {
+    return large(v) || m_outbox.codesApart(pixelsOf(v.frame));
+}
+
+// The batch's change in the rows rendered so far joins the view's stale pixels; a band of new
+// rows it reaches starts again.
 void SimulationStep::markChanged(ViewFrame& v, const Batch& b, uint32_t gridUs) {
-    if (b.changed.empty() || v.rowsDone == 0)
+    if (b.changed.empty() || (v.rowsDone == 0 && v.colsDone == 0))
         return;
-    const PixelRect rect = intersect(dirtyScreenRect(v.camera, m_volume, b.changed),
-                                     {0, 0, v.frame.width(), v.rowsDone});
+    const PixelRect dirty = dirtyScreenRect(v.camera, m_volume, b.changed);
+    const int width = v.frame.width();
+    if (v.colsDone > 0 && !intersect(dirty, {0, v.rowsDone, v.colsDone, v.bandRows}).empty())
+        v.colsDone = 0;
+    const PixelRect rect = intersect(dirty, {0, 0, width, v.rowsDone});
     if (rect.empty())
         return;
     v.stale = unite(v.stale, rect);
@@ -376,7 +386,7 @@ void SimulationStep::schedule() {
     std::vector<ViewFrame*> ready;
     std::vector<uint16_t> peers;
     // One piece for the peer whose turn it is among the views `wanted` selects.
-    auto pieceFor = [&](auto wanted) {
+    auto pieceFor = [&](auto wanted, int64_t atLeast) {
         ready.clear();
         for (ViewFrame& v : m_views)
             if (!v.holders.empty() && wanted(v))
@@ -392,7 +402,7 @@ void SimulationStep::schedule() {
             peers.push_back(v->holders.front());
         ViewFrame& v = *ready[m_share.pick(peers)];
         const uint64_t t0 = m_share.now();
-        workOn(v, rowsLeft);
+        workOn(v, rowsLeft, atLeast);
         m_share.charge(v.holders, m_share.now() - t0);
         if (v.settled())
             postView(v);
@@ -401,13 +411,13 @@ void SimulationStep::schedule() {
     auto changed = [](const ViewFrame& v) { return v.whole() && !v.settled(); };
     auto newRows = [](const ViewFrame& v) { return !v.whole(); };
     for (;;) {
-        if (!pieceFor(changed) && !(rowsLeft > 0 && pieceFor(newRows)))
+        if (!pieceFor(changed, 0) && !(rowsLeft > 0 && pieceFor(newRows, 0)))
             return;
         if (m_config.yield && m_config.yield()) {
-            // Events wait and go first, but a step that gave new views nothing gives them a
-            // piece: others' changes, each step anew, never starve a newcomer's first picture.
-            if (rowsLeft == slice)
-                pieceFor(newRows);
+            // Events wait and go first, but a step gives new views a chunk's worth of rows:
+            // others' changes, each step anew, never starve a newcomer's first picture.
+            if (const int64_t given = slice - rowsLeft; given < m_config.chunkPixels)
+                pieceFor(newRows, m_config.chunkPixels - given);
             return;
         }
     }
@@ -417,8 +427,8 @@ void SimulationStep::schedule() {
 // against the step's `rowsLeft`; a new large view's preview rows first), else its changed
 // pixels. Rows before changes: a change in the rows done so far, every step, would otherwise hold
 // a new view's rows back for good; nothing exact of it is sent before it is whole, so its changes
-// are rendered then, before its copy.
-void SimulationStep::workOn(ViewFrame& v, int64_t& rowsLeft) {
+// are rendered then, before its copy. New rows give way to waiting events after `atLeast` pixels.
+void SimulationStep::workOn(ViewFrame& v, int64_t& rowsLeft, int64_t atLeast) {
     if (v.copying()) {
         copyChunk(v);
         return;
@@ -428,31 +438,47 @@ void SimulationStep::workOn(ViewFrame& v, int64_t& rowsLeft) {
         return;
     }
     if (v.previewing()) {
-        previewChunk(v, rowsLeft);
+        previewChunk(v, rowsLeft, atLeast);
         return;
     }
-    const int width = std::max(v.frame.width(), 1);
-    const int rows = int(std::clamp<int64_t>(std::min(rowsLeft, m_config.chunkPixels) / width, 1,
-                                             v.frame.height() - v.rowsDone));
-    m_renderer->render(v.camera, {0, v.rowsDone, v.frame.width(), rows}, v.frame, &v.cache);
-    v.rowsDone += rows;
-    rowsLeft -= int64_t(rows) * width;
+    rowsLeft -= bandPiece(v.camera, v.frame, &v.cache, v.rowsDone, v.colsDone, v.bandRows, rowsLeft,
+                          atLeast);
     if (v.whole())
         m_book.count(&ServerCounters::renders);
 }
 
-// The next rows of a new view's preview, counted against `rowsLeft` like its exact rows; the
+// Renders on from column `cols` of the band of `band` rows from `rows` (a new band: a chunk's
+// worth of rows, within the step's `rowsLeft` and the frame), stopping at the next column of
+// tiles once events wait (after `atLeast` pixels); a band done moves `rows` on. Returns the pixels
+// rendered. A new view's rows are bulk work: another peer's update waits for one tile of them,
+// not the band.
+int64_t SimulationStep::bandPiece(const Camera& camera, Dbi& frame, HitCache* cache, int& rows,
+                                  int& cols, int& band, int64_t rowsLeft, int64_t atLeast) {
+    const int width = std::max(frame.width(), 1);
+    if (cols == 0)
+        band = int(std::clamp<int64_t>(std::min(rowsLeft, m_config.chunkPixels) / width, 1,
+                                       frame.height() - rows));
+    const PixelRect rect{cols, rows, width - cols, band};
+    const int done = m_config.yield ? m_renderer->renderBulk(camera, rect, frame, cache,
+                                                             m_config.yield, int(atLeast))
+                                    : (m_renderer->render(camera, rect, frame, cache), rect.w);
+    cols += done;
+    if (cols >= width) {
+        cols = 0;
+        rows += band;
+    }
+    return int64_t(done) * band;
+}
+
+// The next piece of a new view's preview, counted against `rowsLeft` like its exact rows; the
 // last sends it.
-void SimulationStep::previewChunk(ViewFrame& v, int64_t& rowsLeft) {
+void SimulationStep::previewChunk(ViewFrame& v, int64_t& rowsLeft, int64_t atLeast) {
     const Camera half = previewCamera(v.camera);
-    if (v.previewRows == 0 &&
+    if (v.previewRows == 0 && v.previewCols == 0 &&
         (v.preview.width() != half.width || v.preview.height() != half.height))
         v.preview = Dbi(half.width, half.height);
-    const int rows = int(std::clamp<int64_t>(std::min(rowsLeft, m_config.chunkPixels) / half.width,
-                                             1, half.height - v.previewRows));
-    m_renderer->render(half, {0, v.previewRows, half.width, rows}, v.preview, nullptr);
-    v.previewRows += rows;
-    rowsLeft -= int64_t(rows) * half.width;
+    rowsLeft -= bandPiece(half, v.preview, nullptr, v.previewRows, v.previewCols, v.previewBand,
+                          rowsLeft, atLeast);
     if (v.previewRows >= half.height)
         postPreview(v);
 }
@@ -460,15 +486,16 @@ void SimulationStep::previewChunk(ViewFrame& v, int64_t& rowsLeft) {
 // Every client waiting for the view's full image gets the half-size preview as one (coded apart,
 // as large full images are; the client shows each pixel as a 2 x 2 block). They still wait: the
 // exact frame's full image follows and replaces it, in the outbox too if the preview has not
-// left; a view changed meanwhile drops both, as ever.
+// left; a view changed meanwhile drops both, as ever. It goes from a copy made in chunks, as a
+// large frame's: the view's own is kept for its next new view of this size.
 void SimulationStep::postPreview(ViewFrame& v) {
-    const Camera half = previewCamera(v.camera);
-    for (uint16_t id : v.holders)
-        if (const Client& c = m_clients.at(id); c.fullCauseUs) {
-            // A copy: the view's own is kept for its next new view of this size.
-            m_outbox.postFullImage(id, half, Dbi(v.preview), c.fullCauseUs, true);
-        }
     v.previewRows = -1;
+    if (std::none_of(v.holders.begin(), v.holders.end(),
+                     [&](uint16_t id) { return m_clients.at(id).fullCauseUs != 0; }))
+        return;
+    v.copy = m_outbox.buffer(v.preview.width(), v.preview.height());
+    v.rowsCopied = 0;
+    v.copyingPreview = true;
 }
 
 // The view's changed pixels: all of them for a view of at most a slice (or the whole view, the
@@ -510,7 +537,7 @@ void SimulationStep::postView(ViewFrame& v) {
     for (uint16_t id : v.holders) {
         Client& c = m_clients.at(id);
         const uint64_t t0 = m_share.now();
-        if (c.fullCauseUs && large(v)) {
+        if (c.fullCauseUs && copiedApart(v)) {
             if (!v.copying()) {
                 v.copy = m_outbox.buffer(v.frame.width(), v.frame.height());
                 v.rowsCopied = 0;
@@ -528,15 +555,17 @@ void SimulationStep::postView(ViewFrame& v) {
     v.timing = {};
 }
 
-// Copies a chunk of the frame's rows for its full image (copying a pixel costs ~1/30 of
-// rendering it); the copy done, every client waiting for the view's full image gets it.
+// Copies a chunk of the frame's rows (or the preview's) for its full image (copying a pixel costs
+// ~1/30 of rendering it: a chunk of 4 x chunkPixels costs about four tiles' render); the copy
+// done, every client waiting for the view's full image gets it.
 void SimulationStep::copyChunk(ViewFrame& v) {
-    const int width = std::max(v.frame.width(), 1), height = v.frame.height();
+    const Dbi& from = v.copyingPreview ? v.preview : v.frame;
+    const int width = std::max(from.width(), 1), height = from.height();
     const int rows =
-        int(std::clamp<int64_t>(m_config.chunkPixels * 32 / width, 1, height - v.rowsCopied));
+        int(std::clamp<int64_t>(m_config.chunkPixels * 4 / width, 1, height - v.rowsCopied));
     const size_t at = size_t(v.rowsCopied) * size_t(width), n = size_t(rows) * size_t(width);
-    std::memcpy(v.copy.color() + 4 * at, v.frame.color() + 4 * at, 4 * n);
-    std::memcpy(v.copy.depth() + at, v.frame.depth() + at, sizeof(float) * n);
+    std::memcpy(v.copy.color() + 4 * at, from.color() + 4 * at, 4 * n);
+    std::memcpy(v.copy.depth() + at, from.depth() + at, sizeof(float) * n);
     v.rowsCopied += rows;
     if (v.rowsCopied < height)
         return;
@@ -544,14 +573,17 @@ void SimulationStep::copyChunk(ViewFrame& v) {
     for (uint16_t id : v.holders)
         if (Client& c = m_clients.at(id); c.fullCauseUs)
             waiting.emplace_back(id, &c);
+    const Camera camera = v.copyingPreview ? previewCamera(v.camera) : v.camera;
     for (size_t i = 0; i < waiting.size(); ++i) {
         auto [id, c] = waiting[i];
-        m_outbox.postFullImage(id, v.camera, i + 1 < waiting.size() ? v.copy : std::move(v.copy),
-                               c->fullCauseUs);
-        c->fullCauseUs = 0;
+        m_outbox.postFullImage(id, camera, i + 1 < waiting.size() ? v.copy : std::move(v.copy),
+                               c->fullCauseUs, v.copyingPreview);
+        if (!v.copyingPreview)
+            c->fullCauseUs = 0; // a preview's clients still wait for the exact image
     }
     v.copy = Dbi();
     v.rowsCopied = -1;
+    v.copyingPreview = false;
 }
 
 void SimulationStep::postRepairs() {
@@ -567,6 +599,11 @@ void SimulationStep::postRepairs() {
         m_outbox.postImage(id, v->camera, v->frame, {}, false, 0, {});
         m_share.charge(id, m_share.now() - t0);
     }
+}
+
+void SimulationStep::renderBulkApart(int nice) {
+    m_bulkPool = std::make_unique<ThreadPool>(m_pool.size(), "trephine-bulk", nice);
+    m_renderer->setBulkPool(m_bulkPool.get());
 }
 
 int64_t SimulationStep::viewPixels() const {

@@ -87,6 +87,8 @@ public:
         m_apartPixels = minPixels;
         m_coder = &coder;
     }
+    // Whether a full image of `pixels` is coded apart (from a copy).
+    bool codesApart(int64_t pixels) const { return m_apartPixels > 0 && pixels >= m_apartPixels; }
     // [Posting thread] Waits until the coder has coded everything posted so far.
     void finishCoding();
 

@@ -39,9 +39,10 @@ struct StepConfig {
     AssessmentConfig assessment{}; // zones; its maxSweepMm is taken from maxSweepMm
     // The views' work goes a piece at a time, the peer whose turn it is first (net/fair_share.h),
     // and the step stops after any piece once `yield` says events wait: they are applied first
-    // (docs/session.md, "Availability"). New views' rows come in pieces of at most chunkPixels,
-    // at most slicePixels a step. A change of a view of at most slicePixels is one piece; a
-    // larger view's change goes in pieces of at most chunkPixels.
+    // (docs/session.md, "Availability"). New views' rows come in bands of chunkPixels' worth
+    // of rows, at most slicePixels a step; a band also stops at the next column of tiles once
+    // events wait. A change of a view of at most slicePixels is one piece; a larger view's
+    // change goes in pieces of at most chunkPixels.
     int64_t slicePixels = int64_t(1) << 18;
     int64_t chunkPixels = int64_t(1) << 13;
     // A new view of more pixels than this is first rendered at half width and height (a quarter
@@ -98,6 +99,10 @@ public:
     const FairShare& share() const { return m_share; }
     // The pixels of every view frame held (the server's memory grows with them).
     int64_t viewPixels() const;
+    // [Before the first step] New views' rows render on background threads at `nice`
+    // (ThreadPool's background kind), so they take only what others' updates, the network and
+    // the clients leave of the CPU; the server does this when it runs its threads.
+    void renderBulkApart(int nice);
 
 private:
     // A participant as the simulation sees it: its view and its tool.
@@ -118,20 +123,22 @@ private:
         Dbi frame;
         HitCache cache;   // where each pixel's ray met bone: dirty re-renders resume there
         int rowsDone = 0; // rows rendered so far: the frame is whole at frame.height()
-        std::vector<uint16_t> holders; // the DBI clients viewing it, charged for its work
+        int colsDone = 0, bandRows = 0; // the band of rows under way after them: its columns done
+        std::vector<uint16_t> holders;  // the DBI clients viewing it, charged for its work
         // Changed pixels (of the rows done) still to render, and those rendered since the
         // view's clients last got them; the oldest cause and the stage times they carry.
         PixelRect stale, fresh;
         uint64_t causeUs = 0;
         ImageTiming timing;
-        // A view larger than a slice: the copy of the frame its full image is coded from, made
-        // in chunks (the frame holds still meanwhile); -1: none under way.
+        // A full image coded apart (SimulationStep::copiedApart): the copy of the frame it is
+        // coded from, made in chunks (the frame holds still meanwhile); -1: none under way.
         Dbi copy;
         int rowsCopied = -1;
+        bool copyingPreview = false; // the copy is of the preview below
         // A view larger than previewPixels, new: its half-size render (previewCamera) so far;
         // -1: no preview under way (none, or sent).
         Dbi preview;
-        int previewRows = -1;
+        int previewRows = -1, previewCols = 0, previewBand = 0;
         bool previewing() const { return previewRows >= 0; }
         bool whole() const { return rowsDone >= frame.height(); }
         bool copying() const { return rowsCopied >= 0; }
@@ -161,9 +168,12 @@ private:
     void renderViews(const Batch& b, uint32_t gridUs);
     void markChanged(ViewFrame& v, const Batch& b, uint32_t gridUs);
     void schedule();
-    void workOn(ViewFrame& v, int64_t& rowsLeft);
+    void workOn(ViewFrame& v, int64_t& rowsLeft, int64_t atLeast);
+    int64_t bandPiece(const Camera& camera, Dbi& frame, HitCache* cache, int& rows, int& cols,
+                      int& band, int64_t rowsLeft, int64_t atLeast);
+    bool copiedApart(const ViewFrame& v) const;
     void renderStale(ViewFrame& v);
-    void previewChunk(ViewFrame& v, int64_t& rowsLeft);
+    void previewChunk(ViewFrame& v, int64_t& rowsLeft, int64_t atLeast);
     void postPreview(ViewFrame& v);
     bool large(const ViewFrame& v) const;
     void postView(ViewFrame& v);
@@ -177,6 +187,7 @@ private:
     std::shared_mutex m_voxelMutex;
     Volume m_volume;
     ThreadPool m_pool;
+    std::unique_ptr<ThreadPool> m_bulkPool;  // renderBulkApart's; null: m_pool does it all
     std::unique_ptr<DbiRenderer> m_renderer; // StepConfig::renderer, else the CPU ray caster
     Assessment m_assessment;
     std::map<uint16_t, Client> m_clients;
