@@ -50,9 +50,14 @@ void ThreadPool::runItems(uint32_t generation, const Job& job) {
                                            std::memory_order_acquire))
             continue;
         (*job.fn)(int(item));
-        // Asked while this item is unfinished, so the caller (and `stop`) is still there.
-        if (job.stop && int(item) + 1 >= job.atLeast && (*job.stop)())
-            close(generation, job.count);
+        // Asked while this item is unfinished, so the caller (and `stop`) is still there, when
+        // the next to claim is past the first `atLeast`.
+        if (job.stop) {
+            const uint32_t next = uint32_t(m_claim.load(std::memory_order_acquire));
+            if (!(next & kClosed) && int(next) >= job.atLeast && int(next) < job.count &&
+                (*job.stop)())
+                close(generation, job.count);
+        }
         if (m_remaining.fetch_sub(1, std::memory_order_acq_rel) == 1)
             m_remaining.notify_all();
         v = m_claim.load(std::memory_order_acquire);

@@ -58,11 +58,23 @@ std::vector<double> niceTicks(double lo, double hi, int count) {
     return ticks;
 }
 
-std::string svgLinePlot(const PlotSpec& spec) {
-    const double W = std::max(spec.width, 200), H = std::max(spec.height, 150);
-    const double left = 70, right = 170, top = 40, bottom = 55; // right: the legend
-    const double pw = W - left - right, ph = H - top - bottom;
+namespace {
 
+// Where the plot area lies in the picture and the data ranges it shows.
+struct PlotArea {
+    double W, H, left, top, pw, ph; // picture; plot area's left, top, width, height
+    double xmin, xmax, ymin, ymax;  // y in log10 when the spec's y is logarithmic
+    double px(double x) const { return left + (x - xmin) / (xmax - xmin) * pw; }
+    double py(double y) const { return top + ph - (y - ymin) / (ymax - ymin) * ph; }
+};
+
+PlotArea plotArea(const PlotSpec& spec) {
+    PlotArea a{};
+    a.W = std::max(spec.width, 200);
+    a.H = std::max(spec.height, 150);
+    a.left = 70, a.top = 40;
+    const double right = 170, bottom = 55; // right: the legend
+    a.pw = a.W - a.left - right, a.ph = a.H - a.top - bottom;
     double xmin = std::numeric_limits<double>::infinity(), xmax = -xmin;
     double ymin = xmin, ymax = -xmin;
     for (const PlotSeries& s : spec.series)
@@ -91,51 +103,52 @@ std::string svgLinePlot(const PlotSpec& spec) {
             ymax = ymin + 1;
         ymax += 0.05 * (ymax - ymin);
     }
-    auto px = [&](double x) { return left + (x - xmin) / (xmax - xmin) * pw; };
-    auto py = [&](double y) { return top + ph - (y - ymin) / (ymax - ymin) * ph; };
+    a.xmin = xmin, a.xmax = xmax, a.ymin = ymin, a.ymax = ymax;
+    return a;
+}
 
+// The title, grid, ticks, frame and axis labels.
+std::string svgAxes(const PlotSpec& spec, const PlotArea& a) {
     std::string svg =
-        fmt::format("<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{:.0f}\" height=\"{:.0f}\" "
-                    "viewBox=\"0 0 {:.0f} {:.0f}\" font-family=\"sans-serif\" font-size=\"12\">\n"
-                    "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n",
-                    W, H, W, H);
-    svg += fmt::format("<text x=\"{:.1f}\" y=\"22\" text-anchor=\"middle\" font-size=\"14\" "
-                       "font-weight=\"bold\">{}</text>\n",
-                       left + pw / 2, net::escapeXml(spec.title).c_str());
-
-    // Grid and ticks.
-    for (double t : niceTicks(xmin, xmax, 8)) {
-        const double x = px(t);
+        fmt::format("<text x=\"{:.1f}\" y=\"22\" text-anchor=\"middle\" font-size=\"14\" "
+                    "font-weight=\"bold\">{}</text>\n",
+                    a.left + a.pw / 2, net::escapeXml(spec.title).c_str());
+    for (double t : niceTicks(a.xmin, a.xmax, 8)) {
+        const double x = a.px(t);
         svg += fmt::format("<line x1=\"{:.1f}\" y1=\"{:.1f}\" x2=\"{:.1f}\" y2=\"{:.1f}\" "
                            "stroke=\"#ddd\"/>\n<text x=\"{:.1f}\" y=\"{:.1f}\" "
                            "text-anchor=\"middle\">{}</text>\n",
-                           x, top, x, top + ph, x, top + ph + 16, tickLabel(t).c_str());
+                           x, a.top, x, a.top + a.ph, x, a.top + a.ph + 16, tickLabel(t).c_str());
     }
     std::vector<double> yticks;
     if (spec.logY)
-        for (double d = ymin; d <= ymax + 1e-9; d += 1)
+        for (double d = a.ymin; d <= a.ymax + 1e-9; d += 1)
             yticks.push_back(d);
     else
-        yticks = niceTicks(ymin, ymax, 6);
+        yticks = niceTicks(a.ymin, a.ymax, 6);
     for (double t : yticks) {
-        const double y = py(t);
+        const double y = a.py(t);
         const std::string label = tickLabel(spec.logY ? std::pow(10.0, t) : t);
         svg += fmt::format("<line x1=\"{:.1f}\" y1=\"{:.1f}\" x2=\"{:.1f}\" y2=\"{:.1f}\" "
                            "stroke=\"#ddd\"/>\n<text x=\"{:.1f}\" y=\"{:.1f}\" "
                            "text-anchor=\"end\">{}</text>\n",
-                           left, y, left + pw, y, left - 6, y + 4, label.c_str());
+                           a.left, y, a.left + a.pw, y, a.left - 6, y + 4, label.c_str());
     }
     svg += fmt::format("<rect x=\"{:.1f}\" y=\"{:.1f}\" width=\"{:.1f}\" height=\"{:.1f}\" "
                        "fill=\"none\" stroke=\"#333\"/>\n",
-                       left, top, pw, ph);
+                       a.left, a.top, a.pw, a.ph);
     svg += fmt::format("<text x=\"{:.1f}\" y=\"{:.1f}\" text-anchor=\"middle\">{}</text>\n",
-                       left + pw / 2, H - 12, net::escapeXml(spec.xLabel).c_str());
+                       a.left + a.pw / 2, a.H - 12, net::escapeXml(spec.xLabel).c_str());
     svg += fmt::format("<text x=\"16\" y=\"{:.1f}\" text-anchor=\"middle\" "
                        "transform=\"rotate(-90 16 {:.1f})\">{}{}</text>\n",
-                       top + ph / 2, top + ph / 2, net::escapeXml(spec.yLabel).c_str(),
+                       a.top + a.ph / 2, a.top + a.ph / 2, net::escapeXml(spec.yLabel).c_str(),
                        spec.logY ? " (log)" : "");
+    return svg;
+}
 
-    // Series and legend.
+// Each series as a line with markers, and its entry in the legend.
+std::string svgSeries(const PlotSpec& spec, const PlotArea& a) {
+    std::string svg;
     size_t paletteIndex = 0;
     for (size_t si = 0; si < spec.series.size(); ++si) {
         const PlotSeries& s = spec.series[si];
@@ -146,7 +159,7 @@ std::string svgLinePlot(const PlotSpec& spec) {
         for (size_t i = 0; i < std::min(s.x.size(), s.y.size()); ++i) {
             if (!usable(s.x[i], s.y[i], spec.logY))
                 continue;
-            const double x = px(s.x[i]), y = py(spec.logY ? std::log10(s.y[i]) : s.y[i]);
+            const double x = a.px(s.x[i]), y = a.py(spec.logY ? std::log10(s.y[i]) : s.y[i]);
             points += fmt::format("{:.1f},{:.1f} ", x, y);
             markers += fmt::format("<circle cx=\"{:.1f}\" cy=\"{:.1f}\" r=\"3\" fill=\"{}\"/>\n", x,
                                    y, color.c_str());
@@ -156,14 +169,28 @@ std::string svgLinePlot(const PlotSpec& spec) {
                         "points=\"{}\"/>\n",
                         color.c_str(), s.dashed ? " stroke-dasharray=\"6 4\"" : "", points.c_str());
         svg += markers;
-        const double ly = top + 10 + 20 * double(si);
+        const double ly = a.top + 10 + 20 * double(si);
         svg += fmt::format(
             "<line x1=\"{:.1f}\" y1=\"{:.1f}\" x2=\"{:.1f}\" y2=\"{:.1f}\" stroke=\"{}\" "
             "stroke-width=\"2\"{}/>\n<text x=\"{:.1f}\" y=\"{:.1f}\">{}</text>\n",
-            left + pw + 12, ly, left + pw + 36, ly, color.c_str(),
-            s.dashed ? " stroke-dasharray=\"6 4\"" : "", left + pw + 42, ly + 4,
+            a.left + a.pw + 12, ly, a.left + a.pw + 36, ly, color.c_str(),
+            s.dashed ? " stroke-dasharray=\"6 4\"" : "", a.left + a.pw + 42, ly + 4,
             net::escapeXml(s.name).c_str());
     }
+    return svg;
+}
+
+} // namespace
+
+std::string svgLinePlot(const PlotSpec& spec) {
+    const PlotArea a = plotArea(spec);
+    std::string svg =
+        fmt::format("<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{:.0f}\" height=\"{:.0f}\" "
+                    "viewBox=\"0 0 {:.0f} {:.0f}\" font-family=\"sans-serif\" font-size=\"12\">\n"
+                    "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>\n",
+                    a.W, a.H, a.W, a.H);
+    svg += svgAxes(spec, a);
+    svg += svgSeries(spec, a);
     svg += "</svg>\n";
     return svg;
 }
