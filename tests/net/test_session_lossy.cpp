@@ -295,3 +295,41 @@ TEST(SessionLossy, TheServersWindowGrowsPastEnetsOnALongFatLink) {
     EXPECT_EQ(received, big);
     EXPECT_GT(largest, uint32_t(ENET_PROTOCOL_MAXIMUM_WINDOW_SIZE));
 }
+
+// What Host::send says it queued is what the link carries, so the figures count it: a lossy
+// message's fragments with their headers, more with parity; the client gets it whole either way.
+TEST(SessionLossy, TheLossyChannelCountsItsFragmentsAndTheirParity) {
+    Host server = Host::listen(0, 1);
+    Host client = Host::client();
+    ASSERT_NE(client.connect(loopback(server.port()), kProtocolVersion), nullptr);
+    std::vector<uint8_t> message(20000);
+    for (size_t i = 0; i < message.size(); ++i)
+        message[i] = uint8_t(i * 7);
+    ENetPeer* peer = nullptr;
+    size_t plain = 0, withParity = 0, reliable = 0;
+    int received = 0;
+    const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+    while (received < 2 && std::chrono::steady_clock::now() < deadline) {
+        server.service(1, [&](const ENetEvent& e) {
+            if (e.type != ENET_EVENT_TYPE_CONNECT)
+                return;
+            peer = e.peer;
+            plain = server.send(peer, Channel::ImageLossy, message);
+            withParity = server.send(peer, Channel::ImageLossy, message, {}, 100);
+            reliable = server.send(peer, Channel::Image, message);
+        });
+        client.service(1, [&](const ENetEvent& e) {
+            if (e.type == ENET_EVENT_TYPE_RECEIVE && e.channelID == uint8_t(Channel::ImageLossy)) {
+                EXPECT_EQ(
+                    std::vector<uint8_t>(e.packet->data, e.packet->data + e.packet->dataLength),
+                    message);
+                ++received;
+            }
+        });
+    }
+    EXPECT_EQ(received, 2);
+    EXPECT_GT(plain, message.size()) << "each fragment's header";
+    EXPECT_LT(plain, message.size() * 11 / 10);
+    EXPECT_GT(withParity, plain + message.size() / 20) << "parity for 10 % loss";
+    EXPECT_EQ(reliable, message.size()) << "a reliable message goes as it is";
+}

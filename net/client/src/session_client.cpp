@@ -71,8 +71,8 @@ void SessionClient::send(Channel ch, const std::vector<uint8_t>& bytes) {
     const std::vector<uint8_t>& wire = m_secure ? sealed : bytes;
     if (m_sendTap)
         m_sendTap(ch, wire);
-    if (m_host.send(m_peer, ch, wire))
-        m_stats.countOut(ch, wire.size());
+    if (const size_t queued = m_host.send(m_peer, ch, wire))
+        m_stats.countOut(ch, queued);
 }
 
 void SessionClient::sendHandshake(Handshake m) {
@@ -93,7 +93,7 @@ bool SessionClient::sendRaw(Channel channel, std::span<const uint8_t> bytes) {
     // Raw bytes, unsealed: tests replay what the tap saw, or send what no code would.
     if (!connected())
         return false;
-    return m_host.send(m_peer, channel, bytes);
+    return m_host.send(m_peer, channel, bytes) > 0;
 }
 
 int SessionClient::pump(uint64_t nowUs) {

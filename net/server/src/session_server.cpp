@@ -589,16 +589,18 @@ bool SessionServer::Impl::sendTo(uint16_t id, Channel ch, const std::vector<uint
     auto link = links.find(id);
     if (bytes.empty() || link == links.end())
         return false;
-    // A proven peer's messages go sealed (docs/security.md); the figures count what goes out.
+    // A proven peer's messages go sealed (docs/security.md); the figures count what goes out, a
+    // lossy message's parity included.
     const bool sealed = gate.sealing(id);
     const std::vector<uint8_t> sealedBytes =
         sealed ? gate.seal(id, ch, bytes) : std::vector<uint8_t>{};
     const std::vector<uint8_t>& wire = sealed ? sealedBytes : bytes;
-    if (!host.send(link->second, ch, wire, inFlight, lossPermille))
+    const size_t queued = host.send(link->second, ch, wire, inFlight, lossPermille);
+    if (!queued)
         return false;
-    stats.countOut(ch, wire.size());
+    stats.countOut(ch, queued);
     book.peer(id, [&](PeerReport& r) {
-        r.bytesOut += wire.size();
+        r.bytesOut += queued;
         ++r.messagesOut;
         r.hapticModels += bytes[0] == uint8_t(MessageType::HapticModel);
         r.hapticRelays += bytes[0] == uint8_t(MessageType::HapticRelay);

@@ -309,19 +309,22 @@ void Host::reassemble(const ENetEvent& ev, const EventHandler& handler) {
     enet_packet_destroy(whole.packet);
 }
 
-bool Host::send(ENetPeer* peer, Channel channel, std::span<const uint8_t> bytes,
-                const InFlight& inFlight, uint32_t lossPermille) {
+size_t Host::send(ENetPeer* peer, Channel channel, std::span<const uint8_t> bytes,
+                  const InFlight& inFlight, uint32_t lossPermille) {
     if (channel == Channel::ImageLossy) {
         // Each fragment fits one ENet datagram unfragmented: the MTU less ENet's headers.
         const size_t room = peer->mtu - sizeof(ENetProtocolHeader) - sizeof(uint32_t) -
                             sizeof(ENetProtocolSendFragment);
         const auto pieces = splitMessage(bytes, fragments(peer).sent++, room, lossPermille);
         bool sent = !pieces.empty();
-        for (const auto& piece : pieces)
+        size_t queued = 0;
+        for (const auto& piece : pieces) {
             sent = sendPacket(peer, channel, piece, inFlight) && sent;
-        return sent;
+            queued += piece.size();
+        }
+        return sent ? queued : 0;
     }
-    return sendPacket(peer, channel, bytes, inFlight);
+    return sendPacket(peer, channel, bytes, inFlight) ? bytes.size() : 0;
 }
 
 bool Host::sendPacket(ENetPeer* peer, Channel channel, std::span<const uint8_t> bytes,

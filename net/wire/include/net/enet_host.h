@@ -116,8 +116,10 @@ public:
     // With `inFlight`, its size counts there until ENet releases the packet. On
     // Channel::ImageLossy it goes as datagram-sized fragments with the parity for a loss of
     // `lossPermille` per thousand (0: none; net/fragments.h); the receiving host delivers it whole.
-    bool send(ENetPeer* peer, Channel channel, std::span<const uint8_t> bytes,
-              const InFlight& inFlight = {}, uint32_t lossPermille = 0);
+    // Returns the bytes queued (on ImageLossy its fragments', headers and parity included: what
+    // the link carries), 0 when it could not be queued.
+    size_t send(ENetPeer* peer, Channel channel, std::span<const uint8_t> bytes,
+                const InFlight& inFlight = {}, uint32_t lossPermille = 0);
     void flush();
 
     // The largest Channel::ImageLossy message a host puts back together: a client's (a server's
