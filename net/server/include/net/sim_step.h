@@ -52,8 +52,9 @@ struct StepConfig {
     // Measures the work charged to peers (FairShare); empty: the steady clock. Not the step's
     // clock: a pumped server's stands still within a pass.
     ServerClock workClock = {};
-    // [Simulation thread] True when events wait for the next step (the server: its queue is not
-    // empty); empty: never.
+    // True when events wait for the next step (the server: its queue is not empty); empty:
+    // never. Asked on the simulation thread and, within bulk pieces, on the render threads at
+    // once (Renderer::renderBulk): it must be safe to call from several threads.
     std::function<bool()> yield = {};
     // Post updates to the outbox (a server). A replay (net/session_replay.h) only drills: it
     // renders nothing until asked (render()).
