@@ -1431,18 +1431,14 @@ void Renderer::render(const Camera& camera, const PixelRect& rect, Dbi& frame) c
 
 void Renderer::render(const Camera& camera, const PixelRect& rect, Dbi& frame,
                       HitCache* cache) const {
-    prepare(camera, frame, cache);
-    // Inside the camera's window too: the hit cache is sized and strided by it, and the assert
-    // in prepare() is gone from a release build.
-    PixelRect r =
-        intersect(intersect(rect, frame.bounds()), PixelRect(0, 0, camera.width, camera.height));
+    const PixelRect r = prepare(camera, rect, frame, cache);
     renderInto(camera, r, frame, r.x, r.y, cache, Tiling{});
 }
 
-void Renderer::prepare(const Camera& camera, const Dbi& frame, HitCache* cache) const {
+PixelRect Renderer::prepare(const Camera& camera, const PixelRect& rect, const Dbi& frame,
+                            HitCache* cache) const {
     assert(frame.width() == camera.width && frame.height() == camera.height &&
            "Renderer::render: the frame must be the camera's window size");
-    (void)frame;
     if (cache && !cache->validFor(*this, camera)) {
         // Another view or a volume that may have gained density: start afresh. 0 (unknown) is a
         // valid lower bound for every pixel.
@@ -1454,6 +1450,9 @@ void Renderer::prepare(const Camera& camera, const Dbi& frame, HitCache* cache) 
         cache->m_inside.assign(size_t(camera.width) * size_t(camera.height), 0);
         cache->m_resumed = 0;
     }
+    // Inside the camera's window too: the hit cache is sized and strided by it, and the assert
+    // above is gone from a release build.
+    return intersect(intersect(rect, frame.bounds()), PixelRect(0, 0, camera.width, camera.height));
 }
 
 Dbi Renderer::renderRect(const Camera& camera, const PixelRect& rect) const {
@@ -1845,7 +1844,7 @@ int Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, 
         return 0;
     const Frame f = makeFrame(*m_volume, camera, m_options, m_bricks);
     const int tile = std::max(4, m_options.tileSize);
-    const int tileH = tiling.columns ? rect.h : tile;
+    const int tileH = tiling.stop ? rect.h : tile;
     const int tilesX = (rect.w + tile - 1) / tile, tilesY = (rect.h + tileH - 1) / tileH;
     int32_t* cacheResume = cache ? cache->m_resume.data() : nullptr;
     uint8_t* cacheInside = cache ? cache->m_inside.data() : nullptr;
@@ -1887,15 +1886,12 @@ int Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, 
 
 int Renderer::renderBulk(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache,
                          const std::function<bool()>& stop, int atLeast) const {
-    // render()'s clipping and cache set-up, then its columns of tiles in order.
-    PixelRect r =
-        intersect(intersect(rect, frame.bounds()), PixelRect(0, 0, camera.width, camera.height));
+    const PixelRect r = prepare(camera, rect, frame, cache);
     if (r.empty() || m_volume->empty())
         return rect.w; // nothing to render: all of it done
-    prepare(camera, frame, cache);
     const int tile = std::max(4, m_options.tileSize);
     const int w = std::min(r.w, tile * renderInto(camera, r, frame, r.x, r.y, cache,
-                                                  {m_bulkPool, true, &stop, std::max(atLeast, 1)}));
+                                                  {m_bulkPool, &stop, std::max(atLeast, 1)}));
     return w == r.w ? rect.w : r.x - rect.x + w;
 }
 

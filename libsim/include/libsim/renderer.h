@@ -145,16 +145,17 @@ public:
     RayHit castRay(const Camera& camera, int x, int y) const;
 
 private:
-    // Tiles of `tile` pixels square, or with columns set columns of the rect's height; with
-    // stop set returns the tiles done (see renderBulk).
+    // Tiles of `tile` pixels square; with `stop` (renderBulk's) columns of the rect's height on
+    // `pool`, and the tiles done are returned.
     struct Tiling {
         ThreadPool* pool = nullptr; // else m_pool
-        bool columns = false;
         const std::function<bool()>* stop = nullptr;
         int atLeast = 0;
     };
-    // Restarts `cache` if it is not valid for the camera (render()'s first step).
-    void prepare(const Camera& camera, const Dbi& frame, HitCache* cache) const;
+    // render()'s first step: `rect` inside the frame and the camera's window, and `cache`
+    // restarted if it is not valid for the camera.
+    PixelRect prepare(const Camera& camera, const PixelRect& rect, const Dbi& frame,
+                      HitCache* cache) const;
     int renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, int outX, int outY,
                    HitCache* cache, const Tiling& tiling) const;
 
