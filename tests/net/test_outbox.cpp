@@ -9,6 +9,8 @@
 
 #include <gtest/gtest.h>
 
+#include <map>
+
 using namespace trephine;
 using namespace trephine::net;
 
@@ -256,6 +258,64 @@ TEST(Outbox, PredictedUpdatesAreCodedAgainstWhatTheClientReallyHolds) {
     // A switch to volume mode forgets the copy: the next DBI is a full one.
     rig.outbox.modeChanged(4, Sync::Volume, Codec::Lz4);
     EXPECT_TRUE(rig.outbox.shadow(4)->empty());
+}
+
+// Clients of one view that hold the same pixels get one coding of a change (a classroom's
+// watchers share views); a client that holds other pixels gets its own. Each copy ends as the
+// frame, bit for bit through the quantiser.
+TEST(Outbox, ClientsHoldingTheSamePixelsShareOneCodingOfAChange) {
+    OutboxRig rig(0);
+    const Camera cam = cameraFor(48, 48);
+    const Dbi first = picture(48, 48, 0), other = picture(48, 48, 9);
+    std::map<uint16_t, ClientCopy> clients;
+    for (uint16_t id : {1, 2, 3}) {
+        rig.outbox.join(id, inFlight(0), Codec::Zstd, Codec::Lz4);
+        rig.outbox.postImage(id, cam, id == 3 ? other : first, first.bounds(), true, 1, {},
+                             id != 3);
+        clients[id] = ClientCopy{cam, {}, 0};
+    }
+    auto deliver = [&] {
+        std::map<uint16_t, ImageUpdate> sent;
+        for (const Outbox::Ready& r : rig.outbox.take(live).updates) {
+            clients[r.client].apply(r);
+            sent[r.client] = decoded(r);
+            rig.outbox.acknowledge(r.client, ImageAck{0, sent[r.client].sequence});
+        }
+        return sent;
+    };
+    auto shared = [&] {
+        return rig.book.read([](const ServerReport& r) { return r.counters.codingsShared; });
+    };
+    ASSERT_EQ(deliver().size(), 3u);
+    EXPECT_EQ(shared(), 1u); // client 2's full image is client 1's
+
+    const PixelRect change{6, 4, 20, 14};
+    const Dbi frame = with(first, picture(48, 48, 5), change);
+    for (uint16_t id : {1, 2, 3})
+        rig.outbox.postImage(id, cam, frame, change, false, 10, {}, id != 3);
+    std::map<uint16_t, ImageUpdate> sent = deliver();
+    ASSERT_EQ(sent.size(), 3u);
+    EXPECT_EQ(shared(), 2u);
+    EXPECT_TRUE(sent[1].predicted && sent[2].predicted && sent[3].predicted);
+    EXPECT_EQ(sent[1].payload, sent[2].payload);
+    EXPECT_EQ(sent[1].baseHash, sent[2].baseHash);
+    EXPECT_NE(sent[1].baseHash, sent[3].baseHash); // coded against what client 3 holds
+    EXPECT_NE(sent[1].sequence, sent[2].sequence);
+    for (uint16_t id : {1, 2}) {
+        EXPECT_EQ(clients[id].resyncs, 0);
+        EXPECT_TRUE(compare(clients[id].dbi, quantised(frame, cam)).identical()) << id;
+    }
+    EXPECT_TRUE(
+        compare(clients[3].dbi.extract(change), quantised(frame, cam).extract(change)).identical());
+
+    // A coding is kept only for clients that follow (keeping it costs copies).
+    const Dbi next = with(frame, picture(48, 48, 6), change);
+    for (uint16_t id : {1, 2})
+        rig.outbox.postImage(id, cam, next, change, false, 20, {});
+    sent = deliver();
+    EXPECT_EQ(shared(), 2u);
+    EXPECT_EQ(sent[1].payload, sent[2].payload);
+    EXPECT_TRUE(compare(clients[2].dbi, quantised(next, cam)).identical());
 }
 
 // A volume client held back with an update waiting: newer changes are only noted, not merged and

@@ -74,6 +74,7 @@ void Outbox::clear() {
     m_volumes.clear();
     m_refused.clear();
     m_lossy.clear();
+    m_coded = {};
 }
 
 const Dbi* Outbox::shadow(uint16_t id) const {
@@ -100,8 +101,8 @@ void Outbox::countNoted() {
 // [SECTION] images
 
 void Outbox::postImage(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect,
-                       bool full, uint64_t causeUs, ImageTiming timing) {
-    post(id, camera, frame, rect, full, causeUs, timing, nullptr);
+                       bool full, uint64_t causeUs, ImageTiming timing, bool othersFollow) {
+    post(id, camera, frame, rect, full, causeUs, timing, nullptr, false, othersFollow);
 }
 
 void Outbox::postFullImage(uint16_t id, const Camera& camera, Dbi pixels, uint64_t causeUs,
@@ -121,7 +122,8 @@ Dbi Outbox::buffer(int width, int height) {
 
 // `owned`: `frame` itself, which a full image coded apart takes instead of a copy.
 void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect, bool full,
-                  uint64_t causeUs, ImageTiming timing, Dbi* owned, bool preview) {
+                  uint64_t causeUs, ImageTiming timing, Dbi* owned, bool preview,
+                  bool othersFollow) {
     Client& c = m_clients[id];
     LossyBase base;
     std::optional<PendingImage> old = takeMergeable(id, c.viewId, full, causeUs, base);
@@ -184,7 +186,7 @@ void Outbox::post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect
     }
     const uint64_t e0 = m_clock();
     const Dbi pixels = frame.extract(rect);
-    Dbi undo = encodeInto(u, c, frame, pixels, camera, !afterFull || chained);
+    Dbi undo = encodeInto(u, c, frame, pixels, camera, !afterFull || chained, othersFollow);
     // Only zstd clients get predicted updates, so only they need the copy (a whole frame:
     // 33.5 MB for 2048 x 2048).
     if (c.codec != Codec::Zstd)
@@ -307,25 +309,49 @@ std::optional<Outbox::PendingImage> Outbox::takeMergeable(uint16_t id, uint32_t 
 // copy for zstd clients when `predictable`, planar otherwise. Gives the copy's pixels it replaces
 // (empty for a full image or a client without a copy), which a merge puts back.
 Dbi Outbox::encodeInto(ImageUpdate& u, const Client& c, const Dbi& frame, const Dbi& pixels,
-                       const Camera& camera, bool predictable) {
+                       const Camera& camera, bool predictable, bool keep) {
     const bool copied = !u.full && c.codec == Codec::Zstd && c.shadow.width() == frame.width() &&
                         c.shadow.height() == frame.height();
     Dbi undo = copied ? c.shadow.extract({int(u.x), int(u.y), int(u.width), int(u.height)}) : Dbi();
     // Predicted updates trade ~4 ns a pixel more coding at each end than the planar form for
     // about half its bytes (benchmark_net 'predicted|planar'): worth it with zstd (the codec
     // chosen for bytes), not with lz4 (chosen for latency).
-    if (copied && predictable) {
-        PredictedImage p = encodePredicted(pixels, undo, c.codec, DepthQuantizer(camera));
-        u.predicted = true;
+    const bool predicted = copied && predictable;
+    const Codec codec = predicted ? c.codec : u.codec;
+    u.predicted = predicted;
+    if (reuseCoding(u, camera, codec, pixels, undo))
+        return undo;
+    if (predicted) {
+        PredictedImage p = encodePredicted(pixels, undo, codec, DepthQuantizer(camera));
         u.baseHash = p.baseHash;
         u.rawBytes = p.rawBytes;
         u.payload = std::move(p.payload);
-        return undo;
+    } else {
+        EncodedImage e = encodeImage(pixels, codec, camera);
+        u.rawBytes = e.rawBytes;
+        u.payload = std::move(e.payload);
     }
-    EncodedImage e = encodeImage(pixels, u.codec, camera);
-    u.rawBytes = e.rawBytes;
-    u.payload = std::move(e.payload);
+    m_coded.payload.clear(); // an empty payload: nothing kept
+    // Keeping the pixels (two copies) costs ~1/6 of coding them: only for clients that follow.
+    if (keep)
+        m_coded = {camera,     codec,      predicted, pixels, predicted ? undo : Dbi(),
+                   u.baseHash, u.rawBytes, u.payload};
     return undo;
+}
+
+// Fills `u` with the kept coding when it is of the same pixels, coded the same way against the
+// same copy (`base`, predicted); comparing costs ~1/20 of coding.
+bool Outbox::reuseCoding(ImageUpdate& u, const Camera& camera, Codec codec, const Dbi& pixels,
+                         const Dbi& base) {
+    const Coded& m = m_coded;
+    if (m.payload.empty() || m.camera != camera || m.codec != codec || m.predicted != u.predicted ||
+        !(m.pixels == pixels) || (u.predicted && !(m.base == base)))
+        return false;
+    u.baseHash = m.baseHash;
+    u.rawBytes = m.rawBytes;
+    u.payload = m.payload;
+    m_book.count(&ServerCounters::codingsShared);
+    return true;
 }
 
 // [Posting thread] Every rectangle before `sequence` is in it (or acknowledged): a loss reported

@@ -71,6 +71,7 @@ nlohmann::ordered_json toJson(const ServerReport& r, const NetStats& stats) {
               {"tool_states_applied", c.toolStatesApplied},
               {"tool_states_dropped", c.toolStatesDropped},
               {"renders", c.renders},
+              {"codings_shared", c.codingsShared},
               {"haptic_models_sent", c.hapticModelsSent},
               {"haptic_relays_sent", c.hapticRelaysSent},
               {"malformed_dropped", stats.malformed()},

@@ -535,6 +535,7 @@ void SimulationStep::renderStale(ViewFrame& v) {
 // (2048 x 2048 on the 2-core VM).
 void SimulationStep::postView(ViewFrame& v) {
     for (uint16_t id : v.holders) {
+        const bool othersFollow = id != v.holders.back();
         Client& c = m_clients.at(id);
         const uint64_t t0 = m_share.now();
         if (c.fullCauseUs && copiedApart(v)) {
@@ -543,10 +544,12 @@ void SimulationStep::postView(ViewFrame& v) {
                 v.rowsCopied = 0;
             }
         } else if (c.fullCauseUs) {
-            m_outbox.postImage(id, v.camera, v.frame, v.frame.bounds(), true, c.fullCauseUs, {});
+            m_outbox.postImage(id, v.camera, v.frame, v.frame.bounds(), true, c.fullCauseUs, {},
+                               othersFollow);
             c.fullCauseUs = 0;
         } else if (!v.fresh.empty()) {
-            m_outbox.postImage(id, v.camera, v.frame, v.fresh, false, v.causeUs, v.timing);
+            m_outbox.postImage(id, v.camera, v.frame, v.fresh, false, v.causeUs, v.timing,
+                               othersFollow);
         }
         m_share.charge(id, m_share.now() - t0);
     }

@@ -104,9 +104,10 @@ public:
 
     // Queues `rect` of `frame` (the view seen by `camera`) for client `id`, merged with its
     // waiting image of the same view: the union is taken from the frame now. A waiting rectangle
-    // outside the frame is never merged: the client gets the whole frame.
+    // outside the frame is never merged: the client gets the whole frame. `othersFollow`: more
+    // clients of this view are posted next, so the coding is kept for them (Coded).
     void postImage(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect, bool full,
-                   uint64_t causeUs, ImageTiming timing);
+                   uint64_t causeUs, ImageTiming timing, bool othersFollow = false);
     // A full image of `pixels` (a copy of the view's frame the caller made, see buffer()), coded
     // apart like the large ones postImage copies itself.
     // `preview`: a new view's first picture, `pixels` and `camera` its half-size render
@@ -271,9 +272,21 @@ private:
         std::optional<VolumeChange> noted;
     };
 
+    // The newest coding kept for the clients of a view that follow: one whose copy holds the
+    // same pixels there gets its payload as it is (a classroom's 64 watchers share 16 views).
+    struct Coded {
+        Camera camera;
+        Codec codec = Codec::Raw;
+        bool predicted = false;
+        Dbi pixels, base; // the rectangle, and the client's copy of it (predicted only)
+        uint32_t baseHash = 0, rawBytes = 0;
+        std::vector<uint8_t> payload;
+    };
+
     bool heldBack(const Host::InFlight& inFlight) const;
     void post(uint16_t id, const Camera& camera, const Dbi& frame, PixelRect rect, bool full,
-              uint64_t causeUs, ImageTiming timing, Dbi* owned, bool preview = false);
+              uint64_t causeUs, ImageTiming timing, Dbi* owned, bool preview = false,
+              bool othersFollow = false);
     bool postVolume(uint16_t id, const Client& c, const Volume& volume, VolumeChange change);
     void postVolumeOrRefuse(uint16_t id, const Client& c, const Volume& volume,
                             const VolumeChange& change);
@@ -281,7 +294,9 @@ private:
     std::optional<PendingImage> takeMergeable(uint16_t id, uint32_t viewId, bool full,
                                               uint64_t& causeUs, LossyBase& base);
     Dbi encodeInto(ImageUpdate& u, const Client& c, const Dbi& frame, const Dbi& pixels,
-                   const Camera& camera, bool predictable);
+                   const Camera& camera, bool predictable, bool keep);
+    bool reuseCoding(ImageUpdate& u, const Camera& camera, Codec codec, const Dbi& pixels,
+                     const Dbi& base);
     void postedSelfContained(uint16_t id, uint32_t sequence);
     static uint32_t chainOn(const Client& c, const LossyBase& base, const PendingImage* merged);
     void postApart(uint16_t id, Client& c, const Camera& camera, const Dbi& frame, Dbi* owned,
@@ -307,6 +322,7 @@ private:
     ServerClock m_clock;
     std::function<void()> m_wake;
     std::map<uint16_t, Client> m_clients;
+    Coded m_coded;
     uint32_t m_sequence = 0; // image and volume updates share one sequence
     std::atomic<int> m_noted{0};
 

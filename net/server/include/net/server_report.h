@@ -34,6 +34,7 @@ struct ServerCounters {
     uint64_t malformedKicks = 0;
     uint64_t toolStatesApplied = 0, toolStatesDropped = 0;
     uint64_t renders = 0;
+    uint64_t codingsShared = 0; // image updates given another client's coding of the same pixels
     uint64_t hapticModelsSent = 0, hapticRelaysSent = 0;
     uint64_t refusedFull = 0, helloTimeouts = 0, viewsRefused = 0;
     uint64_t annotationsRefused = 0, takeOversRefused = 0, drillingPaused = 0;
