@@ -139,6 +139,10 @@ void addWanCommand(CLI::App* study, int& exitCode) {
     wan->add_option("--losses", o->losses, "Only these losses (%), with --rtts")
         ->delimiter(',')
         ->check(CLI::Range(0.0, 50.0));
+    wan->add_option("--classroom-rate", o->classroomRateMbit,
+                    "The classroom's shared link, Mbit/s (0: no limit, loopback through the relay)")
+        ->check(CLI::Range(0.0, 100000.0))
+        ->capture_default_str();
     wan->add_option("--soak", o->soakS, "Seconds of each drilling soak (the target link's: 60)")
         ->check(CLI::Range(0.5, 600.0));
     wan->add_flag("--quick", o->quick,

@@ -481,15 +481,16 @@ void writeClassroom(std::ostringstream& md, const StudyReportInput& in, const st
     const WanResults& r = in.wan;
     md << "## Classroom: one driller, the others watching\n\n";
     md << fmt::format(
-        "N in-process clients of one design on one shared {:.0f} Mbit/s link (the emulator's "
-        "shared rate: every client's datagrams queue for one serialiser each way): client 0 "
+        "N in-process clients of one design on {} (a shared rate: every client's datagrams "
+        "queue for one serialiser each way): client 0 "
         "drills (the server cuts its {}^3 box), the others watch from distinct views (the "
         "paper camera orbited by +-5 to +-35 and 40 degrees: 16 distinct views, then again). "
         "Volume watchers do not re-render on the CPU (a window ray casts on its GPU). "
         "wan-classroom.csv has every client's figures.\n\n",
-        in.wanConfig.classroomRateMbit, in.wanConfig.classroomBox);
+        classroomLink(in.wanConfig.classroomRateMbit), in.wanConfig.classroomBox);
     std::vector<std::vector<std::string>> t;
-    PlotSpec egress{"Server egress in a classroom (shared 100 Mbit/s link)",
+    PlotSpec egress{fmt::format("Server egress in a classroom ({})",
+                                classroomLink(in.wanConfig.classroomRateMbit)),
                     "clients",
                     "Mbit/s",
                     true,
@@ -504,7 +505,7 @@ void writeClassroom(std::ostringstream& md, const StudyReportInput& in, const st
                 continue;
             s.x.push_back(w.clients);
             s.y.push_back(w.egressBytesPerS * 8e-6);
-            if (design == std::string("dbi")) {
+            if (design == std::string("dbi") && w.rateMbit > 0) {
                 link.x.push_back(w.clients);
                 link.y.push_back(w.rateMbit);
             }
@@ -516,7 +517,8 @@ void writeClassroom(std::ostringstream& md, const StudyReportInput& in, const st
         }
         egress.series.push_back(s);
     }
-    egress.series.insert(egress.series.begin(), link);
+    if (!link.x.empty())
+        egress.series.insert(egress.series.begin(), link);
     md << markdownTable({"design", "clients", "server egress (Mbit/s)", "updates/s (median client)",
                          "slowest client (/s)", "latency p50 (median client, ms)", "worst p99 (ms)",
                          "longest stall (ms)", "last join (ms)"},

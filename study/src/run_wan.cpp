@@ -47,6 +47,7 @@ void configureWan(const WanOptions& o, WanStudyConfig& config) {
     }
     if (o.soakS > 0)
         config.soakS = config.classroomSoakS = o.soakS;
+    config.classroomRateMbit = o.classroomRateMbit;
 }
 
 // The paper camera's volume: its spacing makes it span the paper's 300 pixels.
@@ -90,10 +91,10 @@ WanResults runWanCommand(const WanOptions& o, WanStudyConfig& config) {
     makeOutDir(o.out);
     fmt::print("WAN study: {}, paper camera, {}x{}, codec {}, {} links x {} boxes per design, "
                "soaks of {} s ({} s at the target link), {} cuts a second; classrooms of {} "
-               "clients in this process on one shared {} Mbit/s link\n",
+               "clients in this process on {}\n",
                o.volume, config.window, config.window, o.codec, config.links.size(),
                config.boxes.size(), config.soakS, config.targetSoakS, config.cutHz,
-               fmt::join(config.classroom, ", "), config.classroomRateMbit);
+               fmt::join(config.classroom, ", "), classroomLink(config.classroomRateMbit));
     std::fflush(stdout);
     ProgressBar bar(int(2 * (config.links.size() * config.boxes.size() + config.classroom.size())));
     config.progress = [&](const std::string& label, int done, int) { bar.set(done, label); };

@@ -34,6 +34,11 @@ WanLink wanTargetLink() {
     return {100, 1, 20};
 }
 
+std::string classroomLink(double rateMbit) {
+    return rateMbit > 0 ? fmt::format("one shared {:.0f} Mbit/s link", rateMbit)
+                        : std::string("loopback (through the relay, no rate limit)");
+}
+
 std::vector<WanLink> wanSweep(bool quick) {
     std::vector<WanLink> links;
     const std::vector<double> rtts =

@@ -34,7 +34,7 @@ struct WanStudyConfig {
     double cutHz = 40;       // box cuts and restores offered per second during a soak
     std::vector<int> classroom{1, 4, 16, 64}; // clients; empty: no classroom
     int classroomBox = 40;                    // one of `boxes` (else the largest given)
-    double classroomRateMbit = 100;           // the classroom's one shared link
+    double classroomRateMbit = 100;           // the classroom's one shared link; 0: no limit
     double classroomSoakS = 10;
     double joinTimeoutS = 60; // a client not joined by then: its row says so (-1), no soak
     std::function<void(const std::string& label, int done, int total)> progress;
@@ -46,6 +46,8 @@ struct WanStudyConfig {
 std::vector<WanLink> wanSweep(bool quick);
 // The target link: 100 ms RTT, 1 % loss, 20 Mbit/s.
 WanLink wanTargetLink();
+// The classroom's link in words: "one shared 100 Mbit/s link", or loopback for a rate of 0.
+std::string classroomLink(double rateMbit);
 
 // One row of wan.csv. A figure not measured is NaN (an empty cell); a join that timed out is -1.
 struct WanRow {
@@ -106,7 +108,8 @@ struct WanOptions {
     bool boxesGiven = false;
     // Given: the sweep is these RTTs x losses at 100 Mbit/s, and the target link.
     std::vector<double> rtts, losses;
-    double soakS = 0; // given (> 0): each soak's seconds but the target link's 60
+    double soakS = 0;               // given (> 0): each soak's seconds but the target link's 60
+    double classroomRateMbit = 100; // 0: no limit, the relay alone (loopback)
     bool quick = false;
     std::shared_ptr<const Volume> opened; // study all's volume, already open
 };
