@@ -293,7 +293,10 @@ HapticSample HapticLoop::step(double now) {
     s.force = force;
     s.forceN = glm::length(force);
     s.modelForce = m_lastModelForce;
-    s.position = state.pose.position;
+    if (state.valid)
+        m_lastPosition = state.pose.position;
+    s.position = m_lastPosition; // a missed read's pose is no place the hand went
+    s.missed = !state.valid;
     s.stale = m_blender.stale();
     std::lock_guard lock(m_statsMutex);
     m_recorder.add(s);

@@ -33,12 +33,13 @@ public:
     DeviceState read(double) override {
         DeviceState s;
         s.pose.position = position;
-        s.valid = true;
+        s.valid = !missing;
         return s;
     }
     void setForce(glm::vec3 f) override { force = f; }
     glm::vec3 position{0.0f};
     glm::vec3 force{0.0f};
+    bool missing = false; // reads give no pose, as a late or cut-off device's do
 };
 
 } // namespace
@@ -385,6 +386,31 @@ TEST(HapticLoop, StepsDeterministicallyAndThrottlesSends) {
     EXPECT_NEAR(device.force.z, 2.0f, 1e-5f);
     EXPECT_EQ(loop.stats().models, 1u);
     EXPECT_EQ(loop.samples().back().modelForce, glm::vec3(0, 0, 2.0f));
+}
+
+// A tick whose read gave no pose (late, cut off) zeroes the force, sends nothing, and records
+// the last pose read with `missed`: plots and figures never see the hand jump to the origin.
+TEST(HapticLoop, AMissedReadKeepsTheLastPoseInTheRecord) {
+    TestDevice device;
+    device.position = {3, 4, 5};
+    int sends = 0;
+    HapticLoop loop(device, {}, [&](const DeviceState&, double) { ++sends; });
+    loop.setModel(modelAt(device.position, {0, 0, 2.0f}, 1.0f), 0.0);
+    for (int i = 0; i < 200; ++i)
+        loop.step(i * 1e-3);
+    const int sent = sends;
+    device.missing = true;
+    device.position = {0, 0, 0};
+    loop.step(0.2);
+    const HapticSample s = loop.samples().back();
+    EXPECT_TRUE(s.missed);
+    EXPECT_EQ(s.position, glm::vec3(3, 4, 5));
+    EXPECT_EQ(device.force, glm::vec3(0.0f));
+    EXPECT_EQ(sends, sent);
+    device.missing = false;
+    loop.step(0.201);
+    EXPECT_FALSE(loop.samples().back().missed);
+    EXPECT_EQ(loop.samples().back().position, glm::vec3(0.0f));
 }
 
 // A NaN rate (0 / 0 upstream) is clamped like any other out-of-range rate: to the slowest.

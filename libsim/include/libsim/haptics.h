@@ -155,8 +155,9 @@ struct HapticSample {
     float forceN = 0.0f;        // |F| output
     glm::vec3 force{0.0f};      // output to the device
     glm::vec3 modelForce{0.0f}; // the newest server f(P_N)
-    glm::vec3 position{0.0f};   // device position
+    glm::vec3 position{0.0f};   // device position (the last read's when this tick's missed)
     bool stale = false;
+    bool missed = false; // the device gave no pose this tick (late, cut off): zero force
 };
 
 // A ring of the most recent samples for plots; single thread.
@@ -283,6 +284,7 @@ private:
 
     NewestModel m_models;
     glm::vec3 m_lastModelForce{0.0f};
+    glm::vec3 m_lastPosition{0.0f}; // the last valid read's, for a missed tick's sample
 
     mutable std::mutex m_statsMutex;
     HapticRecorder m_recorder;
