@@ -31,7 +31,7 @@ void drawNetworkPanel(const net::ClientSnapshot& snap, const NetworkHistory& his
                 (unsigned long long)snap.malformed, (unsigned long long)snap.updatesRejected);
     if (snap.viewsRefused > 0)
         ImGui::TextColored(ImVec4(1.0f, 0.75f, 0.2f, 1),
-                           "            %llu views too large for the server",
+                           "            %llu views the server does not serve",
                            (unsigned long long)snap.viewsRefused);
     ImGui::Text("updates     %.0f /s   %llu applied (%llu full)", history.updateRate(now),
                 (unsigned long long)snap.updatesApplied, (unsigned long long)snap.fullUpdates);

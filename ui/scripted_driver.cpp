@@ -106,9 +106,9 @@ bool ScriptedDriver::settled(const Frame& f) const {
 
 bool ScriptedDriver::abortsBeforeEnd(const Frame& f) {
     ++m_frameCount;
-    if (f.viewTooLarge.empty() || !scripted())
+    if (f.viewNotServed.empty() || !scripted())
         return false;
-    std::fprintf(stderr, "trephine: %s\n", f.viewTooLarge.c_str());
+    std::fprintf(stderr, "trephine: %s\n", f.viewNotServed.c_str());
     m_exitCode = 1;
     m_ended = true;
     return true;

@@ -456,8 +456,7 @@ struct FrameState {
     ToolKind kind = ToolKind::Burr;
     float diameter = 0.0f;
     HapticLoopStats hstats;
-    int64_t maxViewPixels = 0;
-    bool viewTooLarge = false;
+    std::string viewNotServed; // why the server does not serve this view ("" when it does)
 };
 
 // The trainer window: its members are declared in the order the window needs them built, so
@@ -486,7 +485,6 @@ private:
     void viewGestures(const InjectedInput& in, glm::vec2 delta);
     void composite(const FrameState& f);
     void drawOverlays(FrameState& f);
-    std::string tooLargeText(const FrameState& f) const;
     void drawPanels(const FrameState& f);
     void drawComparisonExtras();
     void drawFrameRate(double now);
@@ -1075,11 +1073,7 @@ void TrainerWindow::drawOverlays(FrameState& f) {
         if (hole || feed.held())
             drawHoleReadout(hole, feed.held(), feedRateMmPerS);
     }
-    // A view larger than the server serves is refused by the client (the window waited for
-    // its first image for good, the reason in one line of the Network panel).
-    f.maxViewPixels = snap.welcome ? snap.welcome->maxViewPixels : 0;
-    f.viewTooLarge = snap.state == net::LinkState::Connected && snap.welcome &&
-                     int64_t(viewSize.x) * viewSize.y > f.maxViewPixels;
+    f.viewNotServed = net::viewNotServedText(snap, viewSize.x, viewSize.y, o.sizeOption);
     if (snap.state == net::LinkState::Connected)
         attemptsWhenConnected = snap.attempts;
     const LinkMessage link = linkMessage(snap.state, snap.attempts, attemptsWhenConnected,
@@ -1089,8 +1083,8 @@ void TrainerWindow::drawOverlays(FrameState& f) {
             ImVec2(0, viewTop), ImVec2(float(viewSize.x), viewTop + float(viewSize.y)),
             IM_COL32(0, 0, 0, 150));
     std::string status;
-    if (f.viewTooLarge)
-        status = tooLargeText(f);
+    if (!f.viewNotServed.empty())
+        status = f.viewNotServed;
     else if (!link.text.empty())
         status = link.text;
     else if (!sceneError.empty())
@@ -1115,13 +1109,6 @@ void TrainerWindow::drawOverlays(FrameState& f) {
     note.draw(f.now, 0.0f, viewTop, float(viewSize.x));
     drawFrameRate(f.now);
     drawSafetyBanner(snap, viewSize.x);
-}
-
-std::string TrainerWindow::tooLargeText(const FrameState& f) const {
-    return "The server serves views of at most " + std::to_string(f.maxViewPixels) +
-           " pixels; this view is " + std::to_string(viewSize.x) + " x " +
-           std::to_string(viewSize.y) + ": restart with " + o.sizeOption + " " +
-           std::to_string(int(std::sqrt(double(f.maxViewPixels)))) + " or less";
 }
 
 // Panels: Forces under the view, and two columns right of it; and what their controls ask of
@@ -1252,8 +1239,7 @@ bool TrainerWindow::endFrame(const FrameState& f) {
     scripted.sinceLastUpdateS = f.now - lastRectAt;
     scripted.holding = f.holding;
     scripted.pointerBusy = o.input && !injected.done;
-    if (f.viewTooLarge)
-        scripted.viewTooLarge = tooLargeText(f);
+    scripted.viewNotServed = f.viewNotServed;
     if (script.abortsBeforeEnd(scripted)) {
         window.endFrame(nullptr);
         return false;

@@ -514,9 +514,18 @@ TEST(AvailabilityPolicy, AllViewsTogetherStayUnderThePixelTotal) {
     const uint16_t small = rig.join("d", viewOf(5, 5));
     EXPECT_TRUE(rig.p().admitted(small));
     ViewRequest grow;
+    grow.requestId = 7;
     grow.view = viewOf(50, 50);
-    EXPECT_EQ(eventsOf<ViewEvent>(rig.send(small, grow)), 0u);
+    PolicyOutput refusedOut = rig.send(small, grow);
+    EXPECT_EQ(eventsOf<ViewEvent>(refusedOut), 0u);
     EXPECT_EQ(rig.availability().viewsOverTotal, 1u);
+    // The peer is told, with what it could have; it keeps its view.
+    ASSERT_EQ(refusedOut.messages.size(), 1u);
+    EXPECT_EQ(refusedOut.messages[0].to, std::vector<uint16_t>{small});
+    ViewRefused refused;
+    ASSERT_TRUE(decodeMessage(refusedOut.messages[0].bytes, refused));
+    EXPECT_EQ(refused.requestId, 7u);
+    EXPECT_EQ(refused.freePixels, 50u);
     // A view that shrinks frees pixels for the others.
     ViewRequest shrink;
     shrink.view = viewOf(10, 10);

@@ -227,6 +227,40 @@ TEST(Session, TwoViewsLateJoinerAndViewChangeConverge) {
     ASSERT_TRUE(waitConverged(server, {&ca, &cb}));
 }
 
+// A view request past the session's pixel total is answered, not dropped: the client keeps the
+// view it has, says what the server had free, and a smaller request is served.
+TEST(Session, AViewPastTheSessionsTotalIsRefusedAndTheViewHeldStays) {
+    Volume sphere = makeSphere(32);
+    ServerConfig sc = testConfig("sphere:32");
+    sc.maxTotalViewPixels = 2 * 64 * 64 + 100;
+    SessionServer server(sphere, sc);
+    Pumped pumped(server);
+    ClientConfig cfg = topViewClient(sphere, 64);
+    SessionClient a(cfg), b(cfg);
+    a.connect(loopback(server.port()));
+    b.connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&a, &b}));
+    const uint32_t held = b.viewId();
+
+    ViewSpec wide = cfg.view;
+    wide.width = wide.height = 96;
+    EXPECT_NE(b.requestView(wide), 0u);
+    ASSERT_TRUE(pumpUntil({&a, &b}, [&] { return b.viewRefusal().has_value(); }));
+    EXPECT_EQ(*b.viewRefusal(), (ViewRefusal{96, 96, 64 * 64 + 100}));
+    EXPECT_EQ(b.viewsRefused(), 1u);
+    EXPECT_EQ(b.viewId(), held);
+    EXPECT_TRUE(b.hasFullImage());
+    EXPECT_EQ(b.dbi().width(), 64);
+
+    ViewSpec smaller = cfg.view;
+    smaller.width = smaller.height = 48;
+    const uint32_t id = b.requestView(smaller);
+    EXPECT_FALSE(b.viewRefusal().has_value());
+    ASSERT_TRUE(pumpUntil({&a, &b}, [&] { return b.viewId() == id && b.hasFullImage(); }));
+    EXPECT_EQ(b.dbi().width(), 48);
+    EXPECT_EQ(b.viewsRefused(), 1u);
+}
+
 TEST(Session, EveryToolPoseReachesTheOtherClients) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, testConfig("sphere:32"));

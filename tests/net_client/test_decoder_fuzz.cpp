@@ -248,6 +248,7 @@ std::vector<std::vector<uint8_t>> sampleMessages() {
     all.push_back(encoded(current));
     all.push_back(encoded(HandLinks{{{2, 5, false}, {3, 0, true}}}));
     all.push_back(encoded(ImageAck{4, 77}));
+    all.push_back(encoded(ViewRefused{5, 250000}));
     all.push_back(encoded(SafetyWarning{4, Zone::Danger, Zone::Caution, "sinus", 0.8f, 17, 99}));
     AssessmentSnapshot snapshot;
     snapshot.serverTimeUs = 5;

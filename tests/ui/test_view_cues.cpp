@@ -57,6 +57,25 @@ TEST(LinkMessage, ALostServerDimsThePictureAndSaysSo) {
     EXPECT_TRUE(has(m.text, "has stopped")) << m.text;
 }
 
+// A view the server does not serve says why: one larger than any it serves, or one past the
+// session's total that it refused, while the window is that size; nothing otherwise.
+TEST(LinkMessage, AViewTheServerDoesNotServeSaysWhy) {
+    net::ClientSnapshot snap;
+    EXPECT_EQ(net::viewNotServedText(snap, 900, 900, "--size"), "") << "not connected yet";
+    snap.state = net::LinkState::Connected;
+    snap.welcome = net::Welcome{};
+    snap.welcome->maxViewPixels = 640000;
+    EXPECT_EQ(net::viewNotServedText(snap, 900, 900, "--size"),
+              "The server serves views of at most 640000 pixels; this view is 900 x 900: restart "
+              "with --size 800 or less");
+    EXPECT_EQ(net::viewNotServedText(snap, 700, 500, "--size"), "");
+    snap.viewRefusal = net::ViewRefusal{700, 500, 120000};
+    EXPECT_EQ(net::viewNotServedText(snap, 700, 500, "--size"),
+              "The session's views are full: the server has 120000 pixels free for your view and "
+              "this one is 700 x 500");
+    EXPECT_EQ(net::viewNotServedText(snap, 300, 300, "--size"), "") << "another size: asked anew";
+}
+
 TEST(Labels, LabelsAtOnePointDoNotCoverEachOther) {
     const UiRect view{0, 0, 500, 500};
     std::vector<LabelRequest> at(5, LabelRequest{200, 200, 80, 14});

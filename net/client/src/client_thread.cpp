@@ -4,8 +4,11 @@
 #include "net/codec.h"
 #include "net/messages.h"
 
+#include <fmt/format.h>
+
 #include <algorithm>
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <functional>
 #include <mutex>
@@ -342,11 +345,11 @@ auto fieldsOf(const ClientSnapshot& s) {
     const auto& [f0, f1, f2, f3, f4, f5, f6, f7, f8, f9, f10, f11, f12, f13, f14, f15, f16, f17,
                  f18, f19, f20, f21, f22, f23, f24, f25, f26, f27, f28, f29, f30, f31, f32, f33,
                  f34, f35, f36, f37, f38, f39, f40, f41, f42, f43, f44, f45, f46, f47, f48, f49,
-                 f50] = s;
+                 f50, f51] = s;
     return std::tie(f0, f1, f2, f3, f4, f5, f6, f7, f8, f9, f10, f11, f12, f13, f14, f15, f16, f17,
                     f18, f19, f20, f21, f22, f23, f24, f25, f26, f27, f28, f29, f30, f31, f32, f33,
                     f34, f35, f36, f37, f38, f39, f40, f41, f42, f43, f44, f45, f46, f47, f48, f49,
-                    f50);
+                    f50, f51);
 }
 
 template <typename Tuple, size_t... I>
@@ -361,6 +364,23 @@ bool ClientSnapshot::operator==(const ClientSnapshot& o) const {
     return sameFields(a, b, std::make_index_sequence<std::tuple_size_v<decltype(a)>>());
 }
 
+std::string viewNotServedText(const ClientSnapshot& snap, int width, int height,
+                              const std::string& sizeOption) {
+    if (snap.state != LinkState::Connected || !snap.welcome)
+        return "";
+    const int64_t most = snap.welcome->maxViewPixels;
+    if (int64_t(width) * height > most)
+        return fmt::format("The server serves views of at most {} pixels; this view is {} x {}: "
+                           "restart with {} {} or less",
+                           most, width, height, sizeOption, int(std::sqrt(double(most))));
+    const std::optional<ViewRefusal>& r = snap.viewRefusal;
+    if (r && r->width == width && r->height == height)
+        return fmt::format("The session's views are full: the server has {} pixels free for "
+                           "your view and this one is {} x {}",
+                           r->freePixels, width, height);
+    return "";
+}
+
 DrawnPart drawnPart(const ClientSnapshot& s) {
     DrawnPart d;
     d.state = s.state;
@@ -372,6 +392,7 @@ DrawnPart drawnPart(const ClientSnapshot& s) {
     d.view = s.view;
     d.viewId = s.viewId;
     d.waitingForView = s.waitingForView;
+    d.viewRefusal = s.viewRefusal;
     d.sync = s.sync;
     d.requestedSync = s.requestedSync;
     d.participants = s.participants;
@@ -428,6 +449,7 @@ void ClientThread::publish(const SessionClient* c, uint64_t nowUs) {
         s->fullUpdates = c->fullUpdates();
         s->updatesRejected = c->updatesRejected();
         s->viewsRefused = c->viewsRefused();
+        s->viewRefusal = c->viewRefusal();
         s->toolStatesSent = c->toolStatesSent();
         s->relaysReceived = c->relaysReceived();
         s->relayedModels = c->relayedModels();

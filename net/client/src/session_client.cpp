@@ -362,6 +362,7 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         peekMessageType(data),
         Handlers{
             [&](MessageTag<Welcome>) { return onWelcome(data, nowUs); },
+            [&](MessageTag<ViewRefused>) { return onViewRefused(data); },
             [&](MessageTag<Scene>) { return onScene(data); },
             [&](MessageTag<ParticipantView>) { return onParticipantView(data); },
             [&](MessageTag<Participants>) { return onParticipants(data); },
@@ -383,6 +384,27 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         false);
 }
 
+// The server serves no more view pixels for that request: it is dropped and the view held stays
+// (a resync asks for that one).
+bool SessionClient::onViewRefused(std::span<const uint8_t> data) {
+    ViewRefused r;
+    if (!decodeMessage(data, r))
+        return false;
+    ++m_viewsRefused;
+    if (auto it = m_requested.find(r.requestId); it != m_requested.end()) {
+        m_viewRefusal = ViewRefusal{it->second.width, it->second.height, r.freePixels};
+        m_requested.erase(it);
+    }
+    forgetRefusedRequests();
+    return true;
+}
+
+// The view asked for last is the newest request still waiting, else the view held.
+void SessionClient::forgetRefusedRequests() {
+    if (m_requestedViewId != m_viewId && !m_requested.contains(m_requestedViewId))
+        m_requestedViewId = m_requested.empty() ? m_viewId : m_requested.rbegin()->first;
+}
+
 bool SessionClient::onWelcome(std::span<const uint8_t> data, uint64_t nowUs) {
     Welcome w;
     if (!decodeMessage(data, w))
@@ -391,16 +413,12 @@ bool SessionClient::onWelcome(std::span<const uint8_t> data, uint64_t nowUs) {
     // Views asked for before the welcome could not be checked against the server's limit:
     // the server drops one too large, and we would wait for its image for good (every later
     // resync waits on the newest request too).
-    for (auto it = m_requested.begin(); it != m_requested.end();) {
-        if (int64_t(it->second.width) * int64_t(it->second.height) > w.maxViewPixels) {
-            ++m_viewsRefused;
-            it = m_requested.erase(it);
-        } else {
-            ++it;
-        }
-    }
-    if (m_requestedViewId != m_viewId && !m_requested.contains(m_requestedViewId))
-        m_requestedViewId = m_requested.empty() ? m_viewId : m_requested.rbegin()->first;
+    const size_t before = m_requested.size();
+    std::erase_if(m_requested, [&](const auto& r) {
+        return int64_t(r.second.width) * int64_t(r.second.height) > w.maxViewPixels;
+    });
+    m_viewsRefused += before - m_requested.size();
+    forgetRefusedRequests();
     // Voxels that overtook the welcome on their own channel: place them now, in order.
     for (VolumeUpdate& early : std::exchange(m_earlyVolume, {})) {
         m_dropped = {.full = early.full};
@@ -959,6 +977,7 @@ uint32_t SessionClient::requestView(const ViewSpec& view) {
     }
     ++m_nextRequestId;
     m_requestedViewId = r.requestId;
+    m_viewRefusal.reset(); // the server answers this one anew
     if (m_sync == Sync::Volume && m_wantSync == Sync::Volume && m_volume) {
         // We render it ourselves, now; the server only keeps it for a switch to DBI.
         m_view = view;

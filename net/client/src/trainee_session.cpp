@@ -99,9 +99,15 @@ Camera TraineeSession::openPreset(const std::string& preset, double timeoutS) {
 
 void TraineeSession::openView(const Camera& camera, double timeoutS) {
     m_core.client().requestView(toViewSpec(camera));
-    if (waitFor(timeoutS, [&] { return m_view.hasPicture(); }))
+    auto notServed = [&] {
+        return viewNotServedText(snap(), camera.width, camera.height, "--size");
+    };
+    if (waitFor(timeoutS, [&] { return m_view.hasPicture() || !notServed().empty(); }) &&
+        notServed().empty())
         return;
     const ClientSnapshot& s = snap();
+    if (!notServed().empty())
+        fail(notServed());
     const std::string from = "no image from " + m_config.address;
     if (s.fault)
         fail(s.closeReason);

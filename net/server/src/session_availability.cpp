@@ -28,13 +28,28 @@ size_t SessionPolicy::admittedCount() const {
     }));
 }
 
-// Whether peer `id` viewing `v` would take every admitted peer's views past the total.
-bool SessionPolicy::overViewTotal(uint16_t id, const ViewSpec& v) const {
-    int64_t total = pixelsOf(v);
+// The pixels a view of peer `id` may have: the total less every other admitted peer's views.
+int64_t SessionPolicy::freeViewPixels(uint16_t id) const {
+    int64_t free = m_config.maxTotalViewPixels;
     for (const auto& [other, p] : m_peers)
         if (other != id && p.hello && !p.kicked)
-            total += p.pixels;
-    return total > m_config.maxTotalViewPixels;
+            free -= p.pixels;
+    return free;
+}
+
+// Whether peer `id` viewing `v` would take every admitted peer's views past the total.
+bool SessionPolicy::overViewTotal(uint16_t id, const ViewSpec& v) const {
+    return pixelsOf(v) > freeViewPixels(id);
+}
+
+void SessionPolicy::refuseView(uint16_t id, uint32_t requestId, PolicyOutput& out) {
+    m_book.record([&](ServerReport& rep) {
+        ++rep.availability.viewsOverTotal;
+        ++rep.peers[id].viewsRefused;
+    });
+    ViewRefused refused{requestId,
+                        uint32_t(std::clamp<int64_t>(freeViewPixels(id), 0, UINT32_MAX))};
+    out.messages.push_back({{id}, Channel::Control, encodeMessage(refused)});
 }
 
 // A view request within the limits: to the simulation now if the peer's render budget covers
@@ -42,10 +57,7 @@ bool SessionPolicy::overViewTotal(uint16_t id, const ViewSpec& v) const {
 bool SessionPolicy::viewRequest(uint16_t id, Peer& p, const ViewRequest& r, uint64_t now,
                                 PolicyOutput& out) {
     if (overViewTotal(id, r.view)) {
-        m_book.record([&](ServerReport& rep) {
-            ++rep.availability.viewsOverTotal;
-            ++rep.peers[id].viewsRefused;
-        });
+        refuseView(id, r.requestId, out);
         return true;
     }
     const bool replaced = p.waitingView.has_value();
@@ -84,7 +96,7 @@ void SessionPolicy::updateAvailability(uint64_t now, PolicyOutput& out) {
             const ViewRequest r = *p.waitingView;
             p.waitingView.reset();
             if (overViewTotal(id, r.view))
-                m_book.record([&](ServerReport& rep) { ++rep.availability.viewsOverTotal; });
+                refuseView(id, r.requestId, out);
             else
                 applyView(id, p, r, out);
         }

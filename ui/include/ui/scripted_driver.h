@@ -49,11 +49,11 @@ public:
         const net::ClientSnapshot* snap = nullptr;
         bool havePicture = false, viewMatches = false, haveScene = false, switching = false;
         double sinceLastUpdateS = 0;
-        uint16_t holding = 0;     // [instructor] the trainee held
-        bool pointerBusy = false; // [Tests] an injected pointer has not finished its gesture
-        std::string viewTooLarge; // the message when the view is larger than served
+        uint16_t holding = 0;      // [instructor] the trainee held
+        bool pointerBusy = false;  // [Tests] an injected pointer has not finished its gesture
+        std::string viewNotServed; // the message when the server does not serve the view
     };
-    // Before the frame ends: true when it ends the run at once, unframed (a view too large).
+    // Before the frame ends: true when it ends the run at once, unframed (a view not served).
     bool abortsBeforeEnd(const Frame& f);
     // Whether the window's picture is wanted from this frame.
     bool wantsCapture(const Frame& f, double now);

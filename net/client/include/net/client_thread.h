@@ -139,6 +139,7 @@ struct ClientSnapshot {
              relaysReceived = 0, malformed = 0;
     uint64_t malformedImages = 0; // image updates among the malformed (SessionClient's)
     uint64_t viewsRefused = 0;    // views asked for that the server does not serve (too large)
+    std::optional<ViewRefusal> viewRefusal; // the newest, until the next view request
     double rttUs = -1, rttP50Us = -1;
     double hapticRoundTripP50Us = -1, hapticRoundTripP99Us = -1; // tool state -> its force model
     uint64_t lastHeardUs = 0; // steadyNowUs() of the last datagram from the server (0: none yet)
@@ -184,6 +185,7 @@ struct DrawnPart {
     ViewSpec view;
     uint32_t viewId = 0;
     bool waitingForView = false;
+    std::optional<ViewRefusal> viewRefusal;
     Sync sync = Sync::Dbi, requestedSync = Sync::Dbi;
     std::map<uint16_t, ParticipantInfo> participants;
     std::vector<AnnotationInfo> annotations;
@@ -194,6 +196,12 @@ struct DrawnPart {
     bool operator==(const DrawnPart&) const = default;
 };
 DrawnPart drawnPart(const ClientSnapshot& s);
+// Why the server does not serve a view of `width` x `height` ("" when it does): larger than any it
+// serves (the client refuses it; restart with a smaller `sizeOption`), or past the session's
+// total of view pixels (the server refused it, ViewRefused, and the last view stays). Every shell
+// says it in these words.
+std::string viewNotServedText(const ClientSnapshot& snap, int width, int height,
+                              const std::string& sizeOption);
 
 struct ClientThreadConfig {
     ClientConfig client;

@@ -69,6 +69,13 @@ struct ServerFault {
 // "HOST sent a malformed scene (DETAIL)": the session's failure text, the one place it is made.
 std::string serverFaultText(const std::string& server, const ServerFault& fault);
 
+// A view the server refused (ViewRefused): its size, and the pixels the server had free for it.
+struct ViewRefusal {
+    int width = 0, height = 0;
+    uint32_t freePixels = 0;
+    bool operator==(const ViewRefusal&) const = default;
+};
+
 // A request the client sends as it is, with nothing of its own state to follow: any message of
 // the table a client sends, except those listed here, which have methods of their own that keep
 // the client's state (its hello and handshake, views, design, tool states, pings, view-as, marks).
@@ -190,6 +197,9 @@ public:
     // 0 and counts in viewsRefused().
     uint32_t requestView(const ViewSpec& view);
     uint64_t viewsRefused() const { return m_viewsRefused; }
+    // The newest view the server refused (ViewRefused: all views together would pass its total):
+    // its size and the pixels the server had free for it. The view held before stays.
+    const std::optional<ViewRefusal>& viewRefusal() const { return m_viewRefusal; }
     void sendPing();
     // [Instructor] Adds a mark, removes one or clears them all (Annotate); the server applies it
     // and sends everyone the new list. A trainee's are refused by the server. Labels are cut to
@@ -352,6 +362,8 @@ private:
     void sendHandshake(Handshake m);
     // One per message type, each decoding its message; false for a malformed or rejected one.
     bool onWelcome(std::span<const uint8_t> data, uint64_t nowUs);
+    bool onViewRefused(std::span<const uint8_t> data);
+    void forgetRefusedRequests();
     bool onScene(std::span<const uint8_t> data);
     bool onParticipantView(std::span<const uint8_t> data);
     bool onParticipants(std::span<const uint8_t> data);
@@ -471,6 +483,7 @@ private:
     std::optional<uint32_t> m_resyncRequestId;
     uint64_t m_relays = 0, m_updatesApplied = 0, m_fullUpdates = 0, m_rejected = 0, m_toolSent = 0;
     uint64_t m_viewsRefused = 0;
+    std::optional<ViewRefusal> m_viewRefusal;
     uint16_t m_viewAs = 0;
     uint64_t m_participantViews = 0;
     NetStats m_stats;

@@ -221,7 +221,10 @@ private:
     bool viewTooLarge(const ViewSpec& v) const;
     // [Availability] availability.cpp: admission counts, idle timeouts, the view budget.
     size_t admittedCount() const;
+    int64_t freeViewPixels(uint16_t id) const;
     bool overViewTotal(uint16_t id, const ViewSpec& v) const;
+    // A view request over the total: answered (ViewRefused), counted; the peer keeps its view.
+    void refuseView(uint16_t id, uint32_t requestId, PolicyOutput& out);
     void applyView(uint16_t id, Peer& p, const ViewRequest& r, PolicyOutput& out);
     bool viewRequest(uint16_t id, Peer& p, const ViewRequest& r, uint64_t now, PolicyOutput& out);
     void updateAvailability(uint64_t now, PolicyOutput& out);

@@ -25,7 +25,7 @@ namespace trephine::net {
 
 // Travels in ENet's connect data; the server refuses other versions with kRefuseVersion. What
 // each version changed: docs/protocol.md, "Versions".
-inline constexpr uint32_t kProtocolVersion = 15;
+inline constexpr uint32_t kProtocolVersion = 16;
 
 // Disconnect reasons (ENet disconnect data) the client turns into a sentence for the user.
 enum class RefuseReason : uint32_t {
@@ -138,7 +138,8 @@ inline bool fitsVolumeUpdate(glm::ivec3 size, bool materials) {
     X(Remove, 25, ClientToServer, Control, false, 9)                                               \
     X(Codes, 26, Both, Control, true, 10)                                                          \
     X(HandLinks, 27, Both, Control, true, 12)                                                      \
-    X(ImageAck, 28, ClientToServer, ImageLossy, true, 13)
+    X(ImageAck, 28, ClientToServer, ImageLossy, true, 13)                                          \
+    X(ViewRefused, 29, ServerToClient, Control, false, 16)
 
 enum class MessageType : uint8_t {
 #define TREPHINE_MESSAGE_ENUM(name, id, direction, channel, newestWins, since) name = id,
@@ -308,6 +309,19 @@ struct ViewRequest {
     template <typename S>
     bool serialize(S& s) {
         return s.integer(requestId) && view.serialize(s);
+    }
+};
+
+// A view request the server does not serve: all participants' views together would pass its
+// total (ServerConfig::maxTotalViewPixels). The client keeps the view it has.
+struct ViewRefused {
+    static constexpr MessageType kType = MessageType::ViewRefused;
+    uint32_t requestId = 0;
+    uint32_t freePixels = 0; // the most pixels a view of this participant could have now
+
+    template <typename S>
+    bool serialize(S& s) {
+        return s.integer(requestId) && s.integer(freePixels);
     }
 };
 
