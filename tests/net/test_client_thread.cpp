@@ -533,6 +533,49 @@ TEST(ClientThread, AVolumeDesignTheServerRefusesIsNotAskedForAgain) {
     server.stop();
 }
 
+// A view past the session's total is refused by the server: the snapshot keeps the view held,
+// says why, and a reconnect asks for the view held (the refused one would have the hello refused).
+TEST(ClientThread, AViewTheServerRefusesIsNotTheNextHellos) {
+    Volume skull = makeSkull(64);
+    ServerConfig sc = loopbackServerConfig("skull:64");
+    sc.maxTotalViewPixels = 96 * 96 + 10;
+    auto server = std::make_unique<SessionServer>(skull, sc);
+    auto pumped = std::make_unique<Pumped>(*server);
+    ClientThreadConfig cc = reconnectingClient(skull, server->port());
+    const ViewSpec held = toViewSpec(cameraPreset("top", skull, {96, 96}));
+    cc.client.view = held;
+    ClientThread client(cc);
+    client.start();
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->hasFullImage; }, 20.0));
+    const ViewSpec wide = toViewSpec(cameraPreset("top", skull, {128, 128}));
+    ASSERT_TRUE(client.requestView(wide));
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->viewRefusal.has_value(); }, 20.0));
+    auto s = client.snapshot();
+    EXPECT_EQ(*s->viewRefusal, (ViewRefusal{128, 128, 96 * 96 + 10}));
+    EXPECT_EQ(s->view, held);
+    EXPECT_EQ(viewNotServedText(*s, 128, 128, "--size"),
+              "The session's views are full: the server has 9226 pixels free for your view and "
+              "this one is 128 x 128");
+    // A new server on the same port: the hello asks for the held view, and is let in.
+    sc.port = server->port();
+    server->stop();
+    pumped.reset();
+    server.reset();
+    ASSERT_TRUE(waitFor([&] { return client.snapshot()->state != LinkState::Connected; }, 10.0));
+    server = std::make_unique<SessionServer>(skull, sc);
+    pumped = std::make_unique<Pumped>(*server);
+    ASSERT_TRUE(waitFor(
+        [&] {
+            auto n = client.snapshot();
+            return n->state == LinkState::Connected && n->hasFullImage;
+        },
+        30.0))
+        << client.snapshot()->closeReason;
+    EXPECT_EQ(client.snapshot()->view, held);
+    client.stop();
+    server->stop();
+}
+
 // An exception on the client thread (here from the haptic callback; in the field memory for a
 // whole volume, or a render pool that cannot start its threads) escaped the thread's body and
 // terminated the window without a word: it now ends that connection with its reason, and the

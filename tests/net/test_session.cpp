@@ -261,6 +261,36 @@ TEST(Session, AViewPastTheSessionsTotalIsRefusedAndTheViewHeldStays) {
     EXPECT_EQ(b.viewsRefused(), 1u);
 }
 
+// In volume sync a view is the client's at once; refused by the server, it gives way to the view
+// the server holds, so a switch to DBI completes with that view's picture.
+TEST(Session, AVolumeClientsRefusedViewGivesWayToTheOneTheServerHolds) {
+    Volume sphere = makeSphere(32);
+    ServerConfig sc = testConfig("sphere:32");
+    sc.maxTotalViewPixels = 64 * 64 + 100;
+    SessionServer server(sphere, sc);
+    Pumped pumped(server);
+    ClientConfig cfg = topViewClient(sphere, 64);
+    cfg.sync = Sync::Volume;
+    cfg.volumeCodec = Codec::Zstd;
+    SessionClient c(cfg);
+    c.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&c}, [&] { return c.localVolume() && c.hasFullImage(); }));
+    const uint32_t held = c.viewId();
+
+    ViewSpec wide = cfg.view;
+    wide.width = wide.height = 96;
+    EXPECT_NE(c.requestView(wide), 0u);
+    EXPECT_EQ(c.view(), wide) << "rendered here at once";
+    ASSERT_TRUE(pumpUntil({&c}, [&] { return c.viewRefusal().has_value(); }));
+    EXPECT_EQ(c.view(), cfg.view);
+    EXPECT_EQ(c.viewId(), held);
+    EXPECT_EQ(c.viewAskedFor(), cfg.view);
+
+    c.requestSync(Sync::Dbi);
+    ASSERT_TRUE(pumpUntil({&c}, [&] { return c.sync() == Sync::Dbi && c.hasFullImage(); }));
+    EXPECT_EQ(c.dbi().width(), 64);
+}
+
 TEST(Session, EveryToolPoseReachesTheOtherClients) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, testConfig("sphere:32"));

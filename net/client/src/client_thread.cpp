@@ -607,6 +607,7 @@ void ClientThread::pollUntilClosed(SessionClient& client, const ClientConfig& cc
     auto clockNow = [&] { return cc.clock ? cc.clock() : steadyNowUs(); };
     const uint64_t start = clockNow();
     uint64_t nextPing = start, nextPublish = start;
+    uint64_t refusedSeen = 0;
     RateClock clock;
     clock.lastTickUs = start;
     clock.nextTickUs = start + 1000000;
@@ -653,6 +654,13 @@ void ClientThread::pollUntilClosed(SessionClient& client, const ClientConfig& cc
             nextPublish = now;
         }
         runCommands(*cp, cc.renderLocally);
+        // A view the server refused is not wanted in the next hello (one over the session's
+        // total would have it refused): the view asked for is the client's own again.
+        if (cp->viewsRefused() != refusedSeen) {
+            refusedSeen = cp->viewsRefused();
+            if (m_wantedView)
+                m_wantedView = cp->viewAskedFor();
+        }
         // A new instructor code stops the old one joining: reconnects prove the new one.
         if (cc.role == Role::Instructor && cp->codes())
             m_wantedCode = cp->codes()->instructor;

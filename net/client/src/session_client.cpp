@@ -384,18 +384,32 @@ bool SessionClient::handleMessage(std::span<const uint8_t> data, uint64_t nowUs)
         false);
 }
 
-// The server serves no more view pixels for that request: it is dropped and the view held stays
-// (a resync asks for that one).
+// The server serves no more view pixels for that request: it is dropped and the view the server
+// holds stays ours (in volume sync, where the view changed at once, it comes back); a resync
+// waiting on it asks for that view instead.
 bool SessionClient::onViewRefused(std::span<const uint8_t> data) {
     ViewRefused r;
     if (!decodeMessage(data, r))
         return false;
-    ++m_viewsRefused;
+    std::optional<ViewSpec> refused;
     if (auto it = m_requested.find(r.requestId); it != m_requested.end()) {
-        m_viewRefusal = ViewRefusal{it->second.width, it->second.height, r.freePixels};
+        refused = it->second;
         m_requested.erase(it);
+    } else if (auto v = m_volumeViews.find(r.requestId); v != m_volumeViews.end()) {
+        refused = v->second;
+        m_volumeViews.erase(v);
+        if (r.requestId == m_viewId && !m_volumeViews.empty())
+            takeLocalView(m_volumeViews.rbegin()->first, m_volumeViews.rbegin()->second);
     }
+    if (!refused)
+        return true; // not ours, or long superseded
+    ++m_viewsRefused;
+    const bool newest = r.requestId == m_requestedViewId;
     forgetRefusedRequests();
+    if (m_resyncRequestId == r.requestId)
+        m_resyncRequestId = m_requested.empty() ? requestView(m_view) : m_requestedViewId;
+    if (newest)
+        m_viewRefusal = ViewRefusal{refused->width, refused->height, r.freePixels};
     return true;
 }
 
@@ -455,7 +469,7 @@ bool SessionClient::onParticipantView(std::span<const uint8_t> data) {
     if (pv.clientId != m_viewAs)
         return true; // one we no longer view as
     // The participant's camera in our own window: the newest size we asked for.
-    const ViewSpec& mine = m_requested.empty() ? m_view : m_requested.rbegin()->second;
+    const ViewSpec& mine = viewAskedFor();
     ViewSpec v = pv.view;
     v.width = mine.width;
     v.height = mine.height;
@@ -747,6 +761,7 @@ bool SessionClient::placeVolumeBox(const VolumeUpdate& u, const Box3i& box, doub
 
 void SessionClient::enterVolumeSync() {
     m_sync = Sync::Volume;
+    m_volumeViews.clear();
     // A view asked for while the DBI was shown is ours at once now: we render it.
     if (!m_requested.empty()) {
         m_view = m_requested.rbegin()->second;
@@ -980,18 +995,28 @@ uint32_t SessionClient::requestView(const ViewSpec& view) {
     m_viewRefusal.reset(); // the server answers this one anew
     if (m_sync == Sync::Volume && m_wantSync == Sync::Volume && m_volume) {
         // We render it ourselves, now; the server only keeps it for a switch to DBI.
-        m_view = view;
-        m_viewId = r.requestId;
-        m_exactViewId = m_viewId;
-        if (m_config.renderLocally)
-            renderLocal();
-        else
-            m_dbi = Dbi(view.width, view.height);
+        if (m_volumeViews.empty())
+            m_volumeViews[m_viewId] = m_view; // the view the server holds before these
+        m_volumeViews[r.requestId] = view;
+        if (m_volumeViews.size() > kVolumeViewsKept)
+            m_volumeViews.erase(m_volumeViews.begin());
+        takeLocalView(r.requestId, view);
     } else {
         m_requested[r.requestId] = view;
     }
     send(Channel::Control, bytes);
     return r.requestId;
+}
+
+// [Volume sync] `view` is ours at once: rendered here.
+void SessionClient::takeLocalView(uint32_t id, const ViewSpec& view) {
+    m_view = view;
+    m_viewId = id;
+    m_exactViewId = m_viewId;
+    if (m_config.renderLocally)
+        renderLocal();
+    else
+        m_dbi = Dbi(view.width, view.height);
 }
 
 void SessionClient::sendPing() {

@@ -331,11 +331,11 @@ Dbi Outbox::encodeInto(ImageUpdate& u, const Client& c, const Dbi& frame, const 
         u.rawBytes = e.rawBytes;
         u.payload = std::move(e.payload);
     }
-    m_coded.payload.clear(); // an empty payload: nothing kept
-    // Keeping the pixels (two copies) costs ~1/6 of coding them: only for clients that follow.
-    if (keep)
-        m_coded = {camera,     codec,      predicted, pixels, predicted ? undo : Dbi(),
-                   u.baseHash, u.rawBytes, u.payload};
+    // Keeping the pixels (two copies) costs ~1/6 of coding them: only for clients that follow;
+    // an empty payload keeps nothing.
+    m_coded = keep ? Coded{camera,     codec,      predicted, pixels, predicted ? undo : Dbi(),
+                           u.baseHash, u.rawBytes, u.payload}
+                   : Coded{};
     return undo;
 }
 

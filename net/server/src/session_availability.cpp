@@ -92,13 +92,16 @@ void SessionPolicy::updateAvailability(uint64_t now, PolicyOutput& out) {
             kick(id, p, RefuseReason::Idle, out, now);
             continue;
         }
-        if (p.waitingView && p.viewPixels.take(double(pixelsOf(p.waitingView->view)), now)) {
-            const ViewRequest r = *p.waitingView;
+        if (!p.waitingView)
+            continue;
+        // Refused before it is charged: a view the total has no room for costs no budget.
+        const ViewRequest r = *p.waitingView;
+        if (overViewTotal(id, r.view)) {
             p.waitingView.reset();
-            if (overViewTotal(id, r.view))
-                refuseView(id, r.requestId, out);
-            else
-                applyView(id, p, r, out);
+            refuseView(id, r.requestId, out);
+        } else if (p.viewPixels.take(double(pixelsOf(r.view)), now)) {
+            p.waitingView.reset();
+            applyView(id, p, r, out);
         }
     }
 }

@@ -200,6 +200,10 @@ public:
     // The newest view the server refused (ViewRefused: all views together would pass its total):
     // its size and the pixels the server had free for it. The view held before stays.
     const std::optional<ViewRefusal>& viewRefusal() const { return m_viewRefusal; }
+    // The view a hello would ask for now: the newest request still waiting, else the view held.
+    const ViewSpec& viewAskedFor() const {
+        return m_requested.empty() ? m_view : m_requested.rbegin()->second;
+    }
     void sendPing();
     // [Instructor] Adds a mark, removes one or clears them all (Annotate); the server applies it
     // and sends everyone the new list. A trainee's are refused by the server. Labels are cut to
@@ -364,6 +368,7 @@ private:
     bool onWelcome(std::span<const uint8_t> data, uint64_t nowUs);
     bool onViewRefused(std::span<const uint8_t> data);
     void forgetRefusedRequests();
+    void takeLocalView(uint32_t id, const ViewSpec& view);
     bool onScene(std::span<const uint8_t> data);
     bool onParticipantView(std::span<const uint8_t> data);
     bool onParticipants(std::span<const uint8_t> data);
@@ -424,6 +429,10 @@ private:
     ViewSpec m_view; // the view the DBI holds
     uint32_t m_viewId = 0;
     std::map<uint32_t, ViewSpec> m_requested; // views asked for, not yet received in full
+    // [Volume sync] views taken at once and sent, the one the server held before them first: a
+    // refused one gives way to the newest left. The newest few (older ones are superseded).
+    static constexpr size_t kVolumeViewsKept = 16;
+    std::map<uint32_t, ViewSpec> m_volumeViews;
     uint32_t m_requestedViewId = 0;
     uint32_t m_nextRequestId = 1;
     Dbi m_dbi;
