@@ -152,6 +152,16 @@ ClientThreadConfig reconnectingClient(const Volume& skull, uint16_t port) {
     cc.connectTimeoutS = 1.0;
     return cc;
 }
+
+// Whether the thread is connected with a whole picture within `seconds`.
+bool connectedWithPicture(const ClientThread& client, double seconds) {
+    return waitFor(
+        [&] {
+            auto s = client.snapshot();
+            return s->state == LinkState::Connected && s->hasFullImage;
+        },
+        seconds);
+}
 } // namespace
 
 TEST(ClientThread, ReconnectsToANewServerOnTheSamePort) {
@@ -191,12 +201,7 @@ TEST(ClientThread, ReconnectsToANewServerOnTheSamePort) {
     sc.port = port;
     server = std::make_unique<SessionServer>(skull, sc);
     pumped = std::make_unique<Pumped>(*server);
-    ASSERT_TRUE(waitFor(
-        [&] {
-            auto s = client.snapshot();
-            return s->state == LinkState::Connected && s->hasFullImage;
-        },
-        20.0));
+    ASSERT_TRUE(connectedWithPicture(client, 20.0));
     EXPECT_TRUE(client.snapshot()->closeReason.empty());
     EXPECT_GT(client.snapshot()->attempts, attemptsBefore);
     bool gotFull = false;
@@ -515,13 +520,7 @@ TEST(ClientThread, AVolumeDesignTheServerRefusesIsNotAskedForAgain) {
     ClientThread client(cc);
     client.start();
     ASSERT_TRUE(waitFor([&] { return client.snapshot()->volumeRefusals == 1; }, 60.0));
-    ASSERT_TRUE(waitFor(
-        [&] {
-            auto s = client.snapshot();
-            return s->state == LinkState::Connected && s->hasFullImage;
-        },
-        30.0))
-        << "a DBI picture after the refusal";
+    ASSERT_TRUE(connectedWithPicture(client, 30.0)) << "a DBI picture after the refusal";
     trephine::testing::pumpFor(1.0); // a second to see that it does not ask again
     auto s = client.snapshot();
     EXPECT_EQ(s->volumeRefusals, 1);
@@ -564,13 +563,7 @@ TEST(ClientThread, AViewTheServerRefusesIsNotTheNextHellos) {
     ASSERT_TRUE(waitFor([&] { return client.snapshot()->state != LinkState::Connected; }, 10.0));
     server = std::make_unique<SessionServer>(skull, sc);
     pumped = std::make_unique<Pumped>(*server);
-    ASSERT_TRUE(waitFor(
-        [&] {
-            auto n = client.snapshot();
-            return n->state == LinkState::Connected && n->hasFullImage;
-        },
-        30.0))
-        << client.snapshot()->closeReason;
+    ASSERT_TRUE(connectedWithPicture(client, 30.0)) << client.snapshot()->closeReason;
     EXPECT_EQ(client.snapshot()->view, held);
     client.stop();
     server->stop();
