@@ -257,8 +257,8 @@ TEST(SessionCli, AHeadlessTraineeLargerThanTheServerServesStopsInOneLine) {
                  shellQuote(dir / "r.json"));
     server.stop();
     EXPECT_NE(r.exitCode, 0);
-    EXPECT_NE(r.err.find("the server serves views of at most 10000 pixels; --size 200 asks for "
-                         "40000: give a smaller --size"),
+    EXPECT_NE(r.err.find("The server serves views of at most 10000 pixels; this view is 200 x 200: "
+                         "restart with --size 100 or less"),
               std::string::npos)
         << r.err;
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;

@@ -188,8 +188,8 @@ TEST(TraineeSession, AViewLargerThanTheServerServesIsRefusedBeforeItIsAsked) {
         what = failure([&] { session.openPreset("top"); });
     });
     EXPECT_EQ(what,
-              "trainee: the server serves views of at most 1024 pixels; --size 64 asks for 4096: "
-              "give a smaller --size");
+              "trainee: The server serves views of at most 1024 pixels; this view is 64 x 64: "
+              "restart with --size 32 or less");
     server.stop();
 }
 

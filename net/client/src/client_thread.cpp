@@ -646,16 +646,11 @@ void ClientThread::pollUntilClosed(SessionClient& client, const ClientConfig& cc
             m_state = LinkState::Connected;
             m_closeReason.clear();
             m_fault.reset();
-            // A view asked for while connecting, which the welcome shows too large (the
-            // client dropped it): not for the next hello either.
-            if (m_wantedView &&
-                int64_t(m_wantedView->width) * m_wantedView->height > cp->welcome().maxViewPixels)
-                m_wantedView.reset();
             nextPublish = now;
         }
         runCommands(*cp, cc.renderLocally);
-        // A view the server refused is not wanted in the next hello (one over the session's
-        // total would have it refused): the view asked for is the client's own again.
+        // A view refused (too large, which the client finds at the welcome, or over the session's
+        // total, which the server says) is not for the next hello: it would have it refused.
         if (cp->viewsRefused() != refusedSeen) {
             refusedSeen = cp->viewsRefused();
             if (m_wantedView)

@@ -407,10 +407,16 @@ bool SessionClient::onViewRefused(std::span<const uint8_t> data) {
     const bool newest = r.requestId == m_requestedViewId;
     forgetRefusedRequests();
     if (m_resyncRequestId == r.requestId)
-        m_resyncRequestId = m_requested.empty() ? requestView(m_view) : m_requestedViewId;
+        m_resyncRequestId = resyncRequest();
     if (newest)
         m_viewRefusal = ViewRefusal{refused->width, refused->height, r.freePixels};
     return true;
+}
+
+// The request whose full image makes our copy the server's again: the newest one waiting, else a
+// new one for the view held.
+uint32_t SessionClient::resyncRequest() {
+    return m_requested.empty() ? requestView(m_view) : m_requested.rbegin()->first;
 }
 
 // The view asked for last is the newest request still waiting, else the view held.
@@ -927,8 +933,7 @@ bool SessionClient::decodeImagePatch(const ImageUpdate& u, const ViewSpec& view,
         // their own.
         ++m_resyncs;
         if (!m_resyncRequestId)
-            m_resyncRequestId =
-                m_requested.empty() ? requestView(m_view) : m_requested.rbegin()->first;
+            m_resyncRequestId = resyncRequest();
         stale = true;
     }
     return true;

@@ -86,28 +86,24 @@ Camera TraineeSession::openPreset(const std::string& preset, double timeoutS) {
     const std::optional<Camera> camera = presetCamera(awaitScene(0.0).scene, preset, {size, size});
     if (!camera)
         fail("the server's scene has no camera preset '" + preset + "'");
-    // Refused (larger than the server serves): it would run on and report the 1x1 placeholder as
-    // its picture.
-    const int64_t pixels = int64_t(size) * size;
-    if (pixels > snap().welcome->maxViewPixels)
-        fail("the server serves views of at most " + std::to_string(snap().welcome->maxViewPixels) +
-             " pixels; --size " + std::to_string(size) + " asks for " + std::to_string(pixels) +
-             ": give a smaller --size");
     openView(*camera, timeoutS);
     return *camera;
 }
 
+// A view the server does not serve (too large, or the session's views full) fails at once, in the
+// window's words: it would otherwise run on and report the 1x1 placeholder as its picture.
 void TraineeSession::openView(const Camera& camera, double timeoutS) {
     m_core.client().requestView(toViewSpec(camera));
-    auto notServed = [&] {
-        return viewNotServedText(snap(), camera.width, camera.height, "--size");
-    };
-    if (waitFor(timeoutS, [&] { return m_view.hasPicture() || !notServed().empty(); }) &&
-        notServed().empty())
+    std::string notServed;
+    const bool done = waitFor(timeoutS, [&] {
+        notServed = viewNotServedText(snap(), camera.width, camera.height, "--size");
+        return m_view.hasPicture() || !notServed.empty();
+    });
+    if (!notServed.empty())
+        fail(notServed);
+    if (done)
         return;
     const ClientSnapshot& s = snap();
-    if (!notServed().empty())
-        fail(notServed());
     const std::string from = "no image from " + m_config.address;
     if (s.fault)
         fail(s.closeReason);

@@ -331,8 +331,8 @@ Dbi Outbox::encodeInto(ImageUpdate& u, const Client& c, const Dbi& frame, const 
         u.rawBytes = e.rawBytes;
         u.payload = std::move(e.payload);
     }
-    // Keeping the pixels (two copies) costs ~1/6 of coding them: only for clients that follow;
-    // an empty payload keeps nothing.
+    // Kept (two copies of the pixels) only for clients that follow: a lone client would pay the
+    // copies for nothing. An empty payload keeps nothing.
     m_coded = keep ? Coded{camera,     codec,      predicted, pixels, predicted ? undo : Dbi(),
                            u.baseHash, u.rawBytes, u.payload}
                    : Coded{};
@@ -340,7 +340,7 @@ Dbi Outbox::encodeInto(ImageUpdate& u, const Client& c, const Dbi& frame, const 
 }
 
 // Fills `u` with the kept coding when it is of the same pixels, coded the same way against the
-// same copy (`base`, predicted); comparing costs ~1/20 of coding.
+// same copy (`base`, predicted): the payload depends on nothing else.
 bool Outbox::reuseCoding(ImageUpdate& u, const Camera& camera, Codec codec, const Dbi& pixels,
                          const Dbi& base) {
     const Coded& m = m_coded;

@@ -369,6 +369,7 @@ private:
     bool onViewRefused(std::span<const uint8_t> data);
     void forgetRefusedRequests();
     void takeLocalView(uint32_t id, const ViewSpec& view);
+    uint32_t resyncRequest();
     bool onScene(std::span<const uint8_t> data);
     bool onParticipantView(std::span<const uint8_t> data);
     bool onParticipants(std::span<const uint8_t> data);
