@@ -6,6 +6,7 @@
 #include "net/codec.h"
 #include "net/fair_share.h"
 #include "net/secure_channel.h"
+#include "net/send_passes.h"
 #include "net/session_codes.h"
 #include "net/session_gate.h"
 #include "net/session_policy.h"
@@ -22,6 +23,7 @@
 
 #include <cstring>
 #include <optional>
+#include <thread>
 
 using namespace trephine;
 using namespace trephine::net;
@@ -594,6 +596,9 @@ struct SliceRig {
     // how often it was asked.
     bool eventsWait = false;
     int yieldAsked = 0, waitFromAsk = 0;
+    // How often the step let what it posted go out first (StepConfig::letSend), and what then.
+    int letSends = 0;
+    std::function<void()> onLetSend;
 
     SliceRig(Volume v, int64_t slicePixels, int64_t chunkPixels = int64_t(1) << 13,
              bool pixelClock = false)
@@ -610,6 +615,12 @@ struct SliceRig {
                        [this] {
                            ++yieldAsked;
                            return eventsWait || (waitFromAsk > 0 && yieldAsked >= waitFromAsk);
+                       },
+                   .letSend =
+                       [this] {
+                           ++letSends;
+                           if (onLetSend)
+                               onLetSend();
                        },
                    .renderer = pixelClock ? DbiRendererFactory([p = pixels](const Volume& vol,
                                                                             ThreadPool* pool) {
@@ -1206,6 +1217,82 @@ TEST(AvailabilityFairShare, UpdatesOfHeldViewsGoBeforeNewViewsRows) {
     EXPECT_LE(*rig.pixels - before, uint64_t(64 * 64)) << "and nothing of the newcomer's rows";
     EXPECT_TRUE(rig.step.rendering());
     EXPECT_TRUE(compare(seen, rig.step.render(small)).identical());
+}
+
+// Chunked work for another peer waits until the updates posted in the step are handed to the
+// network: the trainee's rectangle is taken before the larger view's change renders. A lone
+// trainee never waits, nor do views of at most a slice changed in one step (a classroom's).
+TEST(AvailabilityFairShare, ALargerViewsChunksWaitUntilTheUpdatesBeforeThemAreTaken) {
+    const Volume skull = makeSkull(48);
+    SliceRig rig(skull, 64 * 64 * 4, 256 * 4, true);
+    const Camera small = cameraPreset("top", skull, {64, 64});
+    const Camera large = cameraPreset("top", skull, {256, 256});
+    Dbi smallSeen, largeSeen;
+    ASSERT_TRUE(applyUpdate(rig.run({rig.join(1, small)}), 1, small, smallSeen));
+    ASSERT_TRUE(applyUpdate(rig.run({topCut(skull, rig.now)}), 1, small, smallSeen));
+    EXPECT_EQ(rig.letSends, 0) << "alone, nothing waits";
+    const Camera other = cameraPreset("paper", skull, {64, 64});
+    Dbi otherSeen;
+    ASSERT_TRUE(applyUpdate(rig.run({rig.join(3, other)}), 3, other, otherSeen));
+    LogRecord both = topCut(skull, rig.now);
+    both.as<CutEvent>()->box.lo.z -= 2;
+    const std::vector<Outbox::Ready> classroom = rig.run({both});
+    ASSERT_TRUE(applyUpdate(classroom, 1, small, smallSeen));
+    ASSERT_TRUE(applyUpdate(classroom, 3, other, otherSeen));
+    EXPECT_EQ(rig.letSends, 0) << "two small views changed in one step do not wait";
+
+    std::vector<Outbox::Ready> joined = rig.run({rig.join(2, large)});
+    for (int steps = 0; rig.step.rendering() && steps < 100; ++steps)
+        for (auto& u : rig.run({}))
+            joined.push_back(std::move(u));
+    ASSERT_TRUE(applyUpdate(joined, 2, large, largeSeen));
+
+    rig.letSends = 0;
+    std::vector<Outbox::Ready> handed; // what the network took when the step let it send
+    uint64_t renderedThen = 0;         // and the pixels rendered in the step by then
+    const uint64_t before = *rig.pixels;
+    rig.onLetSend = [&] {
+        renderedThen = *rig.pixels - before;
+        for (auto& u : rig.outbox.take([](uint16_t) { return true; }).updates)
+            handed.push_back(std::move(u));
+    };
+    LogRecord deeper = topCut(skull, rig.now);
+    deeper.as<CutEvent>()->box.lo.z -= 4;
+    const std::vector<Outbox::Ready> after = rig.run({deeper});
+    EXPECT_EQ(rig.letSends, 1) << "once, before the large view's first piece";
+    EXPECT_LE(renderedThen, uint64_t(2 * 64 * 64)) << "the small views' pixels only";
+    ASSERT_TRUE(applyUpdate(handed, 1, small, smallSeen)) << "the trainee's rectangle went first";
+    EXPECT_FALSE(has(handed, 2, false));
+    ASSERT_TRUE(applyUpdate(after, 2, large, largeSeen)) << "the large view's change in the step";
+    EXPECT_TRUE(compare(smallSeen, rig.step.render(small)).identical());
+    EXPECT_TRUE(compare(largeSeen, rig.step.render(large)).identical());
+}
+
+// The simulation waits for a network pass that began after the last post: not one under way
+// then, never while nothing is posted or the network thread is closed, and at most the bound.
+TEST(AvailabilitySendPasses, TheSimulationWaitsForAPassThatBeganAfterThePost) {
+    SendPasses passes;
+    passes.posted();
+    EXPECT_TRUE(passes.awaitPosted(10'000'000)) << "closed: no network thread to wait for";
+    passes.open();
+    EXPECT_FALSE(passes.awaitPosted(2000)) << "posted and no pass since: the bound";
+    { const SendPasses::Pass pass(passes); }
+    EXPECT_TRUE(passes.awaitPosted(10'000'000)) << "a pass after the post";
+    EXPECT_TRUE(passes.awaitPosted(10'000'000)) << "nothing posted since";
+    {
+        const SendPasses::Pass underWay(passes);
+        passes.posted();
+    }
+    EXPECT_FALSE(passes.awaitPosted(2000)) << "the pass under way at the post may have missed it";
+
+    bool released = false;
+    std::thread simulation([&] { released = passes.awaitPosted(10'000'000); });
+    { const SendPasses::Pass pass(passes); }
+    simulation.join();
+    EXPECT_TRUE(released) << "the network thread's pass lets the simulation go";
+    passes.posted();
+    passes.close();
+    EXPECT_TRUE(passes.awaitPosted(10'000'000)) << "closed again";
 }
 
 // Others' changes, anew every step while events always wait, never starve a newcomer: each step

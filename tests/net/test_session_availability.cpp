@@ -167,3 +167,35 @@ TEST(SessionAvailability, AFloodThatCannotReceiveSpendsNoSlotWhenCookiesAreAsked
     EXPECT_EQ(a.at("handshakes_reset").get<uint64_t>(), 0u) << "no half-open slot was spent";
     EXPECT_EQ(a.at("connects_pool_full").get<uint64_t>(), 0u);
 }
+
+// A threaded server lets a trainee's rectangle go out before the chunked work of a larger view
+// that sees the same drilling (StepConfig::letSend): the report counts the waits, and with the
+// network thread running each ends with its pass, not the bound.
+TEST(SessionAvailability, ALargerViewsWorkWaitsUntilTheTraineesRectangleIsTaken) {
+    const Volume sphere = makeSphere(32);
+    SessionServer server(sphere, loopbackServerConfig("sphere:32"));
+    server.start();
+    SessionClient trainee(trephine::testing::namedClientConfig(sphere, "ada", Role::Trainee, 64));
+    ClientConfig wc = trephine::testing::namedClientConfig(sphere, "watcher", Role::Trainee, 64);
+    wc.view = toViewSpec(cameraPreset("top", sphere, {640, 480})); // more than a slice
+    wc.codec = Codec::Raw;                                         // bit for bit
+    SessionClient watcher(wc);
+    trainee.connect(loopback(server.port()));
+    watcher.connect(loopback(server.port()));
+    const std::vector<SessionClient*> all = {&trainee, &watcher};
+    ASSERT_TRUE(pumpUntil(all, [&] { return trainee.hasFullImage() && watcher.hasFullImage(); }));
+    for (uint64_t i = 0; i < 20; ++i) {
+        trainee.sendToolState(
+            trephine::testing::burrState(trephine::testing::sphereTop(32), int(i), 20, 1000000));
+        ASSERT_TRUE(pumpUntil(all, [&] { return server.toolStatesApplied() == i + 1; }));
+    }
+    ASSERT_TRUE(pumpUntil(all, [&] {
+        return server.idle() &&
+               compare(watcher.dbi(), server.renderView(watcher.view())).identical();
+    }));
+    const nlohmann::json report = nlohmann::json::parse(server.reportJson());
+    const uint64_t waits = report.at("send_waits"), bounded = report.at("send_waits_bounded");
+    EXPECT_GT(waits, 0u) << report.dump();
+    EXPECT_LT(bounded, waits) << "the network thread's passes end the waits";
+    server.stop();
+}

@@ -72,6 +72,8 @@ nlohmann::ordered_json toJson(const ServerReport& r, const NetStats& stats) {
               {"tool_states_dropped", c.toolStatesDropped},
               {"renders", c.renders},
               {"codings_shared", c.codingsShared},
+              {"send_waits", c.sendWaits},
+              {"send_waits_bounded", c.sendWaitsBounded},
               {"haptic_models_sent", c.hapticModelsSent},
               {"haptic_relays_sent", c.hapticRelaysSent},
               {"malformed_dropped", stats.malformed()},

@@ -9,6 +9,7 @@
 #include "net/marks_file.h"
 #include "net/outbox.h"
 #include "net/replay_feed.h"
+#include "net/send_passes.h"
 #include "net/session_codes.h"
 #include "net/session_gate.h"
 #include "net/session_log.h"
@@ -72,9 +73,11 @@ private:
     ReportBook* m_book;
 };
 
-StepConfig stepConfig(const ServerConfig& c, std::function<bool()> yield) {
+StepConfig stepConfig(const ServerConfig& c, std::function<bool()> yield,
+                      std::function<void()> letSend) {
     StepConfig s{c.maxStepS, c.maxSweepMm, c.renderThreads, {}};
     s.yield = std::move(yield);
+    s.letSend = std::move(letSend);
     s.renderer = c.renderer;
     s.assessment.cautionMm = c.cautionMm;
     s.assessment.dangerMm = c.dangerMm;
@@ -88,9 +91,15 @@ struct SessionServer::Impl {
         : host(Host::listen(c.port, c.maxClients + c.admission.waitingSlots, c.bulkWindow)),
           wakeFd(eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC)),
           outbox(
-              c.maxInFlightBytes, book, [this] { return clock(); }, [this] { wakeNetwork(); }),
-          step(std::move(v), stepConfig(c, [this] { return eventsWaiting(); }), outbox, book,
-               [this] { return clock(); }),
+              c.maxInFlightBytes, book, [this] { return clock(); },
+              [this] {
+                  sendPasses.posted();
+                  wakeNetwork();
+              }),
+          step(std::move(v),
+               stepConfig(
+                   c, [this] { return eventsWaiting(); }, [this] { letSend(); }),
+               outbox, book, [this] { return clock(); }),
           policy(withScene(c, step.volume()), step.volume().dims(), step.volume().spacing(), book,
                  [this](const ToolState& t, glm::vec3 velocity) { return force(t, velocity); }),
           gate(c, book), maxQueuedToolStates(c.maxQueuedToolStates),
@@ -183,6 +192,16 @@ struct SessionServer::Impl {
     // holding it would stop the network thread's next push.
     std::atomic<bool> inboxWaiting{false}; // !inbox.empty(), written under inMutex
     bool eventsWaiting() const { return inboxWaiting.load(std::memory_order_relaxed); }
+    // The network thread's passes over the outbox, so the simulation can let what it posted go
+    // out before another peer's chunked work (StepConfig::letSend), counted in the report.
+    SendPasses sendPasses;
+    void letSend() {
+        const bool passed = sendPasses.awaitPosted();
+        book.record([&](ServerReport& r) {
+            ++r.counters.sendWaits;
+            r.counters.sendWaitsBounded += !passed;
+        });
+    }
 
     // [Availability] Connections not yet admitted (net/admission.h) and each peer's control
     // backlog (net/budgets.h); network thread only.
@@ -854,6 +873,7 @@ void SessionServer::Impl::playReplayed() {
 
 // Sends the updates the outbox lets go, and sends away the volume clients it refused.
 void SessionServer::Impl::sendUpdates() {
+    const SendPasses::Pass pass(sendPasses);
     Outbox::Taken taken = outbox.take([&](uint16_t id) { return policy.live(id); });
     PolicyOutput out;
     for (uint16_t id : taken.refused) {
@@ -1062,12 +1082,14 @@ void SessionServer::pump(uint64_t nowUs) {
 void SessionServer::networkLoop() {
     nameThread("trephine-net");
     Impl& s = *m_impl;
+    s.sendPasses.open();
     while (!m_stop.load()) {
         // Wait on the socket and the wake-up together, then handle everything pending.
         s.waitNetwork(s.received.waiting() > 0 ? 0 : 1); // messages left waiting go at once
         s.receive(s.clock());
         s.send(s.clock());
     }
+    s.sendPasses.close();
     s.sayGoodbye();
 }
 

@@ -378,9 +378,13 @@ void SimulationStep::markChanged(ViewFrame& v, const Batch& b, uint32_t gridUs) 
 // events wait: they are applied first, so nobody's update waits behind more than one piece of
 // another's work, and a peer that asks for more than its share falls behind in its own queue.
 void SimulationStep::schedule() {
-    for (ViewFrame& v : m_views)
-        if (v.settled())
-            postView(v); // a newcomer to a view already whole gets it now
+    m_posted.clear();
+    for (ViewFrame& v : m_views) {
+        if (!v.settled() || v.holders.empty())
+            continue;
+        if (postView(v)) // a newcomer to a view already whole gets it now
+            m_posted.push_back(v.holders.front());
+    }
     int64_t rowsLeft = std::max<int64_t>(m_config.slicePixels, 1);
     const int64_t slice = rowsLeft;
     std::vector<ViewFrame*> ready;
@@ -400,12 +404,14 @@ void SimulationStep::schedule() {
         peers.clear();
         for (const ViewFrame* v : ready)
             peers.push_back(v->holders.front());
-        ViewFrame& v = *ready[m_share.pick(peers)];
+        const size_t picked = m_share.pick(peers);
+        ViewFrame& v = *ready[picked];
+        letSend(v, peers[picked]);
         const uint64_t t0 = m_share.now();
         workOn(v, rowsLeft, atLeast);
         m_share.charge(v.holders, m_share.now() - t0);
-        if (v.settled())
-            postView(v);
+        if (v.settled() && postView(v))
+            m_posted.push_back(peers[picked]);
         return true;
     };
     auto changed = [](const ViewFrame& v) { return v.whole() && !v.settled(); };
@@ -420,6 +426,19 @@ void SimulationStep::schedule() {
                 pieceFor(newRows, m_config.chunkPixels - given);
             return;
         }
+    }
+}
+
+// A piece of chunked work (new rows, a frame's copy, a chunk of a large view's change) for a peer
+// other than those given an update in the step waits until their updates have been taken: on two
+// cores it would take half the CPU their send needs. A view of at most a slice changes in one
+// short piece, so a classroom's views do not wait for each other.
+void SimulationStep::letSend(const ViewFrame& v, uint16_t peer) {
+    const bool chunked = large(v) || !v.whole() || v.copying();
+    if (m_config.letSend && chunked && !m_posted.empty() &&
+        std::find(m_posted.begin(), m_posted.end(), peer) == m_posted.end()) {
+        m_config.letSend();
+        m_posted.clear();
     }
 }
 
@@ -533,7 +552,8 @@ void SimulationStep::renderStale(ViewFrame& v) {
 // waiting for one, each client charged for its update's coding. A view larger than a slice
 // starts a copy of its frame for them instead: copying 33 MB at once stopped the step for ~11 ms
 // (2048 x 2048 on the 2-core VM).
-void SimulationStep::postView(ViewFrame& v) {
+bool SimulationStep::postView(ViewFrame& v) {
+    bool posted = false;
     for (uint16_t id : v.holders) {
         const bool othersFollow = id != v.holders.back();
         Client& c = m_clients.at(id);
@@ -547,15 +567,18 @@ void SimulationStep::postView(ViewFrame& v) {
             m_outbox.postImage(id, v.camera, v.frame, v.frame.bounds(), true, c.fullCauseUs, {},
                                othersFollow);
             c.fullCauseUs = 0;
+            posted = true;
         } else if (!v.fresh.empty()) {
             m_outbox.postImage(id, v.camera, v.frame, v.fresh, false, v.causeUs, v.timing,
                                othersFollow);
+            posted = true;
         }
         m_share.charge(id, m_share.now() - t0);
     }
     v.fresh = {};
     v.causeUs = 0;
     v.timing = {};
+    return posted;
 }
 
 // Copies a chunk of the frame's rows (or the preview's) for its full image (copying a pixel costs

@@ -35,6 +35,9 @@ struct ServerCounters {
     uint64_t toolStatesApplied = 0, toolStatesDropped = 0;
     uint64_t renders = 0;
     uint64_t codingsShared = 0; // image updates given another client's coding of the same pixels
+    // The simulation's waits for the network to take what it posted (StepConfig::letSend), and
+    // of them those that reached SendPasses::kMaxWaitUs.
+    uint64_t sendWaits = 0, sendWaitsBounded = 0;
     uint64_t hapticModelsSent = 0, hapticRelaysSent = 0;
     uint64_t refusedFull = 0, helloTimeouts = 0, viewsRefused = 0;
     uint64_t annotationsRefused = 0, takeOversRefused = 0, drillingPaused = 0;

@@ -56,6 +56,11 @@ struct StepConfig {
     // never. Asked on the simulation thread and, within bulk pieces, on the render threads at
     // once (Renderer::renderBulk): it must be safe to call from several threads.
     std::function<bool()> yield = {};
+    // Returns once what was posted has been handed to the network (or a bound has passed). The
+    // step calls it before a piece of chunked work for another peer than those just given an
+    // update, so the piece does not take the cores their send needs; it holds the step meanwhile.
+    // Empty: never (the server's waits only while its network thread runs).
+    std::function<void()> letSend = {};
     // Post updates to the outbox (a server). A replay (net/session_replay.h) only drills: it
     // renders nothing until asked (render()).
     bool publish = true;
@@ -177,7 +182,8 @@ private:
     void previewChunk(ViewFrame& v, int64_t& rowsLeft, int64_t atLeast);
     void postPreview(ViewFrame& v);
     bool large(const ViewFrame& v) const;
-    void postView(ViewFrame& v);
+    bool postView(ViewFrame& v); // true if it posted an update
+    void letSend(const ViewFrame& v, uint16_t peer);
     void copyChunk(ViewFrame& v);
     void syncGrid();
 
@@ -200,7 +206,8 @@ private:
     bool m_gridRebuildPending = false;
     std::atomic<bool> m_fullRender{false};
     std::atomic<bool> m_rendering{false};
-    FairShare m_share; // StepConfig::workClock
+    FairShare m_share;              // StepConfig::workClock
+    std::vector<uint16_t> m_posted; // peers given an update in the step since the last letSend
 };
 
 } // namespace trephine::net
