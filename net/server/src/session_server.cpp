@@ -138,6 +138,10 @@ struct SessionServer::Impl {
     // out at once instead of after the rest of a 1 ms wait (-1: no eventfd; the network thread
     // then waits out its timeout).
     int wakeFd = -1;
+    // The network thread's passes over the outbox, so the simulation can let what it posted go
+    // out before another peer's chunked work (StepConfig::letSend, counted in the report). Before
+    // the outbox and its coder, whose posts mark it.
+    SendPasses sendPasses;
     // The time: the last one pump() was given, else the steady clock (before the first pump, and
     // once start()'s threads run).
     std::atomic<uint64_t> pumpedUs{0}; // 0: never pumped
@@ -192,9 +196,7 @@ struct SessionServer::Impl {
     // holding it would stop the network thread's next push.
     std::atomic<bool> inboxWaiting{false}; // !inbox.empty(), written under inMutex
     bool eventsWaiting() const { return inboxWaiting.load(std::memory_order_relaxed); }
-    // The network thread's passes over the outbox, so the simulation can let what it posted go
-    // out before another peer's chunked work (StepConfig::letSend), counted in the report.
-    SendPasses sendPasses;
+    // StepConfig::letSend: the network's next pass waited for, and counted.
     void letSend() {
         const bool passed = sendPasses.awaitPosted();
         book.record([&](ServerReport& r) {

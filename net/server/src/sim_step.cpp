@@ -379,12 +379,9 @@ void SimulationStep::markChanged(ViewFrame& v, const Batch& b, uint32_t gridUs) 
 // another's work, and a peer that asks for more than its share falls behind in its own queue.
 void SimulationStep::schedule() {
     m_posted.clear();
-    for (ViewFrame& v : m_views) {
-        if (!v.settled() || v.holders.empty())
-            continue;
-        if (postView(v)) // a newcomer to a view already whole gets it now
+    for (ViewFrame& v : m_views)
+        if (v.settled() && postView(v)) // a newcomer to a view already whole gets it now
             m_posted.push_back(v.holders.front());
-    }
     int64_t rowsLeft = std::max<int64_t>(m_config.slicePixels, 1);
     const int64_t slice = rowsLeft;
     std::vector<ViewFrame*> ready;
