@@ -37,14 +37,14 @@ ThreadPool::~ThreadPool() {
         t.join();
 }
 
-void ThreadPool::runItems(uint32_t generation, const Job& job) {
+void ThreadPool::runItems(uint32_t generation, const Job& job, int below) {
     uint64_t v = m_claim.load(std::memory_order_acquire);
     for (;;) {
         // A claim is valid only for this job and below its count (a closed job's counter is past
         // it). While a claimed item is unfinished the caller cannot return, so the job's
         // functions stay alive while it runs.
         const uint32_t item = uint32_t(v);
-        if (uint32_t(v >> 32) != generation || int64_t(item) >= job.count)
+        if (uint32_t(v >> 32) != generation || int64_t(item) >= below)
             return;
         if (!m_claim.compare_exchange_weak(v, v + 1, std::memory_order_acq_rel,
                                            std::memory_order_acquire))
@@ -58,8 +58,7 @@ void ThreadPool::runItems(uint32_t generation, const Job& job) {
                 (*job.stop)())
                 close(generation, job.count);
         }
-        if (m_remaining.fetch_sub(1, std::memory_order_acq_rel) == 1)
-            m_remaining.notify_all();
+        finished(1);
         v = m_claim.load(std::memory_order_acquire);
     }
 }
@@ -74,9 +73,19 @@ void ThreadPool::close(uint32_t generation, int count) {
                                           std::memory_order_acq_rel, std::memory_order_acquire))
             break;
     }
-    const int unclaimed = count - int(uint32_t(v));
-    if (m_remaining.fetch_sub(unclaimed, std::memory_order_acq_rel) == unclaimed)
-        m_remaining.notify_all();
+    finished(count - int(uint32_t(v)));
+}
+
+void ThreadPool::finished(int n) {
+    if (m_remaining.fetch_sub(n, std::memory_order_acq_rel) == n) {
+        m_signal.fetch_add(1, std::memory_order_release);
+        m_signal.notify_all();
+    }
+}
+
+void ThreadPool::nudge() {
+    m_signal.fetch_add(1, std::memory_order_release);
+    m_signal.notify_all();
 }
 
 void ThreadPool::workerLoop() {
@@ -91,7 +100,7 @@ void ThreadPool::workerLoop() {
             seen = m_generation;
             job = m_job;
         }
-        runItems(seen, job);
+        runItems(seen, job, job.count);
     }
 }
 
@@ -101,7 +110,7 @@ void ThreadPool::parallelFor(int count, const std::function<void(int)>& fn) {
 
 int ThreadPool::parallelForUntil(int count, const std::function<void(int)>& fn,
                                  const std::function<bool()>& stop, int atLeast) {
-    return run(Job{&fn, count, &stop, std::max(atLeast, 0)});
+    return run(Job{&fn, count, &stop, std::clamp(atLeast, 0, std::max(count, 0))});
 }
 
 int ThreadPool::run(const Job& job) {
@@ -125,11 +134,22 @@ int ThreadPool::run(const Job& job) {
     }
     m_wake.notify_all();
     if (m_callerWorks)
-        runItems(generation, job);
-    // Items the workers still run: wait for them to finish (not for idle workers to wake).
-    for (int left = m_remaining.load(std::memory_order_acquire); left != 0;
-         left = m_remaining.load(std::memory_order_acquire))
-        m_remaining.wait(left, std::memory_order_acquire);
+        runItems(generation, job, job.count);
+    // Items the workers still run: wait for them to finish (not for idle workers to wake). The
+    // signal is read before the count, so a finish or nudge between the two ends the wait at once.
+    for (bool closed = !job.stop;;) {
+        const uint32_t signal = m_signal.load(std::memory_order_acquire);
+        if (m_remaining.load(std::memory_order_acquire) == 0)
+            break;
+        if (!closed && (*job.stop)()) {
+            // Workers not yet on the CPU claim nothing more: the caller does what must be done.
+            runItems(generation, job, job.atLeast);
+            close(generation, job.count);
+            closed = true;
+            continue;
+        }
+        m_signal.wait(signal, std::memory_order_acquire);
+    }
     // Every claimed item is done; the counter says how far the claims went.
     return std::min(job.count, int(uint32_t(m_claim.load(std::memory_order_acquire)) & ~kClosed));
 }

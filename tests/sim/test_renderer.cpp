@@ -11,6 +11,7 @@
 
 #include <atomic>
 #include <cerrno>
+#include <chrono>
 #include <cmath>
 #include <cstring>
 #include <glm/gtc/quaternion.hpp>
@@ -295,9 +296,64 @@ TEST(ThreadPool, ABackgroundPoolsWorkRunsOnItsWorkersAtItsNiceValue) {
     EXPECT_LE(threads.size(), 2u);
     EXPECT_EQ(nices, std::set<int>{7});
     EXPECT_EQ(getpriority(PRIO_PROCESS, id_t(caller)), 0) << "the caller keeps its own";
+    // Stopped at once, it does the first 3, and at most each worker's first item more.
+    const int stopped = background.parallelForUntil(
+        8, [](int) {}, [] { return true; }, 3);
+    EXPECT_GE(stopped, 3);
+    EXPECT_LE(stopped, 5);
+    // Owed more than it has, it does them all, each once, and no more.
+    std::vector<std::atomic<int>> hits(20);
     EXPECT_EQ(background.parallelForUntil(
-                  8, [](int) {}, [] { return true; }, 3),
-              3);
+                  8,
+                  [&](int i) {
+                      hits[size_t(i)].fetch_add(1);
+                      std::this_thread::sleep_for(std::chrono::milliseconds(1));
+                  },
+                  [] { return true; }, 20),
+              8);
+    for (int i = 0; i < 20; ++i)
+        EXPECT_EQ(hits[size_t(i)].load(), i < 8 ? 1 : 0) << "item " << i;
+}
+
+// A background pool's workers may wait long for the CPU. Nudged, the waiting caller asks `stop`
+// itself: it does the first `atLeast` items the workers have not claimed, claims no others, and
+// waits only for the items the workers run.
+TEST(ThreadPool, ANudgedCallerStopsAJobItsWorkersAreNotRunning) {
+    ThreadPool background(2, "bulk", 7);
+    std::atomic<bool> stop{false};
+    std::latch busy(2);               // both workers hold an item
+    std::atomic<bool> release{false}; // ... until this
+    std::atomic<int> byCaller{0};
+    std::vector<std::atomic<int>> hits(100);
+    int got = -1;
+    std::thread job([&] {
+        const pid_t self = pid_t(syscall(SYS_gettid));
+        got = background.parallelForUntil(
+            100,
+            [&](int i) {
+                hits[size_t(i)].fetch_add(1);
+                if (pid_t(syscall(SYS_gettid)) == self) {
+                    byCaller.fetch_add(1);
+                    return;
+                }
+                busy.count_down();
+                while (!release.load())
+                    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+            },
+            [&] { return stop.load(); }, 5);
+    });
+    busy.wait();
+    stop = true;
+    background.nudge();
+    // The caller does items 2-4 while the workers still hold 0 and 1.
+    for (int waited = 0; byCaller.load() < 3 && waited < 10000; ++waited)
+        std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    EXPECT_EQ(byCaller.load(), 3);
+    release = true;
+    job.join();
+    EXPECT_EQ(got, 5);
+    for (int i = 0; i < 100; ++i)
+        ASSERT_EQ(hits[size_t(i)].load(), i < 5 ? 1 : 0) << "item " << i;
 }
 
 // Bulk pieces (columns of tiles, stopped anywhere, on a background pool) assemble the full

@@ -40,11 +40,17 @@ public:
     // order. Not reentrant: call it from one thread at a time.
     void parallelFor(int count, const std::function<void(int)>& fn);
     // As parallelFor, but past the first `atLeast` items `stop` is asked as each item finishes
-    // (from any of the threads, while the job runs): once it says so no more are started, but
-    // for a worker's first item, claimed without asking. Returns how many were done, always the
-    // first ones: items are claimed in order.
+    // (from any of the threads, while the job runs), and by the waiting caller when the job starts
+    // and at each nudge(): once it says so no more are started past the first `atLeast`, but for
+    // a worker's first item, claimed without asking. Returns how many were done, always the first
+    // ones: items are claimed in order.
     int parallelForUntil(int count, const std::function<void(int)>& fn,
                          const std::function<bool()>& stop, int atLeast = 1);
+    // Asks the running job's `stop` again from the waiting caller, now: call it when what `stop`
+    // reads has changed. A background pool's workers may wait long for the CPU; the caller then
+    // runs the first `atLeast` items itself if they are not yet claimed, and waits only for the
+    // items already claimed. Any thread, any time; without a job it does nothing.
+    void nudge();
 
 private:
     struct Job {
@@ -55,8 +61,11 @@ private:
     };
     int run(const Job& job);
     void workerLoop();
-    // Claims and runs items of job `generation` until none is left (or a newer job started).
-    void runItems(uint32_t generation, const Job& job);
+    // Claims and runs items of job `generation` below index `below` until none is left (or a
+    // newer job started).
+    void runItems(uint32_t generation, const Job& job, int below);
+    // Counts `n` items finished; the last one wakes the caller.
+    void finished(int n);
     // Claims no more items of job `generation` (its claim counter gets kClosed); the ones not
     // claimed count as finished.
     void close(uint32_t generation, int count);
@@ -71,8 +80,10 @@ private:
     // (generation << 32) | next unclaimed item of the current job, | kClosed once stopped.
     static constexpr uint32_t kClosed = 1u << 31;
     std::atomic<uint64_t> m_claim{0};
-    // Items of the current job not yet finished; the caller waits for 0.
+    // Items of the current job not yet finished; the caller returns at 0.
     std::atomic<int> m_remaining{0};
+    // What the caller waits on: bumped when m_remaining reaches 0 and by nudge().
+    std::atomic<uint32_t> m_signal{0};
 };
 
 } // namespace trephine

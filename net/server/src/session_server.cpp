@@ -305,6 +305,7 @@ void SessionServer::Impl::push(std::vector<LogRecord>& events, const std::vector
         }
     }
     inCv.notify_one();
+    step.yieldChanged();
     if (dropped)
         book.count(&ServerCounters::toolStatesDropped, dropped);
 }

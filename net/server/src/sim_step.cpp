@@ -629,6 +629,11 @@ void SimulationStep::renderBulkApart(int nice) {
     m_renderer->setBulkPool(m_bulkPool.get());
 }
 
+void SimulationStep::yieldChanged() {
+    if (m_bulkPool)
+        m_bulkPool->nudge();
+}
+
 int64_t SimulationStep::viewPixels() const {
     int64_t total = 0;
     for (const ViewFrame& v : m_views)

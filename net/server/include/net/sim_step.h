@@ -109,6 +109,9 @@ public:
     // (ThreadPool's background kind), so they take only what others' updates, the network and
     // the clients leave of the CPU; the server does this when it runs its threads.
     void renderBulkApart(int nice);
+    // [Any thread] What StepConfig::yield reads has changed: a bulk piece whose background threads
+    // wait for the CPU asks it again now, instead of when one of them next finishes a column.
+    void yieldChanged();
 
 private:
     // A participant as the simulation sees it: its view and its tool.
