@@ -1372,6 +1372,7 @@ void HitCache::clear() {
     m_generation = 0;
     m_resume.clear();
     m_inside.clear();
+    m_rowKnown.clear();
     m_resumed = 0;
 }
 
@@ -1446,13 +1447,28 @@ PixelRect Renderer::prepare(const Camera& camera, const PixelRect& rect, const D
         cache->m_generation = m_generation;
         cache->m_stepVoxels = m_options.stepVoxels;
         cache->m_spacing = m_volume->spacing();
-        cache->m_resume.assign(size_t(camera.width) * size_t(camera.height), 0);
-        cache->m_inside.assign(size_t(camera.width) * size_t(camera.height), 0);
+        cache->m_resume.resize(size_t(camera.width) * size_t(camera.height));
+        cache->m_inside.resize(size_t(camera.width) * size_t(camera.height));
+        cache->m_rowKnown.assign(size_t(camera.height), 0);
         cache->m_resumed = 0;
     }
     // Inside the camera's window too: the hit cache is sized and strided by it, and the assert
     // above is gone from a release build.
-    return intersect(intersect(rect, frame.bounds()), PixelRect(0, 0, camera.width, camera.height));
+    const PixelRect r =
+        intersect(intersect(rect, frame.bounds()), PixelRect(0, 0, camera.width, camera.height));
+    if (cache) {
+        // Rows are zeroed whole, here before the tiles run: a tile reads and writes only its own
+        // pixels, and a later rectangle in the row finds it known.
+        const size_t width = size_t(camera.width);
+        for (int y = r.y; y < r.y + r.h; ++y) {
+            if (cache->m_rowKnown[size_t(y)])
+                continue;
+            std::fill_n(cache->m_resume.begin() + ptrdiff_t(size_t(y) * width), width, 0);
+            std::fill_n(cache->m_inside.begin() + ptrdiff_t(size_t(y) * width), width, 0);
+            cache->m_rowKnown[size_t(y)] = 1;
+        }
+    }
+    return r;
 }
 
 Dbi Renderer::renderRect(const Camera& camera, const PixelRect& rect) const {

@@ -1211,6 +1211,37 @@ TEST(HitCache, ACacheForAnotherCameraIsNeverUsed) {
     EXPECT_FALSE(cache.validFor(renderer, wide));
 }
 
+// Restarted for another view of the same size, a cache forgets the old view's rows as rectangles
+// reach them: rows not yet rendered resume nowhere, and a frame rendered a rectangle at a time,
+// in any order, is the fresh render's.
+TEST(HitCache, ARestartedCacheRendersRectanglesAsAfresh) {
+    Volume skull = makeSkull(48);
+    Renderer renderer(skull);
+    const Camera a = cameraPreset("top", skull, {80, 60});
+    const Camera b = cameraPreset("front", skull, {80, 60});
+    HitCache cache;
+    renderer.render(a, &cache);
+    int known = 0;
+    for (int y = 0; y < 60; ++y)
+        for (int x = 0; x < 80; ++x)
+            known += cache.resumeIndex(x, y) != 0;
+    ASSERT_GT(known, 0) << "the first view leaves indices behind";
+    Dbi frame(80, 60);
+    renderer.render(b, {30, 20, 20, 10}, frame, &cache);
+    for (int y : {0, 19, 30, 59})
+        for (int x = 0; x < 80; ++x)
+            ASSERT_EQ(cache.resumeIndex(x, y), 0) << x << "," << y;
+    for (const PixelRect& r : {PixelRect{0, 20, 30, 10}, PixelRect{50, 0, 30, 60},
+                               PixelRect{0, 30, 50, 30}, PixelRect{0, 0, 50, 20}})
+        renderer.render(b, r, frame, &cache);
+    EXPECT_EQ(frame, renderer.render(b));
+    // Eroded, the cached re-render still matches an uncached one.
+    std::mt19937 rng(7);
+    renderer.volumeChanged(drillSomewhere(skull, renderer, b, rng));
+    renderer.render(b, {0, 0, 80, 60}, frame, &cache);
+    EXPECT_EQ(frame, renderer.render(b));
+}
+
 } // namespace
 // Sample indices are int: sample k of a ray is at k * dt from the eye, dt half the smallest
 // spacing. With 0.001 mm voxels (the smallest a volume may have) and the eye 1e6 mm out on every
