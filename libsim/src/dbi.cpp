@@ -31,11 +31,18 @@ std::string describe(const PixelRect& r) {
     return fmt::format("{} {} {} {}", r.x, r.y, r.w, r.h);
 }
 
-Dbi::Dbi(int width, int height) : m_width(width), m_height(height) {
-    assert(width >= 0 && height >= 0 && "Dbi size must not be negative");
-    m_color.resize(size_t(width) * size_t(height) * 4);
-    m_depth.resize(size_t(width) * size_t(height));
+Dbi::Dbi(int width, int height) : Dbi(unfilled(width, height)) {
     fillBackground();
+}
+
+Dbi Dbi::unfilled(int width, int height) {
+    assert(width >= 0 && height >= 0 && "Dbi size must not be negative");
+    Dbi out;
+    out.m_width = width;
+    out.m_height = height;
+    out.m_color.resize(size_t(width) * size_t(height) * 4);
+    out.m_depth.resize(size_t(width) * size_t(height));
+    return out;
 }
 
 void Dbi::fillBackground() {
@@ -47,7 +54,7 @@ void Dbi::fillBackground() {
 
 Dbi Dbi::extract(const PixelRect& rect) const {
     assert(bounds().contains(rect) && "Dbi::extract: rectangle outside the image");
-    Dbi out(rect.w, rect.h);
+    Dbi out = unfilled(rect.w, rect.h);
     for (int row = 0; row < rect.h; ++row) {
         size_t src = index(rect.x, rect.y + row);
         size_t dst = out.index(0, row);

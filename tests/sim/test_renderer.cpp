@@ -185,6 +185,30 @@ TEST(Renderer, RectangleRenderIsBitForBitTheFullRender) {
     }
 }
 
+// A new image is the background; an unfilled one has only its size until written, and an
+// extracted rectangle is exactly the pixels it covers.
+TEST(Dbi, ANewImageIsBackgroundAndAnExtractIsItsRectangle) {
+    const Dbi blank(7, 5);
+    for (int y = 0; y < 5; ++y)
+        for (int x = 0; x < 7; ++x) {
+            ASSERT_EQ(std::memcmp(blank.color(x, y), kBackgroundRgba, 4), 0) << x << "," << y;
+            ASSERT_EQ(blank.depth(x, y), kBackgroundDepth) << x << "," << y;
+        }
+    Dbi image = Dbi::unfilled(7, 5);
+    EXPECT_EQ(image.bounds(), PixelRect(0, 0, 7, 5));
+    for (int i = 0; i < 35; ++i) {
+        std::memset(image.color() + 4 * i, i, 4);
+        image.depth()[i] = float(i) / 35.0f;
+    }
+    const Dbi part = image.extract({2, 1, 4, 3});
+    ASSERT_EQ(part.bounds(), PixelRect(0, 0, 4, 3));
+    for (int y = 0; y < 3; ++y)
+        for (int x = 0; x < 4; ++x) {
+            EXPECT_EQ(std::memcmp(part.color(x, y), image.color(x + 2, y + 1), 4), 0);
+            EXPECT_EQ(part.depth(x, y), image.depth(x + 2, y + 1));
+        }
+}
+
 // The pool returns only when every item has run, each exactly once, also when its workers wake
 // late (more threads than cores) and for jobs smaller than the pool; back-to-back jobs never see
 // each other's items.

@@ -3,7 +3,9 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace trephine {
@@ -45,6 +47,9 @@ public:
     Dbi() = default;
     // A width x height image filled with the background (colour kBackgroundRgba, depth 1).
     Dbi(int width, int height);
+    // A width x height image whose pixels are not set, for a buffer about to be written whole:
+    // a 2048 x 2048 image's 32 MB are then written once, by whoever fills them, not first here.
+    static Dbi unfilled(int width, int height);
 
     int width() const { return m_width; }
     int height() const { return m_height; }
@@ -72,10 +77,30 @@ public:
     bool operator==(const Dbi& o) const;
 
 private:
+    // Leaves new elements as they are, so resize() writes nothing (std::vector's own zeroes them).
+    template <typename T>
+    struct Unset : std::allocator<T> {
+        template <typename U>
+        struct rebind {
+            using other = Unset<U>;
+        };
+        Unset() = default;
+        template <typename U>
+        Unset(const Unset<U>&) noexcept {}
+        template <typename U>
+        void construct(U* p) noexcept {
+            ::new (static_cast<void*>(p)) U;
+        }
+        template <typename U, typename... Args>
+        void construct(U* p, Args&&... args) {
+            ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+        }
+    };
+
     int m_width = 0;
     int m_height = 0;
-    std::vector<uint8_t> m_color;
-    std::vector<float> m_depth;
+    std::vector<uint8_t, Unset<uint8_t>> m_color;
+    std::vector<float, Unset<float>> m_depth;
 };
 
 // Where two images of the same size differ.

@@ -117,7 +117,7 @@ Dbi Outbox::buffer(int width, int height) {
         if (m_spare.width() == width && m_spare.height() == height)
             return std::exchange(m_spare, Dbi()); // a moved-from Dbi keeps its size, not pixels
     }
-    return Dbi(width, height);
+    return Dbi::unfilled(width, height);
 }
 
 // `owned`: `frame` itself, which a full image coded apart takes instead of a copy.

@@ -298,8 +298,8 @@ void SimulationStep::renderViews(const Batch& b, uint32_t gridUs) {
     };
     // Frames of views no DBI client holds any more are dropped (a view left half rendered
     // included); new views render in slices below, into a dropped frame of their size if there
-    // is one: a fresh 2048 x 2048 frame costs ~20 ms of page faults, and its rows are all
-    // rendered before any pixel of it is sent.
+    // is one: a fresh 2048 x 2048 frame costs ~20 ms of page faults as its rows render, and its
+    // rows are all rendered before any pixel of it is sent.
     std::vector<ViewFrame> dropped;
     std::erase_if(m_views, [&](ViewFrame& v) {
         const bool held = std::any_of(m_clients.begin(), m_clients.end(),
@@ -326,7 +326,8 @@ void SimulationStep::renderViews(const Batch& b, uint32_t gridUs) {
             v.preview = std::move(reuse->preview);
             dropped.erase(reuse);
         } else {
-            v.frame = Dbi(c.camera.width, c.camera.height);
+            // Rendered whole before any of it is sent, as a reused frame is.
+            v.frame = Dbi::unfilled(c.camera.width, c.camera.height);
         }
         if (m_config.previewPixels > 0 && pixelsOf(v.frame) > m_config.previewPixels)
             v.previewRows = 0;
@@ -492,7 +493,7 @@ void SimulationStep::previewChunk(ViewFrame& v, int64_t& rowsLeft, int64_t atLea
     const Camera half = previewCamera(v.camera);
     if (v.previewRows == 0 && v.previewCols == 0 &&
         (v.preview.width() != half.width || v.preview.height() != half.height))
-        v.preview = Dbi(half.width, half.height);
+        v.preview = Dbi::unfilled(half.width, half.height);
     rowsLeft -= bandPiece(half, v.preview, nullptr, v.previewRows, v.previewCols, v.previewBand,
                           rowsLeft, atLeast);
     if (v.previewRows >= half.height)

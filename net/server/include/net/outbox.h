@@ -114,8 +114,9 @@ public:
     // (previewCamera, ImageUpdate::preview); its exact full image follows.
     void postFullImage(uint16_t id, const Camera& camera, Dbi pixels, uint64_t causeUs,
                        bool preview = false);
-    // [Posting thread] A frame of that size for postFullImage: the coder's last buffer when it
-    // fits (its memory already mapped), else a new one.
+    // [Posting thread] A frame of that size for postFullImage, its pixels to be written whole by
+    // the caller: the coder's last buffer when it fits (its memory already mapped), else a new
+    // one left unfilled.
     Dbi buffer(int width, int height);
     // A volume client's change (or none, to retry one noted earlier). Posted, merged with its
     // waiting update, unless the client is held back with one waiting: then it is only noted and
