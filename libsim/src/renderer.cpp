@@ -1856,12 +1856,22 @@ bool cpuHasAvx2() {
 
 int Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, int outX, int outY,
                          HitCache* cache, const Tiling& tiling) const {
-    if (rect.empty() || m_volume->empty())
+    if (rect.empty())
         return 0;
-    const Frame f = makeFrame(*m_volume, camera, m_options, m_bricks);
     const int tile = std::max(4, m_options.tileSize);
     const int tileH = tiling.stop ? rect.h : tile;
     const int tilesX = (rect.w + tile - 1) / tile, tilesY = (rect.h + tileH - 1) / tileH;
+    if (m_volume->empty()) {
+        // Every pixel of the rectangle is written, as a render writes a miss: frames start
+        // unfilled.
+        for (int y = 0; y < rect.h; ++y)
+            for (int x = 0; x < rect.w; ++x) {
+                std::memcpy(out.color(outX + x, outY + y), kBackgroundRgba, 4);
+                out.depth()[out.index(outX + x, outY + y)] = kBackgroundDepth;
+            }
+        return tilesX * tilesY;
+    }
+    const Frame f = makeFrame(*m_volume, camera, m_options, m_bricks);
     int32_t* cacheResume = cache ? cache->m_resume.data() : nullptr;
     uint8_t* cacheInside = cache ? cache->m_inside.data() : nullptr;
     const size_t cacheStride = size_t(camera.width);
@@ -1903,7 +1913,7 @@ int Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, 
 int Renderer::renderBulk(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache,
                          const std::function<bool()>& stop, int atLeast) const {
     const PixelRect r = prepare(camera, rect, frame, cache);
-    if (r.empty() || m_volume->empty())
+    if (r.empty())
         return rect.w; // nothing to render: all of it done
     const int tile = std::max(4, m_options.tileSize);
     const int w = std::min(r.w, tile * renderInto(camera, r, frame, r.x, r.y, cache,

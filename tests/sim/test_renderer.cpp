@@ -209,6 +209,28 @@ TEST(Dbi, ANewImageIsBackgroundAndAnExtractIsItsRectangle) {
         }
 }
 
+// An empty volume renders the background into every pixel of the rectangle, whole or in bulk
+// pieces: a server's new frames start unfilled.
+TEST(Renderer, AnEmptyVolumeRendersTheBackgroundEverywhere) {
+    const Camera c = cameraPreset("top", makeSkull(32), {9, 7});
+    Volume none;
+    Renderer renderer(none);
+    Dbi frame = Dbi::unfilled(9, 7);
+    auto scribble = [&] {
+        std::memset(frame.color(), 0x55, 4 * 9 * 7);
+        std::fill_n(frame.depth(), 9 * 7, 0.5f);
+    };
+    scribble();
+    renderer.render(c, {0, 0, 9, 7}, frame, nullptr);
+    EXPECT_EQ(frame, Dbi(9, 7));
+    scribble();
+    HitCache cache;
+    EXPECT_EQ(renderer.renderBulk(
+                  c, {0, 0, 9, 7}, frame, &cache, [] { return false; }, 0),
+              9);
+    EXPECT_EQ(frame, Dbi(9, 7));
+}
+
 // The pool returns only when every item has run, each exactly once, also when its workers wake
 // late (more threads than cores) and for jobs smaller than the pool; back-to-back jobs never see
 // each other's items.

@@ -41,9 +41,9 @@ public:
     void parallelFor(int count, const std::function<void(int)>& fn);
     // As parallelFor, but past the first `atLeast` items `stop` is asked as each item finishes
     // (from any of the threads, while the job runs), and by the waiting caller when the job starts
-    // and at each nudge(): once it says so no more are started past the first `atLeast`, but for
-    // a worker's first item, claimed without asking. Returns how many were done, always the first
-    // ones: items are claimed in order.
+    // and at each nudge(): once it says so no more are started past the first `atLeast`, but at
+    // most one a worker, claimed without asking (its first, or the one after an owed item).
+    // Returns how many were done, always the first ones: items are claimed in order.
     int parallelForUntil(int count, const std::function<void(int)>& fn,
                          const std::function<bool()>& stop, int atLeast = 1);
     // Asks the running job's `stop` again from the waiting caller, now: call it when what `stop`

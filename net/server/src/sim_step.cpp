@@ -628,11 +628,12 @@ void SimulationStep::postRepairs() {
 void SimulationStep::renderBulkApart(int nice) {
     m_bulkPool = std::make_unique<ThreadPool>(m_pool.size(), "trephine-bulk", nice);
     m_renderer->setBulkPool(m_bulkPool.get());
+    m_bulkNudged.store(m_bulkPool.get(), std::memory_order_release);
 }
 
 void SimulationStep::yieldChanged() {
-    if (m_bulkPool)
-        m_bulkPool->nudge();
+    if (ThreadPool* pool = m_bulkNudged.load(std::memory_order_acquire))
+        pool->nudge();
 }
 
 int64_t SimulationStep::viewPixels() const {

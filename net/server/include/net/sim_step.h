@@ -197,7 +197,9 @@ private:
     std::shared_mutex m_voxelMutex;
     Volume m_volume;
     ThreadPool m_pool;
-    std::unique_ptr<ThreadPool> m_bulkPool;  // renderBulkApart's; null: m_pool does it all
+    std::unique_ptr<ThreadPool> m_bulkPool; // renderBulkApart's; null: m_pool does it all
+    // m_bulkPool for yieldChanged, which any thread that queues events calls, start() or not.
+    std::atomic<ThreadPool*> m_bulkNudged{nullptr};
     std::unique_ptr<DbiRenderer> m_renderer; // StepConfig::renderer, else the CPU ray caster
     Assessment m_assessment;
     std::map<uint16_t, Client> m_clients;
