@@ -1864,11 +1864,7 @@ int Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, 
     if (m_volume->empty()) {
         // Every pixel of the rectangle is written, as a render writes a miss: frames start
         // unfilled.
-        for (int y = 0; y < rect.h; ++y)
-            for (int x = 0; x < rect.w; ++x) {
-                std::memcpy(out.color(outX + x, outY + y), kBackgroundRgba, 4);
-                out.depth()[out.index(outX + x, outY + y)] = kBackgroundDepth;
-            }
+        out.apply(Dbi(rect.w, rect.h), outX, outY);
         return tilesX * tilesY;
     }
     const Frame f = makeFrame(*m_volume, camera, m_options, m_bricks);
