@@ -1447,6 +1447,9 @@ PixelRect Renderer::prepare(const Camera& camera, const PixelRect& rect, const D
         cache->m_generation = m_generation;
         cache->m_stepVoxels = m_options.stepVoxels;
         cache->m_spacing = m_volume->spacing();
+        // Cleared first, so a larger view's arrays are not copied over: rows are zeroed below.
+        cache->m_resume.clear();
+        cache->m_inside.clear();
         cache->m_resume.resize(size_t(camera.width) * size_t(camera.height));
         cache->m_inside.resize(size_t(camera.width) * size_t(camera.height));
         cache->m_rowKnown.assign(size_t(camera.height), 0);

@@ -1286,6 +1286,15 @@ TEST(HitCache, ARestartedCacheRendersRectanglesAsAfresh) {
     renderer.volumeChanged(drillSomewhere(skull, renderer, b, rng));
     renderer.render(b, {0, 0, 80, 60}, frame, &cache);
     EXPECT_EQ(frame, renderer.render(b));
+    // A larger view: its arrays are new and unset, and rows are zeroed as rectangles reach them.
+    const Camera c = cameraPreset("left", skull, {120, 90});
+    Dbi larger = Dbi::unfilled(120, 90);
+    for (const PixelRect& r :
+         {PixelRect{0, 45, 120, 45}, PixelRect{60, 0, 60, 45}, PixelRect{0, 0, 60, 45}})
+        renderer.render(c, r, larger, &cache);
+    EXPECT_EQ(larger, renderer.render(c));
+    renderer.render(c, larger.bounds(), larger, &cache);
+    EXPECT_EQ(larger, renderer.render(c)) << "the cache's own resume indices";
 }
 
 } // namespace

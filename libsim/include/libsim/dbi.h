@@ -2,6 +2,8 @@
 // bottom (glReadPixels order). What the server renders and a client composites with its geometry.
 #pragma once
 
+#include "libsim/unset_allocator.h"
+
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -77,30 +79,10 @@ public:
     bool operator==(const Dbi& o) const;
 
 private:
-    // Leaves new elements as they are, so resize() writes nothing (std::vector's own zeroes them).
-    template <typename T>
-    struct Unset : std::allocator<T> {
-        template <typename U>
-        struct rebind {
-            using other = Unset<U>;
-        };
-        Unset() = default;
-        template <typename U>
-        Unset(const Unset<U>&) noexcept {}
-        template <typename U>
-        void construct(U* p) noexcept {
-            ::new (static_cast<void*>(p)) U;
-        }
-        template <typename U, typename... Args>
-        void construct(U* p, Args&&... args) {
-            ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
-        }
-    };
-
     int m_width = 0;
     int m_height = 0;
-    std::vector<uint8_t, Unset<uint8_t>> m_color;
-    std::vector<float, Unset<float>> m_depth;
+    std::vector<uint8_t, UnsetAllocator<uint8_t>> m_color;
+    std::vector<float, UnsetAllocator<float>> m_depth;
 };
 
 // Where two images of the same size differ.
