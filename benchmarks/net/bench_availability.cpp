@@ -48,9 +48,10 @@ constexpr int kWindow = 500;
 constexpr const char* kTraineeCode = "TRAINEE42";
 constexpr const char* kInstructorCode = "TEACH3R99";
 
-// What a hostile peer does every `everyUs`: ask for a view from a new eye, switch design
-// (volume <-> DBI), or leave and join again.
-enum class Act { View, Switch, Churn };
+// What a peer does every `everyUs`: ask for a view from a new eye, switch design (volume <-> DBI),
+// leave and join again, or (an honest trainee dragging its window's edge) ask for its view one
+// size smaller, through 64 sizes in turn.
+enum class Act { View, Switch, Churn, Resize };
 
 // A peer at 127.0.0.<address> that says hello with a `width` x `height` view and then, every
 // `everyUs` (0: never), does `act`; it drops what it receives.
@@ -108,7 +109,10 @@ private:
                 ViewRequest r;
                 r.requestId = ++request;
                 r.view = m_view;
-                r.view.eye += glm::vec3(float(request % 50) * 0.5f, 0, 0);
+                if (act == Act::Resize)
+                    r.view.height = uint16_t(m_view.height - 4 * (request % 64));
+                else
+                    r.view.eye += glm::vec3(float(request % 50) * 0.5f, 0, 0);
                 send(peer, encodeMessage(r));
                 next = now + uint64_t(everyUs);
             }
@@ -395,6 +399,7 @@ enum class Hostile {
     Greedy,
     Holding,
     Holding1080,
+    Resizing1080,
     Switching,
     Churning,
     Mutating,
@@ -432,7 +437,8 @@ void underAttack(benchmark::State& state, Hostile kind) {
                 reconnecting.push_back(std::make_unique<testing::Reconnectors>(server.port(), 32, a,
                                                                                kProtocolVersion));
         // A new view every 5 ms (256^2, 512^2, 2048^2); the largest view, or a 1920 x 1080 one,
-        // held on the site; design switches 100 a second; leaving and joining 8.8 times a second.
+        // held on the site, or resized every 16 ms (a drag of its window's edge); design switches
+        // 100 a second; leaving and joining 8.8 times a second.
         switch (kind) {
         case Hostile::Greedy256:
             greedy.emplace(server.port(), skull, 256, 5000);
@@ -448,6 +454,9 @@ void underAttack(benchmark::State& state, Hostile kind) {
             break;
         case Hostile::Holding1080:
             greedy.emplace(server.port(), skull, 1920, 0, 5, Act::View, 1080);
+            break;
+        case Hostile::Resizing1080:
+            greedy.emplace(server.port(), skull, 1920, 16000, 5, Act::Resize, 1080);
             break;
         case Hostile::Switching:
             greedy.emplace(server.port(), skull, 500, 10000, 5, Act::Switch);
@@ -709,6 +718,9 @@ BENCHMARK_CAPTURE(underAttack, greedy_views_512, Hostile::Greedy512)->Iterations
 BENCHMARK_CAPTURE(underAttack, greedy_views, Hostile::Greedy)->Iterations(1)->UseRealTime();
 BENCHMARK_CAPTURE(underAttack, holding_large_view, Hostile::Holding)->Iterations(1)->UseRealTime();
 BENCHMARK_CAPTURE(underAttack, holding_1080p_view, Hostile::Holding1080)
+    ->Iterations(1)
+    ->UseRealTime();
+BENCHMARK_CAPTURE(underAttack, resizing_1080p_view, Hostile::Resizing1080)
     ->Iterations(1)
     ->UseRealTime();
 BENCHMARK_CAPTURE(underAttack, design_switches, Hostile::Switching)->Iterations(1)->UseRealTime();
