@@ -16,6 +16,7 @@
 #include "net/view.h"
 
 #include "gate_client.h"
+#include "manual_executor.h"
 
 #include <enet/protocol.h>
 #include <gtest/gtest.h>
@@ -1063,18 +1064,7 @@ TEST(FairInbox, SpoiltSealedMessagesAreDroppedCountedAndChargedToTheirSender) {
 // the newest waiting request wins, it waits until the role's hashing is under its duty cycle,
 // and each hash's time comes back to be charged to whoever asked.
 TEST(CodeMint, RequestsWhileACodeIsHashedCoalesceNewestWinsWithinTheDutyCycle) {
-    struct Manual final : Executor {
-        std::vector<std::function<void()>> tasks;
-        void post(std::function<void()> task) override { tasks.push_back(std::move(task)); }
-        void cancel() override { tasks.clear(); }
-        void drain() override {}
-        void run() {
-            auto now = std::move(tasks);
-            tasks.clear();
-            for (auto& task : now)
-                task();
-        }
-    } worker;
+    trephine::testing::ManualExecutor worker;
     Salt salt{};
     salt[0] = 7;
     CodeMint mint(worker);

@@ -9,6 +9,8 @@
 
 #include <gtest/gtest.h>
 
+#include <chrono>
+#include <future>
 #include <map>
 
 using namespace trephine;
@@ -456,4 +458,35 @@ TEST(Outbox, AFullImageBeingCodedIsSupersededOrDroppedLikeAnyWaitingImage) {
     outbox.finishCoding();
     EXPECT_TRUE(outbox.take(live).updates.empty());
     EXPECT_TRUE(outbox.empty());
+}
+
+// What a task owns is freed before the worker takes its lock again: freeing a dropped view's
+// frames takes milliseconds, and a post meanwhile (the simulation thread's) must not wait for it.
+TEST(WorkerExecutor, ATasksCapturesAreFreedOutsideTheLockAPostTakes) {
+    WorkerExecutor worker{"test-worker", 0};
+    std::promise<void> freeing, released;
+    std::shared_future<void> release = released.get_future().share();
+    struct SlowToFree {
+        std::promise<void>* freeing = nullptr;
+        std::shared_future<void> release;
+        ~SlowToFree() {
+            if (!freeing)
+                return;
+            freeing->set_value();
+            release.wait_for(std::chrono::seconds(10)); // a bound, should the lock be held
+        }
+    };
+    auto owned = std::make_shared<SlowToFree>();
+    owned->freeing = &freeing;
+    owned->release = release;
+    worker.post([owned = std::move(owned)] {});
+    freeing.get_future().wait();
+    std::atomic<bool> ran{false};
+    const auto t0 = std::chrono::steady_clock::now();
+    worker.post([&] { ran = true; }); // returns at once unless the freeing task holds the lock
+    const auto waited = std::chrono::steady_clock::now() - t0;
+    released.set_value();
+    worker.drain();
+    EXPECT_TRUE(ran);
+    EXPECT_LT(waited, std::chrono::seconds(5)) << "the post waited for the free";
 }

@@ -399,7 +399,7 @@ void SessionServer::start() {
         return;
     m_impl->threaded = true;
     m_impl->outbox.codeFullImagesApart(m_impl->apartPixels, m_impl->workerCoder);
-    m_impl->step.renderBulkApart(kBulkNice);
+    m_impl->step.renderBulkApart(kBulkNice, m_impl->workerCoder);
     m_impl->mint.setWorker(m_impl->workerMint);
     m_netThread = std::thread([this] { networkLoop(); });
     m_simThread = std::thread([this] { simulationLoop(); });

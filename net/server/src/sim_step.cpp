@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <memory>
 
 namespace trephine::net {
 
@@ -342,6 +343,8 @@ void SimulationStep::renderViews(const Batch& b, uint32_t gridUs) {
     schedule();
     m_rendering = std::any_of(m_views.begin(), m_views.end(),
                               [](const ViewFrame& v) { return !v.settled(); });
+    if (!dropped.empty()) // their frames are freed there, as the task goes
+        m_freer->post([frames = std::make_shared<std::vector<ViewFrame>>(std::move(dropped))] {});
 }
 
 bool SimulationStep::large(const ViewFrame& v) const {
@@ -625,7 +628,8 @@ void SimulationStep::postRepairs() {
     }
 }
 
-void SimulationStep::renderBulkApart(int nice) {
+void SimulationStep::renderBulkApart(int nice, Executor& freer) {
+    m_freer = &freer;
     m_bulkPool = std::make_unique<ThreadPool>(m_pool.size(), "trephine-bulk", nice);
     m_renderer->setBulkPool(m_bulkPool.get());
     m_bulkNudged.store(m_bulkPool.get(), std::memory_order_release);

@@ -52,6 +52,7 @@ void WorkerExecutor::run() {
         ++m_running;
         lock.unlock();
         task();
+        task = nullptr; // what it owns is freed here, not under the lock posts take
         lock.lock();
         --m_running;
         m_cv.notify_all();

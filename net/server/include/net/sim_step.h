@@ -107,8 +107,9 @@ public:
     int64_t viewPixels() const;
     // [Before the first step] New views' rows render on background threads at `nice`
     // (ThreadPool's background kind), so they take only what others' updates, the network and
-    // the clients leave of the CPU; the server does this when it runs its threads.
-    void renderBulkApart(int nice);
+    // the clients leave of the CPU, and dropped views' frames are freed on `freer`; the server
+    // does this when it runs its threads.
+    void renderBulkApart(int nice, Executor& freer);
     // [Any thread] What StepConfig::yield reads has changed: a bulk piece whose background threads
     // wait for the CPU asks it again now, instead of when one of them next finishes a column.
     void yieldChanged();
@@ -200,6 +201,10 @@ private:
     std::unique_ptr<ThreadPool> m_bulkPool; // renderBulkApart's; null: m_pool does it all
     // m_bulkPool for yieldChanged, which any thread that queues events calls, start() or not.
     std::atomic<ThreadPool*> m_bulkNudged{nullptr};
+    // Where dropped views' frames are freed: a 2048 x 2048 view's frame, hit cache and preview
+    // took the step 4-7 ms to free. Inline (the simulation thread) unless renderBulkApart.
+    InlineExecutor m_inlineFreer;
+    Executor* m_freer = &m_inlineFreer;
     std::unique_ptr<DbiRenderer> m_renderer; // StepConfig::renderer, else the CPU ray caster
     Assessment m_assessment;
     std::map<uint16_t, Client> m_clients;
