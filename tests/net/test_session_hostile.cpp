@@ -170,6 +170,7 @@ TEST(SessionHostile, AViewRequestOverTheLimitIsDroppedAndCounted) {
     EXPECT_EQ(report["views_refused"], 1) << report.dump(2);
     ASSERT_EQ(report["peers"].size(), 1u) << report.dump(2);
     EXPECT_EQ(report["peers"][0]["views_refused"], 1) << report.dump(2);
+    EXPECT_EQ(report["peers"][0]["view_requests"], 1) << "refused, but asked for";
     server.stop();
 }
 

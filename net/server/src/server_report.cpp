@@ -121,6 +121,7 @@ nlohmann::ordered_json toJson(const ServerReport& r, const NetStats& stats) {
                          {"haptic_models", p.hapticModels},
                          {"haptic_relays", p.hapticRelays},
                          {"malformed", p.malformed},
+                         {"view_requests", p.viewRequests},
                          {"views_refused", p.viewsRefused},
                          {"charged_us", p.chargedUs},
                          {"net_charged_us", p.netChargedUs},

@@ -213,13 +213,14 @@ bool SessionPolicy::handle(uint16_t id, Peer& p, std::span<const uint8_t> data, 
                 ViewRequest r;
                 if (!decodeMessage(data, r))
                     return false;
-                if (viewTooLarge(r.view)) { // well-formed, but more than we serve: counted
-                    m_book.record([&](ServerReport& rep) {
-                        ++rep.counters.viewsRefused;
-                        ++rep.peers[id].viewsRefused;
-                    });
+                const bool tooLarge = viewTooLarge(r.view); // well-formed, but more than we serve
+                m_book.record([&](ServerReport& rep) {
+                    ++rep.peers[id].viewRequests;
+                    rep.counters.viewsRefused += tooLarge;
+                    rep.peers[id].viewsRefused += tooLarge;
+                });
+                if (tooLarge)
                     return true;
-                }
                 return viewRequest(id, p, r, now, out);
             },
             [&](MessageTag<ViewAs>) { // net/view_follow.h

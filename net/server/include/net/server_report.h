@@ -70,6 +70,7 @@ struct PeerReport {
     bool hello = false;
     uint64_t bytesIn = 0, bytesOut = 0, messagesIn = 0, messagesOut = 0;
     uint64_t malformed = 0, hapticModels = 0, hapticRelays = 0, toolStates = 0, viewsRefused = 0;
+    uint64_t viewRequests = 0; // well-formed, refused or not
     uint64_t chargedUs = 0;    // the simulation thread's time spent for it (net/fair_share.h)
     uint64_t netChargedUs = 0; // the network thread's (and its code hashing), FairInbox
     uint64_t connectedUs = 0, disconnectedUs = 0; // disconnectedUs 0: still connected
