@@ -472,7 +472,8 @@ private:
     double seconds() const { return std::chrono::duration<double>(Clock::now() - t0).count(); }
     Camera makeCamera() const;
     bool frame();
-    void fitViewToWindow();
+    void fitViewToWindow(double now);
+    void requestWantedView();
     void takeSnapshot(FrameState& f);
     void takeScene(const FrameState& f);
     void requestMovedView(const FrameState& f);
@@ -496,6 +497,11 @@ private:
     glm::ivec2 viewSize;         // the view's (and the DBI's) width and height
     glm::ivec2 windowSize{0};    // the window's size the view was last fitted to (0: not yet)
     bool fittedFullView = false; // ... and whether it was the full-window view
+    // A resize within kResizeSettleS of the last waits to be asked for until the size holds that
+    // long: a window's edge dragged would otherwise ask the server for a new view every frame.
+    static constexpr double kResizeSettleS = 0.1;
+    double lastResizeAt = -1e9;
+    bool resizePending = false; // a size not yet asked for
 
     // The scripted driver (--script, --mark, --take-over, --screenshot, --frames, ...) and the
     // Session panel's controls.
@@ -629,7 +635,7 @@ bool TrainerWindow::frame() {
         if (injected.windowWidth > 0 && injected.windowHeight > 0)
             window.resize(injected.windowWidth, injected.windowHeight);
     }
-    fitViewToWindow();
+    fitViewToWindow(f.now);
     takeSnapshot(f);
     takeScene(f);
     applyRects(f);
@@ -656,24 +662,41 @@ bool TrainerWindow::frame() {
 // and the server is asked for a DBI of its new size; until it comes the old picture is drawn
 // warped (scaled) into the new view. The window opens fitted to --size, so the first size seen is
 // kept.
-void TrainerWindow::fitViewToWindow() {
-    const glm::ivec2 now(window.width(), window.height());
-    if ((now == windowSize && toggles.fullView == fittedFullView) || now.x <= 0 || now.y <= 0)
-        return; // unchanged, or minimised: keep the view
+void TrainerWindow::fitViewToWindow(double now) {
+    const glm::ivec2 size(window.width(), window.height());
+    if ((size == windowSize && toggles.fullView == fittedFullView) || size.x <= 0 || size.y <= 0) {
+        // Unchanged, or minimised: keep the view; a dragged size that has held is asked for.
+        if (resizePending && now - lastResizeAt >= kResizeSettleS && scene)
+            requestWantedView();
+        return;
+    }
     const bool first = windowSize == glm::ivec2(0);
-    windowSize = now;
+    windowSize = size;
     fittedFullView = toggles.fullView;
     if (first)
         return;
-    const glm::ivec2 view = viewAreaFor(now, toggles.fullView);
+    const glm::ivec2 view = viewAreaFor(size, toggles.fullView);
     if (view == viewSize)
         return;
     viewSize = view;
     comp.resizeView(view.x, view.y); // the DBI held stays, and its rectangles still fit it
-    if (scene) {
-        wantedCamera = makeCamera();
-        client.requestView(net::toViewSpec(wantedCamera));
-    }
+    // The first change goes at once (a maximised window, H's full view); the frames of a drag
+    // draw the held picture scaled until the size holds.
+    const bool settled = now - lastResizeAt >= kResizeSettleS;
+    lastResizeAt = now;
+    if (!scene)
+        return;
+    wantedCamera = makeCamera();
+    if (settled)
+        requestWantedView();
+    else
+        resizePending = true;
+}
+
+void TrainerWindow::requestWantedView() {
+    resizePending = false;
+    wantedCamera = makeCamera();
+    client.requestView(net::toViewSpec(wantedCamera));
 }
 
 void TrainerWindow::takeSnapshot(FrameState& f) {
@@ -718,8 +741,7 @@ void TrainerWindow::takeScene(const FrameState& f) {
             baseCamera = *preset;
             viewControls.distanceMm = glm::length(baseCamera.eye - baseCamera.target);
             viewControls.setHome(); // --orbit, --tilt and this distance
-            wantedCamera = makeCamera();
-            client.requestView(net::toViewSpec(wantedCamera));
+            requestWantedView();
         } else {
             sceneError = "the server's scene has no camera preset '" + o.camera + "'";
             scene.reset();
@@ -735,8 +757,7 @@ void TrainerWindow::requestMovedView(const FrameState& f) {
         viewControls.dirty = false;
         if (f.snap->viewingAs != 0) // the View panel moved: our own camera again
             client.viewAs(0);
-        wantedCamera = makeCamera();
-        client.requestView(net::toViewSpec(wantedCamera));
+        requestWantedView();
     }
 }
 
@@ -1287,10 +1308,10 @@ double TrainerWindow::idleFor(const FrameState& f) {
     for (bool down : io.KeysDown)
         input |= down;
     const bool busy = news.exchange(false) || input || lastRectAt == f.now || feed.held() ||
-                      script.drivesTool() || viewControls.dirty || f.snap->waitingForView ||
-                      (f.snap->replay && f.snap->replay->playing) || replayControls.dragS ||
-                      f.switching || !f.havePicture || o.frames > 0 || !o.screenshot.empty() ||
-                      !o.switchSyncAtS.empty() || bool(o.input);
+                      script.drivesTool() || viewControls.dirty || resizePending ||
+                      f.snap->waitingForView || (f.snap->replay && f.snap->replay->playing) ||
+                      replayControls.dragS || f.switching || !f.havePicture || o.frames > 0 ||
+                      !o.screenshot.empty() || !o.switchSyncAtS.empty() || bool(o.input);
     if (busy)
         lastActiveAt = f.now;
     return f.now - lastActiveAt;

@@ -16,6 +16,7 @@
 #include "loopback.h"
 
 #include <gtest/gtest.h>
+#include <nlohmann/json.hpp>
 
 #include <algorithm>
 #include <atomic>
@@ -299,4 +300,74 @@ TEST(ViewWarpWindow, ACameraOrSizeChangeChangesTheNextFrameWhileTheServerIsHeldB
     std::printf("window, resize: the scaled frame has %.1f %% of pixels within 8/255 of the "
                 "server's (bone %.1f %%)\n",
                 100.0 * scaled.all, 100.0 * scaled.bone);
+}
+
+// A window's edge dragged through 40 sizes, a frame each: the first size is asked for at once, the
+// frames after it draw the held picture scaled, and the size it stops at is asked for once it has
+// held kResizeSettleS (0.1 s), not the 38 between. A frame slower than that (a loaded machine)
+// lets one more through.
+TEST(ViewWarpWindow, ADraggedWindowEdgeAsksForItsFirstAndLastSizesOnly) {
+    TREPHINE_NEED_DISPLAY("the trainee window");
+    net::SessionServer server(makeSkull(64), trephine::testing::loopbackServerConfig("skull:64"));
+    trephine::testing::Pumped pumped(server);
+    constexpr int kWidth = 980, kHeight = 760, kSteps = 40; // --size 200's window
+    constexpr double kSettleS = 0.1;
+    std::vector<Camera> composited, pictures;
+    std::vector<double> dragAt; // the input's time at each step of the drag
+    double exactAfterS = 0.0;   // the last step to the exact picture of its size
+    std::atomic<bool> quit{false};
+    int step = 0;
+    TrainerOptions o;
+    o.address = "127.0.0.1:" + std::to_string(server.port());
+    o.size = 200;
+    o.timeoutS = 100.0;
+    o.visible = false;
+    o.quit = &quit;
+    o.onPicture = [&](const Camera& c) { pictures.push_back(c); };
+    o.onComposite = [&](const Dbi&, const Camera& c) { composited.push_back(c); };
+    o.input = [&](double t) {
+        InjectedInput in;
+        if (t < 0.3)
+            return in;
+        if (t > 30.0) // a hung step: fail below
+            quit = true;
+        const bool exact = !composited.empty() && composited.back() == pictures.back();
+        if (step == 0) {
+            step += exact; // the first view's picture is in
+        } else if (step <= kSteps) {
+            dragAt.push_back(t);
+            in.windowWidth = kWidth + 8 * step, in.windowHeight = kHeight + 4 * step;
+            ++step;
+        } else {
+            in.windowWidth = kWidth + 8 * kSteps, in.windowHeight = kHeight + 4 * kSteps;
+            if (exact && composited.back().height != composited.front().height &&
+                t - dragAt.back() > kSettleS && !quit) {
+                exactAfterS = t - dragAt.back();
+                quit = true;
+            }
+        }
+        in.done = quit;
+        return in;
+    };
+    std::future<int> window = std::async(std::launch::async, [&] { return runTrainerWindow(o); });
+    while (window.wait_for(std::chrono::microseconds(500)) != std::future_status::ready)
+        trephine::testing::Pumped::pumpAll();
+    ASSERT_EQ(window.get(), 0);
+    const nlohmann::json report = nlohmann::json::parse(server.reportJson());
+    server.stop();
+    ASSERT_EQ(step, kSteps + 1);
+    int slowGaps = 0;
+    for (size_t i = 1; i < dragAt.size(); ++i)
+        slowGaps += dragAt[i] - dragAt[i - 1] >= kSettleS;
+    ASSERT_EQ(report["peers"].size(), 1u) << report.dump(2);
+    const int requests = report["peers"][0]["view_requests"].get<int>();
+    std::printf("a drag through %d sizes: %d view requests (frames slower than %.2f s: %d); the "
+                "exact picture %.3f s after its last step\n",
+                kSteps, requests, kSettleS, slowGaps, exactAfterS);
+    // The scene's preset view, the drag's first size, the size it stopped at.
+    EXPECT_LE(requests, 3 + slowGaps);
+    EXPECT_GE(requests, 3);
+    // The last picture is the server's of the size the drag stopped at.
+    EXPECT_EQ(pictures.back(), composited.back());
+    EXPECT_GT(composited.back().height, composited.front().height);
 }
