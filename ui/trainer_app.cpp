@@ -681,8 +681,10 @@ void TrainerWindow::fitViewToWindow(double now) {
     viewSize = view;
     comp.resizeView(view.x, view.y); // the DBI held stays, and its rectangles still fit it
     // The first change goes at once (a maximised window, H's full view); the frames of a drag
-    // draw the held picture scaled until the size holds.
-    const bool settled = now - lastResizeAt >= kResizeSettleS;
+    // draw the held picture scaled until the size holds. The volume design's picture is drawn
+    // here, and its view goes at once: the server renders nothing for it.
+    const bool settled =
+        designs.picture == SyncDesign::Volume || now - lastResizeAt >= kResizeSettleS;
     lastResizeAt = now;
     if (!scene)
         return;
@@ -1308,7 +1310,7 @@ double TrainerWindow::idleFor(const FrameState& f) {
     for (bool down : io.KeysDown)
         input |= down;
     const bool busy = news.exchange(false) || input || lastRectAt == f.now || feed.held() ||
-                      script.drivesTool() || viewControls.dirty || resizePending ||
+                      script.drivesTool() || viewControls.dirty || (resizePending && scene) ||
                       f.snap->waitingForView || (f.snap->replay && f.snap->replay->playing) ||
                       replayControls.dragS || f.switching || !f.havePicture || o.frames > 0 ||
                       !o.screenshot.empty() || !o.switchSyncAtS.empty() || bool(o.input);

@@ -183,8 +183,8 @@ TEST(SimulationStep, TheCutterSweepsBetweenDrillingToolStates) {
 // in the step (a 2048 x 2048 view's frame, hit cache and preview took 4-7 ms); a view changed to
 // one of the same size keeps the frame, and nothing goes.
 TEST(SimulationStep, ADroppedViewIsFreedByTheFreerAndASameSizedOneIsReused) {
+    trephine::testing::ManualExecutor freer; // outlives the step that holds it
     StepRig rig(makeSphere(32));
-    trephine::testing::ManualExecutor freer;
     rig.step.renderBulkApart(10, freer);
     const Camera big = cameraPreset("top", rig.original, {256, 256});
     rig.run({rig.join(1, big, Codec::Raw)});
@@ -202,7 +202,8 @@ TEST(SimulationStep, ADroppedViewIsFreedByTheFreerAndASameSizedOneIsReused) {
     applyImage(t.updates[0], small, dbi);
     EXPECT_TRUE(compare(dbi, rig.step.render(small)).identical());
 
-    const size_t held = heapInUse();
+    const int64_t held = int64_t(heapInUse());
     freer.tasks.clear();
-    EXPECT_GE(held - heapInUse(), size_t(256) * 256 * 8) << "the task owned the 256 x 256 frame";
+    EXPECT_GE(held - int64_t(heapInUse()), int64_t(256) * 256 * 8)
+        << "the task owned the 256 x 256 frame";
 }

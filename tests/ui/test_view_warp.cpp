@@ -25,6 +25,7 @@
 #include <cstdlib>
 #include <future>
 #include <memory>
+#include <string>
 #include <vector>
 
 using namespace trephine;
@@ -302,6 +303,33 @@ TEST(ViewWarpWindow, ACameraOrSizeChangeChangesTheNextFrameWhileTheServerIsHeldB
                 100.0 * scaled.all, 100.0 * scaled.bone);
 }
 
+namespace {
+
+// A hidden window of --size 200 (980 x 760) on `server`, run while the test pumps it.
+int runPumpedWindow(const net::SessionServer& server, TrainerOptions& o, std::atomic<bool>& quit,
+                    const std::string& sync) {
+    o.address = "127.0.0.1:" + std::to_string(server.port());
+    o.size = 200;
+    o.timeoutS = 100.0;
+    o.visible = false;
+    o.quit = &quit;
+    o.sync = sync;
+    std::future<int> window = std::async(std::launch::async, [&] { return runTrainerWindow(o); });
+    while (window.wait_for(std::chrono::microseconds(500)) != std::future_status::ready)
+        trephine::testing::Pumped::pumpAll();
+    return window.get();
+}
+
+// One peer's view requests in the server's report.
+int viewRequests(const net::SessionServer& server) {
+    const nlohmann::json report = nlohmann::json::parse(server.reportJson());
+    return report.at("peers").size() == 1 ? report["peers"][0]["view_requests"].get<int>() : -1;
+}
+
+constexpr int kDragWidth = 980, kDragHeight = 760, kDragSteps = 40;
+
+} // namespace
+
 // A window's edge dragged through 40 sizes, a frame each: the first size is asked for at once, the
 // frames after it draw the held picture scaled, and the size it stops at is asked for once it has
 // held kResizeSettleS (0.1 s), not the 38 between. A frame slower than that (a loaded machine)
@@ -310,7 +338,6 @@ TEST(ViewWarpWindow, ADraggedWindowEdgeAsksForItsFirstAndLastSizesOnly) {
     TREPHINE_NEED_DISPLAY("the trainee window");
     net::SessionServer server(makeSkull(64), trephine::testing::loopbackServerConfig("skull:64"));
     trephine::testing::Pumped pumped(server);
-    constexpr int kWidth = 980, kHeight = 760, kSteps = 40; // --size 200's window
     constexpr double kSettleS = 0.1;
     std::vector<Camera> composited, pictures;
     std::vector<double> dragAt; // the input's time at each step of the drag
@@ -318,11 +345,6 @@ TEST(ViewWarpWindow, ADraggedWindowEdgeAsksForItsFirstAndLastSizesOnly) {
     std::atomic<bool> quit{false};
     int step = 0;
     TrainerOptions o;
-    o.address = "127.0.0.1:" + std::to_string(server.port());
-    o.size = 200;
-    o.timeoutS = 100.0;
-    o.visible = false;
-    o.quit = &quit;
     o.onPicture = [&](const Camera& c) { pictures.push_back(c); };
     o.onComposite = [&](const Dbi&, const Camera& c) { composited.push_back(c); };
     o.input = [&](double t) {
@@ -334,12 +356,13 @@ TEST(ViewWarpWindow, ADraggedWindowEdgeAsksForItsFirstAndLastSizesOnly) {
         const bool exact = !composited.empty() && composited.back() == pictures.back();
         if (step == 0) {
             step += exact; // the first view's picture is in
-        } else if (step <= kSteps) {
+        } else if (step <= kDragSteps) {
             dragAt.push_back(t);
-            in.windowWidth = kWidth + 8 * step, in.windowHeight = kHeight + 4 * step;
+            in.windowWidth = kDragWidth + 8 * step, in.windowHeight = kDragHeight + 4 * step;
             ++step;
         } else {
-            in.windowWidth = kWidth + 8 * kSteps, in.windowHeight = kHeight + 4 * kSteps;
+            in.windowWidth = kDragWidth + 8 * kDragSteps;
+            in.windowHeight = kDragHeight + 4 * kDragSteps;
             if (exact && composited.back().height != composited.front().height &&
                 t - dragAt.back() > kSettleS && !quit) {
                 exactAfterS = t - dragAt.back();
@@ -349,25 +372,48 @@ TEST(ViewWarpWindow, ADraggedWindowEdgeAsksForItsFirstAndLastSizesOnly) {
         in.done = quit;
         return in;
     };
-    std::future<int> window = std::async(std::launch::async, [&] { return runTrainerWindow(o); });
-    while (window.wait_for(std::chrono::microseconds(500)) != std::future_status::ready)
-        trephine::testing::Pumped::pumpAll();
-    ASSERT_EQ(window.get(), 0);
-    const nlohmann::json report = nlohmann::json::parse(server.reportJson());
+    ASSERT_EQ(runPumpedWindow(server, o, quit, "dbi"), 0);
+    const int requests = viewRequests(server);
     server.stop();
-    ASSERT_EQ(step, kSteps + 1);
+    ASSERT_EQ(step, kDragSteps + 1);
     int slowGaps = 0;
     for (size_t i = 1; i < dragAt.size(); ++i)
         slowGaps += dragAt[i] - dragAt[i - 1] >= kSettleS;
-    ASSERT_EQ(report["peers"].size(), 1u) << report.dump(2);
-    const int requests = report["peers"][0]["view_requests"].get<int>();
     std::printf("a drag through %d sizes: %d view requests (frames slower than %.2f s: %d); the "
                 "exact picture %.3f s after its last step\n",
-                kSteps, requests, kSettleS, slowGaps, exactAfterS);
+                kDragSteps, requests, kSettleS, slowGaps, exactAfterS);
     // The scene's preset view, the drag's first size, the size it stopped at.
     EXPECT_LE(requests, 3 + slowGaps);
     EXPECT_GE(requests, 3);
     // The last picture is the server's of the size the drag stopped at.
     EXPECT_EQ(pictures.back(), composited.back());
     EXPECT_GT(composited.back().height, composited.front().height);
+}
+
+// In the volume design the window draws its own picture, and the server renders nothing for its
+// views: each size of a drag is asked for at once, so the local picture follows it.
+TEST(ViewWarpWindow, TheVolumeDesignsDraggedEdgeAsksForEverySizeAtOnce) {
+    TREPHINE_NEED_DISPLAY("the trainee window");
+    net::SessionServer server(makeSkull(64), trephine::testing::loopbackServerConfig("skull:64"));
+    trephine::testing::Pumped pumped(server);
+    std::atomic<bool> quit{false};
+    int step = 0;
+    TrainerOptions o;
+    o.input = [&](double t) {
+        InjectedInput in;
+        if (t < 0.3)
+            return in;
+        quit = quit || t > 30.0 || step > kDragSteps + 10;
+        const int at = std::min(step++, kDragSteps);
+        in.windowWidth = kDragWidth + 8 * at, in.windowHeight = kDragHeight + 4 * at;
+        in.done = quit;
+        return in;
+    };
+    ASSERT_EQ(runPumpedWindow(server, o, quit, "volume"), 0);
+    const int requests = viewRequests(server);
+    server.stop();
+    ASSERT_GT(step, kDragSteps);
+    std::printf("the volume design's drag through %d sizes: %d view requests\n", kDragSteps,
+                requests);
+    EXPECT_GE(requests, kDragSteps);
 }
