@@ -474,6 +474,7 @@ private:
     bool frame();
     void fitViewToWindow(double now);
     void requestWantedView();
+    void requestResizedView();
     void takeSnapshot(FrameState& f);
     void takeScene(const FrameState& f);
     void requestMovedView(const FrameState& f);
@@ -502,6 +503,9 @@ private:
     static constexpr double kResizeSettleS = 0.1;
     double lastResizeAt = -1e9;
     bool resizePending = false; // a size not yet asked for
+    // [Instructor] The last snapshot's: whose camera the view follows, and the view held.
+    uint16_t viewingAs = 0;
+    net::ViewSpec heldView;
 
     // The scripted driver (--script, --mark, --take-over, --screenshot, --frames, ...) and the
     // Session panel's controls.
@@ -667,7 +671,7 @@ void TrainerWindow::fitViewToWindow(double now) {
     if ((size == windowSize && toggles.fullView == fittedFullView) || size.x <= 0 || size.y <= 0) {
         // Unchanged, or minimised: keep the view; a dragged size that has held is asked for.
         if (resizePending && now - lastResizeAt >= kResizeSettleS && scene)
-            requestWantedView();
+            requestResizedView();
         return;
     }
     const bool first = windowSize == glm::ivec2(0);
@@ -690,9 +694,23 @@ void TrainerWindow::fitViewToWindow(double now) {
         return;
     wantedCamera = makeCamera();
     if (settled)
-        requestWantedView();
+        requestResizedView();
     else
         resizePending = true;
+}
+
+// A resize keeps what is viewed: our own camera, or, viewing as a participant, theirs, at the new
+// size (as the client asks for a participant's view that moves).
+void TrainerWindow::requestResizedView() {
+    if (viewingAs == 0) {
+        requestWantedView();
+        return;
+    }
+    resizePending = false;
+    net::ViewSpec v = heldView;
+    v.width = uint16_t(viewSize.x);
+    v.height = uint16_t(viewSize.y);
+    client.requestView(v);
 }
 
 void TrainerWindow::requestWantedView() {
@@ -705,6 +723,8 @@ void TrainerWindow::takeSnapshot(FrameState& f) {
     f.snap = client.snapshot();
     const net::ClientSnapshot& snap = *f.snap;
     model.addSnapshot(f.snap, f.now);
+    viewingAs = snap.viewingAs;
+    heldView = snap.view;
     // The server refused the volume design (its whole volume does not fit a message): the
     // client thread goes on in DBI, and so does the toggle.
     if (snap.volumeRefusals != designs.refusalsSeen) {

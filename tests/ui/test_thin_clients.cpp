@@ -267,3 +267,61 @@ TEST(ThinClients, AnInstructorViewsAsATraineeThroughItsCamera) {
                       "viewing as alex", 1.0 / 20.0);
     server.stop();
 }
+
+// An instructor viewing as a trainee resizes its window: it goes on seeing the trainee's camera,
+// at the new size, not its own.
+TEST(ThinClients, AnInstructorViewingAsATraineeKeepsItsCameraThroughAResize) {
+    TREPHINE_NEED_DISPLAY("the instructor window");
+    const Volume skull = makeSkull(64);
+    net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64", 2));
+    trephine::testing::Pumped pumped(server);
+    net::ClientConfig tc =
+        trephine::testing::namedClientConfig(skull, "alex", net::Role::Trainee, 80);
+    tc.view = net::toViewSpec(cameraPreset("left", skull, {80, 80}));
+    net::SessionClient trainee(tc);
+    trainee.connect(trephine::testing::loopback(server.port()));
+    ASSERT_TRUE(trephine::testing::pumpUntil({&trainee}, [&] { return trainee.hasFullImage(); }));
+    std::atomic<bool> stop{false}, quit{false};
+    std::thread pump([&] {
+        while (!stop)
+            trainee.poll(1);
+    });
+    std::vector<Camera> pictures;
+    double resizedAt = -1.0;
+    TrainerReport report;
+    TrainerOptions o;
+    o.address = "127.0.0.1:" + std::to_string(server.port());
+    o.instructor = true;
+    o.name = "ines";
+    o.viewAs = "alex";
+    o.camera = "top";
+    o.size = 200; // a 980 x 760 window
+    o.timeoutS = 100.0;
+    o.visible = false;
+    o.quit = &quit;
+    o.report = &report;
+    o.onPicture = [&](const Camera& c) { pictures.push_back(c); };
+    o.input = [&](double t) {
+        InjectedInput in;
+        quit = quit || t > 30.0;
+        const bool asAlex = !pictures.empty() && pictures.back().eye == toCamera(tc.view).eye;
+        if (resizedAt < 0.0 && t > 0.3 && asAlex)
+            resizedAt = t;
+        if (resizedAt >= 0.0) {
+            in.windowWidth = 1100, in.windowHeight = 820;
+            quit = quit || (t - resizedAt > 0.3 && pictures.back().width != 200);
+        }
+        in.done = quit;
+        return in;
+    };
+    const int rc = trephine::testing::whilePumping([&] { return runTrainerWindow(o); });
+    stop = true;
+    pump.join();
+    server.stop();
+    ASSERT_EQ(rc, 0);
+    ASSERT_GE(resizedAt, 0.0) << "the trainee's picture never came";
+    const net::ViewSpec got = net::toViewSpec(report.camera);
+    EXPECT_NE(got.width, 200) << "the picture of the new size";
+    EXPECT_EQ(got.eye, tc.view.eye) << "the trainee's camera, not the instructor's own";
+    EXPECT_EQ(got.target, tc.view.target);
+}
