@@ -224,41 +224,76 @@ TEST(ThinClients, PickingOnTheDbiFindsTheVolumesSurfaceWithinAVoxel) {
     server.stop();
 }
 
+// A server of skull:64 with trainee "alex" on it (the "left" preset, 80 x 80) polled on a thread of
+// its own, and the options of instructor "ines" viewing as alex from its own "top" camera.
+struct AlexOnAServer {
+    const Volume skull = makeSkull(64);
+    net::SessionServer server{skull, trephine::testing::loopbackServerConfig("skull:64", 2)};
+    trephine::testing::Pumped pumped{server};
+    net::ClientConfig tc = alexConfig(skull);
+    net::SessionClient trainee{tc};
+    std::atomic<bool> stop{false};
+    std::thread pump;
+
+    static net::ClientConfig alexConfig(const Volume& skull) {
+        net::ClientConfig c =
+            trephine::testing::namedClientConfig(skull, "alex", net::Role::Trainee, 80);
+        c.view = net::toViewSpec(cameraPreset("left", skull, {80, 80}));
+        return c;
+    }
+    // False when alex got no picture.
+    bool start() {
+        trainee.connect(trephine::testing::loopback(server.port()));
+        if (!trephine::testing::pumpUntil({&trainee}, [&] { return trainee.hasFullImage(); }))
+            return false;
+        pump = std::thread([this] {
+            while (!stop)
+                trainee.poll(1);
+        });
+        return true;
+    }
+    TrainerOptions instructor() const {
+        TrainerOptions o;
+        o.address = "127.0.0.1:" + std::to_string(server.port());
+        o.instructor = true;
+        o.name = "ines";
+        o.viewAs = "alex";
+        o.camera = "top";
+        o.timeoutS = 100.0;
+        o.visible = false;
+        return o;
+    }
+    int run(const TrainerOptions& o) {
+        const int rc = trephine::testing::whilePumping([&] { return runTrainerWindow(o); });
+        stop = true;
+        if (pump.joinable())
+            pump.join();
+        return rc;
+    }
+    ~AlexOnAServer() {
+        stop = true;
+        if (pump.joinable())
+            pump.join();
+    }
+};
+
 // `trephine instructor --view-as alex`: the instructor's window shows the server's picture of the
 // trainee's camera, at the window's own size.
 TEST(ThinClients, AnInstructorViewsAsATraineeThroughItsCamera) {
     TREPHINE_NEED_DISPLAY("the instructor window");
-    const Volume skull = makeSkull(64);
-    net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64", 2));
-    trephine::testing::Pumped pumped(server);
-    net::ClientConfig tc =
-        trephine::testing::namedClientConfig(skull, "alex", net::Role::Trainee, 80);
-    tc.view = net::toViewSpec(cameraPreset("left", skull, {80, 80}));
-    net::SessionClient trainee(tc);
-    trainee.connect(trephine::testing::loopback(server.port()));
-    ASSERT_TRUE(trephine::testing::pumpUntil({&trainee}, [&] { return trainee.hasFullImage(); }));
-    std::atomic<bool> stop{false};
-    std::thread pump([&] {
-        while (!stop)
-            trainee.poll(1);
-    });
+    AlexOnAServer a;
+    ASSERT_TRUE(a.start());
+    const Volume& skull = a.skull;
+    net::SessionServer& server = a.server;
+    const net::ClientConfig& tc = a.tc;
     TempDir dir;
     TrainerReport report;
-    TrainerOptions o;
-    o.address = "127.0.0.1:" + std::to_string(server.port());
-    o.instructor = true;
-    o.name = "ines";
-    o.viewAs = "alex";
-    o.camera = "top";
+    TrainerOptions o = a.instructor();
     o.size = kView;
     o.screenshot = dir / "as.png";
     o.frames = 2;
-    o.timeoutS = 100.0;
-    o.visible = false;
     o.report = &report;
-    const int rc = trephine::testing::whilePumping([&] { return runTrainerWindow(o); });
-    stop = true;
-    pump.join();
+    const int rc = a.run(o);
     ASSERT_EQ(rc, 0);
     net::ViewSpec want = tc.view;
     want.width = want.height = kView;
@@ -272,32 +307,15 @@ TEST(ThinClients, AnInstructorViewsAsATraineeThroughItsCamera) {
 // at the new size, not its own.
 TEST(ThinClients, AnInstructorViewingAsATraineeKeepsItsCameraThroughAResize) {
     TREPHINE_NEED_DISPLAY("the instructor window");
-    const Volume skull = makeSkull(64);
-    net::SessionServer server(skull, trephine::testing::loopbackServerConfig("skull:64", 2));
-    trephine::testing::Pumped pumped(server);
-    net::ClientConfig tc =
-        trephine::testing::namedClientConfig(skull, "alex", net::Role::Trainee, 80);
-    tc.view = net::toViewSpec(cameraPreset("left", skull, {80, 80}));
-    net::SessionClient trainee(tc);
-    trainee.connect(trephine::testing::loopback(server.port()));
-    ASSERT_TRUE(trephine::testing::pumpUntil({&trainee}, [&] { return trainee.hasFullImage(); }));
-    std::atomic<bool> stop{false}, quit{false};
-    std::thread pump([&] {
-        while (!stop)
-            trainee.poll(1);
-    });
+    AlexOnAServer a;
+    ASSERT_TRUE(a.start());
+    const net::ClientConfig& tc = a.tc;
+    std::atomic<bool> quit{false};
     std::vector<Camera> pictures;
     double resizedAt = -1.0;
     TrainerReport report;
-    TrainerOptions o;
-    o.address = "127.0.0.1:" + std::to_string(server.port());
-    o.instructor = true;
-    o.name = "ines";
-    o.viewAs = "alex";
-    o.camera = "top";
+    TrainerOptions o = a.instructor();
     o.size = 200; // a 980 x 760 window
-    o.timeoutS = 100.0;
-    o.visible = false;
     o.quit = &quit;
     o.report = &report;
     o.onPicture = [&](const Camera& c) { pictures.push_back(c); };
@@ -314,10 +332,8 @@ TEST(ThinClients, AnInstructorViewingAsATraineeKeepsItsCameraThroughAResize) {
         in.done = quit;
         return in;
     };
-    const int rc = trephine::testing::whilePumping([&] { return runTrainerWindow(o); });
-    stop = true;
-    pump.join();
-    server.stop();
+    const int rc = a.run(o);
+    a.server.stop();
     ASSERT_EQ(rc, 0);
     ASSERT_GE(resizedAt, 0.0) << "the trainee's picture never came";
     const net::ViewSpec got = net::toViewSpec(report.camera);
