@@ -472,10 +472,10 @@ private:
     double seconds() const { return std::chrono::duration<double>(Clock::now() - t0).count(); }
     Camera makeCamera() const;
     bool frame();
-    void fitViewToWindow(double now);
-    void requestWantedView();
-    void requestResizedView();
     void takeSnapshot(FrameState& f);
+    void fitViewToWindow(const FrameState& f);
+    void requestWantedView();
+    void requestResizedView(const FrameState& f);
     void takeScene(const FrameState& f);
     void requestMovedView(const FrameState& f);
     void applyRects(const FrameState& f);
@@ -503,9 +503,6 @@ private:
     static constexpr double kResizeSettleS = 0.1;
     double lastResizeAt = -1e9;
     bool resizePending = false; // a size not yet asked for
-    // [Instructor] The last snapshot's: whose camera the view follows, and the view held.
-    uint16_t viewingAs = 0;
-    net::ViewSpec heldView;
 
     // The scripted driver (--script, --mark, --take-over, --screenshot, --frames, ...) and the
     // Session panel's controls.
@@ -639,8 +636,8 @@ bool TrainerWindow::frame() {
         if (injected.windowWidth > 0 && injected.windowHeight > 0)
             window.resize(injected.windowWidth, injected.windowHeight);
     }
-    fitViewToWindow(f.now);
     takeSnapshot(f);
+    fitViewToWindow(f);
     takeScene(f);
     applyRects(f);
     applyVolumeBoxes(f);
@@ -666,12 +663,13 @@ bool TrainerWindow::frame() {
 // and the server is asked for a DBI of its new size; until it comes the old picture is drawn
 // warped (scaled) into the new view. The window opens fitted to --size, so the first size seen is
 // kept.
-void TrainerWindow::fitViewToWindow(double now) {
+void TrainerWindow::fitViewToWindow(const FrameState& f) {
+    const double now = f.now;
     const glm::ivec2 size(window.width(), window.height());
     if ((size == windowSize && toggles.fullView == fittedFullView) || size.x <= 0 || size.y <= 0) {
         // Unchanged, or minimised: keep the view; a dragged size that has held is asked for.
         if (resizePending && now - lastResizeAt >= kResizeSettleS && scene)
-            requestResizedView();
+            requestResizedView(f);
         return;
     }
     const bool first = windowSize == glm::ivec2(0);
@@ -692,22 +690,23 @@ void TrainerWindow::fitViewToWindow(double now) {
     lastResizeAt = now;
     if (!scene)
         return;
-    wantedCamera = makeCamera();
-    if (settled)
-        requestResizedView();
-    else
+    if (settled) {
+        requestResizedView(f);
+    } else {
+        wantedCamera = makeCamera(); // drawn (warped) until it is asked for
         resizePending = true;
+    }
 }
 
 // A resize keeps what is viewed: our own camera, or, viewing as a participant, theirs, at the new
 // size (as the client asks for a participant's view that moves).
-void TrainerWindow::requestResizedView() {
-    if (viewingAs == 0) {
+void TrainerWindow::requestResizedView(const FrameState& f) {
+    if (f.snap->viewingAs == 0) {
         requestWantedView();
         return;
     }
     resizePending = false;
-    net::ViewSpec v = heldView;
+    net::ViewSpec v = f.snap->view;
     v.width = uint16_t(viewSize.x);
     v.height = uint16_t(viewSize.y);
     client.requestView(v);
@@ -723,8 +722,6 @@ void TrainerWindow::takeSnapshot(FrameState& f) {
     f.snap = client.snapshot();
     const net::ClientSnapshot& snap = *f.snap;
     model.addSnapshot(f.snap, f.now);
-    viewingAs = snap.viewingAs;
-    heldView = snap.view;
     // The server refused the volume design (its whole volume does not fit a message): the
     // client thread goes on in DBI, and so does the toggle.
     if (snap.volumeRefusals != designs.refusalsSeen) {
