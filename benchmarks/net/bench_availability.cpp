@@ -13,10 +13,13 @@
 // memory run holds 15 peers asking for distinct 2048^2 views and prints the process's peak
 // resident memory growth beside the bound the server states. The classroom run: 30 participants
 // join behind a guesser at their address (join times beside 5 s, guesses beside the bound).
+// TREPHINE_BENCH_RENDERER=cpu|gpu|auto renders the full-screen runs' server as
+// `trephine server --renderer` does (default cpu); the label says which.
 #include "flood.h"
 
 #include "libsim/skull.h"
 #include "libsim/stats.h"
+#include "libsim_gpu/gpu_renderer.h"
 #include "net/secure_channel.h"
 #include "net/session_client.h"
 #include "net/session_gate.h"
@@ -515,10 +518,17 @@ void fullScreenTrainees(benchmark::State& state) {
     static double lonePadP99Us = 0;
     const Volume skull = makeSkull(80);
     const int n = int(state.range(0));
+    const char* choice = std::getenv("TREPHINE_BENCH_RENDERER");
+    std::string rendering;
+    const std::optional<DbiRendererFactory> renderer =
+        gpu::chooseRenderer(gpu::parseRendererChoice(choice ? choice : "cpu"), &rendering);
+    state.SetLabel(rendering);
     for (auto _ : state) {
         ServerConfig config;
         config.port = 0;
         config.volumeName = "skull:80";
+        if (renderer)
+            config.renderer = *renderer;
         SessionServer server(skull, config);
         server.start();
         if (n == 0) {
