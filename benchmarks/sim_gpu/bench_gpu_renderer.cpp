@@ -3,8 +3,12 @@
 //   full 1920x1080 working-view frame of skull:512     target 5 ms on a GPU (issue 34)
 //   full 500x500 working-view frame of skull:256        beside the CPU renderer's, same run
 //   a 64^2 dirty rectangle of skull:256 (the server's path after drilling: render + read back)
+//   the 1080p frame's parts (cast to glFinish, read back) in either pipeline and the frame in bands
+//   of rows, as the server's step renders a new view (StepConfig::chunkPixels pixels a band)
 // On llvmpipe (no GPU) the figures only say that it works. Filter with --benchmark_filter=Gpu.
+#include "libsim_gpu/gl.h"
 #include "libsim_gpu/gpu_renderer.h"
+#include "libsim_gpu/volume_raycaster.h"
 
 #include "libsim/camera.h"
 #include "libsim/renderer.h"
@@ -13,6 +17,7 @@
 
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <chrono>
 #include <map>
 #include <memory>
@@ -81,6 +86,82 @@ void BM_GpuDirtyRectSkull256(benchmark::State& state) {
     gpuRender(state, 256, 500, 500, int(state.range(0)), 0.0);
 }
 BENCHMARK(BM_GpuDirtyRectSkull256)->Arg(64)->Unit(benchmark::kMicrosecond)->UseRealTime();
+
+// The 1080p frame of skull:512 in its two parts, the cast (to glFinish) and the read back, in
+// the fragment pipeline (arg 0, the window's) and the compute one (arg 1, the server's).
+void BM_GpuFrameSkull512At1080pParts(benchmark::State& state) {
+    std::string why;
+    auto egl = gpu::EglContext::shared(&why);
+    if (!egl) {
+        state.SkipWithError(("no OpenGL through EGL: " + why).c_str());
+        return;
+    }
+    const Volume& volume = skull(512);
+    gpu::EglContext::Current current(*egl);
+    gpu::VolumeRaycaster caster(state.range(0) ? gpu::VolumeRaycaster::Pipeline::Compute
+                                               : gpu::VolumeRaycaster::Pipeline::Fragment);
+    caster.upload(volume);
+    const Camera camera = cameraPreset("working", volume, {1920, 1080});
+    Dbi frame(1920, 1080);
+    caster.render(camera, frame.bounds());
+    caster.readBack(frame);
+    double draw = 0.0, read = 0.0;
+    for (auto _ : state) {
+        const auto t0 = Clock::now();
+        caster.render(camera, frame.bounds());
+        glFinish();
+        const auto t1 = Clock::now();
+        caster.readBack(frame);
+        const auto t2 = Clock::now();
+        draw += std::chrono::duration<double, std::milli>(t1 - t0).count();
+        read += std::chrono::duration<double, std::milli>(t2 - t1).count();
+        benchmark::DoNotOptimize(frame.depth());
+    }
+    const double n = std::max<double>(1.0, double(state.iterations()));
+    state.counters["cast_ms"] = draw / n;
+    state.counters["read_ms"] = read / n;
+    report(state, draw + read, 5.0, frame.bounds());
+    state.SetLabel((state.range(0) ? "compute, " : "fragment, ") + egl->info().renderer);
+}
+BENCHMARK(BM_GpuFrameSkull512At1080pParts)
+    ->Arg(0)
+    ->Arg(1)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+
+// The 1080p frame of skull:512 rendered and read back in bands of rows of about range(0)
+// pixels each, as the server's step renders a new view (8192: StepConfig's chunkPixels).
+void BM_GpuFrameSkull512At1080pInBands(benchmark::State& state) {
+    std::string why;
+    auto egl = gpu::EglContext::shared(&why);
+    if (!egl) {
+        state.SkipWithError(("no OpenGL through EGL: " + why).c_str());
+        return;
+    }
+    const Volume& volume = skull(512);
+    gpu::GpuRenderer renderer(volume, egl);
+    const Camera camera = cameraPreset("working", volume, {1920, 1080});
+    Dbi frame(1920, 1080);
+    const int rows = int(std::clamp<int64_t>(state.range(0) / 1920, 1, 1080));
+    renderer.render(camera, frame.bounds(), frame, nullptr);
+    double total = 0.0;
+    for (auto _ : state) {
+        const auto t0 = Clock::now();
+        for (int y = 0; y < 1080; y += rows)
+            renderer.render(camera, {0, y, 1920, std::min(rows, 1080 - y)}, frame, nullptr);
+        total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
+        benchmark::DoNotOptimize(frame.depth());
+    }
+    state.counters["bands"] = double((1080 + rows - 1) / rows);
+    report(state, total, 5.0, frame.bounds());
+    state.SetLabel(egl->info().renderer);
+}
+BENCHMARK(BM_GpuFrameSkull512At1080pInBands)
+    ->Arg(8192)
+    ->Arg(65536)
+    ->Arg(1 << 19)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 // The CPU renderer's frame of the same view in the same run, for the ratio (all cores).
 void BM_CpuFrameSkull256At500(benchmark::State& state) {

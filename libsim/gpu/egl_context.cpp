@@ -57,7 +57,8 @@ struct Candidate {
     GlInfo info;
 };
 
-// A 3.3 core context on `display`, current for no surface; `why` says what failed.
+// A 4.3 core context (compute shaders) on `display`, current for no surface; `why` says what
+// failed.
 bool tryDisplay(EGLDisplay display, Candidate& out, std::string& why) {
     EGLint major = 0, minor = 0;
     if (!eglInitialize(display, &major, &minor)) {
@@ -83,7 +84,7 @@ bool tryDisplay(EGLDisplay display, Candidate& out, std::string& why) {
         }
     }
     const EGLint attributes[] = {EGL_CONTEXT_MAJOR_VERSION,
-                                 3,
+                                 4,
                                  EGL_CONTEXT_MINOR_VERSION,
                                  3,
                                  EGL_CONTEXT_OPENGL_PROFILE_MASK,
@@ -92,7 +93,7 @@ bool tryDisplay(EGLDisplay display, Candidate& out, std::string& why) {
     EGLContext context = eglCreateContext(display, config, EGL_NO_CONTEXT, attributes);
     if (context == EGL_NO_CONTEXT ||
         !eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, context)) {
-        why = "no OpenGL 3.3 core context";
+        why = "no OpenGL 4.3 core context";
         if (context != EGL_NO_CONTEXT)
             eglDestroyContext(display, context);
         eglTerminate(display);
@@ -136,7 +137,7 @@ std::unique_ptr<EglContext> EglContext::open() {
             break;
     }
     if (found.empty())
-        throw Error("gpu: no OpenGL 3.3 core context through EGL: " + why);
+        throw Error("gpu: no OpenGL 4.3 core context through EGL: " + why);
     // A hardware renderer if one answered (the last tried), else the first.
     auto best = std::find_if(found.begin(), found.end(), [](auto& c) { return !c.info.software; });
     if (best == found.end())

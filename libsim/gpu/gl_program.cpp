@@ -2,6 +2,7 @@
 
 #include "libsim/error.h"
 
+#include <initializer_list>
 #include <string>
 
 namespace trephine::gpu {
@@ -29,6 +30,25 @@ GLuint compile(GLenum type, const char* src, const char* what) {
     return s;
 }
 
+// Links the compiled shaders into a program, deleting them either way.
+GLuint link(std::initializer_list<GLuint> shaders, const char* what) {
+    GLuint p = glCreateProgram();
+    for (GLuint s : shaders)
+        glAttachShader(p, s);
+    glLinkProgram(p);
+    for (GLuint s : shaders)
+        glDeleteShader(s);
+    GLint ok = 0;
+    glGetProgramiv(p, GL_LINK_STATUS, &ok);
+    if (!ok) {
+        char log[2048];
+        glGetProgramInfoLog(p, sizeof log, nullptr, log);
+        glDeleteProgram(p);
+        throw Error(std::string("gl: ") + what + " program does not link: " + log);
+    }
+    return p;
+}
+
 } // namespace
 
 GLuint linkProgram(const char* vertexSource, const char* fragmentSource, const char* what) {
@@ -40,21 +60,11 @@ GLuint linkProgram(const char* vertexSource, const char* fragmentSource, const c
         glDeleteShader(v);
         throw;
     }
-    GLuint p = glCreateProgram();
-    glAttachShader(p, v);
-    glAttachShader(p, f);
-    glLinkProgram(p);
-    glDeleteShader(v);
-    glDeleteShader(f);
-    GLint ok = 0;
-    glGetProgramiv(p, GL_LINK_STATUS, &ok);
-    if (!ok) {
-        char log[2048];
-        glGetProgramInfoLog(p, sizeof log, nullptr, log);
-        glDeleteProgram(p);
-        throw Error(std::string("gl: ") + what + " program does not link: " + log);
-    }
-    return p;
+    return link({v, f}, what);
+}
+
+GLuint linkComputeProgram(const char* source, const char* what) {
+    return link({compile(GL_COMPUTE_SHADER, source, what)}, what);
 }
 
 void makeColorDepthTarget(GLuint& fbo, GLuint& color, GLuint& depth, int width, int height,

@@ -11,7 +11,7 @@ namespace trephine::gpu {
 GpuRenderer::GpuRenderer(const Volume& volume, std::shared_ptr<EglContext> context)
     : m_volume(&volume), m_context(std::move(context)) {
     EglContext::Current current(*m_context);
-    m_caster = std::make_unique<VolumeRaycaster>();
+    m_caster = std::make_unique<VolumeRaycaster>(VolumeRaycaster::Pipeline::Compute);
     m_caster->upload(volume);
 }
 

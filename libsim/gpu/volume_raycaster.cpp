@@ -33,7 +33,10 @@ namespace {
 // Voxel coordinates put voxel centres at integers; the density texture's texel i is voxel i, the
 // gradient texture's texel i is voxel i - 1 (one voxel of apron on every side). Both clamp to a
 // zero border, so voxels outside the volume are air, as in the CPU renderer.
-const char* kFs = R"(#version 330 core
+// The ray, everything but the entry point: castRay(window pixel centre) gives the colour and the
+// hit's GL window depth. Implicit-LOD lookups are undefined outside fragment shaders, so every
+// lookup names level 0 (the textures have no mipmaps: the same texels as texture() there).
+const char* kRay = R"(
 uniform sampler3D uDensity;  // R8, linear: the trilinear density
 uniform sampler3D uMaterial; // R8, fetched
 uniform sampler3D uGradient; // RGB16F, linear: central differences interpolated trilinearly
@@ -56,11 +59,10 @@ uniform mat4 uViewProj;
 uniform vec3 uColor[7];    // materialColor, 0..255
 uniform vec4 uShade[7];    // ambient, diffuse, specular, log2 of the shininess
 uniform vec4 uBackground;
-out vec4 fragColor;
 
 const float kIso = 128.0;
 
-float density(vec3 p) { return texture(uDensity, (p + 0.5) / uDims).r * 255.0; }
+float density(vec3 p) { return textureLod(uDensity, (p + 0.5) / uDims, 0.0).r * 255.0; }
 int voxelDensity(ivec3 v) { return int(texelFetch(uDensity, v, 0).r * 255.0 + 0.5); }
 int voxelMaterial(ivec3 v) { return int(texelFetch(uMaterial, v, 0).r * 255.0 + 0.5); }
 
@@ -93,8 +95,8 @@ int hitMaterial(vec3 pHit, vec3 pIn) {
     return m == 0 ? 1 : m;
 }
 
-void main() {
-    vec2 ndc = (gl_FragCoord.xy - uViewportOrigin) * uNdcPerPixel - 1.0;
+vec4 castRay(vec2 windowPixel, out float depth) {
+    vec2 ndc = (windowPixel - uViewportOrigin) * uNdcPerPixel - 1.0;
     vec4 h = uFarH + ndc.x * uFarDx + ndc.y * uFarDy;
     vec3 toFar = h.xyz / h.w - uEye;
     float tFar = length(toFar);
@@ -153,9 +155,8 @@ void main() {
     if (found && k > kStart && lastK != k - 1) // the sample before the hit was leapt over
         last = density(uOrigin + (float(k - 1) * uDt) * dv);
     if (!found) {
-        fragColor = uBackground;
-        gl_FragDepth = 1.0;
-        return;
+        depth = 1.0;
+        return uBackground;
     }
     float tIn = float(k) * uDt, t = tIn;
     if (k > kStart) { // one regula-falsi step with a sample, then the final secant
@@ -173,10 +174,10 @@ void main() {
         t = ta + (tb - ta) * (fa / (fa - fb));
     }
     vec4 clip = uViewProj * vec4(uEye + t * dir, 1.0);
-    gl_FragDepth = clamp(clip.z / clip.w * 0.5 + 0.5, 0.0, 1.0);
+    depth = clamp(clip.z / clip.w * 0.5 + 0.5, 0.0, 1.0);
 
     vec3 p = uOrigin + t * dv;
-    vec3 grad = texture(uGradient, (p + 1.5) / (uDims + 2.0)).xyz * uInvSpacing;
+    vec3 grad = textureLod(uGradient, (p + 1.5) / (uDims + 2.0), 0.0).xyz * uInvSpacing;
     float len = length(grad);
     vec3 n = len > 0.0 ? -grad / len : -dir;
     int m = hitMaterial(p, uOrigin + tIn * dv);
@@ -186,7 +187,40 @@ void main() {
     for (int i = 0; i < int(s.w); ++i)
         spec *= spec;
     vec3 c = uColor[m] * (s.x + s.y * ndl) + s.z * spec * 255.0;
-    fragColor = vec4(min(c, vec3(255.0)) / 255.0, 1.0);
+    return vec4(min(c, vec3(255.0)) / 255.0, 1.0);
+}
+)";
+
+// The window's entry: a fullscreen triangle's fragments into the bound framebuffer.
+const char* kFsMain = R"(
+out vec4 fragColor;
+void main() {
+    float depth;
+    fragColor = castRay(gl_FragCoord.xy, depth);
+    gl_FragDepth = depth;
+})";
+
+constexpr int kLocalSize = 16; // the compute shader's work group is kLocalSize^2 pixels
+
+// The server's entry: one invocation a pixel of the rectangle, its colour (RGBA8, as a colour
+// attachment rounds it) and depth stored in buffers in the rectangle's row order. Compute shaders
+// run on every multiprocessor, where compute GPUs (H100, H200) run fragment shaders on a few; and
+// on an H200 images a compute shader stored to took 0.84 s to read back through a framebuffer,
+// buffers 4 ms (docs/rendering.md, "The GPU renderer").
+const char* kCsMain = R"(
+layout(local_size_x = 16, local_size_y = 16) in; // kLocalSize
+layout(std430, binding = 0) writeonly buffer ColorOut { uint colorOut[]; };
+layout(std430, binding = 1) writeonly buffer DepthOut { float depthOut[]; };
+uniform ivec2 uSize; // the rectangle's
+void main() {
+    ivec2 p = ivec2(gl_GlobalInvocationID.xy);
+    if (p.x >= uSize.x || p.y >= uSize.y)
+        return;
+    float depth;
+    vec4 c = castRay(vec2(p) + 0.5, depth);
+    int i = p.y * uSize.x + p.x;
+    colorOut[i] = packUnorm4x8(c);
+    depthOut[i] = depth;
 })";
 
 // The shading constants of libsim's renderer (materialShade in renderer.cpp), per label.
@@ -233,8 +267,14 @@ struct UnpackBox {
 
 } // namespace
 
-VolumeRaycaster::VolumeRaycaster() {
-    m_program = linkProgram(kFullscreenTriangleVs, kFs, "volume");
+VolumeRaycaster::VolumeRaycaster(Pipeline pipeline) : m_pipeline(pipeline) {
+    if (pipeline == Pipeline::Compute)
+        m_program = linkComputeProgram(
+            (std::string("#version 430 core\n") + kRay + kCsMain).c_str(), "volume (compute)");
+    else
+        m_program =
+            linkProgram(kFullscreenTriangleVs,
+                        (std::string("#version 330 core\n") + kRay + kFsMain).c_str(), "volume");
     glUseProgram(m_program);
     glUniform1i(glGetUniformLocation(m_program, "uDensity"), 0);
     glUniform1i(glGetUniformLocation(m_program, "uMaterial"), 1);
@@ -257,6 +297,8 @@ VolumeRaycaster::~VolumeRaycaster() {
     GLuint tex[] = {m_densityTex, m_materialTex, m_gradientTex, m_brickTex, m_fboColor};
     glDeleteTextures(5, tex);
     glDeleteRenderbuffers(1, &m_fboDepth);
+    GLuint buffers[] = {m_outColor, m_outDepth};
+    glDeleteBuffers(2, buffers);
     glDeleteFramebuffers(1, &m_fbo);
     glDeleteVertexArrays(1, &m_emptyVao);
     glDeleteProgram(m_program);
@@ -400,16 +442,9 @@ void VolumeRaycaster::uploadBricks(const Volume& volume, const Box3i& bricks) {
 
 // [SECTION] Drawing ----------------------------------------------------------------------------
 
-void VolumeRaycaster::draw(const Camera& camera) {
-    if (empty())
-        return;
-    GLint program = 0, vao = 0, depthFunc = GL_LESS, active = GL_TEXTURE0, viewport[4] = {};
-    glGetIntegerv(GL_CURRENT_PROGRAM, &program);
-    glGetIntegerv(GL_VERTEX_ARRAY_BINDING, &vao);
-    glGetIntegerv(GL_DEPTH_FUNC, &depthFunc);
-    glGetIntegerv(GL_ACTIVE_TEXTURE, &active);
-    glGetIntegerv(GL_VIEWPORT, viewport);
-
+// The program's per-view uniforms (the program in use); `viewportOrigin` is the window pixel
+// position of the view's corner.
+void VolumeRaycaster::setUniforms(const Camera& camera, glm::vec2 viewportOrigin) {
     // The CPU renderer's frame set-up (makeFrame): matrices in double from the float ones.
     const glm::dmat4 vp = viewProjection(camera);
     const glm::dmat4 inv = glm::inverse(vp);
@@ -420,7 +455,6 @@ void VolumeRaycaster::draw(const Camera& camera) {
     const float minSpacing = std::min({m_spacing.x, m_spacing.y, m_spacing.z});
     const glm::mat4 vpf(vp);
 
-    glUseProgram(m_program);
     auto loc = [&](const char* name) { return glGetUniformLocation(m_program, name); };
     glUniform3f(loc("uDims"), float(m_dims.x), float(m_dims.y), float(m_dims.z));
     glUniform3i(loc("uDimsI"), m_dims.x, m_dims.y, m_dims.z);
@@ -432,18 +466,37 @@ void VolumeRaycaster::draw(const Camera& camera) {
     glUniform4fv(loc("uFarDx"), 1, glm::value_ptr(farDx));
     glUniform4fv(loc("uFarDy"), 1, glm::value_ptr(farDy));
     glUniform2f(loc("uNdcPerPixel"), 2.0f / float(camera.width), 2.0f / float(camera.height));
-    glUniform2f(loc("uViewportOrigin"), float(viewport[0]), float(viewport[1]));
+    glUniform2f(loc("uViewportOrigin"), viewportOrigin.x, viewportOrigin.y);
     glUniform1f(loc("uNearOverFar"), float(double(camera.nearMm) / double(camera.farMm)));
     glUniform1f(loc("uDt"), std::max(1e-3f, m_stepVoxels) * minSpacing);
     glUniformMatrix4fv(loc("uViewProj"), 1, GL_FALSE, glm::value_ptr(vpf));
 
     glUniform3i(loc("uBrickDims"), m_brickDims.x, m_brickDims.y, m_brickDims.z);
     glUniform1i(loc("uSkip"), m_skipEmpty ? 1 : 0);
+}
+
+void VolumeRaycaster::bindVolume() {
     const GLuint tex[4] = {m_densityTex, m_materialTex, m_gradientTex, m_brickTex};
     for (int i = 0; i < 4; ++i) {
         glActiveTexture(GLenum(GL_TEXTURE0 + i));
         glBindTexture(GL_TEXTURE_3D, tex[i]);
     }
+}
+
+void VolumeRaycaster::draw(const Camera& camera) {
+    if (m_pipeline != Pipeline::Fragment)
+        throw Error("gpu: VolumeRaycaster::draw needs the fragment pipeline");
+    if (empty())
+        return;
+    GLint program = 0, vao = 0, depthFunc = GL_LESS, active = GL_TEXTURE0, viewport[4] = {};
+    glGetIntegerv(GL_CURRENT_PROGRAM, &program);
+    glGetIntegerv(GL_VERTEX_ARRAY_BINDING, &vao);
+    glGetIntegerv(GL_DEPTH_FUNC, &depthFunc);
+    glGetIntegerv(GL_ACTIVE_TEXTURE, &active);
+    glGetIntegerv(GL_VIEWPORT, viewport);
+    glUseProgram(m_program);
+    setUniforms(camera, {float(viewport[0]), float(viewport[1])});
+    bindVolume();
     glDisable(GL_BLEND);
     glEnable(GL_DEPTH_TEST);
     glDepthMask(GL_TRUE);
@@ -466,6 +519,21 @@ void VolumeRaycaster::ensureTarget(int width, int height) {
                          "volume ray caster's");
 }
 
+// The compute pipeline's buffers hold exactly the rectangle: on an H200, reading a 1920 x 4
+// band out of buffers sized for 1920 x 1080 took 1.6 ms, about what reading them whole took.
+void VolumeRaycaster::sizeOutput(int64_t pixels) {
+    if (pixels == m_outPixels)
+        return;
+    for (GLuint* b : {&m_outColor, &m_outDepth}) {
+        if (!*b)
+            glGenBuffers(1, b);
+        glBindBuffer(GL_SHADER_STORAGE_BUFFER, *b);
+        glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(pixels) * 4, nullptr, GL_STREAM_READ);
+    }
+    glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+    m_outPixels = pixels;
+}
+
 void VolumeRaycaster::render(const Camera& camera) {
     render(camera, {0, 0, camera.width, camera.height});
 }
@@ -478,6 +546,24 @@ void VolumeRaycaster::render(const Camera& camera, const PixelRect& rect) {
     m_rendered = r;
     if (r.empty())
         return;
+    if (m_pipeline == Pipeline::Compute) {
+        if (empty())
+            return; // as draw(): nothing uploaded, nothing cast
+        sizeOutput(r.area());
+        GLint program = 0;
+        glGetIntegerv(GL_CURRENT_PROGRAM, &program);
+        glUseProgram(m_program);
+        setUniforms(camera, {float(-r.x), float(-r.y)});
+        glUniform2i(glGetUniformLocation(m_program, "uSize"), r.w, r.h);
+        bindVolume();
+        glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, m_outColor);
+        glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, m_outDepth);
+        glDispatchCompute(GLuint((r.w + kLocalSize - 1) / kLocalSize),
+                          GLuint((r.h + kLocalSize - 1) / kLocalSize), 1);
+        glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT); // the stores are read back next
+        glUseProgram(GLuint(program));
+        return;
+    }
     ensureTarget(r.w, r.h);
     glBindFramebuffer(GL_FRAMEBUFFER, m_fbo);
     glViewport(-r.x, -r.y, camera.width, camera.height);
@@ -501,10 +587,29 @@ void VolumeRaycaster::readBack(Dbi& frame) {
 // The last render's pixels (at the target's corner) into `out` with their corner at (x, y).
 void VolumeRaycaster::readInto(Dbi& out, int x, int y) {
     const PixelRect r = m_rendered;
-    if (!m_fbo || r.empty())
+    if (r.empty() || (m_pipeline == Pipeline::Compute ? m_outPixels != r.area() : !m_fbo))
         return;
     assert(out.bounds().contains(PixelRect{x, y, r.w, r.h}) &&
            "VolumeRaycaster::readBack: the image does not hold the rendered rectangle");
+    if (m_pipeline == Pipeline::Compute) {
+        // Rows of the rectangle are contiguous in the buffers, and in the image too when the
+        // rectangle spans it (a full frame, a band of rows): then one read each.
+        const bool spans = r.w == out.width();
+        const GLsizeiptr row = GLsizeiptr(r.w) * 4;
+        auto read = [&](GLuint buffer, auto at) {
+            glBindBuffer(GL_SHADER_STORAGE_BUFFER, buffer);
+            if (spans)
+                glGetBufferSubData(GL_SHADER_STORAGE_BUFFER, 0, row * r.h, at(y));
+            else
+                for (int j = 0; j < r.h; ++j)
+                    glGetBufferSubData(GL_SHADER_STORAGE_BUFFER, row * j, row, at(y + j));
+        };
+        read(m_outColor, [&](int yy) { return static_cast<void*>(out.color(x, yy)); });
+        read(m_outDepth,
+             [&](int yy) { return static_cast<void*>(out.depth() + out.index(x, yy)); });
+        glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+        return;
+    }
     glBindFramebuffer(GL_READ_FRAMEBUFFER, m_fbo);
     glPixelStorei(GL_PACK_ALIGNMENT, 1);
     glPixelStorei(GL_PACK_ROW_LENGTH, out.width()); // straight into the image's rows

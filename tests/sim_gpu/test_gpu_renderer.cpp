@@ -2,6 +2,7 @@
 // its full frame bit for bit, it agrees with the CPU Renderer within VolumeView's tolerance on
 // skull:128 views, and after an erosion the uploaded box shows it.
 #include "libsim_gpu/gpu_renderer.h"
+#include "libsim_gpu/volume_raycaster.h"
 
 #include "dbi_agreement.h"
 #include "gpu_test.h"
@@ -136,7 +137,8 @@ TEST(GlRendererName, SoftwareRasterisersAreKnownByName) {
     EXPECT_FALSE(gpu::isSoftwareRenderer("AMD Radeon RX 7900 XTX (radeonsi, navi31, LLVM 15.0.7)"));
 }
 
-// Which GL answered (scripts/gpu-check prints it): an OpenGL of at least 3.3, named.
+// Which GL answered (scripts/gpu-check prints it): an OpenGL of at least 4.3 (compute shaders),
+// named.
 TEST_F(GpuRendererTest, EglContextSaysWhichRendererAnswered) {
     std::printf("  GL renderer: %s, OpenGL %s%s\n", egl->info().renderer.c_str(),
                 egl->info().version.c_str(), egl->info().software ? " (software)" : "");
@@ -144,7 +146,32 @@ TEST_F(GpuRendererTest, EglContextSaysWhichRendererAnswered) {
     int major = 0, minor = 0;
     ASSERT_EQ(std::sscanf(egl->info().version.c_str(), "%d.%d", &major, &minor), 2)
         << egl->info().version;
-    EXPECT_GE(major * 10 + minor, 33) << egl->info().version;
+    EXPECT_GE(major * 10 + minor, 43) << egl->info().version;
+}
+
+// The server's compute pipeline and the window's fragment one run the same ray: on the same
+// views and rectangles they give the same pixels.
+TEST_F(GpuRendererTest, TheComputeAndFragmentPipelinesCastTheSameRays) {
+    const Volume skull = makeSkull(64);
+    gpu::EglContext::Current current(*egl);
+    gpu::VolumeRaycaster compute(gpu::VolumeRaycaster::Pipeline::Compute);
+    gpu::VolumeRaycaster fragment(gpu::VolumeRaycaster::Pipeline::Fragment);
+    compute.upload(skull);
+    fragment.upload(skull);
+    for (const char* preset : {"working", "paper", "left"}) {
+        SCOPED_TRACE(preset);
+        const Camera cam = cameraPreset(preset, skull, {150, 120});
+        for (const PixelRect rect : {PixelRect{0, 0, 150, 120}, PixelRect{37, 11, 61, 70}}) {
+            SCOPED_TRACE(describe(rect));
+            Dbi a(cam.width, cam.height), b(cam.width, cam.height);
+            compute.render(cam, rect);
+            compute.readBack(a);
+            fragment.render(cam, rect);
+            fragment.readBack(b);
+            const DbiDiff d = compare(a, b);
+            EXPECT_EQ(d.differingPixels, 0) << d.describe();
+        }
+    }
 }
 
 // The server renders on its simulation thread, an inspection may come from another: the context

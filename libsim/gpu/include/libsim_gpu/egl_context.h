@@ -1,4 +1,4 @@
-// An OpenGL 3.3 core context through EGL with no display and no window: a headless server
+// An OpenGL 4.3 core context through EGL with no display and no window: a headless server
 // renders into framebuffer objects. EGL's devices are tried first (a GPU's driver), then Mesa's
 // surfaceless platform (llvmpipe where there is no GPU).
 #pragma once
@@ -22,7 +22,7 @@ bool isSoftwareRenderer(const std::string& glRenderer);
 class EglContext {
 public:
     // The first context a hardware renderer gives, else the first any gives. Throws
-    // trephine::Error saying what is missing when none does (no libEGL driver, no GL 3.3 core).
+    // trephine::Error saying what is missing when none does (no libEGL driver, no GL 4.3 core).
     static std::unique_ptr<EglContext> open();
     // The process's one context, opened on first call and kept; null (with `why`, which may be
     // null) when open() failed.

@@ -13,6 +13,8 @@ extern const char* const kFullscreenTriangleVs;
 // Compiles and links a vertex + fragment program; throws trephine::Error with the GL log and
 // `what` (e.g. "volume") on failure. Needs a current GL 3.3 core context.
 GLuint linkProgram(const char* vertexSource, const char* fragmentSource, const char* what);
+// The same for a compute program; needs a GL 4.3 core context.
+GLuint linkComputeProgram(const char* source, const char* what);
 
 // (Re)allocates `color` (RGBA8, nearest) and `depth` (32-bit float renderbuffer) at width x
 // height and attaches them to `fbo`, creating any of the three that is 0. Leaves the default

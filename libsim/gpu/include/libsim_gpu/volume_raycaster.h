@@ -13,6 +13,7 @@
 #include "libsim_gpu/gl.h"
 
 #include <cstdint>
+#include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 
 namespace trephine::gpu {
@@ -27,7 +28,13 @@ struct VolumeUpdateStats {
 
 class VolumeRaycaster {
 public:
-    VolumeRaycaster(); // needs a current GL 3.3 core context
+    // The same ray in either pipeline. Fragment: draw() into the bound framebuffer (the window's
+    // VolumeView), and the offscreen render() below through a fullscreen triangle; needs a GL
+    // 3.3 core context. Compute: the offscreen render() alone, one invocation a pixel (the
+    // server's GPU renderer: compute GPUs run fragment shaders on a few multiprocessors only);
+    // needs GL 4.3 core.
+    enum class Pipeline { Fragment, Compute };
+    explicit VolumeRaycaster(Pipeline pipeline = Pipeline::Fragment);
     ~VolumeRaycaster();
     VolumeRaycaster(const VolumeRaycaster&) = delete;
     VolumeRaycaster& operator=(const VolumeRaycaster&) = delete;
@@ -42,7 +49,8 @@ public:
     glm::ivec3 dims() const { return m_dims; }
 
     // Ray casts the view into the currently bound framebuffer over the current viewport, which
-    // must be camera.width x camera.height pixels (pixel (x, y) is the ray through its centre):
+    // must be camera.width x camera.height pixels (pixel (x, y) is the ray through its centre;
+    // the fragment pipeline only):
     // colour (alpha 1 on bone, kBackgroundRgba elsewhere) and gl_FragDepth, depth test ALWAYS.
     // Restores the program, vertex array and depth function it found, so it can replace the
     // Compositor's pass 1: `comp.begin(camera); view.draw(camera); comp.draw(tool, ...)`.
@@ -66,6 +74,9 @@ public:
 
 private:
     void ensureTarget(int width, int height);
+    void sizeOutput(int64_t pixels);
+    void setUniforms(const Camera& camera, glm::vec2 viewportOrigin);
+    void bindVolume();
     void readInto(Dbi& out, int x, int y);
     void uploadGradients(const Volume& volume, const Box3i& gradientBox);
     void uploadBricks(const Volume& volume, const Box3i& bricks);
@@ -76,8 +87,12 @@ private:
     bool m_skipEmpty = true;
     glm::ivec3 m_brickDims{0};
     GLuint m_densityTex = 0, m_materialTex = 0, m_gradientTex = 0, m_brickTex = 0;
+    Pipeline m_pipeline;
     GLuint m_program = 0, m_emptyVao = 0;
+    // The offscreen target: a framebuffer (fragment), or buffers the shader stores to (compute).
     GLuint m_fbo = 0, m_fboColor = 0, m_fboDepth = 0;
+    GLuint m_outColor = 0, m_outDepth = 0;
+    int64_t m_outPixels = 0;             // the buffers' size: the last rectangle's
     int m_fboWidth = 0, m_fboHeight = 0; // grows to the largest rectangle rendered
     PixelRect m_rendered;                // the last render's rectangle, at the target's corner
 };
