@@ -17,6 +17,7 @@
 // `trephine server --renderer` does (default cpu); the label says which.
 #include "flood.h"
 
+#include "libsim/error.h"
 #include "libsim/skull.h"
 #include "libsim/stats.h"
 #include "libsim_gpu/gpu_renderer.h"
@@ -520,8 +521,14 @@ void fullScreenTrainees(benchmark::State& state) {
     const int n = int(state.range(0));
     const char* choice = std::getenv("TREPHINE_BENCH_RENDERER");
     std::string rendering;
-    const std::optional<DbiRendererFactory> renderer =
-        gpu::chooseRenderer(gpu::parseRendererChoice(choice ? choice : "cpu"), &rendering);
+    std::optional<DbiRendererFactory> renderer;
+    try {
+        renderer =
+            gpu::chooseRenderer(gpu::parseRendererChoice(choice ? choice : "cpu"), &rendering);
+    } catch (const Error& e) {
+        state.SkipWithError(e.what());
+        return;
+    }
     state.SetLabel(rendering);
     for (auto _ : state) {
         ServerConfig config;

@@ -524,13 +524,28 @@ void VolumeRaycaster::ensureTarget(int width, int height) {
 void VolumeRaycaster::sizeOutput(int64_t pixels) {
     if (pixels == m_outPixels)
         return;
+    GLint64 most = 0;
+    glGetInteger64v(GL_MAX_SHADER_STORAGE_BLOCK_SIZE, &most);
+    if (pixels * 4 > most)
+        throw Error(fmt::format("gpu: a rectangle of {} pixels is over this OpenGL's shader "
+                                "storage blocks ({} bytes)",
+                                pixels, most));
+    while (glGetError() != GL_NO_ERROR) {
+    } // errors of earlier, unrelated calls are not these buffers'
+    GLint storage = 0;
+    glGetIntegerv(GL_SHADER_STORAGE_BUFFER_BINDING, &storage);
     for (GLuint* b : {&m_outColor, &m_outDepth}) {
         if (!*b)
             glGenBuffers(1, b);
         glBindBuffer(GL_SHADER_STORAGE_BUFFER, *b);
         glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(pixels) * 4, nullptr, GL_STREAM_READ);
     }
-    glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+    glBindBuffer(GL_SHADER_STORAGE_BUFFER, GLuint(storage));
+    m_outPixels = 0;
+    if (const GLenum e = glGetError(); e != GL_NO_ERROR)
+        throw Error(
+            fmt::format("gpu: OpenGL refused {} pixels of output buffers (error 0x{:04x}{})",
+                        pixels, unsigned(e), e == GL_OUT_OF_MEMORY ? ": out of memory" : ""));
     m_outPixels = pixels;
 }
 
@@ -543,15 +558,16 @@ void VolumeRaycaster::render(const Camera& camera) {
 // rectangle. The scissor keeps a larger target's other pixels unrendered.
 void VolumeRaycaster::render(const Camera& camera, const PixelRect& rect) {
     const PixelRect r = intersect(rect, {0, 0, camera.width, camera.height});
-    m_rendered = r;
-    if (r.empty())
+    // Nothing uploaded, nothing cast: readBack then writes nothing rather than an older render.
+    m_rendered = empty() ? PixelRect{} : r;
+    if (m_rendered.empty())
         return;
     if (m_pipeline == Pipeline::Compute) {
-        if (empty())
-            return; // as draw(): nothing uploaded, nothing cast
         sizeOutput(r.area());
-        GLint program = 0;
+        GLint program = 0, active = GL_TEXTURE0, storage = 0;
         glGetIntegerv(GL_CURRENT_PROGRAM, &program);
+        glGetIntegerv(GL_ACTIVE_TEXTURE, &active);
+        glGetIntegerv(GL_SHADER_STORAGE_BUFFER_BINDING, &storage);
         glUseProgram(m_program);
         setUniforms(camera, {float(-r.x), float(-r.y)});
         glUniform2i(glGetUniformLocation(m_program, "uSize"), r.w, r.h);
@@ -561,6 +577,10 @@ void VolumeRaycaster::render(const Camera& camera, const PixelRect& rect) {
         glDispatchCompute(GLuint((r.w + kLocalSize - 1) / kLocalSize),
                           GLuint((r.h + kLocalSize - 1) / kLocalSize), 1);
         glMemoryBarrier(GL_BUFFER_UPDATE_BARRIER_BIT); // the stores are read back next
+        glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 0, 0);
+        glBindBufferBase(GL_SHADER_STORAGE_BUFFER, 1, 0);
+        glBindBuffer(GL_SHADER_STORAGE_BUFFER, GLuint(storage));
+        glActiveTexture(GLenum(active));
         glUseProgram(GLuint(program));
         return;
     }
@@ -596,6 +616,8 @@ void VolumeRaycaster::readInto(Dbi& out, int x, int y) {
         // rectangle spans it (a full frame, a band of rows): then one read each.
         const bool spans = r.w == out.width();
         const GLsizeiptr row = GLsizeiptr(r.w) * 4;
+        GLint storage = 0;
+        glGetIntegerv(GL_SHADER_STORAGE_BUFFER_BINDING, &storage);
         auto read = [&](GLuint buffer, auto at) {
             glBindBuffer(GL_SHADER_STORAGE_BUFFER, buffer);
             if (spans)
@@ -607,7 +629,7 @@ void VolumeRaycaster::readInto(Dbi& out, int x, int y) {
         read(m_outColor, [&](int yy) { return static_cast<void*>(out.color(x, yy)); });
         read(m_outDepth,
              [&](int yy) { return static_cast<void*>(out.depth() + out.index(x, yy)); });
-        glBindBuffer(GL_SHADER_STORAGE_BUFFER, 0);
+        glBindBuffer(GL_SHADER_STORAGE_BUFFER, GLuint(storage));
         return;
     }
     glBindFramebuffer(GL_READ_FRAMEBUFFER, m_fbo);

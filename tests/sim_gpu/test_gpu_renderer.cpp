@@ -150,18 +150,27 @@ TEST_F(GpuRendererTest, EglContextSaysWhichRendererAnswered) {
 }
 
 // The server's compute pipeline and the window's fragment one run the same ray: on the same
-// views and rectangles they give the same pixels.
+// views and rectangles (the frame, a rectangle inside, a band of rows as the server's step
+// renders, and one of the band's area but another shape) they give the same pixels.
 TEST_F(GpuRendererTest, TheComputeAndFragmentPipelinesCastTheSameRays) {
     const Volume skull = makeSkull(64);
     gpu::EglContext::Current current(*egl);
     gpu::VolumeRaycaster compute(gpu::VolumeRaycaster::Pipeline::Compute);
     gpu::VolumeRaycaster fragment(gpu::VolumeRaycaster::Pipeline::Fragment);
+    { // nothing uploaded: nothing cast or read back
+        const Camera cam = cameraPreset("working", skull, {40, 30});
+        Dbi none(cam.width, cam.height);
+        compute.render(cam);
+        compute.readBack(none);
+        EXPECT_TRUE(none == Dbi(cam.width, cam.height));
+    }
     compute.upload(skull);
     fragment.upload(skull);
     for (const char* preset : {"working", "paper", "left"}) {
         SCOPED_TRACE(preset);
         const Camera cam = cameraPreset(preset, skull, {150, 120});
-        for (const PixelRect rect : {PixelRect{0, 0, 150, 120}, PixelRect{37, 11, 61, 70}}) {
+        for (const PixelRect rect : {PixelRect{0, 0, 150, 120}, PixelRect{37, 11, 61, 70},
+                                     PixelRect{0, 37, 150, 4}, PixelRect{20, 50, 75, 8}}) {
             SCOPED_TRACE(describe(rect));
             Dbi a(cam.width, cam.height), b(cam.width, cam.height);
             compute.render(cam, rect);

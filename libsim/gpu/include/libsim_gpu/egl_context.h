@@ -1,6 +1,6 @@
 // An OpenGL 4.3 core context through EGL with no display and no window: a headless server
-// renders into framebuffer objects. EGL's devices are tried first (a GPU's driver), then Mesa's
-// surfaceless platform (llvmpipe where there is no GPU).
+// renders with compute shaders into buffers. EGL's devices are tried first (a GPU's driver),
+// then Mesa's surfaceless platform (llvmpipe where there is no GPU).
 #pragma once
 
 #include <memory>

@@ -56,8 +56,10 @@ public:
     // Compositor's pass 1: `comp.begin(camera); view.draw(camera); comp.draw(tool, ...)`.
     void draw(const Camera& camera);
 
-    // Own offscreen target (RGBA8 + 32-bit float depth, the camera's size): renders the view
-    // there; readBack returns it (row 0 at the bottom) like Renderer::render's Dbi.
+    // Own offscreen target (RGBA8 + 32-bit float depth: a framebuffer for the fragment pipeline,
+    // buffers of the rectangle's size for the compute one): renders the view there; readBack
+    // returns it (row 0 at the bottom) like Renderer::render's Dbi. Nothing is cast, nor read
+    // back, before a volume is uploaded.
     void render(const Camera& camera);
     Dbi readBack();
     // The pixels of `rect` only (row 0 at the bottom, inside the window), into the own target:
