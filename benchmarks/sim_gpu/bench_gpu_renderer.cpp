@@ -44,15 +44,23 @@ void report(benchmark::State& state, double totalMs, double targetMs, const Pixe
     state.SetItemsProcessed(state.iterations() * rect.area());
 }
 
-// Renders `rect` of the working view of skull:n at width x height on the GPU, as the server does.
-void gpuRender(benchmark::State& state, int n, int width, int height, int rectSize,
-               double targetMs) {
+// The process's EGL context, or null with the benchmark skipped saying why.
+std::shared_ptr<gpu::EglContext> context(benchmark::State& state) {
     std::string why;
     auto egl = gpu::EglContext::shared(&why);
-    if (!egl) {
+    if (!egl)
         state.SkipWithError(("no OpenGL through EGL: " + why).c_str());
+    return egl;
+}
+
+// Renders `rect` of the working view of skull:n at width x height on the GPU, as the server does:
+// the whole frame (rectSize 0), a centred rectSize^2 rectangle, or the frame in bands of rows of
+// about bandPixels each, as the server's step renders a new view.
+void gpuRender(benchmark::State& state, int n, int width, int height, int rectSize, double targetMs,
+               int64_t bandPixels = 0) {
+    const auto egl = context(state);
+    if (!egl)
         return;
-    }
     const Volume& volume = skull(n);
     gpu::GpuRenderer renderer(volume, egl);
     const Camera camera = cameraPreset("working", volume, {width, height});
@@ -60,14 +68,20 @@ void gpuRender(benchmark::State& state, int n, int width, int height, int rectSi
     PixelRect rect = frame.bounds();
     if (rectSize > 0) // centred on the view, where the burr site is
         rect = {width / 2 - rectSize / 2, height / 2 - rectSize / 2, rectSize, rectSize};
+    const int rows = bandPixels > 0 ? int(std::clamp<int64_t>(bandPixels / width, 1, height)) : 0;
     renderer.render(camera, rect, frame, nullptr); // shader compile and first use outside
     double total = 0.0;
     for (auto _ : state) {
         const auto t0 = Clock::now();
-        renderer.render(camera, rect, frame, nullptr);
+        if (rows == 0)
+            renderer.render(camera, rect, frame, nullptr);
+        for (int y = 0; rows > 0 && y < height; y += rows)
+            renderer.render(camera, {0, y, width, std::min(rows, height - y)}, frame, nullptr);
         total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
         benchmark::DoNotOptimize(frame.depth());
     }
+    if (rows > 0)
+        state.counters["bands"] = double((height + rows - 1) / rows);
     report(state, total, targetMs, rect);
     state.SetLabel(egl->info().renderer);
 }
@@ -90,12 +104,9 @@ BENCHMARK(BM_GpuDirtyRectSkull256)->Arg(64)->Unit(benchmark::kMicrosecond)->UseR
 // The 1080p frame of skull:512 in its two parts, the cast (to glFinish) and the read back, in
 // the fragment pipeline (arg 0, the window's) and the compute one (arg 1, the server's).
 void BM_GpuFrameSkull512At1080pParts(benchmark::State& state) {
-    std::string why;
-    auto egl = gpu::EglContext::shared(&why);
-    if (!egl) {
-        state.SkipWithError(("no OpenGL through EGL: " + why).c_str());
+    const auto egl = context(state);
+    if (!egl)
         return;
-    }
     const Volume& volume = skull(512);
     gpu::EglContext::Current current(*egl);
     gpu::VolumeRaycaster caster(state.range(0) ? gpu::VolumeRaycaster::Pipeline::Compute
@@ -132,29 +143,7 @@ BENCHMARK(BM_GpuFrameSkull512At1080pParts)
 // The 1080p frame of skull:512 rendered and read back in bands of rows of about range(0)
 // pixels each, as the server's step renders a new view (8192: StepConfig's chunkPixels).
 void BM_GpuFrameSkull512At1080pInBands(benchmark::State& state) {
-    std::string why;
-    auto egl = gpu::EglContext::shared(&why);
-    if (!egl) {
-        state.SkipWithError(("no OpenGL through EGL: " + why).c_str());
-        return;
-    }
-    const Volume& volume = skull(512);
-    gpu::GpuRenderer renderer(volume, egl);
-    const Camera camera = cameraPreset("working", volume, {1920, 1080});
-    Dbi frame(1920, 1080);
-    const int rows = int(std::clamp<int64_t>(state.range(0) / 1920, 1, 1080));
-    renderer.render(camera, frame.bounds(), frame, nullptr);
-    double total = 0.0;
-    for (auto _ : state) {
-        const auto t0 = Clock::now();
-        for (int y = 0; y < 1080; y += rows)
-            renderer.render(camera, {0, y, 1920, std::min(rows, 1080 - y)}, frame, nullptr);
-        total += std::chrono::duration<double, std::milli>(Clock::now() - t0).count();
-        benchmark::DoNotOptimize(frame.depth());
-    }
-    state.counters["bands"] = double((1080 + rows - 1) / rows);
-    report(state, total, 5.0, frame.bounds());
-    state.SetLabel(egl->info().renderer);
+    gpuRender(state, 512, 1920, 1080, 0, 5.0, state.range(0));
 }
 BENCHMARK(BM_GpuFrameSkull512At1080pInBands)
     ->Arg(8192)
