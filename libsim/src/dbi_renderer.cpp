@@ -2,6 +2,9 @@
 
 #include "libsim/thread_pool.h"
 
+#include <exception>
+#include <utility>
+
 namespace trephine {
 
 CpuDbiRenderer::CpuDbiRenderer(const Volume& volume, ThreadPool* pool)
@@ -9,6 +12,56 @@ CpuDbiRenderer::CpuDbiRenderer(const Volume& volume, ThreadPool* pool)
 
 std::string CpuDbiRenderer::describe() const {
     return "CPU, " + std::to_string(m_threads) + (m_threads == 1 ? " thread" : " threads");
+}
+
+FallbackDbiRenderer::FallbackDbiRenderer(std::unique_ptr<DbiRenderer> primary, Make fallback,
+                                         Told onFallback)
+    : m_current(std::move(primary)), m_fallback(std::move(fallback)),
+      m_told(std::move(onFallback)) {}
+
+template <typename F>
+auto FallbackDbiRenderer::guarded(F&& f) {
+    if (!m_fallback)
+        return f(*m_current);
+    try {
+        return f(*m_current);
+    } catch (const std::exception& e) {
+        const std::string primary = m_current->describe(), error = e.what();
+        m_current = std::exchange(m_fallback, nullptr)();
+        m_current->setBulkPool(m_bulkPool);
+        if (m_told)
+            m_told(primary, error, m_current->describe());
+    }
+    return f(*m_current);
+}
+
+void FallbackDbiRenderer::volumeChanged(const Box3i& changed) {
+    guarded([&](DbiRenderer& r) { r.volumeChanged(changed); });
+}
+
+void FallbackDbiRenderer::rebuild() {
+    guarded([&](DbiRenderer& r) { r.rebuild(); });
+}
+
+void FallbackDbiRenderer::render(const Camera& camera, const PixelRect& rect, Dbi& frame,
+                                 HitCache* cache) {
+    guarded([&](DbiRenderer& r) { r.render(camera, rect, frame, cache); });
+}
+
+int FallbackDbiRenderer::renderBulk(const Camera& camera, const PixelRect& rect, Dbi& frame,
+                                    HitCache* cache, const std::function<bool()>& stop,
+                                    int atLeast) {
+    return guarded(
+        [&](DbiRenderer& r) { return r.renderBulk(camera, rect, frame, cache, stop, atLeast); });
+}
+
+void FallbackDbiRenderer::setBulkPool(ThreadPool* pool) {
+    m_bulkPool = pool;
+    m_current->setBulkPool(pool);
+}
+
+Dbi FallbackDbiRenderer::render(const Camera& camera) {
+    return guarded([&](DbiRenderer& r) { return r.render(camera); });
 }
 
 } // namespace trephine

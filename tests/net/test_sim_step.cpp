@@ -3,6 +3,7 @@
 // client would, then compares with a fresh render of the step's volume.
 #include "net/sim_step.h"
 
+#include "libsim/error.h"
 #include "libsim/skull.h"
 #include "libsim/tool.h"
 #include "manual_executor.h"
@@ -29,8 +30,13 @@ struct StepRig {
     SimulationStep step;
     uint64_t now = 1'000'000;
 
-    explicit StepRig(Volume v)
-        : original(v), step(std::move(v), StepConfig{0.05f, 10.0f, 1}, outbox, book, steadyNowUs) {}
+    explicit StepRig(Volume v, DbiRendererFactory renderer = {})
+        : original(v), step(std::move(v),
+                            StepConfig{.maxStepS = 0.05f,
+                                       .maxSweepMm = 10.0f,
+                                       .renderThreads = 1,
+                                       .renderer = std::move(renderer)},
+                            outbox, book, steadyNowUs) {}
 
     void run(std::vector<LogRecord> batch) {
         now += 10000;
@@ -76,6 +82,30 @@ void applyVolume(const Outbox::Ready& r, Volume& copy, const Volume& like) {
     const Box3i box{{u.x, u.y, u.z}, {u.x + u.sizeX, u.y + u.sizeY, u.z + u.sizeZ}};
     ASSERT_TRUE(applyVolumeBox(copy, box, bytes));
 }
+
+// The CPU ray caster until its `failAt`th render, then a renderer that throws, as a GPU that
+// runs out of memory or loses its device mid-session does.
+class FailingRenderer final : public DbiRenderer {
+public:
+    FailingRenderer(const Volume& v, ThreadPool* pool, int failAt)
+        : m_cpu(v, pool), m_left(failAt) {}
+    void volumeChanged(const Box3i& changed) override { m_cpu.volumeChanged(changed); }
+    void rebuild() override { m_cpu.rebuild(); }
+    void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache*) override {
+        if (--m_left < 0) {
+            const PixelRect in = intersect(rect, frame.bounds());
+            frame.apply(Dbi(in.w, in.h), in.x, in.y); // what a half-done render leaves
+            throw Error("gpu: the device was lost");
+        }
+        m_cpu.render(camera, rect, frame, nullptr);
+    }
+    Dbi render(const Camera& camera) override { return m_cpu.render(camera); }
+    std::string describe() const override { return "GPU: failing"; }
+
+private:
+    CpuDbiRenderer m_cpu;
+    int m_left;
+};
 
 size_t heapInUse() {
     const struct mallinfo2 m = mallinfo2();
@@ -206,4 +236,42 @@ TEST(SimulationStep, ADroppedViewIsFreedByTheFreerAndASameSizedOneIsReused) {
     freer.tasks.clear();
     EXPECT_GE(held - int64_t(heapInUse()), int64_t(256) * 256 * 8)
         << "the task owned the 256 x 256 frame";
+}
+
+// A configured renderer (the GPU's) that fails mid-session: the render it failed and every one
+// after are the CPU's, the client's copy stays a fresh render bit for bit, and the report counts
+// the fallback once.
+TEST(SimulationStep, AConfiguredRendererThatFailsGivesWayToTheCpus) {
+    StepRig rig(makeSphere(32), [](const Volume& v, ThreadPool* pool) {
+        return std::make_unique<FailingRenderer>(v, pool, 1);
+    });
+    const Camera cam = cameraPreset("top", rig.original, {48, 48});
+    rig.run({rig.join(1, cam, Codec::Raw)});
+    Dbi dbi;
+    for (const Outbox::Ready& r : rig.outbox.take(live).updates)
+        applyImage(r, cam, dbi);
+    EXPECT_EQ(rig.book.counter(&ServerCounters::rendererFallbacks), 0u);
+    for (int i = 6; i <= 8; ++i) {
+        SCOPED_TRACE(i);
+        rig.run({rig.cut(surfaceBox(rig.original, i))});
+        const Outbox::Taken t = rig.outbox.take(live);
+        ASSERT_EQ(t.updates.size(), 1u);
+        applyImage(t.updates[0], cam, dbi);
+        EXPECT_TRUE(compare(dbi, Renderer(rig.step.volume()).render(cam)).identical());
+    }
+    EXPECT_EQ(rig.book.counter(&ServerCounters::rendererFallbacks), 1u);
+}
+
+// One that cannot even be made (a volume too large for the GPU): the CPU's renders from the start.
+TEST(SimulationStep, AConfiguredRendererThatCannotBeMadeGivesWayToTheCpus) {
+    StepRig rig(makeSphere(32), [](const Volume&, ThreadPool*) -> std::unique_ptr<DbiRenderer> {
+        throw Error("gpu: OpenGL refused the volume's textures: out of memory");
+    });
+    const Camera cam = cameraPreset("top", rig.original, {48, 48});
+    rig.run({rig.join(1, cam, Codec::Raw)});
+    Dbi dbi;
+    for (const Outbox::Ready& r : rig.outbox.take(live).updates)
+        applyImage(r, cam, dbi);
+    EXPECT_TRUE(compare(dbi, Renderer(rig.step.volume()).render(cam)).identical());
+    EXPECT_EQ(rig.book.counter(&ServerCounters::rendererFallbacks), 1u);
 }

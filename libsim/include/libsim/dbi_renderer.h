@@ -72,4 +72,35 @@ private:
     int m_threads;
 };
 
+// Renders through `primary` until a call of it throws, then through the renderer `fallback` makes
+// (from the same volume, as it is then), from that call on: `onFallback` is told once, with the
+// primary's error. The server runs a configured renderer (the GPU's) behind it, so a GPU that
+// fails mid-session (out of memory, a lost device) costs the session its speed, not its drilling.
+class FallbackDbiRenderer final : public DbiRenderer {
+public:
+    using Make = std::function<std::unique_ptr<DbiRenderer>()>;
+    using Told = std::function<void(const std::string& primary, const std::string& error,
+                                    const std::string& fallback)>;
+    FallbackDbiRenderer(std::unique_ptr<DbiRenderer> primary, Make fallback, Told onFallback);
+    void volumeChanged(const Box3i& changed) override;
+    void rebuild() override;
+    void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache) override;
+    int renderBulk(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache,
+                   const std::function<bool()>& stop, int atLeast) override;
+    void setBulkPool(ThreadPool* pool) override;
+    Dbi render(const Camera& camera) override;
+    std::string describe() const override { return m_current->describe(); }
+    bool fellBack() const { return !m_fallback; }
+
+private:
+    // f(renderer) on the current renderer; on the primary's first throw, on the fallback again.
+    template <typename F>
+    auto guarded(F&& f);
+
+    std::unique_ptr<DbiRenderer> m_current;
+    Make m_fallback; // empty once used
+    Told m_told;
+    ThreadPool* m_bulkPool = nullptr;
+};
+
 } // namespace trephine

@@ -7,6 +7,7 @@
 #include "net/view.h"
 
 #include <algorithm>
+#include <cstdio>
 #include <cstring>
 #include <memory>
 
@@ -29,10 +30,29 @@ int64_t pixelsOf(const Dbi& frame) {
     return int64_t(frame.width()) * frame.height();
 }
 
-std::unique_ptr<DbiRenderer> makeRenderer(const StepConfig& c, const Volume& v, ThreadPool& pool) {
-    if (c.renderer)
-        return c.renderer(v, &pool);
-    return std::make_unique<CpuDbiRenderer>(v, &pool);
+// The configured renderer (the GPU's) with the CPU ray caster behind it should it fail, when it
+// is made (a volume too large for it) or later (out of memory, a lost device): the server says so
+// once and counts it (`renderer_fallbacks`).
+std::unique_ptr<DbiRenderer> makeRenderer(const StepConfig& c, const Volume& v, ThreadPool& pool,
+                                          ReportBook& book) {
+    auto cpu = [&v, &pool] { return std::make_unique<CpuDbiRenderer>(v, &pool); };
+    if (!c.renderer)
+        return cpu();
+    auto told = [&book](const std::string& primary, const std::string& error,
+                        const std::string& now) {
+        std::fprintf(stderr, "trephine server: %s failed (%s); rendering on %s from now on\n",
+                     primary.c_str(), error.c_str(), now.c_str());
+        book.count(&ServerCounters::rendererFallbacks);
+    };
+    std::unique_ptr<DbiRenderer> primary;
+    try {
+        primary = c.renderer(v, &pool);
+    } catch (const std::exception& e) {
+        auto r = cpu();
+        told("the configured renderer", e.what(), r->describe());
+        return r;
+    }
+    return std::make_unique<FallbackDbiRenderer>(std::move(primary), cpu, told);
 }
 
 AssessmentConfig withSweep(const StepConfig& c) {
@@ -47,7 +67,7 @@ SimulationStep::SimulationStep(Volume volume, const StepConfig& config, Outbox& 
                                ReportBook& book, ServerClock clock)
     : m_config(config), m_outbox(outbox), m_book(book), m_clock(std::move(clock)),
       m_volume(normaliseAir(std::move(volume))), m_pool(config.renderThreads),
-      m_renderer(makeRenderer(config, m_volume, m_pool)),
+      m_renderer(makeRenderer(config, m_volume, m_pool, book)),
       m_assessment(m_volume, withSweep(config), book, &m_pool),
       m_share(config.workClock ? config.workClock : ServerClock(steadyNowUs)) {}
 
