@@ -251,7 +251,9 @@ int runServer(const ServerOptions& o) {
                           net::parseAddress("127.0.0.1:" + std::to_string(server.port())), o.port);
     server.start();
     printStarted(o, config, server, d, link.get());
-    std::printf("trephine server: rendering on %s\n", rendering.c_str());
+    // The choice, and why; or, when the chosen renderer failed at start, what renders instead.
+    std::printf("trephine server: rendering on %s\n",
+                server.rendererFallbacks() ? server.rendererName().c_str() : rendering.c_str());
     std::fflush(stdout);
     while (!g_stopRequested.load())
         std::this_thread::sleep_for(std::chrono::milliseconds(50));

@@ -12,12 +12,23 @@ GpuRenderer::GpuRenderer(const Volume& volume, std::shared_ptr<EglContext> conte
     : m_volume(&volume), m_context(std::move(context)) {
     EglContext::Current current(*m_context);
     m_caster = std::make_unique<VolumeRaycaster>(VolumeRaycaster::Pipeline::Compute);
-    m_caster->upload(volume);
+    try {
+        m_caster->upload(volume);
+    } catch (...) {
+        m_caster.reset(); // the textures made so far go while the context is current
+        throw;
+    }
 }
 
+// A renderer that failed may have lost its context: then its GL objects are left to the driver
+// rather than a throw ending the process.
 GpuRenderer::~GpuRenderer() {
-    EglContext::Current current(*m_context);
-    m_caster.reset(); // its GL objects go while the context is current
+    try {
+        EglContext::Current current(*m_context);
+        m_caster.reset(); // its GL objects go while the context is current
+    } catch (...) {
+        (void)m_caster.release();
+    }
 }
 
 void GpuRenderer::volumeChanged(const Box3i& changed) {

@@ -27,8 +27,10 @@ auto FallbackDbiRenderer::guarded(F&& f) {
         return f(*m_current);
     } catch (const std::exception& e) {
         const std::string primary = m_current->describe(), error = e.what();
-        m_current = std::exchange(m_fallback, nullptr)();
-        m_current->setBulkPool(m_bulkPool);
+        std::unique_ptr<DbiRenderer> next = m_fallback(); // should it throw, nothing changed
+        next->setBulkPool(m_bulkPool);
+        m_fallback = nullptr;
+        m_current = std::move(next);
         if (m_told)
             m_told(primary, error, m_current->describe());
     }

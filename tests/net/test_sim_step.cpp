@@ -83,8 +83,9 @@ void applyVolume(const Outbox::Ready& r, Volume& copy, const Volume& like) {
     ASSERT_TRUE(applyVolumeBox(copy, box, bytes));
 }
 
-// The CPU ray caster until its `failAt`th render, then a renderer that throws, as a GPU that
-// runs out of memory or loses its device mid-session does.
+// The CPU ray caster's pictures, each red level one off (a GPU's pixels differ from the CPU's
+// within a tolerance), until its `failAt`th render; then it throws, as a GPU that runs out of
+// memory or loses its device mid-session does, leaving the rectangle half done.
 class FailingRenderer final : public DbiRenderer {
 public:
     FailingRenderer(const Volume& v, ThreadPool* pool, int failAt)
@@ -92,14 +93,21 @@ public:
     void volumeChanged(const Box3i& changed) override { m_cpu.volumeChanged(changed); }
     void rebuild() override { m_cpu.rebuild(); }
     void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache*) override {
+        const PixelRect in = intersect(rect, frame.bounds());
         if (--m_left < 0) {
-            const PixelRect in = intersect(rect, frame.bounds());
-            frame.apply(Dbi(in.w, in.h), in.x, in.y); // what a half-done render leaves
+            frame.apply(Dbi(in.w, in.h), in.x, in.y);
             throw Error("gpu: the device was lost");
         }
         m_cpu.render(camera, rect, frame, nullptr);
+        for (int y = in.y; y < in.y + in.h; ++y)
+            for (int x = in.x; x < in.x + in.w; ++x)
+                frame.color(x, y)[0] ^= 1;
     }
-    Dbi render(const Camera& camera) override { return m_cpu.render(camera); }
+    Dbi render(const Camera& camera) override {
+        Dbi d(camera.width, camera.height);
+        render(camera, d.bounds(), d, nullptr);
+        return d;
+    }
     std::string describe() const override { return "GPU: failing"; }
 
 private:
@@ -239,27 +247,32 @@ TEST(SimulationStep, ADroppedViewIsFreedByTheFreerAndASameSizedOneIsReused) {
 }
 
 // A configured renderer (the GPU's) that fails mid-session: the render it failed and every one
-// after are the CPU's, the client's copy stays a fresh render bit for bit, and the report counts
-// the fallback once.
+// after are the CPU's, the view's other pixels are rendered again and sent, so the client's copy
+// is a fresh CPU render bit for bit once the step is done; the report counts the fallback once.
 TEST(SimulationStep, AConfiguredRendererThatFailsGivesWayToTheCpus) {
     StepRig rig(makeSphere(32), [](const Volume& v, ThreadPool* pool) {
         return std::make_unique<FailingRenderer>(v, pool, 1);
     });
     const Camera cam = cameraPreset("top", rig.original, {48, 48});
-    rig.run({rig.join(1, cam, Codec::Raw)});
     Dbi dbi;
-    for (const Outbox::Ready& r : rig.outbox.take(live).updates)
-        applyImage(r, cam, dbi);
-    EXPECT_EQ(rig.book.counter(&ServerCounters::rendererFallbacks), 0u);
+    auto runAndApply = [&](std::vector<LogRecord> batch) {
+        rig.run(std::move(batch));
+        for (int i = 0; i < 50 && rig.step.rendering(); ++i)
+            rig.run({});
+        for (const Outbox::Ready& r : rig.outbox.take(live).updates)
+            applyImage(r, cam, dbi);
+    };
+    runAndApply({rig.join(1, cam, Codec::Raw)});
+    EXPECT_FALSE(compare(dbi, Renderer(rig.step.volume()).render(cam)).identical())
+        << "the failing renderer's own pictures first";
+    EXPECT_EQ(rig.step.rendererName(), "GPU: failing");
     for (int i = 6; i <= 8; ++i) {
         SCOPED_TRACE(i);
-        rig.run({rig.cut(surfaceBox(rig.original, i))});
-        const Outbox::Taken t = rig.outbox.take(live);
-        ASSERT_EQ(t.updates.size(), 1u);
-        applyImage(t.updates[0], cam, dbi);
+        runAndApply({rig.cut(surfaceBox(rig.original, i))});
         EXPECT_TRUE(compare(dbi, Renderer(rig.step.volume()).render(cam)).identical());
     }
     EXPECT_EQ(rig.book.counter(&ServerCounters::rendererFallbacks), 1u);
+    EXPECT_EQ(rig.step.rendererName(), "CPU, 1 thread");
 }
 
 // One that cannot even be made (a volume too large for the GPU): the CPU's renders from the start.

@@ -542,6 +542,11 @@ Dbi SessionServer::renderView(const ViewSpec& view) {
     return m_impl->step.render(toCamera(view));
 }
 
+std::string SessionServer::rendererName() const {
+    std::lock_guard lock(m_impl->stepMutex);
+    return m_impl->step.rendererName();
+}
+
 Volume SessionServer::volumeSnapshot() {
     std::lock_guard lock(m_impl->stepMutex);
     return m_impl->step.volume();

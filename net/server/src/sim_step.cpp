@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <cstring>
 #include <memory>
+#include <utility>
 
 namespace trephine::net {
 
@@ -34,15 +35,16 @@ int64_t pixelsOf(const Dbi& frame) {
 // is made (a volume too large for it) or later (out of memory, a lost device): the server says so
 // once and counts it (`renderer_fallbacks`).
 std::unique_ptr<DbiRenderer> makeRenderer(const StepConfig& c, const Volume& v, ThreadPool& pool,
-                                          ReportBook& book) {
+                                          ReportBook& book, bool& replaced) {
     auto cpu = [&v, &pool] { return std::make_unique<CpuDbiRenderer>(v, &pool); };
     if (!c.renderer)
         return cpu();
-    auto told = [&book](const std::string& primary, const std::string& error,
-                        const std::string& now) {
+    auto told = [&book, &replaced](const std::string& primary, const std::string& error,
+                                   const std::string& now) {
         std::fprintf(stderr, "trephine server: %s failed (%s); rendering on %s from now on\n",
                      primary.c_str(), error.c_str(), now.c_str());
         book.count(&ServerCounters::rendererFallbacks);
+        replaced = true;
     };
     std::unique_ptr<DbiRenderer> primary;
     try {
@@ -67,7 +69,7 @@ SimulationStep::SimulationStep(Volume volume, const StepConfig& config, Outbox& 
                                ReportBook& book, ServerClock clock)
     : m_config(config), m_outbox(outbox), m_book(book), m_clock(std::move(clock)),
       m_volume(normaliseAir(std::move(volume))), m_pool(config.renderThreads),
-      m_renderer(makeRenderer(config, m_volume, m_pool, book)),
+      m_renderer(makeRenderer(config, m_volume, m_pool, book, m_rendererReplaced)),
       m_assessment(m_volume, withSweep(config), book, &m_pool),
       m_share(config.workClock ? config.workClock : ServerClock(steadyNowUs)) {}
 
@@ -361,6 +363,9 @@ void SimulationStep::renderViews(const Batch& b, uint32_t gridUs) {
                 v.holders.push_back(id);
     }
     schedule();
+    if (std::exchange(m_rendererReplaced, false)) // in this step, or in an inspection before it
+        for (ViewFrame& v : m_views)
+            restale(v);
     m_rendering = std::any_of(m_views.begin(), m_views.end(),
                               [](const ViewFrame& v) { return !v.settled(); });
     if (!dropped.empty()) // their frames are freed there, as the task goes
@@ -394,6 +399,16 @@ void SimulationStep::markChanged(ViewFrame& v, const Batch& b, uint32_t gridUs) 
     v.timing.erodeUs += uint32_t(b.erodeUs);
     v.timing.gridUs += gridUs;
     v.timing.renderUs += gridUs; // the brick grid counts in the render stage
+}
+
+// Every pixel rendered so far is to be rendered again (by another renderer), and sent: the rows
+// done become stale, a band under way starts again.
+void SimulationStep::restale(ViewFrame& v) {
+    v.colsDone = 0;
+    if (v.rowsDone == 0)
+        return;
+    v.stale = unite(v.stale, {0, 0, v.frame.width(), std::min(v.rowsDone, v.frame.height())});
+    v.causeUs = v.causeUs ? v.causeUs : std::max<uint64_t>(m_clock(), 1);
 }
 
 // The views' work a piece at a time, the peer whose turn it is first (FairShare), each piece

@@ -94,6 +94,9 @@ public:
     uint64_t malformedTotal() const;
     uint64_t disconnectedForMalformed() const { return counters().malformedKicks; }
     uint64_t toolStatesApplied() const { return counters().toolStatesApplied; }
+    // What renders the views now, and whether the configured renderer failed (the CPU's since).
+    std::string rendererName() const;
+    uint64_t rendererFallbacks() const { return counters().rendererFallbacks; }
     uint64_t toolStatesDropped() const { return counters().toolStatesDropped; }
     uint64_t rendersDone() const { return counters().renders; }
     uint64_t hapticModelsSent() const { return counters().hapticModelsSent; }

@@ -94,6 +94,8 @@ public:
     // The voxels: written only by step(), under voxelMutex() held exclusively around each write,
     // so another thread may read them under a shared lock (the haptic answer).
     const Volume& volume() const { return m_volume; }
+    // What renders the views ("CPU, 2 threads", "GPU: ..."), after any fallback.
+    std::string rendererName() const { return m_renderer->describe(); }
     std::shared_mutex& voxelMutex() { return m_voxelMutex; }
     // Re-render every view whole on each change (the paper's way) instead of BB_screen only.
     void setFullRender(bool on) { m_fullRender = on; }
@@ -176,6 +178,7 @@ private:
     void postVolumes(const Batch& b);
     uint32_t updateGrid(const Batch& b);
     void renderViews(const Batch& b, uint32_t gridUs);
+    void restale(ViewFrame& v);
     void markChanged(ViewFrame& v, const Batch& b, uint32_t gridUs);
     void schedule();
     void workOn(ViewFrame& v, int64_t& rowsLeft, int64_t atLeast);
@@ -205,6 +208,9 @@ private:
     // took the step 4-7 ms to free. Inline (the simulation thread) unless renderBulkApart.
     InlineExecutor m_inlineFreer;
     Executor* m_freer = &m_inlineFreer;
+    // Set when the configured renderer failed and the CPU's took over: the views' pixels so far
+    // are the failed renderer's, re-rendered by the next step.
+    bool m_rendererReplaced = false;
     std::unique_ptr<DbiRenderer> m_renderer; // StepConfig::renderer, else the CPU ray caster
     Assessment m_assessment;
     std::map<uint16_t, Client> m_clients;
