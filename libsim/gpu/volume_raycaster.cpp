@@ -520,7 +520,8 @@ void VolumeRaycaster::ensureTarget(int width, int height) {
 }
 
 // The compute pipeline's buffers hold exactly the rectangle: on an H200, reading a 1920 x 4
-// band out of buffers sized for 1920 x 1080 took 1.6 ms, about what reading them whole took.
+// band out of buffers sized for 1920 x 1080 took 1.6 ms, as much as a third of reading them
+// whole. Leaves its buffer bound (render() restores the binding it found).
 void VolumeRaycaster::sizeOutput(int64_t pixels) {
     if (pixels == m_outPixels)
         return;
@@ -532,15 +533,12 @@ void VolumeRaycaster::sizeOutput(int64_t pixels) {
                                 pixels, most));
     while (glGetError() != GL_NO_ERROR) {
     } // errors of earlier, unrelated calls are not these buffers'
-    GLint storage = 0;
-    glGetIntegerv(GL_SHADER_STORAGE_BUFFER_BINDING, &storage);
     for (GLuint* b : {&m_outColor, &m_outDepth}) {
         if (!*b)
             glGenBuffers(1, b);
         glBindBuffer(GL_SHADER_STORAGE_BUFFER, *b);
         glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(pixels) * 4, nullptr, GL_STREAM_READ);
     }
-    glBindBuffer(GL_SHADER_STORAGE_BUFFER, GLuint(storage));
     m_outPixels = 0;
     if (const GLenum e = glGetError(); e != GL_NO_ERROR)
         throw Error(
@@ -563,11 +561,11 @@ void VolumeRaycaster::render(const Camera& camera, const PixelRect& rect) {
     if (m_rendered.empty())
         return;
     if (m_pipeline == Pipeline::Compute) {
-        sizeOutput(r.area());
         GLint program = 0, active = GL_TEXTURE0, storage = 0;
         glGetIntegerv(GL_CURRENT_PROGRAM, &program);
         glGetIntegerv(GL_ACTIVE_TEXTURE, &active);
         glGetIntegerv(GL_SHADER_STORAGE_BUFFER_BINDING, &storage);
+        sizeOutput(r.area());
         glUseProgram(m_program);
         setUniforms(camera, {float(-r.x), float(-r.y)});
         glUniform2i(glGetUniformLocation(m_program, "uSize"), r.w, r.h);

@@ -14,10 +14,23 @@ std::string CpuDbiRenderer::describe() const {
     return "CPU, " + std::to_string(m_threads) + (m_threads == 1 ? " thread" : " threads");
 }
 
-FallbackDbiRenderer::FallbackDbiRenderer(std::unique_ptr<DbiRenderer> primary, Make fallback,
-                                         Told onFallback)
-    : m_current(std::move(primary)), m_fallback(std::move(fallback)),
-      m_told(std::move(onFallback)) {}
+FallbackDbiRenderer::FallbackDbiRenderer(const Make& primary, Make fallback, Told onFallback)
+    : m_fallback(std::move(fallback)), m_told(std::move(onFallback)) {
+    try {
+        m_current = primary();
+    } catch (const std::exception& e) {
+        fallBack("the configured renderer", e.what());
+    }
+}
+
+void FallbackDbiRenderer::fallBack(const std::string& primary, const std::string& error) {
+    std::unique_ptr<DbiRenderer> next = m_fallback(); // should it throw, nothing changed
+    next->setBulkPool(m_bulkPool);
+    m_fallback = nullptr;
+    m_current = std::move(next);
+    if (m_told)
+        m_told(primary, error, m_current->describe());
+}
 
 template <typename F>
 auto FallbackDbiRenderer::guarded(F&& f) {
@@ -26,13 +39,7 @@ auto FallbackDbiRenderer::guarded(F&& f) {
     try {
         return f(*m_current);
     } catch (const std::exception& e) {
-        const std::string primary = m_current->describe(), error = e.what();
-        std::unique_ptr<DbiRenderer> next = m_fallback(); // should it throw, nothing changed
-        next->setBulkPool(m_bulkPool);
-        m_fallback = nullptr;
-        m_current = std::move(next);
-        if (m_told)
-            m_told(primary, error, m_current->describe());
+        fallBack(m_current->describe(), e.what());
     }
     return f(*m_current);
 }

@@ -72,16 +72,17 @@ private:
     int m_threads;
 };
 
-// Renders through `primary` until a call of it throws, then through the renderer `fallback` makes
-// (from the same volume, as it is then), from that call on: `onFallback` is told once, with the
-// primary's error. The server runs a configured renderer (the GPU's) behind it, so a GPU that
-// fails mid-session (out of memory, a lost device) costs the session its speed, not its drilling.
+// Renders through the renderer `primary` makes until making it or a call of it throws, then
+// through the renderer `fallback` makes (from the same volume, as it is then), from that call on:
+// `onFallback` is told once, with the primary's error. The server runs a configured renderer (the
+// GPU's) behind it, so a GPU that cannot hold the volume, or fails mid-session (out of memory, a
+// lost device), costs the session its speed, not its drilling.
 class FallbackDbiRenderer final : public DbiRenderer {
 public:
     using Make = std::function<std::unique_ptr<DbiRenderer>()>;
     using Told = std::function<void(const std::string& primary, const std::string& error,
                                     const std::string& fallback)>;
-    FallbackDbiRenderer(std::unique_ptr<DbiRenderer> primary, Make fallback, Told onFallback);
+    FallbackDbiRenderer(const Make& primary, Make fallback, Told onFallback);
     void volumeChanged(const Box3i& changed) override;
     void rebuild() override;
     void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache) override;
@@ -90,12 +91,12 @@ public:
     void setBulkPool(ThreadPool* pool) override;
     Dbi render(const Camera& camera) override;
     std::string describe() const override { return m_current->describe(); }
-    bool fellBack() const { return !m_fallback; }
 
 private:
     // f(renderer) on the current renderer; on the primary's first throw, on the fallback again.
     template <typename F>
     auto guarded(F&& f);
+    void fallBack(const std::string& primary, const std::string& error);
 
     std::unique_ptr<DbiRenderer> m_current;
     Make m_fallback; // empty once used

@@ -46,15 +46,7 @@ std::unique_ptr<DbiRenderer> makeRenderer(const StepConfig& c, const Volume& v, 
         book.count(&ServerCounters::rendererFallbacks);
         replaced = true;
     };
-    std::unique_ptr<DbiRenderer> primary;
-    try {
-        primary = c.renderer(v, &pool);
-    } catch (const std::exception& e) {
-        auto r = cpu();
-        told("the configured renderer", e.what(), r->describe());
-        return r;
-    }
-    return std::make_unique<FallbackDbiRenderer>(std::move(primary), cpu, told);
+    return std::make_unique<FallbackDbiRenderer>([&] { return c.renderer(v, &pool); }, cpu, told);
 }
 
 AssessmentConfig withSweep(const StepConfig& c) {
