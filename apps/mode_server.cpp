@@ -282,7 +282,7 @@ void addServerMode(CLI::App& root, int& exitCode) {
            "--volume FILE)")
         ->check(outputFile());
     sub->add_option("--renderer", o->renderer,
-                    "Render views on the cpu, the gpu (OpenGL through EGL, no display needed; "
+                    "Render views on the cpu, the gpu (OpenGL 4.3 through EGL, no display needed; "
                     "llvmpipe will do) or auto (the GPU when EGL finds a hardware one)")
         ->check(CLI::IsMember({"cpu", "gpu", "auto"}))
         ->capture_default_str();
