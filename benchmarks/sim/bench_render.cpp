@@ -209,6 +209,93 @@ BENCHMARK(BM_RenderDirtyRectCachedOneThread)
     ->Unit(benchmark::kMicrosecond)
     ->UseRealTime();
 
+// One drilling step as the server re-renders it: a 4 mm burr 1 mm into the bone, 0.2 mm along
+// the groove it has cut, in the working view of width x height (Args 0, 1) on the scene's pool
+// (Arg 2 = 0) or the calling thread (1). Each iteration re-renders the step's BB_screen through
+// the view's cache as it was before the step, once with render() and once with renderChanged()
+// (the server's path; the time), interleaved, so their ratio comes from one run. render_us /
+// changed_us: medians; kept: the share of the rectangle renderChanged left as it was.
+struct DrillStep {
+    Scene scene{256}; // its own skull: the shared one carries the stroke already
+    Camera camera;
+    HitCache cacheBefore;
+    Dbi frameBefore;
+    Box3i step;
+    PixelRect rect;
+};
+
+DrillStep& drillStep(glm::ivec2 size) {
+    static std::map<std::pair<int, int>, std::unique_ptr<DrillStep>> steps;
+    std::unique_ptr<DrillStep>& d = steps[{size.x, size.y}];
+    if (d)
+        return *d;
+    d = std::make_unique<DrillStep>();
+    Scene& s = d->scene;
+    d->camera = cameraPreset("working", s.volume, {size.x, size.y});
+    Driller driller(ToolShape::burr(4.0f));
+    ToolPose pose;
+    pose.orientation = glm::rotation(glm::vec3(0, 0, 1), s.site.normal);
+    const glm::vec3 side = glm::normalize(glm::cross(s.site.normal, glm::vec3(0, 0, 1)));
+    auto at = [&](int i) { return s.site.position - s.site.normal * 1.0f + side * (0.2f * i); };
+    for (int i = 0; i < 10; ++i) { // the groove so far
+        pose.position = at(i);
+        s.renderer->volumeChanged(driller.drill(s.volume, pose, 1.0f, 0.01f).changed);
+    }
+    d->frameBefore = s.renderer->render(d->camera, &d->cacheBefore);
+    pose.position = at(10);
+    d->step = driller.drill(s.volume, pose, 1.0f, 0.01f).changed;
+    s.renderer->volumeChanged(d->step);
+    d->rect = dirtyScreenRect(d->camera, s.volume, d->step);
+    return *d;
+}
+
+void BM_RenderDrillStep(benchmark::State& state) {
+    DrillStep& d = drillStep({int(state.range(0)), int(state.range(1))});
+    Scene& s = d.scene;
+    const Camera& camera = d.camera;
+    const PixelRect& rect = d.rect;
+    const Box3i& step = d.step;
+    const Dbi& frameBefore = d.frameBefore;
+    const HitCache& cacheBefore = d.cacheBefore;
+    ThreadPool* pool = state.range(2) ? nullptr : s.pool.get();
+    s.renderer->setPool(pool);
+    HitCache cache;
+    Dbi frame = frameBefore;
+    SampleWindow plain(1 << 16), changed(1 << 16);
+    int64_t kept = 0;
+    for (auto _ : state) {
+        state.PauseTiming();
+        cache = cacheBefore;
+        auto t0 = Clock::now();
+        s.renderer->render(camera, rect, frame, &cache);
+        plain.add(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
+        benchmark::DoNotOptimize(frame.depth());
+        cache = cacheBefore;
+        frame.apply(frameBefore.extract(rect), rect.x, rect.y);
+        state.ResumeTiming();
+        t0 = Clock::now();
+        s.renderer->renderChanged(camera, rect, frame, cache, step);
+        changed.add(std::chrono::duration<double, std::micro>(Clock::now() - t0).count());
+        benchmark::DoNotOptimize(frame.depth());
+        kept = cache.kept();
+    }
+    s.renderer->setPool(s.pool.get());
+    const double p50 = changed.percentile(50), p50Plain = plain.percentile(50);
+    state.counters["render_us"] = p50Plain;
+    state.counters["changed_us"] = p50;
+    state.counters["speedup"] = p50 > 0.0 ? p50Plain / p50 : 0.0;
+    state.counters["kept"] = rect.area() ? double(kept) / double(rect.area()) : 0.0;
+    state.counters["w"] = rect.w;
+    state.counters["h"] = rect.h;
+    state.counters["threads"] = pool ? pool->size() : 1;
+    state.SetItemsProcessed(state.iterations() * rect.area());
+}
+BENCHMARK(BM_RenderDrillStep)
+    ->ArgsProduct({{500}, {500}, {0, 1}})
+    ->ArgsProduct({{1920}, {1080}, {0, 1}})
+    ->Unit(benchmark::kMicrosecond)
+    ->UseRealTime();
+
 // The stroke's own BB_screen, whatever its size (reported as w, h).
 void BM_RenderStrokeBBScreen(benchmark::State& state) {
     Scene& s = skull256();

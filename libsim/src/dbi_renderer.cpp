@@ -57,6 +57,11 @@ void FallbackDbiRenderer::render(const Camera& camera, const PixelRect& rect, Db
     guarded([&](DbiRenderer& r) { r.render(camera, rect, frame, cache); });
 }
 
+void FallbackDbiRenderer::renderChanged(const Camera& camera, const PixelRect& rect, Dbi& frame,
+                                        HitCache& cache, const Box3i& changed) {
+    guarded([&](DbiRenderer& r) { r.renderChanged(camera, rect, frame, cache, changed); });
+}
+
 int FallbackDbiRenderer::renderBulk(const Camera& camera, const PixelRect& rect, Dbi& frame,
                                     HitCache* cache, const std::function<bool()>& stop,
                                     int atLeast) {

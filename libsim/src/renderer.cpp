@@ -8,6 +8,8 @@
 // [SECTION] Renderer: tiles over the worker pool
 #include "libsim/renderer.h"
 
+#include "libsim/dirty_rect.h"
+
 #include "libsim/thread_pool.h"
 
 #include <algorithm>
@@ -96,6 +98,10 @@ struct Frame {
     glm::ivec3 nb;           // bricks per axis
     size_t nbxy;
     bool marchEight; // skipping on and voxel offsets fit int32: marchEight may run (AVX2 build)
+    // Renderer::renderChanged: a pixel whose cached first inside sample lies outside
+    // [keepLo, keepHi] (sample coordinates; lane 3 -inf, +inf) keeps its frame values.
+    bool keep = false;
+    v4sf keepLo, keepHi;
 };
 
 // See makeFrame: float positions are exact to ~6e-8 of their magnitude, and skipping needs them
@@ -445,6 +451,16 @@ inline glm::vec3 samplePos(const Frame& f, const Ray& r, float t) {
 // samplePos in one vector (lane 3 zero): the same operations, the same bits.
 inline v4sf samplePos4(const Frame& f, const Ray& r, float t) {
     return f.origin4 + t * r.dv4;
+}
+
+// renderChanged: the pixel's cached first inside sample `k` (known) proves its hit, and all the
+// hit reads, clear of the change, or the ray can never hit.
+inline bool keptPixel(const Frame& f, const Ray& r, int32_t k) {
+    if (k == HitCache::kNever)
+        return true;
+    const v4sf p = samplePos4(f, r, float(k) * f.dt);
+    return p[0] < f.keepLo[0] || p[1] < f.keepLo[1] || p[2] < f.keepLo[2] || p[0] > f.keepHi[0] ||
+           p[1] > f.keepHi[1] || p[2] > f.keepHi[2];
 }
 
 inline int brickCoord(float p, int n) {
@@ -1374,6 +1390,7 @@ void HitCache::clear() {
     m_inside.clear();
     m_rowKnown.clear();
     m_resumed = 0;
+    m_kept = 0;
 }
 
 bool HitCache::validFor(const Renderer& renderer, const Camera& camera) const {
@@ -1436,6 +1453,12 @@ void Renderer::render(const Camera& camera, const PixelRect& rect, Dbi& frame,
     renderInto(camera, r, frame, r.x, r.y, cache, Tiling{});
 }
 
+void Renderer::renderChanged(const Camera& camera, const PixelRect& rect, Dbi& frame,
+                             HitCache& cache, const Box3i& changed) const {
+    const PixelRect r = prepare(camera, rect, frame, &cache);
+    renderInto(camera, r, frame, r.x, r.y, &cache, Tiling{}, &changed);
+}
+
 PixelRect Renderer::prepare(const Camera& camera, const PixelRect& rect, const Dbi& frame,
                             HitCache* cache) const {
     assert(frame.width() == camera.width && frame.height() == camera.height &&
@@ -1454,6 +1477,7 @@ PixelRect Renderer::prepare(const Camera& camera, const PixelRect& rect, const D
         cache->m_inside.resize(size_t(camera.width) * size_t(camera.height));
         cache->m_rowKnown.assign(size_t(camera.height), 0);
         cache->m_resumed = 0;
+        cache->m_kept = 0;
     }
     // Inside the camera's window too: the hit cache is sized and strided by it, and the assert
     // above is gone from a release build.
@@ -1496,6 +1520,7 @@ struct TileJob {
     size_t cacheStride;
     bool batchHits;
     std::atomic<int64_t>& resumed;
+    std::atomic<int64_t>& kept;
 };
 
 // std::max(a, b) and std::min(a, b) lane by lane: maxps(b, a), minps(b, a). (Functions, not
@@ -1520,7 +1545,7 @@ __attribute__((target("avx2,bmi2"), always_inline)) inline v8si truncOf(v8sf v) 
 __attribute__((target("avx2,bmi2"))) inline void setUpRow(const Frame& f, int bx, int n, int py,
                                                           v8sf skip, v8si k0, unsigned in0,
                                                           PendingHit* h, Span* spans, Packet& p,
-                                                          unsigned& live) {
+                                                          unsigned& live, unsigned& kept) {
     const v8sf fx = __builtin_convertvector(bx + v8si{0, 1, 2, 3, 4, 5, 6, 7}, v8sf) + 0.5f;
     const float fy = float(py) + 0.5f;
     v8sf toFar[3], dv[3], invDv[3];
@@ -1557,6 +1582,16 @@ __attribute__((target("avx2,bmi2"))) inline void setUpRow(const Frame& f, int bx
     const v8si kSkip = truncOf(skip * invDt);
     v8si k = skip > t0 ? (kSkip > kStart ? kSkip : kStart) : kStart;
     k = k0 > k ? k0 : k;
+    // keptPixel lane by lane (a kNever lane's position is far out of any box).
+    v8si keeps = v8si{};
+    if (f.keep) {
+        const v8sf tk = __builtin_convertvector(k0, v8sf) * dt;
+        for (int c = 0; c < 3; ++c) {
+            const v8sf pc = f.origin4[c] + tk * dv[c];
+            keeps |= (pc < f.keepLo[c]) | (pc > f.keepHi[c]);
+        }
+        keeps &= k0 != 0;
+    }
     for (int l = 0; l < n; ++l) {
         Ray& r = h[l].r;
         r.dir = glm::dvec3(dir[0][l], dir[1][l], dir[2][l]);
@@ -1570,7 +1605,10 @@ __attribute__((target("avx2,bmi2"))) inline void setUpRow(const Frame& f, int bx
         r.mainAxis = mainAxisOf(r.dv);
         h[l].m = March{};
         bool marching;
-        if (flat[l] || (in0 >> l & 1u)) {
+        if (keeps[l]) {
+            kept |= 1u << l;
+            marching = false;
+        } else if (flat[l] || (in0 >> l & 1u)) {
             marching = marchSpan(f, r, skip[l], k0[l], (in0 >> l & 1u) != 0, h[l].m, spans[l]);
         } else {
             marching = marches[l] != 0;
@@ -1594,12 +1632,12 @@ __attribute__((target("avx2,bmi2"))) inline void setUpRow(const Frame& f, int bx
 __attribute__((always_inline)) inline void
 marchRows(const Frame& f, int x0, int y0, int bx, int bx1, int y, int rows,
           const float* quarterSkip, int midX, int midY, int32_t* resume, uint8_t* inside,
-          size_t stride, int64_t& known, PendingHit* pending, int& npending, Dbi& out,
-          const PixelRect& rect, int outX, int outY) {
+          size_t stride, int64_t& known, int64_t& keptCount, PendingHit* pending, int& npending,
+          Dbi& out, const PixelRect& rect, int outX, int outY) {
     const int n = bx1 - bx;
     Span spans[kPackets][8];
     Packet pk[kPackets];
-    unsigned live[kPackets] = {}, hits[kPackets] = {};
+    unsigned live[kPackets] = {}, hits[kPackets] = {}, kept[kPackets] = {};
     for (int row = 0; row < rows; ++row) {
         const int py = y + row;
         Packet& p = pk[row];
@@ -1619,7 +1657,8 @@ marchRows(const Frame& f, int x0, int y0, int bx, int bx1, int y, int rows,
             skip[l] = quarterSkip[(x >= midX) + 2 * (py >= midY)];
         }
         setUpRow(f, bx, n, py, skip, k0, in0, &pending[npending + row * n], spans[row], p,
-                 live[row]);
+                 live[row], kept[row]);
+        keptCount += __builtin_popcount(kept[row]);
         for (int l = n; l < 8; ++l)
             p.dvx[l] = p.dvy[l] = p.dvz[l] = 0.0f, p.k[l] = 0, p.kEnd[l] = -1;
         p.lastK = v8si{} + INT_MIN;
@@ -1635,6 +1674,8 @@ marchRows(const Frame& f, int x0, int y0, int bx, int bx1, int y, int rows,
     int next = npending;
     for (int row = 0; row < rows; ++row)
         for (int l = 0; l < n; ++l) {
+            if (kept[row] >> l & 1u)
+                continue; // its frame pixel and cache entry stand
             PendingHit& h = pending[npending + row * n + l];
             const Packet& p = pk[row];
             if (marching[row] >> l & 1u) {
@@ -1683,6 +1724,7 @@ __attribute__((always_inline)) inline void renderTileBody(const TileJob& job, in
     const size_t cacheStride = job.cacheStride;
     std::atomic<int64_t>& resumed = job.resumed;
     int tx = i % tilesX, ty = i / tilesX;
+    int64_t keptCount = 0;
     int x0 = rect.x + tx * tile, y0 = rect.y + ty * tileH;
     int x1 = std::min(x0 + tile, rect.x + rect.w), y1 = std::min(y0 + tileH, rect.y + rect.h);
     int64_t known = 0;
@@ -1764,7 +1806,8 @@ __attribute__((always_inline)) inline void renderTileBody(const TileJob& job, in
                     if (f.marchEight) {
                         const int rows = std::min(kPackets, by1 - y);
                         marchRows(f, x0, y0, bx, bx1, y, rows, quarterSkip, midX, midY, resume,
-                                  inside, stride, known, pending, npending, out, rect, outX, outY);
+                                  inside, stride, known, keptCount, pending, npending, out, rect,
+                                  outX, outY);
                         y += rows - 1;
                         continue;
                     }
@@ -1779,6 +1822,10 @@ __attribute__((always_inline)) inline void renderTileBody(const TileJob& job, in
                     known += *slot != 0;
                     PendingHit& h = pending[npending];
                     h.r = pixelRay(f, x, y);
+                    if (f.keep && *slot != 0 && keptPixel(f, h.r, *slot)) {
+                        ++keptCount;
+                        continue;
+                    }
                     const float skip = quarterSkip[(x >= midX) + 2 * (y >= midY)];
                     h.m = marchToSurface<Wide>(f, h.r, skip, *slot, *wasInside != 0);
                     *slot = h.m.kIn;
@@ -1836,6 +1883,7 @@ __attribute__((always_inline)) inline void renderTileBody(const TileJob& job, in
             std::memcpy(cacheInside + to, &tileInside[size_t(y) * size_t(tw)], size_t(tw));
         }
         resumed.fetch_add(known, std::memory_order_relaxed);
+        job.kept.fetch_add(keptCount, std::memory_order_relaxed);
     }
 }
 
@@ -1858,7 +1906,7 @@ bool cpuHasAvx2() {
 } // namespace
 
 int Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, int outX, int outY,
-                         HitCache* cache, const Tiling& tiling) const {
+                         HitCache* cache, const Tiling& tiling, const Box3i* changed) const {
     if (rect.empty())
         return 0;
     const int tile = std::max(4, m_options.tileSize);
@@ -1870,14 +1918,28 @@ int Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, 
         out.apply(Dbi(rect.w, rect.h), outX, outY);
         return tilesX * tilesY;
     }
-    const Frame f = makeFrame(*m_volume, camera, m_options, m_bricks);
+    Frame f = makeFrame(*m_volume, camera, m_options, m_bricks);
+    if (changed && cache) {
+        // The changed voxels' faces (sample coordinates: voxel v's centre at v) grown by what a
+        // hit reads (kDirtyStencilVoxels) and one step, as the hit lies between the cached
+        // sample and the one before.
+        f.keep = true;
+        const float grow =
+            kDirtyStencilVoxels + f.dt * std::max({f.invSpacing.x, f.invSpacing.y, f.invSpacing.z});
+        for (int c = 0; c < 3; ++c) {
+            f.keepLo[c] = float(changed->lo[c]) - 0.5f - grow;
+            f.keepHi[c] = float(changed->hi[c]) - 0.5f + grow;
+        }
+        f.keepLo[3] = -INFINITY;
+        f.keepHi[3] = INFINITY;
+    }
     int32_t* cacheResume = cache ? cache->m_resume.data() : nullptr;
     uint8_t* cacheInside = cache ? cache->m_inside.data() : nullptr;
     const size_t cacheStride = size_t(camera.width);
-    std::atomic<int64_t> resumed{0};
-    const TileJob job{f,      rect,   out,         outX,        outY,        tile,
-                      tileH,  tilesX, cacheResume, cacheInside, cacheStride, m_options.batchHits,
-                      resumed};
+    std::atomic<int64_t> resumed{0}, kept{0};
+    const TileJob job{f,       rect,   out,         outX,        outY,        tile,
+                      tileH,   tilesX, cacheResume, cacheInside, cacheStride, m_options.batchHits,
+                      resumed, kept};
     const bool avx2 = m_options.avx2 && cpuHasAvx2();
     auto renderTile = [&](int i) {
         if (avx2)
@@ -1904,8 +1966,10 @@ int Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, 
         for (int i = 0; i < tiles; ++i)
             renderTile(i);
     }
-    if (cache)
+    if (cache) {
         cache->m_resumed += resumed.load(std::memory_order_relaxed);
+        cache->m_kept += kept.load(std::memory_order_relaxed);
+    }
     return done;
 }
 

@@ -31,12 +31,12 @@ struct StepRig {
     uint64_t now = 1'000'000;
 
     explicit StepRig(Volume v, DbiRendererFactory renderer = {})
-        : original(v), step(std::move(v),
-                            StepConfig{.maxStepS = 0.05f,
-                                       .maxSweepMm = 10.0f,
-                                       .renderThreads = 1,
-                                       .renderer = std::move(renderer)},
-                            outbox, book, steadyNowUs) {}
+        : StepRig(std::move(v), StepConfig{.maxStepS = 0.05f,
+                                           .maxSweepMm = 10.0f,
+                                           .renderThreads = 1,
+                                           .renderer = std::move(renderer)}) {}
+    StepRig(Volume v, const StepConfig& config)
+        : original(v), step(std::move(v), config, outbox, book, steadyNowUs) {}
 
     void run(std::vector<LogRecord> batch) {
         now += 10000;
@@ -215,6 +215,56 @@ TEST(SimulationStep, TheCutterSweepsBetweenDrillingToolStates) {
     rig.run({state(2, 0.0f, 0.0f, true)});
     EXPECT_EQ(rig.applied(), 4u) << "late: newest wins";
     EXPECT_TRUE(rig.step.volume() == before);
+}
+
+// A drilling trainee's large view, whose changed pixels are rendered a chunk a step while it
+// drills on (events always wait): each chunk's re-render keeps the pixels whose cached hit is
+// clear of every change since they were rendered, not only the newest, so the client's copy is a
+// fresh render bit for bit whenever the step has caught up, and at the end.
+TEST(SimulationStep, ChangesPiledUpWhileAViewRendersAreAllKeptInMind) {
+    StepRig rig(makeSphere(48), StepConfig{.renderThreads = 1,
+                                           .slicePixels = 1024,
+                                           .chunkPixels = 32,
+                                           .previewPixels = 0,
+                                           .yield = [] { return true; }});
+    const Volume& sphere = rig.original;
+    const Camera cam = cameraPreset("top", sphere, {64, 64});
+    Dbi dbi;
+    auto runAndApply = [&](std::vector<LogRecord> batch) {
+        rig.run(std::move(batch));
+        for (const Outbox::Ready& r : rig.outbox.take(live).updates)
+            applyImage(r, cam, dbi);
+    };
+    runAndApply({rig.join(1, cam, Codec::Raw)});
+    for (int i = 0; i < 200 && rig.step.rendering(); ++i)
+        runAndApply({});
+    ASSERT_TRUE(compare(dbi, rig.step.render(cam)).identical());
+    const float top = sphereRadiusMm(48);
+    int caughtUp = 0;
+    // Strokes far apart, one tool state a step: a stroke's rows are still to render when the next
+    // lands elsewhere.
+    for (uint32_t seq = 1; seq <= 24; ++seq) {
+        ToolEvent ev{1, {}};
+        ev.tool.sequence = seq;
+        ev.tool.clientTimeUs = 1000000 + uint64_t(seq) * 20000;
+        ev.tool.toolKind = uint8_t(ToolKind::Burr);
+        ev.tool.diameterMm = 3.0f;
+        const float x = seq % 2 ? -6.0f : 6.0f, y = -6.0f + 0.5f * float(seq);
+        ev.tool.position = {x, y, top - 1.0f};
+        ev.tool.speed = 1.0f;
+        ev.tool.drilling = seq % 4 != 0; // lifted now and then: no sweep across the sphere
+        runAndApply({{rig.now, ev}});
+        if (!rig.step.rendering()) {
+            ++caughtUp;
+            ASSERT_TRUE(compare(dbi, rig.step.render(cam)).identical()) << "state " << seq;
+        }
+    }
+    for (int i = 0; i < 200 && rig.step.rendering(); ++i)
+        runAndApply({});
+    EXPECT_FALSE(rig.step.rendering());
+    EXPECT_FALSE(rig.step.volume() == rig.original) << "the strokes should have cut";
+    EXPECT_TRUE(compare(dbi, rig.step.render(cam)).identical());
+    EXPECT_LT(caughtUp, 24) << "changes should have piled up";
 }
 
 // A view nobody holds any more is handed whole to the freer, which frees it as its task goes, not

@@ -1090,6 +1090,81 @@ TEST(HitCache, CachedDirtyRendersAreBitForBitUncachedFullRenders) {
     EXPECT_GT(resumedBefore, 1000) << "the dirty renders should have resumed from the cache";
 }
 
+// The server's re-render of a drilled view: renderChanged keeps the pixels whose cached hit lies
+// clear of the change, on the AVX2 and the baseline build, and the frame is still an uncached
+// full render bit for bit, stroke after stroke, from cameras looking at the drilling from every
+// side (a hit behind the change, beside it and in front of it).
+TEST(HitCache, ReRendersOfAChangeKeepPixelsClearOfItAndStayBitForBit) {
+    for (bool avx2 : {true, false}) {
+        SCOPED_TRACE(avx2 ? "AVX2 build" : "baseline build");
+        Volume skull = makeSkull(64);
+        ThreadPool pool;
+        Renderer renderer(skull, &pool, RenderOptions{.avx2 = avx2});
+        struct View {
+            Camera camera;
+            HitCache cache;
+            Dbi frame;
+        };
+        std::vector<View> views;
+        for (const char* preset : {"working", "top", "left", "paper"}) {
+            View v{cameraPreset(preset, skull, {140, 110}), {}, {}};
+            v.frame = renderer.render(v.camera, &v.cache);
+            views.push_back(std::move(v));
+        }
+        std::mt19937 rng(34);
+        int64_t area = 0;
+        for (int stroke = 0; stroke < 16; ++stroke) {
+            Box3i changed = drillSomewhere(skull, renderer, views[size_t(stroke) % 4].camera, rng);
+            renderer.volumeChanged(changed);
+            for (View& v : views) {
+                SCOPED_TRACE(describe(v.camera));
+                PixelRect rect = dirtyScreenRect(v.camera, skull, changed);
+                area += rect.area();
+                renderer.renderChanged(v.camera, rect, v.frame, v.cache, changed);
+                Dbi expected = renderer.render(v.camera);
+                ASSERT_TRUE(v.frame == expected)
+                    << "stroke " << stroke << ": " << compare(v.frame, expected).describe();
+            }
+        }
+        int64_t kept = 0;
+        for (const View& v : views)
+            kept += v.cache.kept();
+        EXPECT_GT(kept, area / 10) << "of " << area << " pixels re-rendered";
+        EXPECT_LT(kept, area) << "pixels at the change must be rendered";
+    }
+}
+
+// What renderChanged keeps is the frame's: told of a box that misses the change, it leaves the
+// drilled pixels as they were (so the box, not a re-render, decides), and told of none of it
+// with an unknown cache it renders them all.
+TEST(HitCache, ReRendersTrustTheBoxTheyAreGiven) {
+    Volume skull = makeSkull(64);
+    ThreadPool pool;
+    Renderer renderer(skull, &pool);
+    Camera camera = cameraPreset("working", skull, {140, 110});
+    HitCache cache;
+    Dbi frame = renderer.render(camera, &cache);
+    const Dbi before = frame;
+    std::mt19937 rng(5);
+    Box3i changed = drillSomewhere(skull, renderer, camera, rng);
+    renderer.volumeChanged(changed);
+    const PixelRect rect = dirtyScreenRect(camera, skull, changed);
+    const Dbi expected = renderer.render(camera);
+    ASSERT_GT(compare(before, expected).differingPixels, 20u) << "the drilling should show";
+    // A box far from the drilling: every pixel of the rectangle hits clear of it.
+    const glm::ivec3 corner(0, 0, 0);
+    renderer.renderChanged(camera, rect, frame, cache, Box3i::fromMinMax(corner, corner + 1));
+    EXPECT_TRUE(frame == before) << compare(frame, before).describe();
+    EXPECT_EQ(cache.kept(), rect.area());
+    // A fresh cache knows no hit, so nothing is kept.
+    HitCache fresh;
+    Dbi stale = before;
+    renderer.renderChanged(camera, stale.bounds(), stale, fresh,
+                           Box3i::fromMinMax(corner, corner + 1));
+    EXPECT_TRUE(stale == expected) << compare(stale, expected).describe();
+    EXPECT_EQ(fresh.kept(), 0);
+}
+
 // The update study's case at test size: the paper's view, surface boxes cut out one after
 // another, each BB_screen re-rendered through the view's cache: bit for bit an uncached full render
 // and a render without skipping.
@@ -1117,7 +1192,8 @@ TEST(HitCache, CutHolesRenderBitForBitThroughTheCache) {
 
 // Erosion at the iso-value's edge: voxels of 126..130 lowered by 1 or 2 at a time, so samples
 // cross 128 by the smallest steps there are. A sample that rose by an ulp where its corners went
-// down (a + t (b - a) can) would make the cached render disagree.
+// down (a + t (b - a) can) would make the cached render disagree. (Re-rendered as the server
+// does, with renderChanged: its box here spans most of the volume.)
 TEST(HitCache, ErosionByTheSmallestStepsStaysBitForBit) {
     Volume v({40, 36, 32}, glm::vec3(0.8f));
     std::mt19937 rng(8);
@@ -1149,7 +1225,7 @@ TEST(HitCache, ErosionByTheSmallestStepsStaysBitForBit) {
         for (size_t i = 0; i < cameras.size(); ++i) {
             Dbi old = frames[i];
             PixelRect rect = dirtyScreenRect(cameras[i], v, changed);
-            renderer.render(cameras[i], rect, frames[i], &caches[i]);
+            renderer.renderChanged(cameras[i], rect, frames[i], caches[i], changed);
             Dbi expected = renderer.render(cameras[i]);
             ASSERT_TRUE(frames[i] == expected)
                 << "round " << round << ": " << compare(frames[i], expected).describe();

@@ -27,6 +27,14 @@ public:
     // `frame` at their place. `cache` is the view's HitCache, which only the CPU renderer reads.
     virtual void render(const Camera& camera, const PixelRect& rect, Dbi& frame,
                         HitCache* cache) = 0;
+    // A re-render of `rect` after erosion inside `changed` since the frame's pixels there were
+    // rendered through `cache` (Renderer::renderChanged): a renderer that can tell which pixels
+    // erosion cannot reach keeps them; the rest render it all.
+    virtual void renderChanged(const Camera& camera, const PixelRect& rect, Dbi& frame,
+                               HitCache& cache, const Box3i& changed) {
+        (void)changed;
+        render(camera, rect, frame, &cache);
+    }
     // Bulk work: as render(), but may stop early once `stop` says so after `atLeast` pixels'
     // worth, and runs on the bulk pool if one is set (Renderer::renderBulk); returns the width
     // done from rect.x, all its rows. A renderer that cannot stop part-way renders all of it.
@@ -58,6 +66,10 @@ public:
     void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache) override {
         m_renderer.render(camera, rect, frame, cache);
     }
+    void renderChanged(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache& cache,
+                       const Box3i& changed) override {
+        m_renderer.renderChanged(camera, rect, frame, cache, changed);
+    }
     int renderBulk(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache,
                    const std::function<bool()>& stop, int atLeast) override {
         return m_renderer.renderBulk(camera, rect, frame, cache, stop, atLeast);
@@ -86,6 +98,8 @@ public:
     void volumeChanged(const Box3i& changed) override;
     void rebuild() override;
     void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache) override;
+    void renderChanged(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache& cache,
+                       const Box3i& changed) override;
     int renderBulk(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache,
                    const std::function<bool()>& stop, int atLeast) override;
     void setBulkPool(ThreadPool* pool) override;

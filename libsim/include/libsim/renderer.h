@@ -78,6 +78,8 @@ public:
     }
     // Pixels rendered since the cache was (re)started whose resume index was known.
     int64_t resumed() const { return m_resumed; }
+    // Pixels Renderer::renderChanged left as they were since the cache was (re)started.
+    int64_t kept() const { return m_kept; }
 
 private:
     friend class Renderer;
@@ -97,6 +99,7 @@ private:
     // costs its first pieces microseconds, not a 20 MB clear.
     std::vector<uint8_t> m_rowKnown;
     int64_t m_resumed = 0;
+    int64_t m_kept = 0;
 };
 
 class Renderer {
@@ -137,6 +140,14 @@ public:
     // valid for this camera is restarted first (then this render costs what an uncached one
     // does, and fills the cache for the pixels of `rect`). `cache` may be null.
     void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache) const;
+    // A re-render after erosion: as render(camera, rect, frame, &cache), but a pixel whose
+    // cached first hit lies clear of `changed` (farther than a hit reads, kDirtyStencilVoxels),
+    // or whose ray can never hit, keeps its values in `frame`: erosion cannot move that hit. The
+    // caller promises that `frame`'s pixels in `rect` were rendered through `cache` (or are
+    // unknown to it) and that every voxel changed since lies in `changed`. Bit for bit a full
+    // render's pixels; a drilling step's rectangle keeps its corners (docs/rendering.md).
+    void renderChanged(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache& cache,
+                       const Box3i& changed) const;
     // A full frame that also fills `cache`.
     Dbi render(const Camera& camera, HitCache* cache) const;
     // A piece of bulk work (a new view's rows) that gives way to others' updates within one
@@ -164,8 +175,9 @@ private:
     // restarted if it is not valid for the camera.
     PixelRect prepare(const Camera& camera, const PixelRect& rect, const Dbi& frame,
                       HitCache* cache) const;
+    // `changed`: renderChanged's box (with a cache), else every pixel is rendered.
     int renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, int outX, int outY,
-                   HitCache* cache, const Tiling& tiling) const;
+                   HitCache* cache, const Tiling& tiling, const Box3i* changed = nullptr) const;
 
     const Volume* m_volume;
     ThreadPool* m_pool;

@@ -387,6 +387,7 @@ void SimulationStep::markChanged(ViewFrame& v, const Batch& b, uint32_t gridUs) 
     if (rect.empty())
         return;
     v.stale = unite(v.stale, rect);
+    v.staleBox.merge(b.changed);
     v.causeUs = v.causeUs ? std::min(v.causeUs, b.causeUs) : b.causeUs;
     v.timing.erodeUs += uint32_t(b.erodeUs);
     v.timing.gridUs += gridUs;
@@ -400,6 +401,7 @@ void SimulationStep::restale(ViewFrame& v) {
     if (v.rowsDone == 0)
         return;
     v.stale = unite(v.stale, {0, 0, v.frame.width(), std::min(v.rowsDone, v.frame.height())});
+    v.staleAll = true;
     v.causeUs = v.causeUs ? v.causeUs : std::max<uint64_t>(m_clock(), 1);
 }
 
@@ -556,6 +558,8 @@ void SimulationStep::renderStale(ViewFrame& v) {
         v.timing.renderUs += uint32_t(m_clock() - r0);
         v.fresh = unite(v.fresh, v.stale);
         v.stale = {};
+        v.staleBox = {};
+        v.staleAll = false;
         m_book.count(&ServerCounters::renders);
         return;
     }
@@ -565,13 +569,18 @@ void SimulationStep::renderStale(ViewFrame& v) {
             : v.stale.h;
     const PixelRect chunk{v.stale.x, v.stale.y, v.stale.w, rows};
     const uint64_t r0 = m_clock();
-    m_renderer->render(v.camera, chunk, v.frame, &v.cache);
+    if (v.staleAll)
+        m_renderer->render(v.camera, chunk, v.frame, &v.cache);
+    else
+        m_renderer->renderChanged(v.camera, chunk, v.frame, v.cache, v.staleBox);
     v.timing.renderUs += uint32_t(m_clock() - r0);
     v.fresh = unite(v.fresh, chunk);
     v.stale.y += rows;
     v.stale.h -= rows;
     if (v.stale.h <= 0) {
         v.stale = {};
+        v.staleBox = {};
+        v.staleAll = false;
         m_book.count(&ServerCounters::renders);
     }
 }

@@ -140,6 +140,10 @@ private:
         // Changed pixels (of the rows done) still to render, and those rendered since the
         // view's clients last got them; the oldest cause and the stage times they carry.
         PixelRect stale, fresh;
+        // Every voxel changed since the stale pixels were rendered (their re-render keeps the
+        // pixels whose cached hit is clear of it); restaled: render them all.
+        Box3i staleBox;
+        bool staleAll = false;
         uint64_t causeUs = 0;
         ImageTiming timing;
         // A full image coded apart (SimulationStep::copiedApart): the copy of the frame it is
