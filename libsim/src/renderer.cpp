@@ -100,6 +100,7 @@ struct Frame {
     bool marchEight; // skipping on and voxel offsets fit int32: marchEight may run (AVX2 build)
     // Renderer::renderChanged: a pixel whose cached first inside sample lies outside
     // [keepLo, keepHi] (sample coordinates; lane 3 -inf, +inf) keeps its frame values.
+    bool nearEye; // sample positions are within ~1e-3 voxel of the exact ray (see makeFrame)
     bool keep = false;
     v4sf keepLo, keepHi;
 };
@@ -182,9 +183,9 @@ Frame makeFrame(const Volume& volume, const Camera& camera, const RenderOptions&
     // Skipping relies on sample positions being within ~1e-3 voxel of the exact ray (float
     // rounding grows with the distance of the eye, in voxels): beyond that, march everything.
     glm::vec3 eyeVoxels = glm::abs(f.origin - glm::vec3(f.n) * 0.5f);
-    bool nearEnough = std::max({eyeVoxels.x, eyeVoxels.y, eyeVoxels.z}) < kMaxSkipEyeVoxels;
+    f.nearEye = std::max({eyeVoxels.x, eyeVoxels.y, eyeVoxels.z}) < kMaxSkipEyeVoxels;
     f.distance =
-        options.skipEmpty && !bricks.empty() && nearEnough ? bricks.distanceData() : nullptr;
+        options.skipEmpty && !bricks.empty() && f.nearEye ? bricks.distanceData() : nullptr;
     f.cells = bricks.cellData();
     for (int i = 0; i < 6; ++i)
         f.runs[i] = bricks.empty() ? nullptr : bricks.runData(i / 2, i % 2 != 0);
@@ -1659,6 +1660,7 @@ marchRows(const Frame& f, int x0, int y0, int bx, int bx1, int y, int rows,
         setUpRow(f, bx, n, py, skip, k0, in0, &pending[npending + row * n], spans[row], p,
                  live[row], kept[row]);
         keptCount += __builtin_popcount(kept[row]);
+        known -= __builtin_popcount(kept[row]); // kept lanes were known, and are not rendered
         for (int l = n; l < 8; ++l)
             p.dvx[l] = p.dvy[l] = p.dvz[l] = 0.0f, p.k[l] = 0, p.kEnd[l] = -1;
         p.lastK = v8si{} + INT_MIN;
@@ -1819,13 +1821,13 @@ __attribute__((always_inline)) inline void renderTileBody(const TileJob& job, in
                     const size_t at = resume ? local(x, y) : 0;
                     int32_t* slot = resume ? &resume[at] : &k;
                     uint8_t* wasInside = resume ? &inside[at] : &notInside;
-                    known += *slot != 0;
                     PendingHit& h = pending[npending];
                     h.r = pixelRay(f, x, y);
                     if (f.keep && *slot != 0 && keptPixel(f, h.r, *slot)) {
                         ++keptCount;
                         continue;
                     }
+                    known += *slot != 0;
                     const float skip = quarterSkip[(x >= midX) + 2 * (y >= midY)];
                     h.m = marchToSurface<Wide>(f, h.r, skip, *slot, *wasInside != 0);
                     *slot = h.m.kIn;
@@ -1919,10 +1921,11 @@ int Renderer::renderInto(const Camera& camera, const PixelRect& rect, Dbi& out, 
         return tilesX * tilesY;
     }
     Frame f = makeFrame(*m_volume, camera, m_options, m_bricks);
-    if (changed && cache) {
+    if (changed && cache && f.nearEye) {
         // The changed voxels' faces (sample coordinates: voxel v's centre at v) grown by what a
         // hit reads (kDirtyStencilVoxels) and one step, as the hit lies between the cached
-        // sample and the one before.
+        // sample and the one before. (A far eye's positions round by more than the stencil's
+        // half-voxel margin: it renders every pixel.)
         f.keep = true;
         const float grow =
             kDirtyStencilVoxels + f.dt * std::max({f.invSpacing.x, f.invSpacing.y, f.invSpacing.z});

@@ -265,6 +265,7 @@ TEST(SimulationStep, ChangesPiledUpWhileAViewRendersAreAllKeptInMind) {
     EXPECT_FALSE(rig.step.volume() == rig.original) << "the strokes should have cut";
     EXPECT_TRUE(compare(dbi, rig.step.render(cam)).identical());
     EXPECT_LT(caughtUp, 24) << "changes should have piled up";
+    EXPECT_GT(rig.book.counter(&ServerCounters::pixelsKept), 0u) << "re-renders kept pixels";
 }
 
 // A view nobody holds any more is handed whole to the freer, which frees it as its task goes, not

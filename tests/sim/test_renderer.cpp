@@ -1091,15 +1091,18 @@ TEST(HitCache, CachedDirtyRendersAreBitForBitUncachedFullRenders) {
 }
 
 // The server's re-render of a drilled view: renderChanged keeps the pixels whose cached hit lies
-// clear of the change, on the AVX2 and the baseline build, and the frame is still an uncached
+// clear of the change, on the AVX2 and the baseline build and with a step of 2 voxels (whose
+// margin the stencil's half voxel of slack does not cover), and the frame is still an uncached
 // full render bit for bit, stroke after stroke, from cameras looking at the drilling from every
 // side (a hit behind the change, beside it and in front of it).
 TEST(HitCache, ReRendersOfAChangeKeepPixelsClearOfItAndStayBitForBit) {
-    for (bool avx2 : {true, false}) {
-        SCOPED_TRACE(avx2 ? "AVX2 build" : "baseline build");
+    for (const RenderOptions& options :
+         {RenderOptions{}, RenderOptions{.avx2 = false}, RenderOptions{.stepVoxels = 2.0f}}) {
+        SCOPED_TRACE(::testing::Message()
+                     << "AVX2 " << options.avx2 << ", step " << options.stepVoxels);
         Volume skull = makeSkull(64);
         ThreadPool pool;
-        Renderer renderer(skull, &pool, RenderOptions{.avx2 = avx2});
+        Renderer renderer(skull, &pool, options);
         struct View {
             Camera camera;
             HitCache cache;
@@ -1126,10 +1129,11 @@ TEST(HitCache, ReRendersOfAChangeKeepPixelsClearOfItAndStayBitForBit) {
                     << "stroke " << stroke << ": " << compare(v.frame, expected).describe();
             }
         }
-        int64_t kept = 0;
+        int64_t kept = 0, resumed = 0;
         for (const View& v : views)
-            kept += v.cache.kept();
+            kept += v.cache.kept(), resumed += v.cache.resumed();
         EXPECT_GT(kept, area / 10) << "of " << area << " pixels re-rendered";
+        EXPECT_LE(kept + resumed, area) << "a kept pixel is not rendered, so not resumed";
         EXPECT_LT(kept, area) << "pixels at the change must be rendered";
     }
 }
@@ -1192,8 +1196,8 @@ TEST(HitCache, CutHolesRenderBitForBitThroughTheCache) {
 
 // Erosion at the iso-value's edge: voxels of 126..130 lowered by 1 or 2 at a time, so samples
 // cross 128 by the smallest steps there are. A sample that rose by an ulp where its corners went
-// down (a + t (b - a) can) would make the cached render disagree. (Re-rendered as the server
-// does, with renderChanged: its box here spans most of the volume.)
+// down (a + t (b - a) can) would make the cached render disagree. (renderChanged's box here spans
+// most of the volume.)
 TEST(HitCache, ErosionByTheSmallestStepsStaysBitForBit) {
     Volume v({40, 36, 32}, glm::vec3(0.8f));
     std::mt19937 rng(8);
@@ -1207,10 +1211,13 @@ TEST(HitCache, ErosionByTheSmallestStepsStaysBitForBit) {
     std::vector<Camera> cameras;
     for (const char* preset : {"top", "front", "left"})
         cameras.push_back(cameraPreset(preset, v, {96, 80}));
-    std::vector<HitCache> caches(cameras.size());
-    std::vector<Dbi> frames;
-    for (size_t i = 0; i < cameras.size(); ++i)
+    // Each view twice: re-rendered with render() and with renderChanged().
+    std::vector<HitCache> caches(cameras.size()), changedCaches(cameras.size());
+    std::vector<Dbi> frames, changedFrames;
+    for (size_t i = 0; i < cameras.size(); ++i) {
         frames.push_back(renderer.render(cameras[i], &caches[i]));
+        changedFrames.push_back(renderer.render(cameras[i], &changedCaches[i]));
+    }
     std::uniform_int_distribution<int> x(0, 39), y(0, 35), z(8, 23), by(1, 2);
     int changedPixels = 0;
     for (int round = 0; round < 12; ++round) {
@@ -1225,10 +1232,13 @@ TEST(HitCache, ErosionByTheSmallestStepsStaysBitForBit) {
         for (size_t i = 0; i < cameras.size(); ++i) {
             Dbi old = frames[i];
             PixelRect rect = dirtyScreenRect(cameras[i], v, changed);
-            renderer.renderChanged(cameras[i], rect, frames[i], caches[i], changed);
+            renderer.render(cameras[i], rect, frames[i], &caches[i]);
+            renderer.renderChanged(cameras[i], rect, changedFrames[i], changedCaches[i], changed);
             Dbi expected = renderer.render(cameras[i]);
             ASSERT_TRUE(frames[i] == expected)
                 << "round " << round << ": " << compare(frames[i], expected).describe();
+            ASSERT_TRUE(changedFrames[i] == expected)
+                << "round " << round << ": " << compare(changedFrames[i], expected).describe();
             changedPixels += int(compare(old, expected).differingPixels);
         }
     }

@@ -569,10 +569,13 @@ void SimulationStep::renderStale(ViewFrame& v) {
             : v.stale.h;
     const PixelRect chunk{v.stale.x, v.stale.y, v.stale.w, rows};
     const uint64_t r0 = m_clock();
+    const int64_t kept = v.cache.kept();
     if (v.staleAll)
         m_renderer->render(v.camera, chunk, v.frame, &v.cache);
     else
         m_renderer->renderChanged(v.camera, chunk, v.frame, v.cache, v.staleBox);
+    if (v.cache.kept() > kept)
+        m_book.count(&ServerCounters::pixelsKept, uint64_t(v.cache.kept() - kept));
     v.timing.renderUs += uint32_t(m_clock() - r0);
     v.fresh = unite(v.fresh, chunk);
     v.stale.y += rows;
