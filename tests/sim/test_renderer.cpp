@@ -97,6 +97,24 @@ Box3i drillSomewhere(Volume& volume, const Renderer& renderer, const Camera& cam
     return {};
 }
 
+// A view as the server keeps one: its frame and hit cache, first filled by a full render.
+struct CachedView {
+    Camera camera;
+    HitCache cache;
+    Dbi frame;
+};
+
+// The working, top, left and paper views of `volume` at 140 x 110.
+std::vector<CachedView> cachedViews(const Renderer& renderer, const Volume& volume) {
+    std::vector<CachedView> views;
+    for (const char* preset : {"working", "top", "left", "paper"}) {
+        CachedView v{cameraPreset(preset, volume, {140, 110}), {}, {}};
+        v.frame = renderer.render(v.camera, &v.cache);
+        views.push_back(std::move(v));
+    }
+    return views;
+}
+
 TEST(Renderer, DepthOnTheSphereIsTheAnalyticSurfaceDepth) {
     const int n = 64;
     Volume sphere = makeSphere(n);
@@ -1054,26 +1072,18 @@ TEST(HitCache, CachedDirtyRendersAreBitForBitUncachedFullRenders) {
     Volume skull = makeSkull(64);
     ThreadPool pool;
     Renderer renderer(skull, &pool);
-    struct View {
-        Camera camera;
-        HitCache cache;
-        Dbi frame;
-    };
-    std::vector<View> views;
-    for (const char* preset : {"working", "top", "left", "paper"}) {
-        View v{cameraPreset(preset, skull, {140, 110}), {}, {}};
-        v.frame = renderer.render(v.camera, &v.cache);
+    std::vector<CachedView> views = cachedViews(renderer, skull);
+    for (const CachedView& v : views) {
         EXPECT_TRUE(v.cache.validFor(renderer, v.camera));
-        EXPECT_EQ(v.frame, renderer.render(v.camera)) << preset;
-        views.push_back(std::move(v));
+        EXPECT_EQ(v.frame, renderer.render(v.camera)) << describe(v.camera);
     }
     std::mt19937 rng(21);
     int64_t resumedBefore = 0;
     for (int stroke = 0; stroke < 16; ++stroke) {
-        View& drilled = views[size_t(stroke) % views.size()];
+        CachedView& drilled = views[size_t(stroke) % views.size()];
         Box3i changed = drillSomewhere(skull, renderer, drilled.camera, rng);
         renderer.volumeChanged(changed);
-        for (View& v : views) {
+        for (CachedView& v : views) {
             SCOPED_TRACE(describe(v.camera));
             ASSERT_TRUE(v.cache.validFor(renderer, v.camera)) << "erosion keeps caches valid";
             PixelRect rect = dirtyScreenRect(v.camera, skull, changed);
@@ -1083,7 +1093,7 @@ TEST(HitCache, CachedDirtyRendersAreBitForBitUncachedFullRenders) {
                 << "stroke " << stroke << ": " << compare(v.frame, expected).describe();
         }
     }
-    for (View& v : views) {
+    for (CachedView& v : views) {
         resumedBefore += v.cache.resumed();
         ASSERT_EQ(renderer.render(v.camera, &v.cache), renderer.render(v.camera));
     }
@@ -1103,23 +1113,13 @@ TEST(HitCache, ReRendersOfAChangeKeepPixelsClearOfItAndStayBitForBit) {
         Volume skull = makeSkull(64);
         ThreadPool pool;
         Renderer renderer(skull, &pool, options);
-        struct View {
-            Camera camera;
-            HitCache cache;
-            Dbi frame;
-        };
-        std::vector<View> views;
-        for (const char* preset : {"working", "top", "left", "paper"}) {
-            View v{cameraPreset(preset, skull, {140, 110}), {}, {}};
-            v.frame = renderer.render(v.camera, &v.cache);
-            views.push_back(std::move(v));
-        }
+        std::vector<CachedView> views = cachedViews(renderer, skull);
         std::mt19937 rng(34);
         int64_t area = 0;
         for (int stroke = 0; stroke < 16; ++stroke) {
             Box3i changed = drillSomewhere(skull, renderer, views[size_t(stroke) % 4].camera, rng);
             renderer.volumeChanged(changed);
-            for (View& v : views) {
+            for (CachedView& v : views) {
                 SCOPED_TRACE(describe(v.camera));
                 PixelRect rect = dirtyScreenRect(v.camera, skull, changed);
                 area += rect.area();
@@ -1130,7 +1130,7 @@ TEST(HitCache, ReRendersOfAChangeKeepPixelsClearOfItAndStayBitForBit) {
             }
         }
         int64_t kept = 0, resumed = 0;
-        for (const View& v : views)
+        for (const CachedView& v : views)
             kept += v.cache.kept(), resumed += v.cache.resumed();
         EXPECT_GT(kept, area / 10) << "of " << area << " pixels re-rendered";
         EXPECT_LE(kept + resumed, area) << "a kept pixel is not rendered, so not resumed";
