@@ -4,6 +4,8 @@
 //   dirty rectangle 64^2 / 128^2 after a burr stroke  target 0.3 ms / 1 ms, without and with the
 //                                                     view's hit cache (the server's path), and
 //                                                     cached on one thread (ns_per_px)
+//   one drilling step's BB_screen, render() against   (no target: changed_us, render_us, kept)
+//   renderChanged(), 500^2 and 1920x1080
 //   BB_volume -> BB_screen projection                 (no target: it should be negligible)
 //   the paper's view: 128^3 at 330.2 mm, 60 deg, 500x500
 //   the update study's cut in that view: an N^3 box (10, 40, 80) cut out at the surface, its
