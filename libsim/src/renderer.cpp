@@ -9,7 +9,6 @@
 #include "libsim/renderer.h"
 
 #include "libsim/dirty_rect.h"
-
 #include "libsim/thread_pool.h"
 
 #include <algorithm>
@@ -98,9 +97,9 @@ struct Frame {
     glm::ivec3 nb;           // bricks per axis
     size_t nbxy;
     bool marchEight; // skipping on and voxel offsets fit int32: marchEight may run (AVX2 build)
+    bool nearEye;    // sample positions are within ~1e-3 voxel of the exact ray (see makeFrame)
     // Renderer::renderChanged: a pixel whose cached first inside sample lies outside
     // [keepLo, keepHi] (sample coordinates; lane 3 -inf, +inf) keeps its frame values.
-    bool nearEye; // sample positions are within ~1e-3 voxel of the exact ray (see makeFrame)
     bool keep = false;
     v4sf keepLo, keepHi;
 };

@@ -557,9 +557,7 @@ void SimulationStep::renderStale(ViewFrame& v) {
         m_renderer->render(v.camera, v.frame.bounds(), v.frame, &v.cache);
         v.timing.renderUs += uint32_t(m_clock() - r0);
         v.fresh = unite(v.fresh, v.stale);
-        v.stale = {};
-        v.staleBox = {};
-        v.staleAll = false;
+        v.staleRendered();
         m_book.count(&ServerCounters::renders);
         return;
     }
@@ -574,16 +572,14 @@ void SimulationStep::renderStale(ViewFrame& v) {
         m_renderer->render(v.camera, chunk, v.frame, &v.cache);
     else
         m_renderer->renderChanged(v.camera, chunk, v.frame, v.cache, v.staleBox);
+    v.timing.renderUs += uint32_t(m_clock() - r0);
     if (v.cache.kept() > kept)
         m_book.count(&ServerCounters::pixelsKept, uint64_t(v.cache.kept() - kept));
-    v.timing.renderUs += uint32_t(m_clock() - r0);
     v.fresh = unite(v.fresh, chunk);
     v.stale.y += rows;
     v.stale.h -= rows;
     if (v.stale.h <= 0) {
-        v.stale = {};
-        v.staleBox = {};
-        v.staleAll = false;
+        v.staleRendered();
         m_book.count(&ServerCounters::renders);
     }
 }

@@ -159,6 +159,11 @@ private:
         bool whole() const { return rowsDone >= frame.height(); }
         bool copying() const { return rowsCopied >= 0; }
         bool settled() const { return whole() && stale.empty() && !copying(); }
+        void staleRendered() {
+            stale = {};
+            staleBox = {};
+            staleAll = false;
+        }
     };
     // What one batch changed and who needs a full update.
     struct Batch {
