@@ -57,9 +57,9 @@ struct Candidate {
     GlInfo info;
 };
 
-// A 4.3 core context (compute shaders) on `display`, current for no surface; `why` says what
-// failed.
-bool tryDisplay(EGLDisplay display, Candidate& out, std::string& why) {
+// A core context on `display`, current for no surface: 4.3 (compute shaders) where the driver
+// has it and `compute` asks for it, else 3.3 (fragment shaders); `why` says what failed.
+bool tryDisplay(EGLDisplay display, bool compute, Candidate& out, std::string& why) {
     EGLint major = 0, minor = 0;
     if (!eglInitialize(display, &major, &minor)) {
         why = "eglInitialize failed";
@@ -83,19 +83,30 @@ bool tryDisplay(EGLDisplay display, Candidate& out, std::string& why) {
             return false;
         }
     }
-    const EGLint attributes[] = {EGL_CONTEXT_MAJOR_VERSION,
-                                 4,
-                                 EGL_CONTEXT_MINOR_VERSION,
-                                 3,
-                                 EGL_CONTEXT_OPENGL_PROFILE_MASK,
-                                 EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
-                                 EGL_NONE};
-    EGLContext context = eglCreateContext(display, config, EGL_NO_CONTEXT, attributes);
-    if (context == EGL_NO_CONTEXT ||
-        !eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, context)) {
-        why = "no OpenGL 4.3 core context";
+    EGLContext context = EGL_NO_CONTEXT;
+    bool gotCompute = false;
+    for (const EGLint version : {43, 33}) {
+        if (version == 43 && !compute)
+            continue;
+        const EGLint attributes[] = {EGL_CONTEXT_MAJOR_VERSION,
+                                     version / 10,
+                                     EGL_CONTEXT_MINOR_VERSION,
+                                     version % 10,
+                                     EGL_CONTEXT_OPENGL_PROFILE_MASK,
+                                     EGL_CONTEXT_OPENGL_CORE_PROFILE_BIT,
+                                     EGL_NONE};
+        context = eglCreateContext(display, config, EGL_NO_CONTEXT, attributes);
+        if (context != EGL_NO_CONTEXT &&
+            eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, context)) {
+            gotCompute = version == 43;
+            break;
+        }
         if (context != EGL_NO_CONTEXT)
             eglDestroyContext(display, context);
+        context = EGL_NO_CONTEXT;
+    }
+    if (context == EGL_NO_CONTEXT) {
+        why = "no OpenGL 3.3 core context";
         eglTerminate(display);
         return false;
     }
@@ -103,7 +114,7 @@ bool tryDisplay(EGLDisplay display, Candidate& out, std::string& why) {
         const GLubyte* s = glGetString(e);
         return s ? std::string(reinterpret_cast<const char*>(s)) : std::string("?");
     };
-    out = {display, context, {str(GL_RENDERER), str(GL_VERSION), false}};
+    out = {display, context, {str(GL_RENDERER), str(GL_VERSION), false, gotCompute}};
     out.info.software = isSoftwareRenderer(out.info.renderer);
     eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
     return true;
@@ -125,19 +136,19 @@ bool isSoftwareRenderer(const std::string& glRenderer) {
     return false;
 }
 
-std::unique_ptr<EglContext> EglContext::open() {
+std::unique_ptr<EglContext> EglContext::open(bool compute) {
     std::vector<Candidate> found;
     std::string why = "no EGL platform without a display (EGL_EXT_platform_device or "
                       "EGL_MESA_platform_surfaceless; install libegl1 and a GL driver)";
     for (EGLDisplay d : headlessDisplays()) {
         Candidate c;
-        if (tryDisplay(d, c, why))
+        if (tryDisplay(d, compute, c, why))
             found.push_back(c);
         if (!found.empty() && !found.back().info.software)
             break;
     }
     if (found.empty())
-        throw Error("gpu: no OpenGL 4.3 core context through EGL: " + why);
+        throw Error("gpu: no OpenGL 3.3 core context through EGL: " + why);
     // A hardware renderer if one answered (the last tried), else the first.
     auto best = std::find_if(found.begin(), found.end(), [](auto& c) { return !c.info.software; });
     if (best == found.end())
@@ -169,9 +180,10 @@ std::shared_ptr<EglContext> EglContext::shared(std::string* why) {
     return *context;
 }
 
+// The display stays initialised: EGL gives one handle a device, so terminating it would end the
+// process's other contexts on it.
 EglContext::~EglContext() {
     eglDestroyContext(m_display, m_context);
-    eglTerminate(m_display);
 }
 
 EglContext::Current::Current(const EglContext& context)

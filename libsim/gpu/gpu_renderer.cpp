@@ -11,7 +11,11 @@ namespace trephine::gpu {
 GpuRenderer::GpuRenderer(const Volume& volume, std::shared_ptr<EglContext> context)
     : m_volume(&volume), m_context(std::move(context)) {
     EglContext::Current current(*m_context);
-    m_caster = std::make_unique<VolumeRaycaster>(VolumeRaycaster::Pipeline::Compute);
+    // The same ray either way (docs/rendering.md): a compute dispatch where the driver has 4.3,
+    // fragments through a framebuffer where it has 3.3 only.
+    m_caster = std::make_unique<VolumeRaycaster>(m_context->info().compute
+                                                     ? VolumeRaycaster::Pipeline::Compute
+                                                     : VolumeRaycaster::Pipeline::Fragment);
     try {
         m_caster->upload(volume);
     } catch (...) {
@@ -56,7 +60,10 @@ Dbi GpuRenderer::render(const Camera& camera) {
 }
 
 std::string GpuRenderer::describe() const {
-    return "GPU: " + m_context->info().renderer;
+    return "GPU: " + m_context->info().renderer +
+           (m_caster->pipeline() == VolumeRaycaster::Pipeline::Compute
+                ? ""
+                : " (fragment shaders: no OpenGL 4.3)");
 }
 
 RendererChoice parseRendererChoice(const std::string& name) {
@@ -91,7 +98,8 @@ std::optional<DbiRendererFactory> chooseRenderer(RendererChoice choice, std::str
             ", a software renderer)");
         return std::nullopt;
     }
-    say("the GPU: " + context->info().renderer + " (OpenGL " + context->info().version + ")");
+    say("the GPU: " + context->info().renderer + " (OpenGL " + context->info().version +
+        (context->info().compute ? ")" : "; fragment shaders: no 4.3)"));
     return DbiRendererFactory([context](const Volume& volume, ThreadPool*) {
         return std::unique_ptr<DbiRenderer>(new GpuRenderer(volume, context));
     });

@@ -16,6 +16,7 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <memory>
 #include <random>
 #include <thread>
 
@@ -137,16 +138,56 @@ TEST(GlRendererName, SoftwareRasterisersAreKnownByName) {
     EXPECT_FALSE(gpu::isSoftwareRenderer("AMD Radeon RX 7900 XTX (radeonsi, navi31, LLVM 15.0.7)"));
 }
 
-// Which GL answered (scripts/gpu-check prints it): an OpenGL of at least 4.3 (compute shaders),
-// named.
+// Which GL answered (scripts/gpu-check prints it): an OpenGL of at least 3.3, and 4.3 (compute
+// shaders) when the context says so, named.
 TEST_F(GpuRendererTest, EglContextSaysWhichRendererAnswered) {
-    std::printf("  GL renderer: %s, OpenGL %s%s\n", egl->info().renderer.c_str(),
-                egl->info().version.c_str(), egl->info().software ? " (software)" : "");
+    std::printf("  GL renderer: %s, OpenGL %s, %s shaders%s\n", egl->info().renderer.c_str(),
+                egl->info().version.c_str(), egl->info().compute ? "compute" : "fragment",
+                egl->info().software ? " (software)" : "");
     EXPECT_FALSE(egl->info().renderer.empty());
     int major = 0, minor = 0;
     ASSERT_EQ(std::sscanf(egl->info().version.c_str(), "%d.%d", &major, &minor), 2)
         << egl->info().version;
-    EXPECT_GE(major * 10 + minor, 43) << egl->info().version;
+    EXPECT_GE(major * 10 + minor, egl->info().compute ? 43 : 33) << egl->info().version;
+}
+
+// A driver without OpenGL 4.3 still renders the server's pictures on its GPU: on a 3.3 context,
+// as such a driver gives, the renderer casts the same ray in fragments, so its frames, its
+// rectangles and its eroded boxes are the compute renderer's pixels bit for bit. The context
+// goes at the end and the process's own one stays.
+TEST_F(GpuRendererTest, WithoutOpenGl43TheRendererCastsInFragments) {
+    Volume skull = makeSkull(64);
+    gpu::GpuRenderer shared(skull, egl);
+    // The working view is placed on the bone's surface: placed before the cut.
+    const Camera views[] = {cameraPreset("working", skull, {200, 160}),
+                            cameraPreset("paper", skull, {200, 160})};
+    const Camera& paper = views[1];
+    Dbi last;
+    {
+        const std::shared_ptr<gpu::EglContext> gl33 = gpu::EglContext::open(false);
+        EXPECT_FALSE(gl33->info().compute);
+        gpu::GpuRenderer fragments(skull, gl33);
+        EXPECT_NE(fragments.describe().find("fragment shaders"), std::string::npos)
+            << fragments.describe();
+        if (egl->info().compute) {
+            EXPECT_EQ(shared.describe().find("fragment"), std::string::npos) << shared.describe();
+        }
+        auto expectTheSame = [&](unsigned seed) {
+            for (const Camera& cam : views) {
+                const DbiDiff d = compare(fragments.render(cam), shared.render(cam));
+                EXPECT_EQ(d.differingPixels, 0) << d.describe();
+                expectRectanglesAreTheFullFrame(fragments, cam, seed);
+            }
+        };
+        expectTheSame(5);
+        const Box3i hole{{20, 20, 40}, {44, 44, 64}};
+        skull.fill(hole, 0, Material::Air);
+        fragments.volumeChanged(hole);
+        shared.volumeChanged(hole);
+        expectTheSame(13);
+        last = fragments.render(paper);
+    }
+    EXPECT_TRUE(shared.render(paper) == last) << "the process's context after the other went";
 }
 
 // The server's compute pipeline and the window's fragment one run the same ray: on the same

@@ -1,6 +1,7 @@
-// An OpenGL 4.3 core context through EGL with no display and no window: a headless server
-// renders with compute shaders into buffers. EGL's devices are tried first (a GPU's driver),
-// then Mesa's surfaceless platform (llvmpipe where there is no GPU).
+// An OpenGL core context through EGL with no display and no window: a headless server renders
+// with compute shaders into buffers where the driver has OpenGL 4.3, else with fragment shaders
+// (3.3). EGL's devices are tried first (a GPU's driver), then Mesa's surfaceless platform
+// (llvmpipe where there is no GPU).
 #pragma once
 
 #include <memory>
@@ -14,6 +15,7 @@ namespace trephine::gpu {
 struct GlInfo {
     std::string renderer, version;
     bool software = false;
+    bool compute = false; // a 4.3 context (compute shaders); else 3.3, fragment shaders only
 };
 
 // True for the GL_RENDERER strings of software rasterisers.
@@ -21,9 +23,11 @@ bool isSoftwareRenderer(const std::string& glRenderer);
 
 class EglContext {
 public:
-    // The first context a hardware renderer gives, else the first any gives. Throws
-    // trephine::Error saying what is missing when none does (no libEGL driver, no GL 4.3 core).
-    static std::unique_ptr<EglContext> open();
+    // The first context a hardware renderer gives, else the first any gives: 4.3 core where the
+    // driver has it, else 3.3 core; with `compute` false 3.3 only, as a driver without 4.3
+    // answers. Throws trephine::Error saying what is missing when none does (no libEGL driver,
+    // no GL 3.3 core).
+    static std::unique_ptr<EglContext> open(bool compute = true);
     // The process's one context, opened on first call and kept; null (with `why`, which may be
     // null) when open() failed.
     static std::shared_ptr<EglContext> shared(std::string* why);

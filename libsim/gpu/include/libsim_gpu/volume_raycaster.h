@@ -46,6 +46,7 @@ public:
     // differences that read a changed voxel). `volume` must have the uploaded dimensions.
     VolumeUpdateStats updateBox(const Volume& volume, const Box3i& box);
     bool empty() const { return m_dims.x == 0; }
+    Pipeline pipeline() const { return m_pipeline; }
     glm::ivec3 dims() const { return m_dims; }
 
     // Ray casts the view into the currently bound framebuffer over the current viewport, which
