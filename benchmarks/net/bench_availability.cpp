@@ -6,10 +6,13 @@
 // trainee's site (every change is rendered for it too), (f) a peer switches design 100 times a
 // second, (g) a peer leaves and joins 8.8 times a second, (h) an authenticated trainee sends
 // sealed messages with a byte flipped, cut short or replayed, 2000 a second (and authenticates
-// again each time it is sent away), (i) an instructor asks for a new code 200 times a second.
-// Each prints beside its target: join
-// <= 2 s; p99 <= 2x the figure without hostile peers (run (a) first, in the same process). The
-// full-screen runs: a lone 1920 x 1080 trainee, and four at once, beside a 500^2 one. The
+// again each time it is sent away), (i) an instructor asks for a new code 200 times a second,
+// and (j) nobody again, after the attacks: the control, whose ratio to (a) is this machine's own
+// noise, what any verdict of the run can be trusted to. Each prints beside its target: join
+// <= 2 s; p99 <= 2x the figure without hostile peers (run (a) first, in the same process); and
+// where the CPU went meanwhile (victim_cpu_s, server_cpu_s, attackers_cpu_s: here the attackers
+// share the machine's cores with the server and the victim, as across a network they would not).
+// The full-screen runs: a lone 1920 x 1080 trainee, and four at once, beside a 500^2 one. The
 // memory run holds 15 peers asking for distinct 2048^2 views and prints the process's peak
 // resident memory growth beside the bound the server states. The classroom run: 30 participants
 // join behind a guesser at their address (join times beside 5 s, guesses beside the bound).
@@ -35,11 +38,17 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdlib>
+#include <filesystem>
 #include <fstream>
+#include <map>
 #include <memory>
 #include <optional>
+#include <sstream>
 #include <string>
 #include <thread>
+
+#include <sys/syscall.h>
+#include <unistd.h>
 
 using namespace trephine;
 using namespace trephine::net;
@@ -407,10 +416,55 @@ enum class Hostile {
     Switching,
     Churning,
     Mutating,
-    NewCodes
+    NewCodes,
+    NoneAgain // the control: (a) run again once the attacks are over
 };
 
 double g_quietP99Us = 0; // the figure without hostile peers, from the first run
+
+// CPU seconds each thread of the process has used: thread id -> (name, seconds).
+using ThreadTimes = std::map<int, std::pair<std::string, double>>;
+
+ThreadTimes threadTimes() {
+    ThreadTimes out;
+    const double tick = double(sysconf(_SC_CLK_TCK));
+    std::error_code ec;
+    for (const auto& task : std::filesystem::directory_iterator("/proc/self/task", ec)) {
+        std::ifstream comm(task.path() / "comm"), stat(task.path() / "stat");
+        std::string name, line;
+        std::getline(comm, name);
+        std::getline(stat, line);
+        // After the name's closing parenthesis: fields 3 on; utime and stime are 14 and 15.
+        std::istringstream fields(line.substr(std::min(line.rfind(')') + 2, line.size())));
+        std::string field;
+        double user = 0, system = 0;
+        for (int i = 3; i <= 15 && fields >> field; ++i)
+            if (i >= 14)
+                (i == 14 ? user : system) = std::atof(field.c_str()) / tick;
+        out[std::atoi(task.path().filename().c_str())] = {name, user + system};
+    }
+    return out;
+}
+
+// Where the machine's CPU went since `before`: the victim trainee (the calling thread), the
+// server (its threads are named trephine-...) and everything else, the attackers, which share
+// this machine with both here and would not on a network.
+struct CpuSplit {
+    double victim = 0, server = 0, attackers = 0;
+};
+
+CpuSplit cpuSince(const ThreadTimes& before) {
+    CpuSplit split;
+    const int self = int(syscall(SYS_gettid));
+    for (const auto& [tid, now] : threadTimes()) {
+        const auto was = before.find(tid);
+        const double used = now.second - (was != before.end() ? was->second.second : 0.0);
+        (tid == self                            ? split.victim
+         : now.first.rfind("trephine-", 0) == 0 ? split.server
+                                                : split.attackers) += used;
+    }
+    return split;
+}
 
 void underAttack(benchmark::State& state, Hostile kind) {
     const Volume skull = makeSkull(80);
@@ -483,7 +537,12 @@ void underAttack(benchmark::State& state, Hostile kind) {
                (coder && !coder->welcomed()))
             std::this_thread::sleep_for(std::chrono::milliseconds(5));
         std::this_thread::sleep_for(std::chrono::milliseconds(500)); // the attack under way
+        const ThreadTimes before = threadTimes();
         f = traineeRun(server, skull, kWindow, kWindow, 0, "trainee", sealed ? kTraineeCode : "");
+        const CpuSplit cpu = cpuSince(before);
+        state.counters["victim_cpu_s"] = cpu.victim;
+        state.counters["server_cpu_s"] = cpu.server;
+        state.counters["attackers_cpu_s"] = cpu.attackers;
         const nlohmann::json a = nlohmann::json::parse(server.reportJson()).at("availability");
         for (const char* k :
              {"connects_rate_limited", "connects_address_busy", "connects_pool_full",
@@ -745,6 +804,7 @@ BENCHMARK_CAPTURE(underAttack, design_switches, Hostile::Switching)->Iterations(
 BENCHMARK_CAPTURE(underAttack, join_leave_churn, Hostile::Churning)->Iterations(1)->UseRealTime();
 BENCHMARK_CAPTURE(underAttack, mutated_sealed, Hostile::Mutating)->Iterations(1)->UseRealTime();
 BENCHMARK_CAPTURE(underAttack, new_codes, Hostile::NewCodes)->Iterations(1)->UseRealTime();
+BENCHMARK_CAPTURE(underAttack, quiet_again, Hostile::NoneAgain)->Iterations(1)->UseRealTime();
 BENCHMARK(fullScreenTrainees)->Arg(0)->Arg(1)->Arg(4)->Iterations(1)->UseRealTime();
 BENCHMARK(classroomBehindAGuesser)->Iterations(1)->UseRealTime()->Unit(benchmark::kSecond);
 BENCHMARK(memoryBound)->Iterations(1)->UseRealTime()->Unit(benchmark::kMillisecond);
