@@ -281,9 +281,10 @@ void addServerMode(CLI::App& root, int& exitCode) {
            "the instructors' marks and the scene beside it (FILE.marks, FILE.scene, read back by "
            "--volume FILE)")
         ->check(outputFile());
-    sub->add_option("--renderer", o->renderer,
-                    "Render views on the cpu, the gpu (OpenGL 4.3 through EGL, no display needed; "
-                    "llvmpipe will do) or auto (the GPU when EGL finds a hardware one)")
+    sub->add_option(
+           "--renderer", o->renderer,
+           "Render views on the cpu, the gpu (OpenGL 4.3, or 3.3, through EGL, no display needed; "
+           "llvmpipe will do) or auto (the GPU when EGL finds a hardware one)")
         ->check(CLI::IsMember({"cpu", "gpu", "auto"}))
         ->capture_default_str();
     sub->add_option("--render-threads", o->renderThreads, "Render workers (0: all cores)")

@@ -83,7 +83,7 @@ void gpuRender(benchmark::State& state, int n, int width, int height, int rectSi
     if (rows > 0)
         state.counters["bands"] = double((height + rows - 1) / rows);
     report(state, total, targetMs, rect);
-    state.SetLabel(egl->info().renderer);
+    state.SetLabel(renderer.describe());
 }
 
 void BM_GpuFrameSkull512At1080p(benchmark::State& state) {
@@ -107,6 +107,10 @@ void BM_GpuFrameSkull512At1080pParts(benchmark::State& state) {
     const auto egl = context(state);
     if (!egl)
         return;
+    if (state.range(0) && !egl->info().compute) {
+        state.SkipWithError(("OpenGL " + egl->info().version + ": no compute shaders").c_str());
+        return;
+    }
     const Volume& volume = skull(512);
     gpu::EglContext::Current current(*egl);
     gpu::VolumeRaycaster caster(state.range(0) ? gpu::VolumeRaycaster::Pipeline::Compute

@@ -106,8 +106,7 @@ bool tryDisplay(EGLDisplay display, bool compute, Candidate& out, std::string& w
         context = EGL_NO_CONTEXT;
     }
     if (context == EGL_NO_CONTEXT) {
-        why = "no OpenGL 3.3 core context";
-        eglTerminate(display);
+        why = "no OpenGL 3.3 core context"; // the display stays: another context may live on it
         return false;
     }
     auto str = [](GLenum e) {
@@ -118,11 +117,6 @@ bool tryDisplay(EGLDisplay display, bool compute, Candidate& out, std::string& w
     out.info.software = isSoftwareRenderer(out.info.renderer);
     eglMakeCurrent(display, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
     return true;
-}
-
-void close(const Candidate& c) {
-    eglDestroyContext(c.display, c.context);
-    eglTerminate(c.display);
 }
 
 } // namespace
@@ -153,11 +147,10 @@ std::unique_ptr<EglContext> EglContext::open(bool compute) {
     auto best = std::find_if(found.begin(), found.end(), [](auto& c) { return !c.info.software; });
     if (best == found.end())
         best = found.begin();
-    // The others go; a display shared with the chosen one stays initialised.
+    // The others' contexts go; their displays stay initialised, as ~EglContext leaves its own:
+    // another context of the process may live on one.
     for (auto it = found.begin(); it != found.end(); ++it)
-        if (it != best && it->display != best->display)
-            close(*it);
-        else if (it != best)
+        if (it != best)
             eglDestroyContext(it->display, it->context);
     return std::unique_ptr<EglContext>(new EglContext(best->display, best->context, best->info));
 }

@@ -2,6 +2,9 @@
 
 #include "libsim/error.h"
 
+#include <fmt/format.h>
+
+#include <algorithm>
 #include <initializer_list>
 #include <string>
 
@@ -22,7 +25,7 @@ GLuint compile(GLenum type, const char* src, const char* what) {
     GLint ok = 0;
     glGetShaderiv(s, GL_COMPILE_STATUS, &ok);
     if (!ok) {
-        char log[2048];
+        char log[2048] = {}; // a shader GL refused (0) gets no log written
         glGetShaderInfoLog(s, sizeof log, nullptr, log);
         glDeleteShader(s);
         throw Error(std::string("gl: ") + what + " shader does not compile: " + log);
@@ -41,7 +44,7 @@ GLuint link(std::initializer_list<GLuint> shaders, const char* what) {
     GLint ok = 0;
     glGetProgramiv(p, GL_LINK_STATUS, &ok);
     if (!ok) {
-        char log[2048];
+        char log[2048] = {};
         glGetProgramInfoLog(p, sizeof log, nullptr, log);
         glDeleteProgram(p);
         throw Error(std::string("gl: ") + what + " program does not link: " + log);
@@ -69,6 +72,18 @@ GLuint linkComputeProgram(const char* source, const char* what) {
 
 void makeColorDepthTarget(GLuint& fbo, GLuint& color, GLuint& depth, int width, int height,
                           const char* what) {
+    // A size over the GL's limits, or memory it has not, leaves the old attachments in place and
+    // the framebuffer complete: refused here, with one line, rather than read back undefined.
+    GLint most = 0, mostRenderbuffer = 0;
+    glGetIntegerv(GL_MAX_TEXTURE_SIZE, &most);
+    glGetIntegerv(GL_MAX_RENDERBUFFER_SIZE, &mostRenderbuffer);
+    most = std::min(most, mostRenderbuffer);
+    if (width > most || height > most)
+        throw Error(fmt::format("gl: the {} framebuffer's {} x {} pixels are over this OpenGL's "
+                                "{} a side",
+                                what, width, height, most));
+    while (glGetError() != GL_NO_ERROR) {
+    } // errors of earlier, unrelated calls are not this target's
     if (!color)
         glGenTextures(1, &color);
     glBindTexture(GL_TEXTURE_2D, color);
@@ -88,6 +103,11 @@ void makeColorDepthTarget(GLuint& fbo, GLuint& color, GLuint& depth, int width, 
     glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, depth);
     const bool complete = glCheckFramebufferStatus(GL_FRAMEBUFFER) == GL_FRAMEBUFFER_COMPLETE;
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    if (const GLenum e = glGetError(); e != GL_NO_ERROR)
+        throw Error(fmt::format("gl: OpenGL refused the {} framebuffer's {} x {} pixels (error "
+                                "0x{:04x}{})",
+                                what, width, height, unsigned(e),
+                                e == GL_OUT_OF_MEMORY ? ": out of memory" : ""));
     if (!complete)
         throw Error(std::string("gl: the ") + what + " framebuffer is incomplete");
 }

@@ -513,10 +513,11 @@ void VolumeRaycaster::draw(const Camera& camera) {
 void VolumeRaycaster::ensureTarget(int width, int height) {
     if (m_fbo && width <= m_fboWidth && height <= m_fboHeight)
         return;
-    m_fboWidth = std::max(width, m_fboWidth);
-    m_fboHeight = std::max(height, m_fboHeight);
-    makeColorDepthTarget(m_fbo, m_fboColor, m_fboDepth, m_fboWidth, m_fboHeight,
-                         "volume ray caster's");
+    const int w = std::max(width, m_fboWidth), h = std::max(height, m_fboHeight);
+    m_fboWidth = m_fboHeight = 0; // until the new target is made: a refused one is not kept
+    makeColorDepthTarget(m_fbo, m_fboColor, m_fboDepth, w, h, "volume ray caster's");
+    m_fboWidth = w;
+    m_fboHeight = h;
 }
 
 // The compute pipeline's buffers hold exactly the rectangle: on an H200, reading a 1920 x 4
@@ -556,9 +557,10 @@ void VolumeRaycaster::render(const Camera& camera) {
 // rectangle. The scissor keeps a larger target's other pixels unrendered.
 void VolumeRaycaster::render(const Camera& camera, const PixelRect& rect) {
     const PixelRect r = intersect(rect, {0, 0, camera.width, camera.height});
-    // Nothing uploaded, nothing cast: readBack then writes nothing rather than an older render.
-    m_rendered = empty() ? PixelRect{} : r;
-    if (m_rendered.empty())
+    // Nothing uploaded, nothing cast (or a cast GL refused): readBack then writes nothing rather
+    // than an older render.
+    m_rendered = {};
+    if (empty() || r.empty())
         return;
     if (m_pipeline == Pipeline::Compute) {
         GLint program = 0, active = GL_TEXTURE0, storage = 0;
@@ -580,8 +582,15 @@ void VolumeRaycaster::render(const Camera& camera, const PixelRect& rect) {
         glBindBuffer(GL_SHADER_STORAGE_BUFFER, GLuint(storage));
         glActiveTexture(GLenum(active));
         glUseProgram(GLuint(program));
+        m_rendered = r;
         return;
     }
+    // The viewport is the whole window's: a window over the GL's viewport would be clipped.
+    GLint viewportMost[2] = {};
+    glGetIntegerv(GL_MAX_VIEWPORT_DIMS, viewportMost);
+    if (camera.width > viewportMost[0] || camera.height > viewportMost[1])
+        throw Error(fmt::format("gpu: a {} x {} view is over this OpenGL's viewport ({} x {})",
+                                camera.width, camera.height, viewportMost[0], viewportMost[1]));
     ensureTarget(r.w, r.h);
     glBindFramebuffer(GL_FRAMEBUFFER, m_fbo);
     glViewport(-r.x, -r.y, camera.width, camera.height);
@@ -590,6 +599,7 @@ void VolumeRaycaster::render(const Camera& camera, const PixelRect& rect) {
     draw(camera);
     glDisable(GL_SCISSOR_TEST);
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    m_rendered = r;
 }
 
 Dbi VolumeRaycaster::readBack() {

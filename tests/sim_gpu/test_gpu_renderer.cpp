@@ -1,6 +1,7 @@
 // The server's GPU renderer through EGL with no display (Mesa's llvmpipe here): a rectangle is
 // its full frame bit for bit, it agrees with the CPU Renderer within VolumeView's tolerance on
 // skull:128 views, and after an erosion the uploaded box shows it.
+#include "libsim_gpu/gl.h"
 #include "libsim_gpu/gpu_renderer.h"
 #include "libsim_gpu/volume_raycaster.h"
 
@@ -186,6 +187,21 @@ TEST_F(GpuRendererTest, WithoutOpenGl43TheRendererCastsInFragments) {
         shared.volumeChanged(hole);
         expectTheSame(13);
         last = fragments.render(paper);
+        // A view wider than the GL's viewport is refused in one line, not read back undefined.
+        GLint most[2] = {};
+        {
+            gpu::EglContext::Current current(*gl33);
+            glGetIntegerv(GL_MAX_VIEWPORT_DIMS, most);
+        }
+        const Camera wide = cameraPreset("paper", skull, {most[0] + 1, 1});
+        try {
+            Dbi frame(wide.width, wide.height);
+            fragments.render(wide, frame.bounds(), frame, nullptr);
+            FAIL() << "a view wider than the viewport's " << most[0] << " pixels was rendered";
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find("viewport"), std::string::npos) << e.what();
+        }
+        EXPECT_TRUE(fragments.render(paper) == last) << "after the refusal";
     }
     EXPECT_TRUE(shared.render(paper) == last) << "the process's context after the other went";
 }
@@ -194,6 +210,8 @@ TEST_F(GpuRendererTest, WithoutOpenGl43TheRendererCastsInFragments) {
 // views and rectangles (the frame, a rectangle inside, a band of rows as the server's step
 // renders, and one of the band's area but another shape) they give the same pixels.
 TEST_F(GpuRendererTest, TheComputeAndFragmentPipelinesCastTheSameRays) {
+    if (!egl->info().compute)
+        GTEST_SKIP() << "OpenGL " << egl->info().version << ": no compute shaders";
     const Volume skull = makeSkull(64);
     gpu::EglContext::Current current(*egl);
     gpu::VolumeRaycaster compute(gpu::VolumeRaycaster::Pipeline::Compute);
