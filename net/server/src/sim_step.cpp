@@ -60,7 +60,7 @@ AssessmentConfig withSweep(const StepConfig& c) {
 SimulationStep::SimulationStep(Volume volume, const StepConfig& config, Outbox& outbox,
                                ReportBook& book, ServerClock clock)
     : m_config(config), m_outbox(outbox), m_book(book), m_clock(std::move(clock)),
-      m_volume(normaliseAir(std::move(volume))), m_pool(config.renderThreads, "trephine-render"),
+      m_volume(normaliseAir(std::move(volume))), m_pool(config.renderThreads, "trephine-cast"),
       m_renderer(makeRenderer(config, m_volume, m_pool, book, m_rendererReplaced)),
       m_assessment(m_volume, withSweep(config), book, &m_pool),
       m_share(config.workClock ? config.workClock : ServerClock(steadyNowUs)) {}
