@@ -70,6 +70,19 @@ GLuint linkComputeProgram(const char* source, const char* what) {
     return link({compile(GL_COMPUTE_SHADER, source, what)}, what);
 }
 
+void clearGlErrors() {
+    while (glGetError() != GL_NO_ERROR) {
+    }
+}
+
+void throwIfGlRefused(const std::string& what) {
+    if (const GLenum e = glGetError(); e != GL_NO_ERROR) {
+        clearGlErrors(); // GL may hold more than one
+        throw Error(fmt::format("gpu: OpenGL refused {} (error 0x{:04x}{})", what, unsigned(e),
+                                e == GL_OUT_OF_MEMORY ? ": out of memory" : ""));
+    }
+}
+
 void makeColorDepthTarget(GLuint& fbo, GLuint& color, GLuint& depth, int width, int height,
                           const char* what) {
     // A size over the GL's limits, or memory it has not, leaves the old attachments in place and
@@ -82,8 +95,7 @@ void makeColorDepthTarget(GLuint& fbo, GLuint& color, GLuint& depth, int width, 
         throw Error(fmt::format("gl: the {} framebuffer's {} x {} pixels are over this OpenGL's "
                                 "{} a side",
                                 what, width, height, most));
-    while (glGetError() != GL_NO_ERROR) {
-    } // errors of earlier, unrelated calls are not this target's
+    clearGlErrors();
     if (!color)
         glGenTextures(1, &color);
     glBindTexture(GL_TEXTURE_2D, color);
@@ -103,11 +115,7 @@ void makeColorDepthTarget(GLuint& fbo, GLuint& color, GLuint& depth, int width, 
     glFramebufferRenderbuffer(GL_FRAMEBUFFER, GL_DEPTH_ATTACHMENT, GL_RENDERBUFFER, depth);
     const bool complete = glCheckFramebufferStatus(GL_FRAMEBUFFER) == GL_FRAMEBUFFER_COMPLETE;
     glBindFramebuffer(GL_FRAMEBUFFER, 0);
-    if (const GLenum e = glGetError(); e != GL_NO_ERROR)
-        throw Error(fmt::format("gl: OpenGL refused the {} framebuffer's {} x {} pixels (error "
-                                "0x{:04x}{})",
-                                what, width, height, unsigned(e),
-                                e == GL_OUT_OF_MEMORY ? ": out of memory" : ""));
+    throwIfGlRefused(fmt::format("the {} framebuffer's {} x {} pixels", what, width, height));
     if (!complete)
         throw Error(std::string("gl: the ") + what + " framebuffer is incomplete");
 }

@@ -317,8 +317,7 @@ void VolumeRaycaster::upload(const Volume& volume) {
         throw Error("gpu: the volume (" + std::to_string(d.x) + " x " + std::to_string(d.y) +
                     " x " + std::to_string(d.z) + ") is too large for this OpenGL's 3D textures (" +
                     std::to_string(maxSize) + " texels an axis, less 2 for the gradients' apron)");
-    while (glGetError() != GL_NO_ERROR) {
-    } // errors of earlier, unrelated calls are not this upload's
+    clearGlErrors();
     m_dims = volume.dims();
     m_spacing = volume.spacing();
     auto make = [&](GLuint& tex, GLenum internal, glm::ivec3 size, GLenum format, GLenum type,
@@ -341,10 +340,11 @@ void VolumeRaycaster::upload(const Volume& volume) {
     glBindTexture(GL_TEXTURE_3D, 0);
     // Out of memory (256^3 takes ~140 MB of textures) or a size the driver refuses: say so
     // rather than draw a blank or flat-shaded volume.
-    if (const GLenum e = glGetError(); e != GL_NO_ERROR) {
+    try {
+        throwIfGlRefused("the volume's textures");
+    } catch (...) {
         m_dims = glm::ivec3(0);
-        throw Error(fmt::format("gpu: OpenGL refused the volume's textures (error 0x{:04x}{})",
-                                unsigned(e), e == GL_OUT_OF_MEMORY ? ": out of memory" : ""));
+        throw;
     }
 }
 
@@ -532,8 +532,7 @@ void VolumeRaycaster::sizeOutput(int64_t pixels) {
         throw Error(fmt::format("gpu: a rectangle of {} pixels is over this OpenGL's shader "
                                 "storage blocks ({} bytes)",
                                 pixels, most));
-    while (glGetError() != GL_NO_ERROR) {
-    } // errors of earlier, unrelated calls are not these buffers'
+    clearGlErrors();
     for (GLuint* b : {&m_outColor, &m_outDepth}) {
         if (!*b)
             glGenBuffers(1, b);
@@ -541,10 +540,7 @@ void VolumeRaycaster::sizeOutput(int64_t pixels) {
         glBufferData(GL_SHADER_STORAGE_BUFFER, GLsizeiptr(pixels) * 4, nullptr, GL_STREAM_READ);
     }
     m_outPixels = 0;
-    if (const GLenum e = glGetError(); e != GL_NO_ERROR)
-        throw Error(
-            fmt::format("gpu: OpenGL refused {} pixels of output buffers (error 0x{:04x}{})",
-                        pixels, unsigned(e), e == GL_OUT_OF_MEMORY ? ": out of memory" : ""));
+    throwIfGlRefused(fmt::format("{} pixels of output buffers", pixels));
     m_outPixels = pixels;
 }
 
