@@ -124,8 +124,8 @@ private:
                 r.view = m_view;
                 if (act == Act::Resize)
                     r.view.height = uint16_t(m_view.height - 4 * (request % 64));
-                else
-                    r.view.eye += glm::vec3(float(request % 50) * 0.5f, 0, 0);
+                else // never an eye asked for before: no kept view serves it
+                    r.view.eye += glm::vec3(float(request % 50) * 0.5f, float(request) * 2e-4f, 0);
                 send(peer, encodeMessage(r));
                 next = now + uint64_t(everyUs);
             }

@@ -115,6 +115,26 @@ private:
     int m_left;
 };
 
+// The CPU ray caster, counting the pixels it is asked to render.
+class CountingRenderer final : public DbiRenderer {
+public:
+    CountingRenderer(const Volume& v, ThreadPool* pool, std::shared_ptr<int64_t> pixels)
+        : m_cpu(v, pool), m_pixels(std::move(pixels)) {}
+    void volumeChanged(const Box3i& changed) override { m_cpu.volumeChanged(changed); }
+    void rebuild() override { m_cpu.rebuild(); }
+    void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache) override {
+        const PixelRect in = intersect(rect, frame.bounds());
+        *m_pixels += int64_t(in.w) * in.h;
+        m_cpu.render(camera, rect, frame, cache);
+    }
+    Dbi render(const Camera& camera) override { return m_cpu.render(camera); }
+    std::string describe() const override { return "CPU, counted"; }
+
+private:
+    CpuDbiRenderer m_cpu;
+    std::shared_ptr<int64_t> m_pixels;
+};
+
 size_t heapInUse() {
     const struct mallinfo2 m = mallinfo2();
     return m.uordblks + m.hblkhd;
@@ -270,10 +290,10 @@ TEST(SimulationStep, ChangesPiledUpWhileAViewRendersAreAllKeptInMind) {
 
 // A view nobody holds any more is handed whole to the freer, which frees it as its task goes, not
 // in the step (a 2048 x 2048 view's frame, hit cache and preview took 4-7 ms); a view changed to
-// one of the same size keeps the frame, and nothing goes.
+// one of the same size keeps the frame, and nothing goes. (Views are not kept here.)
 TEST(SimulationStep, ADroppedViewIsFreedByTheFreerAndASameSizedOneIsReused) {
     trephine::testing::ManualExecutor freer; // outlives the step that holds it
-    StepRig rig(makeSphere(32));
+    StepRig rig(makeSphere(32), StepConfig{.renderThreads = 1, .keepViewUs = 0});
     rig.step.renderBulkApart(10, freer);
     const Camera big = cameraPreset("top", rig.original, {256, 256});
     rig.run({rig.join(1, big, Codec::Raw)});
@@ -295,6 +315,91 @@ TEST(SimulationStep, ADroppedViewIsFreedByTheFreerAndASameSizedOneIsReused) {
     freer.tasks.clear();
     EXPECT_GE(held - int64_t(heapInUse()), int64_t(256) * 256 * 8)
         << "the task owned the 256 x 256 frame";
+}
+
+// A view its last client lets go (here, a switch to volume) is kept: nothing renders it, but what
+// changes is noted, so the switch back gets the whole view for the re-render of the changed
+// rectangle alone, and it is a fresh render bit for bit. Its time over, it goes to the freer.
+TEST(SimulationStep, AViewLetGoIsKeptAndTakenUpAgainForItsChangesOnly) {
+    trephine::testing::ManualExecutor freer;
+    auto pixels = std::make_shared<int64_t>(0);
+    StepRig rig(makeSphere(32), StepConfig{.renderThreads = 1,
+                                           .keepViewUs = 5'000'000,
+                                           .renderer = [pixels](const Volume& v, ThreadPool* pool) {
+                                               return std::make_unique<CountingRenderer>(v, pool,
+                                                                                         pixels);
+                                           }});
+    rig.step.renderBulkApart(10, freer);
+    const Camera cam = cameraPreset("top", rig.original, {48, 48});
+    rig.run({rig.join(1, cam, Codec::Raw)});
+    rig.outbox.take(live);
+    EXPECT_EQ(*pixels, 48 * 48);
+
+    rig.run({{0, SyncEvent{1, Sync::Volume}}});
+    rig.outbox.take(live);
+    EXPECT_EQ(rig.step.viewCount(), 0u);
+    EXPECT_EQ(rig.step.keptViewCount(), 1u);
+    rig.run({rig.cut(surfaceBox(rig.original, 6))});
+    rig.run({rig.cut(surfaceBox(rig.original, 8))});
+    rig.outbox.take(live);
+    EXPECT_EQ(*pixels, 48 * 48) << "a kept view is not rendered";
+
+    rig.run({{0, SyncEvent{1, Sync::Dbi}}});
+    Outbox::Taken t = rig.outbox.take(live);
+    ASSERT_EQ(t.updates.size(), 1u);
+    EXPECT_TRUE(t.updates[0].full);
+    Dbi dbi;
+    applyImage(t.updates[0], cam, dbi);
+    EXPECT_TRUE(compare(dbi, rig.step.render(cam)).identical());
+    const int64_t rerendered = *pixels - 48 * 48;
+    EXPECT_GT(rerendered, 0) << "the cuts are in view";
+    EXPECT_LT(rerendered, 48 * 48 / 2) << "only the changed rectangle";
+    EXPECT_EQ(rig.book.counter(&ServerCounters::viewsReused), 1u);
+    EXPECT_EQ(rig.step.keptViewCount(), 0u);
+
+    rig.run({{0, LeaveEvent{1}}});
+    EXPECT_EQ(rig.step.keptViewCount(), 1u);
+    EXPECT_TRUE(freer.tasks.empty());
+    rig.now += 5'000'000;
+    rig.run({});
+    EXPECT_EQ(rig.step.keptViewCount(), 0u);
+    EXPECT_EQ(freer.tasks.size(), 1u) << "its time over, the kept view is freed";
+}
+
+// Past keptPixels, the kept views go oldest first from the peer keeping the most: a peer that
+// changes views every frame spends its own kept views, not another's older one.
+TEST(SimulationStep, KeptViewsPastTheirPixelsGoFromThePeerKeepingTheMost) {
+    constexpr int64_t kView = StepConfig::kKeptViewFloorPixels; // what a 32 x 32 view counts
+    StepRig rig(makeSphere(32), StepConfig{.renderThreads = 1, .keptPixels = 3 * kView});
+    auto eye = [&](float dx) {
+        ViewSpec s = toViewSpec(cameraPreset("top", rig.original, {32, 32}));
+        s.eye.x += dx;
+        return s;
+    };
+    rig.run({rig.join(1, toCamera(eye(0)), Codec::Raw),
+             rig.join(2, cameraPreset("front", rig.original, {32, 32}), Codec::Raw)});
+    rig.run({{0, SyncEvent{2, Sync::Volume}}}); // the oldest kept view: client 2's
+    for (uint32_t i = 1; i <= 3; ++i)           // client 1's views 0, 1, 2 kept
+        rig.run({{0, ViewEvent{1, eye(float(i)), i}}});
+    EXPECT_EQ(rig.step.keptViewCount(), 3u) << "client 1's oldest went";
+
+    rig.run({{0, SyncEvent{2, Sync::Dbi}}});
+    EXPECT_EQ(rig.book.counter(&ServerCounters::viewsReused), 1u) << "client 2's was kept";
+    rig.run({{0, ViewEvent{1, eye(0), 4}}});
+    EXPECT_EQ(rig.book.counter(&ServerCounters::viewsReused), 1u) << "client 1's oldest is gone";
+    const uint64_t renders = rig.book.counter(&ServerCounters::renders);
+    rig.run({{0, ViewEvent{1, eye(1), 5}}});
+    EXPECT_EQ(rig.book.counter(&ServerCounters::viewsReused), 2u);
+    EXPECT_EQ(rig.book.counter(&ServerCounters::renders), renders) << "nothing changed in it";
+
+    // A view taken up is held, not kept, whatever the budget: with room for one kept view,
+    // toggling between two renders neither again.
+    StepRig one(makeSphere(32), StepConfig{.renderThreads = 1, .keptPixels = kView});
+    one.run({one.join(1, toCamera(eye(0)), Codec::Raw)});
+    for (uint32_t i = 1; i <= 4; ++i)
+        one.run({{0, ViewEvent{1, eye(float(i % 2)), i}}});
+    EXPECT_EQ(one.book.counter(&ServerCounters::renders), 2u);
+    EXPECT_EQ(one.book.counter(&ServerCounters::viewsReused), 3u);
 }
 
 // A configured renderer (the GPU's) that fails mid-session: the render it failed and every one

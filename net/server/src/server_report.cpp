@@ -71,6 +71,7 @@ nlohmann::ordered_json toJson(const ServerReport& r, const NetStats& stats) {
               {"tool_states_applied", c.toolStatesApplied},
               {"tool_states_dropped", c.toolStatesDropped},
               {"renders", c.renders},
+              {"views_reused", c.viewsReused},
               {"pixels_kept", c.pixelsKept},
               {"renderer_fallbacks", c.rendererFallbacks},
               {"codings_shared", c.codingsShared},

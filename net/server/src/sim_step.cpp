@@ -100,7 +100,7 @@ void SimulationStep::step(std::span<const LogRecord> batch, uint64_t now) {
     // Volume clients need none of the rendering below: in a mixed session they never wait for
     // the DBI clients' renders.
     postVolumes(b);
-    renderViews(b, updateGrid(b));
+    renderViews(b, updateGrid(b), now);
     m_assessment.tick(now);
     m_book.record([&](ServerReport& r) {
         for (const auto& [id, c] : m_clients)
@@ -307,22 +307,73 @@ uint32_t SimulationStep::updateGrid(const Batch& b) {
     return uint32_t(m_clock() - g0);
 }
 
-void SimulationStep::renderViews(const Batch& b, uint32_t gridUs) {
+// Views no DBI client holds any more are kept, whole, for a client that asks for one again
+// (StepConfig::keepViewUs); past their time or the kept pixels, or never whole (a view left half
+// rendered), they are dropped. Kept views beyond keptPixels go oldest first from the peer keeping
+// the most, so a peer changing views every frame spends its own kept views, not others'; each
+// counts at least a floor, so tiny views cannot pile up in numbers every step walks.
+void SimulationStep::keepOrDrop(std::vector<ViewFrame>& dropped, uint64_t now) {
+    const bool keeping = m_config.keepViewUs > 0 && m_config.keptPixels > 0;
+    std::erase_if(m_views, [&](ViewFrame& v) {
+        const bool held = std::any_of(m_clients.begin(), m_clients.end(), [&](const auto& c) {
+            return c.second.sync == Sync::Dbi && c.second.camera == v.camera;
+        });
+        if (held && v.kept) { // taken up again
+            v.kept = false;
+            m_book.count(&ServerCounters::viewsReused);
+        }
+        if (held)
+            return false;
+        if (!v.kept && keeping && v.whole() && !v.copying() && !v.previewing()) {
+            v.kept = true;
+            v.keptUs = now;
+            v.keptOrder = ++m_keptViews;
+            v.keptBy = v.holders.empty() ? 0 : v.holders.front();
+            v.holders.clear();
+            v.fresh = {}; // whoever takes it up again gets it whole
+            return false;
+        }
+        if (v.kept && now - v.keptUs < m_config.keepViewUs)
+            return false;
+        dropped.push_back(std::move(v));
+        return true;
+    });
+    auto weight = [](const ViewFrame& v) {
+        return std::max(pixelsOf(v.frame), StepConfig::kKeptViewFloorPixels);
+    };
+    std::map<uint16_t, int64_t> keptBy;
+    int64_t kept = 0;
+    for (const ViewFrame& v : m_views)
+        if (v.kept) {
+            keptBy[v.keptBy] += weight(v);
+            kept += weight(v);
+        }
+    while (kept > m_config.keptPixels && !keptBy.empty()) {
+        const uint16_t peer = std::max_element(keptBy.begin(), keptBy.end(), [](auto& x, auto& y) {
+                                  return x.second < y.second;
+                              })->first;
+        auto oldest = m_views.end();
+        for (auto v = m_views.begin(); v != m_views.end(); ++v)
+            if (v->kept && v->keptBy == peer &&
+                (oldest == m_views.end() || v->keptOrder < oldest->keptOrder))
+                oldest = v;
+        kept -= weight(*oldest);
+        if ((keptBy[peer] -= weight(*oldest)) <= 0)
+            keptBy.erase(peer);
+        dropped.push_back(std::move(*oldest));
+        m_views.erase(oldest);
+    }
+}
+
+void SimulationStep::renderViews(const Batch& b, uint32_t gridUs, uint64_t now) {
     auto dbiView = [](const Client& c, const Camera& cam) {
         return c.sync == Sync::Dbi && c.camera == cam;
     };
-    // Frames of views no DBI client holds any more are dropped (a view left half rendered
-    // included); new views render in slices below, into a dropped frame of their size if there
-    // is one: a fresh 2048 x 2048 frame costs ~20 ms of page faults as its rows render, and its
-    // rows are all rendered before any pixel of it is sent.
+    // New views render in slices below, into a dropped frame of their size if there is one: a
+    // fresh 2048 x 2048 frame costs ~20 ms of page faults as its rows render, and its rows are
+    // all rendered before any pixel of it is sent.
     std::vector<ViewFrame> dropped;
-    std::erase_if(m_views, [&](ViewFrame& v) {
-        const bool held = std::any_of(m_clients.begin(), m_clients.end(),
-                                      [&](const auto& c) { return dbiView(c.second, v.camera); });
-        if (!held)
-            dropped.push_back(std::move(v));
-        return !held;
-    });
+    keepOrDrop(dropped, now);
     for (const auto& [id, cause] : b.needFull)
         if (auto c = m_clients.find(id); c != m_clients.end() && !c->second.fullCauseUs)
             c->second.fullCauseUs = std::max<uint64_t>(cause, 1);
@@ -359,7 +410,7 @@ void SimulationStep::renderViews(const Batch& b, uint32_t gridUs) {
         for (ViewFrame& v : m_views)
             restale(v);
     m_rendering = std::any_of(m_views.begin(), m_views.end(),
-                              [](const ViewFrame& v) { return !v.settled(); });
+                              [](const ViewFrame& v) { return !v.kept && !v.settled(); });
     if (!dropped.empty()) // their frames are freed there, as the task goes
         m_freer->post([frames = std::make_shared<std::vector<ViewFrame>>(std::move(dropped))] {});
 }
@@ -673,6 +724,11 @@ void SimulationStep::renderBulkApart(int nice, Executor& freer) {
 void SimulationStep::yieldChanged() {
     if (ThreadPool* pool = m_bulkNudged.load(std::memory_order_acquire))
         pool->nudge();
+}
+
+size_t SimulationStep::viewCount() const {
+    return size_t(
+        std::count_if(m_views.begin(), m_views.end(), [](const ViewFrame& v) { return !v.kept; }));
 }
 
 int64_t SimulationStep::viewPixels() const {

@@ -34,6 +34,7 @@ struct ServerCounters {
     uint64_t malformedKicks = 0;
     uint64_t toolStatesApplied = 0, toolStatesDropped = 0;
     uint64_t renders = 0;
+    uint64_t viewsReused = 0; // new views given a kept one (StepConfig::keepViewUs)
     uint64_t pixelsKept = 0; // changed rectangles' pixels erosion could not reach: not re-rendered
     uint64_t rendererFallbacks = 0; // the configured renderer failed: the CPU's renders since
     uint64_t codingsShared = 0; // image updates given another client's coding of the same pixels

@@ -49,6 +49,15 @@ struct StepConfig {
     // of the rays, in pieces as its rows are), upsampled and sent as its full image, then the
     // exact frame follows as today (docs/session.md, "Progressive first pictures"). 0: never.
     int64_t previewPixels = int64_t(1) << 18;
+    // A whole view its last client lets go (a leave, a switch to volume, a view change) is kept,
+    // unrendered but its changes noted, for keepViewUs, so a client that asks for the same camera
+    // again (a reconnect, a switch back, a preset toggled back) gets it for the re-render of what
+    // changed meanwhile. At most keptPixels are kept, each view counted as at least
+    // kKeptViewFloorPixels: past them, the oldest view of the peer keeping the most goes
+    // (docs/session.md, "Kept views"). 0: none.
+    uint64_t keepViewUs = 60'000'000;
+    int64_t keptPixels = int64_t(1) << 22;
+    static constexpr int64_t kKeptViewFloorPixels = int64_t(1) << 16;
     // Measures the work charged to peers (FairShare); empty: the steady clock. Not the step's
     // clock: a pumped server's stands still within a pass.
     ServerClock workClock = {};
@@ -99,7 +108,9 @@ public:
     std::shared_mutex& voxelMutex() { return m_voxelMutex; }
     // Re-render every view whole on each change (the paper's way) instead of BB_screen only.
     void setFullRender(bool on) { m_fullRender = on; }
-    size_t viewCount() const { return m_views.size(); }
+    // Views some DBI client holds; and those kept after their last client let go (keepViewUs).
+    size_t viewCount() const;
+    size_t keptViewCount() const { return m_views.size() - viewCount(); }
     // [Any thread] Some view's work is not done: step() has work even with no events.
     bool rendering() const { return m_rendering.load(); }
     // The simulation thread's time charged to each peer (the views it holds, its updates' and
@@ -137,6 +148,11 @@ private:
         int rowsDone = 0; // rows rendered so far: the frame is whole at frame.height()
         int colsDone = 0, bandRows = 0; // the band of rows under way after them: its columns done
         std::vector<uint16_t> holders;  // the DBI clients viewing it, charged for its work
+        // Held by nobody since keptUs (StepConfig::keepViewUs), let go last by keptBy; keptOrder
+        // ranks it among the kept, oldest first.
+        bool kept = false;
+        uint64_t keptUs = 0, keptOrder = 0;
+        uint16_t keptBy = 0;
         // Changed pixels (of the rows done) still to render, and those rendered since the
         // view's clients last got them; the oldest cause and the stage times they carry.
         PixelRect stale, fresh;
@@ -186,7 +202,8 @@ private:
     void applyTool(const ToolEvent& ev, uint64_t arrivedUs, uint64_t at, Batch& b);
     void postVolumes(const Batch& b);
     uint32_t updateGrid(const Batch& b);
-    void renderViews(const Batch& b, uint32_t gridUs);
+    void renderViews(const Batch& b, uint32_t gridUs, uint64_t now);
+    void keepOrDrop(std::vector<ViewFrame>& dropped, uint64_t now);
     void restale(ViewFrame& v);
     void markChanged(ViewFrame& v, const Batch& b, uint32_t gridUs);
     void schedule();
@@ -232,6 +249,7 @@ private:
     std::atomic<bool> m_fullRender{false};
     std::atomic<bool> m_rendering{false};
     FairShare m_share;              // StepConfig::workClock
+    uint64_t m_keptViews = 0;       // views kept so far (ViewFrame::keptOrder)
     std::vector<uint16_t> m_posted; // peers given an update in the step since the last letSend
 };
 
