@@ -373,6 +373,28 @@ TEST(SessionVolume, SwitchingLiveWhileDrillingKeepsTheSessionConsistent) {
     EXPECT_EQ(client.sync(), Sync::Volume);
 }
 
+// A switch to volume and back: the server kept the DBI view meanwhile (docs/session.md, "Kept
+// views"), so the switch back takes it up, renders what the drilling changed, and the client's
+// picture is the fresh render of its view bit for bit.
+TEST(SessionVolume, ASwitchBackToDbiTakesUpTheViewTheServerKept) {
+    Volume sphere = makeSphere(48);
+    SessionServer server(sphere, loopbackServerConfig("sphere:48", 2));
+    Pumped pumped(server);
+    SessionClient client(clientConfig(presetView(sphere, "top"), Sync::Dbi));
+    client.connect(loopback(server.port()));
+    ASSERT_TRUE(connectAll({&client}));
+    const Dbi before = client.dbi();
+    client.requestSync(Sync::Volume);
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return client.sync() == Sync::Volume; }));
+    drill(client, {&client}, sphereTop(48), 0, 20, 20);
+    ASSERT_TRUE(pumpUntil({&client}, [&] { return server.toolStatesApplied() == 20u; }));
+    client.requestSync(Sync::Dbi);
+    ASSERT_TRUE(waitConverged(server, {&client}));
+    EXPECT_EQ(client.sync(), Sync::Dbi);
+    EXPECT_FALSE(compare(before, client.dbi()).identical()) << "the drilling shows";
+    EXPECT_EQ(nlohmann::json::parse(server.reportJson()).at("views_reused").get<int>(), 1);
+}
+
 TEST(SessionVolume, MalformedSyncModeIsDroppedAndCountedByTheServer) {
     Volume sphere = makeSphere(32);
     SessionServer server(sphere, loopbackServerConfig("sphere:32", 1));
