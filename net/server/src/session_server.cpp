@@ -179,6 +179,12 @@ struct SessionServer::Impl {
     std::map<uint16_t, ENetPeer*> links;     // policy ids -> ENet peers (network thread only)
     int64_t peakInFlight = 0;                // network thread's copy of the report's peak
     uint64_t nextTickUs = 0;                 // the channel statistics' next tick
+    // guard's scans of every slot and peer (handshakes to reset, network charges to report, held
+    // offers' hello clocks) run at most every kScanPeriodUs: the loop passes ~1000 times a second,
+    // and under a reconnecting flood (328 slots) those scans were two thirds of the network
+    // thread's time.
+    static constexpr uint64_t kScanPeriodUs = 10000;
+    uint64_t nextScanUs = 0;
 
     // Network -> simulation.
     std::mutex inMutex;
@@ -241,6 +247,7 @@ struct SessionServer::Impl {
     void forget(uint16_t id, uint64_t now);     // a peer gone (disconnected, or its slot reset)
     void forgetPeer(ENetPeer* p, uint64_t now); // the peer in an ENet slot the gate resets
     void guard(uint64_t now);                   // admission and control budgets, once a pass
+    void reportNetCharged(uint16_t id);         // the report's copy of its network charges
     void sendUpdates();
     void sendNotices();
     void sayGoodbye();
@@ -659,6 +666,7 @@ void SessionServer::Impl::forget(uint16_t id, uint64_t now) {
         });
     if (dropped)
         book.record([&](ServerReport& r) { r.availability.receivedDropped += dropped; });
+    reportNetCharged(id);
     netCharged.erase(id);
     PolicyOutput out;
     policy.disconnect(id, now, out);
@@ -676,17 +684,24 @@ void SessionServer::Impl::forgetPeer(ENetPeer* p, uint64_t now) {
         forget(id, now);
 }
 
+void SessionServer::Impl::reportNetCharged(uint16_t id) {
+    if (const uint64_t c = received.charged(id); c != netCharged[id]) {
+        netCharged[id] = c;
+        book.peer(id, [&](PeerReport& r) { r.netChargedUs = c; });
+    }
+}
+
 void SessionServer::Impl::guard(uint64_t now) {
-    admission.reap(now);
-    for (const auto& [id, peer] : links)
-        if (const uint64_t c = received.charged(id); c != netCharged[id]) {
-            netCharged[id] = c;
-            book.peer(id, [&](PeerReport& r) { r.netChargedUs = c; });
-        }
+    if (now >= nextScanUs) {
+        nextScanUs = now + kScanPeriodUs;
+        admission.reap(now);
+        for (const auto& [id, peer] : links)
+            reportNetCharged(id);
+        for (uint16_t id : gate.held()) // a held offer's hello clock (seconds) stands still
+            policy.holdHelloClock(id, now);
+    }
     for (const auto& [id, answer] : gate.release(now))
         sendTo(id, Channel::Control, answer);
-    for (uint16_t id : gate.held())
-        policy.holdHelloClock(id, now);
     auto heldBy = [&](uint16_t id) {
         auto it = controlHeld.find(id);
         return it == controlHeld.end() ? int64_t(0) : it->second->load(std::memory_order_relaxed);
@@ -905,6 +920,7 @@ void SessionServer::Impl::sendUpdates() {
                          return received.standing(a.client) < received.standing(b.client);
                      });
     bool handed = false;
+    int64_t peak = peakInFlight; // in-flight bytes grow only as updates are handed to ENet
     for (const Outbox::Ready& u : taken.updates) {
         if (handed && u.message.size() > kLargeUpdateBytes) {
             host.flush();
@@ -918,6 +934,8 @@ void SessionServer::Impl::sendUpdates() {
         if (!sent)
             continue;
         received.charge(u.client, received.now() - t0);
+        if (const Host::InFlight held = policy.inFlight(u.client))
+            peak = std::max(peak, held->load(std::memory_order_relaxed));
         book.record([&](ServerReport& r) {
             ModeTotals& t = r.modes[size_t(u.mode)].sent;
             ++t.updates;
@@ -928,10 +946,6 @@ void SessionServer::Impl::sendUpdates() {
     }
     if (handed)
         host.flush();
-    int64_t peak = peakInFlight;
-    for (const auto& [id, peer] : links)
-        if (const Host::InFlight held = policy.inFlight(id))
-            peak = std::max(peak, held->load(std::memory_order_relaxed));
     if (peak > peakInFlight) {
         peakInFlight = peak;
         book.record([&](ServerReport& r) { r.counters.peakInFlightBytes = peak; });
@@ -950,6 +964,8 @@ void SessionServer::Impl::sendNotices() {
 // connecting meanwhile is told the server is shutting down.
 void SessionServer::Impl::sayGoodbye() {
     const ScreenFor screen(admission, book);
+    for (const auto& [id, peer] : links) // the report's last copy
+        reportNetCharged(id);
     PolicyOutput out;
     policy.goodbye(clock(), out);
     apply(out);
