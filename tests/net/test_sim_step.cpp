@@ -400,6 +400,16 @@ TEST(SimulationStep, KeptViewsPastTheirPixelsGoFromThePeerKeepingTheMost) {
         one.run({{0, ViewEvent{1, eye(float(i % 2)), i}}});
     EXPECT_EQ(one.book.counter(&ServerCounters::renders), 2u);
     EXPECT_EQ(one.book.counter(&ServerCounters::viewsReused), 3u);
+
+    // A newcomer given the id of a peer gone does not spend that peer's kept view.
+    StepRig two(makeSphere(32), StepConfig{.renderThreads = 1, .keptPixels = 2 * kView});
+    two.run({two.join(1, toCamera(eye(0)), Codec::Raw)});
+    two.run({{0, LeaveEvent{1}}});
+    two.run({two.join(1, toCamera(eye(1)), Codec::Raw)});
+    for (uint32_t i = 2; i <= 3; ++i) // its views 1, 2 kept: one too many
+        two.run({{0, ViewEvent{1, eye(float(i)), i}}});
+    two.run({{0, ViewEvent{1, eye(0), 4}}});
+    EXPECT_EQ(two.book.counter(&ServerCounters::viewsReused), 1u) << "the gone peer's is kept";
 }
 
 // A configured renderer (the GPU's) that fails mid-session: the render it failed and every one

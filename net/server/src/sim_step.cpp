@@ -113,6 +113,9 @@ void SimulationStep::step(std::span<const LogRecord> batch, uint64_t now) {
 void SimulationStep::applyJoin(const JoinEvent& ev, uint64_t at, Batch& b, uint64_t now) {
     Client& c = m_clients[ev.client];
     c.camera = toCamera(ev.view);
+    for (ViewFrame& v : m_views) // kept by a peer gone whose id this one reuses: not its to spend
+        if (v.kept && v.keptBy == ev.client)
+            v.keptBy = 0;
     m_assessment.join(ev.client, ev.name, ev.role, at);
     c.sync = ev.sync;
     m_outbox.join(ev.client, ev.inFlight, ev.codec, ev.volumeCodec);

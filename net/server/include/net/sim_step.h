@@ -148,8 +148,8 @@ private:
         int rowsDone = 0; // rows rendered so far: the frame is whole at frame.height()
         int colsDone = 0, bandRows = 0; // the band of rows under way after them: its columns done
         std::vector<uint16_t> holders;  // the DBI clients viewing it, charged for its work
-        // Held by nobody since keptUs (StepConfig::keepViewUs), let go last by keptBy; keptOrder
-        // ranks it among the kept, oldest first.
+        // Held by nobody since keptUs (StepConfig::keepViewUs), let go last by keptBy (0: a peer
+        // gone whose id is in use again); keptOrder ranks it among the kept, oldest first.
         bool kept = false;
         uint64_t keptUs = 0, keptOrder = 0;
         uint16_t keptBy = 0;
