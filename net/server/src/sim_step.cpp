@@ -318,9 +318,8 @@ uint32_t SimulationStep::updateGrid(const Batch& b) {
 void SimulationStep::keepOrDrop(std::vector<ViewFrame>& dropped, uint64_t now) {
     const bool keeping = m_config.keepViewUs > 0 && m_config.keptPixels > 0;
     std::erase_if(m_views, [&](ViewFrame& v) {
-        const bool held = std::any_of(m_clients.begin(), m_clients.end(), [&](const auto& c) {
-            return c.second.sync == Sync::Dbi && c.second.camera == v.camera;
-        });
+        const bool held = std::any_of(m_clients.begin(), m_clients.end(),
+                                      [&](const auto& c) { return c.second.views(v.camera); });
         if (held && v.kept) { // taken up again
             v.kept = false;
             m_book.count(&ServerCounters::viewsReused);
@@ -369,9 +368,6 @@ void SimulationStep::keepOrDrop(std::vector<ViewFrame>& dropped, uint64_t now) {
 }
 
 void SimulationStep::renderViews(const Batch& b, uint32_t gridUs, uint64_t now) {
-    auto dbiView = [](const Client& c, const Camera& cam) {
-        return c.sync == Sync::Dbi && c.camera == cam;
-    };
     // New views render in slices below, into a dropped frame of their size if there is one: a
     // fresh 2048 x 2048 frame costs ~20 ms of page faults as its rows render, and its rows are
     // all rendered before any pixel of it is sent.
@@ -405,7 +401,7 @@ void SimulationStep::renderViews(const Batch& b, uint32_t gridUs, uint64_t now) 
         markChanged(v, b, gridUs);
         v.holders.clear();
         for (const auto& [id, c] : m_clients)
-            if (dbiView(c, v.camera))
+            if (c.views(v.camera))
                 v.holders.push_back(id);
     }
     schedule();

@@ -139,6 +139,7 @@ private:
         bool hasTool = false;
         uint32_t lastSequence = 0;
         uint64_t lastClientUs = 0;
+        bool views(const Camera& view) const { return sync == Sync::Dbi && camera == view; }
     };
     // One render per distinct view; clients that share a camera share its frame.
     struct ViewFrame {
