@@ -4,6 +4,7 @@
 // runs a client over loopback against a pumped server.
 #include "net/sim_step.h"
 
+#include "counting_renderer.h"
 #include "libsim/dbi_preview.h"
 #include "libsim/skull.h"
 #include "loopback.h"
@@ -17,28 +18,9 @@
 
 using namespace trephine;
 using namespace trephine::net;
+using trephine::testing::CountingRenderer;
 
 namespace {
-
-// The CPU ray caster with a clock that counts the pixels it rendered (1 us each), so the pieces
-// charged to peers are the same on every machine.
-class CountingRenderer final : public DbiRenderer {
-public:
-    CountingRenderer(const Volume& v, ThreadPool* pool, std::shared_ptr<uint64_t> pixels)
-        : m_cpu(v, pool), m_pixels(std::move(pixels)) {}
-    void volumeChanged(const Box3i& changed) override { m_cpu.volumeChanged(changed); }
-    void rebuild() override { m_cpu.rebuild(); }
-    void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache) override {
-        *m_pixels += uint64_t(intersect(rect, frame.bounds()).area());
-        m_cpu.render(camera, rect, frame, cache);
-    }
-    Dbi render(const Camera& camera) override { return m_cpu.render(camera); }
-    std::string describe() const override { return "CPU, counting pixels"; }
-
-private:
-    CpuDbiRenderer m_cpu;
-    std::shared_ptr<uint64_t> m_pixels;
-};
 
 constexpr int64_t kPreviewAbove = 64 * 64;
 constexpr int64_t kChunk = 256 * 4;

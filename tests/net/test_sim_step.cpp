@@ -3,6 +3,7 @@
 // client would, then compares with a fresh render of the step's volume.
 #include "net/sim_step.h"
 
+#include "counting_renderer.h"
 #include "libsim/error.h"
 #include "libsim/skull.h"
 #include "libsim/tool.h"
@@ -16,6 +17,7 @@
 
 using namespace trephine;
 using namespace trephine::net;
+using trephine::testing::CountingRenderer;
 
 namespace {
 
@@ -113,26 +115,6 @@ public:
 private:
     CpuDbiRenderer m_cpu;
     int m_left;
-};
-
-// The CPU ray caster, counting the pixels it is asked to render.
-class CountingRenderer final : public DbiRenderer {
-public:
-    CountingRenderer(const Volume& v, ThreadPool* pool, std::shared_ptr<int64_t> pixels)
-        : m_cpu(v, pool), m_pixels(std::move(pixels)) {}
-    void volumeChanged(const Box3i& changed) override { m_cpu.volumeChanged(changed); }
-    void rebuild() override { m_cpu.rebuild(); }
-    void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache) override {
-        const PixelRect in = intersect(rect, frame.bounds());
-        *m_pixels += int64_t(in.w) * in.h;
-        m_cpu.render(camera, rect, frame, cache);
-    }
-    Dbi render(const Camera& camera) override { return m_cpu.render(camera); }
-    std::string describe() const override { return "CPU, counted"; }
-
-private:
-    CpuDbiRenderer m_cpu;
-    std::shared_ptr<int64_t> m_pixels;
 };
 
 size_t heapInUse() {
@@ -322,7 +304,7 @@ TEST(SimulationStep, ADroppedViewIsFreedByTheFreerAndASameSizedOneIsReused) {
 // rectangle alone, and it is a fresh render bit for bit. Its time over, it goes to the freer.
 TEST(SimulationStep, AViewLetGoIsKeptAndTakenUpAgainForItsChangesOnly) {
     trephine::testing::ManualExecutor freer;
-    auto pixels = std::make_shared<int64_t>(0);
+    auto pixels = std::make_shared<uint64_t>(0);
     StepRig rig(makeSphere(32), StepConfig{.renderThreads = 1,
                                            .keepViewUs = 5'000'000,
                                            .renderer = [pixels](const Volume& v, ThreadPool* pool) {
@@ -333,7 +315,7 @@ TEST(SimulationStep, AViewLetGoIsKeptAndTakenUpAgainForItsChangesOnly) {
     const Camera cam = cameraPreset("top", rig.original, {48, 48});
     rig.run({rig.join(1, cam, Codec::Raw)});
     rig.outbox.take(live);
-    EXPECT_EQ(*pixels, 48 * 48);
+    EXPECT_EQ(*pixels, 48u * 48u);
 
     rig.run({{0, SyncEvent{1, Sync::Volume}}});
     rig.outbox.take(live);
@@ -342,7 +324,7 @@ TEST(SimulationStep, AViewLetGoIsKeptAndTakenUpAgainForItsChangesOnly) {
     rig.run({rig.cut(surfaceBox(rig.original, 6))});
     rig.run({rig.cut(surfaceBox(rig.original, 8))});
     rig.outbox.take(live);
-    EXPECT_EQ(*pixels, 48 * 48) << "a kept view is not rendered";
+    EXPECT_EQ(*pixels, 48u * 48u) << "a kept view is not rendered";
 
     rig.run({{0, SyncEvent{1, Sync::Dbi}}});
     Outbox::Taken t = rig.outbox.take(live);
@@ -351,7 +333,7 @@ TEST(SimulationStep, AViewLetGoIsKeptAndTakenUpAgainForItsChangesOnly) {
     Dbi dbi;
     applyImage(t.updates[0], cam, dbi);
     EXPECT_TRUE(compare(dbi, rig.step.render(cam)).identical());
-    const int64_t rerendered = *pixels - 48 * 48;
+    const int64_t rerendered = int64_t(*pixels) - 48 * 48;
     EXPECT_GT(rerendered, 0) << "the cuts are in view";
     EXPECT_LT(rerendered, 48 * 48 / 2) << "only the changed rectangle";
     EXPECT_EQ(rig.book.counter(&ServerCounters::viewsReused), 1u);
