@@ -928,13 +928,13 @@ void SessionServer::Impl::sendUpdates() {
         }
         // Sealing and handing it to ENet (a whole volume's fragments) is work for that client.
         const uint64_t t0 = received.now();
-        const bool sent =
-            sendTo(u.client, u.channel, u.message, policy.inFlight(u.client), u.lossPermille);
+        const Host::InFlight held = policy.inFlight(u.client);
+        const bool sent = sendTo(u.client, u.channel, u.message, held, u.lossPermille);
         handed = handed || sent;
         if (!sent)
             continue;
         received.charge(u.client, received.now() - t0);
-        if (const Host::InFlight held = policy.inFlight(u.client))
+        if (held)
             peak = std::max(peak, held->load(std::memory_order_relaxed));
         book.record([&](ServerReport& r) {
             ModeTotals& t = r.modes[size_t(u.mode)].sent;
