@@ -503,6 +503,43 @@ TEST(AvailabilityPolicy, ViewRequestsBeyondTheRenderBudgetWaitAndTheNewestWins) 
     EXPECT_EQ(eventsOf<ViewEvent>(rig.update()), 0u) << "nothing left waiting";
 }
 
+// The policy walks its peers once a scan period, or sooner when it knows something falls due: a
+// deferred view and a paced design switch each go at their microsecond, not a period later.
+TEST(AvailabilityPolicy, WhatFallsDueBetweenScansGoesAtItsMicrosecond) {
+    ServerConfig c;
+    c.maxViewPixels = 100 * 100;
+    c.viewPixelsPerS = 10000; // one largest view a second, two saved up
+    PolicyRig rig(c);
+    const uint16_t id = rig.join("orbit");
+    rig.update();
+    ViewRequest r;
+    r.view = viewOf(100, 100);
+    size_t applied = 0;
+    for (uint32_t i = 1; i <= 3; ++i) {
+        r.requestId = i;
+        r.view.eye.x += 1.0f;
+        applied += eventsOf<ViewEvent>(rig.send(id, r));
+    }
+    ASSERT_EQ(applied, 2u) << "the third waits for a second's budget";
+    const uint64_t viewDue = rig.now + 1'000'000;
+    SyncMode m;
+    m.sync = Sync::Volume;
+    m.volumeCodec = Codec::Lz4;
+    EXPECT_EQ(eventsOf<SyncEvent>(rig.send(id, m)), 1u) << "the first switch goes at once";
+    const uint64_t switchDue = rig.now + kSyncSwitchIntervalUs;
+    rig.now += 3000;
+    m.sync = Sync::Dbi;
+    EXPECT_EQ(eventsOf<SyncEvent>(rig.send(id, m)), 0u) << "paced";
+    rig.now = switchDue - 1;
+    EXPECT_EQ(eventsOf<SyncEvent>(rig.update()), 0u);
+    rig.now = switchDue;
+    EXPECT_EQ(eventsOf<SyncEvent>(rig.update()), 1u) << "at its microsecond, within a scan period";
+    rig.now = viewDue - 1;
+    EXPECT_EQ(eventsOf<ViewEvent>(rig.update()), 0u);
+    rig.now = viewDue;
+    EXPECT_EQ(eventsOf<ViewEvent>(rig.update()), 1u) << "at its microsecond, within a scan period";
+}
+
 TEST(AvailabilityPolicy, AllViewsTogetherStayUnderThePixelTotal) {
     ServerConfig c;
     c.maxViewPixels = 100 * 100;

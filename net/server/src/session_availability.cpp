@@ -66,6 +66,7 @@ bool SessionPolicy::viewRequest(uint16_t id, Peer& p, const ViewRequest& r, uint
         return true;
     }
     p.waitingView = r;
+    walkBy(p.viewPixels.dueUs(double(pixelsOf(r.view)), now));
     m_book.record([&](ServerReport& rep) {
         ++rep.availability.viewsDeferred;
         rep.availability.viewsCoalesced += replaced;
@@ -92,6 +93,7 @@ void SessionPolicy::updateAvailability(uint64_t now, PolicyOutput& out) {
             kick(id, p, RefuseReason::Idle, out, now);
             continue;
         }
+        walkBy(p.heardUs + idleUs + 1);
         if (!p.waitingView)
             continue;
         // Refused before it is charged: a view the total has no room for costs no budget.
@@ -102,6 +104,8 @@ void SessionPolicy::updateAvailability(uint64_t now, PolicyOutput& out) {
         } else if (p.viewPixels.take(double(pixelsOf(r.view)), now)) {
             p.waitingView.reset();
             applyView(id, p, r, out);
+        } else {
+            walkBy(p.viewPixels.dueUs(double(pixelsOf(r.view)), now));
         }
     }
 }

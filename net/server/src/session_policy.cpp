@@ -137,14 +137,23 @@ void SessionPolicy::holdHelloClock(uint16_t id, uint64_t now) {
 // [SECTION] time
 
 void SessionPolicy::update(uint64_t now, PolicyOutput& out) {
-    updateAvailability(now, out);
-    // A connection that never says hello would hold a client slot for good.
-    const uint64_t helloTimeoutUs = uint64_t(double(m_config.helloTimeoutS) * 1e6);
-    for (auto& [id, p] : m_peers)
-        if (!p.hello && !p.kicked && now - p.connectedUs > helloTimeoutUs) {
-            m_book.count(&ServerCounters::helloTimeouts);
-            kick(id, p, RefuseReason::BadHello, out, now);
+    const bool walk = now >= m_walkUs;
+    if (walk) {
+        m_walkUs = now + kScanPeriodUs;
+        updateAvailability(now, out);
+        // A connection that never says hello would hold a client slot for good.
+        const uint64_t helloTimeoutUs = uint64_t(double(m_config.helloTimeoutS) * 1e6);
+        for (auto& [id, p] : m_peers) {
+            if (p.hello || p.kicked)
+                continue;
+            if (now - p.connectedUs > helloTimeoutUs) {
+                m_book.count(&ServerCounters::helloTimeouts);
+                kick(id, p, RefuseReason::BadHello, out, now);
+            } else {
+                walkBy(p.connectedUs + helloTimeoutUs + 1);
+            }
         }
+    }
     // The whole list, paced: an instructor editing fast (in an open session, any hello may claim
     // the role) cannot make the server queue a list per edit for every participant.
     if (m_marksOut.due(now))
@@ -156,9 +165,15 @@ void SessionPolicy::update(uint64_t now, PolicyOutput& out) {
             out.messages.push_back({participants(), Channel::Control, encodeMessage(links)});
         m_handLinksListed = !links.list.empty();
     }
+    if (!walk)
+        return;
     for (auto& [id, p] : m_peers)
-        if (!p.kicked && p.modeSwitch.pending() && p.modeSwitch.due(now))
-            pushSwitch(id, p, now, out);
+        if (!p.kicked && p.modeSwitch.pending()) {
+            if (p.modeSwitch.due(now))
+                pushSwitch(id, p, now, out);
+            else
+                walkBy(p.modeSwitch.dueAtUs());
+        }
     countSwitches();
 }
 
@@ -422,6 +437,8 @@ bool SessionPolicy::syncMode(uint16_t id, Peer& p, std::span<const uint8_t> data
     p.modeSwitch.mark();
     if (p.modeSwitch.due(now))
         pushSwitch(id, p, now, out);
+    else
+        walkBy(p.modeSwitch.dueAtUs());
     countSwitches();
     m_book.peer(id, [&](PeerReport& r) {
         r.sync = m.sync;

@@ -178,12 +178,10 @@ struct SessionServer::Impl {
     std::map<uint16_t, uint64_t> netCharged; // what the report has of `received`'s charges
     std::map<uint16_t, ENetPeer*> links;     // policy ids -> ENet peers (network thread only)
     int64_t peakInFlight = 0;                // network thread's copy of the report's peak
+    int64_t peakControlBytes = 0;            // the most control bytes ENet held for one peer
     uint64_t nextTickUs = 0;                 // the channel statistics' next tick
     // guard's scans of every slot and peer (handshakes to reset, network charges to report, held
-    // offers' hello clocks) run at most every kScanPeriodUs: the loop passes ~1000 times a second,
-    // and under a reconnecting flood (328 slots) those scans were two thirds of the network
-    // thread's time.
-    static constexpr uint64_t kScanPeriodUs = 10000;
+    // offers' hello clocks) run at most every kScanPeriodUs.
     uint64_t nextScanUs = 0;
 
     // Network -> simulation.
@@ -632,6 +630,8 @@ bool SessionServer::Impl::sendTo(uint16_t id, Channel ch, const std::vector<uint
     const size_t queued = host.send(link->second, ch, wire, inFlight, lossPermille);
     if (!queued)
         return false;
+    if (ch == Channel::Control) // held control bytes grow only here
+        peakControlBytes = std::max(peakControlBytes, inFlight->load(std::memory_order_relaxed));
     stats.countOut(ch, queued);
     book.peer(id, [&](PeerReport& r) {
         r.bytesOut += queued;
@@ -714,8 +714,7 @@ void SessionServer::Impl::guard(uint64_t now) {
     seen.admission = admission.counts();
     seen.controlCoalesced = control.counts().coalesced;
     seen.controlDropped = control.counts().dropped;
-    for (const auto& [id, held] : controlHeld)
-        seen.peakControlBytes = std::max(seen.peakControlBytes, heldBy(id));
+    seen.peakControlBytes = peakControlBytes;
     if (seen.admission == reported.admission &&
         seen.controlCoalesced == reported.controlCoalesced &&
         seen.controlDropped == reported.controlDropped &&

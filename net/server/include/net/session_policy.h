@@ -49,6 +49,8 @@ public:
         return true;
     }
     bool pending() const { return m_pending; }
+    // When a pending mark is due (0: at once).
+    uint64_t dueAtUs() const { return m_urgent || !m_sent ? 0 : m_sentUs + m_intervalUs; }
     void cancel() { m_pending = m_urgent = false; }
 
 private:
@@ -228,6 +230,8 @@ private:
     void applyView(uint16_t id, Peer& p, const ViewRequest& r, PolicyOutput& out);
     bool viewRequest(uint16_t id, Peer& p, const ViewRequest& r, uint64_t now, PolicyOutput& out);
     void updateAvailability(uint64_t now, PolicyOutput& out);
+    // update walks every peer no later than `us` (a deferred view or a paced switch due then).
+    void walkBy(uint64_t us) { m_walkUs = std::min(m_walkUs, us); }
     std::string uniqueName(uint16_t id, const std::string& name);
     void countSwitches();
 
@@ -252,6 +256,9 @@ private:
     Pacer m_roster{kRosterIntervalUs};
     Pacer m_marksOut{kAnnotationsIntervalUs};
     std::atomic<int> m_switchesWaiting{0}; // read by SessionServer::idle() on any thread
+    // update's next walk over every peer: when the first timeout, deferred view or paced switch
+    // it knows of falls due (walkBy), kScanPeriodUs after the last at the latest.
+    uint64_t m_walkUs = 0;
     // [Replay] The recorded participants now in the session, by replayedId(); the simulation
     // clients they joined; the log's mark ids -> this session's.
     struct Replayed {
