@@ -504,7 +504,8 @@ TEST(AvailabilityPolicy, ViewRequestsBeyondTheRenderBudgetWaitAndTheNewestWins) 
 }
 
 // The policy walks its peers once a scan period, or sooner when it knows something falls due: a
-// deferred view and a paced design switch each go at their microsecond, not a period later.
+// paced design switch and a deferred view, each asked for just after a walk, go at their
+// microsecond, not a period later.
 TEST(AvailabilityPolicy, WhatFallsDueBetweenScansGoesAtItsMicrosecond) {
     ServerConfig c;
     c.maxViewPixels = 100 * 100;
@@ -512,32 +513,70 @@ TEST(AvailabilityPolicy, WhatFallsDueBetweenScansGoesAtItsMicrosecond) {
     PolicyRig rig(c);
     const uint16_t id = rig.join("orbit");
     rig.update();
+    const uint64_t t0 = rig.now;
     ViewRequest r;
     r.view = viewOf(100, 100);
-    size_t applied = 0;
-    for (uint32_t i = 1; i <= 3; ++i) {
+    for (uint32_t i = 1; i <= 2; ++i) {
         r.requestId = i;
         r.view.eye.x += 1.0f;
-        applied += eventsOf<ViewEvent>(rig.send(id, r));
+        ASSERT_EQ(eventsOf<ViewEvent>(rig.send(id, r)), 1u) << "the saved-up budget";
     }
-    ASSERT_EQ(applied, 2u) << "the third waits for a second's budget";
-    const uint64_t viewDue = rig.now + 1'000'000;
     SyncMode m;
     m.sync = Sync::Volume;
     m.volumeCodec = Codec::Lz4;
     EXPECT_EQ(eventsOf<SyncEvent>(rig.send(id, m)), 1u) << "the first switch goes at once";
-    const uint64_t switchDue = rig.now + kSyncSwitchIntervalUs;
-    rig.now += 3000;
+    rig.now = t0 + kSyncSwitchIntervalUs - 5000;
+    EXPECT_TRUE(rig.update().events.empty()) << "a walk, with nothing due";
+    rig.now += 1000;
     m.sync = Sync::Dbi;
     EXPECT_EQ(eventsOf<SyncEvent>(rig.send(id, m)), 0u) << "paced";
-    rig.now = switchDue - 1;
+    rig.now = t0 + kSyncSwitchIntervalUs - 1;
     EXPECT_EQ(eventsOf<SyncEvent>(rig.update()), 0u);
-    rig.now = switchDue;
+    rig.now = t0 + kSyncSwitchIntervalUs;
     EXPECT_EQ(eventsOf<SyncEvent>(rig.update()), 1u) << "at its microsecond, within a scan period";
-    rig.now = viewDue - 1;
+    rig.now = t0 + 995'000;
+    EXPECT_TRUE(rig.update().events.empty()) << "a walk, with nothing due";
+    r.requestId = 3;
+    EXPECT_EQ(eventsOf<ViewEvent>(rig.send(id, r)), 0u) << "it waits for a second's budget";
+    rig.now = t0 + 1'000'000 - 1;
     EXPECT_EQ(eventsOf<ViewEvent>(rig.update()), 0u);
-    rig.now = viewDue;
+    rig.now = t0 + 1'000'000;
     EXPECT_EQ(eventsOf<ViewEvent>(rig.update()), 1u) << "at its microsecond, within a scan period";
+}
+
+// A view waiting for its budget that another peer's larger view leaves no room for is refused at
+// the next pass, not at the next scan.
+TEST(AvailabilityPolicy, AWaitingViewAnotherViewLeavesNoRoomForIsRefusedAtTheNextPass) {
+    ServerConfig c;
+    c.maxViewPixels = 100 * 100;
+    c.viewPixelsPerS = 10000;
+    c.maxTotalViewPixels = 100 * 100 + 10 * 10 + 50;
+    PolicyRig rig(c);
+    const uint16_t a = rig.join("a", viewOf(10, 10));
+    const uint16_t b = rig.join("b", viewOf(10, 10));
+    ViewRequest r;
+    uint32_t request = 0;
+    for (auto [w, h] : {std::pair{100, 100}, {100, 99}, {10, 10}}) { // the budget spent
+        r.requestId = ++request;
+        r.view = viewOf(w, h);
+        ASSERT_EQ(eventsOf<ViewEvent>(rig.send(a, r)), 1u);
+    }
+    r.requestId = ++request;
+    r.view = viewOf(100, 100);
+    EXPECT_EQ(eventsOf<ViewEvent>(rig.send(a, r)), 0u) << "it fits, and waits for its budget";
+    rig.update();
+    ViewRequest grow;
+    grow.requestId = 1;
+    grow.view = viewOf(20, 20);
+    ASSERT_EQ(eventsOf<ViewEvent>(rig.send(b, grow)), 1u);
+    EXPECT_EQ(rig.availability().viewsOverTotal, 0u);
+    const PolicyOutput out = rig.update(); // the same microsecond
+    EXPECT_EQ(rig.availability().viewsOverTotal, 1u);
+    ViewRefused refused;
+    ASSERT_EQ(out.messages.size(), 1u);
+    EXPECT_EQ(out.messages[0].to, std::vector<uint16_t>{a});
+    ASSERT_TRUE(decodeMessage(out.messages[0].bytes, refused));
+    EXPECT_EQ(refused.requestId, uint32_t(request));
 }
 
 TEST(AvailabilityPolicy, AllViewsTogetherStayUnderThePixelTotal) {

@@ -37,8 +37,10 @@ uint64_t RateBudget::dueUs(double amount, uint64_t nowUs) {
         return nowUs;
     if (m_perS <= 0.0)
         return UINT64_MAX;
-    // Less a millionth of a microsecond: the refill's float error is no microsecond more.
-    return nowUs + uint64_t(std::ceil((amount - m_tokens) / m_perS * 1e6 - 1e-6));
+    // Less a millionth of a microsecond, the refill's float error is no microsecond more; and
+    // what it does not yet cover is due a microsecond on at the soonest.
+    return nowUs +
+           std::max<uint64_t>(1, uint64_t(std::ceil((amount - m_tokens) / m_perS * 1e6 - 1e-6)));
 }
 
 bool RateBudget::take(double amount, uint64_t nowUs) {

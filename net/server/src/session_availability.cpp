@@ -76,6 +76,7 @@ bool SessionPolicy::viewRequest(uint16_t id, Peer& p, const ViewRequest& r, uint
 
 void SessionPolicy::applyView(uint16_t id, Peer& p, const ViewRequest& r, PolicyOutput& out) {
     p.pixels = pixelsOf(r.view);
+    walkBy(0); // a waiting view may no longer fit the total
     out.events.push_back({0, ViewEvent{id, r.view, r.requestId}});
     ParticipantView seen{id, r.view};
     const std::vector<uint16_t> followers = m_follow.setView(id, r.view);
@@ -84,7 +85,7 @@ void SessionPolicy::applyView(uint16_t id, Peer& p, const ViewRequest& r, Policy
 }
 
 void SessionPolicy::updateAvailability(uint64_t now, PolicyOutput& out) {
-    const uint64_t idleUs = uint64_t(double(m_config.idleTimeoutS) * 1e6);
+    const uint64_t idleUs = idleTimeoutUs();
     for (auto& [id, p] : m_peers) {
         if (!p.hello || p.kicked)
             continue;

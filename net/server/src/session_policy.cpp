@@ -53,6 +53,7 @@ uint16_t SessionPolicy::connect(uint32_t connectData, uint64_t now, PolicyOutput
     } while (m_peers.count(id) || m_replayed.count(id));
     Peer& joined = m_peers[id];
     joined.connectedUs = joined.heardUs = now;
+    walkBy(now + helloTimeoutUs() + 1);
     joined.viewPixels = RateBudget(m_config.viewPixelsPerS, 2.0 * double(m_config.maxViewPixels));
     m_book.record([&](ServerReport& r) {
         // A fresh report: after the ids wrap, one may still hold a left peer's figures.
@@ -142,15 +143,14 @@ void SessionPolicy::update(uint64_t now, PolicyOutput& out) {
         m_walkUs = now + kScanPeriodUs;
         updateAvailability(now, out);
         // A connection that never says hello would hold a client slot for good.
-        const uint64_t helloTimeoutUs = uint64_t(double(m_config.helloTimeoutS) * 1e6);
         for (auto& [id, p] : m_peers) {
             if (p.hello || p.kicked)
                 continue;
-            if (now - p.connectedUs > helloTimeoutUs) {
+            if (now - p.connectedUs > helloTimeoutUs()) {
                 m_book.count(&ServerCounters::helloTimeouts);
                 kick(id, p, RefuseReason::BadHello, out, now);
             } else {
-                walkBy(p.connectedUs + helloTimeoutUs + 1);
+                walkBy(p.connectedUs + helloTimeoutUs() + 1);
             }
         }
     }
@@ -326,6 +326,7 @@ bool SessionPolicy::hello(uint16_t id, Peer& p, std::span<const uint8_t> data, u
         return true;
     }
     p.pixels = int64_t(h.view.width) * int64_t(h.view.height);
+    walkBy(0); // the next pass notes its idle clock; a waiting view may no longer fit the total
     out.log.push_back({now, HelloEvent{id, h.role, h.name}});
     welcome(id, now, out);
     m_follow.setView(id, h.view);

@@ -110,10 +110,11 @@ inline constexpr uint64_t kRosterIntervalUs = 50000;
 // A client's sync mode switches reach the simulation at most this often; one that comes sooner
 // waits, and the latest mode is applied then (each switch to volume encodes the whole volume).
 inline constexpr uint64_t kSyncSwitchIntervalUs = 250000;
-// The network thread walks every peer and slot for what falls due (timeouts of seconds, deferred
-// views, paced switches) once in this period, or when the policy knows something falls due, not
-// on each of its ~1000 passes a second: under a reconnecting flood (328 slots) those walks were
-// most of that thread's time.
+// The network thread's scans of every slot and peer (handshakes to reset, network charges) run
+// once in this period, and the policy's walk over every peer (timeouts, deferred views, paced
+// switches) at least this often, sooner when it knows something falls due; not on each of the
+// thread's ~1000 passes a second: under a reconnecting flood (328 slots) they were most of its
+// time.
 inline constexpr uint64_t kScanPeriodUs = 10000;
 
 } // namespace trephine::net

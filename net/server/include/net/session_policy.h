@@ -230,8 +230,11 @@ private:
     void applyView(uint16_t id, Peer& p, const ViewRequest& r, PolicyOutput& out);
     bool viewRequest(uint16_t id, Peer& p, const ViewRequest& r, uint64_t now, PolicyOutput& out);
     void updateAvailability(uint64_t now, PolicyOutput& out);
-    // update walks every peer no later than `us` (a deferred view or a paced switch due then).
+    // update walks every peer no later than `us` (a timeout, a deferred view or a paced switch
+    // due then; 0: at its next call, as when a view grows and a waiting one may no longer fit).
     void walkBy(uint64_t us) { m_walkUs = std::min(m_walkUs, us); }
+    uint64_t helloTimeoutUs() const { return uint64_t(double(m_config.helloTimeoutS) * 1e6); }
+    uint64_t idleTimeoutUs() const { return uint64_t(double(m_config.idleTimeoutS) * 1e6); }
     std::string uniqueName(uint16_t id, const std::string& name);
     void countSwitches();
 
