@@ -473,11 +473,16 @@ TEST(AvailabilityPolicy, AParticipantSilentForTheIdleTimeoutIsSentAway) {
     EXPECT_TRUE(disconnected(rig.update(), talker, RefuseReason::Idle));
 }
 
-TEST(AvailabilityPolicy, ViewRequestsBeyondTheRenderBudgetWaitAndTheNewestWins) {
+// Views of 100^2 at most, with a render budget of one such view a second, two saved up.
+ServerConfig oneViewASecond() {
     ServerConfig c;
     c.maxViewPixels = 100 * 100;
-    c.viewPixelsPerS = 10000; // one largest view a second, two saved up
-    PolicyRig rig(c);
+    c.viewPixelsPerS = 10000;
+    return c;
+}
+
+TEST(AvailabilityPolicy, ViewRequestsBeyondTheRenderBudgetWaitAndTheNewestWins) {
+    PolicyRig rig(oneViewASecond());
     const uint16_t id = rig.join("orbit");
     size_t applied = 0;
     for (uint32_t i = 1; i <= 5; ++i) {
@@ -507,10 +512,7 @@ TEST(AvailabilityPolicy, ViewRequestsBeyondTheRenderBudgetWaitAndTheNewestWins) 
 // paced design switch and a deferred view, each asked for just after a walk, go at their
 // microsecond, not a period later.
 TEST(AvailabilityPolicy, WhatFallsDueBetweenScansGoesAtItsMicrosecond) {
-    ServerConfig c;
-    c.maxViewPixels = 100 * 100;
-    c.viewPixelsPerS = 10000; // one largest view a second, two saved up
-    PolicyRig rig(c);
+    PolicyRig rig(oneViewASecond());
     const uint16_t id = rig.join("orbit");
     rig.update();
     const uint64_t t0 = rig.now;
@@ -547,9 +549,7 @@ TEST(AvailabilityPolicy, WhatFallsDueBetweenScansGoesAtItsMicrosecond) {
 // A view waiting for its budget that another peer's larger view leaves no room for is refused at
 // the next pass, not at the next scan.
 TEST(AvailabilityPolicy, AWaitingViewAnotherViewLeavesNoRoomForIsRefusedAtTheNextPass) {
-    ServerConfig c;
-    c.maxViewPixels = 100 * 100;
-    c.viewPixelsPerS = 10000;
+    ServerConfig c = oneViewASecond();
     c.maxTotalViewPixels = 100 * 100 + 10 * 10 + 50;
     PolicyRig rig(c);
     const uint16_t a = rig.join("a", viewOf(10, 10));
