@@ -15,6 +15,7 @@
 #include "libsim/skull.h"
 #include "net/view.h"
 
+#include "counting_renderer.h"
 #include "gate_client.h"
 #include "manual_executor.h"
 
@@ -28,6 +29,7 @@
 
 using namespace trephine;
 using namespace trephine::net;
+using trephine::testing::CountingRenderer;
 
 namespace {
 
@@ -634,33 +636,6 @@ TEST(AvailabilityPolicy, NamesInTheRosterAreValidAndUnique) {
 
 namespace {
 
-// The CPU ray caster, with a clock that counts the pixels it rendered (1 us each): the work
-// clock of a rig whose pieces must cost what they render, the same on every machine.
-class PixelClockRenderer final : public DbiRenderer {
-public:
-    PixelClockRenderer(const Volume& v, ThreadPool* pool, std::shared_ptr<uint64_t> pixels)
-        : m_cpu(v, pool), m_pixels(std::move(pixels)) {}
-    void volumeChanged(const Box3i& changed) override { m_cpu.volumeChanged(changed); }
-    void rebuild() override { m_cpu.rebuild(); }
-    void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache) override {
-        const PixelRect in = intersect(rect, frame.bounds());
-        *m_pixels += uint64_t(in.w) * uint64_t(in.h);
-        m_cpu.render(camera, rect, frame, cache);
-    }
-    int renderBulk(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache,
-                   const std::function<bool()>& stop, int atLeast) override {
-        const int w = m_cpu.renderBulk(camera, rect, frame, cache, stop, atLeast);
-        *m_pixels += uint64_t(w) * uint64_t(rect.h); // the step's rects lie in the frame
-        return w;
-    }
-    Dbi render(const Camera& camera) override { return m_cpu.render(camera); }
-    std::string describe() const override { return "CPU, counting pixels"; }
-
-private:
-    CpuDbiRenderer m_cpu;
-    std::shared_ptr<uint64_t> m_pixels;
-};
-
 struct SliceRig {
     // Pixels rendered: the work clock when the rig counts pixels (pixelClock).
     std::shared_ptr<uint64_t> pixels = std::make_shared<uint64_t>(0);
@@ -701,7 +676,7 @@ struct SliceRig {
                        },
                    .renderer = pixelClock ? DbiRendererFactory([p = pixels](const Volume& vol,
                                                                             ThreadPool* pool) {
-                       return std::make_unique<PixelClockRenderer>(vol, pool, p);
+                       return std::make_unique<CountingRenderer>(vol, pool, p);
                    })
                                           : DbiRendererFactory()},
                outbox, book, steadyNowUs) {}

@@ -6,6 +6,7 @@
 #include "libsim/dbi_renderer.h"
 
 #include <cstdint>
+#include <functional>
 #include <memory>
 #include <string>
 
@@ -20,6 +21,13 @@ public:
     void render(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache) override {
         *m_pixels += uint64_t(intersect(rect, frame.bounds()).area());
         m_cpu.render(camera, rect, frame, cache);
+    }
+    // Stops part-way as the CPU ray caster does; counts the columns it rendered.
+    int renderBulk(const Camera& camera, const PixelRect& rect, Dbi& frame, HitCache* cache,
+                   const std::function<bool()>& stop, int atLeast) override {
+        const int w = m_cpu.renderBulk(camera, rect, frame, cache, stop, atLeast);
+        *m_pixels += uint64_t(w) * uint64_t(rect.h); // the step's rects lie in the frame
+        return w;
     }
     Dbi render(const Camera& camera) override { return m_cpu.render(camera); }
     std::string describe() const override { return "CPU, counting pixels"; }
