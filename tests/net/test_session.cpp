@@ -14,6 +14,7 @@
 #include "net/view.h"
 
 #include "loopback.h"
+#include "test_support.h"
 
 #include <gtest/gtest.h>
 #include <nlohmann/json.hpp>
@@ -38,7 +39,9 @@ using trephine::testing::loopback;
 using trephine::testing::pollAll;
 using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
+using trephine::testing::ScopedTmpdir;
 using trephine::testing::sphereTop;
+using trephine::testing::TempDir;
 
 constexpr int kWindow = 160;
 
@@ -125,10 +128,11 @@ DepthCheck compareDepthMm(const Dbi& a, const Dbi& b, const Camera& cam) {
     return r;
 }
 
+// In one folder for the whole run, removed at its end with the marks and scene files beside
+// each saved volume.
 std::string tempPath(const std::string& name) {
-    return (std::filesystem::temp_directory_path() /
-            ("trephine_session_" + std::to_string(getpid()) + "_" + name))
-        .string();
+    static const TempDir dir;
+    return dir / name;
 }
 
 } // namespace
@@ -565,6 +569,7 @@ TEST(Session, ASaveOnExitThatCannotBeWrittenIsRefusedAtOnceOrSavedElsewhere) {
     server->submitBoxCut(surfaceBox(sphere, 6));
     ASSERT_TRUE(pumpUntil({}, [&] { return server->idle(); }));
     std::filesystem::remove_all(folder);
+    const ScopedTmpdir tmp(tempPath("tmp")); // the emergency copy goes there
     server->stop();
     EXPECT_NE(server->saveError().find("final.nrrd"), std::string::npos) << server->saveError();
     ASSERT_FALSE(server->savedTo().empty());
@@ -572,10 +577,9 @@ TEST(Session, ASaveOnExitThatCannotBeWrittenIsRefusedAtOnceOrSavedElsewhere) {
     EXPECT_TRUE(loadVolume(server->savedTo()) == server->volumeSnapshot())
         << "the drilled volume is in the emergency copy";
     EXPECT_FALSE(server->volumeSnapshot() == sphere);
+    EXPECT_EQ(std::filesystem::path(server->savedTo()).parent_path(), tempPath("tmp"));
     EXPECT_TRUE(std::filesystem::is_regular_file(marksPathFor(server->savedTo())))
         << "the marks beside it";
-    std::filesystem::remove(server->savedTo());
-    std::filesystem::remove(marksPathFor(server->savedTo()));
 }
 
 // A server stopped with clients still connected says goodbye to them, and its report lists them

@@ -250,6 +250,7 @@ TEST(Annotations, AFailedMarksWriteLeavesNoOlderMarksBesideTheNewVolume) {
         Pumped pumped(server);
         std::filesystem::create_directories(marksPathFor(saved) + ".trephine-" +
                                             std::to_string(::getpid()) + ".tmp");
+        const trephine::testing::ScopedTmpdir tmp(dir / "tmp"); // the emergency copy goes there
         server.stop();
         EXPECT_FALSE(server.saveError().empty());
         copy = server.savedTo();
@@ -259,8 +260,6 @@ TEST(Annotations, AFailedMarksWriteLeavesNoOlderMarksBesideTheNewVolume) {
         << "the older marks would come back with the new volume";
     ASSERT_FALSE(copy.empty());
     EXPECT_TRUE(readMarksFile(marksPathFor(copy)).empty()) << "the emergency copy has them";
-    std::filesystem::remove(copy);
-    std::filesystem::remove(marksPathFor(copy));
 }
 
 TEST(MarksFile, AFailedWriteLeavesTheEarlierFileWhole) {

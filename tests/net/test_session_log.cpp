@@ -19,6 +19,7 @@
 #include "libsim/volume_io.h"
 
 #include "loopback.h"
+#include "test_support.h"
 
 #include <fmt/format.h>
 #include <gtest/gtest.h>
@@ -42,15 +43,17 @@ using trephine::testing::namedClientConfig;
 using trephine::testing::pollAll;
 using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
+using trephine::testing::TempDir;
 
 namespace {
 
 constexpr int kN = 48;
 
+// In one folder for the whole run, removed at its end with the marks and scene files beside
+// each saved volume.
 std::string tempPath(const std::string& name) {
-    const std::string p = (std::filesystem::temp_directory_path() /
-                           ("trephine_log_" + std::to_string(getpid()) + "_" + name))
-                              .string();
+    static const TempDir dir;
+    const std::string p = dir / name;
     std::filesystem::remove(p);
     return p;
 }

@@ -10,6 +10,7 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <optional>
 #include <string>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -44,6 +45,29 @@ struct TempDir {
     TempDir(const TempDir&) = delete;
     TempDir& operator=(const TempDir&) = delete;
     std::string operator/(const std::string& name) const { return (path / name).string(); }
+};
+
+// Points TMPDIR (std::filesystem::temp_directory_path) at `dir`, made if missing, while it
+// lives: what the code under test writes to "the temporary folder" lands in a test's own folder.
+class ScopedTmpdir {
+public:
+    explicit ScopedTmpdir(const std::string& dir) {
+        std::filesystem::create_directories(dir);
+        if (const char* old = std::getenv("TMPDIR"))
+            m_old = old;
+        ::setenv("TMPDIR", dir.c_str(), 1);
+    }
+    ~ScopedTmpdir() {
+        if (m_old)
+            ::setenv("TMPDIR", m_old->c_str(), 1);
+        else
+            ::unsetenv("TMPDIR");
+    }
+    ScopedTmpdir(const ScopedTmpdir&) = delete;
+    ScopedTmpdir& operator=(const ScopedTmpdir&) = delete;
+
+private:
+    std::optional<std::string> m_old;
 };
 
 inline std::string slurp(const std::string& path) {

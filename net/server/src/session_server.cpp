@@ -487,9 +487,9 @@ void SessionServer::saveSession() {
             save(copy);
             m_savedTo = copy;
             std::fprintf(stderr,
-                         "trephine server: the final volume and marks are saved in %s (and %s) "
-                         "instead\n",
-                         copy.c_str(), marksPathFor(copy).c_str());
+                         "trephine server: the final volume, marks and scene are saved in %s "
+                         "(with %s and %s) instead\n",
+                         copy.c_str(), marksPathFor(copy).c_str(), scenePathFor(copy).c_str());
         } catch (const std::exception& e2) {
             std::fprintf(stderr, "trephine server: no emergency copy either: %s\n", e2.what());
         }
