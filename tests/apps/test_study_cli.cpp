@@ -408,12 +408,11 @@ TEST(StudyCli, AllLinkOffRunsTheUpdateStudyOnce) {
     for (const char* name : {"updates-link.csv", "updates-link.svg", "display.csv", "notes.txt"})
         std::ofstream(out + "/" + name) << "an earlier run\n";
     // No display: the display study is not run, so display.csv is stale too.
-    const char* display = std::getenv("DISPLAY");
-    const std::string savedDisplay = display ? display : "";
-    unsetenv("DISPLAY");
-    CommandResult r = runTrephine(dir, "study all --quick --link off --out '" + out + "'");
-    if (display)
-        setenv("DISPLAY", savedDisplay.c_str(), 1);
+    CommandResult r;
+    {
+        const ScopedEnv noDisplay("DISPLAY", std::nullopt);
+        r = runTrephine(dir, "study all --quick --link off --out '" + out + "'");
+    }
     ASSERT_EQ(r.exitCode, 0) << r.out << r.err;
     EXPECT_NE(r.out.find("== 3/4 display =="), std::string::npos) << r.out;
     EXPECT_NE(r.out.find("== 4/4 WAN and classroom (quick-sized) =="), std::string::npos) << r.out;

@@ -57,12 +57,10 @@ TEST(WindowCli, TheDemoRefusesAScreenshotItCannotTake) {
 
     // No display at all (DISPLAY unset for this run): the same, where the demo used to drill
     // headless and exit 0.
-    const char* display = std::getenv("DISPLAY");
-    const std::string savedDisplay = display ? display : "";
-    unsetenv("DISPLAY");
-    r = runTrephine(dir, "demo --frames 1 --screenshot " + shellQuote(shot));
-    if (display)
-        setenv("DISPLAY", savedDisplay.c_str(), 1);
+    {
+        const trephine::testing::ScopedEnv noDisplay("DISPLAY", std::nullopt);
+        r = runTrephine(dir, "demo --frames 1 --screenshot " + shellQuote(shot));
+    }
     EXPECT_EQ(r.exitCode, 1);
     EXPECT_NE(r.err.find("trephine: --screenshot: no window to take it from: no DISPLAY is set"),
               std::string::npos)

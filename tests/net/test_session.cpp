@@ -39,7 +39,7 @@ using trephine::testing::loopback;
 using trephine::testing::pollAll;
 using trephine::testing::Pumped;
 using trephine::testing::pumpUntil;
-using trephine::testing::ScopedTmpdir;
+using trephine::testing::ScopedEnv;
 using trephine::testing::sphereTop;
 using trephine::testing::TempDir;
 
@@ -569,7 +569,8 @@ TEST(Session, ASaveOnExitThatCannotBeWrittenIsRefusedAtOnceOrSavedElsewhere) {
     server->submitBoxCut(surfaceBox(sphere, 6));
     ASSERT_TRUE(pumpUntil({}, [&] { return server->idle(); }));
     std::filesystem::remove_all(folder);
-    const ScopedTmpdir tmp(tempPath("tmp")); // the emergency copy goes there
+    std::filesystem::create_directories(tempPath("tmp"));
+    const ScopedEnv tmp("TMPDIR", tempPath("tmp")); // the emergency copy goes there
     server->stop();
     EXPECT_NE(server->saveError().find("final.nrrd"), std::string::npos) << server->saveError();
     ASSERT_FALSE(server->savedTo().empty());

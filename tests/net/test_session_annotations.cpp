@@ -250,7 +250,9 @@ TEST(Annotations, AFailedMarksWriteLeavesNoOlderMarksBesideTheNewVolume) {
         Pumped pumped(server);
         std::filesystem::create_directories(marksPathFor(saved) + ".trephine-" +
                                             std::to_string(::getpid()) + ".tmp");
-        const trephine::testing::ScopedTmpdir tmp(dir / "tmp"); // the emergency copy goes there
+        std::filesystem::create_directories(dir / "tmp");
+        const trephine::testing::ScopedEnv tmp("TMPDIR",
+                                               dir / "tmp"); // the emergency copy goes there
         server.stop();
         EXPECT_FALSE(server.saveError().empty());
         copy = server.savedTo();

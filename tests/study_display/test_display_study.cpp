@@ -6,6 +6,7 @@
 
 #include "gl_window_test.h"
 #include "libsim/error.h"
+#include "test_support.h"
 
 #include <gtest/gtest.h>
 
@@ -57,10 +58,8 @@ TEST(DisplayStudy, BadConfigurationIsOneLineError) {
 }
 
 TEST(DisplayStudy, WithoutADisplayItSaysToUseXvfb) {
-    const char* d = std::getenv("DISPLAY");
-    std::string saved = d ? d : "";
-    unsetenv("DISPLAY");
-    unsetenv("WAYLAND_DISPLAY");
+    const trephine::testing::ScopedEnv display("DISPLAY", std::nullopt);
+    const trephine::testing::ScopedEnv wayland("WAYLAND_DISPLAY", std::nullopt);
     DisplayStudyConfig c;
     std::string message;
     try {
@@ -68,8 +67,6 @@ TEST(DisplayStudy, WithoutADisplayItSaysToUseXvfb) {
     } catch (const Error& e) {
         message = e.what();
     }
-    if (!saved.empty())
-        setenv("DISPLAY", saved.c_str(), 1);
     EXPECT_NE(message.find("xvfb-run"), std::string::npos) << message;
     EXPECT_EQ(message.find('\n'), std::string::npos);
 }

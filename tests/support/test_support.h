@@ -14,6 +14,7 @@
 #include <string>
 #include <sys/wait.h>
 #include <unistd.h>
+#include <utility>
 
 namespace trephine::testing {
 
@@ -47,26 +48,27 @@ struct TempDir {
     std::string operator/(const std::string& name) const { return (path / name).string(); }
 };
 
-// Points TMPDIR (std::filesystem::temp_directory_path) at `dir`, made if missing, while it
-// lives: what the code under test writes to "the temporary folder" lands in a test's own folder.
-class ScopedTmpdir {
+// Sets (or, with no value, unsets) the environment variable `name` while it lives, then puts
+// back what was there: TMPDIR pointed at a test's own folder, DISPLAY taken away.
+class ScopedEnv {
 public:
-    explicit ScopedTmpdir(const std::string& dir) {
-        std::filesystem::create_directories(dir);
-        if (const char* old = std::getenv("TMPDIR"))
+    ScopedEnv(std::string name, const std::optional<std::string>& value) : m_name(std::move(name)) {
+        if (const char* old = std::getenv(m_name.c_str()))
             m_old = old;
-        ::setenv("TMPDIR", dir.c_str(), 1);
+        set(value);
     }
-    ~ScopedTmpdir() {
-        if (m_old)
-            ::setenv("TMPDIR", m_old->c_str(), 1);
-        else
-            ::unsetenv("TMPDIR");
-    }
-    ScopedTmpdir(const ScopedTmpdir&) = delete;
-    ScopedTmpdir& operator=(const ScopedTmpdir&) = delete;
+    ~ScopedEnv() { set(m_old); }
+    ScopedEnv(const ScopedEnv&) = delete;
+    ScopedEnv& operator=(const ScopedEnv&) = delete;
 
 private:
+    void set(const std::optional<std::string>& value) {
+        if (value)
+            ::setenv(m_name.c_str(), value->c_str(), 1);
+        else
+            ::unsetenv(m_name.c_str());
+    }
+    std::string m_name;
     std::optional<std::string> m_old;
 };
 
