@@ -199,3 +199,19 @@ TEST(SessionAvailability, ALargerViewsWorkWaitsUntilTheTraineesRectangleIsTaken)
     EXPECT_LT(bounded, waits) << "the network thread's passes end the waits";
     server.stop();
 }
+
+// The report's peaks of what ENet held for one peer, taken as messages are handed to it: a
+// joiner's welcome and scene on the control channel, its first full image as an update.
+TEST(SessionAvailability, TheReportHoldsThePeaksOfWhatENetHeldForAPeer) {
+    const Volume sphere = makeSphere(24);
+    SessionServer server(sphere, loopbackServerConfig("sphere:24"));
+    Pumped pumped(server);
+    SessionClient trainee(trephine::testing::namedClientConfig(sphere, "ada", Role::Trainee, 32));
+    trainee.connect(loopback(server.port()));
+    ASSERT_TRUE(pumpUntil({&trainee}, [&] { return trainee.hasFullImage(); }))
+        << trainee.closeReason();
+    ASSERT_TRUE(pumpUntil({&trainee}, [&] {
+        return availabilityOf(server).at("peak_control_bytes").get<int64_t>() > 0 &&
+               server.peakInFlightBytes() > 0;
+    })) << availabilityOf(server).dump();
+}

@@ -177,9 +177,11 @@ struct SessionServer::Impl {
     CodeMint mint{inlineMint};
     std::map<uint16_t, uint64_t> netCharged; // what the report has of `received`'s charges
     std::map<uint16_t, ENetPeer*> links;     // policy ids -> ENet peers (network thread only)
-    int64_t peakInFlight = 0;                // network thread's copy of the report's peak
-    int64_t peakControlBytes = 0;            // the most control bytes ENet held for one peer
-    uint64_t nextTickUs = 0;                 // the channel statistics' next tick
+    // The most bytes ENet held for one peer, of updates and of control messages: they grow only
+    // as sendTo hands ENet a message, so it takes them there.
+    int64_t peakInFlight = 0;
+    int64_t peakControlBytes = 0;
+    uint64_t nextTickUs = 0; // the channel statistics' next tick
     // guard's scans of every slot and peer (handshakes to reset, network charges to report, held
     // offers' hello clocks) run at most every kScanPeriodUs.
     uint64_t nextScanUs = 0;
@@ -630,8 +632,10 @@ bool SessionServer::Impl::sendTo(uint16_t id, Channel ch, const std::vector<uint
     const size_t queued = host.send(link->second, ch, wire, inFlight, lossPermille);
     if (!queued)
         return false;
-    if (ch == Channel::Control) // held control bytes grow only here
-        peakControlBytes = std::max(peakControlBytes, inFlight->load(std::memory_order_relaxed));
+    if (inFlight) {
+        int64_t& peak = ch == Channel::Control ? peakControlBytes : peakInFlight;
+        peak = std::max(peak, inFlight->load(std::memory_order_relaxed));
+    }
     stats.countOut(ch, queued);
     book.peer(id, [&](PeerReport& r) {
         r.bytesOut += queued;
@@ -919,7 +923,7 @@ void SessionServer::Impl::sendUpdates() {
                          return received.standing(a.client) < received.standing(b.client);
                      });
     bool handed = false;
-    int64_t peak = peakInFlight; // in-flight bytes grow only as updates are handed to ENet
+    const int64_t peakBefore = peakInFlight;
     for (const Outbox::Ready& u : taken.updates) {
         if (handed && u.message.size() > kLargeUpdateBytes) {
             host.flush();
@@ -933,8 +937,6 @@ void SessionServer::Impl::sendUpdates() {
         if (!sent)
             continue;
         received.charge(u.client, received.now() - t0);
-        if (held)
-            peak = std::max(peak, held->load(std::memory_order_relaxed));
         book.record([&](ServerReport& r) {
             ModeTotals& t = r.modes[size_t(u.mode)].sent;
             ++t.updates;
@@ -945,10 +947,8 @@ void SessionServer::Impl::sendUpdates() {
     }
     if (handed)
         host.flush();
-    if (peak > peakInFlight) {
-        peakInFlight = peak;
-        book.record([&](ServerReport& r) { r.counters.peakInFlightBytes = peak; });
-    }
+    if (peakInFlight > peakBefore)
+        book.record([&](ServerReport& r) { r.counters.peakInFlightBytes = peakInFlight; });
 }
 
 // The assessment's warnings and snapshots (net/assessment.h), to whoever is still here.
